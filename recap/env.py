@@ -1,0 +1,117 @@
+"""The environment interface every agent uses, and the errors environments raise.
+
+An environment instance is one task instance (a Robotouille kitchen at a seed, an ALFWorld game).
+``reset`` gives the first observation, the valid actions (None when the action space is open)
+and the goal; ``step`` takes an action string that must *exactly* equal one of the valid
+actions (looked up by index, never by substring). Environments whose benchmark lets any command
+reach the game (ALFWorld answers "Nothing happens.") declare ``invalid_action_mode = "step"``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+
+class EnvError(RuntimeError):
+    """The environment failed (engine error, missing data, broken game file)."""
+
+
+class InvalidActionError(ValueError):
+    """An action string that is not one of the valid actions; the state is unchanged."""
+
+
+class UnknownInstanceError(ValueError):
+    """An instance id or selector that names nothing; the message says what exists."""
+
+
+class DataNotFoundError(FileNotFoundError):
+    """A benchmark data folder is missing or is not the expected layout."""
+
+
+@dataclass(frozen=True)
+class Reset:
+    observation: str
+    valid_actions: tuple[str, ...] | None
+    goal: str
+
+
+@dataclass(frozen=True)
+class Step:
+    observation: str
+    valid_actions: tuple[str, ...] | None
+    done: bool
+    success: bool
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Demonstration:
+    """A one-shot demonstration, rendered by running the agent itself on a scripted model.
+
+    ``make_env`` builds a fresh environment at the demonstration's start (for Robotouille the
+    training kitchen on our engine; for ALFWorld a replay of recorded observations).
+    ``replies`` maps an agent style (``recap``, ``react``, ``act``, ``cot``, ``standard``,
+    ``adapt``) to the model replies, in call order, that solve it. Rendering with the agent keeps
+    the demonstration in exactly the format of the agent's own prompts, for every ablation.
+    """
+
+    name: str
+    make_env: Callable[[], "Environment"]
+    replies: Mapping[str, Sequence[Mapping[str, Any]]]
+
+
+class Environment(ABC):
+    """One benchmark task instance behind a uniform interface."""
+
+    #: stable id, e.g. ``robotouille/asynchronous/5_potato_soup@42``
+    instance_id: str = ""
+    benchmark: str = ""
+    #: split or task family (``synchronous``, ``asynchronous``, ``heat``, ...)
+    split: str = ""
+    #: task name within the benchmark (``5_potato_soup``, ``pick_heat_then_place_in_recep``...)
+    task: str = ""
+    seed: int = 0
+    #: ``reject``: an action not in valid_actions never reaches the engine (no step is taken);
+    #: ``step``: it is sent to the game, which answers and counts a step.
+    invalid_action_mode: Literal["reject", "step"] = "reject"
+    optimal_steps: int | None = None
+    #: environment steps allowed (ceil(optimal x multiplier), or a benchmark's fixed cap)
+    max_steps: int = 50
+    #: when True, the episode is re-checked against max_steps by the agent; envs may also end it
+    test_double: bool = False
+
+    @abstractmethod
+    def reset(self) -> Reset: ...
+
+    @abstractmethod
+    def step(self, action: str) -> Step:
+        """Apply ``action``. Raises InvalidActionError (state unchanged) in ``reject`` mode."""
+
+    @abstractmethod
+    def rules(self) -> str:
+        """The environment description and rules, in the words of our prompts."""
+
+    @abstractmethod
+    def demonstration(self) -> Demonstration | None:
+        """The one-shot demonstration used for this instance (None: zero-shot)."""
+
+    def failure_hints(self) -> str:
+        """Hints shown after an invalid action (e.g. occupied station, inexact name); may be ''."""
+        return ""
+
+    def expert_plan(self) -> list[str] | None:
+        """Remaining actions of an expert solution from the *current* state (None: no expert).
+
+        Used only by the offline expert model (a test double) and solvability checks.
+        """
+        return None
+
+    @property
+    def steps_taken(self) -> int:
+        return getattr(self, "_steps_taken", 0)
+
+    def close(self) -> None:
+        """Release engine resources."""

@@ -1,0 +1,155 @@
+"""The one shared LLM message history of an episode, with pins and a bounded sliding window.
+
+Two messages are pinned (the one-shot demonstration and the initial task prompt); every other
+message lives in a window of at most ``K`` messages that is enforced on *every* insertion, so a
+call never sees more than ``K + pins`` messages (the authors' code trims once per call and lets
+inserted messages creep past the bound).
+
+Two trimming modes keep the same bound:
+
+* ``pair``: drop the oldest (assistant, user) pair whenever the window overflows — the paper's
+  rule; the prompt prefix changes on nearly every call.
+* ``block``: when the window overflows, drop a block of the oldest messages at once (default
+  K/2). Consecutive prompts then share a long identical prefix for K/2 insertions, which lets
+  providers' prompt caching bill that prefix at the cached-input price.
+
+Messages are dropped in pairs so the window always continues the user/assistant alternation
+that starts after the pinned task prompt.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+from recap.llm import ChatMessage
+from schemas.records import MessageRecord
+
+WindowMode = Literal["pair", "block"]
+
+
+class SeqCounter:
+    """Message numbers of one episode, shared by all of its histories."""
+
+    def __init__(self) -> None:
+        self.value = 0
+
+    def take(self) -> int:
+        self.value += 1
+        return self.value - 1
+
+
+@dataclass(frozen=True)
+class Entry:
+    seq: int
+    message: ChatMessage
+    kind: str
+    node_id: int | None
+    pinned: bool
+
+
+class History:
+    def __init__(
+        self,
+        episode_id: str,
+        window: int,
+        *,
+        mode: WindowMode = "pair",
+        block: int | None = None,
+        emit: Callable[[MessageRecord], None] | None = None,
+        counter: "SeqCounter | None" = None,
+    ) -> None:
+        if window < 2:
+            raise ValueError(f"window must be at least 2 messages, got {window}")
+        if mode not in ("pair", "block"):
+            raise ValueError(f"window mode must be 'pair' or 'block', got {mode!r}")
+        self.episode_id = episode_id
+        self.window = window
+        self.mode = mode
+        blk = block if block is not None else max(2, window // 2)
+        self.block = max(2, min(window, blk + (blk % 2)))
+        self._emit = emit or (lambda _r: None)
+        self._pins: list[Entry] = []
+        self._live: list[Entry] = []
+        # a counter shared by every history of an episode keeps message seqs unique when an agent
+        # (ADaPT) works with several separate contexts
+        self._counter = counter if counter is not None else SeqCounter()
+        self.dropped = 0
+
+    # -- insertion -----------------------------------------------------------------------
+    def pin(self, role: str, kind: str, content: str) -> int:
+        """Add a message that is never trimmed (demonstration, initial task prompt)."""
+        if self._live:
+            raise RuntimeError("pins must be added before any windowed message")
+        return self._insert(role, kind, content, None, pinned=True)
+
+    def add(self, role: str, kind: str, content: str, node_id: int | None = None) -> int:
+        seq = self._insert(role, kind, content, node_id, pinned=False)
+        self._enforce()
+        return seq
+
+    def _insert(self, role: str, kind: str, content: str, node_id: int | None, pinned: bool) -> int:
+        seq = self._counter.take()
+        entry = Entry(seq, ChatMessage(role, content), kind, node_id, pinned)
+        (self._pins if pinned else self._live).append(entry)
+        self._emit(
+            MessageRecord(
+                episode_id=self.episode_id,
+                seq=seq,
+                role=role,
+                kind=kind,
+                content=content,
+                node_id=node_id,
+                pinned=pinned,
+            )
+        )
+        return seq
+
+    def _enforce(self) -> None:
+        if len(self._live) <= self.window:
+            return
+        if self.mode == "pair":
+            excess = len(self._live) - self.window
+            self.drop_oldest(excess + (excess % 2))
+        else:
+            while len(self._live) > self.window:
+                self.drop_oldest(self.block)
+
+    # -- trimming ------------------------------------------------------------------------
+    def drop_oldest(self, n: int) -> int:
+        """Drop up to ``n`` (rounded up to even) of the oldest unpinned messages, never the
+        newest one. Returns how many were dropped."""
+        n += n % 2
+        n = min(n, max(0, len(self._live) - 1))
+        if n <= 0:
+            return 0
+        del self._live[:n]
+        self.dropped += n
+        return n
+
+    # -- reading -------------------------------------------------------------------------
+    @property
+    def next_seq(self) -> int:
+        """The seq the next inserted message of this history will get."""
+        return self._counter.value
+
+    @property
+    def counter(self) -> "SeqCounter":
+        return self._counter
+
+    def entries(self) -> list[Entry]:
+        return [*self._pins, *self._live]
+
+    def messages(self) -> tuple[ChatMessage, ...]:
+        return tuple(e.message for e in self.entries())
+
+    def seqs(self) -> tuple[int, ...]:
+        return tuple(e.seq for e in self.entries())
+
+    def __len__(self) -> int:
+        return len(self._pins) + len(self._live)
+
+    @property
+    def live_count(self) -> int:
+        return len(self._live)

@@ -1,0 +1,93 @@
+"""The small client protocol between an agent and a model.
+
+An agent hands an :class:`LLMRequest` (its window of messages plus context for the ledger) to an
+:class:`LLMClient` and gets back an :class:`LLMResponse` with text, tokens, cost and latency —
+or an :class:`LLMError` carrying a class. The same agent therefore runs against the Ray gateway,
+a direct litellm call or a scripted test model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+#: error classes an agent may see; the gateway classifies provider errors into these
+ERROR_KINDS = (
+    "rate_limit",
+    "timeout",
+    "server_error",
+    "context_length",
+    "bad_request",
+    "auth",
+    "budget",
+)
+
+
+class LLMError(RuntimeError):
+    """A failed model call, classified. ``kind`` is one of :data:`ERROR_KINDS`."""
+
+    def __init__(self, kind: str, message: str = "", *, retries: int = 0, cost_usd: float = 0.0):
+        if kind not in ERROR_KINDS:
+            raise ValueError(f"unknown LLM error kind {kind!r}")
+        super().__init__(f"{kind}: {message}" if message else kind)
+        self.kind = kind
+        self.message = message
+        self.retries = retries
+        self.cost_usd = cost_usd
+
+
+@dataclass(frozen=True)
+class ChatMessage:
+    role: str  # "user" | "assistant" | "system"
+    content: str
+
+    def as_dict(self) -> dict[str, str]:
+        return {"role": self.role, "content": self.content}
+
+
+@dataclass(frozen=True)
+class LLMRequest:
+    """What an agent asks for. Only ``messages`` and generation settings reach the provider;
+    the rest identifies the call for the ledger, idempotency and the offline test doubles."""
+
+    messages: tuple[ChatMessage, ...]
+    episode_id: str
+    call_index: int
+    purpose: str
+    window_seqs: tuple[int, ...] = ()
+    node_id: int | None = None
+    #: the seq the reply will take in the agent's history (lets a replay find it in `messages`)
+    response_seq: int | None = None
+    temperature: float | None = None
+    max_tokens: int | None = None
+    json_mode: bool = False
+    #: hints for offline test models only (expert plan, agent style); never sent to a provider
+    hints: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def call_key(self) -> str:
+        """Idempotency key: a repeated key returns the recorded result instead of paying twice."""
+        return f"{self.episode_id}#{self.call_index}"
+
+
+@dataclass(frozen=True)
+class LLMResponse:
+    text: str
+    model: str
+    prompt_tokens: int = 0
+    cached_prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cost_usd: float = 0.0
+    latency_s: float = 0.0
+    retries: int = 0
+    token_count_source: str = "provider"
+    served_from: str = "provider"
+    deployment: str | None = None
+    test_double: bool = False
+
+
+class LLMClient(Protocol):
+    """Anything that completes a request. Raises :class:`LLMError` on failure."""
+
+    def complete(self, request: LLMRequest) -> LLMResponse: ...

@@ -1,0 +1,212 @@
+"""ReCAP (Algorithm 1): plan-ahead decomposition over a recursive context tree, with structured
+re-injection of the parent's think and remaining subtasks on every return, in one shared
+sliding-window LLM context.
+
+Control flow (see the paper, section 2, and docs/method.md):
+
+* the root asks for a full subtask list for the goal;
+* the head of a list becomes a child node. A child whose name is itself a valid action runs
+  directly (the shortcut: no call). Otherwise the child is asked for its own list: exactly one
+  item that is a valid action is executed (a leaf); exactly one item that is not a valid
+  action is a leaf failure (no environment step); an empty list means nothing to do; longer
+  lists make the child composite and it loops the same way;
+* after each child, the parent is re-prompted with its latest think and remaining subtasks
+  (plus the observation after an action) and returns a refined list; an empty list finishes
+  the node, and at the root it ends the episode;
+* every ``reminder_period`` loop iterations the rules are re-sent; at ``max_level`` a node is
+  asked for a single valid action instead of a decomposition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
+
+from recap import recap_prompts as P
+from recap.agent import Agent
+from recap.config import ReCAPConfig
+from recap.env import InvalidActionError, Reset
+from recap.jsonreply import recap_reply
+from recap.runtime import Episode, EpisodeEnd
+from schemas.records import NodeRecord, NodeVersion
+
+
+@dataclass
+class Node:
+    node_id: int
+    parent: "Node | None"
+    depth: int
+    child_index: int
+    task: str
+    kind: str = "composite"
+    status: str = "open"
+    versions: list[NodeVersion] = field(default_factory=list)
+    step_index: int | None = None
+    n_children: int = 0
+
+    @property
+    def subtasks(self) -> tuple[str, ...]:
+        return self.versions[-1].subtasks if self.versions else ()
+
+    @property
+    def thinks(self) -> list[str]:
+        return [v.think for v in self.versions if v.think]
+
+    def add_version(self, think: str | None, subtasks: tuple[str, ...], call_index: int | None, seq: int | None) -> None:
+        self.versions.append(NodeVersion(len(self.versions), think, tuple(subtasks), call_index, seq))
+
+    def record(self, episode_id: str) -> NodeRecord:
+        return NodeRecord(
+            episode_id=episode_id,
+            node_id=self.node_id,
+            parent_id=self.parent.node_id if self.parent else None,
+            depth=self.depth,
+            child_index=self.child_index,
+            task=self.task,
+            kind=self.kind,
+            status=self.status,
+            versions=tuple(self.versions),
+            step_index=self.step_index,
+        )
+
+
+class ReCAPAgent(Agent):
+    style = "recap"
+    config_cls = ReCAPConfig
+    expected_format = P.reply_format(True)
+    config: ReCAPConfig
+
+    def reply_format(self) -> str:
+        return P.reply_format(self.config.think != "none")
+
+    def shape_demo_reply(self, reply: Any) -> Any:
+        if self.config.think == "none":
+            return {k: v for k, v in reply.items() if k != "think"}
+        return reply
+
+    # -- episode state kept on the Episode object (the agent object itself stays reusable) ----
+    def _state(self, ep: Episode) -> dict[str, Any]:
+        return ep.extra
+
+    def play(self, ep: Episode, reset: Reset) -> None:
+        cfg = self.config
+        st = self._state(ep)
+        st.update(nodes=[], iterations=0, rules=ep.env.rules(), max_depth=0)
+        with_think = cfg.think != "none"
+        root = self._new_node(ep, None, reset.goal)
+        root.kind = "root"
+        ep.conv.pin(
+            "task",
+            P.task_prompt(
+                rules=st["rules"],
+                observation=reset.observation,
+                goal=reset.goal,
+                with_think=with_think,
+                preamble=not self.demo_mode,
+            ),
+        )
+        self._ask(ep, root, None, "task")
+        self._loop(ep, root)
+
+    def _new_node(self, ep: Episode, parent: Node | None, task: str) -> Node:
+        st = self._state(ep)
+        depth = 0 if parent is None else parent.depth + 1
+        node = Node(len(st["nodes"]), parent, depth, parent.n_children if parent else 0, task)
+        if parent is not None:
+            parent.n_children += 1
+        st["nodes"].append(node)
+        st["max_depth"] = max(st["max_depth"], depth)
+        return node
+
+    def _ask(self, ep: Episode, node: Node, prompt: str | None, kind: str, shown: tuple[str, ...] | None = None) -> None:
+        parse = partial(recap_reply, with_think=self.config.think != "none")
+        d = ep.driver
+        context = {
+            "task": node.task,
+            "depth": node.depth,
+            "is_root": node.parent is None,
+            "remaining": list(shown if shown is not None else node.subtasks),
+            "valid_actions": list(d.valid_actions) if d.valid_actions is not None else None,
+        }
+        reply, seq = ep.conv.ask(prompt, kind, parse, node_id=node.node_id, context=context)
+        node.add_version(reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq)
+
+    # -- the recursive loop --------------------------------------------------------------------
+    def _loop(self, ep: Episode, node: Node) -> None:
+        while node.subtasks:
+            child = self._new_node(ep, node, node.subtasks[0])
+            outcome, failed_action = self._descend(ep, child)
+            self._return(ep, node, child, outcome, failed_action)
+        node.status = "done"
+
+    def _descend(self, ep: Episode, child: Node) -> tuple[str, str | None]:
+        cfg, d = self.config, ep.driver
+        if cfg.shortcut and d.valid_actions is not None and d.is_valid(child.task):
+            child.kind = "primitive"
+            child.add_version(None, (child.task,), None, None)
+            return self._execute(ep, child, child.task)
+        at_cap = cfg.max_level is not None and child.depth + 1 >= cfg.max_level
+        if at_cap:
+            self._ask(ep, child, P.depth_cap_prompt(child.task), "depth_cap")
+        else:
+            self._ask(ep, child, P.descend_prompt(child.task), "descend")
+        subtasks = child.subtasks
+        if not subtasks:
+            child.status = "done"
+            return "nonleaf", None
+        if at_cap or len(subtasks) == 1:
+            child.kind = "primitive"
+            action = subtasks[0]
+            if d.is_valid(action):
+                return self._execute(ep, child, action)
+            return self._fail(ep, child, action)
+        self._loop(ep, child)
+        return "nonleaf", None
+
+    def _execute(self, ep: Episode, child: Node, action: str) -> tuple[str, str | None]:
+        child.step_index = ep.driver.attempts
+        try:
+            ep.driver.execute(action, child.node_id)
+        except InvalidActionError:
+            child.status = "failed"
+            return "fail", action
+        except EpisodeEnd:
+            child.status = "done"  # the action ran; the episode ends after it
+            raise
+        child.status = "done"
+        return "leaf", None
+
+    def _fail(self, ep: Episode, child: Node, action: str) -> tuple[str, str | None]:
+        child.step_index = ep.driver.attempts
+        ep.driver.reject(action, child.node_id)
+        child.status = "failed"
+        return "fail", action
+
+    def _return(self, ep: Episode, node: Node, child: Node, outcome: str, failed_action: str | None) -> None:
+        cfg, st = self.config, self._state(ep)
+        st["iterations"] += 1
+        shown = node.subtasks if outcome == "fail" else node.subtasks[1:]
+        kind, text = P.return_prompt(
+            outcome=outcome,
+            child_task=child.task,
+            parent_task=node.task,
+            thinks=node.thinks,
+            subtasks=shown,
+            observation=ep.driver.observation if outcome in ("leaf", "fail") else None,
+            think_mode=cfg.think,
+            name_only=cfg.name_only,
+            failed_action=failed_action,
+            hints=ep.env.failure_hints() if outcome == "fail" else "",
+        )
+        if cfg.reminder_period and not self.demo_mode and st["iterations"] % cfg.reminder_period == 0:
+            text = P.reminder(st["rules"]) + "\n\n" + text
+        self._ask(ep, node, text, kind, shown=tuple(shown))
+
+    # -- end of episode ------------------------------------------------------------------------
+    def max_depth(self, ep: Episode) -> int:
+        return int(self._state(ep).get("max_depth", 0))
+
+    def finish(self, ep: Episode) -> None:
+        for node in self._state(ep).get("nodes", []):
+            ep.emit(node.record(ep.conv.episode_id))

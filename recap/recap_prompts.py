@@ -1,0 +1,144 @@
+"""ReCAP's prompt templates, in our own words.
+
+Each function carries the information the paper's template carries (Appendix "Core Framework
+Prompts"); the sentences are ours. The ablation switches change only what is re-injected:
+``think`` = latest | none | many, ``name_only`` = only the finished and the current task.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+
+def reply_format(with_think: bool) -> str:
+    if with_think:
+        return '{"think": "<your reasoning>", "subtasks": ["<subtask>", ...]}'
+    return '{"subtasks": ["<subtask>", ...]}'
+
+
+def system_text(with_think: bool) -> str:
+    think_line = (
+        '- "think": your reasoning about the current task and the latest observation.\n'
+        if with_think
+        else ""
+    )
+    return (
+        "You are an agent that reaches a goal in an environment by planning recursively. "
+        "For the task you are currently working on, you write an ordered list of subtasks; "
+        "the first subtask is carried out next (broken down further if it is not a single "
+        "action), and afterwards you come back to the task to revise the rest of the list "
+        "using what was observed. I keep track of the plan for you: whenever you return to a "
+        "task I show you its previous reasoning and the subtasks still ahead.\n\n"
+        "Answer every time with one JSON object and nothing else:\n"
+        f"{reply_format(with_think)}\n"
+        f"{think_line}"
+        '- "subtasks": the updated, ordered list of subtasks for the current task. When the '
+        "current task can be done with a single action from the valid actions, the list holds "
+        "exactly that action, written exactly as it appears. When the current task is already "
+        "complete, the list is empty."
+    )
+
+
+def numbered(items: Sequence[str]) -> str:
+    return "\n".join(f"{i}. {s}" for i, s in enumerate(items, 1)) if items else "(none)"
+
+
+def task_prompt(*, rules: str, observation: str, goal: str, with_think: bool, preamble: bool) -> str:
+    parts = []
+    if preamble:
+        parts += [system_text(with_think), f"Rules of the environment:\n{rules}"]
+    parts += [
+        f"Initial observation:\n{observation}",
+        f"Your goal:\n{goal}",
+        "Begin the task: first write a list of high-level subtasks that together reach the goal.",
+    ]
+    return "\n\n".join(parts)
+
+
+def descend_prompt(task: str) -> str:
+    return f"OK.\n\nYour current task: {task}\n\nWrite the list of subtasks for this task."
+
+
+def depth_cap_prompt(task: str) -> str:
+    return (
+        f"OK.\n\nYour current task: {task}\n\n"
+        "This task may not be broken down any further. Reply with a list holding exactly one "
+        "action, copied exactly from the valid actions, that carries out this task."
+    )
+
+
+def _thinks(thinks: Sequence[str], mode: str) -> str | None:
+    if mode == "none" or not thinks:
+        return None
+    if mode == "many":
+        return "Your earlier reasoning for this task, oldest first:\n" + numbered(thinks)
+    return f"Your reasoning so far: {thinks[-1]}"
+
+
+def return_prompt(
+    *,
+    outcome: str,
+    child_task: str,
+    parent_task: str,
+    thinks: Sequence[str],
+    subtasks: Sequence[str],
+    observation: str | None,
+    think_mode: str,
+    name_only: bool,
+    failed_action: str | None = None,
+    hints: str = "",
+) -> tuple[str, str]:
+    """The prompt for returning to ``parent_task`` after ``child_task`` ended; (kind, text).
+
+    ``outcome`` is ``leaf`` (an action ran), ``fail`` (the action was not valid; no step was
+    taken) or ``nonleaf`` (a decomposed subtask finished). ``subtasks`` is the parent's list as
+    shown: its remaining subtasks (the head removed) after success, the full list after a failure.
+    """
+    lines: list[str] = []
+    if outcome == "fail":
+        kind = "leaf_fail"
+        lines.append(f"You could not complete the task: {child_task}")
+        shown = f" ('{failed_action}')" if failed_action and failed_action != child_task else ""
+        lines.append(f"The action{shown} is not one of the valid actions, so nothing was done.")
+        if observation is not None:
+            lines.append(f"Current observation:\n{observation}")
+        if hints:
+            lines.append(f"Common causes:\n{hints}")
+    else:
+        lines.append(f"You have completed the task: {child_task}")
+        if outcome == "leaf" and observation is not None:
+            lines.append(f"Result:\n{observation}")
+        elif outcome == "nonleaf":
+            lines.append("Its results are in the conversation above.")
+        has_rest = bool(subtasks)
+        if outcome == "leaf":
+            kind = "leaf_done" if has_rest else "leaf_judge"
+        else:
+            kind = "nonleaf_done" if has_rest else "nonleaf_judge"
+
+    lines.append(f"You are back at the task above it.\nYour current task: {parent_task}")
+    if not name_only:
+        thought = _thinks(thinks, think_mode)
+        if thought:
+            lines.append(thought)
+        if outcome == "fail" or subtasks:
+            lines.append("Your remaining subtasks:\n" + numbered(subtasks))
+
+    if outcome == "fail":
+        lines.append("Change your list of subtasks so that the error is fixed.")
+    elif kind in ("leaf_judge", "nonleaf_judge"):
+        lines.append(
+            "No subtasks are left. Decide whether the current task is complete: if it is, reply "
+            "with an empty list; if not, list the subtasks still needed."
+        )
+    else:
+        lines.append(
+            "Revise the remaining subtasks in light of the latest observation so that the goal is "
+            "reached. If none are needed any more, check whether the current task is complete and "
+            "reply with an empty list if it is. Do not add subtasks outside the current task."
+        )
+    return kind, "\n\n".join(lines)
+
+
+def reminder(rules: str) -> str:
+    return f"Reminder of the environment rules:\n{rules}"

@@ -1,0 +1,376 @@
+"""What every agent shares at run time: the conversation with the model, the environment driver,
+episode ends and results.
+
+* :class:`Conversation` owns the shared history, builds each request from the current window,
+  repairs malformed JSON with a bounded re-ask, recovers from context-length errors by dropping
+  the oldest unpinned messages, enforces the per-episode call/token/cost caps and emits one
+  :class:`~schemas.records.CallRecord` per call.
+* :class:`EnvDriver` wraps the environment: exact action lookup, step records, the step cap and
+  the end of the episode.
+* Any way an episode ends raises :class:`EpisodeEnd` with a named reason; the agent turns it into
+  an :class:`EpisodeResult`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from recap.config import AgentConfig
+from recap.env import Environment, EnvError, InvalidActionError, Reset, Step
+from recap.history import History
+from recap.jsonreply import ReplyFormatError, parse_json_object
+from recap.llm import LLMClient, LLMError, LLMRequest
+from schemas.records import CallRecord, Record, StepRecord
+
+END_REASONS = (
+    "success",
+    "step_cap",
+    "call_cap",
+    "agent_done",
+    "json_failures",
+    "llm_error",
+    "budget_exhausted",
+    "episode_limit",
+    "env_error",
+)
+
+Emit = Callable[[Record], None]
+
+
+class EpisodeEnd(Exception):
+    """Raised from anywhere inside an episode to end it with a named reason."""
+
+    def __init__(self, reason: str, detail: str = "", *, error_kind: str | None = None):
+        if reason not in END_REASONS:
+            raise ValueError(f"unknown end reason {reason!r}")
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+        self.detail = detail
+        self.error_kind = error_kind
+
+
+@dataclass
+class EpisodeResult:
+    end_reason: str
+    success: bool
+    steps: int
+    llm_calls: int
+    prompt_tokens: int = 0
+    cached_prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cost_usd: float = 0.0
+    max_depth: int = 0
+    invalid_actions: int = 0
+    json_repairs: int = 0
+    error: str | None = None
+    error_kind: str | None = None
+
+
+def repair_prompt(problem: str, expected: str) -> str:
+    return (
+        f"I could not use your last reply: {problem}.\n"
+        f"Answer again with a single JSON object of the form {expected} and nothing else."
+    )
+
+
+@dataclass
+class Usage:
+    calls: int = 0
+    prompt_tokens: int = 0
+    cached_prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cost_usd: float = 0.0
+    json_repairs: int = 0
+
+
+class Conversation:
+    """The single shared LLM context of an episode and the only way an agent calls the model."""
+
+    def __init__(
+        self,
+        *,
+        episode_id: str,
+        client: LLMClient,
+        config: AgentConfig,
+        style: str,
+        emit: Emit,
+        expected_format: str,
+        usage: "Usage | None" = None,
+        history: History | None = None,
+    ) -> None:
+        self.episode_id = episode_id
+        self.client = client
+        self.config = config
+        self.style = style
+        self.emit = emit
+        self.expected_format = expected_format
+        self.history = history or History(
+            episode_id,
+            config.window,
+            mode=config.window_mode,
+            block=config.window_block,
+            emit=emit,
+        )
+        self.usage = usage if usage is not None else Usage()
+
+    def fork(self, *, expected_format: str | None = None, style: str | None = None) -> "Conversation":
+        """A separate, empty context for the same episode (ADaPT's isolated planner/executor
+        prompts): usage, caps and message numbering are shared, the history is not."""
+        cfg = self.config
+        return Conversation(
+            episode_id=self.episode_id,
+            client=self.client,
+            config=cfg,
+            style=style or self.style,
+            emit=self.emit,
+            expected_format=expected_format or self.expected_format,
+            usage=self.usage,
+            history=History(
+                self.episode_id,
+                cfg.window,
+                mode=cfg.window_mode,
+                block=cfg.window_block,
+                emit=self.emit,
+                counter=self.history.counter,
+            ),
+        )
+
+    def pin(self, kind: str, content: str) -> int:
+        return self.history.pin("user", kind, content)
+
+    def ask(
+        self,
+        prompt: str | None,
+        kind: str,
+        parse: Callable[[dict[str, Any]], dict[str, Any]],
+        *,
+        node_id: int | None = None,
+        context: Mapping[str, Any] | None = None,
+    ) -> tuple[dict[str, Any], int]:
+        """Send ``prompt`` and return (parsed reply, seq of the reply message).
+
+        ``prompt`` None means the prompt is already in the history (the pinned task prompt).
+        A malformed reply is answered with a repair message, at most ``max_json_repairs`` times;
+        then the episode ends with ``json_failures``.
+        """
+        if prompt is not None:
+            self.history.add("user", kind, prompt, node_id)
+        repairs = 0
+        purpose = kind
+        while True:
+            text, seq = self._call(purpose, node_id, context or {})
+            try:
+                return parse(parse_json_object(text)), seq
+            except ReplyFormatError as exc:
+                if repairs >= self.config.max_json_repairs:
+                    raise EpisodeEnd("json_failures", str(exc)) from None
+                repairs += 1
+                self.usage.json_repairs += 1
+                self.history.add("user", "repair", repair_prompt(str(exc), self.expected_format), node_id)
+                purpose = "repair"
+
+    # -- one model call, with context-length recovery -------------------------------------------
+    def _call(self, purpose: str, node_id: int | None, context: Mapping[str, Any]) -> tuple[str, int]:
+        while True:
+            self._check_caps()
+            call_index = self.usage.calls
+            self.usage.calls += 1
+            request = LLMRequest(
+                messages=self.history.messages(),
+                episode_id=self.episode_id,
+                call_index=call_index,
+                purpose=purpose,
+                window_seqs=self.history.seqs(),
+                node_id=node_id,
+                response_seq=self.history.next_seq,
+                temperature=self.config.temperature,
+                max_tokens=self.config.max_tokens,
+                json_mode=self.config.json_mode,
+                hints={"style": self.style, "purpose": purpose, **context},
+            )
+            started = time.perf_counter()
+            try:
+                response = self.client.complete(request)
+            except LLMError as exc:
+                self._record_error(request, exc, time.perf_counter() - started)
+                if exc.kind == "context_length":
+                    if self.history.drop_oldest(self.config.context_drop) == 0:
+                        raise EpisodeEnd("llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind) from None
+                    continue
+                if exc.kind == "budget":
+                    raise EpisodeEnd("budget_exhausted", exc.message, error_kind=exc.kind) from None
+                raise EpisodeEnd("llm_error", str(exc), error_kind=exc.kind) from None
+            seq = self.history.add("assistant", "reply", response.text, node_id)
+            u = self.usage
+            u.prompt_tokens += response.prompt_tokens
+            u.cached_prompt_tokens += response.cached_prompt_tokens
+            u.completion_tokens += response.completion_tokens
+            u.cost_usd += response.cost_usd
+            self.emit(
+                CallRecord(
+                    episode_id=self.episode_id,
+                    call_index=call_index,
+                    call_key=request.call_key,
+                    purpose=purpose,
+                    window_seqs=request.window_seqs,
+                    model=response.model,
+                    status="ok",
+                    node_id=node_id,
+                    response_seq=seq,
+                    prompt_tokens=response.prompt_tokens,
+                    cached_prompt_tokens=response.cached_prompt_tokens,
+                    completion_tokens=response.completion_tokens,
+                    cost_usd=response.cost_usd,
+                    latency_s=response.latency_s,
+                    retries=response.retries,
+                    token_count_source=response.token_count_source,
+                    served_from=response.served_from,
+                    deployment=response.deployment,
+                    test_double=response.test_double,
+                )
+            )
+            return response.text, seq
+
+    def _check_caps(self) -> None:
+        cfg, u = self.config, self.usage
+        if u.calls >= cfg.max_llm_calls:
+            raise EpisodeEnd("call_cap", f"{u.calls} LLM calls (cap {cfg.max_llm_calls})")
+        if cfg.max_episode_tokens is not None and u.prompt_tokens + u.completion_tokens >= cfg.max_episode_tokens:
+            raise EpisodeEnd("episode_limit", f"{u.prompt_tokens + u.completion_tokens} tokens (limit {cfg.max_episode_tokens})")
+        if cfg.max_episode_cost_usd is not None and u.cost_usd >= cfg.max_episode_cost_usd:
+            raise EpisodeEnd("episode_limit", f"${u.cost_usd:.4f} spent (limit ${cfg.max_episode_cost_usd})")
+
+    def _record_error(self, request: LLMRequest, exc: LLMError, latency: float) -> None:
+        self.usage.cost_usd += exc.cost_usd
+        self.emit(
+            CallRecord(
+                episode_id=self.episode_id,
+                call_index=request.call_index,
+                call_key=request.call_key,
+                purpose=request.purpose,
+                window_seqs=request.window_seqs,
+                model="",
+                status="error",
+                node_id=request.node_id,
+                error_kind=exc.kind,
+                error_message=exc.message[:500],
+                cost_usd=exc.cost_usd,
+                latency_s=latency,
+                retries=exc.retries,
+            )
+        )
+
+
+class EnvDriver:
+    """Steps the environment with exact action lookup, records every attempt, ends the episode."""
+
+    def __init__(self, env: Environment, episode_id: str, emit: Emit) -> None:
+        self.env = env
+        self.episode_id = episode_id
+        self.emit = emit
+        self.steps = 0
+        self.attempts = 0
+        self.invalid = 0
+        self.observation = ""
+        self.goal = ""
+        self.valid_actions: tuple[str, ...] | None = None
+        self._valid_index: dict[str, int] = {}
+        self.success = False
+
+    def reset(self) -> Reset:
+        try:
+            r = self.env.reset()
+        except Exception as exc:  # engine failure at reset
+            raise EpisodeEnd("env_error", f"reset failed: {exc}") from exc
+        self.observation, self.goal = r.observation, r.goal
+        self._set_valid(r.valid_actions)
+        return r
+
+    def _set_valid(self, valid: tuple[str, ...] | None) -> None:
+        self.valid_actions = valid
+        self._valid_index = {} if valid is None else {a: i for i, a in enumerate(valid)}
+
+    def is_valid(self, action: str) -> bool:
+        """Exact membership (index lookup), never substring matching."""
+        return self.valid_actions is None or action in self._valid_index
+
+    def reject(self, action: str, node_id: int | None = None) -> None:
+        """Record an action that is not valid and never reaches the environment."""
+        self.invalid += 1
+        self._record(action, False, self.observation, False, node_id)
+
+    def execute(self, action: str, node_id: int | None = None) -> Step:
+        """Run ``action``. Invalid actions reach the environment only in ``step`` mode."""
+        valid = self.is_valid(action)
+        if not valid and self.env.invalid_action_mode == "reject":
+            self.reject(action, node_id)
+            raise InvalidActionError(action)
+        if not valid:
+            self.invalid += 1
+        try:
+            step = self.env.step(action)
+        except InvalidActionError:
+            self.reject(action, node_id)
+            raise
+        except EnvError as exc:
+            raise EpisodeEnd("env_error", str(exc)) from exc
+        except Exception as exc:
+            raise EpisodeEnd("env_error", f"{type(exc).__name__}: {exc}") from exc
+        self.steps += 1
+        self.observation = step.observation
+        self._set_valid(step.valid_actions)
+        self.success = step.success
+        self._record(action, valid, step.observation, step.done, node_id)
+        if step.success:
+            raise EpisodeEnd("success")
+        if step.done or self.steps >= self.env.max_steps:
+            raise EpisodeEnd("step_cap", f"{self.steps} steps (cap {self.env.max_steps})")
+        return step
+
+    def _record(self, action: str, valid: bool, obs: str, done: bool, node_id: int | None) -> None:
+        self.emit(
+            StepRecord(
+                episode_id=self.episode_id,
+                index=self.attempts,
+                env_step=self.steps,
+                action=action,
+                valid=valid,
+                observation=obs,
+                done=done,
+                success=self.success,
+                node_id=node_id,
+            )
+        )
+        self.attempts += 1
+
+
+@dataclass
+class Episode:
+    """The per-episode state an agent works with."""
+
+    conv: Conversation
+    driver: EnvDriver
+    env: Environment
+    emit: Emit
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def result(self, end: EpisodeEnd, max_depth: int = 0) -> EpisodeResult:
+        u = self.conv.usage
+        return EpisodeResult(
+            end_reason=end.reason,
+            success=end.reason == "success",
+            steps=self.driver.steps,
+            llm_calls=u.calls,
+            prompt_tokens=u.prompt_tokens,
+            cached_prompt_tokens=u.cached_prompt_tokens,
+            completion_tokens=u.completion_tokens,
+            cost_usd=u.cost_usd,
+            max_depth=max_depth,
+            invalid_actions=self.driver.invalid,
+            json_repairs=u.json_repairs,
+            error=end.detail or None,
+            error_kind=end.error_kind,
+        )

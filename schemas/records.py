@@ -1,0 +1,198 @@
+"""Record types: one dataclass per table row.
+
+The agent (``recap/``) emits messages, calls, tree nodes and steps; the pipeline adds episode,
+event and run rows. Records carry ``episode_id`` but not ``run_id``: the sink stamps the run id
+when it writes, so the method stays unaware of where its records go.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar, Union
+
+SCHEMA_VERSION = 1
+
+
+@dataclass(frozen=True)
+class MessageRecord:
+    """One message of the shared LLM history, written once when it is inserted.
+
+    ``seq`` numbers the messages of an episode from 0 in insertion order; call records refer to
+    messages by these numbers (the window of a call), never by copying their text.
+    ``kind`` says which prompt template produced it (``demonstration``, ``task``, ``descend``,
+    ``leaf_done``, ``leaf_judge``, ``leaf_fail``, ``nonleaf_done``, ``nonleaf_judge``,
+    ``depth_cap``, ``repair``, ``reply``, ``observation``, ``feedback``, ...).
+    """
+
+    table: ClassVar[str] = "messages"
+    episode_id: str
+    seq: int
+    role: str
+    kind: str
+    content: str
+    node_id: int | None = None
+    pinned: bool = False
+
+
+@dataclass(frozen=True)
+class CallRecord:
+    """One LLM call: the window it saw (by message seq), its accounting and its outcome."""
+
+    table: ClassVar[str] = "llm_calls"
+    episode_id: str
+    call_index: int
+    call_key: str
+    purpose: str
+    window_seqs: tuple[int, ...]
+    model: str
+    status: str  # "ok" | "error"
+    node_id: int | None = None
+    response_seq: int | None = None
+    error_kind: str | None = None
+    error_message: str | None = None
+    prompt_tokens: int = 0
+    cached_prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cost_usd: float = 0.0
+    latency_s: float = 0.0
+    retries: int = 0
+    token_count_source: str = "provider"  # provider | tokenizer | estimate
+    served_from: str = "provider"  # provider | cache | ledger | replay
+    deployment: str | None = None
+    test_double: bool = False
+
+
+@dataclass(frozen=True)
+class NodeVersion:
+    """One (think, subtasks) version of a tree node; ``call_index`` is None for a shortcut."""
+
+    version: int
+    think: str | None
+    subtasks: tuple[str, ...]
+    call_index: int | None = None
+    message_seq: int | None = None
+
+
+@dataclass(frozen=True)
+class NodeRecord:
+    """A node of the ReCAP context tree with every version it had.
+
+    ``kind`` is ``root``, ``composite`` or ``primitive``; ``status`` is ``done`` (completed),
+    ``failed`` (leaf failure: not a valid action) or ``open`` (the episode ended inside it).
+    ``child_index`` is the node's position among its parent's children in creation order.
+    """
+
+    table: ClassVar[str] = "tree_nodes"
+    episode_id: str
+    node_id: int
+    parent_id: int | None
+    depth: int
+    child_index: int
+    task: str
+    kind: str
+    status: str
+    versions: tuple[NodeVersion, ...] = ()
+    step_index: int | None = None
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """One attempted environment action.
+
+    ``index`` counts attempts; ``env_step`` is the environment's step count after the attempt
+    (an action rejected before reaching the environment has ``valid`` False and takes no step).
+    """
+
+    table: ClassVar[str] = "steps"
+    episode_id: str
+    index: int
+    env_step: int
+    action: str
+    valid: bool
+    observation: str
+    done: bool
+    success: bool
+    node_id: int | None = None
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """The terminal row of one attempt at one unit of work."""
+
+    table: ClassVar[str] = "episodes"
+    episode_id: str
+    unit_id: str
+    attempt: int
+    benchmark: str
+    split: str
+    task: str
+    instance_id: str
+    seed: int
+    method: str
+    method_config: str  # canonical JSON of the agent settings
+    model: str
+    end_reason: str
+    success: bool
+    steps: int
+    llm_calls: int
+    prompt_tokens: int
+    cached_prompt_tokens: int
+    completion_tokens: int
+    cost_usd: float
+    wall_s: float
+    step_cap: int
+    step_multiplier: float
+    optimal_steps: int | None = None
+    max_depth: int = 0
+    error: str | None = None
+    worker_id: str | None = None
+    started_at: float = 0.0
+    ended_at: float = 0.0
+    test_double: bool = False
+
+
+@dataclass(frozen=True)
+class EventRecord:
+    """Something that happened outside an agent's messages: retries, errors, restarts, caps."""
+
+    table: ClassVar[str] = "events"
+    ts: float
+    source: str
+    kind: str
+    severity: str = "info"
+    episode_id: str | None = None
+    unit_id: str | None = None
+    detail: str = "{}"  # JSON
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One row per run start or resume: the spec, versions, revision and host."""
+
+    table: ClassVar[str] = "run"
+    started_at: float
+    spec_yaml: str
+    spec_hash: str
+    package_versions: str  # JSON
+    git_revision: str | None
+    host: str
+    command: str
+    schema_version: int = SCHEMA_VERSION
+
+
+Record = Union[
+    MessageRecord, CallRecord, NodeRecord, StepRecord, EpisodeRecord, EventRecord, RunRecord
+]
+
+ALL_RECORD_TYPES: tuple[type, ...] = (
+    MessageRecord,
+    CallRecord,
+    NodeRecord,
+    StepRecord,
+    EpisodeRecord,
+    EventRecord,
+    RunRecord,
+)
+
+# keeps `field` importable for callers building records generically
+_ = field

@@ -1,0 +1,97 @@
+"""Arrow schemas of the run tables, derived from the record dataclasses.
+
+The schema of each table is the record's fields (in order) after a leading ``run_id`` column.
+Deriving it from the dataclass keeps one definition of every column; the explicit type map
+below pins the Arrow type of each Python annotation so files stay stable across versions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from typing import Any
+
+import pyarrow as pa
+
+from schemas.records import ALL_RECORD_TYPES, SCHEMA_VERSION, NodeVersion
+
+_NODE_VERSION = pa.struct(
+    [
+        pa.field("version", pa.int32(), nullable=False),
+        pa.field("think", pa.string()),
+        pa.field("subtasks", pa.list_(pa.string()), nullable=False),
+        pa.field("call_index", pa.int32()),
+        pa.field("message_seq", pa.int64()),
+    ]
+)
+
+_SCALARS: dict[Any, pa.DataType] = {
+    str: pa.string(),
+    int: pa.int64(),
+    float: pa.float64(),
+    bool: pa.bool_(),
+}
+
+
+def _arrow_type(annotation: Any) -> tuple[pa.DataType, bool]:
+    """Map a resolved annotation to (Arrow type, nullable)."""
+    origin = typing.get_origin(annotation)
+    args = typing.get_args(annotation)
+    if origin is typing.Union or (origin is not None and str(origin) == "<class 'types.UnionType'>"):
+        inner = [a for a in args if a is not type(None)]
+        t, _ = _arrow_type(inner[0])
+        return t, True
+    if origin is tuple:
+        item = args[0]
+        if item is NodeVersion:
+            return pa.list_(_NODE_VERSION), False
+        return pa.list_(_arrow_type(item)[0]), False
+    if annotation in _SCALARS:
+        return _SCALARS[annotation], False
+    raise TypeError(f"no Arrow type for {annotation!r}")
+
+
+def _schema_for(record_type: type) -> pa.Schema:
+    hints = typing.get_type_hints(record_type)
+    fields = [pa.field("run_id", pa.string(), nullable=False)]
+    for f in dataclasses.fields(record_type):
+        t, nullable = _arrow_type(hints[f.name])
+        fields.append(pa.field(f.name, t, nullable=nullable))
+    return pa.schema(fields, metadata={b"recap_eval_schema_version": str(SCHEMA_VERSION).encode()})
+
+
+TABLES: dict[str, pa.Schema] = {rt.table: _schema_for(rt) for rt in ALL_RECORD_TYPES}
+_TYPE_OF_TABLE: dict[str, type] = {rt.table: rt for rt in ALL_RECORD_TYPES}
+
+
+def arrow_schema(table: str) -> pa.Schema:
+    """The Arrow schema of ``table`` (KeyError names the known tables)."""
+    try:
+        return TABLES[table]
+    except KeyError:
+        raise KeyError(f"unknown table {table!r}; known: {sorted(TABLES)}") from None
+
+
+def table_of(record: Any) -> str:
+    return type(record).table
+
+
+def record_type(table: str) -> type:
+    return _TYPE_OF_TABLE[table]
+
+
+def record_to_row(record: Any, run_id: str) -> dict[str, Any]:
+    """A record as a dict in its table's column order, ``run_id`` first."""
+    row: dict[str, Any] = {"run_id": run_id}
+    for f in dataclasses.fields(record):
+        value = getattr(record, f.name)
+        if f.name == "versions":
+            value = [dataclasses.asdict(v) | {"subtasks": list(v.subtasks)} for v in value]
+        elif isinstance(value, tuple):
+            value = list(value)
+        row[f.name] = value
+    return row
+
+
+def rows_to_table(table: str, rows: list[dict[str, Any]]) -> pa.Table:
+    return pa.Table.from_pylist(rows, schema=arrow_schema(table))

@@ -1,0 +1,1 @@
+"""Benchmark environments behind :class:`recap.env.Environment`, found through the registry."""
