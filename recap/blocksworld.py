@@ -100,16 +100,26 @@ def expert_plan_for(s: _State, goal: list[str]) -> list[str]:
         plan.append(a)
         _apply(sim, a)
 
+    def correct_prefix() -> list[str]:
+        """The longest bottom part of a tower that matches goal[:k]."""
+        best: list[str] = []
+        for t in sim.towers:
+            k = 0
+            while k < min(len(t), len(goal)) and t[k] == goal[k]:
+                k += 1
+            if k > len(best):
+                best = t[:k]
+        return best
+
     if sim.holding:
-        do(f"put down {sim.holding}")
-    # the correct prefix: a tower whose bottom part matches goal[:k]
-    base: list[str] = []
-    for t in sim.towers:
-        k = 0
-        while k < min(len(t), len(goal)) and t[k] == goal[k]:
-            k += 1
-        if k > len(base):
-            base = t[:k]
+        held, base = sim.holding, correct_prefix()
+        tower = next((t for t in sim.towers if base and t[: len(base)] == base), None)
+        fits = len(base) < len(goal) and goal[len(base)] == held
+        if fits and base and tower is not None and len(tower) == len(base):
+            do(f"stack {held} on {base[-1]}")  # the held block is the next one of the tower
+        else:
+            do(f"put down {held}")
+    base = correct_prefix()
     for t in list(sim.towers):
         keep = len(base) if t[: len(base)] == base and base else 0
         while len(t) > max(keep, 1):

@@ -107,7 +107,7 @@ class Conversation:
         self.style = style
         self.emit = emit
         self.expected_format = expected_format
-        self.history = history or History(
+        self.history = history if history is not None else History(
             episode_id,
             config.window,
             mode=config.window_mode,

@@ -1,0 +1,375 @@
+"""ADaPT (Prasad et al., 2023, "As-Needed Decomposition and Planning with Language Models").
+
+Control flow (the paper's Algorithm 1, with the released code's depth rule):
+
+    solve(task, depth):
+        if executor(task) reports done:   return success      # try first, plan only on failure
+        if depth == max_depth:            return failure      # deepest tasks are never decomposed
+        subtasks, logic = planner(task)                       # one call
+        AND: run the subtasks in order, stop at the first failure; success iff all succeed
+        OR:  run the subtasks in order, stop at the first success; success iff one succeeds
+
+The root task (the goal) is depth 1; with ``max_depth=3`` (the paper's setting) decompositions
+happen at depths 1 and 2. Subtasks are created and run only when reached (as needed).
+
+* The **executor** is a ReAct-style agent in its own isolated context: a fresh
+  :meth:`~recap.runtime.Conversation.fork` per run (the root's run uses the episode's main
+  context), with the executor demonstration and its task prompt pinned. The task prompt shows
+  only that task, the current observation and the last action taken (ADaPT passes the last
+  step on to the next executor), optionally the episode's first observation
+  (``initial_observation``; ADaPT's ALFWorld code gives each prompt the room description).
+  Each reply is ``{"think", "action"}`` (handled exactly like ReAct: exact lookup, error
+  feedback in ``reject`` mode, pass-through in ``step`` mode) or ``{"think", "status"}`` with
+  ``"done"`` / ``"failed"`` — ADaPT's "Task completed!" / "Task failed!". A run fails when it
+  reports failure, uses up ``executor_steps`` replies without a status (the released code
+  allows 20 commands per run), or makes ``executor_patience`` invalid actions in a row (the
+  released code stops after 5 actions in a row that change nothing).
+* The **planner** is one call in a fresh isolated context: ``{"think", "subtasks", "logic"}``
+  with ``logic`` ``"and"`` or ``"or"`` (default ``"and"`` when left out, as the released code
+  falls back to AND). Nested AND/OR expressions are not supported (ADaPT's own ALFWorld
+  prompt tells the model to avoid OR). An empty list fails the task.
+* The environment is **not** rolled back after a failed executor run (the released ALFWorld
+  code resets the game and replays the successful actions): every agent here plays one
+  uninterrupted pass@1 trajectory, so later executors and planners start from the state the
+  failed attempt left, which their prompts show.
+* Demonstrations: the executor's is rendered by running this agent on the demonstration
+  environment with ``replies["adapt_executor"]`` if present, else the ReAct replies (the root
+  executor solves the demo); the planner's is one planner call at the demonstration's start,
+  replying ``replies["adapt_planner"][0]`` if present, else ReCAP's root decomposition
+  (``replies["recap"][0]``: think and subtasks) with ``"logic": "and"``. A demonstration given
+  as a string is pinned as is in every executor and planner context.
+* Records: messages of every context (one shared seq counter), calls, steps (``node_id`` = the
+  task node), and one tree node per task: ``root``, ``composite`` (decomposed) or
+  ``primitive`` (left to the executor), status ``done`` / ``failed`` / ``open``, with the
+  planner's reply as the node's version. ``EpisodeResult.max_depth`` is the deepest node with
+  the root at 0, as for ReCAP.
+* Message kinds (also the call purposes): executor ``executor_task`` (pinned), ``observation``,
+  ``feedback``; planner ``planner_task`` (pinned); ``repair`` in either. The hints add
+  ``role`` (``executor`` / ``planner``) to ``task`` (the node's task), ``depth`` and
+  ``valid_actions``.
+* The episode ends with ``success`` as soon as the environment reports it, otherwise with
+  ``agent_done`` once the root task is settled (reported done without the environment agreeing,
+  or failed at every depth), or with a cap / error like every agent.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from recap.agent import Agent, DemonstrationError, format_transcript
+from recap.baselines import prompts as P
+from recap.config import AgentConfig, ConfigError
+from recap.env import Demonstration, Environment, InvalidActionError, Reset
+from recap.history import History
+from recap.jsonreply import ReplyFormatError, action_reply, recap_reply
+from recap.runtime import Conversation, Episode, EpisodeEnd
+from recap.scripted import ScriptedClient
+from schemas.records import MessageRecord, NodeRecord, NodeVersion
+
+_DEMOS: dict[tuple[str, ...], str] = {}
+
+
+@dataclass(frozen=True)
+class ADaPTConfig(AgentConfig):
+    """ADaPT settings. ``max_depth``: deepest task level (root = 1; the paper uses 3);
+    ``executor_steps``: replies one executor run may take; ``executor_patience``: invalid
+    actions in a row that end an executor run as failed (None: no limit);
+    ``initial_observation``: also show the episode's first observation in executor and planner
+    prompts once the state has moved on (for benchmarks with partial observations)."""
+
+    max_depth: int = 3
+    executor_steps: int = 20
+    executor_patience: int | None = 5
+    initial_observation: bool = False
+
+    def validate(self) -> None:
+        super().validate()
+        if self.max_depth < 1:
+            raise ConfigError(f"max_depth must be >= 1 (the root task is depth 1), got {self.max_depth}")
+        if self.executor_steps < 1:
+            raise ConfigError(f"executor_steps must be >= 1, got {self.executor_steps}")
+        if self.executor_patience is not None and self.executor_patience < 1:
+            raise ConfigError(f"executor_patience must be >= 1 or null, got {self.executor_patience}")
+
+
+def fork(conv: Conversation, expected_format: str) -> Conversation:
+    """``conv.fork()`` with the message counter really shared.
+
+    Works around ``Conversation.__init__`` taking ``history or History(...)``: an empty History
+    has length 0, is falsy, and the fork's counter-sharing history is replaced by a fresh one
+    (message seqs would restart at 0). A no-op once that is fixed.
+    """
+    forked = conv.fork(expected_format=expected_format)
+    if forked.history.counter is not conv.history.counter:
+        h = conv.history
+        forked.history = History(conv.episode_id, h.window, mode=h.mode, block=h.block, emit=conv.emit, counter=h.counter)
+    return forked
+
+
+# -- reply shapes -----------------------------------------------------------------------------------
+
+
+def executor_reply(obj: Mapping[str, Any]) -> dict[str, Any]:
+    """{"think", "action"} to act, or {"think", "status": "done"|"failed"} to finish."""
+    status = obj.get("status")
+    if status is None:
+        reply = action_reply(obj, with_think=True)
+        return {**reply, "status": None}
+    if not isinstance(status, str) or status.strip().lower() not in ("done", "failed"):
+        raise ReplyFormatError('"status" must be "done" or "failed" (leave it out to take an action)')
+    think = obj.get("think")
+    if not isinstance(think, str):
+        raise ReplyFormatError('the JSON object needs a "think" field (a string)')
+    if obj.get("action") not in (None, ""):
+        raise ReplyFormatError('give either an "action" or a "status", not both')
+    return {"think": think, "action": None, "status": status.strip().lower()}
+
+
+def planner_reply(obj: Mapping[str, Any]) -> dict[str, Any]:
+    """{"think", "subtasks": [...], "logic": "and"|"or"} (logic defaults to "and")."""
+    reply = recap_reply(obj, with_think=True)
+    logic = obj.get("logic", "and")
+    if not isinstance(logic, str) or logic.strip().lower() not in ("and", "or"):
+        raise ReplyFormatError('"logic" must be "and" or "or"')
+    subtasks = tuple(s for s in reply["subtasks"] if s)
+    return {"think": reply["think"], "subtasks": subtasks, "logic": logic.strip().lower()}
+
+
+# -- the task tree ------------------------------------------------------------------------------------
+
+
+@dataclass
+class TaskNode:
+    node_id: int
+    parent: "TaskNode | None"
+    depth: int  # root = 0 (ADaPT's depth is depth + 1)
+    child_index: int
+    task: str
+    kind: str = "primitive"
+    status: str = "open"
+    logic: str | None = None
+    versions: list[NodeVersion] = field(default_factory=list)
+    n_children: int = 0
+
+    def record(self, episode_id: str) -> NodeRecord:
+        return NodeRecord(
+            episode_id=episode_id,
+            node_id=self.node_id,
+            parent_id=self.parent.node_id if self.parent else None,
+            depth=self.depth,
+            child_index=self.child_index,
+            task=self.task,
+            kind=self.kind,
+            status=self.status,
+            versions=tuple(self.versions),
+        )
+
+
+class ADaPTAgent(Agent):
+    style = "adapt"
+    config_cls = ADaPTConfig
+    expected_format = P.EXECUTOR_FORMAT
+    config: ADaPTConfig
+
+    def __init__(self, config: ADaPTConfig | None = None) -> None:
+        super().__init__(config)
+        #: which part a demonstration run renders: "executor" (the whole agent) or "planner"
+        self.demo_part = "executor"
+
+    # -- one episode ------------------------------------------------------------------------------
+    def play(self, ep: Episode, reset: Reset) -> None:
+        st = ep.extra
+        st.update(nodes=[], max_depth=0, rules=ep.env.rules(), initial=reset.observation, last_action=None)
+        st["executor_demo"], st["planner_demo"] = self._demo_texts(ep)
+        root = self._new_node(ep, None, reset.goal)
+        root.kind = "root"
+        if self.demo_mode and self.demo_part == "planner":
+            self._plan(ep, root)
+            raise EpisodeEnd("agent_done", "planner demonstration")
+        if self._solve(ep, root):
+            raise EpisodeEnd("agent_done", "the goal was reported done but the environment does not confirm it")
+        raise EpisodeEnd("agent_done", "the goal failed at every depth")
+
+    def _new_node(self, ep: Episode, parent: TaskNode | None, task: str) -> TaskNode:
+        st = ep.extra
+        depth = 0 if parent is None else parent.depth + 1
+        node = TaskNode(len(st["nodes"]), parent, depth, parent.n_children if parent else 0, task)
+        if parent is not None:
+            parent.n_children += 1
+        st["nodes"].append(node)
+        st["max_depth"] = max(st["max_depth"], depth)
+        return node
+
+    def _solve(self, ep: Episode, node: TaskNode) -> bool:
+        """ADaPT(task, depth): execute first; decompose only on failure, above the depth cap."""
+        if self._execute(ep, node):
+            node.status = "done"
+            return True
+        if node.depth + 1 >= self.config.max_depth:
+            node.status = "failed"
+            return False
+        subtasks, logic = self._plan(ep, node)
+        if node.kind != "root":
+            node.kind = "composite"
+        node.logic = logic
+        ok = False
+        if subtasks:
+            ok = logic == "and"
+            for sub in subtasks:
+                child_ok = self._solve(ep, self._new_node(ep, node, sub))
+                if logic == "and" and not child_ok:
+                    ok = False
+                    break
+                if logic == "or" and child_ok:
+                    ok = True
+                    break
+        node.status = "done" if ok else "failed"
+        return ok
+
+    # -- executor ---------------------------------------------------------------------------------
+    def _situation(self, ep: Episode) -> dict[str, Any]:
+        st = ep.extra
+        moved = st["last_action"] is not None
+        return {
+            "rules": st["rules"],
+            "observation": ep.driver.observation,
+            "last_action": st["last_action"],
+            "initial_observation": st["initial"] if self.config.initial_observation and moved else None,
+            "preamble": not self.demo_mode,
+        }
+
+    def _context(self, ep: Episode, node: TaskNode, role: str) -> dict[str, Any]:
+        valid = ep.driver.valid_actions
+        return {"role": role, "task": node.task, "depth": node.depth, "valid_actions": list(valid) if valid is not None else None}
+
+    def _open(self, ep: Episode, node: TaskNode | None, demo: str | None, expected_format: str) -> Conversation:
+        """The root executor works in the episode's main context (its demonstration is already
+        pinned there); every other executor run and every planner call gets a fresh one."""
+        if node is not None and node.parent is None:
+            return ep.conv
+        conv = fork(ep.conv, expected_format)
+        if demo:
+            conv.pin("demonstration", demo)
+        return conv
+
+    def _execute(self, ep: Episode, node: TaskNode) -> bool:
+        cfg, st, d = self.config, ep.extra, ep.driver
+        conv = self._open(ep, node, st["executor_demo"], P.EXECUTOR_FORMAT)
+        conv.pin("executor_task", P.executor_task_prompt(task=node.task, **self._situation(ep)))
+        prompt: str | None = None
+        kind = "executor_task"
+        streak = 0
+        for _ in range(cfg.executor_steps):
+            reply, _seq = conv.ask(prompt, kind, executor_reply, node_id=node.node_id, context=self._context(ep, node, "executor"))
+            if reply["status"] is not None:
+                return reply["status"] == "done"
+            action = reply["action"]
+            was_valid = d.is_valid(action)
+            try:
+                d.execute(action, node.node_id)
+            except InvalidActionError:
+                prompt, kind = P.invalid_action_prompt(action, d.observation), "feedback"
+                streak += 1
+            else:
+                st["last_action"] = action
+                prompt, kind = P.observation_prompt(d.observation), "observation"
+                streak = 0 if was_valid else streak + 1
+            if cfg.executor_patience is not None and streak >= cfg.executor_patience:
+                return False
+        return False
+
+    # -- planner ----------------------------------------------------------------------------------
+    def _plan(self, ep: Episode, node: TaskNode) -> tuple[tuple[str, ...], str]:
+        conv = self._open(ep, None, ep.extra["planner_demo"], P.PLANNER_FORMAT)
+        conv.pin("planner_task", P.planner_task_prompt(task=node.task, **self._situation(ep)))
+        reply, seq = conv.ask(None, "planner_task", planner_reply, node_id=node.node_id, context=self._context(ep, node, "planner"))
+        node.versions.append(NodeVersion(len(node.versions), reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq))
+        return reply["subtasks"], reply["logic"]
+
+    # -- end of episode ---------------------------------------------------------------------------
+    def max_depth(self, ep: Episode) -> int:
+        return int(ep.extra.get("max_depth", 0))
+
+    def finish(self, ep: Episode) -> None:
+        for node in ep.extra.get("nodes", []):
+            ep.emit(node.record(ep.conv.episode_id))
+
+    # -- demonstrations ---------------------------------------------------------------------------
+    def demo_config(self) -> ADaPTConfig:
+        cfg = super().demo_config()
+        assert isinstance(cfg, ADaPTConfig)
+        return dataclasses.replace(cfg, executor_steps=100_000, executor_patience=None)
+
+    def demonstration_text(self, env: Environment) -> str | None:
+        """The executor's demonstration (pinned in the main context); the planner's is rendered
+        too, so a demonstration that does not work fails before the episode starts."""
+        demo = env.demonstration()
+        if demo is None:
+            return None
+        text = self.render_demonstration(demo)
+        self.render_planner_demonstration(demo)
+        return text
+
+    def _key(self, part: str, demo: Demonstration) -> tuple[str, ...]:
+        return (part, type(self).__name__, demo.name, self.config.to_json())
+
+    def render_demonstration(self, demo: Demonstration) -> str:
+        key = self._key("executor", demo)
+        if key not in _DEMOS:
+            replies = demo.replies.get("adapt_executor") or demo.replies.get("react")
+            if replies is None:
+                raise DemonstrationError(f"demonstration {demo.name!r} has no 'adapt_executor' or 'react' replies for the ADaPT executor")
+            messages, result = self._render_run(demo, list(replies), "executor")
+            if not result.success:
+                raise DemonstrationError(f"demonstration {demo.name!r} does not reach the goal with the ADaPT executor ({result.end_reason}: {result.error})")
+            _DEMOS[key] = format_transcript(messages)
+        return _DEMOS[key]
+
+    def render_planner_demonstration(self, demo: Demonstration) -> str:
+        key = self._key("planner", demo)
+        if key not in _DEMOS:
+            messages, result = self._render_run(demo, [planner_demo_reply(demo)], "planner")
+            if result.end_reason != "agent_done" or result.llm_calls != 1:
+                raise DemonstrationError(f"the ADaPT planner reply of demonstration {demo.name!r} is not usable ({result.end_reason}: {result.error})")
+            prompt, reply = (m.content for m in messages)
+            _DEMOS[key] = P.planner_transcript(prompt, reply)
+        return _DEMOS[key]
+
+    def _render_run(self, demo: Demonstration, replies: list[Any], part: str) -> tuple[list[MessageRecord], Any]:
+        agent = type(self)(self.demo_config())
+        agent.demo_mode = True
+        agent.demo_part = part
+        messages: list[MessageRecord] = []
+
+        def keep(record: Any) -> None:
+            if isinstance(record, MessageRecord):
+                messages.append(record)
+
+        result = agent.run(demo.make_env(), ScriptedClient(replies, model="demonstration"), episode_id=f"demo:{demo.name}:{part}", emit=keep, demonstration=False)
+        return messages, result
+
+    def _demo_texts(self, ep: Episode) -> tuple[str | None, str | None]:
+        """(executor demonstration, planner demonstration) for this episode's contexts."""
+        pinned = [e.message.content for e in ep.conv.history.entries() if e.pinned and e.kind == "demonstration"]
+        if not pinned:
+            return None, None
+        text = pinned[0]
+        demo = ep.env.demonstration()
+        if demo is not None and _DEMOS.get(self._key("executor", demo)) == text:
+            return text, self.render_planner_demonstration(demo)
+        return text, text
+
+
+def planner_demo_reply(demo: Demonstration) -> dict[str, Any]:
+    """The planner's demonstration reply: ``adapt_planner`` if the demonstration has one, else
+    ReCAP's root decomposition of the same goal, combined with AND."""
+    if demo.replies.get("adapt_planner"):
+        return dict(demo.replies["adapt_planner"][0])
+    recap = demo.replies.get("recap")
+    if not recap:
+        raise DemonstrationError(f"demonstration {demo.name!r} has no 'adapt_planner' or 'recap' replies to derive the ADaPT planner's example")
+    first = recap[0]
+    return {"think": first.get("think") or "", "subtasks": list(first["subtasks"]), "logic": "and"}

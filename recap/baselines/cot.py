@@ -1,0 +1,82 @@
+"""CoT (chain-of-thought): one call returns the reasoning and the whole plan
+``{"think", "actions": [...]}``, which is then executed open-loop.
+
+This is how Robotouille's I/O-CoT agent is used: it sees the initial state, the goal and the
+valid actions once, writes the complete action sequence (reasoning about the state each action
+leads to), and is never asked again. Policy decisions (documented, configurable):
+
+* each planned action is looked up exactly among the *current* valid actions and executed;
+* an action that is not valid — ``reject`` mode: ``on_invalid="stop"`` (default) records the
+  rejected attempt and ends the episode with ``agent_done``: an open-loop plan has no way to
+  recover, and Robotouille's I/O agent also terminates on an invalid plan. ``on_invalid="skip"``
+  records it and goes on with the next planned action. ``step`` mode: the action is sent to the
+  environment like any other (the game answers "Nothing happens.") and the plan goes on;
+* the plan running out before the goal is reached ends the episode with ``agent_done``;
+  the step cap applies as for every agent (a plan longer than the cap ends with ``step_cap``).
+
+Messages: the pinned ``task`` prompt and the reply (plus ``repair`` messages); no observation
+is ever sent back, since the model is not asked again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+from typing import ClassVar, Literal
+
+from recap.agent import Agent
+from recap.baselines import prompts as P
+from recap.baselines.react import flat_context
+from recap.config import AgentConfig, ConfigError
+from recap.env import InvalidActionError, Reset
+from recap.jsonreply import plan_reply
+from recap.runtime import Episode, EpisodeEnd
+
+
+@dataclass(frozen=True)
+class PlanConfig(AgentConfig):
+    """CoT / Standard settings: what an invalid planned action does in ``reject`` mode."""
+
+    on_invalid: Literal["stop", "skip"] = "stop"
+
+    def validate(self) -> None:
+        super().validate()
+        if self.on_invalid not in ("stop", "skip"):
+            raise ConfigError(f"on_invalid must be 'stop' or 'skip', got {self.on_invalid!r}")
+
+
+class CoTAgent(Agent):
+    style = "cot"
+    config_cls = PlanConfig
+    expected_format = P.plan_format(True)
+    #: Standard is CoT without the think field
+    with_think: ClassVar[bool] = True
+    config: PlanConfig
+
+    def reply_format(self) -> str:
+        return P.plan_format(self.with_think)
+
+    def play(self, ep: Episode, reset: Reset) -> None:
+        ep.conv.pin(
+            "task",
+            P.plan_task_prompt(
+                rules=ep.env.rules(),
+                observation=reset.observation,
+                goal=reset.goal,
+                with_think=self.with_think,
+                preamble=not self.demo_mode,
+            ),
+        )
+        parse = partial(plan_reply, with_think=self.with_think)
+        reply, _ = ep.conv.ask(None, "task", parse, context=flat_context(ep, reset.goal))
+        actions = reply["actions"]
+        for i, action in enumerate(actions, 1):
+            try:
+                ep.driver.execute(action)
+            except InvalidActionError:
+                if self.config.on_invalid == "stop":
+                    raise EpisodeEnd(
+                        "agent_done",
+                        f"planned action {i} of {len(actions)} ({action!r}) is not a valid action; the plan stops",
+                    ) from None
+        raise EpisodeEnd("agent_done", f"the plan's {len(actions)} action(s) ran out before the goal was reached")

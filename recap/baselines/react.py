@@ -1,0 +1,107 @@
+"""ReAct (Yao et al., 2023): interleave a thought, one action and its observation, in one flat
+context with a sliding window.
+
+One episode:
+
+* pinned: the demonstration (when there is one) and the task prompt (system text with the reply
+  format, the environment rules, the first observation and the goal);
+* each reply ``{"think", "action"}`` is looked up exactly among the valid actions. A valid
+  action is executed and the next user message carries the new observation;
+* an action that is not valid: in ``reject`` mode (Robotouille) it never reaches the
+  environment and the next user message is error feedback naming it, followed by the unchanged
+  observation (Robotouille's ReAct protocol); in ``step`` mode (ALFWorld) it is sent to the
+  environment, whose answer ("Nothing happens.") is the next observation;
+* it runs until the episode ends: success, the step cap, the call cap, JSON failures, a model
+  error or a budget. ``invalid_streak`` optionally reproduces Robotouille's give-up rule.
+
+Message kinds (also the call purposes): ``task`` (pinned), ``observation``, ``feedback`` (after
+a rejected action), ``repair``. Hints for offline models: ``task`` (the goal), ``depth`` 0,
+``valid_actions``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, ClassVar
+
+from recap.agent import Agent
+from recap.baselines import prompts as P
+from recap.config import AgentConfig, ConfigError
+from recap.env import InvalidActionError, Reset
+from recap.jsonreply import action_reply
+from recap.runtime import Episode, EpisodeEnd
+
+
+@dataclass(frozen=True)
+class ReActConfig(AgentConfig):
+    """ReAct / Act settings.
+
+    ``invalid_streak``: Robotouille's ReAct stops proposing after this many consecutive rejected
+    actions (a "round"; it uses 5) and ends the episode after ``invalid_rounds`` such rounds (it
+    uses 3). None (default) switches the rule off: the paper states no such rule, and the call
+    cap bounds the episode anyway.
+    """
+
+    invalid_streak: int | None = None
+    invalid_rounds: int = 3
+
+    def validate(self) -> None:
+        super().validate()
+        if self.invalid_streak is not None and self.invalid_streak < 1:
+            raise ConfigError(f"invalid_streak must be >= 1 or null, got {self.invalid_streak}")
+        if self.invalid_rounds < 1:
+            raise ConfigError(f"invalid_rounds must be >= 1, got {self.invalid_rounds}")
+
+
+def flat_context(ep: Episode, goal: str) -> dict[str, Any]:
+    """Hints for offline test models: flat agents work on the goal at depth 0."""
+    valid = ep.driver.valid_actions
+    return {"task": goal, "depth": 0, "valid_actions": list(valid) if valid is not None else None}
+
+
+class ReActAgent(Agent):
+    style = "react"
+    config_cls = ReActConfig
+    expected_format = P.action_format(True)
+    #: Act is ReAct without the think field
+    with_think: ClassVar[bool] = True
+    config: ReActConfig
+
+    def reply_format(self) -> str:
+        return P.action_format(self.with_think)
+
+    def play(self, ep: Episode, reset: Reset) -> None:
+        cfg, d = self.config, ep.driver
+        ep.conv.pin(
+            "task",
+            P.action_task_prompt(
+                rules=ep.env.rules(),
+                observation=reset.observation,
+                goal=reset.goal,
+                with_think=self.with_think,
+                preamble=not self.demo_mode,
+            ),
+        )
+        parse = partial(action_reply, with_think=self.with_think)
+        prompt: str | None = None  # the first call answers the pinned task prompt
+        kind = "task"
+        streak = rounds = 0
+        while True:
+            reply, _ = ep.conv.ask(prompt, kind, parse, context=flat_context(ep, reset.goal))
+            action = reply["action"]
+            try:
+                d.execute(action)
+            except InvalidActionError:
+                prompt, kind = P.invalid_action_prompt(action, d.observation), "feedback"
+                streak += 1
+                if cfg.invalid_streak is not None and streak >= cfg.invalid_streak:
+                    streak, rounds = 0, rounds + 1
+                    if rounds >= cfg.invalid_rounds:
+                        raise EpisodeEnd(
+                            "agent_done",
+                            f"{rounds} rounds of {cfg.invalid_streak} consecutive invalid actions",
+                        ) from None
+                continue
+            streak = 0
+            prompt, kind = P.observation_prompt(d.observation), "observation"
