@@ -6,6 +6,11 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup_venv.sh "alfworld,test" || exit 1
+# the report's browser check renders the HTML in headless Chromium (a Debian package)
+if ! command -v chromium >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  echo "installing chromium for the report screenshot test"
+  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null 2>&1 || echo "chromium could not be installed; the browser test will be skipped" >&2
+fi
 export LITELLM_LOCAL_MODEL_COST_MAP=True
 export RAY_USAGE_STATS_ENABLED=0
 marker="not slow and not realmodel"

@@ -1,0 +1,186 @@
+"""``recap report`` and ``recap sql``: the command-line faces of the reports package.
+
+The pipeline CLI hands its remaining arguments to :func:`report_main` or :func:`sql_main`; both
+return an exit status (0 ok, 1 a problem with the runs or the query, 2 bad usage) and print
+one-line errors, never tracebacks.
+
+    recap report RUN_DIR [RUN_DIR ...] [--out DIR] [--format md,html,tex,csv]
+                 [--episodes ID[,ID...]] [--viewer-max N] [--title TEXT]
+    recap sql RUN_DIR [RUN_DIR ...] "QUERY" [--csv | --json] [--max-rows N]
+    recap sql RUN_DIR [RUN_DIR ...] --file QUERY.sql
+    recap sql RUN_DIR "@failure_modes"        # a report query from reports/sql/ by name
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, TextIO
+
+from reports.build import FORMATS, ReportOptions, build_report, parse_formats, write_report
+from reports.render_csv import result_csv
+from reports.viewer import DEFAULT_EPISODES
+from reports.views import ReportError, Result, load_sql, open_runs_checked, run_query
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that raises instead of exiting, so the mains can return a status."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise _UsageError(f"{self.prog}: {message}")
+
+
+class _UsageError(Exception):
+    pass
+
+
+def _report_parser() -> _Parser:
+    p = _Parser(prog="recap report", description="Write a report (Markdown, HTML, LaTeX, CSV) over one or more run folders.")
+    p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run folder(s); several are reported together")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/report for one run; required for several)")
+    p.add_argument("--format", default=",".join(FORMATS), metavar="LIST", help=f"comma-separated formats among {','.join(FORMATS)} (default: all)")
+    p.add_argument("--episodes", metavar="IDS", help="comma-separated episode ids to show in the HTML viewer (default: a sample)")
+    p.add_argument("--viewer-max", type=int, default=DEFAULT_EPISODES, metavar="N", help=f"episodes in the viewer sample (default {DEFAULT_EPISODES}; 0 = none)")
+    p.add_argument("--title", default="recap-eval report", help="report title")
+    return p
+
+
+def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+    out, err = stdout or sys.stdout, stderr or sys.stderr
+    try:
+        args = _report_parser().parse_args(list(argv))
+        formats = parse_formats(args.format)
+        if args.viewer_max < 0:
+            raise ReportError("--viewer-max must be >= 0")
+        if args.out is None and len(args.run_dirs) > 1:
+            raise ReportError("--out is required when reporting several run folders")
+        episodes = tuple(e.strip() for e in args.episodes.split(",") if e.strip()) if args.episodes else None
+        options = ReportOptions(formats=formats, episodes=episodes, viewer_max=args.viewer_max, title=args.title)
+        report = build_report(args.run_dirs, options)
+        out_dir = Path(args.out) if args.out else Path(args.run_dirs[0]) / "report"
+        written = write_report(report, out_dir, formats)
+    except _UsageError as exc:
+        print(str(exc), file=err)
+        return 2
+    except ReportError as exc:
+        print(f"error: {exc}", file=err)
+        return 1
+    for s in report.skipped:
+        print(f"warning: {s.line()}", file=err)
+    print(f"wrote {len(written)} files to {out_dir} ({', '.join(formats)})", file=out)
+    for name in ("report.html", "report.md"):
+        if (out_dir / name).exists() and name.split(".")[1] in formats:
+            print(f"  {out_dir / name}", file=out)
+    return 0
+
+
+def _sql_parser() -> _Parser:
+    p = _Parser(prog="recap sql", description="Run a read-only SQL query over the tables and views of one or more run folders.")
+    p.add_argument("args", nargs="+", metavar="RUN_DIR ... QUERY", help="run folder(s), then the query (or @name for reports/sql/name.sql)")
+    p.add_argument("--file", metavar="SQL", help="read the query from this file (then every positional is a run folder)")
+    fmt = p.add_mutually_exclusive_group()
+    fmt.add_argument("--csv", action="store_true", help="print CSV")
+    fmt.add_argument("--json", action="store_true", help="print a JSON array of objects")
+    p.add_argument("--max-rows", type=int, default=100, metavar="N", help="rows printed in table output (default 100)")
+    return p
+
+
+def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+    out, err = stdout or sys.stdout, stderr or sys.stderr
+    try:
+        args = _sql_parser().parse_args(list(argv))
+        if args.file:
+            run_dirs, query = args.args, _read_query_file(args.file)
+        else:
+            if len(args.args) < 2:
+                raise _UsageError("recap sql: give at least one RUN_DIR and a QUERY")
+            run_dirs, query = args.args[:-1], args.args[-1]
+            if query.startswith("@"):
+                query = load_sql(query[1:])
+        con, skipped = open_runs_checked(run_dirs)
+        try:
+            result = run_query(con, query)
+        finally:
+            con.close()
+    except _UsageError as exc:
+        print(str(exc), file=err)
+        return 2
+    except ReportError as exc:
+        print(f"error: {exc}", file=err)
+        return 1
+    for s in skipped:
+        print(f"warning: {s.line()}", file=err)
+    if args.csv:
+        out.write(result_csv(result))
+    elif args.json:
+        out.write(json.dumps([{k: _json_value(v) for k, v in zip(result.columns, r)} for r in result.rows], indent=1, default=str) + "\n")
+    else:
+        out.write(format_table(result, max_rows=args.max_rows))
+    return 0
+
+
+def _read_query_file(path: str) -> str:
+    try:
+        return Path(path).read_text()
+    except OSError as exc:
+        raise ReportError(f"cannot read query file {path}: {exc.strerror or exc}") from None
+
+
+def _json_value(v: Any) -> Any:
+    if isinstance(v, float) and (math.isnan(v) or math.isinf(v)):
+        return None
+    if isinstance(v, tuple):
+        return list(v)
+    return v
+
+
+def _text(v: Any, width: int) -> str:
+    if v is None:
+        s = "NULL"
+    elif isinstance(v, float):
+        s = f"{v:.6g}"
+    else:
+        s = str(v)
+    s = " ".join(s.split()) if "\n" in s else s
+    return s if len(s) <= width else s[: width - 1] + "…"
+
+
+def format_table(result: Result, *, max_rows: int = 100, width: int = 60) -> str:
+    """An aligned text table, numbers right-aligned, at most ``max_rows`` rows."""
+    shown = result.rows[: max(max_rows, 0)]
+    cells = [[_text(v, width) for v in row] for row in shown]
+    def is_number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    numeric = [
+        any(r[i] is not None for r in shown) and all(is_number(r[i]) for r in shown if r[i] is not None)
+        for i in range(len(result.columns))
+    ]
+    widths = [max([len(c)] + [len(row[i]) for row in cells]) for i, c in enumerate(result.columns)]
+
+    def line(values: list[str]) -> str:
+        return " | ".join(v.rjust(w) if numeric[i] else v.ljust(w) for i, (v, w) in enumerate(zip(values, widths))).rstrip()
+
+    lines = [line(list(result.columns)), "-+-".join("-" * w for w in widths)]
+    lines += [line(row) for row in cells]
+    n = len(result.rows)
+    more = n - len(shown)
+    lines.append(f"({n} row{'s' if n != 1 else ''}" + (f"; {more} not shown, use --max-rows, --csv or --json)" if more > 0 else ")"))
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m reports.commands report|sql ...`` (the pipeline CLI calls the two mains)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in ("report", "sql"):
+        print("usage: python -m reports.commands {report,sql} ...", file=sys.stderr)
+        return 2
+    return (report_main if argv[0] == "report" else sql_main)(argv[1:])
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,167 @@
+"""One self-contained HTML page: inline CSS, inline SVG plots, the episode viewer and a few lines
+of JavaScript (no network, no external files), so a report can be mailed or archived as is.
+
+The page records script errors in ``<body data-js-errors>`` and sets ``data-report-ready`` when
+its script has run; the headless-browser test reads both.
+"""
+
+from __future__ import annotations
+
+from html import escape
+
+from reports.model import Report, Table, format_value
+from reports.viewer import anchor
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#222;background:#fafafa}
+main{max-width:1200px;margin:0 auto;padding:1rem 1.5rem 4rem}
+h1{font-size:1.6rem}h2{border-bottom:2px solid #4e79a7;padding-bottom:.2rem;margin-top:2.5rem}
+h3{margin-top:1.6rem}nav ul{display:flex;flex-wrap:wrap;gap:.4rem 1.2rem;list-style:none;padding:0}
+.intro,.note{color:#555;font-size:.9rem;max-width:70rem}
+.scroll{overflow-x:auto}
+table.data{border-collapse:collapse;font-size:.82rem;margin:.4rem 0 1rem;background:#fff}
+table.data th,table.data td{border:1px solid #ddd;padding:.25rem .45rem;text-align:left;vertical-align:top}
+table.data th{background:#eef2f7}td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
+tr.invalid td{background:#fff4f4}
+figure{margin:1rem 0;background:#fff;border:1px solid #e5e5e5;display:inline-block}
+figcaption{font-size:.8rem;color:#555;padding:.2rem .5rem}
+.warn{background:#fff3cd;border:1px solid #e0c36a;padding:.5rem .8rem}
+.episode{background:#fff;border:1px solid #ddd;padding:.4rem 1rem;margin:1rem 0}
+.badge{font-size:.75rem;padding:.1rem .4rem;border-radius:.3rem;color:#fff;vertical-align:middle}
+.badge.ok{background:#59a14f}.badge.fail{background:#e15759}
+dl.meta{display:flex;flex-wrap:wrap;gap:.2rem 1rem;font-size:.82rem}dl.meta dt{font-weight:600}dl.meta dd{margin:0}
+ul.tree{list-style:none;padding-left:1.2rem;border-left:1px dotted #bbb}ul.tree.root{border-left:none;padding-left:0}
+.node{margin:.3rem 0}.ntitle{font-weight:600}.ntag,.vtag,.mtag{color:#666;font-size:.78rem}
+.node.failed>.ntitle{color:#c0392b}.node.open>.ntitle{color:#b8860b}
+ol.versions{margin:.1rem 0 .2rem;padding-left:1.2rem;font-size:.85rem}
+.think{font-style:italic;color:#333}ol.subtasks{margin:.1rem 0;padding-left:1.4rem}
+pre{white-space:pre-wrap;word-break:break-word;margin:.1rem 0;font-size:.8rem}
+ol.messages{list-style:none;padding:0}.msg{border-left:3px solid #4e79a7;padding-left:.5rem;margin:.4rem 0}
+.msg.assistant{border-left-color:#f28e2b}.window-panel{border:2px solid #4e79a7;padding:.5rem;margin:.5rem 0;background:#f5f8fc}
+button.show-window{font-size:.75rem;cursor:pointer}
+"""
+
+ERROR_HOOK = """
+window.addEventListener('error', function (e) {
+  var b = document.body || document.documentElement;
+  var prev = b.getAttribute('data-js-errors') || '';
+  b.setAttribute('data-js-errors', prev + (prev ? ' | ' : '') + (e.message || 'error'));
+});
+"""
+
+SCRIPT = """
+(function () {
+  function expand(spec) {
+    var out = [];
+    spec.split(',').forEach(function (part) {
+      if (!part) return;
+      var ab = part.split('-');
+      var a = parseInt(ab[0], 10), b = ab.length > 1 ? parseInt(ab[1], 10) : a;
+      for (var i = a; i <= b; i++) out.push(i);
+    });
+    return out;
+  }
+  document.querySelectorAll('button.show-window').forEach(function (btn) {
+    btn.addEventListener('click', function () {
+      var id = btn.getAttribute('data-target');
+      var panel = document.getElementById(id + '-window');
+      var list = document.getElementById(id + '-messages');
+      var seqs = expand(btn.getAttribute('data-seqs'));
+      panel.innerHTML = '';
+      var head = document.createElement('p');
+      head.textContent = 'Window of call ' + btn.closest('tr').firstElementChild.textContent +
+        ': ' + seqs.length + ' messages (' + btn.getAttribute('data-seqs') + ')' +
+        (btn.getAttribute('data-response') ? '; reply stored as message ' + btn.getAttribute('data-response') : '');
+      panel.appendChild(head);
+      var ol = document.createElement('ol');
+      ol.className = 'messages';
+      seqs.forEach(function (s) {
+        var li = list ? list.querySelector('li[data-seq="' + s + '"]') : null;
+        if (li) { ol.appendChild(li.cloneNode(true)); }
+        else { var miss = document.createElement('li'); miss.textContent = '#' + s + ' (not in the messages table)'; ol.appendChild(miss); }
+      });
+      panel.appendChild(ol);
+      panel.hidden = false;
+      panel.scrollIntoView({block: 'nearest'});
+    });
+  });
+  // deep link: report.html#call-<episode anchor>-<call index> opens that call's window
+  var m = /^#(call-.+)$/.exec(window.location.hash);
+  if (m) {
+    var target = document.getElementById(m[1]);
+    if (target) {
+      var d = target.closest('details');
+      if (d) d.open = true;
+      target.click();
+    }
+  }
+  var rendered = 0;
+  document.querySelectorAll('svg.chart').forEach(function (el) {
+    var r = el.getBoundingClientRect();
+    if (r.width > 0 && r.height > 0 && el.querySelectorAll('.bar, .line').length > 0) rendered++;
+  });
+  document.body.setAttribute('data-plots-rendered', String(rendered));
+  document.body.setAttribute('data-report-ready', '1');
+})();
+"""
+
+
+def _cell(kind: str, value: object, viewer: set[str]) -> str:
+    if kind == "list" and isinstance(value, list):
+        return ", ".join(
+            f'<a href="#{anchor(str(v))}">{escape(str(v))}</a>' if str(v) in viewer else escape(str(v)) for v in value
+        )
+    return escape(format_value(kind, value))
+
+
+def table_html(t: Table, viewer: set[str]) -> str:
+    head = "".join(f"<th>{escape(c.header)}</th>" for c in t.columns)
+    body = []
+    for row in t.rows:
+        cells = "".join(
+            f'<td class="{"num" if c.kind not in ("text", "list") else ""}">{_cell(c.kind, row.get(c.key), viewer)}</td>'
+            for c in t.columns
+        )
+        body.append(f"<tr>{cells}</tr>")
+    empty = f'<tr><td colspan="{len(t.columns)}">no rows</td></tr>' if not t.rows else ""
+    note = f'<p class="note">{escape(t.note)}</p>' if t.note else ""
+    return (
+        f'<h3 id="t-{escape(t.name)}">{escape(t.title)}</h3>{note}'
+        f'<div class="scroll"><table class="data" data-source="{escape(t.source)}.sql"><thead><tr>{head}</tr></thead>'
+        f"<tbody>{''.join(body)}{empty}</tbody></table></div>"
+    )
+
+
+def render_html(report: Report) -> str:
+    viewer = set(report.viewer_episodes)
+    nav = "".join(f'<li><a href="#s-{s.key}">{escape(s.title)}</a></li>' for s in report.sections)
+    if report.viewer_html:
+        nav += '<li><a href="#viewer">Episode viewer</a></li>'
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<title>{escape(report.title)}</title><style>{CSS}</style><script>{ERROR_HOOK}</script></head>",
+        "<body><main>",
+        f"<h1>{escape(report.title)}</h1>",
+        '<p class="intro">Run folders: ' + ", ".join(f"<code>{escape(d)}</code>" for d in report.run_dirs) + "</p>",
+    ]
+    if report.skipped:
+        parts.append('<div class="warn"><strong>Unreadable part files were skipped:</strong><ul>'
+                     + "".join(f"<li><code>{escape(s.path)}</code>: {escape(s.error)}</li>" for s in report.skipped)
+                     + "</ul></div>")
+    parts.append(f"<nav><ul>{nav}</ul></nav>")
+    for s in report.sections:
+        parts.append(f'<section id="s-{s.key}"><h2>{escape(s.title)}</h2>')
+        if s.intro:
+            parts.append(f'<p class="intro">{escape(s.intro)}</p>')
+        for p in s.plots:
+            parts.append(f'<figure id="p-{escape(p.name)}" data-source="{escape(p.source)}.sql">{p.svg}<figcaption>{escape(p.title)}'
+                         f'{(" — " + escape(p.note)) if p.note else ""}</figcaption></figure>')
+        for t in s.tables:
+            parts.append(table_html(t, viewer))
+        parts.append("</section>")
+    if report.viewer_html:
+        parts.append(report.viewer_html)
+    parts.append(f"</main><script>{SCRIPT}</script></body></html>")
+    return "\n".join(parts)

@@ -1,0 +1,443 @@
+"""The report's sections: each runs its SQL files and lays the results out as tables and plots.
+
+Numbers come only from the SQL in ``reports/sql/`` (the cost permutation test is computed from
+the per-pair differences that ``paired_methods.sql`` returns). Pivoting a long SQL result into
+the paper's layout (methods x splits) happens here; the long results themselves go to CSV.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import duckdb
+
+from reports import paper, svg
+from reports.model import Column, Plot, Section, Table
+from reports.stats import paired_permutation_p
+from reports.views import Result, named_query
+
+Query = Callable[[str], Result]
+
+
+def make_query(con: duckdb.DuckDBPyConnection, results: dict[str, Result]) -> Query:
+    """Run each named SQL file once; keep every result for the CSV output."""
+
+    def q(name: str) -> Result:
+        if name not in results:
+            results[name] = named_query(con, name)
+        return results[name]
+
+    return q
+
+
+def _unique(values: Iterable[Any]) -> list[Any]:
+    seen: dict[Any, None] = {}
+    for v in values:
+        seen.setdefault(v, None)
+    return list(seen)
+
+
+def _rate_ci(row: dict[str, Any]) -> tuple[int, int, float, float]:
+    return (row["successes"], row["episodes"], row["ci_low"], row["ci_high"])
+
+
+def _is_test_double(model_label: str) -> bool:
+    return model_label.endswith(" (test double)")
+
+
+def _row_order(key: tuple[str, str]) -> tuple[bool, str, str]:
+    """Pivot rows: real models first, then test doubles; by model, then method."""
+    return (_is_test_double(key[0]), key[0], key[1])
+
+
+def _series_label(model: str, arm: str, models: list[str]) -> str:
+    return arm if len(models) <= 1 else f"{arm} · {model}"
+
+
+# -- overview -----------------------------------------------------------------------------------
+
+
+def overview(q: Query) -> Section:
+    sec = Section("overview", "Overview")
+    ov = q("overview").dicts()[0]
+    labels = {
+        "run_folders": "run folders",
+        "runs": "runs (run ids with episodes)",
+        "attempts": "episode rows (attempts)",
+        "units": "units (latest attempt each; the rows every table counts)",
+        "successes": "successes",
+        "test_double_units": "units run by a test-double model",
+        "llm_calls": "LLM calls (all attempts)",
+        "spend_usd": "spend, all LLM calls (USD)",
+        "steps": "environment step attempts",
+        "skipped_part_files": "unreadable part files skipped",
+    }
+    rows = [{"metric": labels[k], "value": f"${v:,.4f}" if k == "spend_usd" else f"{v:,}"} for k, v in ov.items()]
+    sec.tables.append(Table("overview", "What this report covers", [Column("metric", "metric"), Column("value", "value")], rows, "overview"))
+    sec.tables.append(
+        Table(
+            "runs",
+            "Runs",
+            [
+                Column("run_id", "run"), Column("starts", "starts", "int"), Column("first_started", "first started"),
+                Column("host", "host"), Column("git_revision", "git revision"), Column("spec_hash", "spec hash"),
+                Column("units", "units", "int"), Column("successes", "successes", "int"),
+            ],
+            q("runs").dicts(),
+            "runs",
+        )
+    )
+    skipped = q("skipped_parts").dicts()
+    if skipped:
+        sec.tables.append(
+            Table(
+                "skipped_parts",
+                "Skipped part files (unreadable; their rows are not in any table)",
+                [Column("table", "table"), Column("path", "file"), Column("error", "error")],
+                skipped,
+                "skipped_parts",
+            )
+        )
+    events = q("events_summary").dicts()
+    if events:
+        sec.tables.append(
+            Table(
+                "events",
+                "Pipeline events",
+                [Column("source", "source"), Column("kind", "kind"), Column("severity", "severity"), Column("events", "events", "int"), Column("episodes", "episodes", "int")],
+                events,
+                "events_summary",
+            )
+        )
+    return sec
+
+
+# -- success rates -------------------------------------------------------------------------------
+
+
+def success(q: Query) -> Section:
+    sec = Section(
+        "success",
+        "Success rates",
+        "pass@1 over the latest attempt of every unit; cells are success % [95% Wilson interval] "
+        "successes/episodes. Paired tests use units both arms ran (same task, instance and seed).",
+    )
+    main = q("success_by_split").dicts()
+    splits = _unique(r["env_split"] for r in main)
+    keys = sorted(_unique((r["model_label"], r["arm"]) for r in main), key=_row_order)
+    refs = {
+        (r["model_label"], r["arm"], r["env_split"]): paper.main_reference(r["env_split"], r["method"])
+        if r["ablation"] == "original" and not _is_test_double(r["model_label"]) else None
+        for r in main
+    }
+    cols = [Column("model", "model"), Column("arm", "method")]
+    for s in splits:
+        cols.append(Column(s, s, "rate_ci"))
+        if any(refs[(m, a, s)] is not None for (m, a) in keys if (m, a, s) in refs):
+            cols.append(Column(f"{s} paper", "paper", "ref"))
+    rows = []
+    for m, a in keys:
+        row: dict[str, Any] = {"model": m, "arm": a}
+        for r in main:
+            if (r["model_label"], r["arm"]) == (m, a):
+                row[r["env_split"]] = _rate_ci(r)
+                row[f"{r['env_split']} paper"] = refs[(m, a, r["env_split"])]
+        rows.append(row)
+    sec.tables.append(Table("main", "Success rate by method and environment split (paper main table)", cols, rows, "success_by_split", "paper: the ReCAP paper's pass@1 (GPT-4o; ADaPT on ALFWorld GPT-3.5)."))
+
+    models = _unique(r["model_label"] for r in main)
+    arms = _unique(_series_label(r["model_label"], r["arm"], models) for r in main)
+    values = {(r["env_split"], _series_label(r["model_label"], r["arm"], models)): 100 * r["success_rate"] for r in main}
+    errors = {(r["env_split"], _series_label(r["model_label"], r["arm"], models)): (100 * r["ci_low"], 100 * r["ci_high"]) for r in main}
+    sec.plots.append(
+        Plot("success_by_split", "Success rate by environment split (95% Wilson intervals)",
+             svg.grouped_bars("Success rate by environment split (95% Wilson intervals)", splits, arms, values, errors=errors, y_label="success (%)", y_max=100, value_fmt=lambda v: f"{v:.1f}"),
+             "success_by_split")
+    )
+
+    per_task = q("success_by_task").dicts()
+    for s in _unique(r["env_split"] for r in per_task):
+        rs = [r for r in per_task if r["env_split"] == s]
+        split_models = _unique(r["model_label"] for r in rs)
+        series = _unique(_series_label(r["model_label"], r["arm"], split_models) for r in rs)
+        rows = []
+        for task in _unique(r["task"] for r in rs):
+            row = {"task": task}
+            for r in rs:
+                if r["task"] == task:
+                    row[_series_label(r["model_label"], r["arm"], split_models)] = _rate_ci(r)
+            rows.append(row)
+        note = "model: " + ", ".join(split_models) if len(split_models) == 1 else ""
+        sec.tables.append(Table(f"tasks_{_slug(s)}", f"Success rate per task: {s}", [Column("task", "task")] + [Column(x, x, "rate_ci") for x in series], rows, "success_by_task", note))
+
+    by_model = q("success_by_model").dicts()
+    arms_m = _unique(r["arm"] for r in by_model)
+    ref_methods = _unique(
+        r["method"] for r in by_model
+        if r["ablation"] == "original" and not _is_test_double(r["model_label"]) and paper.cross_model_reference(r["model_label"], r["method"]) is not None
+    )
+    cols = [Column("model", "model")] + [Column(a, a, "rate_ci") for a in arms_m] + [Column(f"paper {m}", f"paper {m}", "ref") for m in ref_methods]
+    rows = []
+    for m in sorted(_unique(r["model_label"] for r in by_model), key=lambda x: (_is_test_double(x), x)):
+        row = {"model": m}
+        for r in by_model:
+            if r["model_label"] == m:
+                row[r["arm"]] = _rate_ci(r)
+        for meth in ref_methods:
+            row[f"paper {meth}"] = None if _is_test_double(m) else paper.cross_model_reference(m, meth)
+        rows.append(row)
+    sec.tables.append(Table("models", "Success rate by model (cross-model table, all tasks of the run)", cols, rows, "success_by_model", "paper: Robotouille sync tasks 2, 4, 6 with a 64-message cap." if ref_methods else ""))
+
+    abl = q("success_by_ablation").dicts()
+    if any(r["ablation"] != "original" for r in abl):
+        for r in abl:
+            r["rate_ci"] = _rate_ci(r)
+            r["paper"] = (
+                paper.ABLATIONS.get(r["ablation"])
+                if r["method"] == "recap" and r["env_split"] == "robotouille/synchronous" and not _is_test_double(r["model_label"])
+                else None
+            )
+        sec.tables.append(
+            Table(
+                "ablations",
+                "Success rate by ablation, with an exact McNemar test against the original settings",
+                [
+                    Column("model_label", "model"), Column("method", "method"), Column("env_split", "split"),
+                    Column("window_size", "window", "int"), Column("ablation", "ablation"), Column("rate_ci", "success", "rate_ci"),
+                    Column("paper", "paper", "ref"), Column("pairs", "pairs", "int"), Column("original_only", "orig. only", "int"),
+                    Column("variant_only", "variant only", "int"), Column("p_value", "p", "p"),
+                ],
+                abl,
+                "success_by_ablation",
+                "paper: Robotouille sync task 6, 128-message context. orig. only / variant only: paired units only one of the two solved.",
+            )
+        )
+
+    paired = q("paired_methods").dicts()
+    for r in paired:
+        r["a_rate"] = r["a_successes"] / r["pairs"]
+        r["b_rate"] = r["b_successes"] / r["pairs"]
+        r["cost_p"] = paired_permutation_p(r["cost_diffs"])
+    sec.tables.append(
+        Table(
+            "paired",
+            "Paired comparisons between methods (same units)",
+            [
+                Column("model_label", "model"), Column("env_split", "split"), Column("arm_a", "A"), Column("arm_b", "B"),
+                Column("pairs", "pairs", "int"), Column("a_rate", "A %", "pct"), Column("b_rate", "B %", "pct"),
+                Column("a_only", "A only", "int"), Column("b_only", "B only", "int"), Column("p_value", "McNemar p", "p"),
+                Column("mean_cost_diff", "mean $ A−B", "usd"), Column("cost_p", "cost p (perm.)", "p"),
+            ],
+            paired,
+            "paired_methods",
+            "McNemar: exact two-sided test on the discordant pairs (A only, B only). cost p: paired "
+            "permutation (sign-flip) test of the mean cost difference, exact up to 16 non-zero "
+            "differences, else 20,000 random sign patterns.",
+        )
+    )
+    return sec
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in text).strip("_")
+
+
+# -- costs -----------------------------------------------------------------------------------------
+
+
+def costs(q: Query) -> Section:
+    c = paper.COSTS["robotouille_sync_task6"]
+    sec = Section(
+        "costs",
+        "Costs",
+        "Per episode and per success over the latest attempts (episode rows); spend tables count "
+        f"every LLM call of every attempt. Paper anchors: Robotouille sync task 6 {c['calls_per_episode']} "
+        f"calls (sd {c['calls_sd']}) and ${c['usd_per_episode']} (sd {c['usd_sd']}) per episode; ALFWorld "
+        f"134 games ${paper.COSTS['alfworld_134_games_usd']['recap']} ReCAP vs ${paper.COSTS['alfworld_134_games_usd']['react']} ReAct.",
+    )
+    rows = q("costs").dicts()
+    sec.tables.append(
+        Table(
+            "costs",
+            "Dollars, tokens and calls per episode and per success",
+            [
+                Column("model_label", "model"), Column("arm", "method"), Column("env_split", "split"),
+                Column("episodes", "episodes", "int"), Column("successes", "successes", "int"),
+                Column("cost_per_episode", "$/episode", "usd"), Column("cost_sd", "sd", "usd"),
+                Column("cost_per_success", "$/success", "usd"), Column("tokens_per_episode", "tokens/episode", "tokens"),
+                Column("tokens_per_success", "tokens/success", "tokens"), Column("calls_per_episode", "calls/episode", "float"),
+                Column("calls_sd", "sd", "float"), Column("cached_share", "cached %", "pct"),
+                Column("steps_per_episode", "steps/episode", "float"), Column("cost_usd", "total $", "usd"),
+            ],
+            rows,
+            "costs",
+        )
+    )
+    splits = _unique(r["env_split"] for r in rows)
+    models = _unique(r["model_label"] for r in rows)
+    series = _unique(_series_label(r["model_label"], r["arm"], models) for r in rows)
+    values = {(r["env_split"], _series_label(r["model_label"], r["arm"], models)): r["cost_per_episode"] for r in rows}
+    sec.plots.append(Plot("cost_per_episode", "Dollars per episode", svg.grouped_bars("Dollars per episode", splits, series, values, y_label="USD per episode", value_fmt=lambda v: f"${v:,.4f}"), "costs"))
+    sec.tables.append(
+        Table(
+            "spend_by_model",
+            "Spend by model (every call of every attempt)",
+            [
+                Column("model_label", "model"), Column("calls", "calls", "int"), Column("failed_calls", "failed", "int"),
+                Column("retries", "retries", "int"), Column("prompt_tokens", "prompt tokens", "int"),
+                Column("cached_share", "cached %", "pct"), Column("completion_tokens", "completion tokens", "int"),
+                Column("cost_usd", "spend", "usd"), Column("spend_share", "share %", "pct"),
+            ],
+            q("spend_by_model").dicts(),
+            "spend_by_model",
+        )
+    )
+    sec.tables.append(
+        Table(
+            "wasted_spend",
+            "Spend that bought no success",
+            [
+                Column("model_label", "model"), Column("arm", "method"), Column("cost_usd", "spend", "usd"),
+                Column("failed_calls", "failed calls", "int"), Column("retries", "retries", "int"),
+                Column("failed_call_cost", "failed-call $", "usd"), Column("repair_calls", "JSON repairs", "int"),
+                Column("repair_cost", "repair $", "usd"), Column("superseded_cost", "re-run attempts $", "usd"),
+                Column("orphan_cost", "lost attempts $", "usd"), Column("failed_episode_cost", "failed episodes $", "usd"),
+                Column("wasted_cost", "wasted $", "usd"), Column("wasted_share", "wasted %", "pct"),
+            ],
+            q("wasted_spend").dicts(),
+            "wasted_spend",
+            "wasted = all spend except the calls of successful latest attempts (= re-run + lost + failed episodes). "
+            "Failed-call and repair spend are shown separately and are part of whichever episode they belong to.",
+        )
+    )
+    return sec
+
+
+# -- context bound ---------------------------------------------------------------------------------
+
+
+def context(q: Query) -> Section:
+    sec = Section(
+        "context",
+        "The context bound",
+        "Prompt tokens of each call by its position in the episode (successful calls of latest "
+        "attempts). A bounded window keeps the curve flat; slope = least-squares tokens added per call.",
+    )
+    per_call = q("context_by_call").dicts()
+    models = _unique(r["model_label"] for r in per_call)
+    series: dict[str, list[tuple[float, float]]] = {}
+    for r in per_call:
+        series.setdefault(_series_label(r["model_label"], r["arm"], models), []).append((float(r["call_index"]), float(r["mean_prompt_tokens"])))
+    sec.plots.append(Plot("context_by_call", "Mean prompt tokens by call index", svg.lines("Mean prompt tokens by call index", series, x_label="call index in the episode", y_label="prompt tokens"), "context_by_call"))
+    sec.tables.append(
+        Table(
+            "context",
+            "Prompt tokens per call",
+            [
+                Column("model_label", "model"), Column("arm", "method"), Column("calls", "calls", "int"),
+                Column("mean_prompt_tokens", "mean", "tokens"), Column("median_prompt_tokens", "median", "tokens"),
+                Column("p95_prompt_tokens", "p95", "tokens"), Column("max_prompt_tokens", "max", "int"),
+                Column("max_window_messages", "max window (messages)", "int"), Column("tokens_per_call_slope", "slope (tokens/call)", "float"),
+            ],
+            q("context_summary").dicts(),
+            "context_summary",
+        )
+    )
+    return sec
+
+
+# -- task trees -----------------------------------------------------------------------------------
+
+
+def trees(q: Query) -> Section:
+    t = paper.TREE
+    sec = Section(
+        "trees",
+        "Task trees",
+        "From tree_nodes of the latest attempts. depth = deepest node in edges from the root (root 0); "
+        "levels = depth + 1 (root = level 1, as in the level_N ablations); branching factor = mean "
+        "number of children over the nodes that have children (all subtasks a node pushed, over all "
+        "its refinements), averaged over episodes; leaf failures = failed leaf nodes. The paper does not "
+        f"define its measures; it reports depth {t['depth']} and branching factor {t['branching_factor']} "
+        f"on average over {t['episodes']} runs of {t['task']}.",
+    )
+    rows = q("tree_summary").dicts()
+    sec.tables.append(
+        Table(
+            "trees",
+            "Tree depth, branching factor and leaf failures",
+            [
+                Column("model_label", "model"), Column("arm", "method"), Column("env_split", "split"),
+                Column("episodes", "episodes", "int"), Column("mean_levels", "levels", "float"),
+                Column("mean_max_depth", "depth", "float"), Column("max_depth_sd", "sd", "float"),
+                Column("mean_branching_factor", "branching", "float"), Column("branching_factor_sd", "sd", "float"),
+                Column("max_children", "max children", "int"), Column("nodes_per_episode", "nodes/episode", "float"),
+                Column("leaf_failures_per_episode", "leaf failures/episode", "float"), Column("leaf_failures", "leaf failures", "int"),
+                Column("refinements_per_episode", "refinements/episode", "float"),
+            ],
+            rows,
+            "tree_summary",
+        )
+    )
+    dist = q("tree_distribution").dicts()
+    models = _unique(r["model_label"] for r in dist)
+    titles = {"levels": "Tree levels per episode", "branching_factor": "Branching factor per episode (bin [k, k+1))", "leaf_failures": "Leaf failures per episode"}
+    for metric, title in titles.items():
+        rs = [r for r in dist if r["metric"] == metric]
+        if not rs:
+            continue
+        cats = [str(v) for v in sorted(_unique(r["value"] for r in rs))]
+        series = _unique(_series_label(r["model_label"], r["arm"], models) for r in rs)
+        values = {(str(r["value"]), _series_label(r["model_label"], r["arm"], models)): float(r["episodes"]) for r in rs}
+        sec.plots.append(Plot(f"tree_{metric}", title, svg.grouped_bars(title, cats, series, values, y_label="episodes"), "tree_distribution"))
+    return sec
+
+
+# -- failure modes ---------------------------------------------------------------------------------
+
+MODE_NOTE = (
+    "One mode per episode, first match wins: success; model_error:<kind> (LLM error, kind of the "
+    "last failed call); json_failures, budget_exhausted, episode_limit, env_error; then for step "
+    "cap, call cap and agent-declared done: invalid_action_loop (>= 3 invalid attempts in a row, "
+    "or one invalid action tried >= 3 times), repeated_action_loop (a cycle of 1-3 identical "
+    "(action, observation) steps repeated >= 3 times back to back over >= 4 steps); then "
+    "agent_done_early, step_cap, call_cap; other:<end_reason> for anything else."
+)
+
+
+def failures(q: Query) -> Section:
+    sec = Section("failures", "Failure modes", MODE_NOTE)
+    rows = q("failure_modes").dicts()
+    for r in rows:
+        r["examples"] = list(r["examples"])
+    t = Table(
+        "failure_modes",
+        "Failure modes: episodes, cost and examples",
+        [
+            Column("model_label", "model"), Column("mode", "mode"), Column("episodes", "episodes", "int"),
+            Column("share", "share %", "pct"), Column("cost_usd", "cost", "usd"), Column("mean_steps", "steps/episode", "float"),
+            Column("mean_calls", "calls/episode", "float"), Column("examples", "example episodes", "list"),
+        ],
+        rows,
+        "failure_modes",
+    )
+    sec.tables.append(t)
+    by_arm = q("failure_modes_by_arm").dicts()
+    modes = sorted(_unique(r["mode"] for r in by_arm), key=lambda m: (m != "success", m))
+    keys = sorted(_unique((r["model_label"], r["arm"]) for r in by_arm), key=_row_order)
+    rows2 = []
+    for m, a in keys:
+        row: dict[str, Any] = {"model": m, "arm": a}
+        for r in by_arm:
+            if (r["model_label"], r["arm"]) == (m, a):
+                row[r["mode"]] = r["episodes"]
+        rows2.append(row)
+    sec.tables.append(
+        Table("failure_modes_by_arm", "Failure modes by method (episodes)", [Column("model", "model"), Column("arm", "method")] + [Column(mo, mo, "int") for mo in modes], rows2, "failure_modes_by_arm")
+    )
+    models = _unique(m for m, _ in keys)
+    cats = [_series_label(m, a, models) for m, a in keys]
+    counts = {(_series_label(r["model_label"], r["arm"], models), r["mode"]): float(r["episodes"]) for r in by_arm}
+    sec.plots.append(Plot("failure_modes", "Failure modes by method", svg.stacked_shares("Failure modes by method", cats, modes, counts), "failure_modes_by_arm"))
+    return sec

@@ -1,0 +1,192 @@
+-- Named views over the raw tables (episodes, llm_calls, messages, tree_nodes, steps, events, run).
+-- Every report query is written against these; they are also there for short ad-hoc queries
+-- (`recap sql RUN "SELECT mode, count(*) FROM failures GROUP BY ALL"`).
+-- Rows of different runs are told apart by run_id; episodes join their rows on (run_id, episode_id).
+
+-- attempts: every episode row (one per attempt at a unit) with the labels the tables group by.
+--   ablation     ReCAP settings read from method_config: no_think / think_many (think), name_only,
+--                level_N (max_level), no_shortcut; several joined with '+'; 'original' when none.
+--   window_size  method_config.window (messages kept in the LLM context).
+--   arm          method, plus ' [ablation]' unless original, plus ' ctx N' when the same method and
+--                ablation appear with several window sizes in the data.
+--   model_label  the model, with ' (test double)' for test-double models.
+--   is_latest    the latest attempt of its unit (highest attempt; ties: latest ended_at, run_id,
+--                episode_id). A unit id is the same across runs, so a unit re-run in a later run
+--                counts once.
+CREATE VIEW attempts AS
+WITH parsed AS (
+  SELECT e.*,
+    CASE WHEN json_valid(e.method_config) THEN e.method_config END AS _cfg
+  FROM episodes e
+), settings AS (
+  SELECT p.* EXCLUDE (_cfg),
+    TRY_CAST(json_extract_string(_cfg, '$.window') AS BIGINT) AS window_size,
+    coalesce(nullif(concat_ws('+',
+      CASE json_extract_string(_cfg, '$.think') WHEN 'none' THEN 'no_think' WHEN 'many' THEN 'think_many' END,
+      CASE WHEN json_extract_string(_cfg, '$.name_only') = 'true' THEN 'name_only' END,
+      CASE WHEN json_extract_string(_cfg, '$.max_level') IS NOT NULL
+           THEN 'level_' || json_extract_string(_cfg, '$.max_level') END,
+      CASE WHEN json_extract_string(_cfg, '$.shortcut') = 'false' THEN 'no_shortcut' END
+    ), ''), 'original') AS ablation
+  FROM parsed p
+)
+SELECT s.*,
+  model_label(s.model, s.test_double) AS model_label,
+  s.benchmark || '/' || s.split AS env_split,
+  s.method
+    || CASE WHEN s.ablation <> 'original' THEN ' [' || s.ablation || ']' ELSE '' END
+    || CASE WHEN count(DISTINCT s.window_size) OVER (PARTITION BY s.method, s.ablation) > 1
+            THEN ' ctx ' || coalesce(CAST(s.window_size AS VARCHAR), '?') ELSE '' END AS arm,
+  row_number() OVER (
+    PARTITION BY s.unit_id ORDER BY s.attempt DESC, s.ended_at DESC, s.run_id DESC, s.episode_id DESC
+  ) = 1 AS is_latest
+FROM settings s;
+
+-- terminal: the latest attempt of every unit. Only these rows count in success tables.
+CREATE VIEW terminal AS
+SELECT * EXCLUDE (is_latest) FROM attempts WHERE is_latest;
+
+-- calls: llm_calls with the episode's labels.
+--   latest_attempt  TRUE/FALSE for the call's attempt; NULL when the attempt has no episode row
+--                   (an attempt lost with its worker).
+--   episode_success the success of the call's attempt (NULL without an episode row).
+--   model_label     the call's model (the episode's when the call failed and has none), labelled.
+CREATE VIEW calls AS
+SELECT c.*,
+  a.unit_id, a.method, a.arm, a.env_split, a.task,
+  a.is_latest AS latest_attempt,
+  a.success AS episode_success,
+  model_label(coalesce(nullif(c.model, ''), a.model), c.test_double OR coalesce(a.test_double, false)) AS model_label,
+  len(c.window_seqs) AS window_len,
+  c.prompt_tokens + c.completion_tokens AS total_tokens
+FROM llm_calls c
+LEFT JOIN attempts a ON a.run_id = c.run_id AND a.episode_id = c.episode_id;
+
+-- nodes: tree_nodes with the child count and the latest version's think and subtasks.
+CREATE VIEW nodes AS
+WITH kids AS (
+  SELECT run_id, episode_id, parent_id, count(*) AS n_children
+  FROM tree_nodes WHERE parent_id IS NOT NULL
+  GROUP BY run_id, episode_id, parent_id
+)
+SELECT n.*,
+  coalesce(k.n_children, 0) AS n_children,
+  k.n_children IS NULL AS is_leaf,
+  len(n.versions) AS n_versions,
+  n.versions[-1].think AS think,
+  n.versions[-1].subtasks AS subtasks
+FROM tree_nodes n
+LEFT JOIN kids k ON k.run_id = n.run_id AND k.episode_id = n.episode_id AND k.parent_id = n.node_id;
+
+-- tree_stats: one row per episode with a task tree.
+--   max_depth         deepest node, in edges from the root (the root has depth 0; episodes.max_depth)
+--   levels            max_depth + 1: levels of the tree counting the root as level 1, the
+--                     convention of the level_N ablations (level_2 = root and one level below)
+--   branching_factor  mean number of children over the nodes that have children (non-leaf nodes);
+--                     a node's children are all subtasks it pushed, over all its refinements
+--   leaf_failures     nodes with status 'failed' (a one-item reply that is not a valid action,
+--                     or an action the environment rejected)
+--   refinements       versions beyond each node's first
+CREATE VIEW tree_stats AS
+SELECT run_id, episode_id,
+  count(*) AS nodes,
+  max(depth) AS max_depth,
+  max(depth) + 1 AS levels,
+  count(*) FILTER (WHERE NOT is_leaf) AS internal_nodes,
+  avg(n_children) FILTER (WHERE NOT is_leaf) AS branching_factor,
+  max(n_children) AS max_children,
+  count(*) FILTER (WHERE status = 'failed') AS leaf_failures,
+  count(*) FILTER (WHERE kind = 'primitive') AS primitive_nodes,
+  sum(greatest(n_versions - 1, 0)) AS refinements
+FROM nodes
+GROUP BY run_id, episode_id;
+
+-- step_patterns: one row per episode with steps; the loop detectors of the failure taxonomy.
+--   longest_invalid_run  longest stretch of consecutive invalid attempts (by step index)
+--   max_same_invalid     most attempts of one and the same invalid action string
+--   invalid_loop         longest_invalid_run >= 3 OR max_same_invalid >= 3
+--   repeated_loop        a cycle of L = 1, 2 or 3 attempts with the same (action, observation,
+--                        validity) occurs back to back at least 3 times and over at least 4
+--                        attempts: L=1 four identical attempts in a row, L=2 a-b-a-b-a-b, L=3
+--                        a-b-c-a-b-c-a-b-c. Repeats that change the observation (progress, e.g.
+--                        cutting 1/3, 2/3, 3/3) are not loops.
+--   loop_cycle_len       the shortest such L
+-- One window pass: h is a hash of (action, observation, valid); lag k looks k attempts back.
+CREATE VIEW step_patterns AS
+WITH marked AS MATERIALIZED (
+  SELECT run_id, episode_id, valid, action,
+    sum(CASE WHEN valid THEN 1 ELSE 0 END) OVER w AS valid_so_far,
+    h = lag(h, 1) OVER w AND h = lag(h, 2) OVER w AND h = lag(h, 3) OVER w AS loop1,
+    h = lag(h, 2) OVER w AND h = lag(h, 4) OVER w
+      AND lag(h, 1) OVER w = lag(h, 3) OVER w AND lag(h, 3) OVER w = lag(h, 5) OVER w AS loop2,
+    h = lag(h, 3) OVER w AND h = lag(h, 6) OVER w
+      AND lag(h, 1) OVER w = lag(h, 4) OVER w AND lag(h, 4) OVER w = lag(h, 7) OVER w
+      AND lag(h, 2) OVER w = lag(h, 5) OVER w AND lag(h, 5) OVER w = lag(h, 8) OVER w AS loop3
+  FROM (SELECT run_id, episode_id, "index", valid, action, hash(action, observation, valid) AS h FROM steps)
+  WINDOW w AS (PARTITION BY run_id, episode_id ORDER BY "index")
+), invalid_runs AS (
+  SELECT run_id, episode_id, max(n) AS longest_invalid_run
+  FROM (SELECT run_id, episode_id, valid_so_far, count(*) AS n FROM marked WHERE NOT valid GROUP BY ALL)
+  GROUP BY ALL
+), invalid_same AS (
+  SELECT run_id, episode_id, max(n) AS max_same_invalid
+  FROM (SELECT run_id, episode_id, action, count(*) AS n FROM marked WHERE NOT valid GROUP BY ALL)
+  GROUP BY ALL
+), per_episode AS (
+  SELECT run_id, episode_id,
+    count(*) AS attempts,
+    count(*) FILTER (WHERE NOT valid) AS invalid_steps,
+    CASE WHEN bool_or(loop1) THEN 1 WHEN bool_or(loop2) THEN 2 WHEN bool_or(loop3) THEN 3 END AS loop_cycle_len
+  FROM marked
+  GROUP BY run_id, episode_id
+)
+SELECT c.run_id, c.episode_id, c.attempts, c.invalid_steps,
+  coalesce(r.longest_invalid_run, 0) AS longest_invalid_run,
+  coalesce(q.max_same_invalid, 0) AS max_same_invalid,
+  coalesce(r.longest_invalid_run, 0) >= 3 OR coalesce(q.max_same_invalid, 0) >= 3 AS invalid_loop,
+  c.loop_cycle_len IS NOT NULL AS repeated_loop,
+  c.loop_cycle_len
+FROM per_episode c
+LEFT JOIN invalid_runs r ON r.run_id = c.run_id AND r.episode_id = c.episode_id
+LEFT JOIN invalid_same q ON q.run_id = c.run_id AND q.episode_id = c.episode_id;
+
+-- episode_modes: every terminal episode with one failure mode, first match wins:
+--   success                     end_reason success
+--   model_error:<kind>          end_reason llm_error; kind = error_kind of the episode's last failed call
+--   json_failures | budget_exhausted | episode_limit | env_error    those end reasons
+--   invalid_action_loop         step_cap / call_cap / agent_done with invalid_loop
+--   repeated_action_loop        step_cap / call_cap / agent_done with repeated_loop
+--   agent_done_early            agent_done (the agent declared the task finished; it was not)
+--   step_cap | call_cap         those end reasons
+--   other:<end_reason>          anything else
+CREATE VIEW episode_modes AS
+WITH last_error AS (
+  SELECT run_id, episode_id, arg_max(error_kind, call_index) AS last_error_kind
+  FROM llm_calls WHERE status = 'error'
+  GROUP BY run_id, episode_id
+)
+SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.ablation, t.env_split,
+  t.task, t.instance_id, t.seed, t.end_reason, t.success, t.steps, t.llm_calls, t.cost_usd, t.error,
+  coalesce(p.invalid_loop, false) AS invalid_loop,
+  coalesce(p.repeated_loop, false) AS repeated_loop,
+  coalesce(p.longest_invalid_run, 0) AS longest_invalid_run,
+  coalesce(p.max_same_invalid, 0) AS max_same_invalid,
+  p.loop_cycle_len,
+  le.last_error_kind,
+  CASE
+    WHEN t.end_reason = 'success' THEN 'success'
+    WHEN t.end_reason = 'llm_error' THEN 'model_error:' || coalesce(le.last_error_kind, 'unknown')
+    WHEN t.end_reason IN ('json_failures', 'budget_exhausted', 'episode_limit', 'env_error') THEN t.end_reason
+    WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.invalid_loop, false) THEN 'invalid_action_loop'
+    WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.repeated_loop, false) THEN 'repeated_action_loop'
+    WHEN t.end_reason = 'agent_done' THEN 'agent_done_early'
+    WHEN t.end_reason IN ('step_cap', 'call_cap') THEN t.end_reason
+    ELSE 'other:' || t.end_reason
+  END AS mode
+FROM terminal t
+LEFT JOIN step_patterns p ON p.run_id = t.run_id AND p.episode_id = t.episode_id
+LEFT JOIN last_error le ON le.run_id = t.run_id AND le.episode_id = t.episode_id;
+
+-- failures: the terminal episodes that did not succeed.
+CREATE VIEW failures AS
+SELECT * FROM episode_modes WHERE mode <> 'success';

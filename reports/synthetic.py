@@ -1,0 +1,297 @@
+"""Synthetic run folders of any size, for the report benchmark and for trying ``recap report``
+without running a sweep.
+
+The rows follow the schemas (``schemas/tables.py``) and the run layout of ``workers/storage.py``
+(atomic ``part-<writer>-<n>.parquet`` files per table); the numbers are random but consistent:
+an episode's calls, messages, steps and tree agree with its episode row, windows are bounded
+like a sliding window of ``window`` messages after two pinned ones, and outcomes depend on the
+method. Columns are built with NumPy so a million-message run takes seconds to write.
+
+    python -m reports.synthetic OUT_DIR [--messages 1000000] [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from schemas.tables import arrow_schema
+
+METHODS = ("recap", "react", "act")
+SPLITS = (("robotouille", "synchronous"), ("robotouille", "asynchronous"), ("alfworld", "eval_out_of_distribution"))
+SUCCESS = {"recap": 0.65, "react": 0.38, "act": 0.3}
+END_FAIL = ("step_cap", "call_cap", "agent_done", "json_failures", "llm_error", "env_error")
+PURPOSES = ("descend", "leaf_done", "leaf_fail", "nonleaf_done", "leaf_judge", "repair")
+WORDS = np.array(
+    "the onion is on table1 cut lettuce stack patty on bottombun cook at stove3 wait pick put "
+    "go to counter2 fridge open drawer take apple heat it with microwave clean sink place".split()
+)
+
+
+@dataclass(frozen=True)
+class SyntheticSpec:
+    messages: int = 1_000_000
+    mean_calls: int = 120
+    window: int = 64
+    seed: int = 0
+    #: rows per part file and per row group: the sink writes one part file per batch, so a
+    #: real run's files are batch-sized and each covers a limited set of episodes
+    part_rows: int = 50_000
+    row_group_rows: int = 10_000
+
+
+def _write(run_dir: Path, table: str, data: pa.Table, writer: str, part_rows: int, row_group_rows: int) -> int:
+    """Part files like PartWriter writes them (temporary name, then rename)."""
+    schema = arrow_schema(table)
+    data = data.select(schema.names).cast(schema)
+    folder = run_dir / table
+    folder.mkdir(parents=True, exist_ok=True)
+    n = 0
+    for start in range(0, max(data.num_rows, 1), part_rows):
+        n += 1
+        final = folder / f"part-{writer}-{n:06d}.parquet"
+        tmp = folder / f".tmp-{final.name}"
+        pq.write_table(data.slice(start, part_rows), tmp, row_group_size=row_group_rows)
+        os.replace(tmp, final)
+    return n
+
+
+def _texts(rng: np.random.Generator, n: int, lo: int, hi: int) -> list[str]:
+    """n texts of lo..hi words drawn from a pool (fast: 4,096 distinct bodies + a counter)."""
+    pool = [" ".join(rng.choice(WORDS, size=int(k))) for k in rng.integers(lo, hi + 1, size=4096)]
+    idx = rng.integers(0, len(pool), size=n)
+    return [f"{pool[i]} [{j}]" for j, i in enumerate(idx)]
+
+
+def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec(), run_id: str = "synthetic") -> dict[str, int]:
+    """Write a run folder with about ``spec.messages`` message rows; returns rows per table."""
+    rng = np.random.default_rng(spec.seed)
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "run.json").write_text(json.dumps({"run_id": run_id, "spec_hash": "synthetic"}))
+
+    # -- episodes: calls per episode decide messages (2 pinned + prompt and reply per call) -------
+    n_ep = max(1, spec.messages // (2 * spec.mean_calls + 2))
+    calls_per = np.clip(rng.poisson(spec.mean_calls, n_ep), 2, None).astype(np.int64)
+    msgs_per = 2 * calls_per + 2
+    steps_per = np.maximum(1, (calls_per * rng.uniform(0.4, 0.8, n_ep)).astype(np.int64))
+    method = np.array(METHODS)[np.arange(n_ep) % len(METHODS)]
+    split_i = (np.arange(n_ep) // len(METHODS)) % len(SPLITS)
+    task_i = (np.arange(n_ep) // (len(METHODS) * len(SPLITS))) % 10
+    seed = 42 * (1 + (np.arange(n_ep) // (len(METHODS) * len(SPLITS) * 10)))
+    success = rng.uniform(size=n_ep) < np.vectorize(SUCCESS.get)(method)
+    end = np.where(success, "success", np.array(END_FAIL)[rng.integers(0, len(END_FAIL), n_ep)])
+    ep_ids = np.array([f"ep-{i:07d}" for i in range(n_ep)])
+
+    # -- calls -------------------------------------------------------------------------------
+    n_calls = int(calls_per.sum())
+    call_ep = np.repeat(np.arange(n_ep), calls_per)
+    call_start = np.concatenate([[0], np.cumsum(calls_per)[:-1]])
+    call_idx = np.arange(n_calls) - np.repeat(call_start, calls_per)
+    # window of call k: seqs 0,1 (pinned) + the newest messages before its reply, at most `window`
+    before = 2 + 2 * call_idx + 1  # messages in history when call k is made (its prompt included)
+    tail = np.minimum(before - 2, spec.window - 2)
+    win_len = 2 + tail
+    offsets = np.concatenate([[0], np.cumsum(win_len)]).astype(np.int32)
+    values = np.empty(int(win_len.sum()), dtype=np.int64)
+    pos = offsets[:-1]
+    values[pos] = 0
+    values[pos + 1] = 1
+    # tail seqs: before - tail .. before - 1
+    rel = np.arange(values.size) - np.repeat(pos, win_len)
+    mask = rel >= 2
+    values[mask] = (np.repeat(before - tail, win_len) + rel - 2)[mask]
+    window = pa.ListArray.from_arrays(pa.array(offsets), pa.array(values))
+    prompt = (300 + 55 * (win_len - 2) + rng.integers(0, 200, n_calls) + np.where(np.repeat(method, calls_per) == "recap", 0, 20 * np.minimum(call_idx, 40))).astype(np.int64)
+    cached = (prompt * rng.uniform(0, 0.6, n_calls)).astype(np.int64)
+    completion = rng.integers(20, 200, n_calls).astype(np.int64)
+    status = np.where(rng.uniform(size=n_calls) < 0.01, "error", "ok")
+    cost = np.where(status == "ok", (prompt - cached) * 2.5e-6 + cached * 1.25e-6 + completion * 1e-5, 0.0)
+    retries = np.where(status == "error", rng.integers(1, 4, n_calls), (rng.uniform(size=n_calls) < 0.02).astype(np.int64))
+    purpose = np.where(call_idx == 0, "task", np.array(PURPOSES)[rng.integers(0, len(PURPOSES), n_calls)])
+    calls = pa.table({
+        "run_id": pa.array([run_id] * n_calls),
+        "episode_id": ep_ids[call_ep],
+        "call_index": call_idx,
+        "call_key": np.char.add(np.char.add(ep_ids[call_ep], "#"), call_idx.astype(str)),
+        "purpose": purpose,
+        "window_seqs": window,
+        "model": np.where(status == "ok", "gpt-4o", ""),
+        "status": status,
+        "node_id": pa.nulls(n_calls, pa.int64()),
+        "response_seq": before,
+        "error_kind": pa.array(np.where(status == "error", "rate_limit", None).tolist(), pa.string()),
+        "error_message": pa.nulls(n_calls, pa.string()),
+        "prompt_tokens": np.where(status == "ok", prompt, 0),
+        "cached_prompt_tokens": np.where(status == "ok", cached, 0),
+        "completion_tokens": np.where(status == "ok", completion, 0),
+        "cost_usd": cost,
+        "latency_s": rng.uniform(0.3, 3.0, n_calls),
+        "retries": retries,
+        "token_count_source": ["provider"] * n_calls,
+        "served_from": ["provider"] * n_calls,
+        "deployment": pa.nulls(n_calls, pa.string()),
+        "test_double": np.zeros(n_calls, dtype=bool),
+    })
+
+    # -- messages ------------------------------------------------------------------------------
+    n_msg = int(msgs_per.sum())
+    msg_ep = np.repeat(np.arange(n_ep), msgs_per)
+    msg_seq = np.arange(n_msg) - np.repeat(np.concatenate([[0], np.cumsum(msgs_per)[:-1]]), msgs_per)
+    role = np.where((msg_seq >= 2) & (msg_seq % 2 == 1), "assistant", "user")
+    kind = np.where(msg_seq == 0, "demonstration", np.where(msg_seq == 1, "task", np.where(role == "assistant", "reply", "observation")))
+    messages = pa.table({
+        "run_id": pa.array([run_id] * n_msg),
+        "episode_id": ep_ids[msg_ep],
+        "seq": msg_seq,
+        "role": role,
+        "kind": kind,
+        "content": _texts(rng, n_msg, 20, 90),
+        "node_id": pa.nulls(n_msg, pa.int64()),
+        "pinned": msg_seq < 2,
+    })
+
+    # -- steps: a few invalid attempts, some episodes end in an a-b loop ----------------------------
+    n_steps = int(steps_per.sum())
+    st_ep = np.repeat(np.arange(n_ep), steps_per)
+    st_idx = np.arange(n_steps) - np.repeat(np.concatenate([[0], np.cumsum(steps_per)[:-1]]), steps_per)
+    valid = rng.uniform(size=n_steps) > 0.08
+    actions = np.array(["go to table1", "pick onion", "cut lettuce", "cook patty", "stack", "wait", "put bun"])
+    act = actions[rng.integers(0, len(actions), n_steps)]
+    obs = np.char.add("state ", st_idx.astype(str))
+    looping = np.repeat(rng.uniform(size=n_ep) < 0.1, steps_per) & (st_idx >= np.repeat(steps_per, steps_per) - 8)
+    act = np.where(looping, np.where(st_idx % 2 == 0, "go to table1", "go to table2"), act)
+    obs = np.where(looping, np.where(st_idx % 2 == 0, "at table1", "at table2"), obs)
+    valid = valid | looping
+    steps = pa.table({
+        "run_id": pa.array([run_id] * n_steps),
+        "episode_id": ep_ids[st_ep],
+        "index": st_idx,
+        "env_step": st_idx + 1,
+        "action": act,
+        "valid": valid,
+        "observation": obs,
+        "done": st_idx == np.repeat(steps_per, steps_per) - 1,
+        "success": (st_idx == np.repeat(steps_per, steps_per) - 1) & np.repeat(success, steps_per),
+        "node_id": pa.nulls(n_steps, pa.int64()),
+    })
+
+    # -- task trees for recap episodes: root, ~8 composites, leaves under them -------------------
+    rec = np.flatnonzero(method == "recap")
+    nodes_per = np.maximum(3, steps_per[rec] + 1 + np.minimum(8, steps_per[rec] // 4))
+    n_nodes = int(nodes_per.sum())
+    nd_ep = np.repeat(rec, nodes_per)
+    nd_id = np.arange(n_nodes) - np.repeat(np.concatenate([[0], np.cumsum(nodes_per)[:-1]]), nodes_per)
+    n_comp = np.repeat(np.minimum(8, steps_per[rec] // 4) + 1, nodes_per)  # node 1..n_comp-1 composite
+    is_comp = (nd_id >= 1) & (nd_id < n_comp)
+    leaf_slot = nd_id - n_comp
+    parent = np.where(nd_id == 0, -1, np.where(is_comp, 0, np.where(n_comp > 1, leaf_slot % np.maximum(n_comp - 1, 1) + 1, 0)))
+    child_index = np.where(nd_id == 0, 0, np.where(is_comp, nd_id - 1, np.where(n_comp > 1, leaf_slot // np.maximum(n_comp - 1, 1), leaf_slot)))
+    depth = np.where(nd_id == 0, 0, np.where(is_comp | (parent == 0), 1, 2))
+    kind_n = np.where(nd_id == 0, "root", np.where(is_comp, "composite", "primitive"))
+    status_n = np.where(rng.uniform(size=n_nodes) < 0.05, "failed", "done")
+    n_ver = np.where(kind_n == "primitive", 1, rng.integers(1, 5, n_nodes))
+    v_total = int(n_ver.sum())
+    v_off = np.concatenate([[0], np.cumsum(n_ver)]).astype(np.int32)
+    v_num = (np.arange(v_total) - np.repeat(v_off[:-1], n_ver)).astype(np.int32)
+    sub_len = rng.integers(1, 6, v_total)
+    s_off = np.concatenate([[0], np.cumsum(sub_len)]).astype(np.int32)
+    subtasks = pa.ListArray.from_arrays(pa.array(s_off), pa.array(actions[rng.integers(0, len(actions), int(sub_len.sum()))]))
+    versions = pa.ListArray.from_arrays(
+        pa.array(v_off),
+        pa.StructArray.from_arrays(
+            [pa.array(v_num), pa.array(_texts(rng, v_total, 5, 25), pa.string()), subtasks,
+             pa.array(rng.integers(0, 100, v_total).astype(np.int32)), pa.array(rng.integers(2, 200, v_total))],
+            names=["version", "think", "subtasks", "call_index", "message_seq"],
+        ),
+    )
+    tasks = np.array(["make a burger", "cut lettuce", "cook patty", "assemble", "serve the dish"])
+    nodes = pa.table({
+        "run_id": pa.array([run_id] * n_nodes),
+        "episode_id": ep_ids[nd_ep],
+        "node_id": nd_id,
+        "parent_id": pa.array(parent, mask=parent < 0),
+        "depth": depth,
+        "child_index": child_index,
+        "task": tasks[nd_id % len(tasks)],
+        "kind": kind_n,
+        "status": status_n,
+        "versions": versions,
+        "step_index": pa.nulls(n_nodes, pa.int64()),
+    })
+    max_depth = np.zeros(n_ep, dtype=np.int64)
+    max_depth[rec] = 2
+
+    # -- episodes --------------------------------------------------------------------------------
+    per_ep_cost = np.bincount(call_ep, weights=cost, minlength=n_ep)
+    ok = status == "ok"
+    bench = np.array([b for b, _ in SPLITS])[split_i]
+    split = np.array([s for _, s in SPLITS])[split_i]
+    task = np.char.add(np.char.add(split_i.astype(str), "_task"), task_i.astype(str))
+    cfg = np.where(method == "recap", json.dumps({"window": spec.window, "think": "latest", "max_level": None, "name_only": False, "shortcut": True}), json.dumps({"window": spec.window}))
+    unit = np.char.add(np.char.add(np.char.add(method, "|"), task), np.char.add("|", seed.astype(str)))
+    ended = 1.7e9 + np.arange(n_ep, dtype=np.float64)
+    episodes = pa.table({
+        "run_id": pa.array([run_id] * n_ep),
+        "episode_id": ep_ids,
+        "unit_id": np.char.add(np.char.add(unit, "|"), bench),
+        "attempt": np.ones(n_ep, dtype=np.int64),
+        "benchmark": bench,
+        "split": split,
+        "task": task,
+        "instance_id": np.char.add(np.char.add(bench, "/"), task),
+        "seed": seed,
+        "method": method,
+        "method_config": cfg,
+        "model": ["gpt-4o"] * n_ep,
+        "end_reason": end,
+        "success": success,
+        "steps": steps_per,
+        "llm_calls": calls_per,
+        "prompt_tokens": np.bincount(call_ep, weights=np.where(ok, prompt, 0), minlength=n_ep).astype(np.int64),
+        "cached_prompt_tokens": np.bincount(call_ep, weights=np.where(ok, cached, 0), minlength=n_ep).astype(np.int64),
+        "completion_tokens": np.bincount(call_ep, weights=np.where(ok, completion, 0), minlength=n_ep).astype(np.int64),
+        "cost_usd": per_ep_cost,
+        "wall_s": rng.uniform(30, 600, n_ep),
+        "step_cap": np.full(n_ep, 120, dtype=np.int64),
+        "step_multiplier": np.full(n_ep, 4.0),
+        "optimal_steps": np.full(n_ep, 30, dtype=np.int64),
+        "max_depth": max_depth,
+        "error": pa.nulls(n_ep, pa.string()),
+        "worker_id": ["w0"] * n_ep,
+        "started_at": ended - 100.0,
+        "ended_at": ended,
+        "test_double": np.zeros(n_ep, dtype=bool),
+    })
+    run = pa.table({
+        "run_id": [run_id], "started_at": [1.7e9], "spec_yaml": ["synthetic: true\n"], "spec_hash": ["synthetic"],
+        "package_versions": ["{}"], "git_revision": [None], "host": ["bench"], "command": ["python -m reports.synthetic"],
+        "schema_version": [1],
+    })
+    counts = {}
+    for table, data in (("episodes", episodes), ("llm_calls", calls), ("messages", messages), ("steps", steps), ("tree_nodes", nodes), ("run", run)):
+        _write(run_dir, table, data, "synth001", spec.part_rows, spec.row_group_rows)
+        counts[table] = data.num_rows
+    return counts
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m reports.synthetic", description="Write a synthetic run folder.")
+    p.add_argument("out_dir")
+    p.add_argument("--messages", type=int, default=SyntheticSpec.messages)
+    p.add_argument("--seed", type=int, default=0)
+    a = p.parse_args(argv)
+    counts = write_synthetic_run(a.out_dir, SyntheticSpec(messages=a.messages, seed=a.seed))
+    print(", ".join(f"{k}: {v:,}" for k, v in counts.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
