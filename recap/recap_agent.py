@@ -19,6 +19,7 @@ Control flow (see the paper, section 2, and docs/method.md):
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -79,6 +80,11 @@ class ReCAPAgent(Agent):
 
     def reply_format(self) -> str:
         return P.reply_format(self.config.think != "none")
+
+    def demo_config(self) -> ReCAPConfig:
+        """Demonstrations are written for the full method: no depth cap, shortcut on (the depth
+        and shortcut ablations change how the agent runs, not the example it is shown)."""
+        return dataclasses.replace(super().demo_config(), max_level=None, shortcut=True, reminder_period=None)
 
     def shape_demo_reply(self, reply: Any) -> Any:
         if self.config.think == "none":

@@ -1,0 +1,93 @@
+"""The Robotouille benchmark as the registry sees it: list instances, make environments.
+
+``make(instance_id, step_multiplier=4.0, data_dir=None, engine="ours")`` reads the instance file
+``instances/<split>/<task>_<seed>.json`` from the data folder and builds our engine on its
+``generated_environment_json`` (the exact problem the real engine's seeded generator produced).
+``engine="real"`` wraps the real ``robotouille`` package instead, when it is installed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from recap.env import Demonstration, Environment
+
+from . import catalog
+from .data import DataFileError, instance_path, read_json, require, resolve_data_dir, train_instance_path
+from .demo import DEMO_SEED, DEMO_SPLIT, DEMO_TASK, make_demonstration
+from .domain import load_domain
+from .env import RobotouilleEnv
+
+ENGINES = ("ours", "real")
+#: step cap of the demonstration kitchen (it is in no benchmark list, so has no optimal count)
+DEMO_MAX_STEPS = 100
+
+
+class RobotouilleBenchmark:
+    name = catalog.BENCHMARK_NAME
+
+    def list_instances(self, selector: str | None = None) -> list[str]:
+        return [ref.instance_id for ref in catalog.select(selector)]
+
+    def make(self, instance_id: str, **options: Any) -> Environment:
+        step_multiplier = float(options.pop("step_multiplier", 4.0))
+        data_dir = options.pop("data_dir", None)
+        engine = options.pop("engine", "ours")
+        if options:
+            raise TypeError(f"unknown Robotouille option(s): {', '.join(sorted(options))}")
+        if engine not in ENGINES:
+            raise ValueError(f"unknown Robotouille engine {engine!r}; engines: {', '.join(ENGINES)}")
+        ref = catalog.parse_id(instance_id)
+        if engine == "real":
+            from .real_engine import make_real_env
+
+            return make_real_env(ref, step_multiplier=step_multiplier)
+        root = resolve_data_dir(data_dir)
+        return make_instance_env(root, ref, step_multiplier)
+
+
+def make_instance_env(root: Path, ref: catalog.InstanceRef, step_multiplier: float = 4.0) -> RobotouilleEnv:
+    path = instance_path(root, ref.split, ref.task, ref.seed)
+    raw = read_json(path)
+    problem = require(raw, "generated_environment_json", path)
+    if not isinstance(problem, dict):
+        raise DataFileError(f"Robotouille data file {str(path)!r}: generated_environment_json is not an object")
+    return RobotouilleEnv(
+        domain=load_domain(root),
+        problem_json=problem,
+        source=str(path),
+        instance_id=ref.instance_id,
+        split=ref.split,
+        task=ref.task,
+        seed=ref.seed,
+        optimal_steps=ref.optimal_steps,
+        step_multiplier=step_multiplier,
+        demonstration=lambda: demonstration(root),
+    )
+
+
+def make_demo_env(root: Path) -> RobotouilleEnv:
+    """Our engine on the training kitchen of the one-shot demonstration."""
+    path = train_instance_path(root, DEMO_SPLIT, DEMO_TASK, DEMO_SEED)
+    raw = read_json(path)
+    problem = require(raw, "generated_environment_json", path)
+    return RobotouilleEnv(
+        domain=load_domain(root),
+        problem_json=problem,
+        source=str(path),
+        instance_id=f"robotouille/{DEMO_SPLIT}_train/{DEMO_TASK}@{DEMO_SEED}",
+        split=DEMO_SPLIT,
+        task=DEMO_TASK,
+        seed=DEMO_SEED,
+        optimal_steps=None,
+        max_steps=DEMO_MAX_STEPS,
+    )
+
+
+def demonstration(root: Path) -> Demonstration:
+    """The onion cheese sandwich demo (used for sync and async instances alike, as in the paper)."""
+    return make_demonstration(lambda: make_demo_env(root))
+
+
+BENCHMARK = RobotouilleBenchmark()

@@ -1,0 +1,163 @@
+"""Special effects in flight: delayed (timers), repetitive (counters), conditional, creation, ...
+
+An action's special effects are templates (``domain.EffectSpec``); taking the action binds them to
+the action's objects and registers them on the state, where they are updated once *actively* (by
+the action itself) and then once *passively* per step until they complete. Equality ignores the
+counters so that re-issuing an action (the 2nd and 3rd cut) advances the effect already running
+instead of starting another one.
+
+Timing, as observed on the real engine:
+- delayed: counts passive updates only and fires when its counter reaches ``time + 1`` (the
+  action's own step is the first tick: cook at step t -> cooked after step t+3 with time 3);
+- repetitive: counts active updates only and fires on the ``n``-th one (cut x3);
+- conditional: while its conditions hold, applies its effects and updates its nested effects
+  (with the same active flag); it completes when all nested effects have (at once if none);
+- creation: creates ``<name><k>``, binds it and applies its effects; deletion removes its object;
+  immediate: applies its effects. These three complete on their first update.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import TYPE_CHECKING
+
+from .domain import EffectSpec
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .state import State
+
+_TRAILING_DIGITS = re.compile(r"\d+$")
+
+
+def base_name(obj: str) -> str:
+    """``chicken12`` -> ``chicken`` (the name the problem file used for the object)."""
+    return _TRAILING_DIGITS.sub("", obj)
+
+
+def _params_of(spec: EffectSpec, out: set[str]) -> set[str]:
+    out.add(spec.param)
+    for lit in spec.fx:
+        out.update(lit.params)
+    for lit in spec.conditions:
+        out.update(lit.params)
+    for nested in spec.nested:
+        _params_of(nested, out)
+    if spec.created is not None:
+        out.discard(spec.created.param)
+    return out
+
+
+class ActiveEffect:
+    """One bound special effect (with its nested effects) registered on a state."""
+
+    __slots__ = ("spec", "arg", "binding", "nested", "completed", "counter", "goal", "key")
+
+    def __init__(self, spec: EffectSpec, binding: dict[str, str], config: dict) -> None:
+        self.spec = spec
+        self.binding = binding
+        self.arg = binding[spec.param]
+        self.completed = False
+        self.counter = 0
+        self.goal = 0
+        if spec.kind == "delayed":
+            self.goal = _config_value(config, "cook_time", self.arg) + 1
+        elif spec.kind == "repetitive":
+            self.goal = _config_value(config, "num_cuts", self.arg)
+        self.nested = [ActiveEffect(n, binding, config) for n in spec.nested]
+        used = sorted(_params_of(spec, set()))
+        self.key = (spec, tuple((p, binding.get(p)) for p in used))
+
+    # equality ignores counters and completion, as the real engine's does
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, ActiveEffect) and self.key == other.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    def copy(self) -> "ActiveEffect":
+        new = object.__new__(ActiveEffect)
+        new.spec = self.spec
+        new.arg = self.arg
+        new.binding = self.binding
+        new.completed = self.completed
+        new.counter = self.counter
+        new.goal = self.goal
+        new.key = self.key
+        new.nested = [n.copy() for n in self.nested]
+        return new
+
+    def update(self, state: "State", active: bool) -> None:
+        if self.completed:
+            return
+        kind = self.spec.kind
+        if kind == "conditional":
+            if all(state.holds(lit, self.binding) for lit in self.spec.conditions):
+                state.apply_literals(self.spec.fx, self.binding)
+                for nested in self.nested:
+                    nested.update(state, active)
+                self.completed = all(n.completed for n in self.nested)
+            return
+        if kind == "delayed":
+            if not active:
+                self.counter += 1
+            if self.counter == self.goal:
+                self._fire(state, self.binding, active)
+            return
+        if kind == "repetitive":
+            if active:
+                self.counter += 1
+            if self.counter == self.goal:
+                self._fire(state, self.binding, active)
+            return
+        if kind == "creation":
+            created = self.spec.created
+            assert created is not None
+            name = state.create_object(created.name, created.type)
+            binding = dict(self.binding)
+            binding[created.param] = name
+            for nested in self.nested:
+                nested.binding = binding
+            self._fire(state, binding, active)
+            return
+        if kind == "deletion":
+            state.apply_literals(self.spec.fx, self.binding)
+            state.delete_object(self.arg)
+            for nested in self.nested:
+                nested.update(state, active)
+            self.completed = True
+            return
+        # immediate
+        self._fire(state, self.binding, active)
+
+    def _fire(self, state: "State", binding: dict[str, str], active: bool) -> None:
+        state.apply_literals(self.spec.fx, binding)
+        for nested in self.nested:
+            nested.update(state, active)
+        self.completed = True
+
+    def describe(self) -> dict:
+        """The effect in the shape the recorded trajectories list it (for replay checks)."""
+        kind = self.spec.kind
+        out: dict = {
+            "type": kind.capitalize() + "Effect",
+            "arg": self.arg,
+            "param": self.spec.param,
+            "completed": self.completed,
+        }
+        if kind == "delayed":
+            out["current_time"] = self.counter
+            out["goal_time"] = self.goal
+        elif kind == "repetitive":
+            out["current_repetitions"] = self.counter
+            out["goal_repetitions"] = self.goal
+        if self.nested:
+            out["nested"] = [n.describe() for n in self.nested]
+        return out
+
+
+def _config_value(config: dict, key: str, arg: str) -> int:
+    table = config.get(key) or {}
+    name = base_name(arg)
+    if name in table:
+        return int(table[name])
+    return int(table.get("default", 3))
