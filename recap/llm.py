@@ -85,6 +85,9 @@ class LLMResponse:
     served_from: str = "provider"
     deployment: str | None = None
     test_double: bool = False
+    finish_reason: str | None = None
+    #: litellm's own cost estimate (a cross-check; ``cost_usd`` comes from our price table)
+    provider_cost_usd: float | None = None
 
 
 class LLMClient(Protocol):

@@ -230,6 +230,8 @@ class Conversation:
                     served_from=response.served_from,
                     deployment=response.deployment,
                     test_double=response.test_double,
+                    finish_reason=response.finish_reason,
+                    provider_cost_usd=response.provider_cost_usd,
                 )
             )
             return response.text, seq

@@ -50,6 +50,9 @@ class SyntheticSpec:
 def _write(run_dir: Path, table: str, data: pa.Table, writer: str, part_rows: int, row_group_rows: int) -> int:
     """Part files like PartWriter writes them (temporary name, then rename)."""
     schema = arrow_schema(table)
+    for f in schema:  # columns the generator does not model are null (nullable by schema)
+        if f.name not in data.column_names:
+            data = data.append_column(f.name, pa.nulls(data.num_rows, f.type))
     data = data.select(schema.names).cast(schema)
     folder = run_dir / table
     folder.mkdir(parents=True, exist_ok=True)

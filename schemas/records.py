@@ -60,6 +60,10 @@ class CallRecord:
     served_from: str = "provider"  # provider | cache | ledger | replay
     deployment: str | None = None
     test_double: bool = False
+    #: the provider's finish reason ("stop", "length", ...) when known
+    finish_reason: str | None = None
+    #: litellm's own cost estimate, kept only as a cross-check of ``cost_usd`` (our price table)
+    provider_cost_usd: float | None = None
 
 
 @dataclass(frozen=True)

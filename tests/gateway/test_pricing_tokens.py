@@ -1,0 +1,64 @@
+"""Prices from the repo table (exact integer costs) and offline token counts."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from workers.llm.litellm_setup import get_litellm
+from workers.llm.pricing import Price, PriceError, PriceTable, default_prices, require_prices
+from workers.llm.tokens import count_prompt_tokens, prompt_token_bound
+
+
+def test_gpt4o_cost_uses_cached_input_price():
+    price = default_prices().get("openai/gpt-4o")
+    assert (price.input, price.cached_input, price.output) == (2.50, 1.25, 10.00)
+    # 800 uncached * 2.5e-6 + 200 cached * 1.25e-6 + 100 * 1e-5 = 0.00325 USD
+    assert price.cost_pico(1000, 200, 100) == 3_250_000_000
+    assert price.cost_usd(1000, 200, 100) == 0.00325
+
+
+def test_lookup_strips_provider_prefix_and_marks_test_doubles():
+    table = default_prices()
+    assert table.get("gpt-4o-mini") == table.get("openai/gpt-4o-mini")
+    assert table.get("openai/fake-gpt").test_double is True
+    assert table.get("offline/expert").test_double is True
+    assert table.get("together_ai/Qwen/Qwen2.5-72B-Instruct-Turbo").cached_input is None
+    assert table.get("deepseek/deepseek-chat").rates() == (280_000, 28_000, 420_000)
+    assert table.get("no-such/model") is None
+
+
+def test_require_prices_names_every_missing_model_and_accepts_overrides():
+    with pytest.raises(PriceError) as err:
+        require_prices(["openai/gpt-4o", "acme/model-a", "acme/model-b"])
+    assert "no price for model(s) acme/model-a, acme/model-b" in str(err.value)
+    found = require_prices(["acme/model-a"], {"acme/model-a": {"input": 0.5, "output": 1.5}})
+    assert found["acme/model-a"].cost_pico(10, 0, 10) == 10 * 500_000 + 10 * 1_500_000
+
+
+def test_malformed_prices_are_refused():
+    with pytest.raises(PriceError, match="more than 6 decimals"):
+        Price(input=0.0000001, output=1.0)
+    with pytest.raises(PriceError, match="needs 'output'"):
+        PriceTable({}).with_overrides({"m": {"input": 1.0}})
+    with pytest.raises(PriceError, match="unknown price field"):
+        PriceTable({}).with_overrides({"m": {"input": 1.0, "output": 1.0, "cache": 1.0}})
+
+
+def test_openai_models_are_counted_with_the_bundled_tokenizer():
+    messages = [{"role": "user", "content": "Put the onion on the cutting board, then cut it."}]
+    counted = count_prompt_tokens("openai/gpt-4o", messages)
+    assert counted.source == "tokenizer"
+    assert counted.tokens == get_litellm().token_counter(model="gpt-4o", messages=messages)
+
+
+def test_other_models_get_the_documented_estimate_without_network():
+    messages = [{"role": "user", "content": "x" * 41}, {"role": "assistant", "content": "ok"}]
+    t0 = time.monotonic()
+    counted = count_prompt_tokens("together_ai/meta-llama/Llama-3.3-70B-Instruct-Turbo", messages)
+    assert time.monotonic() - t0 < 1.0  # no tokenizer download attempted
+    # 3 (reply priming) + (3 + ceil(41/4)) + (3 + ceil(2/4))
+    assert (counted.tokens, counted.source) == (3 + 14 + 4, "estimate")
+    # upper bound for the budget: one token per UTF-8 byte plus template allowance
+    assert prompt_token_bound("together_ai/x", messages, counted) == 32 + (16 + 41) + (16 + 2)

@@ -1,0 +1,96 @@
+"""The LLM gateway: every model call of a run, through one place per provider deployment.
+
+Public API
+==========
+
+Configuration (built by the pipeline from the sweep spec)::
+
+    DeploymentConfig(model="openai/gpt-4o", api_base=None, api_key_env="OPENAI_API_KEY",
+                     rpm=500, tpm=30_000, window_s=60, max_concurrency=16,
+                     max_attempts=6, total_timeout_s=900, attempt_timeout_s=120,
+                     params={"temperature": 0.5, "max_tokens": 1024},
+                     price=None,            # or {"input": 2.5, "cached_input": 1.25, "output": 10}
+                     cache=False,           # serve identical requests from the ledger
+                     offline_options={})    # offline/ test doubles: seed, invalid_action_rate, ...
+    require_prices(models, overrides)      # PriceError naming every model without a price
+
+On Ray (one GatewayActor per deployment; one BudgetActor per run, or - budget="local", the
+default for a single deployment - the ledger inside the one GatewayActor)::
+
+    gws = RunGateways(configs, run_dir, run_id, run_cap_usd=50.0, model_caps_usd={"openai/gpt-4o": 40},
+                      budget="auto")           # "shared" | "local" | "auto" | a BudgetActor handle
+    # or by hand: BudgetActor.remote(run_dir, run_cap_usd, model_caps_usd)
+    #             GatewayActor.remote(config, run_dir, run_id, budget_actor)
+    client = gws.client("openai/gpt-4o")   # GatewayClient, a recap.llm.LLMClient (picklable)
+    resp = client.complete(request)        # LLMResponse, or raises LLMError(kind)
+    client.stats(); client.pause(); client.resume(); client.set_limits(rpm=..., tpm=..., max_concurrency=...)
+    gws.stats(); gws.close()               # close flushes llm_calls rows and the journal
+
+Without Ray (tests, single process)::
+
+    gw = DeploymentGateway(config, run_dir=run_dir, run_id=run_id, run_cap_usd=5.0)
+    resp = await gw.complete(request); await gw.aclose()
+    with BlockingGateway(config, run_dir=run_dir, run_id=run_id) as client:   # a sync LLMClient
+        resp = client.complete(request)
+    # several deployments sharing one budget in-process: budget=LocalBudget(BudgetLedger(run_dir, ...), owned=False)
+
+Without a gateway at all: ``workers.llm.direct.LiteLLMClient(config)`` (same errors and prices,
+no quotas, budget or ledger).
+
+Guarantees
+==========
+- RPM/TPM: no window of ``window_s`` (plus ``window_pad_s`` of jitter) holds more than the limit;
+  HTTP 429 halves concurrency and pauses for Retry-After; 5xx and timeouts back off and retry.
+- Budget: a call is sent only after its worst-case cost is reserved within the run cap and the
+  model cap; spend is settled to actual cost; the journal ``RUN_DIR/gateway/ledger.jsonl`` is
+  fsync'd, so a killed gateway/ledger restarted from the run folder continues from the exact
+  spend (open reservations of the dead process are charged at worst case).
+- Idempotency: a repeated ``request.call_key`` returns the recorded response
+  (``served_from="ledger"``, cost 0), across restarts too. With ``cache=True`` identical
+  requests (model, params, messages) are served from the ledger (``"cache"``, cost 0).
+- Records: one ``llm_calls`` row per call, written by the gateway (batched, flushed every
+  second and on close) with the agent's context from the request. Errors reach the caller as
+  ``LLMError(kind)`` with ``kind`` in ``recap.llm.ERROR_KINDS``; API keys never appear in
+  records, logs or error messages.
+- Test doubles: ``offline/expert``, ``offline/random``, ``offline/replay`` (litellm custom
+  provider) and ``workers.llm.fake_server``; their records carry ``test_double=True``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from workers.gateway.blocking import BlockingGateway
+from workers.gateway.core import DeploymentGateway
+from workers.gateway.ledger import BudgetLedger, LocalBudget
+from workers.llm.pricing import Price, PriceError, PriceTable, require_prices
+from workers.llm.providers import DeploymentConfig, DeploymentConfigError
+
+__all__ = [
+    "BlockingGateway",
+    "BudgetActor",
+    "BudgetLedger",
+    "DeploymentConfig",
+    "DeploymentConfigError",
+    "DeploymentGateway",
+    "GatewayActor",
+    "GatewayClient",
+    "LocalBudget",
+    "Price",
+    "PriceError",
+    "PriceTable",
+    "RunGateways",
+    "require_prices",
+]
+
+_RAY_NAMES = {"BudgetActor": "actors", "GatewayActor": "actors", "RunGateways": "actors",
+              "GatewayClient": "client"}
+
+
+def __getattr__(name: str) -> Any:
+    """Ray-backed names are imported on first use, so the core works without Ray."""
+    if name in _RAY_NAMES:
+        import importlib
+
+        return getattr(importlib.import_module(f"workers.gateway.{_RAY_NAMES[name]}"), name)
+    raise AttributeError(f"module 'workers.gateway' has no attribute {name!r}")

@@ -1,0 +1,237 @@
+"""Thin Ray wrappers: one async ``GatewayActor`` per deployment, one ``BudgetActor`` per run.
+
+Why thin: all behaviour lives in :class:`workers.gateway.core.DeploymentGateway` and
+:class:`workers.gateway.ledger.BudgetLedger`, tested without Ray. The actors only host them.
+
+Control methods (stats, pause, resume, set_limits, set_caps) run in their own concurrency
+group - Ray gives each group its own thread and event loop - so they never queue behind
+requests. They are handed to the request loop with ``call_soon_threadsafe`` (asyncio objects
+belong to one loop); requests there only await, so a control call waits microseconds.
+
+Requests return an envelope, ``("ok", LLMResponse)`` or ``("error", kind, message, retries,
+cost_usd)``, which :class:`workers.gateway.client.GatewayClient` turns back into a response or
+an ``LLMError`` of the same kind (Ray's own exception wrapping would lose the kind).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
+
+import ray  # noqa: E402
+
+from recap.llm import LLMError, LLMRequest  # noqa: E402
+from workers.gateway.ledger import BudgetLedger  # noqa: E402
+from workers.llm.errors import scrub  # noqa: E402
+from workers.llm.providers import DeploymentConfig  # noqa: E402
+
+CONTROL = "control"
+
+
+@ray.remote(num_cpus=0, concurrency_groups={CONTROL: 2})
+class BudgetActor:
+    """The run's single budget authority (one journal writer per run folder)."""
+
+    def __init__(self, run_dir: str, run_cap_usd: float | None = None,
+                 model_caps_usd: Mapping[str, float] | None = None, durable_reservations: bool = True):
+        self.ledger = BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
+                                   durable_reservations=durable_reservations)
+
+    async def begin(self, call_key: str, model: str, worst_pico: int | None, cache_key: str | None,
+                    owner: str) -> Mapping[str, Any]:
+        return self.ledger.begin(call_key, model, worst_pico, cache_key, owner)
+
+    async def reserve(self, call_key: str, model: str, worst_pico: int | None, owner: str) -> Mapping[str, Any]:
+        return self.ledger.reserve(call_key, model, worst_pico, owner)
+
+    async def settle(self, rid: int, cost_pico: int, status: str, result: Mapping[str, Any] | None,
+                     cache_key: str | None, litellm_cost_usd: float | None) -> None:
+        self.ledger.settle(rid, cost_pico, status, result, cache_key, litellm_cost_usd)
+
+    async def charge_worst(self, rid: int) -> int:
+        return self.ledger.charge_worst(rid)
+
+    async def adopt_orphans(self, deployment: str, keep_owner: str) -> int:
+        return self.ledger.adopt_orphans(deployment, keep_owner)
+
+    @ray.method(concurrency_group=CONTROL)
+    async def stats(self) -> dict[str, Any]:
+        return self.ledger.stats()
+
+    @ray.method(concurrency_group=CONTROL)
+    async def set_caps(self, run_cap_usd: float | None = None,
+                       model_caps_usd: Mapping[str, float] | None = None) -> None:
+        self.ledger.set_caps(run_cap_usd, model_caps_usd)
+
+    async def close(self) -> None:
+        self.ledger.close()
+
+
+class RemoteBudget:
+    """The async face of a ``BudgetActor`` handle, as a gateway core expects it."""
+
+    def __init__(self, handle: Any):
+        self.handle = handle
+        self._unconfirmed: list[Any] = []  # settlements sent without waiting
+
+    async def begin(self, call_key, model, worst_pico, cache_key, owner):  # type: ignore[no-untyped-def]
+        return await self.handle.begin.remote(call_key, model, worst_pico, cache_key, owner)
+
+    async def reserve(self, call_key, model, worst_pico, owner):  # type: ignore[no-untyped-def]
+        return await self.handle.reserve.remote(call_key, model, worst_pico, owner)
+
+    async def settle(self, rid, cost_pico, status, result, cache_key, litellm_cost_usd):  # type: ignore[no-untyped-def]
+        # not awaited: the reservation already bounds this call's cost, so the caller need
+        # not wait a round trip; if the settlement is lost, a restart charges the worst case
+        self._unconfirmed.append(self.handle.settle.remote(rid, cost_pico, status, result, cache_key,
+                                                           litellm_cost_usd))
+        if len(self._unconfirmed) > 256:
+            _, self._unconfirmed = ray.wait(self._unconfirmed, num_returns=len(self._unconfirmed), timeout=0)
+
+    async def charge_worst(self, rid):  # type: ignore[no-untyped-def]
+        return await self.handle.charge_worst.remote(rid)
+
+    async def adopt_orphans(self, deployment, keep_owner):  # type: ignore[no-untyped-def]
+        return await self.handle.adopt_orphans.remote(deployment, keep_owner)
+
+    async def stats(self) -> dict[str, Any]:
+        return await self.handle.stats.remote()
+
+    async def close(self) -> None:
+        """Wait for the settlements sent so far (the BudgetActor outlives any one gateway)."""
+        pending, self._unconfirmed = self._unconfirmed, []
+        if pending:
+            await asyncio.gather(*pending, return_exceptions=True)
+
+
+@ray.remote(num_cpus=0, concurrency_groups={CONTROL: 2})
+class GatewayActor:
+    """Hosts one :class:`DeploymentGateway`; ``budget`` is the run's ``BudgetActor`` (or None:
+    the gateway keeps its own ledger in the run folder, for a single-deployment run)."""
+
+    def __init__(self, config: DeploymentConfig | Mapping[str, Any], run_dir: str, run_id: str | None = None,
+                 budget: Any = None, run_cap_usd: float | None = None,
+                 model_caps_usd: Mapping[str, float] | None = None):
+        from workers.gateway.core import DeploymentGateway
+
+        cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
+        self.core = DeploymentGateway(
+            cfg, run_dir=Path(run_dir), run_id=run_id,
+            budget=None if budget is None else RemoteBudget(budget),
+            run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd)
+
+    async def complete(self, request: LLMRequest) -> tuple:
+        try:
+            return ("ok", await self.core.complete(request))
+        except LLMError as exc:
+            return ("error", exc.kind, exc.message, exc.retries, exc.cost_usd)
+        except Exception as exc:  # e.g. the budget actor died: transient for the caller
+            return ("error", "server_error", scrub(f"gateway failure: {type(exc).__name__}: {exc}")[:500], 0, 0.0)
+
+    async def _on_core_loop(self, fn: Callable[[], Any]) -> Any:
+        loop = self.core.loop
+        if loop is None or not loop.is_running():
+            return fn()  # no request has started the core's loop yet: nothing to race with
+        done: asyncio.Future = asyncio.get_running_loop().create_future()
+        here = asyncio.get_running_loop()
+
+        def run() -> None:
+            try:
+                value = fn()
+            except BaseException as exc:  # hand the failure back to the control loop
+                here.call_soon_threadsafe(done.set_exception, exc)
+            else:
+                here.call_soon_threadsafe(done.set_result, value)
+
+        loop.call_soon_threadsafe(run)
+        return await done
+
+    @ray.method(concurrency_group=CONTROL)
+    async def stats(self) -> dict[str, Any]:
+        return await self._on_core_loop(self.core.stats)
+
+    @ray.method(concurrency_group=CONTROL)
+    async def budget_stats(self) -> dict[str, Any]:
+        return await self.core.budget.stats()
+
+    @ray.method(concurrency_group=CONTROL)
+    async def pause(self) -> None:
+        await self._on_core_loop(self.core.pause)
+
+    @ray.method(concurrency_group=CONTROL)
+    async def resume(self) -> None:
+        await self._on_core_loop(self.core.resume)
+
+    @ray.method(concurrency_group=CONTROL)
+    async def set_limits(self, rpm: int | None = None, tpm: int | None = None,
+                         max_concurrency: int | None = None) -> None:
+        await self._on_core_loop(lambda: self.core.set_limits(rpm=rpm, tpm=tpm, max_concurrency=max_concurrency))
+
+    async def close(self) -> None:
+        await self.core.aclose()
+
+
+class RunGateways:
+    """The gateways of one run: one GatewayActor per deployment and one budget authority.
+
+    ``budget``: ``"shared"`` - a BudgetActor serves every deployment (needed when a run has
+    several deployments: caps are per run); ``"local"`` - the single deployment's
+    GatewayActor keeps the ledger itself (no extra round trips per call); ``"auto"`` (default)
+    - local for one deployment, shared otherwise; or an existing BudgetActor handle.
+    ``client(name)`` gives the :class:`GatewayClient` of a deployment (by deployment name or
+    model, when the model has one deployment).
+    """
+
+    def __init__(self, configs: Sequence[DeploymentConfig], run_dir: Path | str, run_id: str,
+                 run_cap_usd: float | None = None, model_caps_usd: Mapping[str, float] | None = None,
+                 budget: Any = "auto"):
+        self.run_dir = str(run_dir)
+        self.run_id = run_id
+        self.configs = list(configs)
+        names = [c.deployment_name for c in self.configs]
+        if len(set(names)) != len(names):
+            raise ValueError(f"two deployments share a name: {sorted(names)}")
+        if budget == "auto":
+            budget = "local" if len(self.configs) == 1 else "shared"
+        if budget == "local":
+            if len(self.configs) != 1:
+                raise ValueError("budget='local' needs exactly one deployment (caps are per run)")
+            self.budget = None
+            self.actors = {names[0]: GatewayActor.remote(self.configs[0], self.run_dir, run_id, None,
+                                                         run_cap_usd, model_caps_usd)}
+            return
+        self.budget = BudgetActor.remote(self.run_dir, run_cap_usd, model_caps_usd) if budget == "shared" else budget
+        self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget)
+                       for c in self.configs}
+
+    def client(self, name: str) -> "Any":
+        from workers.gateway.client import GatewayClient
+
+        if name in self.actors:
+            return GatewayClient(self.actors[name], deployment=name)
+        matches = [c.deployment_name for c in self.configs if c.model == name]
+        if len(matches) != 1:
+            raise KeyError(f"no single deployment named or serving {name!r}; deployments: {sorted(self.actors)}")
+        return GatewayClient(self.actors[matches[0]], deployment=matches[0])
+
+    def stats(self) -> dict[str, Any]:
+        out = {name: ray.get(a.stats.remote()) for name, a in self.actors.items()}
+        if self.budget is not None:
+            out["budget"] = ray.get(self.budget.stats.remote())
+        else:
+            out["budget"] = ray.get(next(iter(self.actors.values())).budget_stats.remote())
+        return out
+
+    def budget_stats(self) -> dict[str, Any]:
+        return self.stats()["budget"]
+
+    def close(self) -> None:
+        """Flush every gateway's rows and close the ledger journal."""
+        ray.get([a.close.remote() for a in self.actors.values()])
+        if self.budget is not None:
+            ray.get(self.budget.close.remote())

@@ -1,0 +1,82 @@
+"""Batched writer of the run's ``llm_calls`` rows (one per call, written by the gateway itself).
+
+Why batches: one Parquet part file per call would bury the run folder in tiny files, and a
+part per minute would lose a minute of rows to a crash. Rows are flushed when ``max_rows``
+are pending, at least every ``flush_interval_s`` (1 s) by :meth:`run_periodic_flush`, and on
+close. Part files are atomic (:class:`workers.storage.PartWriter`); a crash loses at most the
+last second of rows - the budget itself is in the fsync'd ledger journal, not here.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import re
+import threading
+import uuid
+from pathlib import Path
+from typing import Any
+
+from schemas.records import CallRecord
+from schemas.tables import record_to_row
+from workers.storage import PartWriter
+
+
+class RunIdentityError(RuntimeError):
+    """No run id given and the run folder has no readable run.json."""
+
+
+def run_id_of(run_dir: Path | str) -> str:
+    """The run id in ``RUN_DIR/run.json`` (written once by the pipeline)."""
+    path = Path(run_dir) / "run.json"
+    try:
+        return str(json.loads(path.read_text())["run_id"])
+    except (OSError, ValueError, KeyError) as exc:
+        raise RunIdentityError(f"pass run_id or create {path} with a run_id ({type(exc).__name__})") from None
+
+
+def writer_name(deployment: str) -> str:
+    slug = re.sub(r"[^A-Za-z0-9]+", "-", deployment).strip("-")[:40] or "gateway"
+    return f"gw-{slug}-{uuid.uuid4().hex[:6]}"
+
+
+class CallLog:
+    def __init__(self, run_dir: Path | str, run_id: str, writer: str, *, max_rows: int = 256,
+                 flush_interval_s: float = 1.0):
+        self.run_id = run_id
+        self.flush_interval_s = flush_interval_s
+        self.max_rows = max_rows
+        self._writer = PartWriter(Path(run_dir), writer=writer)
+        self._pending: list[dict[str, Any]] = []
+        self._write_lock = threading.Lock()
+        self.rows_written = 0
+
+    def add(self, record: CallRecord) -> None:
+        self._pending.append(record_to_row(record, self.run_id))
+        if len(self._pending) >= self.max_rows:
+            self.flush()
+
+    def flush(self) -> None:
+        rows, self._pending = self._pending, []
+        if rows:
+            self._write(rows)
+
+    async def run_periodic_flush(self) -> None:
+        """Flush every ``flush_interval_s`` until cancelled (then flush once more)."""
+        try:
+            while True:
+                await asyncio.sleep(self.flush_interval_s)
+                rows, self._pending = self._pending, []
+                if rows:
+                    await asyncio.to_thread(self._write, rows)
+        finally:
+            self.flush()
+
+    def _write(self, rows: list[dict[str, Any]]) -> None:
+        with self._write_lock:
+            self._writer.write_rows(CallRecord.table, rows)
+            self.rows_written += len(rows)
+
+    @property
+    def pending(self) -> int:
+        return len(self._pending)

@@ -1,0 +1,361 @@
+"""The gateway of one provider deployment, in plain asyncio (the Ray actor is a thin wrapper).
+
+Why without Ray: admission control, retries, the budget protocol and the records are the hard
+parts, and they are tested here directly, against the fake server, in one process.
+
+One call (:meth:`DeploymentGateway.complete`):
+1. count the prompt offline; size the worst case (prompt bound + max output tokens);
+2. attempts under tenacity (attempts, total time, per-attempt timeout). Each waits for
+   admission (concurrency slot, Retry-After pause, RPM/TPM windows), then - only then, so
+   queued calls hold no budget - asks the budget authority: the first attempt *begins*
+   (a recorded result for this ``call_key``: idempotency, ``served_from="ledger"``; or for an
+   identical request: opt-in cache, ``"cache"``; or a refusal: ``LLMError("budget")``; or a
+   reservation), later ones reserve again only if the previous reservation was charged;
+   then one litellm call. 429 shrinks concurrency and pauses, 5xx/timeouts back off
+   exponentially; context_length, bad_request, auth return at once. A timed-out attempt
+   may have been billed, so its reservation is charged at worst case;
+3. settle the reservation to the actual cost and write the ``llm_calls`` row (agent context
+   from the request + accounting; messages with secrets scrubbed).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import time
+import uuid
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, stop_after_attempt, stop_after_delay
+from tenacity import wait_exponential_jitter
+
+from recap.llm import LLMError, LLMRequest, LLMResponse
+from workers.gateway.call_log import CallLog, run_id_of, writer_name
+from workers.gateway.ledger import BudgetLedger, LocalBudget
+from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
+from workers.llm.accounting import cost_pico, error_record, ok_record, served_from, usage_of
+from workers.llm.calling import Attempt, attempt_async, litellm_kwargs
+from workers.llm.errors import Classified, classify, scrub
+from workers.llm.fingerprint import request_fingerprint
+from workers.llm.litellm_setup import get_litellm
+from workers.llm.pricing import PriceTable, pico_to_usd
+from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provider_messages
+from workers.llm.tokens import count_prompt_tokens, prompt_token_bound
+
+#: extra seconds granted to litellm's own timeout before asyncio cuts the attempt
+_TIMEOUT_BACKSTOP_S = 2.0
+
+
+class _AttemptFailed(Exception):
+    def __init__(self, classified: Classified):
+        super().__init__(classified.message)
+        self.classified = classified
+
+
+class _Retryable(_AttemptFailed):
+    pass
+
+
+class _Final(_AttemptFailed):
+    pass
+
+
+class _Served(Exception):
+    """The call was answered from the ledger (idempotency) or the response cache."""
+
+    def __init__(self, result: dict[str, Any], source: str):
+        super().__init__(source)
+        self.result = result
+        self.source = source
+
+
+@dataclass
+class _Call:
+    """What one call needs across its attempts."""
+
+    request: LLMRequest
+    messages: list[dict[str, str]]
+    params: dict[str, Any]
+    window_tokens: int
+    worst: int | None
+    cache_key: str | None
+    deadline: float
+    rid: int | None = None  # the live reservation
+    begun: bool = False
+    attempts: int = 0
+    charged: int = 0  # pico charged at worst case for attempts that may have been billed
+
+
+class DeploymentGateway:
+    """Admission, retries, budget, idempotency, cache and records for one deployment."""
+
+    def __init__(self, config: DeploymentConfig, *, run_dir: Path | str, run_id: str | None = None,
+                 budget: Any = None, prices: PriceTable | None = None,
+                 run_cap_usd: float | None = None, model_caps_usd: dict[str, float] | None = None,
+                 call_log: CallLog | None = None, durable_reservations: bool = True,
+                 clock: Callable[[], float] = time.monotonic):
+        get_litellm()  # import now (seconds), not inside the first call
+        self.config = config
+        self.run_dir = Path(run_dir)
+        self.run_id = run_id or run_id_of(run_dir)
+        self.deployment = config.deployment_name
+        self.instance = f"{self.deployment}:{uuid.uuid4().hex[:8]}"
+        self.price = config.resolved_price(prices)
+        self.test_double = config.is_test_double(prices)
+        self.budget = budget if budget is not None else LocalBudget(
+            BudgetLedger(self.run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
+                         durable_reservations=durable_reservations))
+        self.admission = AdmissionController(
+            rpm=config.rpm, tpm=config.tpm, window_s=config.window_s, pad_s=config.window_pad_s,
+            max_concurrency=config.max_concurrency,
+            rate_limit_default_wait_s=config.rate_limit_default_wait_s, anchor=config.window_anchor,
+            clock=clock)
+        self.call_log = call_log or CallLog(self.run_dir, self.run_id, writer_name(self.deployment))
+        self._clock = clock
+        self._inflight: dict[str, asyncio.Future] = {}
+        self._flusher: asyncio.Task | None = None
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self._started = False
+        self.counts: Counter[str] = Counter()
+        self.errors: Counter[str] = Counter()
+        self.spent_pico = 0
+
+    # ---- lifecycle ----
+    async def _ensure_started(self) -> None:
+        if self._started:
+            return
+        self._started = True
+        self.loop = asyncio.get_running_loop()
+        self._flusher = self.loop.create_task(self.call_log.run_periodic_flush())
+        # reservations left open by an earlier incarnation of this deployment's gateway
+        self.counts["orphans_adopted"] += await self.budget.adopt_orphans(self.deployment, self.instance)
+
+    async def aclose(self) -> None:
+        """Flush the call rows (and close the ledger when this gateway owns it)."""
+        if self._flusher is not None:
+            self._flusher.cancel()
+            try:
+                await self._flusher
+            except asyncio.CancelledError:
+                pass
+            self._flusher = None
+        self.call_log.flush()
+        await self.budget.close()  # a shared budget only confirms this gateway's settlements
+
+    # ---- the call ----
+    async def complete(self, request: LLMRequest) -> LLMResponse:
+        await self._ensure_started()
+        key = request.call_key
+        first = self._inflight.get(key)
+        if first is not None:  # the same call already in flight here: never pay twice
+            t0 = self._clock()
+            resp = await asyncio.shield(first)
+            return self._served(request, response_as_result(resp), "ledger", t0)
+        fut: asyncio.Future = asyncio.get_running_loop().create_future()
+        fut.add_done_callback(lambda f: f.cancelled() or f.exception())
+        self._inflight[key] = fut
+        try:
+            resp = await self._complete(request)
+        except BaseException as exc:
+            if isinstance(exc, LLMError):
+                fut.set_exception(exc)
+            else:
+                fut.cancel()
+            raise
+        else:
+            fut.set_result(resp)
+            return resp
+        finally:
+            self._inflight.pop(key, None)
+
+    async def _complete(self, request: LLMRequest) -> LLMResponse:
+        t0 = self._clock()
+        cfg = self.config
+        self.counts["calls"] += 1
+        messages = provider_messages(request.messages)
+        params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
+        counted = count_prompt_tokens(cfg.model, messages)
+        max_out = int(params["max_tokens"])
+        call = _Call(
+            request=request, messages=messages, params=params, window_tokens=counted.tokens + max_out,
+            worst=None if self.price is None else self.price.cost_pico(
+                prompt_token_bound(cfg.model, messages, counted), 0, max_out),
+            cache_key=request_fingerprint(cfg.model, params, messages) if cfg.cache else None,
+            deadline=t0 + cfg.total_timeout_s)
+        try:
+            attempt = await self._attempts(call)
+        except _Served as served:
+            return self._served(request, served.result, served.source, t0)
+        except _AttemptFailed as exc:
+            if call.rid is not None:
+                await self.budget.settle(call.rid, 0, "error", None, None, None)
+            raise self._fail(request, exc.classified, t0, call.attempts, call.charged, counted.source) from None
+        except BaseException:
+            # cancelled mid-call: the provider may bill it; keep the cap safe
+            if call.rid is not None:
+                await self.budget.charge_worst(call.rid)
+            raise
+
+        usage = usage_of(cfg.model, attempt, counted)
+        cost = cost_pico(self.price, usage, attempt.litellm_cost_usd)
+        result = {"text": attempt.text, "finish_reason": attempt.finish_reason, **usage.as_dict()}
+        await self.budget.settle(call.rid, cost, "ok", result, call.cache_key, attempt.litellm_cost_usd)
+        total = cost + call.charged
+        self.spent_pico += total
+        self.counts["ok"] += 1
+        resp = LLMResponse(
+            text=attempt.text, model=cfg.model, prompt_tokens=usage.prompt_tokens,
+            cached_prompt_tokens=usage.cached_prompt_tokens, completion_tokens=usage.completion_tokens,
+            cost_usd=pico_to_usd(total), latency_s=self._clock() - t0, retries=call.attempts - 1,
+            token_count_source=usage.token_count_source, served_from=served_from(cfg.model),
+            deployment=self.deployment, test_double=self.test_double,
+            finish_reason=attempt.finish_reason, provider_cost_usd=attempt.litellm_cost_usd)
+        self._record(request, resp)
+        return resp
+
+    async def _attempts(self, call: "_Call") -> Attempt:
+        cfg = self.config
+        backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
+
+        def wait(rs: RetryCallState) -> float:
+            exc = rs.outcome.exception() if rs.outcome else None
+            if isinstance(exc, _AttemptFailed) and exc.classified.kind == "rate_limit":
+                return 0.0  # admission holds every attempt until the Retry-After pause ends
+            return min(backoff(rs), max(0.0, call.deadline - self._clock()))
+
+        retrying = AsyncRetrying(
+            stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
+            wait=wait, retry=retry_if_exception_type(_Retryable), reraise=True)
+        async for attempt_ctx in retrying:
+            with attempt_ctx:
+                return await self._one_attempt(call)
+        raise AssertionError("unreachable: tenacity reraises the last failure")
+
+    async def _admit_and_reserve(self, call: "_Call") -> Ticket:
+        """Wait for admission, then make sure the attempt is covered by a reservation.
+
+        The budget is asked only once the attempt may be sent, so calls queued behind the
+        concurrency limit or the windows do not hold reservations (they would starve the cap).
+        The first attempt asks ``begin`` (which may answer with a recorded result instead)."""
+        cfg = self.config
+        remaining = call.deadline - self._clock()
+        if remaining <= 0:
+            raise _Final(Classified("timeout", f"total timeout {cfg.total_timeout_s}s reached"))
+        try:
+            ticket = await asyncio.wait_for(self.admission.acquire(call.window_tokens), remaining)
+        except AdmissionError as exc:
+            raise _Final(Classified("bad_request", str(exc))) from None
+        except asyncio.TimeoutError:
+            raise _Final(Classified("timeout", f"no capacity within the total timeout {cfg.total_timeout_s}s")) from None
+        key = call.request.call_key
+        try:
+            if not call.begun:
+                answer = await self.budget.begin(key, cfg.model, call.worst, call.cache_key, self.instance)
+                call.begun = True
+            elif call.rid is None:
+                answer = await self.budget.reserve(key, cfg.model, call.worst, self.instance)
+            else:
+                return ticket
+        except BaseException:
+            self.admission.cancel(ticket)
+            raise
+        if answer["status"] == "reserved":
+            call.rid = answer["rid"]
+            return ticket
+        self.admission.cancel(ticket)  # nothing is sent
+        if answer["status"] == "recorded":
+            raise _Served(answer["result"], answer["served_from"])
+        raise _Final(Classified("budget", answer["message"]))
+
+    async def _one_attempt(self, call: "_Call") -> Attempt:
+        cfg = self.config
+        call.attempts += 1
+        if call.attempts > 1:
+            self.counts["retries"] += 1
+        ticket = await self._admit_and_reserve(call)
+        api_key: str | None = None
+        try:
+            api_key = cfg.api_key()
+            timeout_s = max(0.001, min(cfg.attempt_timeout_s, call.deadline - self._clock()))
+            kwargs = litellm_kwargs(cfg, call.messages, call.params, timeout_s=timeout_s,
+                                    call_key=call.request.call_key, hints=call.request.hints, api_key=api_key)
+            attempt = await asyncio.wait_for(attempt_async(kwargs), timeout_s + _TIMEOUT_BACKSTOP_S)
+        except DeploymentConfigError as exc:
+            self.admission.cancel(ticket)
+            raise _Final(Classified("auth", str(exc))) from None
+        except asyncio.CancelledError:
+            self.admission.release(ticket, "cancelled")
+            raise
+        except Exception as exc:
+            c = classify(exc, secrets=[api_key])
+            self.admission.release(ticket, c.kind, retry_after_s=c.retry_after_s)
+            self.errors[c.kind] += 1
+            if c.kind == "timeout" and call.rid is not None:
+                call.charged += await self.budget.charge_worst(call.rid)
+                call.rid = None
+            raise (_Retryable if c.retryable else _Final)(c) from None
+        reported = (attempt.prompt_tokens or 0) + (attempt.completion_tokens or 0)
+        self.admission.release(ticket, "ok", actual_tokens=reported if attempt.prompt_tokens is not None else None)
+        return attempt
+
+    # ---- results and records ----
+    def _served(self, request: LLMRequest, result: dict[str, Any], source: str, t0: float) -> LLMResponse:
+        """A response recorded earlier (ledger / cache), at no cost."""
+        self.counts[f"served_{source}"] += 1
+        resp = LLMResponse(
+            text=result["text"], model=self.config.model, prompt_tokens=int(result["prompt_tokens"]),
+            cached_prompt_tokens=int(result["cached_prompt_tokens"]),
+            completion_tokens=int(result["completion_tokens"]), cost_usd=0.0,
+            latency_s=self._clock() - t0, retries=0, token_count_source=str(result["token_count_source"]),
+            served_from=source, deployment=self.deployment, test_double=self.test_double)
+        self._record(request, resp)
+        return resp
+
+    def _fail(self, request: LLMRequest, c: Classified, t0: float, attempts: int, charged: int,
+              source: str) -> LLMError:
+        self.counts["failed"] += 1
+        self.counts[f"failed_{c.kind}"] += 1
+        self.spent_pico += charged
+        message = scrub(c.message)
+        retries = max(0, attempts - 1)
+        self.call_log.add(error_record(
+            request, model=self.config.model, kind=c.kind, message=message, cost_usd=pico_to_usd(charged),
+            latency_s=self._clock() - t0, retries=retries, token_count_source=source,
+            deployment=self.deployment, test_double=self.test_double))
+        return LLMError(c.kind, message, retries=retries, cost_usd=pico_to_usd(charged))
+
+    def _record(self, request: LLMRequest, resp: LLMResponse) -> None:
+        self.call_log.add(ok_record(request, resp))
+
+    # ---- control ----
+    def pause(self) -> None:
+        self.admission.pause()
+
+    def resume(self) -> None:
+        self.admission.resume()
+
+    def set_limits(self, *, rpm: int | None = None, tpm: int | None = None,
+                   max_concurrency: int | None = None) -> None:
+        self.admission.set_limits(rpm=rpm, tpm=tpm, max_concurrency=max_concurrency)
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "deployment": self.deployment,
+            "model": self.config.model,
+            "calls": dict(self.counts),
+            "errors": dict(self.errors),
+            "spent_usd": pico_to_usd(self.spent_pico),
+            "rows_written": self.call_log.rows_written,
+            "rows_pending": self.call_log.pending,
+            "inflight": len(self._inflight),
+            **self.admission.stats(),
+        }
+
+
+def response_as_result(resp: LLMResponse) -> dict[str, Any]:
+    return {k: v for k, v in dataclasses.asdict(resp).items()
+            if k in ("text", "prompt_tokens", "cached_prompt_tokens", "completion_tokens", "token_count_source")}

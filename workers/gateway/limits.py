@@ -1,0 +1,263 @@
+"""Admission control of one deployment: RPM/TPM windows, adaptive concurrency, Retry-After.
+
+Why sliding windows rather than refilling token buckets: providers count requests and tokens
+per minute, and a bucket that starts full lets through up to twice its limit in one minute
+(a full burst, then the refill). Here every request takes an entry in a request window and a
+token window; a request is admitted only when the entries within ``window_s + pad_s`` leave
+room for it. An entry counts from admission until a window's length after its response came
+back (the provider saw the request somewhere in between), so no provider-side window can see
+more than the limit whatever the client's or the network's delays. A token entry is sized
+before the call (counted prompt + max output) and corrected to the reported usage after it.
+
+Concurrency is AIMD: halve the in-flight limit on HTTP 429 (at most once per Retry-After
+pause) and add 1/limit per success, back up to ``max_concurrency``. A 429's Retry-After
+pauses every new attempt of the deployment. 5xx and timeouts retry without shrinking.
+Admission is FIFO: one waiter at a time holds the window lock, so large requests do not starve.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+
+class AdmissionError(ValueError):
+    """A request that can never be admitted (bigger than the token window)."""
+
+
+class _Entry:
+    __slots__ = ("t", "amount", "ends")
+
+    def __init__(self, t: float, amount: int, ends: float | None):
+        self.t = t
+        self.amount = amount
+        #: the time the entry's window starts to run out; None while the request is in flight
+        self.ends = ends
+
+
+class SlidingWindow:
+    """Amounts sent within the last ``span_s`` seconds; room for ``amount`` when sum + amount <= limit.
+
+    With ``anchor="response"`` (default) an entry counts from its admission until ``span_s``
+    after its *response* arrived: the provider saw the request somewhere in between, so the
+    entry covers every provider-side window that can contain it, whatever the delays of the
+    client or the network. With ``anchor="admission"`` it counts for ``span_s`` from admission
+    (higher utilisation for slow generations; ``pad_s`` must then cover the send delay).
+    """
+
+    def __init__(self, limit: int | None, span_s: float, anchor: str = "response"):
+        if anchor not in ("response", "admission"):
+            raise ValueError(f"window anchor must be 'response' or 'admission', got {anchor!r}")
+        self.limit = limit
+        self.span_s = span_s
+        self.anchor = anchor
+        self._entries: list[_Entry] = []
+        self.total = 0
+
+    def _prune(self, now: float) -> None:
+        cutoff = now - self.span_s
+        if any(e.ends is not None and e.ends <= cutoff for e in self._entries):
+            kept = [e for e in self._entries if e.ends is None or e.ends > cutoff]
+            self._entries = kept
+            self.total = sum(e.amount for e in kept)
+
+    def wait_s(self, amount: int, now: float) -> float:
+        """Seconds until ``amount`` fits (0 when it fits now; ``span_s`` when only requests
+        still in flight could make room - a finishing request wakes the waiter earlier)."""
+        if self.limit is None:
+            return 0.0
+        self._prune(now)
+        if self.total + amount <= self.limit:
+            return 0.0
+        remaining = self.total
+        for e in sorted((e for e in self._entries if e.ends is not None), key=lambda e: e.ends):
+            remaining -= e.amount
+            if remaining + amount <= self.limit:
+                return max(1e-4, e.ends + self.span_s - now)
+        return self.span_s
+
+    def add(self, amount: int, now: float) -> _Entry:
+        e = _Entry(now, amount, now if self.anchor == "admission" else None)
+        self._entries.append(e)
+        self.total += amount
+        return e
+
+    def finish(self, entry: _Entry, now: float, amount: int | None = None) -> None:
+        """The request's response arrived (its window starts to run out); ``amount`` replaces
+        the estimate by the actual usage."""
+        if entry.ends is None:
+            entry.ends = now
+        if amount is not None:
+            if any(e is entry for e in self._entries):
+                self.total += amount - entry.amount
+            entry.amount = amount
+
+    def remove(self, entry: _Entry) -> None:
+        for i, e in enumerate(self._entries):
+            if e is entry:
+                del self._entries[i]
+                self.total -= e.amount
+                return
+
+    def usage(self, now: float) -> tuple[int, int]:
+        self._prune(now)
+        return len(self._entries), self.total
+
+
+@dataclass
+class Ticket:
+    """An admitted attempt: its window entries, released with the outcome."""
+
+    request_entry: _Entry
+    token_entry: _Entry
+    admitted_at: float
+    released: bool = False
+
+
+class AdmissionController:
+    def __init__(self, *, rpm: int | None, tpm: int | None, window_s: float, pad_s: float,
+                 max_concurrency: int, rate_limit_default_wait_s: float = 5.0, anchor: str = "response",
+                 clock: Callable[[], float] = time.monotonic):
+        self._clock = clock
+        self.requests = SlidingWindow(rpm, window_s + pad_s, anchor)
+        self.tokens = SlidingWindow(tpm, window_s + pad_s, anchor)
+        self.max_concurrency = max_concurrency
+        self.limit = float(max_concurrency)
+        self.active = 0
+        self.rate_limit_default_wait_s = rate_limit_default_wait_s
+        self.paused_until = 0.0
+        self.paused = False
+        self._waiters: deque[asyncio.Future] = deque()
+        self._window_lock = asyncio.Lock()
+        self._window_changed = asyncio.Event()
+        self.rate_limited = 0
+        self.shrinks = 0
+
+    # ---- admission ----
+    def _slots(self) -> int:
+        return max(1, math.floor(self.limit))
+
+    def _wake(self) -> None:
+        while self._waiters:
+            fut = self._waiters.popleft()
+            if not fut.done():
+                fut.set_result(None)
+
+    async def _enter(self) -> None:
+        while self.paused or self.active >= self._slots():
+            fut = asyncio.get_running_loop().create_future()
+            self._waiters.append(fut)
+            try:
+                await fut
+            except asyncio.CancelledError:
+                if fut in self._waiters:
+                    self._waiters.remove(fut)
+                raise
+        self.active += 1
+
+    async def _sleep_interruptibly(self, seconds: float) -> None:
+        """Sleep, but wake early when limits change (set_limits, resume)."""
+        self._window_changed.clear()
+        try:
+            await asyncio.wait_for(self._window_changed.wait(), timeout=seconds)
+        except asyncio.TimeoutError:
+            pass
+
+    async def acquire(self, tokens: int) -> Ticket:
+        """Wait for a concurrency slot, the end of any Retry-After pause and window room."""
+        if self.tokens.limit is not None and tokens > self.tokens.limit:
+            raise AdmissionError(
+                f"request needs {tokens} tokens (prompt + max output), more than the deployment's "
+                f"TPM limit {self.tokens.limit}"
+            )
+        await self._enter()
+        try:
+            async with self._window_lock:
+                while True:
+                    now = self._clock()
+                    wait = max(self.requests.wait_s(1, now), self.tokens.wait_s(tokens, now),
+                               self.paused_until - now)
+                    if wait <= 0 and not self.paused:
+                        break
+                    await self._sleep_interruptibly(wait if wait > 0 else 0.05)
+                return Ticket(self.requests.add(1, now), self.tokens.add(tokens, now), now)
+        except BaseException:
+            self.active -= 1
+            self._wake()
+            raise
+
+    def release(self, ticket: Ticket, outcome: str, *, actual_tokens: int | None = None,
+                retry_after_s: float | None = None) -> None:
+        """``outcome``: ``ok`` or an error kind. Corrects the token entry on success."""
+        if ticket.released:
+            return
+        ticket.released = True
+        self.active -= 1
+        now = self._clock()
+        self.requests.finish(ticket.request_entry, now)
+        self.tokens.finish(ticket.token_entry, now, actual_tokens if outcome == "ok" else None)
+        if outcome == "ok":
+            self.limit = min(float(self.max_concurrency), self.limit + 1.0 / self.limit)
+        elif outcome == "rate_limit":
+            self.rate_limited += 1
+            if now >= self.paused_until:  # one shrink per pause: a burst of 429s halves once
+                self.limit = max(1.0, self.limit / 2.0)
+                self.shrinks += 1
+            wait = self.rate_limit_default_wait_s if retry_after_s is None else retry_after_s
+            self.paused_until = max(self.paused_until, now + wait)
+        self._window_changed.set()  # a finished request may make room in the windows
+        self._wake()
+
+    def cancel(self, ticket: Ticket) -> None:
+        """Return an admission that sent nothing: its window entries are removed."""
+        if ticket.released:
+            return
+        ticket.released = True
+        self.active -= 1
+        self.requests.remove(ticket.request_entry)
+        self.tokens.remove(ticket.token_entry)
+        self._window_changed.set()
+        self._wake()
+
+    # ---- control ----
+    def pause(self) -> None:
+        self.paused = True
+
+    def resume(self) -> None:
+        self.paused = False
+        self._window_changed.set()
+        self._wake()
+
+    def set_limits(self, *, rpm: int | None = None, tpm: int | None = None,
+                   max_concurrency: int | None = None) -> None:
+        if rpm is not None:
+            self.requests.limit = rpm
+        if tpm is not None:
+            self.tokens.limit = tpm
+        if max_concurrency is not None:
+            self.max_concurrency = max_concurrency
+            self.limit = float(max_concurrency)
+        self._window_changed.set()
+        self._wake()
+
+    def stats(self) -> dict:
+        now = self._clock()
+        n_req, n_tok = self.requests.usage(now)
+        return {
+            "active": self.active,
+            "waiting": len(self._waiters),
+            "concurrency_limit": self.limit,
+            "max_concurrency": self.max_concurrency,
+            "paused": self.paused,
+            "retry_after_pause_s": max(0.0, self.paused_until - now),
+            "window_requests": n_req,
+            "window_tokens": n_tok,
+            "rpm": self.requests.limit,
+            "tpm": self.tokens.limit,
+            "rate_limited": self.rate_limited,
+            "shrinks": self.shrinks,
+        }

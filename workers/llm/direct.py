@@ -1,0 +1,106 @@
+"""``LiteLLMClient``: a Ray-free :class:`recap.llm.LLMClient` calling litellm directly.
+
+Why: a single episode (debugging, a demo, a notebook) should not need a cluster, and the
+gateway's overhead is measured against exactly this. It shares the gateway's request
+building, error classes, token accounting and prices, and retries with tenacity the same way
+(Retry-After honoured by sleeping) - but has no quota windows, budget ledger or cache. Rows
+go to ``record_sink`` (e.g. a :class:`workers.gateway.call_log.CallLog`'s ``add``) if given.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from tenacity import Retrying, RetryCallState, retry_if_exception_type, stop_after_attempt, stop_after_delay
+from tenacity import wait_exponential_jitter
+
+from recap.llm import LLMError, LLMRequest, LLMResponse
+from schemas.records import CallRecord
+from workers.llm.accounting import cost_pico, error_record, ok_record, served_from, usage_of
+from workers.llm.calling import Attempt, attempt_sync, litellm_kwargs
+from workers.llm.errors import Classified, classify
+from workers.llm.litellm_setup import get_litellm
+from workers.llm.pricing import PriceTable, pico_to_usd
+from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provider_messages
+from workers.llm.tokens import count_prompt_tokens
+
+
+class _Failed(Exception):
+    def __init__(self, classified: Classified):
+        super().__init__(classified.message)
+        self.classified = classified
+
+
+class _Retry(_Failed):
+    pass
+
+
+class LiteLLMClient:
+    def __init__(self, config: DeploymentConfig, *, prices: PriceTable | None = None,
+                 record_sink: Callable[[CallRecord], Any] | None = None):
+        self.config = config
+        self.price = config.resolved_price(prices)
+        self.test_double = config.is_test_double(prices)
+        self.record_sink = record_sink
+        get_litellm()  # import now (seconds), not inside the first call
+
+    def complete(self, request: LLMRequest) -> LLMResponse:
+        cfg = self.config
+        t0 = time.monotonic()
+        deadline = t0 + cfg.total_timeout_s
+        messages = provider_messages(request.messages)
+        params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
+        counted = count_prompt_tokens(cfg.model, messages)
+        attempts = 0
+        backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
+
+        def wait(rs: RetryCallState) -> float:
+            exc = rs.outcome.exception() if rs.outcome else None
+            if isinstance(exc, _Failed) and exc.classified.retry_after_s is not None:
+                pause = exc.classified.retry_after_s
+            elif isinstance(exc, _Failed) and exc.classified.kind == "rate_limit":
+                pause = cfg.rate_limit_default_wait_s
+            else:
+                pause = backoff(rs)
+            return min(pause, max(0.0, deadline - time.monotonic()))
+
+        def one() -> Attempt:
+            nonlocal attempts
+            attempts += 1
+            api_key = None
+            try:
+                api_key = cfg.api_key()
+                timeout_s = max(0.001, min(cfg.attempt_timeout_s, deadline - time.monotonic()))
+                return attempt_sync(litellm_kwargs(cfg, messages, params, timeout_s=timeout_s,
+                                                   call_key=request.call_key, hints=request.hints,
+                                                   api_key=api_key))
+            except DeploymentConfigError as exc:
+                raise _Failed(Classified("auth", str(exc))) from None
+            except Exception as exc:
+                c = classify(exc, secrets=[api_key])
+                raise (_Retry if c.retryable else _Failed)(c) from None
+
+        try:
+            attempt = Retrying(stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
+                               wait=wait, retry=retry_if_exception_type(_Retry), reraise=True)(one)
+        except _Failed as exc:
+            c = exc.classified
+            if self.record_sink is not None:
+                self.record_sink(error_record(
+                    request, model=cfg.model, kind=c.kind, message=c.message, cost_usd=0.0,
+                    latency_s=time.monotonic() - t0, retries=attempts - 1, token_count_source=counted.source,
+                    deployment=cfg.deployment_name, test_double=self.test_double))
+            raise LLMError(c.kind, c.message, retries=attempts - 1) from None
+        usage = usage_of(cfg.model, attempt, counted)
+        resp = LLMResponse(
+            text=attempt.text, model=cfg.model, prompt_tokens=usage.prompt_tokens,
+            cached_prompt_tokens=usage.cached_prompt_tokens, completion_tokens=usage.completion_tokens,
+            cost_usd=pico_to_usd(cost_pico(self.price, usage, attempt.litellm_cost_usd)),
+            latency_s=time.monotonic() - t0, retries=attempts - 1, token_count_source=usage.token_count_source,
+            served_from=served_from(cfg.model), deployment=cfg.deployment_name, test_double=self.test_double,
+            finish_reason=attempt.finish_reason, provider_cost_usd=attempt.litellm_cost_usd)
+        if self.record_sink is not None:
+            self.record_sink(ok_record(request, resp))
+        return resp

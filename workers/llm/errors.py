@@ -1,0 +1,139 @@
+"""Provider exceptions -> the error classes of :data:`recap.llm.ERROR_KINDS`, and secret scrubbing.
+
+Why one place: the gateway, the direct client and the retry policy must agree on what a
+failure *is* (retry it? shrink concurrency? give up at once?). litellm maps every provider's
+errors onto OpenAI-style exception classes with a ``status_code``; we map those (and plain
+asyncio/httpx timeouts) onto our seven kinds. Messages are scrubbed of API keys before they
+reach any record, log line or exception, because providers echo keys back in auth errors.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+#: kinds worth another attempt; the others are returned to the caller at once
+RETRYABLE_KINDS = frozenset({"rate_limit", "timeout", "server_error"})
+MAX_MESSAGE_CHARS = 500
+
+_SECRET_PATTERNS = (
+    re.compile(r"\b(sk|pk|rk)-[A-Za-z0-9_\-*]{6,}"),  # OpenAI/DeepSeek/Anthropic style
+    re.compile(r"(?i)(bearer\s+)[A-Za-z0-9._\-~+/=*]{8,}"),
+    re.compile(r"(?i)((?:api[_-]?key|authorization|x-api-key|token)[\"']?\s*[:=]\s*[\"']?)[^\s\"',}]{6,}"),
+)
+
+
+def scrub(text: str, secrets: Iterable[str | None] = ()) -> str:
+    """``text`` with the given secrets and anything that looks like an API key replaced."""
+    out = str(text)
+    for secret in secrets:
+        if secret and len(secret) >= 4:
+            out = out.replace(secret, "[REDACTED]")
+    out = _SECRET_PATTERNS[0].sub("[REDACTED]", out)
+    out = _SECRET_PATTERNS[1].sub(r"\1[REDACTED]", out)
+    out = _SECRET_PATTERNS[2].sub(r"\1[REDACTED]", out)
+    return out
+
+
+@dataclass(frozen=True)
+class Classified:
+    kind: str
+    message: str
+    #: seconds the provider asked us to wait (Retry-After), if it said
+    retry_after_s: float | None = None
+    status_code: int | None = None
+
+    @property
+    def retryable(self) -> bool:
+        return self.kind in RETRYABLE_KINDS
+
+
+def _header(headers: Any, name: str) -> str | None:
+    if headers is None:
+        return None
+    try:
+        items = headers.items() if hasattr(headers, "items") else headers
+        for k, v in items:
+            if str(k).lower() == name:
+                return str(v)
+    except Exception:
+        return None
+    return None
+
+
+def retry_after_seconds(exc: BaseException) -> float | None:
+    """Retry-After of a provider error, from litellm's copy of the response headers."""
+    sources = [getattr(exc, "litellm_response_headers", None)]
+    response = getattr(exc, "response", None)
+    if response is not None:
+        sources.append(getattr(response, "headers", None))
+    for headers in sources:
+        ms = _header(headers, "retry-after-ms")
+        if ms is not None:
+            try:
+                return max(0.0, float(ms) / 1000.0)
+            except ValueError:
+                pass
+        s = _header(headers, "retry-after")
+        if s is not None:
+            try:
+                return max(0.0, float(s))
+            except ValueError:
+                pass  # an HTTP date: ignore, the backoff applies
+    return None
+
+
+_CONTEXT_MARKERS = ("context_length_exceeded", "maximum context length", "context window",
+                    "too many tokens", "prompt is too long")
+
+
+def _kind_of_status(status: int | None, text: str) -> str | None:
+    if status is None:
+        return None
+    if status == 429:
+        return "rate_limit"
+    if status in (401, 403):
+        return "auth"
+    if status in (408, 504):
+        return "timeout"
+    if status >= 500:
+        return "server_error"
+    if status == 400 and any(m in text.lower() for m in _CONTEXT_MARKERS):
+        return "context_length"
+    if 400 <= status < 500:
+        return "bad_request"
+    return None
+
+
+def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classified:
+    """The error class of an exception raised by one litellm call."""
+    from workers.llm.litellm_setup import get_litellm
+
+    litellm = get_litellm()
+    message = scrub(f"{type(exc).__name__}: {exc}", secrets)[:MAX_MESSAGE_CHARS]
+    status = getattr(exc, "status_code", None)
+    status = status if isinstance(status, int) else None
+    kind: str | None
+    if isinstance(exc, litellm.ContextWindowExceededError):
+        kind = "context_length"
+    elif isinstance(exc, litellm.RateLimitError):
+        kind = "rate_limit"
+    elif isinstance(exc, (litellm.Timeout, asyncio.TimeoutError, TimeoutError)):
+        kind = "timeout"
+    elif isinstance(exc, (litellm.AuthenticationError, litellm.PermissionDeniedError)):
+        kind = "auth"
+    elif isinstance(exc, (litellm.InternalServerError, litellm.ServiceUnavailableError,
+                          litellm.BadGatewayError, litellm.APIConnectionError)):
+        kind = "server_error"
+    elif isinstance(exc, (litellm.BadRequestError, litellm.NotFoundError,
+                          litellm.UnprocessableEntityError, litellm.UnsupportedParamsError)):
+        kind = _kind_of_status(400, str(exc)) or "bad_request"
+    else:
+        kind = _kind_of_status(status, str(exc))
+        if kind is None:
+            # unknown failure inside the client (malformed body, dropped connection): transient
+            kind = "server_error"
+    return Classified(kind, message, retry_after_seconds(exc) if kind == "rate_limit" else None, status)

@@ -1,0 +1,63 @@
+"""Deterministic error injection for the offline test doubles.
+
+Why: the agents' recovery paths (malformed JSON repair, leaf failure, invalid-action feedback)
+must be exercised without a real model, and a failing test must fail the same way every time.
+Every random choice is drawn from a generator seeded by (seed, call_key), so a call's outcome
+depends only on those two - not on call order, process or concurrency.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import random
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+#: an action no benchmark has; injected to make the agent meet an invalid action
+INVALID_ACTION = "xyzzy the unknown object (injected invalid action)"
+#: a reply cut in the middle of its JSON object; injected to exercise the repair path
+MALFORMED_JSON = '{"think": "the reply stops in the middle of'
+
+
+class OfflineOptionsError(ValueError):
+    """Bad options for an offline test double."""
+
+
+@dataclass(frozen=True)
+class Knobs:
+    seed: int = 0
+    invalid_action_rate: float = 0.0
+    malformed_json_rate: float = 0.0
+    #: actions per subgoal chunk of offline/expert at the root (None: at most 4 chunks)
+    chunk_size: int | None = None
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, Any] | None) -> "Knobs":
+        options = dict(options or {})
+        unknown = set(options) - {"seed", "invalid_action_rate", "malformed_json_rate", "chunk_size"}
+        if unknown:
+            raise OfflineOptionsError(f"unknown offline model option(s) {sorted(unknown)}")
+        knobs = cls(
+            seed=int(options.get("seed", 0)),
+            invalid_action_rate=float(options.get("invalid_action_rate", 0.0)),
+            malformed_json_rate=float(options.get("malformed_json_rate", 0.0)),
+            chunk_size=None if options.get("chunk_size") is None else int(options["chunk_size"]),
+        )
+        for name in ("invalid_action_rate", "malformed_json_rate"):
+            rate = getattr(knobs, name)
+            if not 0.0 <= rate <= 1.0:
+                raise OfflineOptionsError(f"{name} must be within [0, 1], got {rate}")
+        if knobs.chunk_size is not None and knobs.chunk_size < 1:
+            raise OfflineOptionsError(f"chunk_size must be >= 1, got {knobs.chunk_size}")
+        return knobs
+
+
+def call_rng(call_key: str, seed: int, salt: str) -> random.Random:
+    """A generator that depends only on (seed, call_key, salt)."""
+    digest = hashlib.sha256(f"{seed}|{call_key}|{salt}".encode()).digest()
+    return random.Random(int.from_bytes(digest[:8], "big"))
+
+
+def draw(call_key: str, seed: int, salt: str) -> float:
+    return call_rng(call_key, seed, salt).random()

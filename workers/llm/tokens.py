@@ -1,0 +1,130 @@
+"""Offline prompt-token counts: a tokenizer where one ships with the install, else an estimate.
+
+Why: admission control (TPM) and the budget reservation must know a request's size *before*
+it is sent, and nothing may be downloaded at run time. litellm bundles three tiktoken
+encodings (cl100k_base, o200k_base, p50k_base); OpenAI models that map to one of them are
+counted exactly ("tokenizer"). Every other model (Llama, Qwen, DeepSeek, self-hosted) gets the
+documented estimate ``ceil(chars / 4)`` per message ("estimate"); the provider's reported
+usage replaces either count after the call ("provider").
+
+Two numbers are used:
+- :func:`count_prompt_tokens` - the best guess, for TPM windows and for the record when the
+  provider reports no usage;
+- :func:`prompt_token_bound` - an upper bound, for the budget reservation, so a cap is never
+  exceeded even when the estimate is low: byte-level BPE and SentencePiece-with-byte-fallback
+  tokenizers emit at most one token per UTF-8 byte, plus chat-template tokens per message.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+#: chars per token of the estimate (English text with GPT-style BPE is about 4)
+CHARS_PER_TOKEN = 4
+#: tokens the OpenAI chat format adds per message (role + separators) and to prime the reply
+TOKENS_PER_MESSAGE = 3
+REPLY_PRIMING_TOKENS = 3
+#: chat-template tokens allowed per message / per request in the upper bound (any template
+#: we know of uses fewer: Llama-3 uses 5 per message, ChatML 4-5)
+BOUND_TOKENS_PER_MESSAGE = 16
+BOUND_TOKENS_PER_REQUEST = 32
+
+_ENCODING_URL = "https://openaipublic.blob.core.windows.net/encodings/{}.tiktoken"
+#: provider prefixes whose model names are OpenAI model names
+_OPENAI_PREFIXES = ("openai/", "azure/", "text-completion-openai/")
+
+
+@dataclass(frozen=True)
+class TokenCount:
+    tokens: int
+    source: str  # "tokenizer" | "estimate"
+
+
+def estimate_text_tokens(text: str) -> int:
+    """The documented estimate: ceil(characters / 4)."""
+    return math.ceil(len(text) / CHARS_PER_TOKEN)
+
+
+def _content(message: Mapping[str, Any]) -> str:
+    content = message.get("content") or ""
+    return content if isinstance(content, str) else str(content)
+
+
+def estimate_prompt_tokens(messages: Sequence[Mapping[str, Any]]) -> int:
+    """Estimate of a chat prompt: per message ceil(chars/4) + 3, plus 3 for the reply."""
+    return REPLY_PRIMING_TOKENS + sum(
+        TOKENS_PER_MESSAGE + estimate_text_tokens(_content(m)) for m in messages
+    )
+
+
+def _bundled_encoding_available(name: str) -> bool:
+    """True when tiktoken can load ``name`` from the local cache (litellm's bundled files)."""
+    cache_dir = os.environ.get("TIKTOKEN_CACHE_DIR")
+    if not cache_dir:
+        return False
+    key = hashlib.sha1(_ENCODING_URL.format(name).encode()).hexdigest()
+    return os.path.exists(os.path.join(cache_dir, key))
+
+
+@lru_cache(maxsize=64)
+def _encoding_for(model: str) -> Any:
+    """The tiktoken encoding of an OpenAI model name, or None (not OpenAI / not bundled)."""
+    from workers.llm.litellm_setup import get_litellm
+
+    get_litellm()  # sets TIKTOKEN_CACHE_DIR to the bundled encodings
+    base = model
+    for prefix in _OPENAI_PREFIXES:
+        if base.startswith(prefix):
+            base = base[len(prefix):]
+            break
+    else:
+        if "/" in base:  # another provider's model: no bundled tokenizer
+            return None
+    import tiktoken
+    import tiktoken.model
+
+    try:
+        name = tiktoken.model.encoding_name_for_model(base)
+    except KeyError:
+        return None
+    if not _bundled_encoding_available(name):
+        return None
+    return tiktoken.get_encoding(name)
+
+
+def count_prompt_tokens(model: str, messages: Sequence[Mapping[str, Any]]) -> TokenCount:
+    """Prompt tokens of a chat request, counted offline."""
+    enc = _encoding_for(model)
+    if enc is None:
+        return TokenCount(estimate_prompt_tokens(messages), "estimate")
+    n = REPLY_PRIMING_TOKENS
+    for m in messages:
+        n += TOKENS_PER_MESSAGE + len(enc.encode(_content(m), disallowed_special=()))
+        n += len(enc.encode(str(m.get("role", "")), disallowed_special=()))
+    return TokenCount(n, "tokenizer")
+
+
+def count_text_tokens(model: str, text: str) -> TokenCount:
+    """Tokens of a completion text (used only when the provider reports no usage)."""
+    enc = _encoding_for(model)
+    if enc is None:
+        return TokenCount(estimate_text_tokens(text), "estimate")
+    return TokenCount(len(enc.encode(text, disallowed_special=())), "tokenizer")
+
+
+def prompt_token_bound(
+    model: str, messages: Sequence[Mapping[str, Any]], counted: TokenCount | None = None
+) -> int:
+    """An upper bound on the prompt tokens any provider will bill for these messages."""
+    counted = counted or count_prompt_tokens(model, messages)
+    if counted.source == "tokenizer":
+        return counted.tokens + BOUND_TOKENS_PER_REQUEST
+    return BOUND_TOKENS_PER_REQUEST + sum(
+        BOUND_TOKENS_PER_MESSAGE + len(_content(m).encode("utf-8")) for m in messages
+    )
