@@ -1,0 +1,192 @@
+"""Pipeline throughput: episodes per minute vs workers, sink rows per second, worker memory.
+
+Every episode is ReAct on a blocksworld instance against the fake OpenAI server
+(``workers.llm.fake_server``) answering after 200 ms, through the real driver, episode workers,
+gateway and sink; the per-episode call limit fixes each episode at CALLS model calls, so the
+ideal is ``workers x 60 / (CALLS x 0.2 s)`` episodes per minute. The series runs without a
+quota; a last run repeats the largest worker count under a gateway quota, where the rate must
+stop at the quota's.
+
+    python bench/pipeline.py                               # 1 2 4 8 16 workers + quota run
+    python bench/pipeline.py --workers 1 4 --rounds 3 --quota-check 0
+
+Prints a table; figures only, nothing asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
+os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+
+CALLS = 10
+LATENCY = 0.2
+
+
+def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float) -> str:
+    seeds = list(range((units + 8) // 9))
+    quota = f"\n    rpm: {rpm}\n    window_s: {window_s}" if rpm else ""
+    return f"""run: bench-{workers}
+output: {out}
+models:
+  - model: openai/fake-gpt
+    api_base: {url}
+    api_key_env: RECAP_BENCH_KEY
+    concurrency: 64{quota}
+methods: [{{method: react}}]
+environments: [{{benchmark: blocksworld, tasks: ["3", "4", "5"]}}]
+seeds: {seeds}
+limits: {{llm_calls: {CALLS}}}
+workers: {workers}
+"""
+
+
+def run_one(url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp: Path) -> dict:
+    tmp.mkdir(parents=True, exist_ok=True)
+    import ray
+
+    from pipeline.driver import Driver, Hooks, prepare
+    from pipeline.gateway_backend import make_backend
+    from pipeline.spec import parse_spec
+    from pipeline.store import RunStore
+
+    out = tmp / f"w{workers}"
+    text = sweep_text(out, url, workers, max(workers * rounds, 4), rpm, window_s)
+    spec = parse_spec(text)
+    prepared = prepare(spec, text)
+    n_units = workers * rounds
+    prepared.plan.units = prepared.plan.units[:n_units]
+    actors: dict[str, object] = {}
+    rss: dict[str, int] = {}
+
+    def on_dispatch(unit, attempt, actor):
+        actors[str(actor._actor_id)] = actor
+
+    def on_result(unit, attempt, out_):
+        for key, actor in actors.items():
+            try:
+                rss[key] = max(rss.get(key, 0), ray.get(actor.memory.remote(), timeout=10))
+            except Exception:
+                pass
+
+    t0 = time.monotonic()
+    summary = Driver(prepared, make_backend(spec), progress="off", hooks=Hooks(on_dispatch, on_result)).run()
+    wall = time.monotonic() - t0
+    eps, _ = RunStore(out).read_table("episodes", ["started_at", "ended_at", "llm_calls", "end_reason"])
+    starts, ends = eps.column("started_at").to_pylist(), sorted(eps.column("ended_at").to_pylist())
+    # steady state: the first round of episodes carries every process's cold start (the gateway
+    # imports litellm on its first call), so rate = episodes after the first round / their span
+    steady = eps.num_rows - workers
+    span = ends[-1] - ends[workers - 1] if steady > 0 else ends[-1] - min(starts)
+    n_measured = steady if steady > 0 else eps.num_rows
+    calls = sum(eps.column("llm_calls").to_pylist()) * n_measured / eps.num_rows
+    lat, _ = RunStore(out).read_table("llm_calls", ["latency_s"])
+    gw_latency = statistics.median(lat.column("latency_s").to_pylist()) if lat.num_rows else float("nan")
+    return {
+        "workers": workers, "episodes": eps.num_rows, "finished": summary.finished_now, "span_s": span, "wall_s": wall,
+        "eps_per_min": n_measured / span * 60, "calls_per_s": calls / span,
+        "calls_per_episode": calls / max(n_measured, 1),
+        "gw_ms": gw_latency * 1000, "call_ms": span * workers / max(calls, 1) * 1000,
+        "rss_mb": statistics.median(rss.values()) / 2**20 if rss else float("nan"),
+        "reasons": sorted(set(eps.column("end_reason").to_pylist())),
+    }
+
+
+def sink_rows_per_second(n_rows: int, tmp: Path, via_ray: bool) -> float:
+    """Message rows (300-character contents) through the sink in batches of 500."""
+    from schemas.records import MessageRecord
+    from schemas.tables import record_to_row
+    from workers.sink import Sink, sink_actor
+
+    text = "You arrive at the stove. On the stove you see a pot, a pan and a potato. " * 4
+    batch = [record_to_row(MessageRecord(f"ep{i // 50}", i % 50, "user", "observation", text[:300], i % 7), "bench")
+             for i in range(500)]
+    folder = tmp / ("sink-ray" if via_ray else "sink")
+    if via_ray:
+        import ray
+
+        sink = sink_actor().remote(str(folder), "bench", flush_rows=5000)
+        ray.get(sink.stats.remote())  # the actor is up: time only the rows
+        t0 = time.perf_counter()
+        refs = []
+        for _ in range(n_rows // 500):
+            refs.append(sink.add.remote({"messages": batch}))
+            if len(refs) > 8:
+                ray.get(refs.pop(0))
+        ray.get(refs)
+        ray.get(sink.flush.remote())
+        ray.kill(sink)
+    else:
+        t0 = time.perf_counter()
+        sink = Sink(str(folder), "bench", flush_rows=5000)
+        for _ in range(n_rows // 500):
+            sink.add({"messages": batch})
+        sink.flush()
+    return n_rows / (time.perf_counter() - t0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4, 8, 16])
+    ap.add_argument("--rounds", type=int, default=4, help="episodes per worker in each measurement (the first is warm-up)")
+    ap.add_argument("--rpm", type=int, default=0, help="gateway quota per window for the scaling series (0: none)")
+    ap.add_argument("--window-s", type=float, default=10.0, help="quota window in seconds")
+    ap.add_argument("--quota-check", type=int, default=100, metavar="RPM",
+                    help="finally run the largest worker count under this quota per window (0: skip)")
+    ap.add_argument("--num-cpus", type=int, default=None)
+    ap.add_argument("--sink-rows", type=int, default=100_000)
+    args = ap.parse_args()
+
+    import ray
+
+    from pipeline.raysetup import init_ray
+    from pipeline.spec import RaySpec
+    from workers.llm.fake_server import FakeServer, FakeServerConfig
+
+    os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
+    server = FakeServer(FakeServerConfig(latency_s=LATENCY))
+    url = server.start_in_thread()
+    init_ray(RaySpec(num_cpus=args.num_cpus))
+    cpus = ray.cluster_resources().get("CPU", 0)
+    print(f"host CPUs {os.cpu_count()}, Ray CPUs {cpus:.0f}; fake server latency {LATENCY * 1000:.0f} ms; "
+          f"{CALLS} calls per episode; {args.rounds} episodes per worker (first round = warm-up, not timed)")
+    print(f"{'workers':>7} {'quota/s':>7} {'episodes':>8} {'ep/min':>8} {'ideal':>8} {'vs ideal':>8} {'vs linear':>9} "
+          f"{'calls/s':>8} {'gw ms':>6} {'call ms':>7} {'worker RSS MB':>13}")
+    base = None
+    runs = [(w, args.rpm) for w in args.workers]
+    if args.quota_check:
+        runs.append((max(args.workers), args.quota_check))
+    with tempfile.TemporaryDirectory(prefix="recap-bench-") as tmp:
+        for i, (w, rpm) in enumerate(runs):
+            r = run_one(url, w, args.rounds, rpm, args.window_s, Path(tmp) / str(i))
+            quota = rpm / args.window_s if rpm else None
+            ideal = w * 60 / (CALLS * LATENCY)
+            if quota:
+                ideal = min(ideal, quota * 60 / CALLS)
+            if base is None and not quota:
+                base = r["eps_per_min"] / w
+            linear = f"{r['eps_per_min'] / (base * w):>9.0%}" if base and not quota else f"{'-':>9}"
+            print(f"{w:>7} {(f'{quota:.0f}' if quota else '-'):>7} {r['episodes']:>8} {r['eps_per_min']:>8.1f} {ideal:>8.1f} "
+                  f"{r['eps_per_min'] / ideal:>8.0%} {linear} {r['calls_per_s']:>8.1f} {r['gw_ms']:>6.0f} "
+                  f"{r['call_ms']:>7.0f} {r['rss_mb']:>13.0f}  {','.join(r['reasons'])}", flush=True)
+        local = sink_rows_per_second(args.sink_rows, Path(tmp), via_ray=False)
+        remote = sink_rows_per_second(args.sink_rows, Path(tmp), via_ray=True)
+    print(f"sink: {local:,.0f} rows/s in process, {remote:,.0f} rows/s through the Ray actor "
+          f"(message rows of 300 characters, batches of 500)")
+    print("ideal = workers x 60 s / (calls x latency), or the quota's rate when lower; vs linear = ep/min relative to\n"
+          "1 worker x workers; gw ms = median call latency inside the gateway; call ms = wall time per call in a worker")
+    server.stop_thread()
+    ray.shutdown()
+
+
+if __name__ == "__main__":
+    main()

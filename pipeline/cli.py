@@ -1,0 +1,300 @@
+"""The ``recap`` command: run, resume, status, estimate, show, sql, report, env.
+
+Every user error is one line on stderr (``recap: error: ...``) and exit status 2, raised before
+any model call and before anything is written. Exit status of ``run``/``resume``: 0 when every
+unit is done, 3 when work remains (a cap stopped it), 130 when interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
+os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+
+from pipeline.errors import PipelineError  # noqa: E402
+
+EXIT_USAGE = 2
+
+
+def _console(stderr: bool = False) -> Any:
+    """A rich console; wide when writing to a file or pipe so tables keep one line per row."""
+    from rich.console import Console
+
+    stream = sys.stderr if stderr else sys.stdout
+    width = None if getattr(stream, "isatty", lambda: False)() else 200
+    return Console(file=stream, highlight=False, width=width)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="recap", description="Run and inspect ReCAP evaluation sweeps.")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+
+    def run_flags(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--address", help="join an existing Ray cluster (e.g. 10.0.0.5:6379 or auto)")
+        sp.add_argument("--workers", type=int, help="number of episode workers")
+        sp.add_argument("--run-cap", type=float, dest="run_cap", help="run dollar cap (USD)")
+        sp.add_argument("--progress", choices=("auto", "live", "lines", "off"), default="auto")
+
+    r = sub.add_parser("run", help="run a sweep file")
+    r.add_argument("spec")
+    run_flags(r)
+    r.add_argument("--output", help="output folder (overrides the spec's)")
+    r.add_argument("--dry-run", action="store_true", help="check the spec and show the plan, run nothing")
+
+    rs = sub.add_parser("resume", help="finish a run after a crash or with a higher cap")
+    rs.add_argument("run_dir")
+    run_flags(rs)
+
+    st = sub.add_parser("status", help="units done/total, success, spend of a run folder")
+    st.add_argument("run_dir")
+
+    es = sub.add_parser("estimate", help="units, calls, tokens and a cost range of a sweep file")
+    es.add_argument("spec")
+
+    sh = sub.add_parser("show", help="one episode's ReCAP context tree")
+    sh.add_argument("run_dir")
+    sh.add_argument("episode")
+
+    q = sub.add_parser("sql", help="read-only SQL over a run's tables")
+    q.add_argument("run_dir")
+    q.add_argument("query")
+
+    rp = sub.add_parser("report", help="build the report of one or more runs", add_help=False)
+    rp.add_argument("args", nargs=argparse.REMAINDER)
+
+    env = sub.add_parser("env", help="list, play or replay benchmark instances")
+    esub = env.add_subparsers(dest="env_cmd", required=True, metavar="ACTION")
+    el = esub.add_parser("list", help="instance ids of a benchmark")
+    el.add_argument("bench")
+    el.add_argument("selector", nargs="?")
+    ep = esub.add_parser("play", help="play an instance by hand")
+    ep.add_argument("instance_id")
+    ep.add_argument("--step-multiplier", type=float, default=4.0)
+    er = esub.add_parser("replay", help="replay a recorded Robotouille trajectory")
+    er.add_argument("trajectory")
+    return p
+
+
+# --------------------------------------------------------------------------------------------
+def _backend(spec: Any) -> Any:
+    from pipeline.gateway_backend import make_backend
+
+    return make_backend(spec)
+
+
+@contextmanager
+def _named(source: str) -> Iterator[None]:
+    """Prefix spec and preflight errors with the sweep file they come from."""
+    from pipeline.errors import PreflightError, SpecError
+
+    try:
+        yield
+    except (SpecError, PreflightError) as exc:
+        msg = str(exc)
+        if msg.startswith(source + ":"):
+            raise
+        raise type(exc)(f"{source}: {msg}") from None
+
+
+def _print_plan(prepared: Any, console: Any) -> None:
+    from pipeline.summary import model_label
+
+    plan = prepared.plan
+    models = ", ".join(model_label(m.name, m.test_double) for m in plan.spec.models)
+    console.print(f"run {plan.spec.run}: {len(plan.units)} units -> {prepared.store.location}  (models: {models})")
+    if prepared.diff is not None:
+        d = prepared.diff
+        console.print(f"changes since the last start: {d.describe()}")
+        for label, keys in (("new", d.new), ("changed", d.changed)):
+            for k in keys[:10]:
+                console.print(f"  {label}: {k}")
+            if len(keys) > 10:
+                console.print(f"  ... and {len(keys) - 10} more {label}")
+
+
+def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any = None) -> int:
+    from pipeline.driver import Driver
+    from pipeline.summary import collect, render
+
+    console = _console()
+    backend = backend if backend is not None else _backend(prepared.spec)
+    driver = Driver(prepared, backend, command=command, progress=args.progress, address=args.address)
+    summary = driver.run()
+    render(collect(prepared.store), console)
+    if summary.stopped:
+        console.print(f"[yellow]stopped: {summary.stopped}; {summary.not_started} units not started, "
+                      f"{summary.budget_stopped} episodes ended budget_exhausted this session[/yellow]")
+        console.print(f"continue with a higher cap: recap resume {prepared.store.location} --run-cap <USD>")
+    if summary.interrupted:
+        console.print(f"[yellow]interrupted; continue with: recap resume {prepared.store.location}[/yellow]")
+    if summary.abandoned:
+        console.print(f"[red]{summary.abandoned} units gave up after {prepared.spec.max_attempts} failed attempts (see the events table)[/red]")
+    console.print(f"run folder: {prepared.store.location}   report: recap report {prepared.store.location}")
+    return summary.exit_code()
+
+
+def cmd_run(args: argparse.Namespace, command: str) -> int:
+    from pipeline.driver import prepare
+    from pipeline.spec import load_spec, with_overrides
+
+    spec, text = load_spec(args.spec)
+    spec = with_overrides(spec, workers=args.workers, run_cap_usd=args.run_cap, output=args.output)
+    with _named(Path(args.spec).name):
+        prepared = prepare(spec, text)
+        backend = _backend(spec)
+    console = _console()
+    _print_plan(prepared, console)
+    if args.dry_run:
+        return 0
+    return _execute(prepared, args, command, backend)
+
+
+def cmd_resume(args: argparse.Namespace, command: str) -> int:
+    from pipeline.driver import prepare
+    from pipeline.errors import RunFolderError
+    from pipeline.spec import parse_spec, with_overrides
+    from pipeline.store import SPEC_FILE, RunStore
+
+    store = RunStore(args.run_dir)
+    ident = store.require_identity()
+    text = store.read_text(SPEC_FILE)
+    if text is None:
+        raise RunFolderError(f"{args.run_dir} has no {SPEC_FILE}; start it again with recap run SPEC")
+    spec = parse_spec(text, f"{args.run_dir}/{SPEC_FILE}")
+    spec = with_overrides(spec, workers=args.workers, run_cap_usd=args.run_cap, output=args.run_dir)
+    if spec.run != ident.run:
+        raise RunFolderError(f"{args.run_dir}: {SPEC_FILE} names run {spec.run!r} but run.json names {ident.run!r}")
+    with _named(f"{args.run_dir}/{SPEC_FILE}"):
+        prepared = prepare(spec, text)
+        backend = _backend(spec)
+    _print_plan(prepared, _console())
+    return _execute(prepared, args, command, backend)
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    from pipeline.store import RunStore
+    from pipeline.summary import collect, render
+
+    store = RunStore(args.run_dir)
+    store.require_identity()
+    try:
+        report = collect(store)
+    except PipelineError:
+        raise
+    except Exception as exc:  # status must never die with a traceback on a damaged folder
+        raise PipelineError(f"cannot read {args.run_dir}: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}") from None
+    render(report, _console())
+    return 0
+
+
+def cmd_estimate(args: argparse.Namespace) -> int:
+    from pipeline.estimate import estimate, render
+    from pipeline.spec import load_spec
+    from pipeline.units import expand
+
+    spec, _ = load_spec(args.spec)
+    plan = expand(spec)
+    render(plan, estimate(plan), _console())
+    return 0
+
+
+def cmd_report(argv: list[str]) -> int:
+    try:
+        from reports.commands import report_main
+    except ModuleNotFoundError as exc:
+        if exc.name in ("reports", "reports.commands"):
+            raise PipelineError("reports are not available (reports.commands is not installed)") from None
+        raise
+    return int(report_main(argv) or 0)
+
+
+def dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    command = "recap " + " ".join(argv)
+    if args.cmd == "run":
+        return cmd_run(args, command)
+    if args.cmd == "resume":
+        return cmd_resume(args, command)
+    if args.cmd == "status":
+        return cmd_status(args)
+    if args.cmd == "estimate":
+        return cmd_estimate(args)
+    if args.cmd == "show":
+        from pipeline.show import show_main
+
+        return show_main(args.run_dir, args.episode, _console())
+    if args.cmd == "sql":
+        from pipeline.sqlview import sql_main
+
+        return sql_main(args.run_dir, args.query, _console())
+    if args.cmd == "env":
+        from pipeline import envcmd
+
+        if args.env_cmd == "list":
+            return envcmd.list_main(args.bench, args.selector, sys.stdout)
+        if args.env_cmd == "play":
+            return envcmd.play_main(args.instance_id, sys.stdin, sys.stdout, args.step_multiplier)
+        return envcmd.replay_main(args.trajectory, sys.stdout)
+    raise AssertionError(args.cmd)
+
+
+def _local_run_args(args: list[str]) -> list[str]:
+    """Object-store run folders among ``args`` replaced by freshly pulled local mirrors (the
+    reports package reads local folders)."""
+    from pipeline.store import RUN_FILE, RunStore
+    from workers.sink import is_uri
+
+    out = []
+    for a in args:
+        if is_uri(a) and RunStore(a).exists(RUN_FILE):
+            from pipeline.mirror import mirror_dir, pull
+
+            local = mirror_dir(a)
+            pull(a, local)
+            a = str(local)
+        out.append(a)
+    return out
+
+
+def cmd_sql_delegated(argv: list[str]) -> int | None:
+    """``recap sql ...`` handed whole to reports.commands.sql_main (several run folders,
+    --csv/--json, named queries); None when the reports package is not installed."""
+    from pipeline.sqlview import _delegate
+
+    delegate = _delegate()
+    if delegate is None:
+        return None
+    return int(delegate(_local_run_args(argv)) or 0)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in ("report", "sql") and not {"-h", "--help"} & set(argv[1:2]):
+        try:
+            if argv[0] == "report":
+                return cmd_report(_local_run_args(argv[1:]))
+            code = cmd_sql_delegated(argv[1:])
+            if code is not None:
+                return code
+        except PipelineError as exc:
+            print(f"recap: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+    args = _parser().parse_args(argv)
+    try:
+        return dispatch(args, argv)
+    except PipelineError as exc:
+        print(f"recap: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("recap: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,167 @@
+"""``recap estimate SPEC``: units, expected calls, tokens and a cost range before spending anything.
+
+The estimate is deliberately a *range* from a simple model of each method, not a promise:
+
+* calls per episode: ReCAP makes about one call per environment step when its plans hold and up
+  to ~2.5 per allowed step when it re-plans; ReAct/Act one per step; CoT/Standard one plan call
+  (plus repairs); ADaPT up to ~3 per step. Both ends are clipped to the per-episode call limit.
+* prompt tokens per call: the pinned prompt (rules, demonstration, first observation - measured
+  on the instance itself, at 4 characters per token) plus the sliding window, which fills with
+  one observation and one reply per step up to its size K.
+* cost: those tokens at the model's price (sweep override, else the repo price table); the low
+  end bills half of each prompt at the cached-input price.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from pipeline.spec import SweepSpec
+from pipeline.units import Plan
+
+#: (low, high) calls per allowed environment step, per method family
+CALLS_PER_STEP = {"recap": (1.0, 2.5), "react": (1.0, 1.0), "act": (1.0, 1.0), "adapt": (1.0, 3.0)}
+ONE_SHOT = {"cot", "standard"}
+COMPLETION_TOKENS = (60, 250)
+DEFAULT_OPTIMAL = 20
+
+
+def _tokens(text: str) -> int:
+    return max(1, (len(text) + 3) // 4)
+
+
+@dataclass
+class InstanceShape:
+    optimal: int
+    max_steps: int
+    pinned_tokens: int
+    obs_tokens: int
+    measured: bool
+
+
+def measure_instance(instance_id: str, step_multiplier: float, options: dict[str, Any]) -> InstanceShape:
+    from workers.envs.registry import make_env
+
+    try:
+        env = make_env(instance_id, step_multiplier=step_multiplier, **options)
+        try:
+            r = env.reset()
+            rules = env.rules()
+            optimal = env.optimal_steps or DEFAULT_OPTIMAL
+            obs = _tokens(r.observation)
+            demo = 3 * (_tokens(rules) + obs) if env.demonstration() is not None else 0
+            return InstanceShape(optimal, env.max_steps, _tokens(rules) + obs + demo + 200, obs, True)
+        finally:
+            env.close()
+    except Exception:
+        return InstanceShape(DEFAULT_OPTIMAL, math.ceil(DEFAULT_OPTIMAL * step_multiplier), 3000, 300, False)
+
+
+@dataclass
+class Range:
+    low: float = 0.0
+    high: float = 0.0
+
+    def add(self, low: float, high: float) -> None:
+        self.low += low
+        self.high += high
+
+
+@dataclass
+class GroupEstimate:
+    method: str
+    model: str
+    test_double: bool
+    units: int = 0
+    calls: Range = None  # type: ignore[assignment]
+    tokens: Range = None  # type: ignore[assignment]
+    cost: Range | None = None
+
+    def __post_init__(self) -> None:
+        self.calls, self.tokens = Range(), Range()
+
+
+def _price(spec: SweepSpec, model_label: str) -> Any:
+    from workers.llm.pricing import PriceError, resolve_price
+
+    m = spec.model(model_label)
+    try:
+        return resolve_price(m.model, m.prices.model_dump() if m.prices else None)
+    except PriceError:
+        return None
+
+
+def estimate(plan: Plan) -> list[GroupEstimate]:
+    spec = plan.spec
+    shapes: dict[str, InstanceShape] = {}
+    groups: dict[tuple[str, str], GroupEstimate] = {}
+    for u in plan.units:
+        if u.instance_id not in shapes:
+            shapes[u.instance_id] = measure_instance(u.instance_id, u.step_multiplier, dict(u.env_options))
+        shape = shapes[u.instance_id]
+        cfg = json.loads(u.method_config)
+        max_calls = int(cfg.get("max_llm_calls") or 400)
+        window = int(cfg.get("window") or 64)
+        if u.method in ONE_SHOT:
+            c_low, c_high = 1.0, float(min(max_calls, 1 + int(cfg.get("max_json_repairs", 3))))
+        else:
+            lo, hi = CALLS_PER_STEP.get(u.method, (1.0, 2.5))
+            c_low = min(max_calls, max(1.0, shape.optimal * lo + 1))
+            c_high = min(max_calls, max(c_low, shape.max_steps * hi + 1))
+        per_msg = shape.obs_tokens + COMPLETION_TOKENS[1] // 2
+
+        def prompt_total(calls: float) -> float:
+            # call i sees the pinned prompt + min(window, 2i) messages of ~per_msg tokens
+            full = max(0.0, calls - window / 2)
+            ramp = min(calls, window / 2)
+            return calls * shape.pinned_tokens + per_msg * (ramp * ramp + full * window)
+
+        p_low, p_high = prompt_total(c_low), prompt_total(c_high)
+        o_low, o_high = c_low * COMPLETION_TOKENS[0], c_high * COMPLETION_TOKENS[1]
+        g = groups.setdefault((u.method_label, u.model_label),
+                              GroupEstimate(u.method_label, u.model_label, u.model.startswith("offline/")))
+        g.units += 1
+        g.calls.add(c_low, c_high)
+        g.tokens.add(p_low + o_low, p_high + o_high)
+        price = _price(spec, u.model_label)
+        if price is not None:
+            r_in, r_cached, r_out = (x / 1e12 for x in price.rates())
+            low = p_low / 2 * r_cached + p_low / 2 * r_in + o_low * r_out
+            high = p_high * r_in + o_high * r_out
+            if g.cost is None:
+                g.cost = Range()
+            g.cost.add(low, high)
+    return list(groups.values())
+
+
+def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
+    from rich.table import Table
+
+    from pipeline.summary import model_label
+
+    t = Table(title=f"estimate for run {plan.spec.run}: {len(plan.units)} units")
+    for col in ("method", "model", "units", "calls", "tokens", "cost $"):
+        t.add_column(col, justify="left" if col in ("method", "model") else "right")
+    total_cost = Range()
+    unknown = False
+    for g in groups:
+        cost = f"{g.cost.low:.2f} - {g.cost.high:.2f}" if g.cost else "no price"
+        if g.cost:
+            total_cost.add(g.cost.low, g.cost.high)
+        else:
+            unknown = True
+        t.add_row(g.method, model_label(g.model, g.test_double), str(g.units), f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
+                  f"{g.tokens.low:,.0f} - {g.tokens.high:,.0f}", cost)
+    console.print(t)
+    calls = sum(g.calls.low for g in groups), sum(g.calls.high for g in groups)
+    line = f"total: {len(plan.units)} units, {calls[0]:,.0f} - {calls[1]:,.0f} calls, ${total_cost.low:.2f} - ${total_cost.high:.2f}"
+    if unknown:
+        line += " (plus models without a price)"
+    console.print(line)
+    cap = plan.spec.run_cap_usd
+    if cap is not None:
+        verdict = "fits" if total_cost.high <= cap else ("may be reached" if total_cost.low <= cap else "will be reached")
+        console.print(f"run cap ${cap:.2f}: {verdict}")

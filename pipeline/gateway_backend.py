@@ -1,0 +1,178 @@
+"""The product's model backend: the LLM gateway (``workers.gateway``) on Ray.
+
+One ``BudgetActor`` per run (the dollar caps, journalled under ``RUN_DIR/gateway/``) and one
+``GatewayActor`` per model of the sweep (rate limits, retries, the ``llm_calls`` rows). Both
+write into the run folder, so they are pinned to the driver's node. Each sweep model entry
+becomes a :class:`workers.llm.providers.DeploymentConfig`; building those configs validates
+params and test-double options, so a bad entry fails before anything is written.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from pipeline.backend import RateStats, Spend
+from pipeline.errors import SpecError
+from pipeline.spec import ModelSpec, SweepSpec
+
+
+def deployment_config(m: ModelSpec, where: str) -> Any:
+    """The gateway's config for one sweep model entry; errors name the entry."""
+    from pydantic import ValidationError
+
+    from workers.llm.offline.knobs import Knobs, OfflineOptionsError
+    from workers.llm.providers import DeploymentConfig
+
+    if m.options and not m.test_double:
+        raise SpecError(f"{where} ({m.name}): 'options' are for offline/ test doubles only")
+    if m.test_double:
+        try:
+            Knobs.from_options(m.options)
+        except OfflineOptionsError as exc:
+            raise SpecError(f"{where} ({m.name}): {exc}") from None
+    kwargs: dict[str, Any] = {"model": m.model, "api_base": m.api_base, "api_key_env": m.api_key_env,
+                              "name": m.label, "rpm": m.rpm, "tpm": m.tpm, "params": dict(m.params),
+                              "offline_options": dict(m.options)}
+    if m.window_s is not None:
+        kwargs["window_s"] = m.window_s
+    if m.concurrency is not None:
+        kwargs["max_concurrency"] = m.concurrency
+    if m.retries is not None:
+        kwargs["max_attempts"] = m.retries + 1
+    if m.timeout_s is not None:
+        kwargs["attempt_timeout_s"] = m.timeout_s
+    if m.prices is not None:
+        kwargs["price"] = m.prices.model_dump()
+    try:
+        return DeploymentConfig(**kwargs)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        loc = ".".join(str(x) for x in err.get("loc", ()))
+        raise SpecError(f"{where} ({m.name}): {loc + ': ' if loc else ''}{err.get('msg', 'invalid').removeprefix('Value error, ')}") from None
+    except ValueError as exc:
+        raise SpecError(f"{where} ({m.name}): {exc}") from None
+
+
+def model_caps(spec: SweepSpec) -> dict[str, float]:
+    """Per-model caps keyed by model string (the gateway ledger's key)."""
+    caps: dict[str, float] = {}
+    for i, m in enumerate(spec.models):
+        if m.cap_usd is None:
+            continue
+        if m.model in caps and caps[m.model] != m.cap_usd:
+            raise SpecError(f"models[{i}] ({m.name}): another entry of {m.model} has a different cap_usd; a model cap applies per model string")
+        caps[m.model] = m.cap_usd
+    return caps
+
+
+@dataclass
+class GatewayFactory:
+    """Picklable: the workers get one GatewayClient (an actor handle) per sweep model label."""
+
+    clients: dict[str, Any]
+    writes_llm_calls: bool = True
+
+    def client(self, model: str) -> Any:
+        return self.clients[model]
+
+
+class GatewayBackend:
+    writes_llm_calls = True
+
+    def __init__(self, spec: SweepSpec) -> None:
+        self.spec = spec
+        self.configs = {m.name: deployment_config(m, f"models[{i}]") for i, m in enumerate(spec.models)}
+        self.caps = model_caps(spec)
+        self.budget: Any = None
+        self.actors: dict[str, Any] = {}
+        self.clients: dict[str, Any] = {}
+        self._closed = False
+
+    def start(self, *, run_dir: str, run_id: str, runtime_env: dict[str, Any] | None = None, node_id: str | None = None) -> None:
+        from workers.gateway import BudgetActor, GatewayActor, GatewayClient
+
+        opts: dict[str, Any] = {"runtime_env": self._runtime_env()}
+        if node_id is not None:
+            from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+            opts["scheduling_strategy"] = NodeAffinitySchedulingStrategy(node_id=node_id, soft=False)
+        self.budget = BudgetActor.options(**opts).remote(str(run_dir), self.spec.run_cap_usd, self.caps)
+        for label, cfg in self.configs.items():
+            actor = GatewayActor.options(**opts).remote(cfg, str(run_dir), run_id, self.budget)
+            self.actors[label] = actor
+            self.clients[label] = GatewayClient(actor, deployment=cfg.deployment_name)
+
+    def _runtime_env(self) -> dict[str, Any]:
+        """The job's environment plus the models' API keys, for the gateway actors only.
+
+        On a cluster joined with ``--address`` the actors do not inherit the driver's
+        environment, so the keys the sweep's models need travel with the gateway actors (and
+        only with them: episode workers never see a key)."""
+        import os
+
+        from pipeline.preflight import key_variables
+        from pipeline.raysetup import runtime_env
+
+        env_vars = dict(runtime_env()["env_vars"])
+        for m in self.spec.models:
+            for name in key_variables(m):
+                if os.environ.get(name):
+                    env_vars[name] = os.environ[name]
+        return {"env_vars": env_vars}
+
+    def factory(self) -> GatewayFactory:
+        return GatewayFactory(dict(self.clients))
+
+    def spend(self) -> Spend:
+        import ray
+
+        stats = ray.get(self.budget.stats.remote())
+        by_model = stats.get("by_model_spent_usd", {})
+        return Spend(float(stats.get("spent_usd", 0.0)), {label: float(by_model.get(cfg.model, 0.0)) for label, cfg in self.configs.items()})
+
+    def rate_stats(self) -> dict[str, RateStats]:
+        import ray
+
+        out: dict[str, RateStats] = {}
+        stats = ray.get([a.stats.remote() for a in self.actors.values()], timeout=5)
+        for (label, cfg), s in zip(self.configs.items(), stats):
+            per_min = 60.0 / cfg.window_s
+            out[label] = RateStats(
+                rpm=s.get("window_requests", 0) * per_min, rpm_limit=(s["rpm"] * per_min) if s.get("rpm") else None,
+                tpm=s.get("window_tokens", 0) * per_min, tpm_limit=(s["tpm"] * per_min) if s.get("tpm") else None,
+                in_flight=s.get("inflight"))
+        return out
+
+    def set_run_cap(self, usd: float | None) -> None:
+        import ray
+
+        if usd is not None:
+            ray.get(self.budget.set_caps.remote(usd, None))
+
+    def flush(self) -> None:
+        """Write every pending llm_calls row and close the ledger journal (end of session)."""
+        import ray
+
+        if self._closed or self.budget is None:
+            return
+        self._closed = True
+        ray.get([a.close.remote() for a in self.actors.values()])
+        ray.get(self.budget.close.remote())
+
+    def close(self) -> None:
+        import ray
+
+        try:
+            self.flush()
+        except Exception:
+            pass
+        for a in list(self.actors.values()) + ([self.budget] if self.budget is not None else []):
+            try:
+                ray.kill(a)
+            except Exception:
+                pass
+
+
+def make_backend(spec: SweepSpec) -> GatewayBackend:
+    return GatewayBackend(spec)

@@ -1,0 +1,100 @@
+"""``recap show RUN_DIR EPISODE``: one episode's ReCAP context tree in the terminal.
+
+Each node shows its task, kind and status, every (think, subtasks) version it went through, and
+for a leaf the action it ran with the outcome. Flat methods (ReAct, Act, ...) have no tree and
+are shown as their list of actions. EPISODE is an episode id, a unit id (its latest attempt), or
+an unambiguous prefix of either.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pipeline.errors import PipelineError
+from pipeline.store import RunStore
+
+
+def _first_line(text: str | None, width: int = 120) -> str:
+    line = (text or "").strip().splitlines()[0] if (text or "").strip() else ""
+    return line if len(line) <= width else line[: width - 1] + "..."
+
+
+def resolve_episode(store: RunStore, ref: str) -> dict[str, Any]:
+    eps, _ = store.read_table("episodes")
+    rows = eps.to_pylist()
+    exact = [r for r in rows if r["episode_id"] == ref]
+    if exact:
+        return exact[0]
+    by_unit = [r for r in rows if r["unit_id"] == ref]
+    if by_unit:
+        return max(by_unit, key=lambda r: r["attempt"])
+    pref = [r for r in rows if r["episode_id"].startswith(ref)]
+    ids = sorted({r["episode_id"] for r in pref})
+    if len(ids) == 1:
+        return pref[0]
+    if len(ids) > 1:
+        units = {r["unit_id"] for r in pref}
+        if len(units) == 1:
+            return max(pref, key=lambda r: r["attempt"])
+        raise PipelineError(f"episode {ref!r} is ambiguous: {', '.join(ids[:5])}{' ...' if len(ids) > 5 else ''}")
+    raise PipelineError(f"no episode {ref!r} in {store.location} (use an episode id or unit id from the episodes table)")
+
+
+def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list[dict[str, Any]]) -> Any:
+    from rich.markup import escape
+    from rich.tree import Tree
+
+    status = "[green]success[/green]" if episode["success"] else f"[red]{episode['end_reason']}[/red]"
+    title = (f"[bold]{escape(episode['episode_id'])}[/bold]  {escape(episode['instance_id'])}  {escape(episode['method'])} / "
+             f"{escape(episode['model'])}  {status}  steps {episode['steps']}  calls {episode['llm_calls']}  ${episode['cost_usd']:.4f}")
+    root_tree = Tree(title)
+    step_at = {s["index"]: s for s in steps}
+    if not nodes:
+        for s in sorted(steps, key=lambda s: s["index"]):
+            mark = "[green]ok[/green]" if s["valid"] else "[red]invalid[/red]"
+            root_tree.add(f"[cyan]{escape(s['action'])}[/cyan] {mark}  [dim]{escape(_first_line(s['observation']))}[/dim]")
+        return root_tree
+    children: dict[int | None, list[dict[str, Any]]] = {}
+    for n in nodes:
+        children.setdefault(n["parent_id"], []).append(n)
+    for lst in children.values():
+        lst.sort(key=lambda n: n["child_index"])
+
+    def add(tree: Any, node: dict[str, Any]) -> None:
+        colour = {"done": "green", "failed": "red", "open": "yellow"}.get(node["status"], "white")
+        label = f"[bold]{escape(node['task'])}[/bold]  [dim]{node['kind']}[/dim] [{colour}]{node['status']}[/{colour}]"
+        branch = tree.add(label)
+        versions = node.get("versions") or []
+        show_versions = node["kind"] != "primitive" or any(v.get("think") for v in versions)
+        if show_versions:
+            for v in versions:
+                think = f"think: {_first_line(v.get('think'))} | " if v.get("think") else ""
+                subs = ", ".join(v.get("subtasks") or [])
+                branch.add(f"[dim]v{v['version']}[/dim] " + escape(f"{think}subtasks: [{subs}]"))
+        if node.get("step_index") is not None and node["step_index"] in step_at:
+            s = step_at[node["step_index"]]
+            mark = "[green]ok[/green]" if s["valid"] else "[red]invalid[/red]"
+            branch.add(f"action [cyan]{escape(s['action'])}[/cyan] {mark}  [dim]{escape(_first_line(s['observation']))}[/dim]")
+        for child in children.get(node["node_id"], []):
+            add(branch, child)
+
+    for top in children.get(None, []):
+        add(root_tree, top)
+    return root_tree
+
+
+def show_main(run_dir: str, ref: str, console: Any) -> int:
+    import pyarrow.compute as pc
+
+    store = RunStore(run_dir)
+    store.require_identity()
+    ep = resolve_episode(store, ref)
+    eid = ep["episode_id"]
+    nodes_t, _ = store.read_table("tree_nodes")
+    steps_t, _ = store.read_table("steps")
+    nodes = nodes_t.filter(pc.equal(nodes_t["episode_id"], eid)).to_pylist() if nodes_t.num_rows else []
+    steps = steps_t.filter(pc.equal(steps_t["episode_id"], eid)).to_pylist() if steps_t.num_rows else []
+    console.print(build_tree(ep, nodes, steps))
+    if ep.get("error"):
+        console.print(f"[dim]end: {ep['end_reason']}: {_first_line(ep['error'], 300)}[/dim]")
+    return 0

@@ -1,0 +1,135 @@
+"""What a run folder holds, as numbers and a table: the end-of-run summary and ``recap status``.
+
+Both read only the run folder (plan.json + the tables), so they work after a crash, while a run
+is still going, and on a folder copied from a cluster. Unreadable part files are counted and
+named, never fatal.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, field
+from typing import Any
+
+from pipeline.store import PLAN_FILE, RunStore
+from workers.storage import BadPart
+
+TEST_DOUBLE_LABEL = " (test double)"
+
+
+@dataclass
+class GroupRow:
+    method: str
+    model: str
+    units: int
+    done: int = 0
+    success: int = 0
+    budget_stopped: int = 0
+    steps: int = 0
+    calls: int = 0
+    cost_usd: float = 0.0
+    test_double: bool = False
+
+
+@dataclass
+class StatusReport:
+    location: str
+    run: str
+    run_id: str
+    total: int
+    completed: int
+    success: int
+    budget_stopped: int
+    spend_usd: float
+    terminal_rows: int
+    duplicate_terminal: int
+    groups: list[GroupRow] = field(default_factory=list)
+    bad_parts: list[BadPart] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def remaining(self) -> int:
+        return self.total - self.completed
+
+
+def model_label(name: str, test_double: bool) -> str:
+    return name + (TEST_DOUBLE_LABEL if test_double else "")
+
+
+def collect(store: RunStore) -> StatusReport:
+    """Read plan + tables and count; never raises for unreadable parts (they are listed)."""
+    ident = store.require_identity()
+    problems: list[str] = []
+    try:
+        plan = store.read_json(PLAN_FILE) or {"units": []}
+    except ValueError as exc:
+        plan = {"units": []}
+        problems.append(f"{PLAN_FILE} unreadable: {exc}")
+    units = plan.get("units", [])
+    bad: list[BadPart] = []
+    eps, b = store.read_table("episodes")
+    bad += b
+    rows = eps.to_pylist()
+    latest: dict[str, dict[str, Any]] = {}
+    seen: dict[tuple[str, int], int] = defaultdict(int)
+    for r in rows:
+        seen[(r["unit_id"], r["attempt"])] += 1
+        prev = latest.get(r["unit_id"])
+        if prev is None or r["attempt"] > prev["attempt"]:
+            latest[r["unit_id"]] = r
+    duplicates = sum(n - 1 for n in seen.values() if n > 1)
+    calls, b = store.read_table("llm_calls", ["cost_usd"])
+    bad += b
+    spend = float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist())) if calls.num_rows else \
+        float(sum(r["cost_usd"] for r in rows))
+    groups: dict[tuple[str, str], GroupRow] = {}
+    for u in units:
+        key = (u["method"], u["model"])
+        g = groups.setdefault(key, GroupRow(u["method"], u["model"], 0, test_double=u["model"].startswith("offline/")))
+        g.units += 1
+        r = latest.get(u["unit_id"])
+        if r is None:
+            continue
+        g.test_double = g.test_double or bool(r["test_double"])
+        g.cost_usd += r["cost_usd"]
+        if r["end_reason"] == "budget_exhausted":
+            g.budget_stopped += 1
+            continue
+        g.done += 1
+        g.success += int(r["success"])
+        g.steps += r["steps"]
+        g.calls += r["llm_calls"]
+    completed = sum(g.done for g in groups.values())
+    return StatusReport(
+        location=store.location, run=ident.run, run_id=ident.run_id, total=len(units), completed=completed,
+        success=sum(g.success for g in groups.values()), budget_stopped=sum(g.budget_stopped for g in groups.values()),
+        spend_usd=spend, terminal_rows=len(rows), duplicate_terminal=duplicates,
+        groups=list(groups.values()), bad_parts=bad, problems=problems,
+    )
+
+
+def render(report: StatusReport, console: Any) -> None:
+    """The summary table plus totals (rich)."""
+    from rich.table import Table
+
+    t = Table(title=f"run {report.run} ({report.run_id}) - {report.location}")
+    for col, just in (("method", "left"), ("model", "left"), ("done", "right"), ("success", "right"),
+                      ("avg steps", "right"), ("avg calls", "right"), ("cost $", "right")):
+        t.add_column(col, justify=just)
+    for g in report.groups:
+        rate = f"{g.success}/{g.done} ({100 * g.success / g.done:.0f}%)" if g.done else "-"
+        t.add_row(g.method, model_label(g.model, g.test_double), f"{g.done}/{g.units}", rate,
+                  f"{g.steps / g.done:.1f}" if g.done else "-", f"{g.calls / g.done:.1f}" if g.done else "-",
+                  f"{g.cost_usd:.4f}")
+    console.print(t)
+    console.print(
+        f"units {report.completed}/{report.total} done, {report.success} succeeded, "
+        f"{report.budget_stopped} stopped by a budget cap, {report.remaining - report.budget_stopped} not finished; "
+        f"spend ${report.spend_usd:.4f}"
+    )
+    if report.duplicate_terminal:
+        console.print(f"[red]{report.duplicate_terminal} duplicate terminal rows[/red]")
+    for p in report.problems:
+        console.print(f"[yellow]{p}[/yellow]")
+    for bp in report.bad_parts:
+        console.print(f"[yellow]unreadable part file {bp.path}: {bp.error}[/yellow]")

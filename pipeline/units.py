@@ -1,0 +1,201 @@
+"""Units of work: (environment instance, method + settings, model + params, seed).
+
+Each unit has a stable content hash, ``unit_id``: the hash of everything that can change what an
+episode *does* — the instance, the method name and its fully resolved settings (profile,
+ablation, per-episode limits included), the model string and its params, the seed and the step
+multiplier. Transport settings (retries, rpm/tpm, concurrency, worker counts, caps, prices,
+API base and key) are left out, so raising a rate limit or a cap never invalidates finished
+work. A unit's *key* (instance, method label, model label, seed) is its human identity: a key
+whose hash changed between two versions of a sweep file is a *changed* unit.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from pipeline.errors import SpecError
+from pipeline.spec import EnvSpec, SweepSpec
+from recap.config import ConfigError
+from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
+from workers.episode_worker import build_agent
+
+HASH_VERSION = 1
+
+
+def _canonical(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+
+
+@dataclass(frozen=True, eq=False)
+class Unit:
+    unit_id: str
+    instance_id: str
+    method_label: str
+    method: str
+    profile: str | None
+    ablation: str | None
+    settings: Mapping[str, Any]
+    method_config: str
+    model_label: str
+    model: str
+    model_params: Mapping[str, Any]
+    seed: int
+    step_multiplier: float
+    env_options: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def benchmark(self) -> str:
+        return self.instance_id.split("/", 1)[0]
+
+    @property
+    def key(self) -> str:
+        return f"{self.instance_id} | {self.method_label} | {self.model_label} | seed {self.seed}"
+
+    def payload(self) -> dict[str, Any]:
+        """What a worker needs to play the unit (plain data, cheap to ship)."""
+        return {
+            "unit_id": self.unit_id, "instance_id": self.instance_id, "method": self.method,
+            "method_label": self.method_label, "profile": self.profile, "ablation": self.ablation,
+            "settings": dict(self.settings), "method_config": self.method_config,
+            "model_label": self.model_label, "model": self.model, "seed": self.seed,
+            "step_multiplier": self.step_multiplier, "env_options": dict(self.env_options),
+        }
+
+    def summary(self) -> dict[str, Any]:
+        """What plan.json keeps per unit (enough for status and diffs without the benchmarks)."""
+        return {"unit_id": self.unit_id, "key": self.key, "instance_id": self.instance_id,
+                "method": self.method_label, "model": self.model_label, "seed": self.seed}
+
+
+def unit_hash(*, instance_id: str, method: str, method_config: str, model: str, params: Mapping[str, Any],
+              seed: int, step_multiplier: float) -> str:
+    content = {
+        "v": HASH_VERSION, "instance": instance_id, "method": method, "config": json.loads(method_config),
+        "model": model, "params": dict(params), "seed": seed, "step_multiplier": float(step_multiplier),
+    }
+    return hashlib.sha256(_canonical(content).encode()).hexdigest()[:16]
+
+
+# --------------------------------------------------------------------------------------------
+def resolve_instances(envs: Sequence[EnvSpec]) -> list[tuple[str, dict[str, Any]]]:
+    """Instance ids (with their env options) in spec order, deduplicated; errors name the entry."""
+    from workers.envs.registry import get_benchmark, split_id
+
+    out: list[tuple[str, dict[str, Any]]] = []
+    seen: set[str] = set()
+    for i, env in enumerate(envs):
+        where = f"environments[{i}]"
+        try:
+            bench = get_benchmark(env.benchmark)
+        except UnknownInstanceError as exc:
+            raise SpecError(f"{where}: {exc}") from None
+        except (ImportError, AttributeError) as exc:
+            raise SpecError(f"{where}: benchmark {env.benchmark!r} is not available here ({exc})") from None
+        ids: list[str] = []
+        for sel in env.tasks:
+            try:
+                found = list(bench.list_instances(sel))
+            except (UnknownInstanceError, DataNotFoundError, EnvError, ValueError) as exc:
+                raise SpecError(f"{where}: {env.benchmark} task {sel!r}: {exc}") from None
+            if not found:
+                raise SpecError(f"{where}: {env.benchmark} task {sel!r} matches no instance")
+            ids += found[: env.limit] if env.limit else found
+        for inst in env.instances:
+            try:
+                b, _ = split_id(inst)
+                if b != env.benchmark:
+                    raise UnknownInstanceError(f"instance {inst!r} is not a {env.benchmark} instance")
+                bench.make(inst, **env.options).close()
+            except (UnknownInstanceError, DataNotFoundError, EnvError, ValueError) as exc:
+                raise SpecError(f"{where}: {exc}") from None
+            ids.append(inst)
+        for inst in ids:
+            if inst not in seen:
+                seen.add(inst)
+                out.append((inst, dict(env.options)))
+    return out
+
+
+def resolve_methods(spec: SweepSpec) -> list[tuple[Any, dict[str, Any], str]]:
+    """(method spec, effective settings, canonical config JSON) per method; errors name it."""
+    limits = spec.limits.agent_settings()
+    out = []
+    for i, m in enumerate(spec.methods):
+        settings = {**limits, **m.settings}
+        try:
+            agent = build_agent(m.method, profile=m.profile, ablation=m.ablation, settings=settings)
+        except ConfigError as exc:
+            raise SpecError(f"methods[{i}] ({m.name}): {exc}") from None
+        except TypeError as exc:
+            raise SpecError(f"methods[{i}] ({m.name}): {exc}") from None
+        out.append((m, settings, agent.config.to_json()))
+    return out
+
+
+@dataclass
+class Plan:
+    spec: SweepSpec
+    units: list[Unit]
+
+    def by_id(self) -> dict[str, Unit]:
+        return {u.unit_id: u for u in self.units}
+
+    def to_json(self) -> str:
+        return json.dumps({"hash_version": HASH_VERSION, "units": [u.summary() for u in self.units]}, indent=1)
+
+
+def expand(spec: SweepSpec) -> Plan:
+    """All units of a sweep, in a fixed order (instances, then methods, models, seeds)."""
+    instances = resolve_instances(spec.environments)
+    methods = resolve_methods(spec)
+    units: list[Unit] = []
+    seen: dict[str, str] = {}
+    for inst, options in instances:
+        for m, settings, cfg in methods:
+            for model in spec.models:
+                for seed in spec.seeds:
+                    uid = unit_hash(instance_id=inst, method=m.method, method_config=cfg, model=model.model,
+                                    params={**model.params, **({"options": model.options} if model.options else {})}, seed=seed, step_multiplier=spec.step_multiplier)
+                    u = Unit(uid, inst, m.name, m.method, m.profile, m.ablation, settings, cfg, model.name,
+                             model.model, dict(model.params), seed, spec.step_multiplier, options)
+                    if uid in seen:
+                        raise SpecError(f"units {seen[uid]!r} and {u.key!r} are identical (same method settings and model); remove one")
+                    seen[uid] = u.key
+                    units.append(u)
+    return Plan(spec, units)
+
+
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PlanDiff:
+    new: list[str]
+    unchanged: list[str]
+    changed: list[str]
+    removed: list[str]
+
+    def describe(self) -> str:
+        return (f"{len(self.new)} new, {len(self.unchanged)} unchanged, {len(self.changed)} changed"
+                + (f", {len(self.removed)} no longer in the spec" if self.removed else ""))
+
+
+def diff_plans(old: Mapping[str, Any] | None, plan: Plan) -> PlanDiff:
+    """Compare a stored plan.json with a new plan by unit key and hash."""
+    old_units = (old or {}).get("units", [])
+    old_by_key = {u["key"]: u["unit_id"] for u in old_units}
+    new_keys = set()
+    new, unchanged, changed = [], [], []
+    for u in plan.units:
+        new_keys.add(u.key)
+        prev = old_by_key.get(u.key)
+        if prev is None:
+            new.append(u.key)
+        elif prev == u.unit_id:
+            unchanged.append(u.key)
+        else:
+            changed.append(u.key)
+    removed = [k for k in old_by_key if k not in new_keys]
+    return PlanDiff(new, unchanged, changed, removed)

@@ -1,0 +1,154 @@
+"""Sweep specs, unit hashes, plan diffs and the run folder's identity (no Ray)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pipeline.errors import RunFolderError, SpecError
+from pipeline.spec import parse_spec, with_overrides
+from pipeline.store import RunStore
+from pipeline.units import diff_plans, expand, unit_hash
+
+BASE = """
+run: unit-test
+output: {out}
+models:
+  - model: offline/expert
+methods:
+  - method: recap
+environments:
+  - benchmark: blocksworld
+    tasks: ["3"]
+seeds: [0, 1]
+"""
+
+
+def spec_of(text: str, out: str = "/tmp/never-written"):
+    return parse_spec(text.replace("{out}", out), "sweep.yaml")
+
+
+def test_defaults_and_unit_count():
+    spec = spec_of(BASE)
+    assert (spec.workers, spec.max_attempts, spec.step_multiplier, spec.run_cap_usd) == (4, 3, 4.0, None)
+    plan = expand(spec)
+    # 3 blocksworld instances of size 3 x 1 method x 1 model x 2 seeds
+    assert len(plan.units) == 6
+    assert [u.instance_id for u in plan.units[:2]] == ["blocksworld/3@1", "blocksworld/3@1"]
+    assert [u.seed for u in plan.units[:2]] == [0, 1]
+    assert len({u.unit_id for u in plan.units}) == 6
+    assert plan.units[0].key == "blocksworld/3@1 | recap | offline/expert | seed 0"
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("run: x\noutput: o\nmodels:\n  - model: a\n   bad", "sweep.yaml: malformed YAML at line 5, column 4: expected <block end>, but found '<scalar>'"),
+        ("- a", "sweep.yaml: the sweep file must be a YAML mapping (run:, output:, models:, ...)"),
+        (BASE.replace("- model: offline/expert", "- model: offline/expert\n    rmp: 3"), "sweep.yaml: models[0].rmp: unknown field"),
+        (BASE.replace("- model: offline/expert", "- model: offline/expert\n    prices: {input: -1, output: 2}"),
+         "sweep.yaml: models[0].prices.input: Input should be greater than or equal to 0"),
+        (BASE.replace("run: unit-test", "run: 'bad name'"),
+         "sweep.yaml: run: must be letters, digits, '.', '_' or '-' (starting with a letter or digit)"),
+        (BASE.replace("seeds: [0, 1]", "seeds: [0, 0]"), "sweep.yaml: seeds: repeated seed"),
+        (BASE.replace("run: unit-test\n", ""), "sweep.yaml: run: required field is missing"),
+        (BASE + "methods:\n  - method: recap\n  - method: recap\n",
+         "sweep.yaml: methods: two entries are both named 'recap'; give them distinct 'label's"),
+    ],
+)
+def test_spec_errors_are_one_line(text, message):
+    with pytest.raises(SpecError) as err:
+        spec_of(text)
+    assert str(err.value) == message
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (("benchmark: blocksworld", "benchmark: nowhere"), "environments[0]: unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld"),
+        (('tasks: ["3"]', 'tasks: ["9"]'),
+         "environments[0]: blocksworld task '9': no blocksworld instance matches '9'; sizes [3, 4, 5], e.g. blocksworld/3@1"),
+        (("- method: recap", "- method: recap\n    settings: {windw: 3}"),
+         "methods[0] (recap): unknown setting(s) windw for ReCAPConfig; known: context_drop, json_mode, max_episode_cost_usd, "
+         "max_episode_tokens, max_json_repairs, max_level, max_llm_calls, max_tokens, name_only, reminder_period, shortcut, "
+         "temperature, think, window, window_block, window_mode"),
+        (("- method: recap", "- method: recap\n    ablation: level_9"),
+         "methods[0] (recap[level_9]): unknown ablation 'level_9'; known: original, no_think, think_many, name_only, level_2, level_3, level_4, level_5, no_shortcut"),
+    ],
+)
+def test_expansion_errors_name_the_entry(change, message):
+    with pytest.raises(SpecError) as err:
+        expand(spec_of(BASE.replace(*change)))
+    assert str(err.value) == message
+
+
+def test_unit_hash_is_pinned():
+    """The hash of a fixed unit must never change silently (finished work would re-run)."""
+    uid = unit_hash(instance_id="blocksworld/3@1", method="recap", method_config='{"window": 64}', model="offline/expert",
+                    params={}, seed=0, step_multiplier=4.0)
+    assert uid == "58de48ed5ccdeed2"
+
+
+def test_transport_settings_do_not_change_unit_ids():
+    ids = [u.unit_id for u in expand(spec_of(BASE)).units]
+    transport = BASE.replace("- model: offline/expert", "- model: offline/expert\n    rpm: 10\n    tpm: 1000\n    concurrency: 2\n"
+                             "    retries: 9\n    timeout_s: 5\n    api_base: http://127.0.0.1:1\n    cap_usd: 3\n"
+                             "    prices: {input: 1, output: 1}") + "workers: 16\nmax_attempts: 5\nrun_cap_usd: 2\n"
+    assert [u.unit_id for u in expand(spec_of(transport)).units] == ids
+    assert [u.unit_id for u in expand(with_overrides(spec_of(BASE), workers=9, run_cap_usd=1.5)).units] == ids
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        ("- method: recap", "- method: recap\n    settings: {window: 32}"),
+        ("- method: recap", "- method: recap\n    label: recap\n    ablation: no_think"),
+        ("- model: offline/expert", "- model: offline/expert\n    params: {max_tokens: 256}"),
+        ("- model: offline/expert", "- model: offline/expert\n    options: {invalid_action_rate: 0.2}"),
+        ("seeds: [0, 1]", "seeds: [0, 1]\nstep_multiplier: 2"),
+        ("seeds: [0, 1]", "seeds: [0, 1]\nlimits: {llm_calls: 50}"),
+    ],
+)
+def test_content_changes_change_unit_ids(change):
+    before = {u.key: u.unit_id for u in expand(spec_of(BASE)).units}
+    after = {u.key: u.unit_id for u in expand(spec_of(BASE.replace(*change))).units}
+    assert before.keys() == after.keys()
+    assert all(before[k] != after[k] for k in before)
+
+
+def test_limits_map_to_agent_config():
+    spec = spec_of(BASE + "limits: {llm_calls: 50, tokens: 90000, usd: 0.5}\n")
+    cfg = json.loads(expand(spec).units[0].method_config)
+    assert (cfg["max_llm_calls"], cfg["max_episode_tokens"], cfg["max_episode_cost_usd"]) == (50, 90000, 0.5)
+    own = spec_of(BASE.replace("- method: recap", "- method: recap\n    settings: {max_llm_calls: 7}") + "limits: {llm_calls: 50}\n")
+    assert json.loads(expand(own).units[0].method_config)["max_llm_calls"] == 7
+
+
+def test_plan_diff_new_unchanged_changed():
+    old = json.loads(expand(spec_of(BASE)).to_json())
+    changed = BASE.replace("- method: recap", "- method: recap\n  - method: react").replace('tasks: ["3"]', 'tasks: ["3"]\n    instances: [blocksworld/4@1]')
+    plan = expand(spec_of(changed))
+    d = diff_plans(old, plan)
+    assert (len(d.new), len(d.unchanged), len(d.changed), len(d.removed)) == (10, 6, 0, 0)
+    assert d.describe() == "10 new, 6 unchanged, 0 changed"
+    d2 = diff_plans(old, expand(spec_of(BASE.replace("- method: recap", "- method: recap\n    settings: {window: 32}"))))
+    assert (len(d2.new), len(d2.unchanged), len(d2.changed)) == (0, 0, 6)
+    assert d2.changed[0] == "blocksworld/3@1 | recap | offline/expert | seed 0"
+
+
+def test_run_folder_identity(tmp_path):
+    store = RunStore(tmp_path / "run")
+    assert store.check_can_hold("a") is None
+    assert not (tmp_path / "run").exists()  # checking writes nothing
+    ident = store.create_identity("a")
+    assert store.check_can_hold("a") == ident
+    with pytest.raises(RunFolderError) as err:
+        store.check_can_hold("b")
+    assert str(err.value) == (f"output folder {tmp_path / 'run'} holds run 'a' (run_id {ident.run_id}), not 'b'; "
+                              "choose another output folder or use the same run name")
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "notes.txt").write_text("mine")
+    with pytest.raises(RunFolderError) as err:
+        RunStore(tmp_path / "other").check_can_hold("a")
+    assert str(err.value) == f"output folder {tmp_path / 'other'} is not empty and holds no run.json; choose a new folder"

@@ -1,0 +1,318 @@
+"""The episode worker: a Ray actor that hosts one environment and one agent and plays units.
+
+Why an actor per worker (not a task per episode): an environment can be expensive to load
+(ALFWorld games, Robotouille data), an agent renders its demonstration once per settings, and a
+long-lived process keeps both warm between units. The driver hands a worker one unit at a time;
+the worker builds the environment, runs the agent against the model client, forwards the
+agent's records (messages, tree nodes, steps, and LLM calls unless the gateway writes those
+itself) to the sink in batches, and returns a plain summary. It never writes the terminal
+``episodes`` row: the driver does, after the attempt ends, so a worker that dies mid-episode
+cannot leave a duplicate.
+
+The module imports Ray only inside :func:`worker_actor`, so the pieces (agent construction,
+the client wrapper, the record forwarder) are usable and testable without a cluster.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+import traceback
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol
+
+from recap.agent import Agent
+from recap.config import ConfigError, ReCAPConfig, build_config
+from recap.env import Environment
+from recap.llm import LLMClient, LLMRequest, LLMResponse
+from recap.recap_agent import ReCAPAgent
+from recap.runtime import EpisodeResult
+from schemas.records import CallRecord
+from schemas.tables import record_to_row
+
+OFFLINE_PREFIX = "offline/"
+
+
+# --------------------------------------------------------------------------------------------
+# agents
+# --------------------------------------------------------------------------------------------
+def _methods_module() -> Any | None:
+    try:
+        import recap.methods as methods
+    except ModuleNotFoundError as exc:
+        if exc.name == "recap.methods":
+            return None
+        raise
+    return methods
+
+
+def known_methods() -> list[str]:
+    mod = _methods_module()
+    if mod is None:
+        return ["recap"]
+    return sorted(getattr(mod, "METHODS", {"recap": None}))
+
+
+def build_agent(method: str, *, profile: str | None = None, ablation: str | None = None,
+                settings: Mapping[str, Any] | None = None) -> Agent:
+    """The agent for a method name + profile + ablation + settings.
+
+    Uses ``recap.methods.make_agent`` (ReCAP and the baselines) when present; otherwise only
+    ReCAP is available. Unknown methods or settings raise :class:`recap.config.ConfigError`.
+    """
+    settings = dict(settings or {})
+    mod = _methods_module()
+    if mod is not None and hasattr(mod, "make_agent"):
+        methods = getattr(mod, "METHODS", None)
+        if methods is not None and method not in methods:
+            raise ConfigError(f"unknown method {method!r}; known: {', '.join(sorted(methods))}")
+        try:
+            return mod.make_agent(method, profile=profile, ablation=ablation, **settings)
+        except ConfigError:
+            raise
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ConfigError(str(exc).strip("'\"")) from None
+    if method != "recap":
+        raise ConfigError(f"unknown method {method!r}; known: recap (the baselines module is not installed)")
+    return ReCAPAgent(build_config(ReCAPConfig, profile, ablation, **settings))
+
+
+# --------------------------------------------------------------------------------------------
+# model clients
+# --------------------------------------------------------------------------------------------
+class ClientFactory(Protocol):
+    """What the driver hands each worker: a way to get a client for a model of the sweep.
+
+    ``writes_llm_calls`` True means the client's backend (the gateway) records every call in the
+    ``llm_calls`` table itself, so the worker must not forward the agent's CallRecords.
+    """
+
+    writes_llm_calls: bool
+
+    def client(self, model: str) -> LLMClient: ...
+
+
+class ClientError(RuntimeError):
+    """A client failed with something other than an LLMError (gateway gone, bug)."""
+
+
+class EpisodeClient:
+    """Wraps a model client for one episode: adds the unit's seed and, for offline test-double
+    models, the expert plan from the *current* environment state to each request's hints."""
+
+    def __init__(self, inner: LLMClient, env: Environment, *, seed: int, offline: bool) -> None:
+        self.inner = inner
+        self.env = env
+        self.seed = seed
+        self.offline = offline
+        self.test_double = False
+        self.models: set[str] = set()
+
+    def complete(self, request: LLMRequest) -> LLMResponse:
+        hints = dict(request.hints)
+        hints["seed"] = self.seed
+        if self.offline:
+            hints["expert_plan"] = self.env.expert_plan()
+        request = dataclasses.replace(request, hints=hints)
+        try:
+            response = self.inner.complete(request)
+        except Exception as exc:
+            from recap.llm import LLMError
+
+            if isinstance(exc, LLMError):
+                raise
+            raise ClientError(f"{type(exc).__name__}: {exc}") from exc
+        self.test_double = self.test_double or response.test_double
+        if response.model:
+            self.models.add(response.model)
+        return response
+
+
+# --------------------------------------------------------------------------------------------
+# forwarding records to the sink
+# --------------------------------------------------------------------------------------------
+class RecordForwarder:
+    """Buffers an episode's records as rows and hands them to ``send`` in batches.
+
+    ``send(rows_by_table)`` returns something to wait on (a Ray ObjectRef) or None; at most one
+    batch is in flight, which bounds the worker's memory when the sink is slow.
+    """
+
+    def __init__(self, run_id: str, send: Callable[[dict[str, list[dict]]], Any], wait: Callable[[Any], Any],
+                 *, skip_calls: bool, batch_rows: int = 500) -> None:
+        self.run_id = run_id
+        self.send = send
+        self.wait = wait
+        self.skip_calls = skip_calls
+        self.batch_rows = batch_rows
+        self.buffer: dict[str, list[dict]] = {}
+        self.n = 0
+        self.sent = 0
+        self._inflight: Any = None
+
+    def __call__(self, record: Any) -> None:
+        if self.skip_calls and isinstance(record, CallRecord):
+            return
+        self.buffer.setdefault(type(record).table, []).append(record_to_row(record, self.run_id))
+        self.n += 1
+        if self.n >= self.batch_rows:
+            self._ship()
+
+    def _ship(self) -> None:
+        if not self.n:
+            return
+        if self._inflight is not None:
+            self.wait(self._inflight)
+        batch, self.buffer, count = self.buffer, {}, self.n
+        self.n = 0
+        self._inflight = self.send(batch)
+        self.sent += count
+
+    def close(self) -> int:
+        """Send what is left and wait until the sink holds every row; returns rows sent."""
+        self._ship()
+        if self._inflight is not None:
+            self.wait(self._inflight)
+            self._inflight = None
+        return self.sent
+
+
+# --------------------------------------------------------------------------------------------
+# one unit
+# --------------------------------------------------------------------------------------------
+def _resident_bytes() -> int:
+    try:
+        with open(f"/proc/{os.getpid()}/status") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+class EpisodeRunner:
+    """Plays units; the Ray actor is a thin shell around this (so it can be tested directly)."""
+
+    def __init__(self, worker_id: str, run_id: str, factory: ClientFactory,
+                 send: Callable[[dict[str, list[dict]]], Any], wait: Callable[[Any], Any], *, batch_rows: int = 500) -> None:
+        self.worker_id = worker_id
+        self.run_id = run_id
+        self.factory = factory
+        self.send = send
+        self.wait = wait
+        self.batch_rows = batch_rows
+        self._agents: dict[str, Agent] = {}
+        self._clients: dict[str, LLMClient] = {}
+        self.units_done = 0
+
+    def _agent(self, unit: Mapping[str, Any]) -> Agent:
+        key = unit["method_config"] + "|" + unit["method"]
+        if key not in self._agents:
+            self._agents[key] = build_agent(unit["method"], profile=unit.get("profile"), ablation=unit.get("ablation"),
+                                            settings=unit.get("settings") or {})
+        return self._agents[key]
+
+    def _client(self, model_label: str) -> LLMClient:
+        if model_label not in self._clients:
+            self._clients[model_label] = self.factory.client(model_label)
+        return self._clients[model_label]
+
+    def run_unit(self, unit: Mapping[str, Any], attempt: int) -> dict[str, Any]:
+        from workers.envs.registry import make_env
+
+        episode_id = f"{unit['unit_id']}-{attempt}"
+        started = time.time()
+        t0 = time.perf_counter()
+        out: dict[str, Any] = {
+            "unit_id": unit["unit_id"], "attempt": attempt, "episode_id": episode_id,
+            "worker_id": self.worker_id, "pid": os.getpid(), "started_at": started,
+            "env": {"benchmark": unit["instance_id"].split("/", 1)[0], "split": "", "task": "", "optimal_steps": None, "max_steps": 0},
+            "result": None, "crash": None, "model": unit["model"], "test_double": unit["model"].startswith(OFFLINE_PREFIX),
+            "rows_sent": 0,
+        }
+        forward = RecordForwarder(self.run_id, self.send, self.wait, skip_calls=bool(self.factory.writes_llm_calls),
+                                  batch_rows=self.batch_rows)
+        env: Environment | None = None
+        try:
+            try:
+                env = make_env(unit["instance_id"], step_multiplier=unit["step_multiplier"], **(unit.get("env_options") or {}))
+            except Exception as exc:  # missing data, broken game file: the attempt ends with env_error
+                out["result"] = dataclasses.asdict(EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000]))
+                return out
+            out["env"] = {"benchmark": env.benchmark, "split": env.split, "task": env.task,
+                          "optimal_steps": env.optimal_steps, "max_steps": env.max_steps}
+            agent = self._agent(unit)
+            client = EpisodeClient(self._client(unit["model_label"]), env, seed=int(unit["seed"]),
+                                   offline=unit["model"].startswith(OFFLINE_PREFIX))
+            try:
+                result = agent.run(env, client, episode_id=episode_id, emit=forward)
+            except ClientError as exc:
+                out["crash"] = {"source": "client", "error": str(exc)[:2000]}
+                return out
+            except Exception as exc:
+                out["crash"] = {"source": "agent", "error": f"{type(exc).__name__}: {exc}"[:2000],
+                                "traceback": traceback.format_exc()[-4000:]}
+                return out
+            out["result"] = dataclasses.asdict(result)
+            out["test_double"] = out["test_double"] or client.test_double
+            if client.models:
+                out["model"] = sorted(client.models)[0]
+            return out
+        finally:
+            if env is not None:
+                try:
+                    env.close()
+                except Exception:
+                    pass
+            out["rows_sent"] = forward.close()
+            out["ended_at"] = time.time()
+            out["wall_s"] = time.perf_counter() - t0
+            self.units_done += 1
+
+
+# --------------------------------------------------------------------------------------------
+# the Ray actor
+# --------------------------------------------------------------------------------------------
+class _EpisodeWorker:
+    def __init__(self, worker_id: str, run_id: str, sink: Any, factory: ClientFactory, batch_rows: int = 500) -> None:
+        import ray
+
+        self._sink = sink
+        self.runner = EpisodeRunner(worker_id, run_id, factory, send=lambda rows: sink.add.remote(rows),
+                                    wait=lambda ref: ray.get(ref), batch_rows=batch_rows)
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def ping(self) -> str:
+        return self.runner.worker_id
+
+    def node(self) -> str:
+        import ray
+
+        return ray.get_runtime_context().get_node_id()
+
+    def memory(self) -> int:
+        """Resident set size of this worker process, in bytes."""
+        return _resident_bytes()
+
+    def run_unit(self, unit: dict[str, Any], attempt: int) -> dict[str, Any]:
+        return self.runner.run_unit(unit, attempt)
+
+
+def worker_actor(num_cpus: float = 0.05, spread: bool = False, runtime_env: dict | None = None) -> Any:
+    """The Ray actor class with the given resource shape.
+
+    ``max_restarts=0``: the driver replaces dead workers itself, so that it can count attempts
+    and record the loss. ``max_concurrency`` > 1 only so that ``pid``/``memory`` answer while a
+    unit runs; the driver never sends a worker two units at once."""
+    import ray
+
+    options: dict[str, Any] = {"num_cpus": num_cpus, "max_restarts": 0, "max_concurrency": 4}
+    if spread:
+        options["scheduling_strategy"] = "SPREAD"
+    if runtime_env:
+        options["runtime_env"] = runtime_env
+    return ray.remote(**options)(_EpisodeWorker)
