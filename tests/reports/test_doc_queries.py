@@ -1,4 +1,4 @@
-"""The five queries in docs/queries.md run over the known run and print what the page shows."""
+"""The five queries in the README run over the known run and print what the page shows."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 from reports.commands import sql_main
 
-DOC = Path(__file__).resolve().parents[2] / "docs" / "queries.md"
+DOC = Path(__file__).resolve().parents[2] / "README.md"
 
 
 def _examples() -> list[tuple[str, list[str]]]:
