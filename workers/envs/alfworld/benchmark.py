@@ -1,0 +1,130 @@
+"""The ALFWorld benchmark for the registry: list the 134 evaluation games, make one.
+
+Instance ids are ``alfworld/<type>/<game folder>/<trial>`` with the short task type
+(``put clean heat cool examine puttwo``), e.g.
+``alfworld/heat/pick_heat_then_place_in_recep-Mug-None-Cabinet-10/trial_T20190909_021100_341887``:
+stable across machines and data copies, and the path of the game is readable in the id.
+
+Options of :meth:`AlfworldBenchmark.make`:
+- ``data_dir``: the primary data folder (game-file version 2.1.1); default ``$ALFWORLD_DATA``.
+- ``version``: ``"2.1.1"`` (default, ``put X in/on Y``) or ``"2.1.2"`` (``move X to Y``).
+- ``data_dir_2_1_2``: the 2.1.2 folder; default ``$ALFWORLD_DATA_2_1_2``, else
+  ``<data_dir>/../alfworld-2.1.2``. Needed to play 2.1.2; also the source of the expert
+  walkthroughs (without it, ``expert_plan()`` is None when playing 2.1.1).
+- ``max_steps``: environment steps per episode (default 50, the paper's cap).
+- ``step_multiplier`` is accepted and has no effect: ALFWorld's cap is a fixed step count.
+- ``seed`` is accepted and recorded: the games are deterministic.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from recap.env import Environment
+from workers.envs.alfworld.game_env import AlfworldEnvironment
+from workers.envs.alfworld.games import (
+    BENCHMARK_NAME,
+    Game,
+    discover_games,
+    load_walkthrough,
+    resolve_data_dir,
+    resolve_data_dir_2_1_2,
+)
+from workers.envs.alfworld.task_types import SHORT_NAMES, TASK_TYPES
+from workers.envs.alfworld.wording import DEFAULT_VERSION, check_version
+from workers.envs.registry import DataNotFoundError, UnknownInstanceError
+
+DEFAULT_MAX_STEPS = 50
+#: selectors meaning "every evaluation game"
+_ALL = ("all", "eval_out_of_distribution", "valid_unseen")
+
+
+class AlfworldBenchmark:
+    name = BENCHMARK_NAME
+
+    def __init__(self, data_dir: str | os.PathLike[str] | None = None):
+        self.data_dir = data_dir
+
+    # -- listing --------------------------------------------------------------------------------
+    def games(self, selector: str | None = None, *, data_dir: Any = None) -> list[Game]:
+        """The games ``selector`` names, in the fixed order (sorted by game path)."""
+        games = discover_games(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
+        if selector is None:
+            return list(games)
+        key = selector.strip()
+        if key.startswith(f"{BENCHMARK_NAME}/") and key.count("/") == 1:
+            key = key.split("/", 1)[1]  # "alfworld/heat" reads like "heat"
+        if key in _ALL or key == BENCHMARK_NAME:
+            return list(games)
+        if key in TASK_TYPES:
+            return [g for g in games if g.short_type == key]
+        if key in SHORT_NAMES:
+            return [g for g in games if g.task_type == key]
+        exact = [g for g in games if g.instance_id == key]
+        if exact:
+            return exact
+        raise UnknownInstanceError(
+            f"unknown ALFWorld game or selector {selector!r}; use all, a task type "
+            f"({', '.join(TASK_TYPES)}), or a full id such as {games[0].instance_id}"
+        )
+
+    def list_instances(self, selector: str | None = None) -> list[str]:
+        return [g.instance_id for g in self.games(selector)]
+
+    # -- making ---------------------------------------------------------------------------------
+    def make(
+        self,
+        instance_id: str,
+        *,
+        data_dir: str | os.PathLike[str] | None = None,
+        data_dir_2_1_2: str | os.PathLike[str] | None = None,
+        version: str = DEFAULT_VERSION,
+        max_steps: int = DEFAULT_MAX_STEPS,
+        step_multiplier: float | None = None,
+        seed: int = 0,
+        **unknown: Any,
+    ) -> Environment:
+        if unknown:
+            raise ValueError(
+                f"unknown ALFWorld option(s) {', '.join(sorted(unknown))}; accepted: data_dir, "
+                "data_dir_2_1_2, version, max_steps, step_multiplier, seed"
+            )
+        check_version(version)
+        if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+            raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+        primary = resolve_data_dir(data_dir if data_dir is not None else self.data_dir)
+        game = self._one_game(instance_id, primary)
+        dir_2_1_2 = resolve_data_dir_2_1_2(primary, data_dir_2_1_2)
+        if version == "2.1.2" and dir_2_1_2 is None:
+            raise DataNotFoundError(
+                "ALFWorld 2.1.2 data not found: set ALFWORLD_DATA_2_1_2 (or pass data_dir_2_1_2=) "
+                f"to the alfworld-2.1.2 folder, or place it next to {primary}"
+            )
+        walkthrough = load_walkthrough(dir_2_1_2, game) if dir_2_1_2 is not None else None
+        game_file = game.game_file(dir_2_1_2 if version == "2.1.2" else primary)  # type: ignore[arg-type]
+        if not game_file.is_file():
+            raise DataNotFoundError(f"ALFWorld game file missing: {game_file}")
+
+        env = AlfworldEnvironment(
+            game,
+            game_file=game_file,
+            primary=primary,
+            version=version,
+            max_steps=max_steps,
+            walkthrough=walkthrough,
+        )
+        env.seed = seed
+        return env
+
+    def _one_game(self, instance_id: str, primary: Any) -> Game:
+        games = self.games(instance_id, data_dir=primary)
+        if len(games) != 1:
+            raise UnknownInstanceError(
+                f"{instance_id!r} names {len(games)} ALFWorld games; make() needs one full id "
+                f"such as {games[0].instance_id}"
+            )
+        return games[0]
+
+
+BENCHMARK = AlfworldBenchmark()

@@ -1,0 +1,119 @@
+"""One real ALFWorld game (textworld engine) behind :class:`recap.env.Environment`.
+
+The game accepts any command: a command that is not admissible is still sent, the game answers
+"Nothing happens." and its state does not change, and it uses one of the ``max_steps`` steps
+(``invalid_action_mode = "step"``), as in the paper's runs. Success is the game's ``won`` flag;
+the game never signals a loss, so an episode ends on a win or when the step budget is spent.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from recap.env import Demonstration, EnvError, Environment, InvalidActionError, Reset, Step
+from workers.envs.alfworld.demos import demonstration_for
+from workers.envs.alfworld.engine import close_game, open_game
+from workers.envs.alfworld.expert import WalkthroughExpert
+from workers.envs.alfworld.games import Game
+from workers.envs.alfworld.rules import failure_hints_text, rules_text
+from workers.envs.alfworld.wording import extract_goal, strip_banner
+
+
+class AlfworldEnvironment(Environment):
+    benchmark = "alfworld"
+    invalid_action_mode = "step"
+
+    def __init__(
+        self,
+        game: Game,
+        *,
+        game_file: Path,
+        primary: Path,
+        version: str,
+        max_steps: int,
+        walkthrough: tuple[str, ...] | None,
+    ):
+        self.game = game
+        self.instance_id = game.instance_id
+        self.split = game.short_type
+        self.task = game.task_type
+        self.version = version
+        self.max_steps = max_steps
+        self.game_file = game_file
+        self._expert = WalkthroughExpert(walkthrough, version) if walkthrough is not None else None
+        self._env = open_game(game_file, primary, max_steps)
+        self._steps_taken = 0
+        self._started = False
+        self._done = False
+
+    # -- episode -------------------------------------------------------------------------------
+    def reset(self) -> Reset:
+        obs, info = self._engine(lambda: self._env.reset())
+        text = strip_banner(obs)
+        goal = extract_goal(text)
+        if goal is None:
+            raise EnvError(f"{self.instance_id}: the game text has no 'Your task is to:' sentence")
+        self._steps_taken = 0
+        self._started, self._done = True, False
+        if self._expert is not None:
+            self._expert.reset()
+        return Reset(observation=text, valid_actions=tuple(info["admissible_commands"]), goal=goal)
+
+    def step(self, action: str) -> Step:
+        if not isinstance(action, str):
+            raise InvalidActionError(f"an ALFWorld action is a string, got {type(action).__name__}")
+        if not self._started:
+            raise EnvError(f"{self.instance_id}: call reset() before step()")
+        if self._done:
+            raise EnvError(f"{self.instance_id}: the episode is over; call reset() to play again")
+        obs, _score, engine_done, info = self._engine(lambda: self._env.step(action))
+        self._steps_taken += 1
+        if self._expert is not None:
+            self._expert.observe(action)
+        won = bool(info["won"])
+        valid = tuple(info["admissible_commands"])
+        self._done = won or bool(engine_done) or self._steps_taken >= self.max_steps
+        return Step(
+            observation=obs.strip(),
+            valid_actions=valid,
+            done=self._done,
+            success=won,
+            info={
+                "steps": self._steps_taken,
+                "max_steps": self.max_steps,
+                "won": won,
+                "admissible_commands": valid,
+            },
+        )
+
+    def _engine(self, call: Callable[[], Any]) -> Any:
+        if self._env is None:
+            raise EnvError(f"{self.instance_id}: the environment is closed; make a new one")
+        try:
+            return call()
+        except EnvError:
+            raise
+        except Exception as exc:  # the engine's own failures become one error type
+            raise EnvError(f"{self.instance_id}: ALFWorld engine failed: {exc!r}") from None
+
+    # -- prompt material ---------------------------------------------------------------------------
+    def rules(self) -> str:
+        return rules_text(self.version, self.max_steps)
+
+    def failure_hints(self) -> str:
+        return failure_hints_text()
+
+    def demonstration(self) -> Demonstration:
+        # the demonstration keeps the default cap: a game played with a tight cap still needs
+        # its full demonstration episode to render
+        return demonstration_for(self.split, self.version)
+
+    def expert_plan(self) -> list[str] | None:
+        return None if self._expert is None else self._expert.remaining()
+
+    def close(self) -> None:
+        env, self._env = self._env, None
+        if env is not None:
+            close_game(env)

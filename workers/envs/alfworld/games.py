@@ -1,0 +1,152 @@
+"""Find the ALFWorld evaluation games on disk and name them with stable ids.
+
+The evaluation set is ALFWorld's ``eval_out_of_distribution`` split (ALFRED ``valid_unseen``).
+We apply the same selection rule as ``AlfredTWEnv.collect_game_files`` (a trial folder with
+``traj_data.json``, a path without "movable" or "Sliced", a game file marked solvable) to the
+folder itself rather than trusting a shipped list, so a damaged or partial copy is noticed.
+Only the standard library is used: listing games must work without ``alfworld`` installed.
+
+Two copies of the games exist: the primary folder (``ALFWORLD_DATA``, game-file version 2.1.1,
+with ``traj_data.json``) and the 2.1.2 re-release (``move X to Y`` wording, a ``walkthrough``
+per game, game files only). Both share the ``json_2.1.1/valid_unseen/<game>/<trial>`` layout.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+from workers.envs.alfworld.task_types import SHORT_NAMES
+from workers.envs.registry import DataNotFoundError
+
+DATA_ENV = "ALFWORLD_DATA"
+DATA_ENV_2_1_2 = "ALFWORLD_DATA_2_1_2"
+#: folder name of the 2.1.2 copy when it sits next to the primary data folder
+SIBLING_2_1_2 = "alfworld-2.1.2"
+SPLIT_DIR = Path("json_2.1.1") / "valid_unseen"
+GAME_FILE = "game.tw-pddl"
+TRAJ_FILE = "traj_data.json"
+BENCHMARK_NAME = "alfworld"
+
+
+@dataclass(frozen=True)
+class Game:
+    """One evaluation game: where it lives (relative to a data folder) and its task type."""
+
+    short_type: str  # "heat"
+    task_type: str  # "pick_heat_then_place_in_recep"
+    game_dir: str  # "pick_heat_then_place_in_recep-Mug-None-Cabinet-10"
+    trial: str  # "trial_T20190909_021100_341887"
+
+    @property
+    def instance_id(self) -> str:
+        return f"{BENCHMARK_NAME}/{self.short_type}/{self.game_dir}/{self.trial}"
+
+    @property
+    def relpath(self) -> Path:
+        """The trial folder relative to a data folder (same in both versions)."""
+        return SPLIT_DIR / self.game_dir / self.trial
+
+    def game_file(self, data_dir: Path) -> Path:
+        return data_dir / self.relpath / GAME_FILE
+
+
+def resolve_data_dir(data_dir: str | os.PathLike[str] | None = None) -> Path:
+    """The primary (2.1.1) data folder: ``data_dir`` if given, else ``$ALFWORLD_DATA``."""
+    raw = data_dir if data_dir is not None else os.environ.get(DATA_ENV)
+    if not raw:
+        raise DataNotFoundError(
+            f"ALFWorld data folder not set: set {DATA_ENV} (or pass data_dir=) to the folder "
+            f"that holds {SPLIT_DIR.as_posix()}"
+        )
+    path = Path(raw).expanduser().resolve()
+    if not (path / SPLIT_DIR).is_dir():
+        source = "data_dir" if data_dir is not None else DATA_ENV
+        raise DataNotFoundError(
+            f"ALFWorld data folder {path} (from {source}) has no {SPLIT_DIR.as_posix()}; "
+            f"point {source} at the folder that holds it"
+        )
+    return path
+
+
+def resolve_data_dir_2_1_2(
+    primary: Path, data_dir_2_1_2: str | os.PathLike[str] | None = None
+) -> Path | None:
+    """The 2.1.2 folder: ``data_dir_2_1_2``, else ``$ALFWORLD_DATA_2_1_2``, else the sibling
+    ``<primary>/../alfworld-2.1.2``; None when none is configured and no sibling exists.
+
+    A folder named explicitly (option or variable) that is not the expected layout is an error;
+    a missing sibling is not (the caller decides whether 2.1.2 data is required).
+    """
+    explicit = data_dir_2_1_2 if data_dir_2_1_2 is not None else os.environ.get(DATA_ENV_2_1_2)
+    if explicit:
+        path = Path(explicit).expanduser().resolve()
+        if not (path / SPLIT_DIR).is_dir():
+            source = "data_dir_2_1_2" if data_dir_2_1_2 is not None else DATA_ENV_2_1_2
+            raise DataNotFoundError(
+                f"ALFWorld 2.1.2 data folder {path} (from {source}) has no "
+                f"{SPLIT_DIR.as_posix()}; point {source} at the alfworld-2.1.2 folder"
+            )
+        return path
+    sibling = (primary.parent / SIBLING_2_1_2).resolve()
+    return sibling if (sibling / SPLIT_DIR).is_dir() else None
+
+
+@lru_cache(maxsize=8)
+def _discover(primary: str) -> tuple[Game, ...]:
+    split = Path(primary) / SPLIT_DIR
+    games = []
+    for trial_dir in sorted(p for p in split.glob("*/*") if p.is_dir()):
+        rel = trial_dir.relative_to(split).as_posix()
+        if "movable" in rel or "Sliced" in rel:
+            continue
+        traj = trial_dir / TRAJ_FILE
+        game_file = trial_dir / GAME_FILE
+        if not traj.is_file() or not game_file.is_file():
+            continue
+        task_type = _read_json(traj).get("task_type")
+        if task_type not in SHORT_NAMES:
+            continue
+        if _read_json(game_file).get("solvable") is not True:
+            continue
+        games.append(Game(SHORT_NAMES[task_type], task_type, trial_dir.parent.name, trial_dir.name))
+    games.sort(key=lambda g: g.relpath.as_posix())
+    return tuple(games)
+
+
+def discover_games(primary: Path) -> tuple[Game, ...]:
+    """The evaluation games in ``primary``, sorted by path (the order of ALFWorld's own listing)."""
+    games = _discover(str(primary))
+    if not games:
+        raise DataNotFoundError(
+            f"no playable ALFWorld games under {primary / SPLIT_DIR}; "
+            f"point {DATA_ENV} (or data_dir=) at a complete copy of the data"
+        )
+    return games
+
+
+def load_walkthrough(data_dir_2_1_2: Path, game: Game) -> tuple[str, ...]:
+    """The winning command list stored in the 2.1.2 game file (2.1.2 wording)."""
+    path = game.game_file(data_dir_2_1_2)
+    if not path.is_file():
+        raise DataNotFoundError(
+            f"ALFWorld 2.1.2 game file missing: {path}; the 2.1.2 folder must hold all 134 games"
+        )
+    walkthrough = _read_json(path).get("walkthrough")
+    if not isinstance(walkthrough, list) or not all(isinstance(a, str) for a in walkthrough):
+        raise DataNotFoundError(f"ALFWorld 2.1.2 game file {path} has no walkthrough list")
+    return tuple(walkthrough)
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        with path.open(encoding="utf-8") as f:
+            data = json.load(f)
+    except (OSError, json.JSONDecodeError) as exc:
+        raise DataNotFoundError(f"unreadable ALFWorld file {path}: {exc}") from None
+    if not isinstance(data, dict):
+        raise DataNotFoundError(f"ALFWorld file {path} is not a JSON object")
+    return data
