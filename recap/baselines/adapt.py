@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from recap.agent import Agent, DemonstrationError, format_transcript
@@ -67,7 +67,8 @@ from recap.history import History
 from recap.jsonreply import ReplyFormatError, action_reply, recap_reply
 from recap.runtime import Conversation, Episode, EpisodeEnd
 from recap.scripted import ScriptedClient
-from schemas.records import MessageRecord, NodeRecord, NodeVersion
+from recap.tree import Node
+from schemas.records import MessageRecord, NodeVersion
 
 _DEMOS: dict[tuple[str, ...], str] = {}
 
@@ -142,30 +143,11 @@ def planner_reply(obj: Mapping[str, Any]) -> dict[str, Any]:
 
 
 @dataclass
-class TaskNode:
-    node_id: int
-    parent: "TaskNode | None"
-    depth: int  # root = 0 (ADaPT's depth is depth + 1)
-    child_index: int
-    task: str
-    kind: str = "primitive"
-    status: str = "open"
-    logic: str | None = None
-    versions: list[NodeVersion] = field(default_factory=list)
-    n_children: int = 0
+class TaskNode(Node):
+    """An ADaPT task: executed first, decomposed (with AND/OR logic) only when it fails."""
 
-    def record(self, episode_id: str) -> NodeRecord:
-        return NodeRecord(
-            episode_id=episode_id,
-            node_id=self.node_id,
-            parent_id=self.parent.node_id if self.parent else None,
-            depth=self.depth,
-            child_index=self.child_index,
-            task=self.task,
-            kind=self.kind,
-            status=self.status,
-            versions=tuple(self.versions),
-        )
+    kind: str = "primitive"
+    logic: str | None = None
 
 
 class ADaPTAgent(Agent):

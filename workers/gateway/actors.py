@@ -26,38 +26,71 @@ os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 import ray  # noqa: E402
 
 from recap.llm import LLMError, LLMRequest  # noqa: E402
-from workers.gateway.ledger import BudgetLedger  # noqa: E402
+from workers.gateway.ledger import BudgetLedger, LocalBudget  # noqa: E402
 from workers.llm.errors import scrub  # noqa: E402
 from workers.llm.providers import DeploymentConfig  # noqa: E402
 
 CONTROL = "control"
 
 
+class SecretEnv:
+    """Environment variables (API keys) handed to a gateway actor as a constructor argument.
+
+    Why not Ray's ``runtime_env``: Ray writes a job's runtime environment, variables included,
+    into its session logs (``runtime_env_agent.log``), so a key passed that way ends up on
+    disk. Its repr names the variables only, so an error message or log line that shows the
+    actor's arguments cannot print a key either."""
+
+    def __init__(self, values: Mapping[str, str] | None = None):
+        self._values = dict(values or {})
+
+    def apply(self) -> None:
+        os.environ.update(self._values)
+
+    def names(self) -> list[str]:
+        return sorted(self._values)
+
+    def __repr__(self) -> str:
+        return f"SecretEnv({', '.join(self.names())})"
+
+    __str__ = __repr__
+
+
+def _ledger_restored_event(run_dir: str, ledger: BudgetLedger) -> None:
+    """An ``events`` row when a restarted budget authority found reservations of a dead
+    process in the journal (charged at worst case): the restart is visible in the tables."""
+    if not ledger.restored_orphans:
+        return
+    import json
+    import time
+    import uuid
+
+    from schemas.records import EventRecord
+    from workers.gateway.call_log import run_id_of
+    from workers.storage import PartWriter
+
+    try:
+        run_id = run_id_of(run_dir)
+    except Exception:  # a bare ledger folder (tests): nothing to attach the row to
+        return
+    stats = ledger.stats()
+    detail = {"orphans": ledger.restored_orphans, "spent_usd": stats["spent_usd"]}
+    PartWriter(Path(run_dir), f"budget-{uuid.uuid4().hex[:6]}").write_records(run_id, [EventRecord(
+        ts=time.time(), source="gateway", kind="ledger_restored", severity="warning",
+        detail=json.dumps(detail, sort_keys=True))])
+
+
 @ray.remote(num_cpus=0, concurrency_groups={CONTROL: 2})
-class BudgetActor:
-    """The run's single budget authority (one journal writer per run folder)."""
+class BudgetActor(LocalBudget):
+    """The run's single budget authority (one journal writer per run folder). The request-path
+    methods (begin, reserve, settle, ...) are LocalBudget's; control methods run in their own
+    concurrency group so they never wait behind requests."""
 
     def __init__(self, run_dir: str, run_cap_usd: float | None = None,
                  model_caps_usd: Mapping[str, float] | None = None, durable_reservations: bool = True):
-        self.ledger = BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
-                                   durable_reservations=durable_reservations)
-
-    async def begin(self, call_key: str, model: str, worst_pico: int | None, cache_key: str | None,
-                    owner: str) -> Mapping[str, Any]:
-        return self.ledger.begin(call_key, model, worst_pico, cache_key, owner)
-
-    async def reserve(self, call_key: str, model: str, worst_pico: int | None, owner: str) -> Mapping[str, Any]:
-        return self.ledger.reserve(call_key, model, worst_pico, owner)
-
-    async def settle(self, rid: int, cost_pico: int, status: str, result: Mapping[str, Any] | None,
-                     cache_key: str | None, litellm_cost_usd: float | None) -> None:
-        self.ledger.settle(rid, cost_pico, status, result, cache_key, litellm_cost_usd)
-
-    async def charge_worst(self, rid: int) -> int:
-        return self.ledger.charge_worst(rid)
-
-    async def adopt_orphans(self, deployment: str, keep_owner: str) -> int:
-        return self.ledger.adopt_orphans(deployment, keep_owner)
+        super().__init__(BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
+                                      durable_reservations=durable_reservations))
+        _ledger_restored_event(run_dir, self.ledger)
 
     @ray.method(concurrency_group=CONTROL)
     async def stats(self) -> dict[str, Any]:
@@ -67,9 +100,6 @@ class BudgetActor:
     async def set_caps(self, run_cap_usd: float | None = None,
                        model_caps_usd: Mapping[str, float] | None = None) -> None:
         self.ledger.set_caps(run_cap_usd, model_caps_usd)
-
-    async def close(self) -> None:
-        self.ledger.close()
 
 
 class RemoteBudget:
@@ -116,8 +146,11 @@ class GatewayActor:
 
     def __init__(self, config: DeploymentConfig | Mapping[str, Any], run_dir: str, run_id: str | None = None,
                  budget: Any = None, run_cap_usd: float | None = None,
-                 model_caps_usd: Mapping[str, float] | None = None):
+                 model_caps_usd: Mapping[str, float] | None = None, secret_env: SecretEnv | None = None):
         from workers.gateway.core import DeploymentGateway
+
+        if secret_env is not None:  # the API keys, for this actor process only
+            secret_env.apply()
 
         cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
         self.core = DeploymentGateway(
