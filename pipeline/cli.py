@@ -13,7 +13,7 @@ import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -32,8 +32,18 @@ def _console(stderr: bool = False) -> Any:
     return Console(file=stream, highlight=False, width=width)
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse whose usage errors are one line like every other error (``recap: error: ...``),
+    exit status 2, instead of a usage block followed by the message."""
+
+    def error(self, message: str) -> "NoReturn":  # type: ignore[override]
+        where = self.prog.removeprefix("recap").strip()
+        hint = f"recap {where} --help" if where else "recap --help"
+        self.exit(EXIT_USAGE, f"recap: error: {where + ': ' if where else ''}{message} (see {hint})\n")
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="recap", description="Run and inspect ReCAP evaluation sweeps.")
+    p = _OneLineParser(prog="recap", description="Run and inspect ReCAP evaluation sweeps.")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
     def run_flags(sp: argparse.ArgumentParser) -> None:

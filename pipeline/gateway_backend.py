@@ -9,12 +9,17 @@ params and test-double options, so a bad entry fails before anything is written.
 
 from __future__ import annotations
 
+import uuid
 from dataclasses import dataclass
 from typing import Any
 
 from pipeline.backend import RateStats, Spend
 from pipeline.errors import SpecError
 from pipeline.spec import ModelSpec, SweepSpec
+
+#: times a call in flight on a gateway (or budget) actor that died is re-sent to its restart;
+#: bounded so that a request that kills the actor every time cannot loop for ever
+TASK_RETRIES = 3
 
 
 def deployment_config(m: ModelSpec, where: str) -> Any:
@@ -92,34 +97,49 @@ class GatewayBackend:
     def start(self, *, run_dir: str, run_id: str, runtime_env: dict[str, Any] | None = None, node_id: str | None = None) -> None:
         from workers.gateway import BudgetActor, GatewayActor, GatewayClient
 
-        opts: dict[str, Any] = {"runtime_env": self._runtime_env()}
+        # a killed gateway or budget actor is restarted by Ray (same arguments: the ledger is
+        # replayed from the run folder's journal) and the calls it had in flight are sent to
+        # the new incarnation, so a crash of either costs a few seconds, not the episodes
+        opts: dict[str, Any] = {"runtime_env": self._runtime_env(), "max_restarts": -1,
+                                "max_task_retries": TASK_RETRIES}
         if node_id is not None:
             from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
             opts["scheduling_strategy"] = NodeAffinitySchedulingStrategy(node_id=node_id, soft=False)
-        self.budget = BudgetActor.options(**opts).remote(str(run_dir), self.spec.run_cap_usd, self.caps)
+        # named, so that the gateways find it by name: a handle among an actor's arguments makes
+        # Ray warn at every start that a restart depends on the object store
+        budget_name = f"recap-budget-{run_id}-{uuid.uuid4().hex[:8]}"
+        self.budget = BudgetActor.options(name=budget_name, **opts).remote(str(run_dir), self.spec.run_cap_usd, self.caps)
+        keys = self._api_keys()
         for label, cfg in self.configs.items():
-            actor = GatewayActor.options(**opts).remote(cfg, str(run_dir), run_id, self.budget)
+            actor = GatewayActor.options(**opts).remote(cfg, str(run_dir), run_id, budget_name, secret_env=keys)
             self.actors[label] = actor
             self.clients[label] = GatewayClient(actor, deployment=cfg.deployment_name)
 
     def _runtime_env(self) -> dict[str, Any]:
-        """The job's environment plus the models' API keys, for the gateway actors only.
+        """The job's environment (data folders, offline litellm) for the gateway actors."""
+        from pipeline.raysetup import runtime_env
+
+        return {"env_vars": dict(runtime_env()["env_vars"])}
+
+    def _api_keys(self) -> Any:
+        """The API keys the sweep's models need, read from the driver's environment.
 
         On a cluster joined with ``--address`` the actors do not inherit the driver's
-        environment, so the keys the sweep's models need travel with the gateway actors (and
-        only with them: episode workers never see a key)."""
+        environment, so the keys travel with the gateway actors (and only with them: episode
+        workers never see a key) - as a constructor argument, never in the ``runtime_env``,
+        which Ray writes into its session logs."""
         import os
 
         from pipeline.preflight import key_variables
-        from pipeline.raysetup import runtime_env
+        from workers.gateway.actors import SecretEnv
 
-        env_vars = dict(runtime_env()["env_vars"])
+        keys: dict[str, str] = {}
         for m in self.spec.models:
             for name in key_variables(m):
                 if os.environ.get(name):
-                    env_vars[name] = os.environ[name]
-        return {"env_vars": env_vars}
+                    keys[name] = os.environ[name]
+        return SecretEnv(keys)
 
     def factory(self) -> GatewayFactory:
         return GatewayFactory(dict(self.clients))

@@ -4,11 +4,14 @@ Why a module: every process of a run — the driver, the gateway, the episode wo
 must import litellm offline (``LITELLM_LOCAL_MODEL_COST_MAP``), find this project and the
 benchmark data folders. Locally the project may not be pip-installed (a checkout), so its root
 is put on the workers' ``PYTHONPATH``; on a cluster the nodes have it installed (cluster.yaml).
+A local Ray listens on the loopback only (see :func:`_loopback_node`).
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -42,13 +45,64 @@ def init_ray(ray_spec: RaySpec, address: str | None = None) -> bool:
     common: dict[str, Any] = {"runtime_env": runtime_env(), "log_to_driver": False,
                               "configure_logging": True, "logging_level": "error"}
     if address:
-        ray.init(address=address, **common)
+        if _is_loopback(address):  # a local Ray started on the loopback (ours, or ray start --node-ip-address 127.0.0.1)
+            with _loopback_node():
+                ray.init(address=address, **common)
+        else:
+            ray.init(address=address, **common)
     else:
-        ray.init(
-            num_cpus=ray_spec.num_cpus or os.cpu_count() or 2,
-            include_dashboard=ray_spec.dashboard,
-            dashboard_host="127.0.0.1",
-            object_store_memory=ray_spec.object_store_mb * 1024 * 1024,
-            **common,
-        )
+        with _loopback_node():
+            ray.init(
+                num_cpus=ray_spec.num_cpus or os.cpu_count() or 2,
+                include_dashboard=ray_spec.dashboard,
+                dashboard_host="127.0.0.1",
+                object_store_memory=ray_spec.object_store_mb * 1024 * 1024,
+                **common,
+            )
     return True
+
+
+def _is_loopback(address: str) -> bool:
+    """Whether ``address`` (host:port, or ``auto`` = the latest local cluster) is on the loopback;
+    a driver joining such a cluster must take the loopback as its own node address too, or
+    Ray looks for a local node under the machine's outward address and waits for ever."""
+    import ipaddress
+
+    if address == "auto":
+        try:
+            from ray._private.services import canonicalize_bootstrap_address
+
+            address = canonicalize_bootstrap_address("auto") or ""
+        except Exception:
+            return False
+    host = address.split("://")[-1].rsplit(":", 1)[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+@contextmanager
+def _loopback_node() -> Iterator[None]:
+    """Make a local Ray start on 127.0.0.1.
+
+    Why: Ray takes the machine's outward-facing address as the node address and then binds
+    its servers (GCS, raylet, object manager, workers, dashboard agent) on it or on 0.0.0.0,
+    so a laptop or a shared box running a sweep would expose them to its network. A local
+    run has no other node (clusters are joined with ``--address``), so its node address is the
+    loopback, and with it every one of those servers listens on 127.0.0.1 only. Ray offers no
+    public switch for this; its node-address lookup returns the loopback when "clusters" are
+    disabled (the setting it uses on macOS/Windows), which is what this sets for the start."""
+    try:
+        from ray._private import ray_constants
+    except ImportError:  # another Ray layout: leave the default
+        yield
+        return
+    before = ray_constants.ENABLE_RAY_CLUSTER
+    ray_constants.ENABLE_RAY_CLUSTER = False
+    try:
+        yield
+    finally:
+        ray_constants.ENABLE_RAY_CLUSTER = before

@@ -3,9 +3,11 @@
 Resume reads everything from the tables, never from the driver's memory: a unit is *completed*
 when it has a terminal ``episodes`` row whose end reason is not ``budget_exhausted`` (an episode
 cut by a cap is unfinished work that a resume with a higher cap continues). Attempt numbers
-continue after the highest attempt seen anywhere (episode rows, events, and the episode ids of
-rows a crashed attempt already wrote), so a new attempt never shares an ``episode_id`` with an
-old one. Only attempts that *failed* (worker lost, worker error) count against
+continue after the highest attempt seen anywhere (episode rows, events, the episode ids of
+rows a crashed attempt already wrote, and the call keys of the gateway's ledger journal - an
+attempt killed within a second of its calls has no rows yet, only journal lines), so a new
+attempt never shares an ``episode_id`` with an old one (nor its call keys, which the ledger
+would otherwise answer with the killed attempt's recorded replies). Only attempts that *failed* (worker lost, worker error) count against
 ``max_attempts``; an attempt cut short by a driver crash does not.
 """
 
@@ -18,11 +20,14 @@ from dataclasses import dataclass, field
 
 from pipeline.store import RunStore
 from pipeline.units import Unit
+from workers.gateway.ledger import JOURNAL_NAME
 from workers.storage import BadPart
 
 #: event kinds that record a failed attempt of a unit
 FAILED_ATTEMPT_EVENTS = ("worker_lost", "attempt_failed")
 _ID_TABLES = ("messages", "steps", "tree_nodes", "llm_calls")
+#: the gateway's budget journal, relative to the run folder
+JOURNAL_FILE = JOURNAL_NAME
 
 
 def parse_episode_id(episode_id: str) -> tuple[str, int] | None:
@@ -77,7 +82,25 @@ def load_state(store: RunStore) -> RunState:
             parsed = parse_episode_id(eid or "")
             if parsed:
                 state._seen(*parsed)
+    for eid in journal_episode_ids(store):
+        parsed = parse_episode_id(eid)
+        if parsed:
+            state._seen(*parsed)
     return state
+
+
+def journal_episode_ids(store: RunStore) -> set[str]:
+    """Episode ids named by the call keys (``<episode_id>#<call>``) of the ledger journal."""
+    text = store.read_text(JOURNAL_FILE)
+    out: set[str] = set()
+    for line in (text or "").splitlines():
+        try:
+            key = json.loads(line).get("key")
+        except (ValueError, AttributeError):
+            continue  # a torn last line
+        if isinstance(key, str) and "#" in key:
+            out.add(key.rsplit("#", 1)[0])
+    return out
 
 
 @dataclass

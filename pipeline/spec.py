@@ -101,6 +101,18 @@ class ModelSpec(_Strict):
             raise ValueError("must not be empty")
         return v
 
+    @model_validator(mode="after")
+    def _api_base_url(self) -> "ModelSpec":
+        """A provider's base URL must be one (a typo would fail every call of the night);
+        ``offline/replay`` takes a run folder there instead."""
+        if self.api_base is not None and not self.test_double:
+            from urllib.parse import urlparse
+
+            url = urlparse(self.api_base)
+            if url.scheme not in ("http", "https") or not url.netloc:
+                raise ValueError(f"api_base: must be an http(s) URL such as http://127.0.0.1:8000/v1, got {self.api_base!r}")
+        return self
+
 
 class MethodSpec(_Strict):
     method: str = Field(min_length=1)

@@ -123,8 +123,12 @@ class RunStore:
         folder holds another run or unrelated files. Writes nothing."""
         ident = self.identity()
         if ident is None:
+            if not self.remote and self.path.exists() and not self.path.is_dir():
+                raise RunFolderError(f"output folder {self.location} is a file; choose a folder")
             if not self.is_empty():
                 raise RunFolderError(f"output folder {self.location} is not empty and holds no {RUN_FILE}; choose a new folder")
+            if not self.remote:
+                self._check_creatable()
             return None
         if ident.run != run_name:
             raise RunFolderError(
@@ -134,6 +138,17 @@ class RunStore:
         if ident.schema_version != SCHEMA_VERSION:
             raise RunFolderError(f"output folder {self.location} was written with schema version {ident.schema_version}, this is {SCHEMA_VERSION}")
         return ident
+
+    def _check_creatable(self) -> None:
+        """A local output folder that does not exist yet must be creatable: its nearest existing
+        ancestor is a writable folder (found now, not at the first write of a started run)."""
+        parent = self.path.absolute()
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        if not parent.is_dir():
+            raise RunFolderError(f"output folder {self.location} cannot be created: {parent} is not a folder")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise RunFolderError(f"output folder {self.location} cannot be created: {parent} is not writable")
 
     def create_identity(self, run_name: str) -> RunIdentity:
         ident = RunIdentity(run_id=uuid.uuid4().hex[:16], run=run_name, created_at=time.time())
@@ -222,6 +237,25 @@ class RunStore:
         if not pieces:
             return schema.empty_table(), bad
         return pa.concat_tables(pieces), bad
+
+    def check_parts(self, table: str) -> list[BadPart]:
+        """The unreadable part files of ``table``, found from their footers alone (truncated,
+        corrupt, or without the table's columns) - cheap enough to run over every table."""
+        names = set(arrow_schema(table).names)
+        bad: list[BadPart] = []
+        for path in self.part_files(table):
+            try:
+                if self.remote:
+                    with self.fs.open_input_file(path) as fh:
+                        found = pq.read_schema(fh)
+                else:
+                    found = pq.read_schema(path)
+                missing = sorted(names - set(found.names))
+                if missing:
+                    raise ValueError(f"not a {table} part: missing column(s) {', '.join(missing[:5])}")
+            except Exception as exc:
+                bad.append(BadPart(Path(path), f"{type(exc).__name__}: {exc}".splitlines()[0][:300]))
+        return bad
 
     def tables(self) -> list[str]:
         return list(TABLES)

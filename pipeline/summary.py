@@ -80,6 +80,9 @@ def collect(store: RunStore) -> StatusReport:
     duplicates = sum(n - 1 for n in seen.values() if n > 1)
     calls, b = store.read_table("llm_calls", ["cost_usd"])
     bad += b
+    for table in store.tables():  # the other tables: status names every unreadable part
+        if table not in ("episodes", "llm_calls"):
+            bad += store.check_parts(table)
     spend = float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist())) if calls.num_rows else \
         float(sum(r["cost_usd"] for r in rows))
     groups: dict[tuple[str, str], GroupRow] = {}

@@ -51,7 +51,16 @@ Guarantees
 - Records: one ``llm_calls`` row per call, written by the gateway (batched, flushed every
   second and on close) with the agent's context from the request. Errors reach the caller as
   ``LLMError(kind)`` with ``kind`` in ``recap.llm.ERROR_KINDS``; API keys never appear in
-  records, logs or error messages.
+  records, logs or error messages. ``events`` rows (source ``gateway``): ``retry`` / ``call_failed``
+  per failed attempt (detail: kind, status, call_key), ``orphans_charged`` when a restarted
+  gateway charges its predecessor's open reservations, ``ledger_restored`` when a restarted
+  BudgetActor did.
+- Restarts (pipeline): the actors are created with ``max_restarts=-1`` and a few task
+  retries, so a killed gateway or budget actor comes back from the run folder and the calls
+  it had in flight are re-sent (served from the ledger when they had been settled); the
+  gateways find the BudgetActor by name (``GatewayActor(..., budget="<name>")``). API keys
+  reach the actors as a ``SecretEnv`` constructor argument, never through ``runtime_env``
+  (which Ray logs).
 - Test doubles: ``offline/expert``, ``offline/random``, ``offline/replay`` (litellm custom
   provider) and ``workers.llm.fake_server``; their records carry ``test_double=True``.
 """

@@ -141,8 +141,9 @@ class RemoteBudget:
 
 @ray.remote(num_cpus=0, concurrency_groups={CONTROL: 2})
 class GatewayActor:
-    """Hosts one :class:`DeploymentGateway`; ``budget`` is the run's ``BudgetActor`` (or None:
-    the gateway keeps its own ledger in the run folder, for a single-deployment run)."""
+    """Hosts one :class:`DeploymentGateway`; ``budget`` is the run's ``BudgetActor`` - a handle,
+    or the name of a named one - (or None: the gateway keeps its own ledger in the run folder,
+    for a single-deployment run). ``secret_env``: API keys set in this actor's process only."""
 
     def __init__(self, config: DeploymentConfig | Mapping[str, Any], run_dir: str, run_id: str | None = None,
                  budget: Any = None, run_cap_usd: float | None = None,
@@ -151,6 +152,8 @@ class GatewayActor:
 
         if secret_env is not None:  # the API keys, for this actor process only
             secret_env.apply()
+        if isinstance(budget, str):  # a named BudgetActor: no handle among the arguments, so Ray
+            budget = ray.get_actor(budget)  # restarts this actor without an object-store argument
 
         cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
         self.core = DeploymentGateway(

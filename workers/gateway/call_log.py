@@ -1,4 +1,6 @@
-"""Batched writer of the run's ``llm_calls`` rows (one per call, written by the gateway itself).
+"""Batched writer of the run's ``llm_calls`` rows (one per call, written by the gateway itself)
+and of the gateway's ``events`` rows (failed attempts that are retried, calls that fail,
+reservations of a dead gateway charged at restart).
 
 Why batches: one Parquet part file per call would bury the run folder in tiny files, and a
 part per minute would lose a minute of rows to a crash. Rows are flushed when ``max_rows``
@@ -13,11 +15,12 @@ import asyncio
 import json
 import re
 import threading
+import time
 import uuid
 from pathlib import Path
 from typing import Any
 
-from schemas.records import CallRecord
+from schemas.records import CallRecord, EventRecord
 from schemas.tables import record_to_row
 from workers.storage import PartWriter
 
@@ -48,18 +51,34 @@ class CallLog:
         self.max_rows = max_rows
         self._writer = PartWriter(Path(run_dir), writer=writer)
         self._pending: list[dict[str, Any]] = []
+        self._events: list[dict[str, Any]] = []
         self._write_lock = threading.Lock()
         self.rows_written = 0
+        self.events_written = 0
 
     def add(self, record: CallRecord) -> None:
         self._pending.append(record_to_row(record, self.run_id))
         if len(self._pending) >= self.max_rows:
             self.flush()
 
+    def add_event(self, kind: str, severity: str, detail: dict[str, Any], episode_id: str | None = None) -> None:
+        """A gateway ``events`` row (``source="gateway"``), written with the next batch.
+
+        ``unit_id`` stays empty: resume reads attempt numbers from events that name a unit,
+        and a call attempt is not a unit attempt."""
+        self._events.append(record_to_row(EventRecord(
+            ts=time.time(), source="gateway", kind=kind, severity=severity, episode_id=episode_id,
+            detail=json.dumps(detail, sort_keys=True, default=str)), self.run_id))
+        if len(self._events) >= self.max_rows:
+            self.flush()
+
     def flush(self) -> None:
         rows, self._pending = self._pending, []
+        events, self._events = self._events, []
         if rows:
             self._write(rows)
+        if events:
+            self._write_events(events)
 
     async def run_periodic_flush(self) -> None:
         """Flush every ``flush_interval_s`` until cancelled (then flush once more)."""
@@ -69,6 +88,9 @@ class CallLog:
                 rows, self._pending = self._pending, []
                 if rows:
                     await asyncio.to_thread(self._write, rows)
+                events, self._events = self._events, []
+                if events:
+                    await asyncio.to_thread(self._write_events, events)
         finally:
             self.flush()
 
@@ -76,6 +98,11 @@ class CallLog:
         with self._write_lock:
             self._writer.write_rows(CallRecord.table, rows)
             self.rows_written += len(rows)
+
+    def _write_events(self, rows: list[dict[str, Any]]) -> None:
+        with self._write_lock:
+            self._writer.write_rows(EventRecord.table, rows)
+            self.events_written += len(rows)
 
     @property
     def pending(self) -> int:

@@ -15,7 +15,9 @@ One call (:meth:`DeploymentGateway.complete`):
    exponentially; context_length, bad_request, auth return at once. A timed-out attempt
    may have been billed, so its reservation is charged at worst case;
 3. settle the reservation to the actual cost and write the ``llm_calls`` row (agent context
-   from the request + accounting; messages with secrets scrubbed).
+   from the request + accounting; messages with secrets scrubbed). Every failed attempt also
+   writes an ``events`` row (``retry`` or, when the call gives up, ``call_failed``, with the
+   error class), so faults that retries absorbed stay visible.
 """
 
 from __future__ import annotations
@@ -132,7 +134,10 @@ class DeploymentGateway:
         self.loop = asyncio.get_running_loop()
         self._flusher = self.loop.create_task(self.call_log.run_periodic_flush())
         # reservations left open by an earlier incarnation of this deployment's gateway
-        self.counts["orphans_adopted"] += await self.budget.adopt_orphans(self.deployment, self.instance)
+        adopted = await self.budget.adopt_orphans(self.deployment, self.instance)
+        self.counts["orphans_adopted"] += adopted
+        if adopted:
+            self.call_log.add_event("orphans_charged", "warning", {"deployment": self.deployment, "reservations": adopted})
 
     async def aclose(self) -> None:
         """Flush the call rows (and close the ledger when this gateway owns it)."""
@@ -193,6 +198,8 @@ class DeploymentGateway:
         except _AttemptFailed as exc:
             if call.rid is not None:
                 await self.budget.settle(call.rid, 0, "error", None, None, None)
+            if exc.classified.kind != "budget":  # a refusal is the cap at work, not a fault
+                self._attempt_event("call_failed", "error", call, exc.classified, call.attempts)
             raise self._fail(request, exc.classified, t0, call.attempts, call.charged, counted.source) from None
         except BaseException:
             # cancelled mid-call: the provider may bill it; keep the cap safe
@@ -227,9 +234,14 @@ class DeploymentGateway:
                 return 0.0  # admission holds every attempt until the Retry-After pause ends
             return min(backoff(rs), max(0.0, call.deadline - self._clock()))
 
+        def before_sleep(rs: RetryCallState) -> None:
+            exc = rs.outcome.exception() if rs.outcome else None
+            if isinstance(exc, _AttemptFailed):
+                self._attempt_event("retry", "warning", call, exc.classified, rs.attempt_number)
+
         retrying = AsyncRetrying(
             stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
-            wait=wait, retry=retry_if_exception_type(_Retryable), reraise=True)
+            wait=wait, retry=retry_if_exception_type(_Retryable), reraise=True, before_sleep=before_sleep)
         async for attempt_ctx in retrying:
             with attempt_ctx:
                 return await self._one_attempt(call)
@@ -314,6 +326,16 @@ class DeploymentGateway:
             served_from=source, deployment=self.deployment, test_double=self.test_double)
         self._record(request, resp)
         return resp
+
+    def _attempt_event(self, kind: str, severity: str, call: "_Call", c: Classified, attempt: int) -> None:
+        """An ``events`` row per failed attempt: ``retry`` when another follows, ``call_failed``
+        when the call gives up - so provider trouble that retries absorbed stays visible."""
+        detail: dict[str, Any] = {"deployment": self.deployment, "call_key": call.request.call_key,
+                                  "call_attempt": attempt, "kind": c.kind, "status": c.status_code,
+                                  "message": scrub(c.message)[:300]}
+        if c.retry_after_s is not None:
+            detail["retry_after_s"] = c.retry_after_s
+        self.call_log.add_event(kind, severity, detail, episode_id=call.request.episode_id)
 
     def _fail(self, request: LLMRequest, c: Classified, t0: float, attempts: int, charged: int,
               source: str) -> LLMError:

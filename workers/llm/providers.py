@@ -25,6 +25,30 @@ DEFAULT_MAX_TOKENS = 1024
 OFFLINE_PREFIX = "offline/"
 
 
+#: numeric generation params: (integer only, lowest, highest); a wrong value would be refused
+#: by the provider on every call of a run, so it is refused here, before the first
+_NUMERIC_PARAMS: dict[str, tuple[bool, float | None, float | None]] = {
+    "temperature": (False, 0.0, 2.0), "top_p": (False, 0.0, 1.0), "max_tokens": (True, 1, None),
+    "n": (True, 1, None), "seed": (True, None, None),
+    "presence_penalty": (False, -2.0, 2.0), "frequency_penalty": (False, -2.0, 2.0),
+}
+
+
+def _param_problem(name: str, value: Any) -> str | None:
+    """What is wrong with one generation param's value (None when nothing is)."""
+    if name in _NUMERIC_PARAMS:
+        integer, low, high = _NUMERIC_PARAMS[name]
+        kind = "an integer" if integer else "a number"
+        if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+            return f"must be {kind}"
+        if (low is not None and value < low) or (high is not None and value > high):
+            bounds = f">= {low}" if high is None else f"within [{low}, {high}]"
+            return f"must be {kind} {bounds}"
+    if name == "stop" and not (isinstance(value, str) or (isinstance(value, list) and all(isinstance(x, str) for x in value))):
+        return "must be a string or a list of strings"
+    return None
+
+
 class DeploymentConfigError(ValueError):
     """A deployment configuration that cannot work."""
 
@@ -87,6 +111,10 @@ class DeploymentConfig(BaseModel):
         unknown = set(v) - ALLOWED_PARAMS
         if unknown:
             raise ValueError(f"unknown generation param(s) {sorted(unknown)}; allowed: {sorted(ALLOWED_PARAMS)}")
+        for name, value in v.items():
+            problem = _param_problem(name, value)
+            if problem:
+                raise ValueError(f"{name} {problem}, got {value!r}")
         return v
 
     @field_validator("price", mode="before")
