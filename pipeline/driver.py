@@ -503,7 +503,10 @@ class Driver:
                         self._finish(ref)
                     if self.records_out:
                         recs, self.records_out = self.records_out, []
-                        self.sink.add_records.remote(recs)
+                        # terminal rows are written at once: a unit whose episode finished must not
+                        # be re-run (and paid again) because its row was still buffered at a crash
+                        terminal = any(isinstance(r, EpisodeRecord) for r in recs)
+                        self.sink.add_records.remote(recs, flush=terminal)
                     now = time.monotonic()
                     if ready or now - last_tick >= 0.5:
                         last_tick = now
