@@ -103,7 +103,7 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
             shapes[u.instance_id] = measure_instance(u.instance_id, u.step_multiplier, dict(u.env_options))
         shape = shapes[u.instance_id]
         cfg = json.loads(u.method_config)
-        max_calls = int(cfg.get("max_llm_calls") or 400)
+        max_calls = int(cfg.get("max_llm_calls") or 10**9)  # None: derived from the step cap (c_high below)
         window = int(cfg.get("window") or 64)
         if u.method in ONE_SHOT:
             c_low, c_high = 1.0, float(min(max_calls, 1 + int(cfg.get("max_json_repairs", 3))))

@@ -120,14 +120,15 @@ def resolve_instances(envs: Sequence[EnvSpec]) -> list[tuple[str, dict[str, Any]
     return out
 
 
-def resolve_methods(spec: SweepSpec) -> list[tuple[Any, dict[str, Any], str]]:
-    """(method spec, effective settings, canonical config JSON) per method; errors name it."""
+def resolve_methods(spec: SweepSpec, benchmark: str | None = None) -> list[tuple[Any, dict[str, Any], str]]:
+    """(method spec, effective settings, canonical config JSON) per method, as the method runs
+    on ``benchmark`` (profiles can differ per benchmark); errors name the method."""
     limits = spec.limits.agent_settings()
     out = []
     for i, m in enumerate(spec.methods):
         settings = {**limits, **m.settings}
         try:
-            agent = build_agent(m.method, profile=m.profile, ablation=m.ablation, settings=settings)
+            agent = build_agent(m.method, profile=m.profile, ablation=m.ablation, settings=settings, benchmark=benchmark)
         except ConfigError as exc:
             raise SpecError(f"methods[{i}] ({m.name}): {exc}") from None
         except TypeError as exc:
@@ -151,11 +152,14 @@ class Plan:
 def expand(spec: SweepSpec) -> Plan:
     """All units of a sweep, in a fixed order (instances, then methods, models, seeds)."""
     instances = resolve_instances(spec.environments)
-    methods = resolve_methods(spec)
+    methods_by_benchmark: dict[str, list[tuple[Any, dict[str, Any], str]]] = {}
     units: list[Unit] = []
     seen: dict[str, str] = {}
     for inst, options in instances:
-        for m, settings, cfg in methods:
+        benchmark = inst.split("/", 1)[0]
+        if benchmark not in methods_by_benchmark:
+            methods_by_benchmark[benchmark] = resolve_methods(spec, benchmark)
+        for m, settings, cfg in methods_by_benchmark[benchmark]:
             for model in spec.models:
                 for seed in spec.seeds:
                     uid = unit_hash(instance_id=inst, method=m.method, method_config=cfg, model=model.model,

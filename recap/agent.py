@@ -4,17 +4,24 @@ play until an :class:`EpisodeEnd`, return an :class:`EpisodeResult`.
 Demonstrations are rendered by running the agent itself, with the same settings, on the
 demonstration's environment against a scripted model that returns the demonstration's replies.
 The transcript is therefore in exactly the agent's own prompt format for every ablation, and it
-is flattened into one pinned user message.
+is flattened into one pinned user message. ``demo_observations`` decides which of the
+example's observations the transcript shows (:class:`ElidedObservations`).
+
+The call cap: unless a run fixes ``max_llm_calls``, each episode's cap is derived from its step
+cap S by the method's own formula ``ceil(calls_per_step x S) + call_overhead +
+max_json_repairs``, so a method that needs more calls per environment step (ReCAP: a descend
+and a return per action) is never cut by calls before it could use its step budget.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
-from recap.config import AgentConfig
-from recap.env import Demonstration, Environment, Reset
+from recap.config import OMITTED_OBSERVATION, AgentConfig
+from recap.env import Demonstration, Environment, Reset, Step
 from recap.llm import LLMClient
 from recap.runtime import Conversation, EnvDriver, Emit, Episode, EpisodeEnd, EpisodeResult
 from recap.scripted import ScriptedClient
@@ -31,12 +38,54 @@ def _discard(_record: Any) -> None:
     return None
 
 
+class ElidedObservations(Environment):
+    """A demonstration environment whose observations are left out of the transcript.
+
+    Everything the agent acts on (valid actions, success, the step cap) comes from the wrapped
+    environment unchanged; only the observation *text* is replaced by
+    :data:`~recap.config.OMITTED_OBSERVATION` — after the first one (``keep_first``) or always.
+    """
+
+    def __init__(self, inner: Environment, *, keep_first: bool) -> None:
+        self.inner = inner
+        self.keep_first = keep_first
+        for name in ("instance_id", "benchmark", "split", "task", "seed", "invalid_action_mode",
+                     "optimal_steps", "max_steps", "test_double", "partially_observed"):
+            setattr(self, name, getattr(inner, name))
+
+    def reset(self) -> Reset:
+        r = self.inner.reset()
+        return r if self.keep_first else dataclasses.replace(r, observation=OMITTED_OBSERVATION)
+
+    def step(self, action: str) -> Step:
+        return dataclasses.replace(self.inner.step(action), observation=OMITTED_OBSERVATION)
+
+    def rules(self) -> str:
+        return self.inner.rules()
+
+    def demonstration(self) -> Demonstration | None:
+        return None
+
+    def failure_hints(self) -> str:
+        return self.inner.failure_hints()
+
+    @property
+    def steps_taken(self) -> int:
+        return self.inner.steps_taken
+
+    def close(self) -> None:
+        self.inner.close()
+
+
 class Agent(ABC):
     #: key into Demonstration.replies and the ``style`` hint for offline models
     style: ClassVar[str]
     config_cls: ClassVar[type[AgentConfig]] = AgentConfig
     #: the reply shape, as shown to the model in repair messages
     expected_format: ClassVar[str]
+    #: the derived call cap: ceil(calls_per_step x step cap) + call_overhead + max_json_repairs
+    calls_per_step: ClassVar[float] = 2.0
+    call_overhead: ClassVar[int] = 10
 
     def __init__(self, config: AgentConfig | None = None) -> None:
         self.config = config if config is not None else self.config_cls()
@@ -66,7 +115,7 @@ class Agent(ABC):
         conv = Conversation(
             episode_id=episode_id,
             client=client,
-            config=self.config,
+            config=self.episode_config(env),
             style=self.style,
             emit=emit,
             expected_format=self.reply_format(),
@@ -84,6 +133,16 @@ class Agent(ABC):
         finally:
             self.finish(ep)
         return result
+
+    def call_cap(self, max_steps: int) -> int:
+        """The method's call cap for an episode whose step cap is ``max_steps``."""
+        return math.ceil(self.calls_per_step * max_steps) + self.call_overhead + self.config.max_json_repairs
+
+    def episode_config(self, env: Environment) -> AgentConfig:
+        """The settings one episode runs with: a derived call cap filled in from ``env``."""
+        if self.config.max_llm_calls is not None:
+            return self.config
+        return dataclasses.replace(self.config, max_llm_calls=self.call_cap(int(env.max_steps)))
 
     @abstractmethod
     def play(self, ep: Episode, reset: Reset) -> None:
@@ -129,12 +188,19 @@ class Agent(ABC):
                 messages.append(record)
 
         shaped = [self.shape_demo_reply(r) for r in replies]
-        result = agent.run(demo.make_env(), ScriptedClient(shaped, model="demonstration"), episode_id=f"demo:{demo.name}", emit=keep, demonstration=False)
+        result = agent.run(self.demo_env(demo), ScriptedClient(shaped, model="demonstration"), episode_id=f"demo:{demo.name}", emit=keep, demonstration=False)
         if not result.success:
             raise DemonstrationError(f"demonstration {demo.name!r} does not reach the goal with {type(self).__name__} ({result.end_reason}: {result.error})")
         text = format_transcript(messages)
         _DEMO_CACHE[key] = text
         return text
+
+    def demo_env(self, demo: Demonstration) -> Environment:
+        """The demonstration's environment, with observations left out as configured."""
+        env = demo.make_env()
+        if self.config.demo_observations == "all":
+            return env
+        return ElidedObservations(env, keep_first=self.config.demo_observations == "first")
 
 
 def format_transcript(messages: list[MessageRecord]) -> str:

@@ -3,6 +3,20 @@
 Ablations are configuration of one agent, never copies of it. ``paper`` follows the paper
 (K = 64 messages, temperature 0.5); ``released`` follows the authors' released code (K = 128,
 temperature not sent, so the provider default applies).
+
+A profile can depend on the benchmark (the paper runs Robotouille's own ReAct protocol on
+Robotouille and Yao et al.'s on ALFWorld) and on the ablation (the released code runs its
+ablation variants without the shortcut). Each config class says what a profile means for it
+in :meth:`AgentConfig.profile_defaults`, so the protocol of a method lives with the method; the
+README's protocol table lists every item.
+
+Two settings are *derived* when left at None, from facts known only when an episode starts:
+
+* ``max_llm_calls``: from the environment's step cap by the method's own formula
+  (:meth:`recap.agent.Agent.call_cap`), so no method is cut by calls before it could use its
+  step budget;
+* ``max_tokens``: each config class has a default output cap measured from the longest expert
+  reply in its reply format (``bench/protocol.py`` prints the measurement).
 """
 
 from __future__ import annotations
@@ -13,9 +27,17 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 PROFILES: dict[str, dict[str, Any]] = {
+    # the paper: K = 64 unpinned messages, T = 0.5; demonstrations show the example's first
+    # observation and leave later ones out on Robotouille (see demo_observations)
     "paper": {"window": 64, "temperature": 0.5},
-    "released": {"window": 128, "temperature": None},
+    # the released code: K = 128 counted over the whole history (pins included), provider default T
+    "released": {"window": 128, "temperature": None, "window_counts_pins": True},
 }
+
+#: how a demonstration shows the example's observations (see recap.agent.ElidedObservations)
+DemoObservations = Literal["all", "first", "none"]
+#: what the one-shot demonstration puts in place of an observation it leaves out
+OMITTED_OBSERVATION = "(observation left out of this example)"
 
 
 class ConfigError(ValueError):
@@ -29,14 +51,38 @@ class AgentConfig:
     window: int = 64
     window_mode: Literal["pair", "block"] = "pair"
     window_block: int | None = None
+    #: True: K bounds the whole history, pins included (the released code); False: K bounds
+    #: the messages after the two pins (the paper's reading)
+    window_counts_pins: bool = False
     temperature: float | None = 0.5
-    max_tokens: int | None = None
+    #: output-token cap per call. Each method's default is measured by bench/protocol.py: twice
+    #: the longest expert reply of any instance in the method's reply format, rounded up to 512,
+    #: and at least 1024 (a reply that still hits it ends the episode as ``truncated``)
+    max_tokens: int | None = 1024
     json_mode: bool = True
     max_json_repairs: int = 3
-    max_llm_calls: int = 400
+    #: None derives the cap from the step cap (recap.agent.Agent.call_cap); a number fixes it
+    max_llm_calls: int | None = None
     max_episode_tokens: int | None = None
     max_episode_cost_usd: float | None = None
     context_drop: int = 32
+    #: the one-shot demonstration shows every observation (all), only the first one (first),
+    #: or none of them (none); left-out observations read OMITTED_OBSERVATION
+    demo_observations: DemoObservations = "all"
+
+    @classmethod
+    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
+        """What ``profile`` sets for this method on ``benchmark`` beyond PROFILES (the method's
+        own protocol). Subclasses extend it; unknown benchmarks get the generic values."""
+        out: dict[str, Any] = {}
+        if profile == "paper" and benchmark == "robotouille":
+            # Robotouille observations are the whole kitchen plus its valid actions (~3.5K
+            # characters); repeating them after each of the example's 22 actions pins ~20K tokens
+            # into every call. The paper's one-shot example follows the benchmark's demonstration
+            # with the observations left out; we keep the first one so the example's reasoning
+            # can be checked against the state it starts from.
+            out["demo_observations"] = "first"
+        return out
 
     def validate(self) -> None:
         if self.window < 2:
@@ -47,10 +93,23 @@ class AgentConfig:
             raise ConfigError(f"temperature must be in [0, 2], got {self.temperature}")
         if self.max_json_repairs < 0:
             raise ConfigError("max_json_repairs must be >= 0")
-        if self.max_llm_calls < 1:
-            raise ConfigError("max_llm_calls must be >= 1")
+        if self.max_llm_calls is not None and self.max_llm_calls < 1:
+            raise ConfigError("max_llm_calls must be >= 1 or null (derived from the step cap)")
+        if self.max_tokens is not None and self.max_tokens < 1:
+            raise ConfigError("max_tokens must be >= 1 or null (the model's own cap)")
         if self.context_drop < 2:
             raise ConfigError("context_drop must be >= 2")
+        if self.demo_observations not in ("all", "first", "none"):
+            raise ConfigError(f"demo_observations must be all, first or none, got {self.demo_observations!r}")
+        if self.window_counts_pins and self.window < 4:
+            raise ConfigError("window must be >= 4 messages when it counts the two pins")
+
+    def history_window(self) -> int:
+        """K as the shared history applies it (ReAct's ``history: last`` narrows it)."""
+        return self.window
+
+    def history_counts_pins(self) -> bool:
+        return self.window_counts_pins
 
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): part of a unit's content hash and of episode rows."""
@@ -63,11 +122,32 @@ class ReCAPConfig(AgentConfig):
     ``think`` is ``latest`` (paper), ``none`` (no_think) or ``many`` (think_many);
     ``name_only`` makes return prompts carry only the finished and the current task."""
 
+    #: ReCAP's root may list every action of a long recipe as subtasks: the longest expert plan
+    #: (async 9 @420, 103 actions) is 1,283 tokens with a think
+    max_tokens: int | None = 3072
     max_level: int | None = None
     think: Literal["latest", "none", "many"] = "latest"
     name_only: bool = False
     reminder_period: int | None = 10
+    #: what the reminder period counts: ``calls`` (LLM calls, the paper) or ``iterations``
+    #: (control-loop iterations: every child entered, shortcuts included, and every return;
+    #: the released code). The reminder goes on whichever prompt is sent next.
+    reminder_on: Literal["calls", "iterations"] = "calls"
     shortcut: bool = True
+    #: the released code leaves a shortcut's trace in the history (the descend prompt and a
+    #: synthetic reply naming the action, no call); the paper describes no such messages
+    shortcut_trace: bool = False
+
+    @classmethod
+    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
+        out = super().profile_defaults(profile, benchmark, ablation)
+        if profile == "released":
+            out.update(reminder_on="iterations", shortcut_trace=True)
+            if benchmark == "alfworld":
+                out["reminder_period"] = None  # the released ALFWorld code has no reminder
+            if ablation not in (None, "original"):
+                out["shortcut"] = False  # the released ablation variants have no shortcut
+        return out
 
     def validate(self) -> None:
         super().validate()
@@ -77,6 +157,8 @@ class ReCAPConfig(AgentConfig):
             raise ConfigError(f"think must be latest, none or many, got {self.think!r}")
         if self.reminder_period is not None and self.reminder_period < 1:
             raise ConfigError("reminder_period must be >= 1 or null")
+        if self.reminder_on not in ("calls", "iterations"):
+            raise ConfigError(f"reminder_on must be calls or iterations, got {self.reminder_on!r}")
 
 
 #: the paper's ablation names, as settings of ReCAPConfig
@@ -93,13 +175,16 @@ ABLATIONS: dict[str, dict[str, Any]] = {
 }
 
 
-def build_config(cls: type[AgentConfig], profile: str | None = None, ablation: str | None = None, **overrides: Any) -> AgentConfig:
-    """Profile defaults, then an ablation, then explicit overrides; unknown names are errors."""
+def build_config(cls: type[AgentConfig], profile: str | None = None, ablation: str | None = None,
+                 benchmark: str | None = None, **overrides: Any) -> AgentConfig:
+    """Profile defaults (generic, then the method's own for ``benchmark``), then an ablation,
+    then explicit overrides; unknown names are errors."""
     values: dict[str, Any] = {}
     if profile is not None:
         if profile not in PROFILES:
             raise ConfigError(f"unknown profile {profile!r}; known: {', '.join(PROFILES)}")
         values.update(PROFILES[profile])
+        values.update(cls.profile_defaults(profile, benchmark, ablation))
     if ablation is not None:
         if ablation not in ABLATIONS:
             raise ConfigError(f"unknown ablation {ablation!r}; known: {', '.join(ABLATIONS)}")

@@ -77,6 +77,10 @@ class Environment(ABC):
     #: ``reject``: an action not in valid_actions never reaches the engine (no step is taken);
     #: ``step``: it is sent to the game, which answers and counts a step.
     invalid_action_mode: Literal["reject", "step"] = "reject"
+    #: True when an observation shows only part of the state (ALFWorld: what is at the agent's
+    #: location), so a context opened later also needs the episode's first observation; False
+    #: when every observation shows the whole state (Robotouille, blocksworld).
+    partially_observed: bool = False
     optimal_steps: int | None = None
     #: environment steps allowed (ceil(optimal x multiplier), or a benchmark's fixed cap)
     max_steps: int = 50

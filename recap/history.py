@@ -15,6 +15,10 @@ Two trimming modes keep the same bound:
 
 Messages are dropped in pairs so the window always continues the user/assistant alternation
 that starts after the pinned task prompt.
+
+``counts_pins`` makes K bound the whole history, pins included (the released code's reading:
+"more than ctx_len messages" counts the demonstration and the task prompt); otherwise K bounds
+the messages after the pins.
 """
 
 from __future__ import annotations
@@ -59,6 +63,7 @@ class History:
         block: int | None = None,
         emit: Callable[[MessageRecord], None] | None = None,
         counter: "SeqCounter | None" = None,
+        counts_pins: bool = False,
     ) -> None:
         if window < 2:
             raise ValueError(f"window must be at least 2 messages, got {window}")
@@ -76,6 +81,14 @@ class History:
         # (ADaPT) works with several separate contexts
         self._counter = counter if counter is not None else SeqCounter()
         self.dropped = 0
+        self.counts_pins = counts_pins
+
+    @property
+    def live_limit(self) -> int:
+        """How many unpinned messages the window holds."""
+        if self.counts_pins:
+            return max(2, self.window - len(self._pins))
+        return self.window
 
     # -- insertion -----------------------------------------------------------------------
     def pin(self, role: str, kind: str, content: str) -> int:
@@ -107,14 +120,15 @@ class History:
         return seq
 
     def _enforce(self) -> None:
-        if len(self._live) <= self.window:
+        limit = self.live_limit
+        if len(self._live) <= limit:
             return
         if self.mode == "pair":
-            excess = len(self._live) - self.window
+            excess = len(self._live) - limit
             self.drop_oldest(excess + (excess % 2))
         else:
-            while len(self._live) > self.window:
-                self.drop_oldest(self.block)
+            while len(self._live) > limit:
+                self.drop_oldest(min(self.block, limit))
 
     # -- trimming ------------------------------------------------------------------------
     def drop_oldest(self, n: int) -> int:

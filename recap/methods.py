@@ -39,7 +39,9 @@ def method_classes(method: str) -> tuple[type[Agent], type[AgentConfig]]:
     return METHODS[method]
 
 
-def make_agent(method: str, profile: str | None = None, ablation: str | None = None, **settings: Any) -> Agent:
-    """Profile defaults, then the ablation, then explicit settings (see ``build_config``)."""
+def make_agent(method: str, profile: str | None = None, ablation: str | None = None,
+               benchmark: str | None = None, **settings: Any) -> Agent:
+    """Profile defaults (for ``benchmark`` when given), then the ablation, then explicit
+    settings (see ``build_config``)."""
     agent_cls, config_cls = method_classes(method)
-    return agent_cls(build_config(config_cls, profile, ablation, **settings))
+    return agent_cls(build_config(config_cls, profile, ablation, benchmark, **settings))

@@ -13,8 +13,12 @@ Control flow (see the paper, section 2, and docs/method.md):
 * after each child, the parent is re-prompted with its latest think and remaining subtasks
   (plus the observation after an action) and returns a refined list; an empty list finishes
   the node, and at the root it ends the episode;
-* every ``reminder_period`` loop iterations the rules are re-sent; at ``max_level`` a node is
-  asked for a single valid action instead of a decomposition.
+* the rules are re-sent every ``reminder_period`` LLM calls (``reminder_on: calls``, the paper)
+  or control-loop iterations (``iterations``: every child entered, shortcuts included, and every
+  return; the released code), prepended to whichever prompt is sent next; at ``max_level`` a
+  node is asked for a single valid action instead of a decomposition;
+* ``shortcut_trace`` (released code): a shortcut child still leaves its descend prompt and a
+  synthetic reply naming the action in the history (no call is made).
 """
 
 from __future__ import annotations
@@ -37,6 +41,8 @@ class ReCAPAgent(Agent):
     config_cls = ReCAPConfig
     expected_format = P.reply_format(True)
     config: ReCAPConfig
+    #: a descend and a return per action, plus room for leaf failures and decompositions
+    calls_per_step = 3.0
 
     def reply_format(self) -> str:
         return P.reply_format(self.config.think != "none")
@@ -58,7 +64,8 @@ class ReCAPAgent(Agent):
     def play(self, ep: Episode, reset: Reset) -> None:
         cfg = self.config
         st = self._state(ep)
-        st.update(nodes=[], iterations=0, rules=ep.env.rules(), max_depth=0)
+        st.update(nodes=[], iterations=0, rules=ep.env.rules(), max_depth=0, remind=False,
+                  next_reminder_call=cfg.reminder_period)
         with_think = cfg.think != "none"
         root = self._new_node(ep, None, reset.goal)
         root.kind = "root"
@@ -85,7 +92,32 @@ class ReCAPAgent(Agent):
         st["max_depth"] = max(st["max_depth"], depth)
         return node
 
+    # -- rule reminders ------------------------------------------------------------------------
+    def _tick_iteration(self, ep: Episode) -> None:
+        """One control-loop iteration (a child entered or a return); arms the reminder when the
+        period counts iterations."""
+        cfg, st = self.config, self._state(ep)
+        st["iterations"] += 1
+        if cfg.reminder_on == "iterations" and cfg.reminder_period and st["iterations"] % cfg.reminder_period == 0:
+            st["remind"] = True
+
+    def _reminder_due(self, ep: Episode) -> bool:
+        cfg, st = self.config, self._state(ep)
+        if not cfg.reminder_period or self.demo_mode:
+            return False
+        if cfg.reminder_on == "calls":
+            # every reminder_period calls: the prompt of call period+1, 2*period+1, ... gets it
+            due = st["next_reminder_call"] is not None and ep.conv.usage.calls >= st["next_reminder_call"]
+            if due:
+                while st["next_reminder_call"] <= ep.conv.usage.calls:
+                    st["next_reminder_call"] += cfg.reminder_period
+            return due
+        due, st["remind"] = st["remind"], False
+        return due
+
     def _ask(self, ep: Episode, node: Node, prompt: str | None, kind: str, shown: tuple[str, ...] | None = None) -> None:
+        if prompt is not None and self._reminder_due(ep):
+            prompt = P.reminder(self._state(ep)["rules"]) + "\n\n" + prompt
         parse = partial(recap_reply, with_think=self.config.think != "none")
         d = ep.driver
         context = {
@@ -108,9 +140,11 @@ class ReCAPAgent(Agent):
 
     def _descend(self, ep: Episode, child: Node) -> tuple[str, str | None]:
         cfg, d = self.config, ep.driver
+        self._tick_iteration(ep)
         if cfg.shortcut and d.valid_actions is not None and d.is_valid(child.task):
             child.kind = "primitive"
-            child.add_version(None, (child.task,), None, None)
+            seq = self._shortcut_trace(ep, child) if cfg.shortcut_trace else None
+            child.add_version(None, (child.task,), None, seq)
             return self._execute(ep, child, child.task)
         at_cap = cfg.max_level is not None and child.depth + 1 >= cfg.max_level
         if at_cap:
@@ -129,6 +163,17 @@ class ReCAPAgent(Agent):
             return self._fail(ep, child, action)
         self._loop(ep, child)
         return "nonleaf", None
+
+    def _shortcut_trace(self, ep: Episode, child: Node) -> int:
+        """The released code's record of a shortcut: the descend prompt and a reply naming the
+        action, added to the shared history without a call. Returns the reply's seq."""
+        h = ep.conv.history
+        prompt = P.descend_prompt(child.task)
+        if self._reminder_due(ep):
+            prompt = P.reminder(self._state(ep)["rules"]) + "\n\n" + prompt
+        h.add("user", "descend", prompt, child.node_id)
+        reply = P.shortcut_reply(child.task, self.config.think != "none")
+        return h.add("assistant", "shortcut", reply, child.node_id)
 
     def _execute(self, ep: Episode, child: Node, action: str) -> tuple[str, str | None]:
         child.step_index = ep.driver.attempts
@@ -150,8 +195,8 @@ class ReCAPAgent(Agent):
         return "fail", action
 
     def _return(self, ep: Episode, node: Node, child: Node, outcome: str, failed_action: str | None) -> None:
-        cfg, st = self.config, self._state(ep)
-        st["iterations"] += 1
+        cfg = self.config
+        self._tick_iteration(ep)
         shown = node.subtasks if outcome == "fail" else node.subtasks[1:]
         kind, text = P.return_prompt(
             outcome=outcome,
@@ -165,8 +210,6 @@ class ReCAPAgent(Agent):
             failed_action=failed_action,
             hints=ep.env.failure_hints() if outcome == "fail" else "",
         )
-        if cfg.reminder_period and not self.demo_mode and st["iterations"] % cfg.reminder_period == 0:
-            text = P.reminder(st["rules"]) + "\n\n" + text
         self._ask(ep, node, text, kind, shown=tuple(shown))
 
     # -- end of episode ------------------------------------------------------------------------

@@ -7,6 +7,7 @@ Prompts"); the sentences are ours. The ablation switches change only what is re-
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 
 
@@ -138,6 +139,14 @@ def return_prompt(
             "reply with an empty list if it is. Do not add subtasks outside the current task."
         )
     return kind, "\n\n".join(lines)
+
+
+def shortcut_reply(action: str, with_think: bool) -> str:
+    """The synthetic reply the released code records for a shortcut (no model call)."""
+    reply = {"think": "This task is itself one of the valid actions, so I carry it out directly.", "subtasks": [action]}
+    if not with_think:
+        del reply["think"]
+    return json.dumps(reply)
 
 
 def reminder(rules: str) -> str:

@@ -35,6 +35,7 @@ END_REASONS = (
     "budget_exhausted",
     "episode_limit",
     "env_error",
+    "truncated",
 )
 
 Emit = Callable[[Record], None]
@@ -109,10 +110,11 @@ class Conversation:
         self.expected_format = expected_format
         self.history = history if history is not None else History(
             episode_id,
-            config.window,
+            config.history_window(),
             mode=config.window_mode,
             block=config.window_block,
             emit=emit,
+            counts_pins=config.history_counts_pins(),
         )
         self.usage = usage if usage is not None else Usage()
 
@@ -130,11 +132,12 @@ class Conversation:
             usage=self.usage,
             history=History(
                 self.episode_id,
-                cfg.window,
+                cfg.history_window(),
                 mode=cfg.window_mode,
                 block=cfg.window_block,
                 emit=self.emit,
                 counter=self.history.counter,
+                counts_pins=cfg.history_counts_pins(),
             ),
         )
 
@@ -234,11 +237,18 @@ class Conversation:
                     provider_cost_usd=response.provider_cost_usd,
                 )
             )
+            if response.finish_reason == "length":
+                # the reply hit the output cap: whatever it holds is cut off, so it is neither
+                # parsed nor repaired (a repair would pay again for the same cut)
+                raise EpisodeEnd(
+                    "truncated",
+                    f"reply cut at the output cap ({response.completion_tokens} tokens, max_tokens {self.config.max_tokens})",
+                )
             return response.text, seq
 
     def _check_caps(self) -> None:
         cfg, u = self.config, self.usage
-        if u.calls >= cfg.max_llm_calls:
+        if cfg.max_llm_calls is not None and u.calls >= cfg.max_llm_calls:
             raise EpisodeEnd("call_cap", f"{u.calls} LLM calls (cap {cfg.max_llm_calls})")
         if cfg.max_episode_tokens is not None and u.prompt_tokens + u.completion_tokens >= cfg.max_episode_tokens:
             raise EpisodeEnd("episode_limit", f"{u.prompt_tokens + u.completion_tokens} tokens (limit {cfg.max_episode_tokens})")

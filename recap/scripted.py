@@ -13,7 +13,9 @@ from typing import Any, Union
 
 from recap.llm import LLMError, LLMRequest, LLMResponse
 
-Item = Union[str, Mapping[str, Any], LLMError, Callable[[LLMRequest], Any]]
+#: a reply text, a JSON object, an error to raise, a whole response (e.g. one cut at the output
+#: cap), or a function of the request returning any of these
+Item = Union[str, Mapping[str, Any], LLMError, LLMResponse, Callable[[LLMRequest], Any]]
 
 
 class ScriptExhausted(RuntimeError):
@@ -52,6 +54,8 @@ class ScriptedClient:
             item = item(request)
         if isinstance(item, LLMError):
             raise item
+        if isinstance(item, LLMResponse):
+            return item
         text = item if isinstance(item, str) else json.dumps(dict(item), ensure_ascii=False)
         prompt_tokens = sum(estimate_tokens(m.content) for m in request.messages)
         completion_tokens = estimate_tokens(text)

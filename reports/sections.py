@@ -398,7 +398,8 @@ def trees(q: Query) -> Section:
 
 MODE_NOTE = (
     "One mode per episode, first match wins: success; model_error:<kind> (LLM error, kind of the "
-    "last failed call); json_failures, budget_exhausted, episode_limit, env_error; then for step "
+    "last failed call); json_failures, truncated (a reply cut at the output cap), budget_exhausted, "
+    "episode_limit, env_error; then for step "
     "cap, call cap and agent-declared done: invalid_action_loop (>= 3 invalid attempts in a row, "
     "or one invalid action tried >= 3 times), repeated_action_loop (a cycle of 1-3 identical "
     "(action, observation) steps repeated >= 3 times back to back over >= 4 steps); then "

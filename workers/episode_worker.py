@@ -55,7 +55,7 @@ def known_methods() -> list[str]:
 
 
 def build_agent(method: str, *, profile: str | None = None, ablation: str | None = None,
-                settings: Mapping[str, Any] | None = None) -> Agent:
+                settings: Mapping[str, Any] | None = None, benchmark: str | None = None) -> Agent:
     """The agent for a method name + profile + ablation + settings.
 
     Uses ``recap.methods.make_agent`` (ReCAP and the baselines) when present; otherwise only
@@ -68,14 +68,27 @@ def build_agent(method: str, *, profile: str | None = None, ablation: str | None
         if methods is not None and method not in methods:
             raise ConfigError(f"unknown method {method!r}; known: {', '.join(sorted(methods))}")
         try:
-            return mod.make_agent(method, profile=profile, ablation=ablation, **settings)
+            return mod.make_agent(method, profile=profile, ablation=ablation, benchmark=benchmark, **settings)
         except ConfigError:
             raise
         except (KeyError, TypeError, ValueError) as exc:
             raise ConfigError(str(exc).strip("'\"")) from None
     if method != "recap":
         raise ConfigError(f"unknown method {method!r}; known: recap (the baselines module is not installed)")
-    return ReCAPAgent(build_config(ReCAPConfig, profile, ablation, **settings))
+    return ReCAPAgent(build_config(ReCAPConfig, profile, ablation, benchmark, **settings))
+
+
+def env_options_for(unit: Mapping[str, Any], agent: Agent) -> dict[str, Any]:
+    """The make() options of a unit's environment: what its benchmark chooses for the agent's
+    method (ALFWorld: whether observations list the valid actions), then the sweep's own
+    options, which win."""
+    from workers.envs.registry import get_benchmark
+
+    bench = get_benchmark(unit["instance_id"].split("/", 1)[0])
+    hook = getattr(bench, "options_for_agent", None)
+    options = dict(hook(agent.style)) if hook is not None else {}
+    options.update({k: v for k, v in (unit.get("env_options") or {}).items() if v is not None})
+    return options
 
 
 # --------------------------------------------------------------------------------------------
@@ -211,7 +224,8 @@ class EpisodeRunner:
         key = unit["method_config"] + "|" + unit["method"]
         if key not in self._agents:
             self._agents[key] = build_agent(unit["method"], profile=unit.get("profile"), ablation=unit.get("ablation"),
-                                            settings=unit.get("settings") or {})
+                                            settings=unit.get("settings") or {},
+                                            benchmark=unit["instance_id"].split("/", 1)[0])
         return self._agents[key]
 
     def _client(self, model_label: str) -> LLMClient:
@@ -236,14 +250,14 @@ class EpisodeRunner:
                                   batch_rows=self.batch_rows)
         env: Environment | None = None
         try:
+            agent = self._agent(unit)
             try:
-                env = make_env(unit["instance_id"], step_multiplier=unit["step_multiplier"], **(unit.get("env_options") or {}))
+                env = make_env(unit["instance_id"], step_multiplier=unit["step_multiplier"], **env_options_for(unit, agent))
             except Exception as exc:  # missing data, broken game file: the attempt ends with env_error
                 out["result"] = dataclasses.asdict(EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000]))
                 return out
             out["env"] = {"benchmark": env.benchmark, "split": env.split, "task": env.task,
                           "optimal_steps": env.optimal_steps, "max_steps": env.max_steps}
-            agent = self._agent(unit)
             client = EpisodeClient(self._client(unit["model_label"]), env, seed=int(unit["seed"]),
                                    offline=unit["model"].startswith(OFFLINE_PREFIX))
             try:

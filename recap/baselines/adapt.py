@@ -16,8 +16,13 @@ happen at depths 1 and 2. Subtasks are created and run only when reached (as nee
   :meth:`~recap.runtime.Conversation.fork` per run (the root's run uses the episode's main
   context), with the executor demonstration and its task prompt pinned. The task prompt shows
   only that task, the current observation and the last action taken (ADaPT passes the last
-  step on to the next executor), optionally the episode's first observation
-  (``initial_observation``; ADaPT's ALFWorld code gives each prompt the room description).
+  step on to the next executor), and, once the state has moved on, the episode's first
+  observation (the reset observation) when the environment is partially observed
+  (``Environment.partially_observed``, e.g. ALFWorld: an executor opened for a subtask would
+  otherwise never see the room description and the goal; ADaPT's ALFWorld code gives each
+  prompt the room description). On a fully observed environment (Robotouille) the current
+  observation already shows the whole state and the first one is left out, unless
+  ``initial_observation`` asks for it (that option also adds it to planner prompts).
   Each reply is ``{"think", "action"}`` (handled exactly like ReAct: exact lookup, error
   feedback in ``reject`` mode, pass-through in ``step`` mode) or ``{"think", "status"}`` with
   ``"done"`` / ``"failed"`` — ADaPT's "Task completed!" / "Task failed!". A run fails when it
@@ -28,10 +33,11 @@ happen at depths 1 and 2. Subtasks are created and run only when reached (as nee
   with ``logic`` ``"and"`` or ``"or"`` (default ``"and"`` when left out, as the released code
   falls back to AND). Nested AND/OR expressions are not supported (ADaPT's own ALFWorld
   prompt tells the model to avoid OR). An empty list fails the task.
-* The environment is **not** rolled back after a failed executor run (the released ALFWorld
-  code resets the game and replays the successful actions): every agent here plays one
-  uninterrupted pass@1 trajectory, so later executors and planners start from the state the
-  failed attempt left, which their prompts show.
+* The environment is **not** rolled back after a failed executor run, and a failed executor's
+  actions are not undone (the released ALFWorld code resets the game and replays the
+  successful actions). This is deliberate: every agent here plays one uninterrupted pass@1
+  trajectory under the same step budget, and a rollback would replay steps outside it. Later
+  executors and planners start from the state the failed attempt left, which their prompts show.
 * Demonstrations: the executor's is rendered by running this agent on the demonstration
   environment with ``replies["adapt_executor"]`` if present, else the ReAct replies (the root
   executor solves the demo); the planner's is one planner call at the demonstration's start,
@@ -79,7 +85,8 @@ class ADaPTConfig(AgentConfig):
     ``executor_steps``: replies one executor run may take; ``executor_patience``: invalid
     actions in a row that end an executor run as failed (None: no limit);
     ``initial_observation``: also show the episode's first observation in executor and planner
-    prompts once the state has moved on (for benchmarks with partial observations)."""
+    prompts once the state has moved on, on any environment (executor prompts on a partially
+    observed environment show it whatever this says)."""
 
     max_depth: int = 3
     executor_steps: int = 20
@@ -106,7 +113,8 @@ def fork(conv: Conversation, expected_format: str) -> Conversation:
     forked = conv.fork(expected_format=expected_format)
     if forked.history.counter is not conv.history.counter:
         h = conv.history
-        forked.history = History(conv.episode_id, h.window, mode=h.mode, block=h.block, emit=conv.emit, counter=h.counter)
+        forked.history = History(conv.episode_id, h.window, mode=h.mode, block=h.block, emit=conv.emit, counter=h.counter,
+                                 counts_pins=h.counts_pins)
     return forked
 
 
@@ -155,6 +163,8 @@ class ADaPTAgent(Agent):
     config_cls = ADaPTConfig
     expected_format = P.EXECUTOR_FORMAT
     config: ADaPTConfig
+    #: an executor call per action, plus planner calls, status replies and rejected actions
+    calls_per_step = 3.0
 
     def __init__(self, config: ADaPTConfig | None = None) -> None:
         super().__init__(config)
@@ -212,14 +222,18 @@ class ADaPTAgent(Agent):
         return ok
 
     # -- executor ---------------------------------------------------------------------------------
-    def _situation(self, ep: Episode) -> dict[str, Any]:
+    def _situation(self, ep: Episode, role: str) -> dict[str, Any]:
+        """What a task prompt shows. The episode's first observation is added once the state
+        has moved on (before that it is the current observation): for every executor on a
+        partially observed environment, and for every prompt with ``initial_observation``."""
         st = ep.extra
         moved = st["last_action"] is not None
+        initial = self.config.initial_observation or (role == "executor" and ep.env.partially_observed)
         return {
             "rules": st["rules"],
             "observation": ep.driver.observation,
             "last_action": st["last_action"],
-            "initial_observation": st["initial"] if self.config.initial_observation and moved else None,
+            "initial_observation": st["initial"] if initial and moved else None,
             "preamble": not self.demo_mode,
         }
 
@@ -240,7 +254,7 @@ class ADaPTAgent(Agent):
     def _execute(self, ep: Episode, node: TaskNode) -> bool:
         cfg, st, d = self.config, ep.extra, ep.driver
         conv = self._open(ep, node, st["executor_demo"], P.EXECUTOR_FORMAT)
-        conv.pin("executor_task", P.executor_task_prompt(task=node.task, **self._situation(ep)))
+        conv.pin("executor_task", P.executor_task_prompt(task=node.task, **self._situation(ep, "executor")))
         prompt: str | None = None
         kind = "executor_task"
         streak = 0
@@ -266,7 +280,7 @@ class ADaPTAgent(Agent):
     # -- planner ----------------------------------------------------------------------------------
     def _plan(self, ep: Episode, node: TaskNode) -> tuple[tuple[str, ...], str]:
         conv = self._open(ep, None, ep.extra["planner_demo"], P.PLANNER_FORMAT)
-        conv.pin("planner_task", P.planner_task_prompt(task=node.task, **self._situation(ep)))
+        conv.pin("planner_task", P.planner_task_prompt(task=node.task, **self._situation(ep, "planner")))
         reply, seq = conv.ask(None, "planner_task", planner_reply, node_id=node.node_id, context=self._context(ep, node, "planner"))
         node.versions.append(NodeVersion(len(node.versions), reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq))
         return reply["subtasks"], reply["logic"]
@@ -330,7 +344,7 @@ class ADaPTAgent(Agent):
             if isinstance(record, MessageRecord):
                 messages.append(record)
 
-        result = agent.run(demo.make_env(), ScriptedClient(replies, model="demonstration"), episode_id=f"demo:{demo.name}:{part}", emit=keep, demonstration=False)
+        result = agent.run(self.demo_env(demo), ScriptedClient(replies, model="demonstration"), episode_id=f"demo:{demo.name}:{part}", emit=keep, demonstration=False)
         return messages, result
 
     def _demo_texts(self, ep: Episode) -> tuple[str | None, str | None]:

@@ -38,6 +38,9 @@ class PlanConfig(AgentConfig):
     """CoT / Standard settings: what an invalid planned action does in ``reject`` mode."""
 
     on_invalid: Literal["stop", "skip"] = "stop"
+    #: the whole plan in one reply: the longest expert plan (async 9 @420, 103 actions) is
+    #: 1,286 tokens with a think (bench/protocol.py); 1024 cut it
+    max_tokens: int | None = 3072
 
     def validate(self) -> None:
         super().validate()
@@ -51,6 +54,9 @@ class CoTAgent(Agent):
     expected_format = P.plan_format(True)
     #: Standard is CoT without the think field
     with_think: ClassVar[bool] = True
+    #: one call (plus JSON repairs), whatever the step cap
+    calls_per_step = 0.0
+    call_overhead = 1
     config: PlanConfig
 
     def reply_format(self) -> str:

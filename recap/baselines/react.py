@@ -12,7 +12,15 @@ One episode:
   observation (Robotouille's ReAct protocol); in ``step`` mode (ALFWorld) it is sent to the
   environment, whose answer ("Nothing happens.") is the next observation;
 * it runs until the episode ends: success, the step cap, the call cap, JSON failures, a model
-  error or a budget. ``invalid_streak`` optionally reproduces Robotouille's give-up rule.
+  error or a budget. ``invalid_streak`` optionally reproduces Robotouille's give-up rule;
+* ``history``: ``window`` keeps the last K messages (Yao et al.'s ReAct, bounded by the shared
+  window); ``last`` keeps only the last reply and the message after it (Robotouille's own ReAct,
+  "last reasoning and action": the model sees the pins, its previous think + action and the
+  current observation or error feedback).
+
+The ``paper`` and ``released`` profiles use Robotouille's protocol on Robotouille (``history:
+last``, give up after 3 rounds of 5 consecutive invalid actions) and Yao et al.'s on ALFWorld
+(``history: window``, no give-up rule; invalid commands reach the game as in their setting).
 
 Message kinds (also the call purposes): ``task`` (pinned), ``observation``, ``feedback`` (after
 a rejected action), ``repair``. Hints for offline models: ``task`` (the goal), ``depth`` 0,
@@ -23,7 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import partial
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
@@ -45,9 +53,29 @@ class ReActConfig(AgentConfig):
 
     invalid_streak: int | None = None
     invalid_rounds: int = 3
+    history: Literal["window", "last"] = "window"
+
+    @classmethod
+    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
+        out = super().profile_defaults(profile, benchmark, ablation)
+        if benchmark == "robotouille":
+            # the benchmark's ReAct: last reasoning + action only; after 5 consecutive invalid
+            # actions it starts a new round of feedback, and the third such round ends the episode
+            out.update(history="last", invalid_streak=5, invalid_rounds=3)
+        elif benchmark == "alfworld":
+            out.update(history="window", invalid_streak=None)
+        return out
+
+    def history_window(self) -> int:
+        return 2 if self.history == "last" else self.window
+
+    def history_counts_pins(self) -> bool:
+        return False if self.history == "last" else self.window_counts_pins
 
     def validate(self) -> None:
         super().validate()
+        if self.history not in ("window", "last"):
+            raise ConfigError(f"history must be window or last, got {self.history!r}")
         if self.invalid_streak is not None and self.invalid_streak < 1:
             raise ConfigError(f"invalid_streak must be >= 1 or null, got {self.invalid_streak}")
         if self.invalid_rounds < 1:

@@ -153,7 +153,8 @@ LEFT JOIN invalid_same q ON q.run_id = c.run_id AND q.episode_id = c.episode_id;
 -- episode_modes: every terminal episode with one failure mode, first match wins:
 --   success                     end_reason success
 --   model_error:<kind>          end_reason llm_error; kind = error_kind of the episode's last failed call
---   json_failures | budget_exhausted | episode_limit | env_error    those end reasons
+--   json_failures | truncated | budget_exhausted | episode_limit | env_error    those end reasons
+--                               (truncated: a reply cut at the output cap, never counted as a JSON failure)
 --   invalid_action_loop         step_cap / call_cap / agent_done with invalid_loop
 --   repeated_action_loop        step_cap / call_cap / agent_done with repeated_loop
 --   agent_done_early            agent_done (the agent declared the task finished; it was not)
@@ -176,7 +177,7 @@ SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.abla
   CASE
     WHEN t.end_reason = 'success' THEN 'success'
     WHEN t.end_reason = 'llm_error' THEN 'model_error:' || coalesce(le.last_error_kind, 'unknown')
-    WHEN t.end_reason IN ('json_failures', 'budget_exhausted', 'episode_limit', 'env_error') THEN t.end_reason
+    WHEN t.end_reason IN ('json_failures', 'truncated', 'budget_exhausted', 'episode_limit', 'env_error') THEN t.end_reason
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.invalid_loop, false) THEN 'invalid_action_loop'
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.repeated_loop, false) THEN 'repeated_action_loop'
     WHEN t.end_reason = 'agent_done' THEN 'agent_done_early'

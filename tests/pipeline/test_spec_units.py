@@ -70,9 +70,10 @@ def test_spec_errors_are_one_line(text, message):
         (('tasks: ["3"]', 'tasks: ["9"]'),
          "environments[0]: blocksworld task '9': no blocksworld instance matches '9'; sizes [3, 4, 5], e.g. blocksworld/3@1"),
         (("- method: recap", "- method: recap\n    settings: {windw: 3}"),
-         "methods[0] (recap): unknown setting(s) windw for ReCAPConfig; known: context_drop, json_mode, max_episode_cost_usd, "
-         "max_episode_tokens, max_json_repairs, max_level, max_llm_calls, max_tokens, name_only, reminder_period, shortcut, "
-         "temperature, think, window, window_block, window_mode"),
+         "methods[0] (recap): unknown setting(s) windw for ReCAPConfig; known: context_drop, demo_observations, json_mode, "
+         "max_episode_cost_usd, max_episode_tokens, max_json_repairs, max_level, max_llm_calls, max_tokens, name_only, "
+         "reminder_on, reminder_period, shortcut, shortcut_trace, temperature, think, window, window_block, "
+         "window_counts_pins, window_mode"),
         (("- method: recap", "- method: recap\n    ablation: level_9"),
          "methods[0] (recap[level_9]): unknown ablation 'level_9'; known: original, no_think, think_many, name_only, level_2, level_3, level_4, level_5, no_shortcut"),
     ],
@@ -152,3 +153,18 @@ def test_run_folder_identity(tmp_path):
     with pytest.raises(RunFolderError) as err:
         RunStore(tmp_path / "other").check_can_hold("a")
     assert str(err.value) == f"output folder {tmp_path / 'other'} is not empty and holds no run.json; choose a new folder"
+
+
+def test_profiles_resolve_per_benchmark_in_the_unit_config(monkeypatch):
+    """The paper profile runs Robotouille's ReAct on Robotouille and Yao et al.'s elsewhere; the
+    unit's resolved config (part of its hash) says which."""
+    import os
+
+    monkeypatch.setenv("ROBOTOUILLE_DATA", os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "robotouille"))
+    text = BASE.replace("- method: recap", "- method: react\n    profile: paper").replace(
+        '    tasks: ["3"]', '    tasks: ["3"]\n    limit: 1\n  - benchmark: robotouille\n    tasks: [synchronous/0]\n    limit: 1')
+    plan = expand(spec_of(text))
+    cfg = {u.instance_id.split("/")[0]: json.loads(u.method_config) for u in plan.units}
+    assert (cfg["robotouille"]["history"], cfg["robotouille"]["invalid_streak"], cfg["robotouille"]["demo_observations"]) == ("last", 5, "first")
+    assert (cfg["blocksworld"]["history"], cfg["blocksworld"]["invalid_streak"], cfg["blocksworld"]["demo_observations"]) == ("window", None, "all")
+    assert cfg["robotouille"]["max_llm_calls"] is None and cfg["robotouille"]["max_tokens"] == 1024

@@ -17,7 +17,12 @@ EXPECTED = {
     "T3_async_0_cheese_chicken_sandwich_seed42_solved.json": 19,
     "T4_async_5_potato_soup_seed42_solved.json": 24,
     "T6_async_0_cheese_chicken_sandwich_seed252_two_cooks_quirk.json": 21,
+    # picks the patty up from the stove while it cooks (step 25) and puts it back (step 27)
+    "T7_sync_0_cheese_sandwich_seed126_pickup_while_cooking.json": 45,
 }
+T6 = "T6_async_0_cheese_chicken_sandwich_seed252_two_cooks_quirk.json"
+#: every trajectory in the data folder (found at collection time) and every expected one
+ALL_FILES = sorted(set(EXPECTED) | {p.name for p in (DATA / "trajectories").glob("T*.json")})
 
 
 def test_every_trajectory_file_is_covered():
@@ -25,10 +30,34 @@ def test_every_trajectory_file_is_covered():
     assert sorted(p.name for p in (DATA / "trajectories").glob("T*.json")) == sorted(EXPECTED)
 
 
-@pytest.mark.parametrize("name", sorted(EXPECTED))
+@pytest.mark.parametrize("name", ALL_FILES)
 def test_trajectory_replays_identically(name):
+    """Observation text, valid actions in order, done, true predicates and effects, at every step."""
+    assert name in EXPECTED, f"{name}: a new trajectory file; add its step count to EXPECTED"
     ok, message = replay_file(str(require_data() / "trajectories" / name))
     assert (ok, message) == (True, f"{EXPECTED[name]} steps identical")
+
+
+def test_every_trajectory_replays_through_the_environment_api():
+    """The same actions through RobotouilleEnv.step: the recorded observation, actions and done."""
+    from workers.envs.robotouille.domain import load_domain
+    from workers.envs.robotouille.env import RobotouilleEnv
+
+    checked = 0
+    for name in ALL_FILES:
+        record = json.loads((require_data() / "trajectories" / name).read_text())
+        env = RobotouilleEnv(domain=load_domain(DATA), problem_json=record["generated_environment_json"],
+                             source=name, instance_id=name, split="test", task=name, seed=record["seed"],
+                             optimal_steps=None, max_steps=len(record["steps"]) + 1)
+        reset = env.reset()
+        assert reset.observation == record["initial"]["observation"], name
+        for t, step in enumerate(record["steps"], start=1):
+            result = env.step(step["action"])
+            assert result.observation == step["observation"], (name, t)
+            assert list(result.valid_actions) == step["valid_actions"], (name, t)
+            assert result.done == step["done"], (name, t)
+            checked += 1
+    assert checked == sum(EXPECTED.values())
 
 
 def test_timer_skip_quirk_second_cook_finishes_one_step_late():
@@ -36,7 +65,7 @@ def test_timer_skip_quirk_second_cook_finishes_one_step_late():
     from workers.envs.robotouille.domain import load_domain
     from workers.envs.robotouille.problem import build_problem
 
-    record = json.loads((require_data() / "trajectories" / sorted(EXPECTED)[-1]).read_text())
+    record = json.loads((require_data() / "trajectories" / T6).read_text())
     problem = build_problem(load_domain(DATA), record["generated_environment_json"])
     state = problem.state
     cooked_after = {}

@@ -179,8 +179,13 @@ class DeploymentConfig(BaseModel):
         params = dict(self.params)
         if temperature is not None:
             params["temperature"] = temperature
-        cap = self.max_output_tokens
-        params["max_tokens"] = min(int(max_tokens), cap) if max_tokens else cap
+        if "max_tokens" in self.params and self.params["max_tokens"]:
+            # the user's own cap for this model bounds every request (and the budget's worst case)
+            cap = int(self.params["max_tokens"])
+            params["max_tokens"] = min(int(max_tokens), cap) if max_tokens else cap
+        else:
+            # otherwise the method's measured need (AgentConfig.max_tokens) is sent as is
+            params["max_tokens"] = int(max_tokens) if max_tokens else DEFAULT_MAX_TOKENS
         if json_mode and "response_format" not in params:
             params["response_format"] = {"type": "json_object"}
         return params

@@ -14,6 +14,13 @@ Options of :meth:`AlfworldBenchmark.make`:
 - ``max_steps``: environment steps per episode (default 50, the paper's cap).
 - ``step_multiplier`` is accepted and has no effect: ALFWorld's cap is a fixed step count.
 - ``seed`` is accepted and recorded: the games are deterministic.
+- ``show_valid_actions`` (:data:`SHOW_VALID_ACTIONS`): True appends the currently valid actions
+  (the admissible commands, in the game's order) to every observation - the first one at reset
+  and every one after a step, "Nothing happens." included - as a blank line, the header line
+  ``Valid actions:`` and one command per line (:mod:`~workers.envs.alfworld.observation`);
+  False shows the game's text alone. The default None means "not decided by the environment":
+  the caller fills it per method (:func:`show_valid_actions_for`); left as None it acts as
+  False. The environment's one-shot demonstration uses the same setting as its episodes.
 """
 
 from __future__ import annotations
@@ -31,11 +38,29 @@ from workers.envs.alfworld.games import (
     resolve_data_dir,
     resolve_data_dir_2_1_2,
 )
+from workers.envs.alfworld.observation import check_show_valid_actions
 from workers.envs.alfworld.task_types import SHORT_NAMES, TASK_TYPES
 from workers.envs.alfworld.wording import DEFAULT_VERSION, check_version
 from workers.envs.registry import DataNotFoundError, UnknownInstanceError
 
 DEFAULT_MAX_STEPS = 50
+#: the make() option that appends the valid actions to every observation (True / False / None)
+SHOW_VALID_ACTIONS = "show_valid_actions"
+#: agent styles whose ALFWorld observations list the valid actions (see show_valid_actions_for)
+STYLES_SHOWING_VALID_ACTIONS = frozenset({"recap"})
+
+
+def show_valid_actions_for(style: str) -> bool:
+    """The ``show_valid_actions`` setting for an agent ``style`` (``recap``, ``react``, ...).
+
+    On for ReCAP: the paper's ALFWorld setting exposes the executable actions and its released
+    code appends the admissible commands to every observation. Off for every other style: Yao et
+    al.'s ReAct/Act ALFWorld prompts show no list, and CoT, Standard and ADaPT follow them.
+    Pass the result as ``make(..., show_valid_actions=show_valid_actions_for(style))``; an
+    explicit True/False given by a run takes precedence over this choice.
+    """
+    return style in STYLES_SHOWING_VALID_ACTIONS
+
 #: selectors meaning "every evaluation game"
 _ALL = ("all", "eval_out_of_distribution", "valid_unseen")
 
@@ -45,6 +70,10 @@ class AlfworldBenchmark:
 
     def __init__(self, data_dir: str | os.PathLike[str] | None = None):
         self.data_dir = data_dir
+
+    def options_for_agent(self, style: str) -> dict[str, Any]:
+        """make() options an agent style runs with unless a sweep sets them (the pipeline asks)."""
+        return {SHOW_VALID_ACTIONS: show_valid_actions_for(style)}
 
     # -- listing --------------------------------------------------------------------------------
     def games(self, selector: str | None = None, *, data_dir: Any = None) -> list[Game]:
@@ -83,14 +112,16 @@ class AlfworldBenchmark:
         max_steps: int = DEFAULT_MAX_STEPS,
         step_multiplier: float | None = None,
         seed: int = 0,
+        show_valid_actions: bool | None = None,
         **unknown: Any,
     ) -> Environment:
         if unknown:
             raise ValueError(
                 f"unknown ALFWorld option(s) {', '.join(sorted(unknown))}; accepted: data_dir, "
-                "data_dir_2_1_2, version, max_steps, step_multiplier, seed"
+                "data_dir_2_1_2, version, max_steps, step_multiplier, seed, show_valid_actions"
             )
         check_version(version)
+        show = check_show_valid_actions(show_valid_actions)
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
         primary = resolve_data_dir(data_dir if data_dir is not None else self.data_dir)
@@ -113,6 +144,7 @@ class AlfworldBenchmark:
             version=version,
             max_steps=max_steps,
             walkthrough=walkthrough,
+            show_valid_actions=show,
         )
         env.seed = seed
         return env

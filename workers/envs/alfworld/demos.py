@@ -496,15 +496,37 @@ def replies_for(short_type: str, version: str = "2.1.1") -> dict[str, list[dict[
     }
 
 
-def demonstration_for(short_type: str, version: str = "2.1.1", max_steps: int = 50) -> Demonstration:
+def demonstration_name(short_type: str, version: str = "2.1.1", show_valid_actions: bool = False) -> str:
+    """``alfworld-<type>``, plus ``-2.1.2`` and ``-valid-actions`` for those variants.
+
+    Agents cache a rendered demonstration by its name, so every variant that renders to a
+    different text needs its own name.
+    """
+    name = f"alfworld-{short_type}"
+    if version != "2.1.1":
+        name += f"-{version}"
+    if show_valid_actions:
+        name += "-valid-actions"
+    return name
+
+
+def demonstration_for(
+    short_type: str, version: str = "2.1.1", max_steps: int = 50, *, show_valid_actions: bool = False
+) -> Demonstration:
+    """The demonstration for ``short_type``; ``show_valid_actions`` as in the episode's game
+    environment (the replay then appends the valid actions to every observation)."""
     recording = recording_for(short_type, version)
     rules, hints = rules_text(version, max_steps), failure_hints_text()
 
     def make_env() -> ReplayEnvironment:
-        return ReplayEnvironment(recording, rules=rules, failure_hints=hints, max_steps=max_steps)
+        return ReplayEnvironment(
+            recording, rules=rules, failure_hints=hints, max_steps=max_steps, show_valid_actions=show_valid_actions
+        )
 
     return Demonstration(
-        name=f"alfworld-{short_type}", make_env=make_env, replies=replies_for(short_type, version)
+        name=demonstration_name(short_type, version, show_valid_actions),
+        make_env=make_env,
+        replies=replies_for(short_type, version),
     )
 
 

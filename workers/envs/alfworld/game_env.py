@@ -4,6 +4,11 @@ The game accepts any command: a command that is not admissible is still sent, th
 "Nothing happens." and its state does not change, and it uses one of the ``max_steps`` steps
 (``invalid_action_mode = "step"``), as in the paper's runs. Success is the game's ``won`` flag;
 the game never signals a loss, so an episode ends on a win or when the step budget is spent.
+
+With ``show_valid_actions`` every observation (at reset and after every step, "Nothing
+happens." included) is followed by the admissible commands, in the game's order (format in
+:mod:`~workers.envs.alfworld.observation`); the one-shot demonstration uses the same setting.
+The game shows only what is at the agent's location, so the environment is partially observed.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from workers.envs.alfworld.demos import demonstration_for
 from workers.envs.alfworld.engine import close_game, open_game
 from workers.envs.alfworld.expert import WalkthroughExpert
 from workers.envs.alfworld.games import Game
+from workers.envs.alfworld.observation import render_observation
 from workers.envs.alfworld.rules import failure_hints_text, rules_text
 from workers.envs.alfworld.wording import extract_goal, strip_banner
 
@@ -24,6 +30,7 @@ from workers.envs.alfworld.wording import extract_goal, strip_banner
 class AlfworldEnvironment(Environment):
     benchmark = "alfworld"
     invalid_action_mode = "step"
+    partially_observed = True
 
     def __init__(
         self,
@@ -34,6 +41,7 @@ class AlfworldEnvironment(Environment):
         version: str,
         max_steps: int,
         walkthrough: tuple[str, ...] | None,
+        show_valid_actions: bool = False,
     ):
         self.game = game
         self.instance_id = game.instance_id
@@ -42,6 +50,8 @@ class AlfworldEnvironment(Environment):
         self.version = version
         self.max_steps = max_steps
         self.game_file = game_file
+        #: append the valid actions to every observation (resolved: never None here)
+        self.show_valid_actions = show_valid_actions
         self._expert = WalkthroughExpert(walkthrough, version) if walkthrough is not None else None
         self._env = open_game(game_file, primary, max_steps)
         self._steps_taken = 0
@@ -59,7 +69,8 @@ class AlfworldEnvironment(Environment):
         self._started, self._done = True, False
         if self._expert is not None:
             self._expert.reset()
-        return Reset(observation=text, valid_actions=tuple(info["admissible_commands"]), goal=goal)
+        valid = tuple(info["admissible_commands"])
+        return Reset(observation=render_observation(text, valid, self.show_valid_actions), valid_actions=valid, goal=goal)
 
     def step(self, action: str) -> Step:
         if not isinstance(action, str):
@@ -76,7 +87,7 @@ class AlfworldEnvironment(Environment):
         valid = tuple(info["admissible_commands"])
         self._done = won or bool(engine_done) or self._steps_taken >= self.max_steps
         return Step(
-            observation=obs.strip(),
+            observation=render_observation(obs.strip(), valid, self.show_valid_actions),
             valid_actions=valid,
             done=self._done,
             success=won,
@@ -107,8 +118,8 @@ class AlfworldEnvironment(Environment):
 
     def demonstration(self) -> Demonstration:
         # the demonstration keeps the default cap: a game played with a tight cap still needs
-        # its full demonstration episode to render
-        return demonstration_for(self.split, self.version)
+        # its full demonstration episode to render; it shows the valid actions iff the episode does
+        return demonstration_for(self.split, self.version, show_valid_actions=self.show_valid_actions)
 
     def expert_plan(self) -> list[str] | None:
         return None if self._expert is None else self._expert.remaining()

@@ -6,6 +6,9 @@ step. Replaying it lets the agent render the demonstration by running itself, ex
 game: a command outside the valid actions gets "Nothing happens." and a step, as in ALFWorld.
 A *valid* command other than the recorded one cannot be answered faithfully, so it is an error
 (a demonstration's replies that stray from their own recording are a bug to fix, not a game).
+The recording holds the game's text only; with ``show_valid_actions`` the replay appends the
+valid actions to every observation exactly as the real game environment does (see
+:mod:`~workers.envs.alfworld.observation`), so a rendered demonstration looks like the episodes.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from recap.env import Demonstration, EnvError, Environment, InvalidActionError, Reset, Step
+from workers.envs.alfworld.observation import render_observation
 
 NOTHING_HAPPENS = "Nothing happens."
 
@@ -44,6 +48,7 @@ class Recording:
 class ReplayEnvironment(Environment):
     benchmark = "alfworld"
     invalid_action_mode = "step"
+    partially_observed = True
 
     def __init__(
         self,
@@ -53,6 +58,7 @@ class ReplayEnvironment(Environment):
         failure_hints: str = "",
         max_steps: int = 50,
         expert: bool = True,
+        show_valid_actions: bool = False,
     ):
         self.recording = recording
         self.instance_id = f"alfworld-demo/{recording.split}/{recording.name}"
@@ -62,6 +68,7 @@ class ReplayEnvironment(Environment):
         self._rules = rules
         self._hints = failure_hints
         self._expert = expert
+        self.show_valid_actions = show_valid_actions
         self._next = 0
         self._steps_taken = 0
         self._valid: tuple[str, ...] = recording.valid_actions
@@ -73,7 +80,8 @@ class ReplayEnvironment(Environment):
         self._steps_taken = 0
         self._valid = self.recording.valid_actions
         self._started, self._done = True, False
-        return Reset(self.recording.observation, self._valid, self.recording.goal)
+        observation = render_observation(self.recording.observation, self._valid, self.show_valid_actions)
+        return Reset(observation, self._valid, self.recording.goal)
 
     def step(self, action: str) -> Step:
         if not isinstance(action, str):
@@ -98,7 +106,7 @@ class ReplayEnvironment(Environment):
         self._steps_taken += 1
         self._done = won or self._steps_taken >= self.max_steps
         return Step(
-            observation=observation,
+            observation=render_observation(observation, self._valid, self.show_valid_actions),
             valid_actions=self._valid,
             done=self._done,
             success=won,

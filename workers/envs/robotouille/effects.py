@@ -14,6 +14,50 @@ Timing, as observed on the real engine:
   (with the same active flag); it completes when all nested effects have (at once if none);
 - creation: creates ``<name><k>``, binds it and applies its effects; deletion removes its object;
   immediate: applies its effects. These three complete on their first update.
+
+Taking an item (or pot) off its station while an effect runs, and putting it back
+---------------------------------------------------------------------------------
+The real engine (release c8236a2e; trajectory T7, and its ``ConditionalEffect.update``) checks a
+conditional effect's conditions at *every* update, active or passive. Our reading, implemented here
+for every conditional effect of any domain (nothing is special-cased for cook):
+
+- Removal. When one of its conditions does not hold (cook, fry: ``item_on(i1, s1)``; fill pot,
+  boil: ``container_at(c1, s1)``), the update sets each of the conditional's *own* effects to its
+  negation and returns: the nested effects are not updated, so their timers do not tick that step.
+  Cook: ``iscooking`` becomes false (the observation shows the patty held, not cooking). Fry, fill
+  pot and boil have no own effects, so only their timers stop. The effect is neither completed nor
+  reset: it stays registered with its nested counters as they were, and repeats the negation at
+  every update while its conditions fail (it is never dropped if they never hold again).
+- Return. The effect is still registered, so as soon as its conditions hold again - already at the
+  passive update of the step that puts the item back on the *same* station (the conditions name
+  the station the action was taken on) - it re-applies its effects (``iscooking`` true again) and
+  its nested effects tick on from their saved counters: **the timer pauses; it neither restarts
+  nor stays done.** T7: Cook at step 24 (timer 1/4), Pick up at 25 (timer 1, not cooking), Do
+  nothing at 26 (timer 1), Place back at 27 (timer 2, cooking), 28 (timer 3), cooked after 29:
+  two steps late, the two steps the patty spent off the stove.
+- Re-issuing the action on the same station finds the equal effect already registered (equality
+  ignores counters) and updates that one actively: nothing restarts (for cook the precondition
+  ``not iscooking`` normally forbids it anyway, since the put-back step already set ``iscooking``).
+  On *another* station the conditions differ, so a new effect starts from zero while the old one
+  stays registered and paused, negating its effects at each of its updates (effects update in
+  registration order, so the newer one's ``iscooking`` wins), and resumes if the item ever returns
+  to its first station.
+- Both directions go through ordinary updates, so the timer-skip quirk (see ``state.State.apply``)
+  applies to them too: an effect that misses its passive update in the pickup step leaves the item
+  shown cooking for that step, and one that misses it in the put-back step shows it not cooking.
+
+The other kinds under the same reading:
+- delayed: only ticks when updated; nested in a conditional it is paused by removal and resumes on
+  return as above (its counter is kept). A top-level delayed effect (none in the benchmark domain)
+  would not care where its object is.
+- repetitive (cut): top level, not conditional; it counts the active updates of the one effect
+  bound to the item (its equality key names only the item), so taking the item off the board and
+  cutting again later, on any board, continues the count: it fires on the 3rd cut whatever happens
+  in between. The cut's conditional (``isfryable`` once cut, for fryable-if-cut items) has no nested
+  effects; while its conditions fail it sets ``isfryable`` false at each update.
+- creation (the water of a filled pot): nested in the fill's delayed effect, it fires only when
+  that timer does, i.e. with the pot on its sink; removal pauses it, return resumes it.
+- deletion and immediate: complete on their first update; nothing is left in flight to pause.
 """
 
 from __future__ import annotations
@@ -96,6 +140,10 @@ class ActiveEffect:
                 for nested in self.nested:
                     nested.update(state, active)
                 self.completed = all(n.completed for n in self.nested)
+            else:
+                # conditions no longer hold (item taken off its station): undo the effects and
+                # leave the nested ones untouched, so their timers pause (see module docstring)
+                state.apply_literals(self.spec.fx, self.binding, negate=True)
             return
         if kind == "delayed":
             if not active:

@@ -7,7 +7,9 @@ Semantics follow the real engine (release c8236a2e) as documented in the data RE
 - a step applies the immediate effects, registers each special effect (an equal one already in
   flight is reused) and updates it actively, then updates every effect passively, dropping the
   completed ones *while iterating*: like the real engine, the effect right after a dropped one is
-  not updated in that step (the "timer-skip" quirk).
+  not updated in that step (the "timer-skip" quirk);
+- a conditional effect whose conditions stop holding (its item taken off the station) sets its own
+  effects to their negation and pauses its nested timers until they hold again (``effects``).
 
 Facts are stored per predicate as sets of argument tuples so that grounding is a join over the
 positive preconditions instead of a scan of every object combination (fast steps and clones).
@@ -82,10 +84,11 @@ class State:
         args = tuple(binding[p] for p in lit.params)
         return (args in self.facts[lit.predicate]) == lit.is_true
 
-    def apply_literals(self, literals, binding: dict[str, str]) -> None:
+    def apply_literals(self, literals, binding: dict[str, str], negate: bool = False) -> None:
+        """Set each literal to its truth value (to the opposite one with ``negate``)."""
         for lit in literals:
             args = tuple(binding[p] for p in lit.params)
-            if lit.is_true:
+            if lit.is_true != negate:
                 self.facts[lit.predicate].add(args)
             else:
                 self.facts[lit.predicate].discard(args)
