@@ -8,19 +8,10 @@ import sys
 import pytest
 
 from recap.env import EnvError, InvalidActionError
-from tests.alfworld.helpers import DATA, DATA_2_1_2, REPO, win_by_expert
+from tests.alfworld.helpers import DATA, DATA_2_1_2, HEAT_ID, HEAT_START, REPO, win_by_expert
 from workers.envs.alfworld import AlfworldBenchmark
 from workers.envs.alfworld.task_types import TASK_TYPES
 
-HEAT_ID = "alfworld/heat/pick_heat_then_place_in_recep-Apple-None-Fridge-10/trial_T20190906_182259_116320"
-HEAT_START = (
-    "You are in the middle of a room. Looking quickly around you, you see a cabinet 6, a cabinet 5, "
-    "a cabinet 4, a cabinet 3, a cabinet 2, a cabinet 1, a coffeemachine 1, a countertop 3, "
-    "a countertop 2, a countertop 1, a drawer 3, a drawer 2, a drawer 1, a fridge 1, a garbagecan 1, "
-    "a microwave 1, a shelf 3, a shelf 2, a shelf 1, a sinkbasin 1, a stoveburner 4, a stoveburner 3, "
-    "a stoveburner 2, a stoveburner 1, and a toaster 1.\n\nYour task is to: heat some apple and put it "
-    "in fridge."
-)
 HEAT_PLAN_2_1_1 = [
     "go to garbagecan 1", "take apple 2 from garbagecan 1", "go to microwave 1",
     "heat apple 2 with microwave 1", "go to fridge 1", "open fridge 1", "put apple 2 in/on fridge 1",

@@ -10,7 +10,7 @@ from recap.baselines.react import ReActAgent, ReActConfig
 from recap.config import ReCAPConfig
 from recap.recap_agent import ReCAPAgent
 from recap.scripted import ScriptedClient
-from tests.alfworld.helpers import DATA, win_by_expert
+from tests.alfworld.helpers import DATA, HEAT_ID, HEAT_START, win_by_expert
 from workers.envs.alfworld import AlfworldBenchmark
 from workers.envs.alfworld.benchmark import SHOW_VALID_ACTIONS, show_valid_actions_for
 from workers.envs.alfworld.demos import demonstration_for, demonstration_name
@@ -24,15 +24,6 @@ from workers.envs.registry import make_env
 from workers.llm.offline.expert import expert_reply
 from workers.llm.offline.knobs import Knobs
 
-HEAT_ID = "alfworld/heat/pick_heat_then_place_in_recep-Apple-None-Fridge-10/trial_T20190906_182259_116320"
-HEAT_START = (
-    "You are in the middle of a room. Looking quickly around you, you see a cabinet 6, a cabinet 5, "
-    "a cabinet 4, a cabinet 3, a cabinet 2, a cabinet 1, a coffeemachine 1, a countertop 3, "
-    "a countertop 2, a countertop 1, a drawer 3, a drawer 2, a drawer 1, a fridge 1, a garbagecan 1, "
-    "a microwave 1, a shelf 3, a shelf 2, a shelf 1, a sinkbasin 1, a stoveburner 4, a stoveburner 3, "
-    "a stoveburner 2, a stoveburner 1, and a toaster 1.\n\nYour task is to: heat some apple and put it "
-    "in fridge."
-)
 HEAT_ARRIVE = (
     "You arrive at loc 31. On the garbagecan 1, you see a apple 2, a apple 1, a egg 2, a egg 1, "
     "a potato 2, and a potato 1."
