@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from recap.env import EnvError
@@ -20,7 +22,7 @@ def test_one_demonstration_per_task_type():
     for short in TASK_TYPES:
         demo = demonstration_for(short)
         assert demo.name == f"alfworld-{short}"
-        assert set(demo.replies) == set(STYLES) == {"recap", "react", "act"}
+        assert set(demo.replies) == set(STYLES) == {"recap", "react", "act", "cot", "standard"}
     with pytest.raises(ValueError, match="^no ALFWorld demonstration for 'boil'; task types: put, clean, heat, cool, examine, puttwo$"):
         demonstration_for("boil")
 
@@ -160,3 +162,21 @@ def test_recorder_rejects_a_step_that_is_not_admissible():
     assert ok.steps[-1].won and not any(s.won for s in ok.steps[:-1])
     assert ok.steps[-1].valid_actions == (
         "examine desk 1", "go to drawer 1", "inventory", "look", "take pen 1 from desk 1")
+
+
+@pytest.mark.parametrize(("short", "version"), CASES)
+def test_cot_and_standard_plans_win_the_replay_and_render(short, version):
+    """CoT/Standard on ALFWorld: one plan with every demonstration action, in the version's
+    wording; rendering runs the agent itself on the replay, so the plan must reach the goal."""
+    from recap.baselines import CoTAgent, PlanConfig, StandardAgent
+
+    demo = demonstration_for(short, version)
+    actions = [a["action"] for a in demo.replies["act"]]
+    assert demo.replies["standard"] == [{"actions": actions}]
+    (cot,) = demo.replies["cot"]
+    assert cot["actions"] == actions and cot["think"].startswith("I write the whole plan now, one step per action")
+    assert cot["think"].count("(") >= len(actions)
+    for agent in (CoTAgent(PlanConfig()), StandardAgent(PlanConfig())):
+        text = agent.render_demonstration(demo)
+        assert text.endswith("[End of example: the goal was reached.]")
+        assert json.dumps(actions[-1])[1:-1] in text

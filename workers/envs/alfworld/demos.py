@@ -5,6 +5,10 @@ so each demonstration is an invented household episode (see :mod:`household`) so
 commands in 2.1.1 wording. For every task type we give:
 
 - ``react``: one {"think", "action"} reply per step; ``act``: the same actions without thinks;
+- ``cot``: the whole episode as one plan, {"think", "actions"}, whose think walks through the
+  same reasoning in order; ``standard``: the same plan without the think. (The paper does not
+  run CoT and Standard on ALFWorld - an open-loop plan cannot look inside closed receptacles -
+  but a sweep may, and then they are shown the same episode as every other method.)
 - ``recap``: {"think", "subtasks"} replies in ReCAP's exact call order (notes/AGENT_PROTOCOL.md):
   a root decomposition, a "descend" reply for every child that is not itself a valid action,
   and one "refine" reply for the parent after each child returns, until the winning action.
@@ -28,8 +32,9 @@ from workers.envs.alfworld.rules import failure_hints_text, rules_text
 from workers.envs.alfworld.task_types import TASK_TYPES
 from workers.envs.alfworld.wording import to_version
 
-#: agent styles that have ALFWorld demonstrations (the paper runs ReCAP, ReAct and Act here)
-STYLES = ("recap", "react", "act")
+#: agent styles that have ALFWorld demonstrations (the paper runs ReCAP, ReAct and Act here;
+#: ADaPT's executor uses the ReAct replies)
+STYLES = ("recap", "react", "act", "cot", "standard")
 
 
 @dataclass(frozen=True)
@@ -493,7 +498,15 @@ def replies_for(short_type: str, version: str = "2.1.1") -> dict[str, list[dict[
         ],
         "react": [{"think": t, "action": a} for a, (_, t) in zip(actions, demo.steps, strict=True)],
         "act": [{"action": a} for a in actions],
+        "cot": [{"think": plan_think(demo), "actions": actions}],
+        "standard": [{"actions": actions}],
     }
+
+
+def plan_think(demo: _Demo) -> str:
+    """CoT's single think: the episode's reasoning, step by step, written before acting."""
+    steps = " ".join(f"({i}) {thought}" for i, (_, thought) in enumerate(demo.steps, 1))
+    return f"I write the whole plan now, one step per action, reasoning about where things are likely to be: {steps}"
 
 
 def demonstration_name(short_type: str, version: str = "2.1.1", show_valid_actions: bool = False) -> str:
