@@ -1,7 +1,8 @@
 """``recap env ...``: look at the benchmarks without any model.
 
 * ``env list BENCH [SELECTOR]`` - the instance ids a sweep file can name;
-* ``env play ID`` - play an instance by hand: type an action (or its number), see the observation;
+* ``env play ID`` - play an instance by hand: type an action (any letter case) or its number, see
+  the observation and the step count against the step cap;
 * ``env replay TRAJECTORY.json`` - re-run a recorded Robotouille trajectory on our engine and say
   whether every observation is identical (exit 0 only then).
 """
@@ -29,10 +30,41 @@ def list_main(bench: str, selector: str | None, out: TextIO) -> int:
         raise _registry_error(exc) from None
     except (ImportError, AttributeError) as exc:
         raise PipelineError(f"benchmark {bench!r} is not available here ({exc})") from None
-    for i in ids:
-        print(i, file=out)
+    try:
+        for i in ids:
+            print(i, file=out)
+        out.flush()
+    except BrokenPipeError:
+        # `recap env list ... | head`: the reader has what it wanted; say nothing more
+        _silence_stdout()
+        return 0
     print(f"{len(ids)} instance{'s' if len(ids) != 1 else ''}", file=sys.stderr)
     return 0
+
+
+def _silence_stdout() -> None:
+    """After a broken pipe, point stdout at /dev/null so the interpreter's final flush is quiet."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+
+
+def match_action(text: str, valid: Any) -> str:
+    """The valid action ``text`` names: its number in the list, or the action in any letter case
+    and spacing. Anything else is returned unchanged (the environment rejects it)."""
+    if not valid:
+        return text
+    if text.isdigit() and 1 <= int(text) <= len(valid):
+        return valid[int(text) - 1]
+    wanted = " ".join(text.split()).casefold()
+    for a in valid:
+        if " ".join(a.split()).casefold() == wanted:
+            return a
+    return text
 
 
 def _show(obs: str, valid: Any, out: TextIO) -> None:
@@ -55,8 +87,10 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
         raise PipelineError(f"cannot load {instance_id!r}: {exc}") from None
     try:
         r = env.reset()
-        print(f"Goal: {r.goal}", file=out)
+        if f"Goal: {r.goal}" not in r.observation:  # Robotouille's observation ends with it already
+            print(f"Goal: {r.goal}", file=out)
         _show(r.observation, r.valid_actions, out)
+        print(f"Step 0 of {env.max_steps}", file=out)
         valid = r.valid_actions
         while True:
             print("> ", end="", file=out, flush=True)
@@ -69,8 +103,7 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
                 return 0
             if not action:
                 continue
-            if valid and action.isdigit() and 1 <= int(action) <= len(valid):
-                action = valid[int(action) - 1]
+            action = match_action(action, valid)
             try:
                 step = env.step(action)
             except InvalidActionError as exc:
@@ -81,6 +114,7 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
                 continue
             valid = step.valid_actions
             _show(step.observation, valid, out)
+            print(f"Step {env.steps_taken} of {env.max_steps}", file=out)
             if step.done:
                 print(f"Episode over after {env.steps_taken} steps: {'SUCCESS' if step.success else 'not solved'}", file=out)
                 return 0

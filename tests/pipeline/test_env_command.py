@@ -1,0 +1,62 @@
+"""``recap env``: playing by hand (any letter case, step counts, the goal once) and listing into
+a pipe that closes early."""
+
+from __future__ import annotations
+
+import io
+import sys
+from pathlib import Path
+
+from pipeline.cli import main
+from pipeline.envcmd import match_action
+from recap.blocksworld import BENCHMARK
+
+REPO = Path(__file__).resolve().parents[2]
+ROBOTOUILLE = REPO.parent / "shared" / "data" / "robotouille"
+
+
+def test_match_action_by_number_case_and_spacing():
+    valid = ("Move robot1 from stove1 to table1", "Do nothing")
+    assert match_action("2", valid) == "Do nothing"
+    assert match_action("move ROBOT1  from stove1 to Table1", valid) == "Move robot1 from stove1 to table1"
+    assert match_action("3", valid) == "3" and match_action("fly", valid) == "fly"
+
+
+def test_play_shows_step_counts_and_accepts_any_case(capsys, monkeypatch):
+    env = BENCHMARK.make("blocksworld/3@1")
+    start = env.reset()
+    plan = env.expert_plan()
+    lines = [plan[0].upper()] + plan[1:]
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n".join(lines) + "\n"))
+    assert main(["env", "play", "blocksworld/3@1"]) == 0
+    out = capsys.readouterr().out
+    assert out.count(f"Goal: {start.goal}") == 1
+    steps = [line for line in out.splitlines() if line.startswith("Step ")]
+    assert steps == [f"Step {i} of {env.max_steps}" for i in range(len(plan) + 1)]
+    assert out.rstrip().endswith(f"Episode over after {len(plan)} steps: SUCCESS")
+
+
+def test_play_robotouille_prints_the_goal_once(capsys, monkeypatch):
+    monkeypatch.setenv("ROBOTOUILLE_DATA", str(ROBOTOUILLE))
+    monkeypatch.setattr(sys, "stdin", io.StringIO("q\n"))
+    assert main(["env", "play", "robotouille/synchronous/0_cheese_sandwich@42"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("Goal: ") == 1 and "Step 0 of 40" in out
+
+
+class _ClosedPipe(io.StringIO):
+    """A reader that went away after the first line (``recap env list ... | head -1``)."""
+
+    def write(self, text: str) -> int:
+        if self.getvalue():
+            raise BrokenPipeError(32, "Broken pipe")
+        return super().write(text)
+
+
+def test_list_into_a_closed_pipe_ends_quietly(capsys):
+    from pipeline.envcmd import list_main
+
+    out = _ClosedPipe()
+    assert list_main("blocksworld", None, out) == 0
+    assert out.getvalue() == "blocksworld/3@1"
+    assert capsys.readouterr().err == ""  # no count line, no traceback after the reader left
