@@ -19,6 +19,18 @@ def _first_line(text: str | None, width: int = 120) -> str:
     return line if len(line) <= width else line[: width - 1] + "..."
 
 
+def observation_change(prev: str | None, cur: str | None, width: int = 120) -> str:
+    """What an observation says that the one before it did not: its new lines, in order, joined
+    by " | " (Robotouille repeats the whole kitchen each step, so its first line never changes).
+    An unchanged observation reads "(no change)"; the first step is compared with nothing (all of
+    its lines but the object headers)."""
+    seen = set((prev or "").splitlines())
+    new = [line.strip() for line in (cur or "").splitlines()
+           if line.strip() and line not in seen and not line.rstrip().endswith(":")]
+    text = " | ".join(new) if new else ("(no change)" if prev is not None else _first_line(cur, width))
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
 def resolve_episode(store: RunStore, ref: str) -> dict[str, Any]:
     eps, _ = store.read_table("episodes")
     rows = eps.to_pylist()
@@ -48,11 +60,15 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
     title = (f"[bold]{escape(episode['episode_id'])}[/bold]  {escape(episode['instance_id'])}  {escape(episode['method'])} / "
              f"{escape(episode['model'])}  {status}  steps {episode['steps']}  calls {episode['llm_calls']}  ${episode['cost_usd']:.4f}")
     root_tree = Tree(title)
-    step_at = {s["index"]: s for s in steps}
+    ordered = sorted(steps, key=lambda s: s["index"])
+    step_at = {s["index"]: s for s in ordered}
+    # each step's observation shown as what changed since the step before it
+    change = {s["index"]: observation_change(p["observation"] if p else None, s["observation"])
+              for p, s in zip([None, *ordered], ordered)}
     if not nodes:
-        for s in sorted(steps, key=lambda s: s["index"]):
+        for s in ordered:
             mark = "[green]ok[/green]" if s["valid"] else "[red]invalid[/red]"
-            root_tree.add(f"[cyan]{escape(s['action'])}[/cyan] {mark}  [dim]{escape(_first_line(s['observation']))}[/dim]")
+            root_tree.add(f"[cyan]{escape(s['action'])}[/cyan] {mark}  [dim]{escape(change[s['index']])}[/dim]")
         return root_tree
     children: dict[int | None, list[dict[str, Any]]] = {}
     for n in nodes:
@@ -74,7 +90,7 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
         if node.get("step_index") is not None and node["step_index"] in step_at:
             s = step_at[node["step_index"]]
             mark = "[green]ok[/green]" if s["valid"] else "[red]invalid[/red]"
-            branch.add(f"action [cyan]{escape(s['action'])}[/cyan] {mark}  [dim]{escape(_first_line(s['observation']))}[/dim]")
+            branch.add(f"action [cyan]{escape(s['action'])}[/cyan] {mark}  [dim]{escape(change[s['index']])}[/dim]")
         for child in children.get(node["node_id"], []):
             add(branch, child)
 

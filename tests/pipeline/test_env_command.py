@@ -60,3 +60,15 @@ def test_list_into_a_closed_pipe_ends_quietly(capsys):
     assert list_main("blocksworld", None, out) == 0
     assert out.getvalue() == "blocksworld/3@1"
     assert capsys.readouterr().err == ""  # no count line, no traceback after the reader left
+
+
+def test_show_prints_what_each_observation_changed():
+    from pipeline.show import observation_change
+
+    before = "Station table1:\ntable1 has bread1\n\nPlayer robot1:\nrobot1 is at stove1\nrobot1 is holding nothing"
+    after = "Station table1:\ntable1 has bread1\n\nPlayer robot1:\nrobot1 is at table1\nrobot1 is holding nothing"
+    assert observation_change(before, after) == "robot1 is at table1"
+    assert observation_change(after, after) == "(no change)"
+    assert observation_change(None, "You arrive at loc 5.\nOn the desk 1, you see a pen 2.") == "You arrive at loc 5. | On the desk 1, you see a pen 2."
+    assert observation_change("You arrive at loc 5.", "Nothing happens.") == "Nothing happens."
+    assert observation_change("", "x" * 200).endswith("...") and len(observation_change("", "x" * 200)) == 120
