@@ -33,5 +33,9 @@ if [ "$status" -ne 0 ] && [ "$status" -ne 3 ]; then
   exit "$status"
 fi
 "${RECAP[@]}" report "$OUT"
-echo "summary: ${RECAP[*]} status $OUT    queries: ${RECAP[*]} sql $OUT \"select method, avg(success::int) from episodes group by 1\""
+echo
+echo "The recap command lives in .venv: run 'source .venv/bin/activate' first, or call .venv/bin/recap."
+echo "  status:  .venv/bin/recap status $OUT"
+echo "  query:   .venv/bin/recap sql $OUT \"select arm, count(*) units, avg(success::int) success from terminal group by 1\""
+echo "  report:  $OUT/report/ (spend shown for offline/* models is nominal: they are test doubles)"
 exit "$status"
