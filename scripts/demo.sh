@@ -6,7 +6,7 @@
 #   bash scripts/demo.sh                 # output in runs/demo (a second call finds it complete)
 #   DEMO_OUT=runs/demo2 bash scripts/demo.sh
 #
-# Environment: ROBOTOUILLE_DATA / ALFWORLD_DATA (default: ../shared/data/...), PYTHON (default
+# Environment: ROBOTOUILLE_DATA / ALFWORLD_DATA (default: `recap data list`'s look-up), PYTHON (default
 # python3, 3.11+), RECAP_SKIP_INSTALL=1 to use the current .venv as it is.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,9 +18,8 @@ fi
 
 export LITELLM_LOCAL_MODEL_COST_MAP=True
 export RAY_USAGE_STATS_ENABLED=0
-SHARED="$(cd "$ROOT/.." && pwd)/shared/data"
-export ROBOTOUILLE_DATA="${ROBOTOUILLE_DATA:-$SHARED/robotouille}"
-export ALFWORLD_DATA="${ALFWORLD_DATA:-$SHARED/alfworld}"
+# data folders: ROBOTOUILLE_DATA / ALFWORLD_DATA when set, else the same look-up as every recap
+# command (`recap data list`: upstream caches, ~/.cache/recap-eval/data, ../shared/data)
 OUT="${DEMO_OUT:-runs/demo}"
 
 # the console script when installed, else the module (RECAP_SKIP_INSTALL on a bare checkout)

@@ -106,11 +106,15 @@ def test_bad_options(bench):
 
 def test_missing_data_folder(monkeypatch, tmp_path):
     monkeypatch.delenv("ALFWORLD_DATA", raising=False)
+    # nothing in the caches or next to the checkout either (workers/envs/data_paths.py)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.delenv("RECAP_EVAL_CACHE", raising=False)
+    monkeypatch.setattr("workers.envs.data_paths.CHECKOUT_DATA_ROOT", tmp_path / "none")
     with pytest.raises(DataNotFoundError) as err:
         AlfworldBenchmark().list_instances()
-    assert str(err.value) == (
+    assert str(err.value).startswith(
         "ALFWorld data folder not set: set ALFWORLD_DATA (or pass data_dir=) to the folder "
-        "that holds json_2.1.1/valid_unseen"
+        "that holds json_2.1.1/valid_unseen, or run `recap data fetch alfworld` (looked in "
     )
     monkeypatch.setenv("ALFWORLD_DATA", str(tmp_path))
     with pytest.raises(DataNotFoundError) as err:

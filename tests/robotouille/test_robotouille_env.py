@@ -155,10 +155,14 @@ def test_step_before_reset_is_an_error():
         env.step("Do nothing")
 
 
-def test_data_folder_from_environment_variable(monkeypatch):
+def test_data_folder_from_environment_variable(monkeypatch, tmp_path):
     monkeypatch.setenv("ROBOTOUILLE_DATA", str(require_data()))
     assert BENCHMARK.make(POTATO).reset().goal.startswith("Make potato soup")
     monkeypatch.delenv("ROBOTOUILLE_DATA")
+    # nothing in the caches or next to the checkout either (workers/envs/data_paths.py)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.delenv("RECAP_EVAL_CACHE", raising=False)
+    monkeypatch.setattr("workers.envs.data_paths.CHECKOUT_DATA_ROOT", tmp_path / "none")
     with pytest.raises(DataNotFoundError, match="pass data_dir=... or set ROBOTOUILLE_DATA"):
         BENCHMARK.make(POTATO)
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
+from workers.envs import data_paths
 from workers.envs.alfworld.task_types import SHORT_NAMES
 from workers.envs.registry import DataNotFoundError
 
@@ -54,21 +55,77 @@ class Game:
         return data_dir / self.relpath / GAME_FILE
 
 
+#: how each game-file version spells "put an object down" in the grammar of a game.tw-pddl
+_WORDING_MARKS = {"2.1.1": b"put {o} in/on {r}", "2.1.2": b"move {o} to {r}"}
+
+
+def game_file_version(folder: Path) -> str | None:
+    """The wording version ("2.1.1"/"2.1.2") of the first game file under ``folder``, or None
+    when there is none or it is unreadable (reads one file; used to probe implicit folders)."""
+    split = folder / SPLIT_DIR
+    try:
+        for game_dir in sorted(p for p in split.iterdir() if p.is_dir()):
+            for trial in sorted(p for p in game_dir.iterdir() if p.is_dir()):
+                game_file = trial / GAME_FILE
+                if game_file.is_file():
+                    text = game_file.read_bytes()
+                    for version, mark in _WORDING_MARKS.items():
+                        if mark in text:
+                            return version
+                    return None
+    except OSError:
+        return None
+    return None
+
+
+def _probe_2_1_1(folder: Path) -> str | None:
+    """Why a probed folder cannot serve as the primary (2.1.1) folder, or None."""
+    version = game_file_version(folder)
+    if version == "2.1.1":
+        return None
+    if version == "2.1.2":
+        return (
+            "holds game-file version 2.1.2 (what alfworld 0.4.2's alfworld-download fetches); "
+            f"it can serve as the 2.1.2 folder ({DATA_ENV_2_1_2}); "
+            "`recap data fetch alfworld` gets the 2.1.1 games"
+        )
+    return "no readable game file"
+
+
+def _invalid(path: Path, source: str, problem: str) -> str:
+    return (
+        f"ALFWorld data folder {path.resolve()} (from {source}) has no {SPLIT_DIR.as_posix()}; "
+        f"point {source} at the folder that holds it"
+    )
+
+
+def _missing(rungs: list[data_paths.Rung]) -> str:
+    return (
+        f"ALFWorld data folder not set: set {DATA_ENV} (or pass data_dir=) to the folder "
+        f"that holds {SPLIT_DIR.as_posix()}, or run `recap data fetch alfworld` "
+        f"(looked in {data_paths.describe_probed(rungs)})"
+    )
+
+
+#: how the shared resolver (workers/envs/data_paths.py) recognises the primary ALFWorld folder
+LOCATION = data_paths.DataLocation(
+    name=BENCHMARK_NAME,
+    title="ALFWorld",
+    env_var=DATA_ENV,
+    marker=SPLIT_DIR.as_posix(),
+    upstream_cache=data_paths.ALFWORLD_UPSTREAM_CACHE,
+    probe=_probe_2_1_1,
+)
+
+
 def resolve_data_dir(data_dir: str | os.PathLike[str] | None = None) -> Path:
-    """The primary (2.1.1) data folder: ``data_dir`` if given, else ``$ALFWORLD_DATA``."""
-    raw = data_dir if data_dir is not None else os.environ.get(DATA_ENV)
-    if not raw:
-        raise DataNotFoundError(
-            f"ALFWorld data folder not set: set {DATA_ENV} (or pass data_dir=) to the folder "
-            f"that holds {SPLIT_DIR.as_posix()}"
-        )
-    path = Path(raw).expanduser().resolve()
-    if not (path / SPLIT_DIR).is_dir():
-        source = "data_dir" if data_dir is not None else DATA_ENV
-        raise DataNotFoundError(
-            f"ALFWorld data folder {path} (from {source}) has no {SPLIT_DIR.as_posix()}; "
-            f"point {source} at the folder that holds it"
-        )
+    """The primary (2.1.1) data folder, found by the shared rule (workers/envs/data_paths.py):
+    ``data_dir`` if given, else ``$ALFWORLD_DATA``, else ALFWorld's own cache
+    (``~/.cache/alfworld``), else recap-eval's cache (``~/.cache/recap-eval/data/alfworld``),
+    else ``<checkout>/../shared/data/alfworld``. The caches and the checkout folder are used
+    only when they hold 2.1.1 game files; a folder named by ``data_dir``/``$ALFWORLD_DATA``
+    without ``json_2.1.1/valid_unseen`` is an error."""
+    path, _rung = data_paths.resolve(LOCATION, data_dir, invalid=_invalid, missing=_missing)
     return path
 
 

@@ -2,8 +2,9 @@
 
 The engine is a clean-room interpreter of the benchmark's *data* (domain, problems, generated
 instances); the data stays outside the repository, so every entry point goes through this module
-to find the folder (``data_dir`` option, else ``ROBOTOUILLE_DATA``) and to turn a missing or broken
-file into one clear error that names it.
+to find the folder (the shared rule of ``workers/envs/data_paths.py``: ``data_dir`` option, else
+``ROBOTOUILLE_DATA``, else recap-eval's cache, else ``../shared/data/robotouille``) and to turn a
+missing or broken file into one clear error that names it.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from recap.env import EnvError
+from workers.envs import data_paths
 from workers.envs.registry import DataNotFoundError
 
 ENV_VAR = "ROBOTOUILLE_DATA"
@@ -27,30 +29,40 @@ class DataFileError(EnvError):
     """A data file exists but is not valid JSON or lacks a field the engine needs."""
 
 
-def resolve_data_dir(data_dir: str | os.PathLike[str] | None = None) -> Path:
-    """The Robotouille data folder: ``data_dir`` if given, else ``$ROBOTOUILLE_DATA``.
+def _invalid(path: Path, source: str, problem: str) -> str:
+    if problem == "absent":
+        return f"Robotouille data folder {str(path)!r} (from {source}) does not exist"
+    return f"{str(path)!r} (from {source}) is not a Robotouille data folder: {DOMAIN_FILE} is missing"
 
-    Raises DataNotFoundError when neither is set, the folder does not exist, or it does not hold
-    the domain file (i.e. it is not a Robotouille data folder).
+
+def _missing(rungs: list[data_paths.Rung]) -> str:
+    return (
+        f"no Robotouille data folder: pass data_dir=... or set {ENV_VAR} "
+        f"to a folder holding {DOMAIN_FILE} and {INSTANCES_DIR}/, or run `recap data fetch robotouille` "
+        f"(looked in {data_paths.describe_probed(rungs)})"
+    )
+
+
+#: how the shared resolver (workers/envs/data_paths.py) recognises a Robotouille folder
+LOCATION = data_paths.DataLocation(
+    name="robotouille",
+    title="Robotouille",
+    env_var=ENV_VAR,
+    marker=DOMAIN_FILE,
+    upstream_note="none (Robotouille keeps its data inside its repository checkout)",
+)
+
+
+def resolve_data_dir(data_dir: str | os.PathLike[str] | None = None) -> Path:
+    """The Robotouille data folder, found by the shared rule (workers/envs/data_paths.py):
+    ``data_dir`` if given, else ``$ROBOTOUILLE_DATA``, else recap-eval's cache
+    (``~/.cache/recap-eval/data/robotouille``), else ``<checkout>/../shared/data/robotouille``.
+
+    Raises DataNotFoundError when a folder named by ``data_dir``/``$ROBOTOUILLE_DATA`` does not
+    exist or lacks the domain file (it is not a Robotouille data folder), or when none is found.
     """
-    source = "data_dir"
-    if data_dir is None:
-        data_dir = os.environ.get(ENV_VAR)
-        source = ENV_VAR
-        if not data_dir:
-            raise DataNotFoundError(
-                f"no Robotouille data folder: pass data_dir=... or set {ENV_VAR} "
-                "to a folder holding domain/robotouille.json and instances/"
-            )
-    path = Path(data_dir).expanduser()
-    if not path.is_dir():
-        raise DataNotFoundError(f"Robotouille data folder {str(path)!r} (from {source}) does not exist")
-    if not (path / DOMAIN_FILE).is_file():
-        raise DataNotFoundError(
-            f"{str(path)!r} (from {source}) is not a Robotouille data folder: "
-            f"{DOMAIN_FILE} is missing"
-        )
-    return path.resolve()
+    path, _rung = data_paths.resolve(LOCATION, data_dir, invalid=_invalid, missing=_missing)
+    return path
 
 
 def read_json(path: Path) -> Any:
@@ -58,7 +70,7 @@ def read_json(path: Path) -> Any:
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise DataNotFoundError(f"Robotouille data file {str(path)!r} does not exist") from None
+        raise DataNotFoundError(f"Robotouille data file {str(path)!r} does not exist{_instances_hint(path)}") from None
     except OSError as exc:
         raise DataFileError(f"cannot read Robotouille data file {str(path)!r}: {exc}") from None
     try:
@@ -68,6 +80,17 @@ def read_json(path: Path) -> Any:
             f"malformed JSON in Robotouille data file {str(path)!r}: {exc.msg} "
             f"(line {exc.lineno}, column {exc.colno})"
         ) from None
+
+
+def _instances_hint(path: Path) -> str:
+    """Why an instance file can be missing from a fetched folder (they cannot be downloaded)."""
+    if INSTANCES_DIR in path.parts or TRAIN_INSTANCES_DIR in path.parts:
+        return (
+            "; the benchmark instances are made by the real engine's seeded generator and cannot "
+            "be downloaded: copy instances/ and instances_train/ from a complete Robotouille data "
+            "folder (`recap data check robotouille` lists what is missing)"
+        )
+    return ""
 
 
 def require(mapping: Any, key: str, path: Path) -> Any:

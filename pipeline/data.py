@@ -1,0 +1,732 @@
+"""``recap data``: where the benchmark data is, whether it is intact, and how to get it.
+
+The data never lives in this repository. Three benchmark folders exist: ``robotouille``,
+``alfworld`` (ALFWorld games, game-file version 2.1.1: the primary folder) and ``alfworld-2.1.2``
+(the same 134 games re-released in 2.1.2 wording, with walkthroughs; optional).
+
+* ``recap data list [BENCH] [--data-dir DIR]`` - every place a benchmark's folder is looked for,
+  in order, what each holds, and which one is used. The order is the one rule of
+  :mod:`workers.envs.data_paths`, the same for the library, ``recap env``, ``recap run`` and the
+  scripts: ``--data-dir``/``data_dir=``, the environment variable (``ROBOTOUILLE_DATA``,
+  ``ALFWORLD_DATA``), the upstream project's own cache (ALFWorld: ``~/.cache/alfworld``, what
+  ``alfworld-download`` writes), recap-eval's cache (``$RECAP_EVAL_CACHE/data/<bench>``, default
+  ``~/.cache/recap-eval/data/<bench>``: where ``fetch`` writes), ``<checkout>/../shared/data/<bench>``.
+  ``alfworld-2.1.2`` keeps its own rule (:func:`workers.envs.alfworld.games.resolve_data_dir_2_1_2`):
+  ``--data-dir``, ``ALFWORLD_DATA_2_1_2``, else the folder ``alfworld-2.1.2`` next to the ALFWorld
+  folder in use (both caches and ``../shared/data`` put it there).
+* ``recap data check [BENCH] [--data-dir DIR]`` - verifies each folder against the sha256
+  manifest this repository carries (``pipeline/manifests/<bench>.sha256``, ``sha256sum`` format:
+  metadata, not data); one line per benchmark: path, files checked, OK / N missing / N mismatched.
+* ``recap data fetch [BENCH] [--mirror URL_OR_DIR] [--dest DIR]`` - downloads what can be
+  downloaded, verifies every file against the manifest, and only then moves the folder into
+  place (staged in a hidden folder next to the destination, renamed at the end; a failure
+  removes the stage, so no half-written folder is ever left). Default destination:
+  recap-eval's cache; ``--dest`` names the folder for one benchmark, or the parent of the three
+  folders when no benchmark is named. A destination that exists is verified, not overwritten.
+
+Sources (``--mirror`` replaces the base of every URL below with a folder or a URL prefix holding
+the same file names; ``file://`` URLs work):
+
+* Robotouille: the archive of the upstream repository at the pinned commit,
+  ``https://github.com/portal-cornell/robotouille/archive/<commit>.tar.gz``; only the data paths
+  the manifest lists are extracted (``LICENSE``, ``domain/``, ``environments/``, ``agents/``,
+  ``conf/``), never code.
+* ALFWorld 2.1.1: ALFWorld's release archives ``json_2.1.1_json.zip`` (traj_data.json),
+  ``json_2.1.1_pddl.zip`` (initial_state.pddl), ``json_2.1.1_tw-pddl.zip`` (game.tw-pddl), the
+  URLs of ALFWorld 0.3.x's ``alfworld-download``, plus ``logic/alfred.pddl`` and
+  ``logic/alfred.twl2`` as shipped in alfworld 0.3.5's package data (alfworld 0.4.2 ships the
+  2.1.2 wording). Only the 134 evaluation games are extracted.
+* ALFWorld 2.1.2: ``json_2.1.2_tw-pddl.zip`` (the ``TW_PDDL_FILES_URL`` of alfworld 0.4.2's
+  ``alfworld-download``).
+
+ALFWorld's own downloader is not called: in alfworld 0.4.2 it is a console script
+(``bin/alfworld-download``), not an importable function; its URLs are module constants with no
+mirror or base-URL option; its ``download()`` uses ``requests`` (no ``file://``); importing it
+creates ``$ALFWORLD_DATA`` or ``~/.cache/alfworld``; its ``main()`` also downloads the 170 MB
+MaskRCNN detector and fetches the 2.1.2 game files, not 2.1.1. So ``fetch`` downloads the same
+archives itself (default URLs above, checked against the installed script's constants by the
+tests) and keeps only the files it verifies.
+
+Robotouille's 200 benchmark instances (``instances/``) and the two demonstration instances
+(``instances_train/``) are not in the upstream repository: they are the output of upstream's
+seeded generator (``environments/env_generator/procedural_generator.py``,
+``randomize_environment(env_json, seed)``) run by the real engine, retried with seed+1, ... on
+failure (33 of 200 used another seed). Reproducing them here was investigated and is not
+feasible with this project's engine: the generator is a sequence of Python ``random`` calls
+(``random.seed(seed)``, then ``randrange``/``choice``/``shuffle`` over the grid, over the
+upstream code's own ``Item``/``Station`` enumerations, with reachability checks, deep copies,
+retries on exceptions) whose exact output depends on every call and its order. Our engine is a
+clean-room interpreter of the benchmark's *data* and contains no generator; matching
+``generated_environment_json`` byte for byte would mean porting upstream's generator code,
+enum order included, which is neither data nor in the data folder. So ``fetch`` gets everything
+else, and ``check`` reports ``instances/`` and ``instances_train/`` as missing with that reason:
+copy them from a complete Robotouille data folder. ``trajectories/`` (recorded on the real
+engine; read only by ``recap env replay`` and the tests) are optional: their absence is noted,
+not a failure.
+
+Exit status: 0 - every benchmark asked about has a folder and it verifies (``fetch``: every
+benchmark was fetched and verified, or was already there and verifies); 1 - a check failed: a
+benchmark has no folder, a file is missing or does not match, a download or an archive failed
+(one line on stderr per failure); 2 - bad usage: unknown benchmark or option, ``--data-dir``
+without a benchmark, a mirror folder that does not exist (one line on stderr); 130 -
+interrupted (a fetch in progress leaves nothing behind).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import re
+import shutil
+import tarfile
+import tempfile
+import urllib.error
+import urllib.parse
+import urllib.request
+import zipfile
+import zlib
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import IO, Any, NoReturn, TextIO
+
+from pipeline.errors import one_line
+from workers.envs import data_paths
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+
+MANIFEST_DIR = Path(__file__).resolve().parent / "manifests"
+MANIFEST_NAME = "MANIFEST.sha256"
+BENCHMARKS = ("robotouille", "alfworld", "alfworld-2.1.2")
+
+#: Robotouille: upstream repository and the commit the data folder was taken from
+ROBOTOUILLE_REPO_ARCHIVES = "https://github.com/portal-cornell/robotouille/archive"
+ROBOTOUILLE_COMMIT = "c8236a2e3afa75354475ade9147dc38a7e589944"
+#: ALFWorld release assets (the URLs of alfworld-download; 2.1.1 games: ALFWorld 0.3.x's, 2.1.2: 0.4.2's)
+ALFWORLD_RELEASES = "https://github.com/alfworld/alfworld/releases/download"
+ALFWORLD_JSON_URL = f"{ALFWORLD_RELEASES}/0.2.2/json_2.1.1_json.zip"
+ALFWORLD_PDDL_URL = f"{ALFWORLD_RELEASES}/0.2.2/json_2.1.1_pddl.zip"
+ALFWORLD_TW_PDDL_2_1_1_URL = f"{ALFWORLD_RELEASES}/0.2.2/json_2.1.1_tw-pddl.zip"
+ALFWORLD_TW_PDDL_2_1_2_URL = f"{ALFWORLD_RELEASES}/0.4.0/json_2.1.2_tw-pddl.zip"
+#: alfworld 0.3.5's package data: the PDDL domain and grammar in 2.1.1 wording (the manifest's logic/)
+ALFWORLD_LOGIC_BASE = "https://raw.githubusercontent.com/alfworld/alfworld/0.3.5/alfworld/data"
+
+_CHUNK = 1 << 20
+_TIMEOUT_S = 60
+#: no data file is near this size; a larger member is refused before it fills the disk
+_MAX_FILE_BYTES = 256 << 20
+
+
+class UsageError(Exception):
+    """Bad command line: exit 2."""
+
+
+class DataError(Exception):
+    """A check or a fetch failed: exit 1."""
+
+
+# ---------------------------------------------------------------------------------------------
+# what each benchmark folder holds
+
+
+@dataclass(frozen=True)
+class Group:
+    """Files of a benchmark folder sharing a path prefix and a story (where they come from)."""
+
+    prefix: str  # "instances/", or a file name ("LICENSE")
+    fetchable: bool
+    required: bool = True
+    note: str = ""
+
+    def holds(self, rel: str) -> bool:
+        return rel == self.prefix or (self.prefix.endswith("/") and rel.startswith(self.prefix))
+
+
+@dataclass(frozen=True)
+class Source:
+    """One file to download: its name at a mirror, its default URL, and how its content maps
+    onto the folder (``archive``: zip or tar.gz members; else a single file saved as ``saves_as``)."""
+
+    name: str
+    url: str
+    kind: str  # "zip", "tar.gz" or "file"
+    saves_as: str = ""
+
+    def location(self, mirror: str | None) -> str:
+        if mirror is None:
+            return self.url
+        if _is_url(mirror):
+            return mirror.rstrip("/") + "/" + self.name
+        return str(Path(mirror).expanduser() / self.name)
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    name: str
+    title: str
+    groups: tuple[Group, ...]
+    sources: tuple[Source, ...]
+    #: member name in an archive -> path in the folder (None: not wanted)
+    member_path: Callable[[str], str | None]
+    after_fetch: str = ""  # printed after a successful fetch
+
+    @property
+    def manifest_file(self) -> Path:
+        return MANIFEST_DIR / f"{self.name}.sha256"
+
+    def group_of(self, rel: str) -> Group:
+        for group in self.groups:
+            if group.holds(rel):
+                return group
+        return Group("", fetchable=False)
+
+
+def _strip_top_folder(member: str) -> str | None:
+    """``robotouille-<commit>/domain/x.json`` -> ``domain/x.json`` (GitHub archives' layout)."""
+    _top, sep, rest = member.partition("/")
+    return rest if sep and rest else None
+
+
+_VALID_UNSEEN = re.compile(r"(?:^|/)(valid_unseen/.+)$")
+
+
+def _alfworld_member(member: str) -> str | None:
+    """Any ``.../valid_unseen/<game>/<trial>/<file>`` member -> ``json_2.1.1/valid_unseen/...``."""
+    match = _VALID_UNSEEN.search(member)
+    return f"json_2.1.1/{match.group(1)}" if match else None
+
+
+_INSTANCES_NOTE = (
+    "made by the real engine's seeded generator, not stored upstream, not reproducible by our "
+    "engine: copy instances/ and instances_train/ from a complete Robotouille data folder"
+)
+
+ROBOTOUILLE = Benchmark(
+    name="robotouille",
+    title="Robotouille",
+    groups=(
+        Group("LICENSE", fetchable=True),
+        Group("domain/", fetchable=True),
+        Group("environments/", fetchable=True),
+        Group("agents/", fetchable=True),
+        Group("conf/", fetchable=True),
+        Group("instances/", fetchable=False, note=_INSTANCES_NOTE),
+        Group("instances_train/", fetchable=False, note=_INSTANCES_NOTE),
+        Group("trajectories/", fetchable=False, required=False,
+              note="recorded on the real engine; only `recap env replay` and the tests read them"),
+    ),
+    sources=(Source(f"{ROBOTOUILLE_COMMIT}.tar.gz", f"{ROBOTOUILLE_REPO_ARCHIVES}/{ROBOTOUILLE_COMMIT}.tar.gz", "tar.gz"),),
+    member_path=_strip_top_folder,
+    after_fetch=(
+        "instances/ and instances_train/ are not downloadable (" + _INSTANCES_NOTE + "); "
+        "`recap data check robotouille` fails until they are there"
+    ),
+)
+
+ALFWORLD = Benchmark(
+    name="alfworld",
+    title="ALFWorld (game files 2.1.1)",
+    groups=(Group("json_2.1.1/", fetchable=True), Group("logic/", fetchable=True)),
+    sources=(
+        Source("json_2.1.1_json.zip", ALFWORLD_JSON_URL, "zip"),
+        Source("json_2.1.1_pddl.zip", ALFWORLD_PDDL_URL, "zip"),
+        Source("json_2.1.1_tw-pddl.zip", ALFWORLD_TW_PDDL_2_1_1_URL, "zip"),
+        Source("alfred.pddl", f"{ALFWORLD_LOGIC_BASE}/alfred.pddl", "file", "logic/alfred.pddl"),
+        Source("alfred.twl2", f"{ALFWORLD_LOGIC_BASE}/alfred.twl2", "file", "logic/alfred.twl2"),
+    ),
+    member_path=_alfworld_member,
+)
+
+ALFWORLD_2_1_2 = Benchmark(
+    name="alfworld-2.1.2",
+    title="ALFWorld (game files 2.1.2)",
+    groups=(Group("json_2.1.1/", fetchable=True),),
+    sources=(Source("json_2.1.2_tw-pddl.zip", ALFWORLD_TW_PDDL_2_1_2_URL, "zip"),),
+    member_path=_alfworld_member,
+)
+
+_BY_NAME = {b.name: b for b in (ROBOTOUILLE, ALFWORLD, ALFWORLD_2_1_2)}
+
+
+def read_manifest(path: Path) -> dict[str, str]:
+    """``{relative path: sha256}`` from a ``sha256sum``-format file (``<hex>  ./path``)."""
+    entries: dict[str, str] = {}
+    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if not line.strip():
+            continue
+        digest, sep, name = line.partition(" ")
+        name = name.lstrip(" *")
+        if not sep or not re.fullmatch(r"[0-9a-f]{64}", digest) or not name:
+            raise DataError(f"malformed manifest line {number} in {path}")
+        entries[name.removeprefix("./")] = digest
+    return entries
+
+
+def write_manifest(path: Path, entries: dict[str, str]) -> None:
+    path.write_text("".join(f"{entries[rel]}  ./{rel}\n" for rel in sorted(entries)), encoding="utf-8")
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for chunk in iter(lambda: f.read(_CHUNK), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+# ---------------------------------------------------------------------------------------------
+# where (list)
+
+
+def _location(bench: Benchmark) -> data_paths.DataLocation:
+    if bench is ROBOTOUILLE:
+        from workers.envs.robotouille.data import LOCATION
+
+        return LOCATION
+    from workers.envs.alfworld.games import LOCATION as ALF
+
+    if bench is ALFWORLD:
+        return ALF
+    from workers.envs.alfworld.games import DATA_ENV_2_1_2
+
+    return data_paths.DataLocation(name=bench.name, title=bench.title, env_var=DATA_ENV_2_1_2, marker=ALF.marker)
+
+
+def search(bench: Benchmark, data_dir: str | None) -> tuple[list[data_paths.Rung], data_paths.Rung | None]:
+    """Every rung of the search for ``bench`` and the one whose folder is used (None: none)."""
+    if bench is not ALFWORLD_2_1_2:
+        rungs = data_paths.search(_location(bench), data_dir, stop_at_first=False)
+        return rungs, data_paths.chosen(rungs)
+    return _search_2_1_2(data_dir)
+
+
+def _search_2_1_2(data_dir: str | None) -> tuple[list[data_paths.Rung], data_paths.Rung | None]:
+    """The 2.1.2 rule (games.resolve_data_dir_2_1_2), rung by rung: option, variable, sibling."""
+    from workers.envs.alfworld.games import DATA_ENV_2_1_2, SIBLING_2_1_2, SPLIT_DIR
+
+    def rung(step: str, raw: str | None, explicit: bool, unset: str) -> data_paths.Rung:
+        if not raw:
+            return data_paths.Rung(step, None, explicit, unset)
+        path = Path(raw).expanduser()
+        ok = (path / SPLIT_DIR).is_dir()
+        bad = ("invalid: " if explicit else "") + ("absent" if not path.is_dir() else f"no {SPLIT_DIR.as_posix()}")
+        return data_paths.Rung(step, path, explicit, "found" if ok else bad)
+
+    rungs = [
+        rung("data_dir", data_dir, True, "not given"),
+        rung(f"${DATA_ENV_2_1_2}", os.environ.get(DATA_ENV_2_1_2), True, "not set"),
+    ]
+    primary = data_paths.chosen(search(ALFWORLD, None)[0])
+    if primary is None or primary.path is None:
+        rungs.append(data_paths.Rung("next to ALFWorld", None, False, "no ALFWorld folder"))
+    else:
+        rungs.append(rung("next to ALFWorld", str(primary.path.resolve().parent / SIBLING_2_1_2), False, ""))
+    return rungs, data_paths.chosen(rungs)
+
+
+def _describe(rung: data_paths.Rung) -> str:
+    return f"{rung.path} ({rung.step})"
+
+
+def cmd_list(benches: list[Benchmark], data_dir: str | None, out: TextIO) -> list[str]:
+    failures = []
+    for bench in benches:
+        rungs, used = search(bench, data_dir)
+        if used is not None:
+            print(f"{bench.name}: {_describe(used)}", file=out)
+        else:
+            failures.append(f"{bench.name}: {_not_found(bench, rungs)}")
+            print(f"{bench.name}: not found", file=out)
+        width = max(len(r.step) for r in rungs)
+        for i, r in enumerate(rungs, 1):
+            where = f"{r.path}: {r.status}" if r.path is not None else r.status
+            mark = "  <- used" if r is used else ""
+            print(f"  {i}. {r.step:<{width}}  {where}{mark}", file=out)
+    return failures
+
+
+def _not_found(bench: Benchmark, rungs: list[data_paths.Rung]) -> str:
+    bad = data_paths.first_explicit_error(rungs)
+    if bad is not None:
+        return f"{bad.path} (from {bad.step}) is not a {bench.title} folder: {bad.status.removeprefix('invalid: ')}"
+    return f"no folder found; run `recap data fetch {bench.name}` (see `recap data list {bench.name}`)"
+
+
+# ---------------------------------------------------------------------------------------------
+# check
+
+
+@dataclass
+class CheckResult:
+    bench: Benchmark
+    folder: Path
+    source: str = ""  # the rung it was found on ("checkout", "$ROBOTOUILLE_DATA", ...)
+    checked: int = 0
+    missing: dict[str, int] = field(default_factory=dict)  # group prefix -> count (required)
+    optional_missing: dict[str, int] = field(default_factory=dict)
+    mismatched: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.missing and not self.mismatched
+
+    def line(self) -> str:
+        where = f"{self.folder} ({self.source})" if self.source else str(self.folder)
+        head = f"{self.bench.name}: {where}: {self.checked} files checked: "
+        n_missing = sum(self.missing.values())
+        optional = ""
+        if self.optional_missing:
+            groups = ", ".join(f"{g} ({n})" for g, n in self.optional_missing.items())
+            notes = "; ".join(dict.fromkeys(self.bench.group_of(g).note for g in self.optional_missing))
+            optional = f" ({sum(self.optional_missing.values())} optional files absent: {groups}: {notes})"
+        if self.ok:
+            return head + "OK" + optional
+        parts = [f"{n_missing} missing", f"{len(self.mismatched)} mismatched"]
+        text = head + ", ".join(parts)
+        if self.mismatched:
+            text += f" (e.g. {self.mismatched[0]})"
+        if self.missing:
+            where = ", ".join(f"{g} ({n})" for g, n in self.missing.items())
+            text += f": missing {where}"
+            unfetchable = [g for g in self.missing if not self.bench.group_of(g).fetchable]
+            if unfetchable:
+                text += " - " + "; ".join(dict.fromkeys(self.bench.group_of(g).note for g in unfetchable))
+            if len(unfetchable) < len(self.missing):
+                text += f"; `recap data fetch {self.bench.name}` gets the rest"
+        elif self.mismatched:
+            text += f"; fetch a fresh copy: `recap data fetch {self.bench.name} --dest NEW_FOLDER`"
+        return text + optional + ": FAILED"
+
+
+def check_folder(bench: Benchmark, folder: Path, only: Callable[[Group], bool] = lambda g: True) -> CheckResult:
+    """``folder`` against the repository's manifest of ``bench`` (files of groups ``only`` keeps)."""
+    manifest = read_manifest(bench.manifest_file)
+    result = CheckResult(bench, folder)
+    for rel, digest in manifest.items():
+        group = bench.group_of(rel)
+        if not only(group):
+            continue
+        result.checked += 1
+        path = folder / rel
+        if not path.is_file():
+            bucket = result.missing if group.required else result.optional_missing
+            bucket[group.prefix] = bucket.get(group.prefix, 0) + 1
+        elif sha256_file(path) != digest:
+            result.mismatched.append(rel)
+    return result
+
+
+def cmd_check(benches: list[Benchmark], data_dir: str | None, out: TextIO) -> list[str]:
+    failures = []
+    for bench in benches:
+        rungs, used = search(bench, data_dir)
+        if used is None or used.path is None:
+            reason = _not_found(bench, rungs)
+            print(f"{bench.name}: {reason}: FAILED", file=out)
+            failures.append(f"{bench.name}: {reason}")
+            continue
+        try:
+            result = check_folder(bench, used.path.resolve())
+        except OSError as exc:
+            print(f"{bench.name}: {used.path} ({used.step}): cannot read: {exc}: FAILED", file=out)
+            failures.append(f"{bench.name}: cannot read {used.path}: {exc.strerror or exc}")
+            continue
+        result.source = used.step
+        print(result.line(), file=out)
+        if not result.ok:
+            failures.append(f"{bench.name}: {sum(result.missing.values())} missing, {len(result.mismatched)} mismatched")
+    return failures
+
+
+# ---------------------------------------------------------------------------------------------
+# fetch
+
+
+def _is_url(text: str) -> bool:
+    return bool(re.match(r"^[A-Za-z][A-Za-z0-9+.-]*://", text))
+
+
+def _local_path(location: str) -> Path | None:
+    """The local file a location names (a path or a file:// URL), None for a remote URL."""
+    if not _is_url(location):
+        return Path(location)
+    parsed = urllib.parse.urlparse(location)
+    if parsed.scheme == "file":
+        return Path(urllib.request.url2pathname(parsed.path))
+    return None
+
+
+def check_mirror(mirror: str | None) -> None:
+    if mirror is None:
+        return
+    local = _local_path(mirror)
+    if local is not None and not local.is_dir():
+        raise UsageError(f"mirror folder {mirror} does not exist")
+    if local is None and urllib.parse.urlparse(mirror).scheme not in ("http", "https"):
+        raise UsageError(f"mirror {mirror!r}: use a folder, a file:// URL or an http(s):// URL")
+
+
+def _obtain(source: Source, mirror: str | None, downloads: Path, out: TextIO) -> tuple[Path, str]:
+    """The source's file on this machine (downloaded into ``downloads`` if remote) and where it came from."""
+    location = source.location(mirror)
+    local = _local_path(location)
+    if local is not None:
+        if not local.is_file():
+            raise DataError(f"{source.name} is not in the mirror ({local} does not exist)")
+        return local, str(local)
+    target = downloads / source.name
+    print(f"  downloading {location}", file=out, flush=True)
+    request = urllib.request.Request(location, headers={"User-Agent": "recap-eval data fetch"})
+    try:
+        with urllib.request.urlopen(request, timeout=_TIMEOUT_S) as response, target.open("wb") as f:
+            shutil.copyfileobj(response, f, _CHUNK)
+    except urllib.error.HTTPError as exc:
+        raise DataError(f"cannot download {location}: HTTP {exc.code} {exc.reason}") from None
+    except (urllib.error.URLError, OSError, TimeoutError) as exc:
+        reason = getattr(exc, "reason", None) or exc
+        raise DataError(f"cannot download {location}: {reason}") from None
+    return target, location
+
+
+def _members(path: Path, kind: str, label: str) -> Iterator[tuple[str, Callable[[], IO[bytes]]]]:
+    """(member name, opener) for every regular file of an archive; a broken archive is a DataError."""
+    try:
+        if kind == "zip":
+            with zipfile.ZipFile(path) as archive:
+                for info in archive.infolist():
+                    if not info.is_dir():
+                        yield info.filename, partial(archive.open, info)
+        else:
+            with tarfile.open(path, "r|gz") as archive:
+                for member in archive:
+                    if member.isfile():
+                        yield member.name, partial(_tar_member, archive, member)
+    except (zipfile.BadZipFile, tarfile.TarError, zlib.error, EOFError, OSError, ValueError) as exc:
+        raise DataError(f"{label} is not a readable {kind} archive ({one_line(exc) or type(exc).__name__})") from None
+
+
+def _tar_member(archive: tarfile.TarFile, member: tarfile.TarInfo) -> IO[bytes]:
+    f = archive.extractfile(member)
+    if f is None:
+        raise tarfile.TarError(f"cannot read {member.name}")
+    return f
+
+
+def _save(opener: Callable[[], IO[bytes]], target: Path) -> str:
+    """Copy a stream to ``target`` and return its sha256."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    digest = hashlib.sha256()
+    size = 0
+    with opener() as src, target.open("wb") as dst:
+        for chunk in iter(lambda: src.read(_CHUNK), b""):
+            size += len(chunk)
+            if size > _MAX_FILE_BYTES:
+                raise DataError(f"{target.name} is larger than {_MAX_FILE_BYTES >> 20} MiB: not the expected file")
+            digest.update(chunk)
+            dst.write(chunk)
+    return digest.hexdigest()
+
+
+def _stage(bench: Benchmark, mirror: str | None, stage: Path, out: TextIO) -> dict[str, str]:
+    """Fetch every fetchable manifest file of ``bench`` into ``stage/data``; verify each one.
+    Returns the files written with their sha256."""
+    manifest = read_manifest(bench.manifest_file)
+    wanted = {rel: d for rel, d in manifest.items() if bench.group_of(rel).fetchable}
+    data, downloads = stage / "data", stage / "downloads"
+    data.mkdir()
+    downloads.mkdir()
+    got: dict[str, str] = {}
+    origin: dict[str, str] = {}
+    for source in bench.sources:
+        path, where = _obtain(source, mirror, downloads, out)
+        if source.kind == "file":
+            if source.saves_as in wanted:
+                got[source.saves_as] = _save(partial(path.open, "rb"), data / source.saves_as)
+                origin[source.saves_as] = where
+        else:
+            try:
+                for member, opener in _members(path, source.kind, source.name):
+                    rel = bench.member_path(member)
+                    if rel in wanted and rel not in got:
+                        got[rel] = _save(opener, data / rel)
+                        origin[rel] = where
+            except (zlib.error, EOFError, OSError, zipfile.BadZipFile, tarfile.TarError) as exc:
+                raise DataError(f"{source.name} is not a readable {source.kind} archive ({one_line(exc)})") from None
+        if path.parent == downloads:
+            path.unlink()  # keep the stage small: archives are large, their files are extracted
+    absent = sorted(set(wanted) - set(got))
+    if absent:
+        raise DataError(
+            f"the sources lack {len(absent)} of the {len(wanted)} files needed (e.g. {absent[0]}); "
+            "wrong mirror or upstream changed"
+        )
+    for rel in sorted(got):
+        if got[rel] != wanted[rel]:
+            raise DataError(
+                f"{rel} from {origin[rel]} does not match the manifest (sha256 {got[rel][:12]}..., "
+                f"expected {wanted[rel][:12]}...): corrupted download or wrong mirror"
+            )
+    write_manifest(data / MANIFEST_NAME, got)
+    return got
+
+
+def fetch_one(bench: Benchmark, dest: Path, mirror: str | None, out: TextIO) -> None:
+    """Fetch ``bench`` into ``dest`` (must not exist, or be empty); DataError on any failure,
+    leaving ``dest`` and its parents as they were."""
+    dest = dest.expanduser().absolute()
+    if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
+        if not dest.is_dir():
+            raise DataError(f"{dest} exists and is not a folder")
+        result = check_folder(bench, dest, only=lambda g: g.fetchable)
+        if result.ok:
+            print(f"{bench.name}: {dest} is already there and verifies ({result.checked} files)", file=out)
+            return
+        raise DataError(
+            f"{dest} exists and does not verify ({sum(result.missing.values())} missing, "
+            f"{len(result.mismatched)} mismatched); remove it or pass another --dest"
+        )
+    created = [p for p in [dest.parent, *dest.parent.parents] if not p.exists()]
+    stage: Path | None = None
+    done = False
+    try:
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=f".{dest.name}.partial-", dir=dest.parent))
+        print(f"{bench.name}: fetching into {dest}", file=out, flush=True)
+        got = _stage(bench, mirror, stage, out)
+        if dest.is_dir():
+            dest.rmdir()  # empty (checked above)
+        os.rename(stage / "data", dest)
+        done = True
+    finally:
+        if stage is not None:
+            shutil.rmtree(stage, ignore_errors=True)
+        if not done:
+            for folder in created:  # innermost first: parents this call created, if still empty
+                try:
+                    folder.rmdir()
+                except OSError:
+                    break
+    print(f"{bench.name}: {dest}: {len(got)} files fetched and verified", file=out)
+    if bench.after_fetch:
+        print(f"{bench.name}: note: {bench.after_fetch}", file=out)
+    _note_precedence(bench, dest, out)
+
+
+def _note_precedence(bench: Benchmark, dest: Path, out: TextIO) -> None:
+    """Say so when the resolver will not pick the folder just fetched."""
+    _rungs, used = search(bench, None)
+    if used is not None and used.path is not None and used.path.resolve() == dest.resolve():
+        return
+    env_var = _location(bench).env_var
+    where = f"{_describe(used)} is used instead" if used is not None else "it is not on the search path"
+    print(f"{bench.name}: note: {where}; set {env_var}={dest} to use this folder", file=out)
+
+
+def default_dest(bench: Benchmark, dest: str | None, several: bool) -> Path:
+    if dest is None:
+        return data_paths.recap_cache_root() / bench.name
+    root = Path(dest).expanduser()
+    return root / bench.name if several else root
+
+
+def cmd_fetch(benches: list[Benchmark], dest: str | None, mirror: str | None, out: TextIO) -> list[str]:
+    check_mirror(mirror)
+    failures = []
+    for bench in benches:
+        target = default_dest(bench, dest, several=len(benches) > 1)
+        try:
+            fetch_one(bench, target, mirror, out)
+        except DataError as exc:
+            failures.append(f"{bench.name}: {exc}; nothing was written")
+        except OSError as exc:  # the destination cannot be written (permissions, disk full)
+            failures.append(f"{bench.name}: cannot write {target}: {exc.strerror or exc}; nothing was written")
+    return failures
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports into the given streams and raises instead of exiting."""
+
+    def __init__(self, *args: Any, out: TextIO, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.out = out
+
+    def error(self, message: str) -> NoReturn:  # type: ignore[override]
+        where = self.prog.removeprefix("recap").strip()
+        raise UsageError(f"{message} (see recap {where} --help)")
+
+    def exit(self, status: int = 0, message: str | None = None) -> NoReturn:  # type: ignore[override]
+        if message:
+            self.out.write(message)
+        raise _Exit(status)
+
+    def print_help(self, file: Any = None) -> None:
+        self.out.write(self.format_help())
+
+    def print_usage(self, file: Any = None) -> None:
+        self.out.write(self.format_usage())
+
+
+class _Exit(Exception):
+    def __init__(self, status: int) -> None:
+        super().__init__(status)
+        self.status = status
+
+
+def _parser(out: TextIO) -> _Parser:
+    p = _Parser(prog="recap data", description="Find, verify and fetch the benchmark data folders.", out=out,
+                epilog="exit status: 0 all verified; 1 a check or fetch failed; 2 bad usage")
+    sub = p.add_subparsers(dest="action", required=True, metavar="ACTION",
+                           parser_class=partial(_Parser, out=out))
+    choices = (*BENCHMARKS, "all")
+    for name, text in (("list", "where each benchmark's folder is looked for, and which one is used"),
+                       ("check", "verify each folder against the sha256 manifest")):
+        sp = sub.add_parser(name, help=text, description=text)
+        sp.add_argument("bench", nargs="?", default="all", choices=choices, metavar="BENCH",
+                        help=f"one of {', '.join(choices)} (default all)")
+        sp.add_argument("--data-dir", dest="data_dir", help="look here first (needs BENCH)")
+    f = sub.add_parser("fetch", help="download, verify and install the data",
+                       description="Download what can be downloaded, verify it, then move it into place.")
+    f.add_argument("bench", nargs="?", default="all", choices=choices, metavar="BENCH",
+                   help=f"one of {', '.join(choices)} (default all)")
+    f.add_argument("--mirror", help="folder or URL prefix holding the upstream file names (default: upstream URLs)")
+    f.add_argument("--dest", help="the folder (with BENCH) or the parent of the folders (without); "
+                   "default ~/.cache/recap-eval/data/<bench>")
+    return p
+
+
+def data_main(argv: list[str], stdout: TextIO, stderr: TextIO) -> int:
+    """``recap data ...``: returns the exit status (0 ok, 1 check/fetch failed, 2 bad usage)."""
+    try:
+        args = _parser(stdout).parse_args(argv)
+        benches = list(_BY_NAME.values()) if args.bench == "all" else [_BY_NAME[args.bench]]
+        if getattr(args, "data_dir", None) is not None and args.bench == "all":
+            raise UsageError("--data-dir names one benchmark's folder: give BENCH too")
+        if args.action == "list":
+            failures = cmd_list(benches, args.data_dir, stdout)
+        elif args.action == "check":
+            failures = cmd_check(benches, args.data_dir, stdout)
+        else:
+            failures = cmd_fetch(benches, args.dest, args.mirror, stdout)
+    except _Exit as exc:
+        return exc.status
+    except UsageError as exc:
+        print(f"recap: error: data: {one_line(exc)}", file=stderr)
+        return EXIT_USAGE
+    except DataError as exc:
+        print(f"recap: error: data: {one_line(exc)}", file=stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:  # fetch has removed its stage already (finally)
+        print("recap: interrupted", file=stderr)
+        return 130
+    stdout.flush()
+    for failure in failures:
+        print(f"recap: error: data {args.action}: {one_line(failure)}", file=stderr)
+    return EXIT_FAILED if failures else EXIT_OK
