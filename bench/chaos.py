@@ -8,13 +8,32 @@ server - nothing leaves the machine - and reports, over its randomised runs:
     duplicated  terminal rows beyond one per unit
     overspend   $ past a cap as the provider billed it, or paid again for a completed unit
 
-    python bench/chaos.py                          # every scenario (about 4 minutes on 2 cores)
+The scenarios (``--only NAME``; the functions live in ``tests/chaos/MODULE.py``):
+
+    worker    kills     episode workers SIGKILLed at random points of 20 episodes
+    gateway   kills     the gateway and budget actors SIGKILLed under a binding run cap
+    driver    kills     ``recap run`` / ``recap resume`` SIGKILLed, then resumed to the end
+    sink      kills     the sink actor SIGKILLed mid-run (Ray restarts it), then ``recap resume``
+    sinkgone  kills     the sink SIGKILLed with no restart left: the driver stops; ``recap resume``
+    faults    faults    transient provider faults and context-length errors
+    storm     faults    a 429 storm of --storm-s seconds
+    parts     folders   corrupt part files: reported, resume re-runs only the lost units
+    inputs    inputs    bad sweep files and flags: one line, nothing written, no model call
+    secrets   exposure  no key in files, logs or output; every socket on loopback
+    sql       guards    every write / escape attack through ``recap sql``: exit 2, 0 bytes changed
+    caps      guards    a lying provider (usage, n choices, cost figure) against a small run cap
+    lock      guards    synchronised threads and processes racing for the driver lock: 1 winner
+
+    python bench/chaos.py                          # every scenario (about 6 minutes on 2 cores)
     python bench/chaos.py --only worker gateway    # some of them
     python bench/chaos.py --runs 3 --seed 7        # more randomised runs of the kill scenarios
     python bench/chaos.py --storm-s 30 --keep      # the 429 storm's length; keep the run folders
 
-The same scenarios are asserted by ``tests/chaos/test_chaos_slow.py`` (``pytest -m slow
-tests/chaos``). Prints a table; exit status 1 when a scenario failed a check.
+The kill, fault, folder and exposure scenarios are asserted by ``tests/chaos/test_chaos_slow.py``
+and ``tests/chaos/test_chaos_sink.py`` (``pytest -m slow tests/chaos``); the guards borrow the
+attacks and helpers of ``tests/reports/test_sql_read_only.py``, ``tests/gateway/test_hostile_provider.py``
+and ``tests/pipeline/test_driver_lock.py``, which assert them one by one. Prints a table; exit
+status 1 when a scenario failed a check.
 """
 
 from __future__ import annotations
@@ -32,16 +51,21 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 
-#: name -> (module, function, takes runs)
-SCENARIOS = {
+#: name -> (module, function, takes runs[, fixed keyword arguments])
+SCENARIOS: dict[str, tuple] = {
     "worker": ("kills", "worker_kill", True),
     "gateway": ("kills", "gateway_kill", True),
     "driver": ("kills", "driver_kill", True),
+    "sink": ("kills", "sink_kill", True, {"restarts": True}),
+    "sinkgone": ("kills", "sink_kill", True, {"restarts": False}),
     "faults": ("faults", "provider_faults", False),
     "storm": ("faults", "rate_limit_storm", False),
     "parts": ("folders", "corrupt_parts", False),
     "inputs": ("inputs", "bad_inputs", False),
     "secrets": ("exposure", "secrets_and_sockets", False),
+    "sql": ("guards", "sql_attacks", False),
+    "caps": ("guards", "cap_attacks", False),
+    "lock": ("guards", "lock_race", False),
 }
 
 
@@ -69,9 +93,9 @@ def main(argv: list[str] | None = None) -> int:
     t_all = time.monotonic()
     try:
         for name in args.only or list(SCENARIOS):
-            module, fn, takes_runs = SCENARIOS[name]
+            module, fn, takes_runs, *fixed = SCENARIOS[name]
             run = getattr(importlib.import_module(f"tests.chaos.{module}"), fn)
-            kwargs = {}
+            kwargs = dict(fixed[0]) if fixed else {}
             if takes_runs and args.runs is not None:
                 kwargs["runs"] = args.runs
             if name == "storm":

@@ -30,6 +30,8 @@ class RateStats:
     tpm: float | None = None
     tpm_limit: float | None = None
     in_flight: int | None = None
+    #: epoch seconds until which a provider's Retry-After pauses this model (None: not paused)
+    paused_until: float | None = None
 
 
 class ModelBackend(Protocol):

@@ -18,18 +18,62 @@ from typing import Any, NoReturn
 os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 
-from pipeline.errors import PipelineError  # noqa: E402
+from pipeline.errors import PipelineError, one_line  # noqa: E402
 
 EXIT_USAGE = 2
 
 
-def _console(stderr: bool = False) -> Any:
+def _plain(text: str) -> Any:
+    """``text`` for a rich console with markup off: user strings (run and model names, paths,
+    unit keys) are printed as they are, never read as ``[style]`` tags."""
+    from rich.text import Text
+
+    return Text(text)
+
+
+def _styled(text: str, style: str) -> Any:
+    from rich.text import Text
+
+    return Text(text, style=style)
+
+
+def _finite_positive(value: str) -> float:
+    """argparse type: a finite number > 0 (``nan``, ``inf`` and ``-1`` are usage errors)."""
+    import math
+
+    try:
+        x = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid number: {value!r}") from None
+    if not math.isfinite(x) or x <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {value!r}")
+    return x
+
+
+def _console(stderr: bool = False, *, markup: bool = True) -> Any:
     """A rich console; wide when writing to a file or pipe so tables keep one line per row."""
     from rich.console import Console
 
     stream = sys.stderr if stderr else sys.stdout
     width = None if getattr(stream, "isatty", lambda: False)() else 200
-    return Console(file=stream, highlight=False, width=width)
+    return Console(file=stream, highlight=False, width=width, markup=markup)
+
+
+def _render(render: Any, *args: Any) -> None:
+    """``render(*args, console)`` where the rendered text holds user strings (run, method and
+    model names, paths) that may read as Rich markup (``[/]`` in an old run's label would raise
+    on every ``recap status``): rendered once off screen, and with markup off if that fails."""
+    import io
+
+    from rich.console import Console
+    from rich.errors import MarkupError
+
+    console = _console()
+    try:
+        render(*args, Console(file=io.StringIO(), highlight=False, width=console.width))
+    except MarkupError:
+        console = _console(markup=False)
+    render(*args, console)
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -39,12 +83,13 @@ class _OneLineParser(argparse.ArgumentParser):
     def error(self, message: str) -> "NoReturn":  # type: ignore[override]
         where = self.prog.removeprefix("recap").strip()
         hint = f"recap {where} --help" if where else "recap --help"
-        self.exit(EXIT_USAGE, f"recap: error: {where + ': ' if where else ''}{message} (see {hint})\n")
+        self.exit(EXIT_USAGE, one_line(f"recap: error: {where + ': ' if where else ''}{message} (see {hint})") + "\n")
 
 
 def _parser() -> argparse.ArgumentParser:
     p = _OneLineParser(prog="recap", description="Run and inspect ReCAP evaluation sweeps.")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+    sub.add_parser("data", help="list, check or fetch the benchmark data folders (recap data --help)", add_help=False)
 
     def run_flags(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("--address", help="join an existing Ray cluster (e.g. 10.0.0.5:6379 or auto)")
@@ -61,6 +106,8 @@ def _parser() -> argparse.ArgumentParser:
     rs = sub.add_parser("resume", help="finish a run after a crash or with a higher cap")
     rs.add_argument("run_dir")
     run_flags(rs)
+    rs.add_argument("--repair", action="store_true",
+                    help="first cut a torn last line off the ledger journal (a backup is kept); refuses a corrupt line in the middle")
 
     st = sub.add_parser("status", help="units done/total, success, spend of a run folder")
     st.add_argument("run_dir")
@@ -86,7 +133,7 @@ def _parser() -> argparse.ArgumentParser:
     el.add_argument("selector", nargs="?")
     ep = esub.add_parser("play", help="play an instance by hand")
     ep.add_argument("instance_id")
-    ep.add_argument("--step-multiplier", type=float, default=4.0)
+    ep.add_argument("--step-multiplier", type=_finite_positive, default=4.0)
     er = esub.add_parser("replay", help="replay a recorded Robotouille trajectory")
     er.add_argument("trajectory")
     return p
@@ -118,15 +165,15 @@ def _print_plan(prepared: Any, console: Any) -> None:
 
     plan = prepared.plan
     models = ", ".join(model_label(m.name, m.test_double) for m in plan.spec.models)
-    console.print(f"run {plan.spec.run}: {len(plan.units)} units -> {prepared.store.location}  (models: {models})")
+    console.print(_plain(f"run {plan.spec.run}: {len(plan.units)} units -> {prepared.store.location}  (models: {models})"))
     if prepared.diff is not None:
         d = prepared.diff
-        console.print(f"changes since the last start: {d.describe()}")
+        console.print(_plain(f"changes since the last start: {d.describe()}"))
         for label, keys in (("new", d.new), ("changed", d.changed)):
             for k in keys[:10]:
-                console.print(f"  {label}: {k}")
+                console.print(_plain(f"  {label}: {k}"))
             if len(keys) > 10:
-                console.print(f"  ... and {len(keys) - 10} more {label}")
+                console.print(_plain(f"  ... and {len(keys) - 10} more {label}"))
 
 
 def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any = None) -> int:
@@ -137,28 +184,63 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
     backend = backend if backend is not None else _backend(prepared.spec)
     driver = Driver(prepared, backend, command=command, progress=args.progress, address=args.address)
     summary = driver.run()
-    render(collect(prepared.store), console)
+    _render(render, collect(prepared.store))
     if summary.stopped:
-        console.print(f"[yellow]stopped: {summary.stopped}; {summary.not_started} units not started, "
-                      f"{summary.budget_stopped} episodes ended budget_exhausted this session[/yellow]")
-        console.print(f"continue with a higher cap: recap resume {prepared.store.location} --run-cap <USD>")
+        console.print(_styled(f"stopped: {summary.stopped}; {summary.not_started} units not started, "
+                              f"{summary.budget_stopped} episodes ended budget_exhausted this session", "yellow"))
+        console.print(_plain(f"continue with a higher cap: recap resume {prepared.store.location} --run-cap <USD>"))
     if summary.interrupted:
-        console.print(f"[yellow]interrupted; continue with: recap resume {prepared.store.location}[/yellow]")
+        console.print(_styled(f"interrupted; continue with: recap resume {prepared.store.location}", "yellow"))
     if summary.abandoned:
-        console.print(f"[red]{summary.abandoned} units gave up after {prepared.spec.max_attempts} failed attempts (see the events table)[/red]")
-    console.print(f"run folder: {prepared.store.location}   report: recap report {prepared.store.location}")
+        console.print(_styled(f"{summary.abandoned} units gave up after {prepared.spec.max_attempts} failed attempts (see the events table)", "red"))
+    console.print(_plain(f"run folder: {prepared.store.location}   report: recap report {prepared.store.location}"))
     return summary.exit_code()
 
 
-def cmd_run(args: argparse.Namespace, command: str) -> int:
+_CHECKED: set[str] = set()
+
+
+def _check_location(location: str) -> None:
+    """An object-store run folder must answer (bounded in time) before anything touches it;
+    checked once per location and command (``main`` forgets the checks of the last command)."""
+    from pipeline.spec import check_output_location
+
+    if location not in _CHECKED:
+        check_output_location(location)
+        _CHECKED.add(location)
+
+
+def _prepare(spec: Any, text: str) -> tuple[Any, Any]:
+    """(prepared run, model backend); an OS-level failure (an unreadable data file, an output
+    store that refuses a listing) is one line too, before anything is written."""
     from pipeline.driver import prepare
+
+    _check_location(spec.output)
+    try:
+        prepared = prepare(spec, text)
+        return prepared, _backend(spec)
+    except OSError as exc:
+        detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise PipelineError(f"cannot prepare the run in {spec.output}: {detail}") from None
+
+
+def _check_ray_address(spec: Any) -> None:
+    """A cluster address given as host:port must answer before the driver writes anything
+    (bounded: ``ray.init`` on a dead address would retry for minutes)."""
+    from pipeline.spec import check_ray_address_reachable
+
+    check_ray_address_reachable(spec.ray.address)
+
+
+def cmd_run(args: argparse.Namespace, command: str) -> int:
     from pipeline.spec import load_spec, with_overrides
 
     spec, text = load_spec(args.spec)
-    spec = with_overrides(spec, workers=args.workers, run_cap_usd=args.run_cap, output=args.output)
+    spec = with_overrides(spec, workers=args.workers, run_cap_usd=args.run_cap, output=args.output, address=args.address)
     with _named(Path(args.spec).name):
-        prepared = prepare(spec, text)
-        backend = _backend(spec)
+        prepared, backend = _prepare(spec, text)
+    if not args.dry_run:
+        _check_ray_address(spec)
     console = _console()
     _print_plan(prepared, console)
     if args.dry_run:
@@ -167,23 +249,27 @@ def cmd_run(args: argparse.Namespace, command: str) -> int:
 
 
 def cmd_resume(args: argparse.Namespace, command: str) -> int:
-    from pipeline.driver import prepare
     from pipeline.errors import RunFolderError
     from pipeline.spec import parse_spec, with_overrides
     from pipeline.store import SPEC_FILE, RunStore
 
+    _check_location(args.run_dir)
     store = RunStore(args.run_dir)
     ident = store.require_identity()
+    if args.repair:
+        from pipeline.resume import repair_run
+
+        _console().print(repair_run(store), markup=False, soft_wrap=True)
     text = store.read_text(SPEC_FILE)
     if text is None:
         raise RunFolderError(f"{args.run_dir} has no {SPEC_FILE}; start it again with recap run SPEC")
     spec = parse_spec(text, f"{args.run_dir}/{SPEC_FILE}")
-    spec = with_overrides(spec, workers=args.workers, run_cap_usd=args.run_cap, output=args.run_dir)
+    spec = with_overrides(spec, workers=args.workers, run_cap_usd=args.run_cap, output=args.run_dir, address=args.address)
     if spec.run != ident.run:
         raise RunFolderError(f"{args.run_dir}: {SPEC_FILE} names run {spec.run!r} but run.json names {ident.run!r}")
     with _named(f"{args.run_dir}/{SPEC_FILE}"):
-        prepared = prepare(spec, text)
-        backend = _backend(spec)
+        prepared, backend = _prepare(spec, text)
+    _check_ray_address(spec)
     _print_plan(prepared, _console())
     return _execute(prepared, args, command, backend)
 
@@ -192,6 +278,7 @@ def cmd_status(args: argparse.Namespace) -> int:
     from pipeline.store import RunStore
     from pipeline.summary import collect, render
 
+    _check_location(args.run_dir)
     store = RunStore(args.run_dir)
     store.require_identity()
     try:
@@ -200,7 +287,7 @@ def cmd_status(args: argparse.Namespace) -> int:
         raise
     except Exception as exc:  # status must never die with a traceback on a damaged folder
         raise PipelineError(f"cannot read {args.run_dir}: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}") from None
-    render(report, _console())
+    _render(render, report)
     return 0
 
 
@@ -211,7 +298,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
     spec, _ = load_spec(args.spec)
     plan = expand(spec)
-    render(plan, estimate(plan), _console())
+    _render(render, plan, estimate(plan))
     return 0
 
 
@@ -235,6 +322,8 @@ def dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
         return cmd_status(args)
     if args.cmd == "estimate":
         return cmd_estimate(args)
+    if args.cmd in ("show", "sql"):
+        _check_location(args.run_dir)
     if args.cmd == "show":
         from pipeline.show import show_main
 
@@ -260,8 +349,12 @@ def _local_run_args(args: list[str]) -> list[str]:
     from pipeline.store import RUN_FILE, RunStore
     from workers.sink import is_uri
 
+    from pipeline.spec import URI_SCHEMES
+
     out = []
     for a in args:
+        if is_uri(a) and a.split("://", 1)[0].lower() in URI_SCHEMES:  # not a query that quotes a URL
+            _check_location(a)
         if is_uri(a) and RunStore(a).exists(RUN_FILE):
             from pipeline.mirror import mirror_dir, pull
 
@@ -285,6 +378,11 @@ def cmd_sql_delegated(argv: list[str]) -> int | None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    _CHECKED.clear()
+    if argv and argv[0] == "data":
+        from pipeline.data import data_main
+
+        return data_main(argv[1:], sys.stdout, sys.stderr)
     if argv and argv[0] in ("report", "sql") and not {"-h", "--help"} & set(argv[1:2]):
         try:
             if argv[0] == "report":

@@ -8,11 +8,29 @@ nothing and leaves nothing behind.
 from __future__ import annotations
 
 
+def one_line(message: object) -> str:
+    """``message`` as one printable line: runs of whitespace (newlines included) become one
+    space and every other control or format character (an escape code, a bidi override) its
+    ``\\x..``/``\\u....`` escape, so a user string inside a message cannot move the cursor,
+    recolour the terminal or split the line."""
+    text = " ".join(str(message).split())
+    if text.isprintable():
+        return text
+    out = []
+    for ch in text:
+        if ch.isprintable() or ch == " ":
+            out.append(ch)
+        else:
+            code = ord(ch)
+            out.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}" if code < 0x10000 else f"\\U{code:08x}")
+    return "".join(out)
+
+
 class PipelineError(Exception):
-    """Base class: ``str(err)`` is a complete one-line message."""
+    """Base class: ``str(err)`` is a complete one-line message (see :func:`one_line`)."""
 
     def __init__(self, message: str) -> None:
-        super().__init__(" ".join(str(message).split()))
+        super().__init__(one_line(message))
 
 
 class SpecError(PipelineError):

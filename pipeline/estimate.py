@@ -138,11 +138,12 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
 
 
 def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
+    from rich.markup import escape
     from rich.table import Table
 
     from pipeline.summary import model_label
 
-    t = Table(title=f"estimate for run {plan.spec.run}: {len(plan.units)} units")
+    t = Table(title=escape(f"estimate for run {plan.spec.run}: {len(plan.units)} units"))
     for col in ("method", "model", "units", "calls", "tokens", "cost $"):
         t.add_column(col, justify="left" if col in ("method", "model") else "right")
     total_cost = Range()
@@ -153,7 +154,7 @@ def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
             total_cost.add(g.cost.low, g.cost.high)
         else:
             unknown = True
-        t.add_row(g.method, model_label(g.model, g.test_double), str(g.units), f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
+        t.add_row(escape(g.method), escape(model_label(g.model, g.test_double)), str(g.units), f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
                   f"{g.tokens.low:,.0f} - {g.tokens.high:,.0f}", cost)
     console.print(t)
     calls = sum(g.calls.low for g in groups), sum(g.calls.high for g in groups)

@@ -161,7 +161,7 @@ class GatewayBackend:
             out[label] = RateStats(
                 rpm=s.get("window_requests", 0) * per_min, rpm_limit=(s["rpm"] * per_min) if s.get("rpm") else None,
                 tpm=s.get("window_tokens", 0) * per_min, tpm_limit=(s["tpm"] * per_min) if s.get("tpm") else None,
-                in_flight=s.get("inflight"))
+                in_flight=s.get("inflight"), paused_until=s.get("paused_until"))
         return out
 
     def set_run_cap(self, usd: float | None) -> None:

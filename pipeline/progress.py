@@ -29,6 +29,14 @@ class Snapshot:
     stopped: str | None = None
 
 
+def paused_text(until: float | None, now: float | None = None) -> str:
+    """"  paused until HH:MM:SS" while a provider's Retry-After holds a model back, else ""."""
+    now = time.time() if now is None else now
+    if until is None or until <= now:
+        return ""
+    return "  paused until " + time.strftime("%H:%M:%S", time.localtime(until))
+
+
 def fmt_duration(seconds: float | None) -> str:
     if seconds is None:
         return "--"
@@ -48,7 +56,8 @@ def _pct(used: float | None, limit: float | None) -> str:
 
 def status_line(s: Snapshot) -> str:
     cap = f" / cap ${s.run_cap_usd:.2f}" if s.run_cap_usd is not None else ""
-    rate = "; ".join(f"{m}: rpm {_pct(r.rpm, r.rpm_limit)} tpm {_pct(r.tpm, r.tpm_limit)}" for m, r in s.rates.items())
+    rate = "; ".join(f"{m}: rpm {_pct(r.rpm, r.rpm_limit)} tpm {_pct(r.tpm, r.tpm_limit)}{paused_text(r.paused_until)}"
+                     for m, r in s.rates.items())
     line = (f"units {s.done}/{s.total} | success {s.success}/{s.done} | running {s.running} | "
             f"spend ${s.spend_usd:.4f}{cap} | ETA {fmt_duration(s.eta_s)}")
     if s.restarts:
@@ -88,6 +97,7 @@ class ProgressView:
             self._live = None
 
     def _render(self, s: Snapshot | None) -> Any:
+        from rich.markup import escape
         from rich.panel import Panel
         from rich.progress_bar import ProgressBar
         from rich.table import Table
@@ -97,7 +107,7 @@ class ProgressView:
         t.add_column()
         if s is None:
             t.add_row("starting", "")
-            return Panel(t, title=self.title)
+            return Panel(t, title=escape(self.title))
         t.add_row("units", f"{s.done}/{s.total}  (running {s.running})")
         t.add_row("", ProgressBar(total=max(s.total, 1), completed=s.done, width=40))
         rate = f"{100 * s.success / s.done:.1f}%" if s.done else "--"
@@ -105,14 +115,15 @@ class ProgressView:
         cap = f" of ${s.run_cap_usd:.2f} cap ({100 * s.spend_usd / s.run_cap_usd:.0f}%)" if s.run_cap_usd else ""
         t.add_row("spend", f"${s.spend_usd:.4f}{cap}")
         for m, r in s.rates.items():
-            t.add_row(f"{m}", f"rpm {_pct(r.rpm, r.rpm_limit)}  tpm {_pct(r.tpm, r.tpm_limit)}"
-                      + (f"  in flight {r.in_flight}" if r.in_flight is not None else ""))
+            t.add_row(escape(f"{m}"), f"rpm {_pct(r.rpm, r.rpm_limit)}  tpm {_pct(r.tpm, r.tpm_limit)}"
+                      + (f"  in flight {r.in_flight}" if r.in_flight is not None else "")
+                      + paused_text(r.paused_until))
         t.add_row("ETA", fmt_duration(s.eta_s))
         if s.restarts:
             t.add_row("restarts", str(s.restarts))
         if s.stopped:
-            t.add_row("stopped", f"[yellow]{s.stopped}[/yellow]")
-        return Panel(t, title=self.title)
+            t.add_row("stopped", f"[yellow]{escape(s.stopped)}[/yellow]")
+        return Panel(t, title=escape(self.title))
 
     def update(self, s: Snapshot, *, force: bool = False) -> None:
         if self.mode == "live" and self._live is not None:

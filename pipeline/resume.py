@@ -1,8 +1,14 @@
 """What a run folder says is done, and the queue of what is left.
 
 Resume reads everything from the tables, never from the driver's memory: a unit is *completed*
-when it has a terminal ``episodes`` row whose end reason is not ``budget_exhausted`` (an episode
-cut by a cap is unfinished work that a resume with a higher cap continues). Attempt numbers
+when it has a terminal ``episodes`` row whose end reason is neither ``budget_exhausted`` (an
+episode cut by a cap is unfinished work that a resume with a higher cap continues) nor an
+*infrastructure failure* (:func:`infra_failure`: ``llm_error`` of a failed model service -
+connection, auth, rate limit, timeout, server error, not found - or a unit the driver gave up
+on after its workers died or its client failed). Such a unit is *retryable*: the next ``recap
+resume`` (or ``recap run`` of the same sweep, e.g. with the ``api_base`` corrected) runs it
+again under the next attempt number; its earlier rows stay for the record, and its failed
+attempts before that row no longer count against ``max_attempts``. Attempt numbers
 continue after the highest attempt seen anywhere (episode rows, events, the episode ids of
 rows a crashed attempt already wrote, and the call keys of the gateway's ledger journal - an
 attempt killed within a second of its calls has no rows yet, only journal lines), so a new
@@ -14,10 +20,15 @@ would otherwise answer with the killed attempt's recorded replies). Only attempt
 from __future__ import annotations
 
 import json
+import os
+import re
+import shutil
+import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+from pipeline.errors import RunFolderError
 from pipeline.store import RunStore
 from pipeline.units import Unit
 from workers.gateway.ledger import JOURNAL_NAME
@@ -28,6 +39,53 @@ FAILED_ATTEMPT_EVENTS = ("worker_lost", "attempt_failed")
 _ID_TABLES = ("messages", "steps", "tree_nodes", "llm_calls")
 #: the gateway's budget journal, relative to the run folder
 JOURNAL_FILE = JOURNAL_NAME
+
+
+#: ``llm_error`` kinds (the first word of the row's error) that say the model service failed
+INFRA_ERROR_KINDS = ("rate_limit", "timeout", "server_error", "auth", "connection", "not_found")
+#: how the driver's row for a unit it gave up on begins
+GAVE_UP_PREFIX = "gave up after"
+_GAVE_UP_INFRA = re.compile(r"\(infrastructure: (\w+)\)")
+#: what the last error of a give-up row written before the marker existed says of a lost worker
+_WORKER_DEATHS = ("ActorDiedError", "RayActorError", "ActorUnavailableError", "WorkerCrashedError", "worker lost")
+
+
+def infra_failure(end_reason: str | None, error: str | None) -> str | None:
+    """The infrastructure failure a terminal row records (``server_error``, ``auth``,
+    ``not_found``, ``worker_lost`` ...), or None when the row is a real outcome.
+
+    * ``llm_error`` rows: the error text starts with the LLM error kind (``"auth: ..."``); a
+      ``bad_request`` that is a 404 (a wrong ``api_base`` path or model name) is ``not_found``;
+      ``context_length`` and other bad requests are outcomes of the agent's own requests.
+    * rows of units the driver gave up on (``"gave up after N failed attempts ..."``): infra
+      when the attempts were lost to dying workers or a failing model client (the row says
+      ``(infrastructure: KIND)``), not when the agent itself crashed.
+    """
+    text = (error or "").strip()
+    if text.startswith(GAVE_UP_PREFIX):
+        m = _GAVE_UP_INFRA.search(text)
+        if m:
+            return m.group(1)
+        head = text.split("; last:", 1)
+        last = head[1].strip() if len(head) > 1 else ""
+        if last.startswith("client:"):
+            return "client"
+        if any(s in last for s in _WORKER_DEATHS):
+            return "worker_lost"
+        return None
+    if end_reason != "llm_error":
+        return None
+    kind = text.split(":", 1)[0].strip()
+    if kind in INFRA_ERROR_KINDS:
+        return kind
+    if kind == "bad_request" and re.search(r"NotFoundError|\b404\b|[Nn]ot [Ff]ound", text):
+        return "not_found"
+    return None
+
+
+def is_final(end_reason: str | None, error: str | None) -> bool:
+    """A terminal row that completes its unit (not cut by a cap, not an infrastructure failure)."""
+    return end_reason != "budget_exhausted" and infra_failure(end_reason, error) is None
 
 
 def parse_episode_id(episode_id: str) -> tuple[str, int] | None:
@@ -41,6 +99,8 @@ def parse_episode_id(episode_id: str) -> tuple[str, int] | None:
 class RunState:
     completed: set[str] = field(default_factory=set)
     budget_stopped: set[str] = field(default_factory=set)
+    #: unit -> the infrastructure failure its latest terminal row records (retryable)
+    infra_failed: dict[str, str] = field(default_factory=dict)
     last_attempt: dict[str, int] = field(default_factory=dict)
     failures: dict[str, int] = field(default_factory=dict)
     terminal_rows: int = 0
@@ -53,16 +113,28 @@ class RunState:
 
 def load_state(store: RunStore) -> RunState:
     state = RunState()
-    eps, bad = store.read_table("episodes", ["unit_id", "attempt", "end_reason"])
+    cols = ("unit_id", "attempt", "end_reason", "error")
+    eps, bad = store.read_table("episodes", list(cols))
     state.bad_parts += bad
     state.terminal_rows = eps.num_rows
-    for unit_id, attempt, reason in zip(*(eps.column(c).to_pylist() for c in ("unit_id", "attempt", "end_reason"))):
+    #: unit -> (attempt, infra kind) of its latest infrastructure-failure row
+    infra: dict[str, tuple[int, str]] = {}
+    #: unit -> the highest attempt of any terminal row (failures before it are spent)
+    ended: dict[str, int] = {}
+    for unit_id, attempt, reason, error in zip(*(eps.column(c).to_pylist() for c in cols)):
         state._seen(unit_id, attempt)
+        ended[unit_id] = max(ended.get(unit_id, 0), attempt)
+        kind = infra_failure(reason, error)
         if reason == "budget_exhausted":
             state.budget_stopped.add(unit_id)
+        elif kind is not None:
+            if attempt >= infra.get(unit_id, (0, ""))[0]:
+                infra[unit_id] = (attempt, kind)
         else:
             state.completed.add(unit_id)
+    state.infra_failed = {u: k for u, (_, k) in infra.items() if u not in state.completed}
     state.budget_stopped -= state.completed
+    state.budget_stopped -= set(state.infra_failed)
     events, bad = store.read_table("events", ["kind", "unit_id", "detail"])
     state.bad_parts += bad
     for kind, unit_id, detail in zip(*(events.column(c).to_pylist() for c in ("kind", "unit_id", "detail"))):
@@ -73,7 +145,8 @@ def load_state(store: RunStore) -> RunState:
         except (ValueError, TypeError, AttributeError):
             attempt = 0
         state._seen(unit_id, attempt)
-        if kind in FAILED_ATTEMPT_EVENTS:
+        # a unit that ended (e.g. gave up after its workers died) starts a fresh count when retried
+        if kind in FAILED_ATTEMPT_EVENTS and (unit_id not in ended or attempt > ended[unit_id]):
             state.failures[unit_id] = state.failures.get(unit_id, 0) + 1
     for table in _ID_TABLES:
         ids, bad = store.read_table(table, ["episode_id"])
@@ -91,13 +164,13 @@ def load_state(store: RunStore) -> RunState:
 
 def journal_episode_ids(store: RunStore) -> set[str]:
     """Episode ids named by the call keys (``<episode_id>#<call>``) of the ledger journal."""
-    text = store.read_text(JOURNAL_FILE)
+    data = store.read_bytes(JOURNAL_FILE)
     out: set[str] = set()
-    for line in (text or "").splitlines():
+    for line in (data or b"").decode("utf-8", errors="replace").splitlines():
         try:
             key = json.loads(line).get("key")
         except (ValueError, AttributeError):
-            continue  # a torn last line
+            continue  # a torn (or corrupt) line
         if isinstance(key, str) and "#" in key:
             out.add(key.rsplit("#", 1)[0])
     return out
@@ -138,3 +211,127 @@ class UnitQueue:
 
     def units(self) -> list[Unit]:
         return [p.unit for p in self._q]
+
+
+# --------------------------------------------------------------------------------------------
+# the gateway's budget journal: find a torn or corrupt line, and repair a torn last one
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class JournalIssue:
+    """A line of the ledger journal that is not a complete entry.
+
+    ``torn``: the last line (a crash mid-write; the entry never completed, so its call was
+    never sent or its settlement stays open and is charged at its reserved worst case) - safe
+    to cut away. Otherwise a line in the middle is corrupt: the spend cannot be restored
+    without guessing, so nothing cuts it automatically."""
+
+    path: str
+    line: int
+    lines: int
+    torn: bool
+    good_end: int
+    size: int
+
+    def describe(self) -> str:
+        if self.torn:
+            return (f"ledger journal {self.path}: line {self.line} of {self.lines} is torn (a crash mid-write); "
+                    f"the next resume drops it, keeping a backup (or now: recap resume <run> --repair)")
+        return (f"ledger journal {self.path}: line {self.line} of {self.lines} is corrupt and not the last line; "
+                f"the run's spend cannot be restored from it - restore the file from a backup "
+                f"(recap resume --repair only cuts a torn last line)")
+
+
+def _entry_ok(line: bytes) -> bool:
+    try:
+        return isinstance(json.loads(line), dict)
+    except ValueError:  # JSONDecodeError, UnicodeDecodeError (garbage or zero-filled bytes)
+        return False
+
+
+def _blank(line: bytes) -> bool:
+    return not line.strip(b" \t\r\n\x00")
+
+
+def scan_journal(data: bytes, path: str = JOURNAL_FILE) -> JournalIssue | None:
+    """The first line of a journal's bytes that is not a complete entry (its line number as an
+    editor shows it), or None."""
+    lines = data.split(b"\n")
+    n_lines = len(lines) - (1 if data.endswith(b"\n") else 0)
+    good_end = 0
+    for i, line in enumerate(lines):
+        last = i == len(lines) - 1
+        if not line.strip(b" \t\r") or _entry_ok(line):  # an entry, or plain whitespace
+            good_end += len(line) + (0 if last else 1)
+            continue
+        # a torn or garbage line: torn when nothing but blanks / zero bytes follow it
+        torn = all(_blank(r) for r in lines[i + 1:])
+        return JournalIssue(path, i + 1, max(n_lines, i + 1), torn, good_end, len(data))
+    return None
+
+
+def journal_issue(store: RunStore) -> JournalIssue | None:
+    """What is wrong with the run folder's ledger journal (None: nothing, or no journal)."""
+    data = store.read_bytes(JOURNAL_FILE)
+    if not data:
+        return None
+    where = f"{store.location.rstrip('/')}/{JOURNAL_FILE}"
+    return scan_journal(data, where)
+
+
+def check_journal(store: RunStore) -> None:
+    """Refuse (one line, before anything starts) a journal corrupt before its last line; a
+    torn last line is left to the ledger, which cuts it when it opens the journal."""
+    issue = journal_issue(store)
+    if issue is not None and not issue.torn:
+        raise RunFolderError(issue.describe())
+
+
+def repair_run(store: RunStore) -> str:
+    """``recap resume RUN --repair``: cut a torn last line off the ledger journal, keeping a
+    backup of the whole file next to it; refuse a corrupt line in the middle (and a folder a
+    live driver or ledger holds). Returns one line saying what was done."""
+    store.require_identity()
+    store.check_unlocked()
+    issue = journal_issue(store)
+    if issue is None:
+        return f"nothing to repair in {store.location}: the ledger journal is intact"
+    if not issue.torn:
+        raise RunFolderError(issue.describe().replace("(recap resume --repair only cuts a torn last line)",
+                                                      "- --repair only cuts a torn last line, so it changed nothing"))
+    stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime())
+    if store.remote:
+        data = store.read_bytes(JOURNAL_FILE) or b""
+        backup_name = f"{JOURNAL_FILE}.bak-{stamp}"
+        store.write_bytes(backup_name, data)
+        store.write_bytes(JOURNAL_FILE, data[:issue.good_end])
+        backup = f"{store.location.rstrip('/')}/{backup_name}"
+    else:
+        import fcntl
+
+        path = store.path / JOURNAL_FILE
+        with open(path, "r+b") as fh:
+            try:  # no live ledger may hold it (the gateway's own lock)
+                fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise RunFolderError(f"{path} is held by a live ledger (a driver is running on this run); "
+                                     "repair it once that driver has ended") from None
+            data = fh.read()
+            again = scan_journal(data, str(path))
+            if again is None or not again.torn:  # changed under us
+                raise RunFolderError(f"{path} changed while it was being repaired; run recap status {store.location}")
+            backup_path = path.with_name(f"{path.name}.bak-{stamp}")
+            n = 1
+            while backup_path.exists():
+                n += 1
+                backup_path = path.with_name(f"{path.name}.bak-{stamp}-{n}")
+            shutil.copy2(path, backup_path)
+            with open(backup_path, "rb") as b:
+                os.fsync(b.fileno())
+            fh.truncate(again.good_end)
+            fh.flush()
+            os.fsync(fh.fileno())
+            issue = again
+        backup = str(backup_path)
+    cut = issue.size - issue.good_end
+    return (f"repaired {issue.path}: cut the torn last line {issue.line} ({cut} bytes); "
+            f"the whole file before the repair is kept as {backup}")

@@ -112,5 +112,7 @@ def show_main(run_dir: str, ref: str, console: Any) -> int:
     steps = steps_t.filter(pc.equal(steps_t["episode_id"], eid)).to_pylist() if steps_t.num_rows else []
     console.print(build_tree(ep, nodes, steps))
     if ep.get("error"):
-        console.print(f"[dim]end: {ep['end_reason']}: {_first_line(ep['error'], 300)}[/dim]")
+        from rich.markup import escape
+
+        console.print(f"[dim]end: {escape(str(ep['end_reason']))}: {escape(_first_line(ep['error'], 300))}[/dim]")
     return 0

@@ -33,58 +33,222 @@ Example::
     run_cap_usd: 5.0
     workers: 8
     max_attempts: 3
+
+Hardening (every rule fails as one line before any model call or write):
+
+* The file: a regular file of at most :data:`MAX_SPEC_BYTES` (1 MiB) of UTF-8 text (devices,
+  FIFOs and sockets are refused before they are opened for reading). YAML anchors, aliases and
+  merge keys (``&a``, ``*a``, ``<<``) are refused (an alias bomb cannot expand), so is a key
+  given twice in one mapping at any depth (``duplicate key 'cap_usd' at line 12``), a value
+  longer than :data:`MAX_SCALAR_CHARS` characters and nesting deeper than :data:`MAX_DEPTH`.
+* Numbers, anywhere in the file (free-form ``params``/``options``/``settings`` included):
+  floats must be finite (``.nan``/``.inf`` refused), integers must fit a signed 64-bit column.
+  Every integer field refuses ``true``/``false`` and has a documented range (the ``*_MAX``
+  constants below): seeds 0..2**31-1, workers 1..1024, max_attempts 1..100, rpm 1..10**7,
+  tpm 1..10**11, concurrency 1..10000, retries 0..100, timeout_s and window_s up to a day,
+  limits.llm_calls 1..10**6, limits.tokens 1..10**10, environment limit 1..10**5, ray.num_cpus
+  1..4096, ray.object_store_mb 64..1048576; dollar amounts (caps, limits.usd) up to 10**6,
+  prices up to 10**4 USD per million tokens, step_multiplier up to 1000, worker_cpus up to 1024.
+* Strings: run names match ``[A-Za-z0-9][A-Za-z0-9_.-]*`` (at most 200 characters); labels are
+  at most 200 characters of letters, digits, space and ``- _ . : @ + / ( ) , = # %`` (no
+  brackets, backslashes or control characters: nothing a terminal or Rich markup interprets);
+  model strings are at most 2000 printable ASCII characters without spaces, brackets or
+  backslashes; api_base at most 2000 characters; every other name at most 200 and selectors or
+  instance ids at most 1000 printable characters.
+* Sizes: at most 100 models, methods and environments, 10000 seeds, 1000 task selectors and
+  10000 instance ids per environment (20000 in all).
+* Paths: ``output`` is resolved once, here (``~`` expanded, made absolute), so every component
+  sees the same folder; so are ``environments[].options`` paths (``data_dir`` and every
+  ``*_dir`` option) and an offline/replay model's ``api_base`` folder. An object-store output
+  must use a known scheme; :func:`check_output_location` checks that it can be reached before
+  anything is written.
+* ``ray.address``: ``auto``, ``local``, ``host:port`` or ``ray://host:port`` (port 1..65535).
 """
 
 from __future__ import annotations
 
 import hashlib
+import ipaddress
+import math
+import os
 import re
+import stat
+import unicodedata
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from pipeline.errors import SpecError
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+#: labels (models, methods): what is printed in tables and unit keys
+_LABEL = re.compile(r"^[A-Za-z0-9 _.:@+/(),=#%\-]+$")
+#: litellm model strings: printable ASCII without space, brackets or backslash
+_MODEL = re.compile(r"^[\x21-\x5a\x5e-\x7e]+$")
+_ENV_VAR = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 #: models served in-process by the gateway's test-double provider (no key, no real spend)
 OFFLINE_PREFIX = "offline/"
 
+# -- documented bounds ---------------------------------------------------------------------------
+MAX_SPEC_BYTES = 1 << 20
+MAX_SCALAR_CHARS = 4096
+MAX_DEPTH = 16
+INT64_MAX = 2**63 - 1
+SEED_MAX = 2**31 - 1
+NAME_MAX = 200
+LONG_MAX = 2000
+SELECTOR_MAX = 1000
+PATH_MAX = 4096
+USD_MAX = 1_000_000.0
+PRICE_MAX = 10_000.0
+STEP_MULTIPLIER_MAX = 1000.0
+WORKERS_MAX = 1024
+ATTEMPTS_MAX = 100
+RPM_MAX = 10**7
+TPM_MAX = 10**11
+CONCURRENCY_MAX = 10_000
+RETRIES_MAX = 100
+SECONDS_MAX = 86_400.0
+LLM_CALLS_MAX = 10**6
+TOKENS_MAX = 10**10
+LIMIT_MAX = 100_000
+NUM_CPUS_MAX = 4096
+OBJECT_STORE_MB_MAX = 1 << 20
+WORKER_CPUS_MAX = 1024.0
+LIST_MAX = 100
+SEEDS_MAX = 10_000
+SELECTORS_MAX = 1000
+INSTANCES_MAX = 10_000
+INSTANCES_TOTAL_MAX = 20_000
+
+#: object-store schemes an output may use (``file://`` is a local folder)
+URI_SCHEMES = ("file", "s3", "gs", "gcs", "hdfs", "abfs", "abfss")
+
+
+# -- field types ---------------------------------------------------------------------------------
+def _not_bool(v: Any) -> Any:
+    if isinstance(v, bool):
+        raise ValueError("must be a number, not true/false")
+    return v
+
+
+def _int(*, ge: int | None = None, gt: int | None = None, le: int) -> Any:
+    return Annotated[int, BeforeValidator(_not_bool), Field(ge=ge, gt=gt, le=le)]
+
+
+def _float(*, ge: float | None = None, gt: float | None = None, le: float) -> Any:
+    return Annotated[float, BeforeValidator(_not_bool), Field(ge=ge, gt=gt, le=le, allow_inf_nan=False)]
+
+
+def _unprintable(v: str) -> str | None:
+    """The first character a terminal would interpret (control, format, line separators)."""
+    for ch in v:
+        if unicodedata.category(ch)[0] == "C" or unicodedata.category(ch) in ("Zl", "Zp"):
+            return ch
+    return None
+
+
+def _printable(v: str) -> str:
+    bad = _unprintable(v)
+    if bad is not None:
+        raise ValueError(f"must not contain control characters (found {bad!r})")
+    return v
+
+
+def _label(v: str) -> str:
+    if v != v.strip():
+        raise ValueError("must not start or end with a space")
+    if not _LABEL.match(v):
+        raise ValueError("may hold only letters, digits, spaces and - _ . : @ + / ( ) , = # % "
+                         f"(no brackets or control characters), got {v!r}")
+    return v
+
+
+def _model_string(v: str) -> str:
+    if not _MODEL.match(v):
+        raise ValueError(f"must be a litellm model string (printable, no spaces, brackets or backslashes), got {v!r}")
+    return v
+
+
+Name = Annotated[str, Field(min_length=1, max_length=NAME_MAX), AfterValidator(_printable)]
+Label = Annotated[str, Field(min_length=1, max_length=NAME_MAX), AfterValidator(_label)]
+Selector = Annotated[str, Field(min_length=1, max_length=SELECTOR_MAX), AfterValidator(_printable)]
+Seed = _int(ge=0, le=SEED_MAX)
+Usd = _float(ge=0, le=USD_MAX)
+Price = _float(ge=0, le=PRICE_MAX)
+Seconds = _float(gt=0, le=SECONDS_MAX)
+
+
+def _local_path(v: str) -> str:
+    """``~`` expanded and made absolute (normalised, symlinks kept), once for every component."""
+    p = os.path.expanduser(v)
+    if p.startswith("~"):
+        raise ValueError(f"cannot expand {v!r} (no such user or no home folder)")
+    return os.path.abspath(p)
+
+
+def _is_uri(v: str) -> bool:
+    return "://" in v
+
+
+def _path_option(key: str) -> bool:
+    return key.startswith("data_dir") or key.endswith("_dir")
+
+
+def _check_free_form(v: dict[str, Any], what: str) -> dict[str, Any]:
+    if len(v) > LIST_MAX:
+        raise ValueError(f"at most {LIST_MAX} {what}")
+    for k in v:
+        if not isinstance(k, str) or not k or len(k) > NAME_MAX or _unprintable(k) is not None:
+            raise ValueError(f"{k!r} is not a valid key (at most {NAME_MAX} printable characters)")
+    return v
+
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=PATH_MAX)
 
 
 class PriceSpec(_Strict):
     """USD per million tokens; ``cached_input`` defaults to ``input``."""
 
-    input: float = Field(ge=0)
-    output: float = Field(ge=0)
-    cached_input: float | None = Field(default=None, ge=0)
+    input: Price
+    output: Price
+    cached_input: Price | None = None
 
 
 class ModelSpec(_Strict):
-    model: str = Field(min_length=1)
-    label: str | None = None
+    model: Annotated[str, Field(min_length=1, max_length=LONG_MAX), AfterValidator(_model_string)]
+    label: Label | None = None
     #: sent with every call (temperature override, top_p, provider options, test-double knobs)
     params: dict[str, Any] = Field(default_factory=dict)
     #: knobs of the offline/ test doubles (seed, invalid_action_rate, malformed_json_rate,
     #: chunk_size); part of the unit hash
     options: dict[str, Any] = Field(default_factory=dict)
     # --- transport: never part of a unit's identity ---
-    rpm: int | None = Field(default=None, gt=0)
-    tpm: int | None = Field(default=None, gt=0)
-    concurrency: int | None = Field(default=None, gt=0)
+    rpm: _int(gt=0, le=RPM_MAX) | None = None
+    tpm: _int(gt=0, le=TPM_MAX) | None = None
+    concurrency: _int(gt=0, le=CONCURRENCY_MAX) | None = None
     #: the quota window rpm/tpm count over (60 s for real providers; shorter for test servers)
-    window_s: float | None = Field(default=None, gt=0)
-    retries: int | None = Field(default=None, ge=0)
-    timeout_s: float | None = Field(default=None, gt=0)
+    window_s: Seconds | None = None
+    retries: _int(ge=0, le=RETRIES_MAX) | None = None
+    timeout_s: Seconds | None = None
     prices: PriceSpec | None = None
-    api_base: str | None = None
-    api_key_env: str | None = None
-    cap_usd: float | None = Field(default=None, ge=0)
+    api_base: Annotated[str, Field(min_length=1, max_length=LONG_MAX), AfterValidator(_printable)] | None = None
+    api_key_env: Annotated[str, Field(max_length=NAME_MAX)] | None = None
+    cap_usd: Usd | None = None
 
     @property
     def name(self) -> str:
@@ -94,32 +258,63 @@ class ModelSpec(_Strict):
     def test_double(self) -> bool:
         return self.model.startswith(OFFLINE_PREFIX)
 
-    @field_validator("label")
+    @field_validator("params")
     @classmethod
-    def _label(cls, v: str | None) -> str | None:
-        if v is not None and not v.strip():
-            raise ValueError("must not be empty")
+    def _params(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _check_free_form(v, "params")
+
+    @field_validator("options")
+    @classmethod
+    def _options(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _check_free_form(v, "options")
+
+    @field_validator("api_key_env")
+    @classmethod
+    def _api_key_env(cls, v: str | None) -> str | None:
+        if v is not None and not _ENV_VAR.match(v):
+            raise ValueError(f"must be an environment variable name (letters, digits, _), got {v!r}")
         return v
 
-    @model_validator(mode="after")
-    def _api_base_url(self) -> "ModelSpec":
+    @field_validator("api_base")
+    @classmethod
+    def _api_base_url(cls, v: str | None, info: ValidationInfo) -> str | None:
         """A provider's base URL must be one (a typo would fail every call of the night);
-        ``offline/replay`` takes a run folder there instead."""
-        if self.api_base is not None and not self.test_double:
-            from urllib.parse import urlparse
+        ``offline/replay`` takes a run folder there instead (resolved like ``output``)."""
+        model = info.data.get("model")
+        if v is None or model is None:
+            return v
+        if not model.startswith(OFFLINE_PREFIX):
+            from urllib.parse import parse_qsl, urlparse
 
-            url = urlparse(self.api_base)
-            if url.scheme not in ("http", "https") or not url.netloc:
-                raise ValueError(f"api_base: must be an http(s) URL such as http://127.0.0.1:8000/v1, got {self.api_base!r}")
-        return self
+            url = urlparse(v)
+            if url.scheme not in ("http", "https") or not url.netloc or any(c.isspace() for c in v):
+                raise ValueError(f"must be an http(s) URL such as http://127.0.0.1:8000/v1, got {v!r}")
+            try:
+                url.port  # noqa: B018 - raises on a port out of range
+            except ValueError:
+                raise ValueError(f"port out of range in {v!r}") from None
+            secret_query = {"key", "api_key", "apikey", "token", "access_token", "password", "secret"}
+            if url.username or url.password or any(
+                    k.lower() in secret_query for k, _ in parse_qsl(url.query)):
+                # credentials in the URL would be stored with the spec and clash with the key
+                # header at the provider; keys travel in the environment only
+                raise ValueError("must not carry credentials (user:password@ or a key/token query "
+                                 "parameter): put the key in the variable named by api_key_env")
+            return v
+        return v if _is_uri(v) else _local_path(v)
 
 
 class MethodSpec(_Strict):
-    method: str = Field(min_length=1)
-    label: str | None = None
-    profile: str | None = None
-    ablation: str | None = None
+    method: Name
+    label: Label | None = None
+    profile: Name | None = None
+    ablation: Name | None = None
     settings: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("settings")
+    @classmethod
+    def _settings(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _check_free_form(v, "settings")
 
     @property
     def name(self) -> str:
@@ -130,24 +325,35 @@ class MethodSpec(_Strict):
 
 
 class EnvSpec(_Strict):
-    benchmark: str = Field(min_length=1)
+    benchmark: Name
     #: selectors handed to the benchmark's list_instances (split, task, task type...)
-    tasks: list[str] = Field(default_factory=list)
+    tasks: list[Selector] = Field(default_factory=list, max_length=SELECTORS_MAX)
     #: explicit instance ids
-    instances: list[str] = Field(default_factory=list)
+    instances: list[Selector] = Field(default_factory=list, max_length=INSTANCES_MAX)
     #: at most this many instances per selector (in the benchmark's fixed order)
-    limit: int | None = Field(default=None, gt=0)
-    #: options for the benchmark's make() (data_dir ...); not part of the unit hash
+    limit: _int(gt=0, le=LIMIT_MAX) | None = None
+    #: options for the benchmark's make() (data_dir ...); not part of the unit hash. Path
+    #: options (data_dir, *_dir) are resolved here (~ expanded, made absolute).
     options: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("options")
+    @classmethod
+    def _options(cls, v: dict[str, Any]) -> dict[str, Any]:
+        _check_free_form(v, "options")
+        out = dict(v)
+        for k, val in v.items():
+            if _path_option(k) and isinstance(val, str) and val and not _is_uri(val):
+                out[k] = _local_path(val)
+        return out
 
 
 class LimitsSpec(_Strict):
     """Per-episode limits, mapped onto AgentConfig max_llm_calls / max_episode_tokens /
     max_episode_cost_usd (a method's own settings win)."""
 
-    llm_calls: int | None = Field(default=None, gt=0)
-    tokens: int | None = Field(default=None, gt=0)
-    usd: float | None = Field(default=None, gt=0)
+    llm_calls: _int(gt=0, le=LLM_CALLS_MAX) | None = None
+    tokens: _int(gt=0, le=TOKENS_MAX) | None = None
+    usd: _float(gt=0, le=USD_MAX) | None = None
 
     def agent_settings(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -160,27 +366,47 @@ class LimitsSpec(_Strict):
         return out
 
 
+_HOST_LABEL = r"[A-Za-z0-9](?:[A-Za-z0-9\-]{0,61}[A-Za-z0-9])?"
+_ADDRESS = re.compile(rf"^(?:ray://)?(?P<host>{_HOST_LABEL}(?:\.{_HOST_LABEL})*|\[[0-9A-Fa-f:.%A-Za-z]+\]):(?P<port>\d{{1,5}})$")
+
+
+def check_ray_address(v: str) -> str:
+    """``auto``, ``local``, ``host:port`` or ``ray://host:port`` with a port in 1..65535."""
+    if v in ("auto", "local"):
+        return v
+    m = _ADDRESS.match(v)
+    ok = m is not None and 1 <= int(m["port"]) <= 65535
+    if ok and m["host"].startswith("["):
+        try:
+            ipaddress.IPv6Address(m["host"][1:-1])
+        except ValueError:
+            ok = False
+    if not ok:
+        raise ValueError(f"must be auto, host:port or ray://host:port with a port in 1..65535, got {v!r}")
+    return v
+
+
 class RaySpec(_Strict):
-    address: str | None = None
-    num_cpus: int | None = Field(default=None, gt=0)
+    address: Annotated[str, Field(max_length=NAME_MAX), AfterValidator(check_ray_address)] | None = None
+    num_cpus: _int(gt=0, le=NUM_CPUS_MAX) | None = None
     dashboard: bool = False
-    object_store_mb: int = Field(default=256, ge=64)
+    object_store_mb: _int(ge=64, le=OBJECT_STORE_MB_MAX) = 256
     #: CPU share of one episode worker actor (small: workers wait on the model)
-    worker_cpus: float = Field(default=0.05, ge=0)
+    worker_cpus: _float(ge=0, le=WORKER_CPUS_MAX) = 0.05
 
 
 class SweepSpec(_Strict):
-    run: str
-    output: str = Field(min_length=1)
-    models: list[ModelSpec] = Field(min_length=1)
-    methods: list[MethodSpec] = Field(min_length=1)
-    environments: list[EnvSpec] = Field(min_length=1)
-    seeds: list[int] = Field(default_factory=lambda: [0], min_length=1)
-    step_multiplier: float = Field(default=4.0, gt=0)
+    run: Annotated[str, Field(max_length=NAME_MAX)]
+    output: Annotated[str, Field(min_length=1, max_length=PATH_MAX)]
+    models: list[ModelSpec] = Field(min_length=1, max_length=LIST_MAX)
+    methods: list[MethodSpec] = Field(min_length=1, max_length=LIST_MAX)
+    environments: list[EnvSpec] = Field(min_length=1, max_length=LIST_MAX)
+    seeds: list[Seed] = Field(default_factory=lambda: [0], min_length=1, max_length=SEEDS_MAX)
+    step_multiplier: _float(gt=0, le=STEP_MULTIPLIER_MAX) = 4.0
     limits: LimitsSpec = Field(default_factory=LimitsSpec)
-    run_cap_usd: float | None = Field(default=None, ge=0)
-    workers: int = Field(default=4, gt=0)
-    max_attempts: int = Field(default=3, gt=0)
+    run_cap_usd: Usd | None = None
+    workers: _int(gt=0, le=WORKERS_MAX) = 4
+    max_attempts: _int(gt=0, le=ATTEMPTS_MAX) = 3
     ray: RaySpec = Field(default_factory=RaySpec)
 
     @field_validator("run")
@@ -188,6 +414,25 @@ class SweepSpec(_Strict):
     def _run_name(cls, v: str) -> str:
         if not _NAME.match(v):
             raise ValueError("must be letters, digits, '.', '_' or '-' (starting with a letter or digit)")
+        return v
+
+    @field_validator("output")
+    @classmethod
+    def _output(cls, v: str) -> str:
+        """Resolved once: every component (store, sink, gateway, mirror) sees this string."""
+        _printable(v)
+        if not _is_uri(v):
+            return _local_path(v)
+        scheme, rest = v.split("://", 1)
+        if scheme.lower() not in URI_SCHEMES:
+            raise ValueError(f"unknown URI scheme {scheme!r}; use a local folder or {', '.join(s + '://' for s in URI_SCHEMES)}")
+        if any(c.isspace() for c in v):
+            raise ValueError(f"an object-store URI must not contain spaces, got {v!r}")
+        if scheme.lower() == "file":
+            if not rest.startswith("/"):
+                raise ValueError(f"a file:// URI needs an absolute path (file:///abs/path), got {v!r}")
+        elif not rest.split("?", 1)[0].strip("/"):
+            raise ValueError(f"{v!r} names no bucket or container")
         return v
 
     @model_validator(mode="after")
@@ -203,6 +448,8 @@ class SweepSpec(_Strict):
         for i, e in enumerate(self.environments):
             if not e.tasks and not e.instances:
                 raise ValueError(f"environments[{i}]: give 'tasks' (selectors) or 'instances' (ids)")
+        if sum(len(e.instances) for e in self.environments) > INSTANCES_TOTAL_MAX:
+            raise ValueError(f"environments: at most {INSTANCES_TOTAL_MAX} instance ids in all")
         return self
 
     def model(self, name: str) -> ModelSpec:
@@ -231,7 +478,7 @@ def _loc(loc: tuple[Any, ...]) -> str:
 def _pydantic_message(source: str, exc: ValidationError) -> str:
     errors = exc.errors()
     first = errors[0]
-    loc = _loc(tuple(first.get("loc", ())))
+    loc = _loc(tuple(x for x in first.get("loc", ()) if not str(x).startswith("function-")))
     msg = first.get("msg", "invalid")
     if first.get("type") == "extra_forbidden":
         msg = "unknown field"
@@ -242,15 +489,166 @@ def _pydantic_message(source: str, exc: ValidationError) -> str:
     return f"{source}: {loc + ': ' if loc else ''}{msg}{more}"
 
 
-def parse_spec(text: str, source: str = "spec") -> SweepSpec:
-    """Parse and validate YAML text; every problem is one :class:`SpecError` line."""
+# --------------------------------------------------------------------------------------------
+# the YAML reader: no aliases, no duplicate keys, bounded sizes
+# --------------------------------------------------------------------------------------------
+class _Refused(Exception):
+    """A YAML construct the sweep file may not use; the message names the line."""
+
+
+def _line(node_or_event: Any) -> int:
+    mark = getattr(node_or_event, "start_mark", None)
+    return mark.line + 1 if mark is not None else 0
+
+
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
+class _SpecLoader(yaml.SafeLoader):
+    """SafeLoader that refuses anchors/aliases/merge keys, duplicate keys, huge scalars and deep
+    nesting, each with the line it is on."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            raise _Refused(f"YAML aliases are not allowed (*{event.anchor} at line {_line(event)}); write the value out")
+        anchor = getattr(event, "anchor", None)
+        if anchor is not None:
+            raise _Refused(f"YAML anchors are not allowed (&{anchor} at line {_line(event)}); write the value out")
+        if isinstance(event, yaml.ScalarEvent) and len(event.value) > MAX_SCALAR_CHARS:
+            raise _Refused(f"a value of {len(event.value)} characters at line {_line(event)}; at most {MAX_SCALAR_CHARS}")
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise _Refused(f"nested deeper than {MAX_DEPTH} levels at line {_line(event)}")
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[Any, int] = {}
+            for key_node, _ in node.value:
+                if key_node.tag == _MERGE_TAG:
+                    raise _Refused(f"YAML merge keys (<<) are not allowed (line {_line(key_node)})")
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.get(key)
+                except TypeError:
+                    raise _Refused(f"a mapping key at line {_line(key_node)} is not a plain value") from None
+                if first is not None:
+                    raise _Refused(f"duplicate key {key!r} at line {_line(key_node)} (first at line {first})")
+                seen[key] = _line(key_node)
+        return super().construct_mapping(node, deep=deep)
+
+    def construct_yaml_int(self, node: Any) -> int:
+        try:
+            return super().construct_yaml_int(node)
+        except ValueError:
+            raise _Refused(f"integer {node.value[:20]!r}... at line {_line(node)} is too large") from None
+
+
+_SpecLoader.add_constructor("tag:yaml.org,2002:int", _SpecLoader.construct_yaml_int)
+
+
+def _check_values(data: Any, loc: tuple[Any, ...] = ()) -> None:
+    """Every number in the file finite and within a signed 64-bit column (free-form mappings
+    such as params, options and settings included); only plain JSON-like values (no dates,
+    binary or sets, which would reach JSON columns and hashes as something else)."""
+    if isinstance(data, dict):
+        for k, v in data.items():
+            _check_values(v, (*loc, k))
+    elif isinstance(data, list):
+        for i, v in enumerate(data):
+            _check_values(v, (*loc, i))
+    elif data is not None and not isinstance(data, (str, int, float)):
+        raise _Refused(f"{_loc(loc) or 'value'}: a YAML {type(data).__name__} is not allowed here; quote it to make it a string")
+    elif isinstance(data, float) and not math.isfinite(data):
+        raise _Refused(f"{_loc(loc) or 'value'}: must be a finite number, got {data}")
+    elif isinstance(data, int) and not isinstance(data, bool) and not -INT64_MAX - 1 <= data <= INT64_MAX:
+        raise _Refused(f"{_loc(loc) or 'value'}: integer out of range (-2**63 .. 2**63-1)")
+
+
+def _check_events(text: str, loader: Any) -> None:
+    """One pass over the parser's events (libyaml's when there is one: fast): anchors, aliases,
+    huge scalars and deep nesting are refused before anything is composed."""
+    depth = 0
+    for event in yaml.parse(text, Loader=loader):
+        if isinstance(event, yaml.AliasEvent):
+            raise _Refused(f"YAML aliases are not allowed (*{event.anchor} at line {_line(event)}); write the value out")
+        anchor = getattr(event, "anchor", None)
+        if anchor is not None:
+            raise _Refused(f"YAML anchors are not allowed (&{anchor} at line {_line(event)}); write the value out")
+        if isinstance(event, yaml.ScalarEvent) and len(event.value) > MAX_SCALAR_CHARS:
+            raise _Refused(f"a value of {len(event.value)} characters at line {_line(event)}; at most {MAX_SCALAR_CHARS}")
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise _Refused(f"nested deeper than {MAX_DEPTH} levels at line {_line(event)}")
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+
+
+#: malformed files up to this size are re-read by the (slower) pure-Python parser for its message
+_PY_MESSAGE_MAX = 64 * 1024
+
+
+def _yaml_data(text: str) -> Any:
+    fast = getattr(yaml, "CSafeLoader", None)
+    if fast is None:
+        loader = _SpecLoader(text)
+        try:
+            return loader.get_single_data()
+        finally:
+            loader.dispose()
     try:
-        data = yaml.safe_load(text)
+        _check_events(text, fast)
+        node = yaml.compose(text, Loader=fast)
+    except yaml.YAMLError:
+        if len(text) > _PY_MESSAGE_MAX:
+            raise
+        # the pure-Python parser's message (and line) for the same problem: the one users know
+        loader = _SpecLoader(text)
+        try:
+            loader.get_single_data()
+        finally:
+            loader.dispose()
+        raise
+    if node is None:
+        return None
+    constructor = _SpecLoader("")
+    try:
+        return constructor.construct_document(node)
+    finally:
+        constructor.dispose()
+
+
+def load_yaml(text: str, source: str = "spec") -> Any:
+    """The YAML data of a sweep file (see the module docstring for what is refused)."""
+    if len(text) > MAX_SPEC_BYTES or len(text.encode("utf-8", "surrogatepass")) > MAX_SPEC_BYTES:
+        raise SpecError(f"{source}: larger than {MAX_SPEC_BYTES} bytes; a sweep file may be at most 1 MiB")
+    try:
+        data = _yaml_data(text)
+        _check_values(data)
+        return data
+    except _Refused as exc:
+        raise SpecError(f"{source}: {exc}") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise SpecError(f"{source}: malformed YAML{where}: {problem}") from None
+    except (ValueError, OverflowError, RecursionError, MemoryError) as exc:
+        raise SpecError(f"{source}: malformed YAML: {type(exc).__name__}: {str(exc)[:200]}") from None
+
+
+def parse_spec(text: str, source: str = "spec") -> SweepSpec:
+    """Parse and validate YAML text; every problem is one :class:`SpecError` line."""
+    data = load_yaml(text, source)
     if not isinstance(data, dict):
         raise SpecError(f"{source}: the sweep file must be a YAML mapping (run:, output:, models:, ...)")
     try:
@@ -259,16 +657,49 @@ def parse_spec(text: str, source: str = "spec") -> SweepSpec:
         raise SpecError(_pydantic_message(source, exc)) from None
 
 
+def read_spec_text(path: str | Path) -> str:
+    """The text of a sweep file: a regular file of at most MAX_SPEC_BYTES of UTF-8. A device
+    (``/dev/zero``), FIFO or socket is refused before it is read (or opened: a FIFO's open
+    would block)."""
+    p = Path(path)
+    name = repr(str(p))
+    try:
+        st = os.stat(p)
+    except (FileNotFoundError, NotADirectoryError):
+        raise SpecError(f"sweep file {name} does not exist") from None
+    except OSError as exc:
+        raise SpecError(f"sweep file {name} cannot be read: {exc.strerror or exc}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise SpecError(f"sweep file {name} cannot be read: it is a folder")
+    if not stat.S_ISREG(st.st_mode):
+        raise SpecError(f"sweep file {name} cannot be read: not a regular file (a device, FIFO or socket)")
+    if st.st_size > MAX_SPEC_BYTES:
+        raise SpecError(f"sweep file {name} is {st.st_size} bytes; a sweep file may be at most 1 MiB")
+    try:
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as exc:
+        raise SpecError(f"sweep file {name} cannot be read: {exc.strerror or exc}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):  # swapped since the stat
+            raise SpecError(f"sweep file {name} cannot be read: not a regular file (a device, FIFO or socket)")
+        with os.fdopen(fd, "rb", closefd=False) as fh:
+            raw = fh.read(MAX_SPEC_BYTES + 1)
+    except OSError as exc:
+        raise SpecError(f"sweep file {name} cannot be read: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if len(raw) > MAX_SPEC_BYTES:
+        raise SpecError(f"sweep file {name} is larger than {MAX_SPEC_BYTES} bytes; a sweep file may be at most 1 MiB")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SpecError(f"sweep file {name} cannot be read: not UTF-8 text (byte {raw[exc.start]:#04x} at offset {exc.start})") from None
+
+
 def load_spec(path: str | Path) -> tuple[SweepSpec, str]:
     """(validated spec, its YAML text) from a file."""
-    p = Path(path)
-    try:
-        text = p.read_text()
-    except FileNotFoundError:
-        raise SpecError(f"sweep file {str(p)!r} does not exist") from None
-    except (IsADirectoryError, UnicodeDecodeError) as exc:
-        raise SpecError(f"sweep file {str(p)!r} cannot be read: {exc}") from None
-    return parse_spec(text, p.name), text
+    text = read_spec_text(path)
+    return parse_spec(text, Path(path).name), text
 
 
 def with_overrides(spec: SweepSpec, **changes: Any) -> SweepSpec:
@@ -288,3 +719,152 @@ def with_overrides(spec: SweepSpec, **changes: Any) -> SweepSpec:
 
 def text_hash(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# --------------------------------------------------------------------------------------------
+# object-store outputs: usable before anything is written
+# --------------------------------------------------------------------------------------------
+#: seconds the reachability check of an object-store output may take (env override)
+STORE_CHECK_TIMEOUT_S = 15.0
+
+_FS_MODULES = {"s3": "pyarrow._s3fs", "gs": "pyarrow._gcsfs", "gcs": "pyarrow._gcsfs", "hdfs": "pyarrow._hdfs",
+               "abfs": "pyarrow._azurefs", "abfss": "pyarrow._azurefs"}
+
+_PROBE = """
+import sys
+try:
+    import pyarrow.fs as pafs
+    fs, root = pafs.FileSystem.from_uri(sys.argv[1])
+    info = fs.get_file_info(root.rstrip("/") or root)
+    if info.type == pafs.FileType.File:
+        print("it is a file, not a folder")
+        sys.exit(1)
+except BaseException as exc:
+    print(f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"[:300])
+    sys.exit(1)
+"""
+
+
+def _endpoint(scheme: str, location: str) -> tuple[str, int]:
+    """(host, port) an object-store URI talks to."""
+    from urllib.parse import parse_qs, urlsplit
+
+    u = urlsplit(location)
+    query = {k: v[-1] for k, v in parse_qs(u.query).items()}
+
+    def host_port(text: str, default_port: int) -> tuple[str, int]:
+        if "://" not in text:
+            text = "//" + text
+        hp = urlsplit(text)
+        return hp.hostname or "", hp.port or (443 if hp.scheme == "https" else 80 if hp.scheme == "http" else default_port)
+
+    if scheme == "s3":
+        override = query.get("endpoint_override") or os.environ.get("AWS_ENDPOINT_URL_S3") or os.environ.get("AWS_ENDPOINT_URL")
+        if override:
+            return host_port(override, 80 if query.get("scheme") == "http" else 443)
+        return "s3.amazonaws.com", 443
+    if scheme in ("gs", "gcs"):
+        override = query.get("endpoint_override") or os.environ.get("STORAGE_EMULATOR_HOST")
+        if override:
+            return host_port(override, 80 if query.get("scheme") == "http" else 443)
+        return "storage.googleapis.com", 443
+    if scheme == "hdfs":
+        return u.hostname or "", u.port or 8020
+    # abfs://container@account.dfs.core.windows.net/path
+    return (u.hostname or "").rpartition("@")[2], 443
+
+
+def _reach(host: str, port: int, timeout: float) -> str | None:
+    """Why ``host:port`` cannot be reached within ``timeout`` seconds (None when it can);
+    name resolution runs in a daemon thread so a stuck resolver cannot hang the check."""
+    import socket
+    import threading
+
+    if not host:
+        return "no host in the URI"
+    result: dict[str, Any] = {}
+
+    def resolve() -> None:
+        try:
+            result["addrs"] = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        except OSError as exc:
+            result["error"] = exc
+
+    t = threading.Thread(target=resolve, daemon=True)
+    t.start()
+    t.join(timeout)
+    if t.is_alive():
+        return f"name resolution of {host} took longer than {timeout:g} s"
+    if "error" in result:
+        return f"cannot resolve {host} ({result['error']})"
+    last: OSError | None = None
+    for family, socktype, proto, _, addr in result.get("addrs", []):
+        s = socket.socket(family, socktype, proto)
+        s.settimeout(timeout)
+        try:
+            s.connect(addr)
+            return None
+        except OSError as exc:
+            last = exc
+        finally:
+            s.close()
+    return f"cannot connect to {host}:{port} ({last})"
+
+
+def check_output_location(location: str, *, timeout_s: float | None = None) -> None:
+    """An object-store output (or run folder) must be usable now, not at the first write of a
+    started run: the scheme is known, this pyarrow supports it, its endpoint answers, and the
+    folder can be listed with the credentials at hand. Bounded in time (``timeout_s``, default
+    ``RECAP_STORE_CHECK_TIMEOUT_S`` or 15 s); writes nothing. A local path or ``file://`` URI
+    passes (the run store checks that it can be created)."""
+    import importlib
+    import subprocess
+    import sys
+
+    if not _is_uri(location):
+        return
+    scheme = location.split("://", 1)[0].lower()
+    if scheme not in URI_SCHEMES:
+        raise SpecError(f"output {location}: unknown URI scheme {scheme!r}; use a local folder or "
+                        f"{', '.join(s + '://' for s in URI_SCHEMES)}")
+    if scheme == "file":
+        return
+    if timeout_s is None:
+        try:
+            timeout_s = float(os.environ.get("RECAP_STORE_CHECK_TIMEOUT_S", STORE_CHECK_TIMEOUT_S))
+        except ValueError:
+            timeout_s = STORE_CHECK_TIMEOUT_S
+    try:
+        importlib.import_module(_FS_MODULES[scheme])
+    except ImportError:
+        raise SpecError(f"output {location}: this pyarrow cannot write {scheme}:// (no {scheme} support built in); "
+                        "use a local folder") from None
+    host, port = _endpoint(scheme, location)
+    why = _reach(host, port, min(timeout_s, 5.0))
+    if why is not None:
+        raise SpecError(f"output {location} cannot be used: {why}; check the network or use a local folder")
+    try:
+        r = subprocess.run([sys.executable, "-c", _PROBE, location], capture_output=True, text=True,
+                           timeout=timeout_s, stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        raise SpecError(f"output {location} cannot be used: no answer within {timeout_s:g} s "
+                        "(check credentials and network, or use a local folder)") from None
+    except OSError as exc:
+        raise SpecError(f"output {location} cannot be checked: {exc}") from None
+    if r.returncode != 0:
+        detail = (r.stdout.strip().splitlines() or r.stderr.strip().splitlines()[-1:] or ["unknown error"])[-1]
+        raise SpecError(f"output {location} cannot be used: {detail}")
+
+
+def check_ray_address_reachable(address: str | None, timeout_s: float = 5.0) -> None:
+    """A ``host:port`` / ``ray://host:port`` cluster address must accept a TCP connection within
+    ``timeout_s`` (``ray.init`` on a dead address retries for a long time); ``auto``/``local``
+    and no address pass. Writes nothing."""
+    if not address or address in ("auto", "local"):
+        return
+    check_ray_address(address)
+    m = _ADDRESS.match(address)
+    assert m is not None
+    why = _reach(m["host"].strip("[]"), int(m["port"]), timeout_s)
+    if why is not None:
+        raise SpecError(f"ray.address {address}: {why}; is the cluster up (ray status)?")

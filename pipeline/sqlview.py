@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from rich.markup import escape
+
 from pipeline.errors import PipelineError
 from pipeline.store import RunStore
 
@@ -53,7 +55,7 @@ def sql_main(run_dir: str, query: str, console: Any) -> int:
         return int(delegate([run_dir, query]) or 0)
     con, bad = open_tables(store)
     for bp in bad:
-        console.print(f"[yellow]skipped unreadable part file {bp.path}: {bp.error}[/yellow]")
+        console.print(f"[yellow]skipped unreadable part file {escape(str(bp.path))}: {escape(str(bp.error))}[/yellow]")
     try:
         cur = con.execute(query)
     except Exception as exc:
@@ -61,11 +63,13 @@ def sql_main(run_dir: str, query: str, console: Any) -> int:
     if cur.description is None:
         return 0
     from rich.table import Table
+    from rich.text import Text
 
     t = Table()
     for col in cur.description:
-        t.add_column(str(col[0]))
+        t.add_column(escape(str(col[0])))
     for row in cur.fetchall():
-        t.add_row(*("NULL" if v is None else str(v) for v in row))
+        # user data: never read as Rich markup
+        t.add_row(*(Text("NULL" if v is None else str(v)) for v in row))
     console.print(t)
     return 0

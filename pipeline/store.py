@@ -5,10 +5,19 @@ A run folder is a local path or an object-store URI (anything ``pyarrow.fs`` und
 at the folder is an error, so two sweeps can never interleave their rows. Reads skip part files
 that cannot be read and report them (a crash can leave a truncated temp file; a reader must not
 die on it).
+
+One driver at a time: ``driver.lock`` is taken with an exclusive ``flock`` on an open file,
+atomically, and held for the driver's whole session; the kernel releases it when the driver's
+process ends, however it ends, so a lock left by a crashed driver is free (stale) without any
+pid guessing. The file also names its holder (pid, host) for the refusal message. For an
+object-store run folder the lock is the local mirror's (one driver per machine), plus the
+holder file on the store (checked, then written: best effort between machines).
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
 import os
 import socket
@@ -25,7 +34,7 @@ from pipeline.errors import RunFolderError
 from schemas.records import SCHEMA_VERSION
 from schemas.tables import TABLES, arrow_schema
 from workers.sink import is_uri
-from workers.storage import BadPart
+from workers.storage import BadPart, inspect_parts, read_parts
 
 RUN_FILE = "run.json"
 LOCK_FILE = "driver.lock"
@@ -57,6 +66,8 @@ class RunStore:
             self.root = self.root.rstrip("/")
         else:
             self.path = Path(self.location)
+        #: the open, flock'd lock file while this store holds the driver lock
+        self._lock_fd: int | None = None
 
     def __str__(self) -> str:
         return self.location
@@ -92,6 +103,32 @@ class RunStore:
         except (FileNotFoundError, OSError):
             return None
 
+    def read_bytes(self, name: str) -> bytes | None:
+        try:
+            if self.remote:
+                with self.fs.open_input_stream(self._p(name)) as fh:
+                    return fh.read()
+            return (self.path / name).read_bytes()
+        except (FileNotFoundError, OSError):
+            return None
+
+    def write_bytes(self, name: str, data: bytes) -> None:
+        """Atomic write of bytes (temp + fsync + rename locally; one PUT on an object store)."""
+        if self.remote:
+            parent = self._p(name).rsplit("/", 1)[0]
+            self.fs.create_dir(parent, recursive=True)
+            with self.fs.open_output_stream(self._p(name)) as fh:
+                fh.write(data)
+            return
+        dest = self.path / name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        tmp = dest.with_name(f".tmp-{dest.name}-{uuid.uuid4().hex[:6]}")
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, dest)
+
     def write_text(self, name: str, text: str) -> None:
         """Atomic write (temp + rename locally; one PUT on an object store)."""
         if self.remote:
@@ -125,7 +162,7 @@ class RunStore:
         if ident is None:
             if not self.remote and self.path.exists() and not self.path.is_dir():
                 raise RunFolderError(f"output folder {self.location} is a file; choose a folder")
-            if not self.is_empty():
+            if not self.is_empty() and not self._only_lock():
                 raise RunFolderError(f"output folder {self.location} is not empty and holds no {RUN_FILE}; choose a new folder")
             if not self.remote:
                 self._check_creatable()
@@ -138,6 +175,20 @@ class RunStore:
         if ident.schema_version != SCHEMA_VERSION:
             raise RunFolderError(f"output folder {self.location} was written with schema version {ident.schema_version}, this is {SCHEMA_VERSION}")
         return ident
+
+    def _only_lock(self) -> bool:
+        """The folder holds nothing but the driver lock (a driver starting, or one that crashed
+        before it wrote run.json) and temp files."""
+        try:
+            if self.remote:
+                import pyarrow.fs as pafs
+
+                names = [i.base_name for i in self.fs.get_file_info(pafs.FileSelector(self.root, recursive=False))]
+            else:
+                names = [p.name for p in self.path.iterdir()]
+        except OSError:
+            return False
+        return all(n == LOCK_FILE or n.startswith(".tmp-") for n in names)
 
     def _check_creatable(self) -> None:
         """A local output folder that does not exist yet must be creatable: its nearest existing
@@ -164,45 +215,183 @@ class RunStore:
         return ident
 
     # -- one driver at a time --------------------------------------------------------------------
+    def _lock_path(self) -> Path:
+        """The file whose flock is the lock: ``driver.lock`` in a local run folder; for an
+        object-store run, a file beside its local mirror (one driver per machine)."""
+        if not self.remote:
+            return self.path / LOCK_FILE
+        from pipeline.mirror import mirror_dir
+
+        mirror = mirror_dir(self.location)
+        return mirror.with_name(mirror.name + "." + LOCK_FILE)
+
+    def _holder_text(self, path: Path) -> dict[str, Any]:
+        try:
+            holder = json.loads(path.read_text() or "{}")
+        except (OSError, ValueError):
+            holder = {}
+        return holder if isinstance(holder, dict) else {}
+
     def lock_holder(self) -> dict[str, Any] | None:
-        """The driver holding the folder (pid, host), or None when free or its holder is dead."""
-        text = self.read_text(LOCK_FILE)
+        """The driver holding the folder (pid, host), or None when free or its holder is dead.
+
+        Decided by the flock, not by the file's contents: a crashed driver's lock is free."""
+        path = self._lock_path()
+        holder: dict[str, Any] | None = None
+        if path.exists():
+            try:
+                fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+            except OSError:
+                fd = -1
+            if fd >= 0:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+                    fcntl.flock(fd, fcntl.LOCK_UN)  # free: nobody holds it (or its holder died)
+                except BlockingIOError:
+                    holder = self._holder_text(path) or {"pid": "?", "host": "?"}
+                except OSError:  # a file system without locks: fall back on the holder's pid
+                    holder = self._legacy_holder(path.read_text() if path.exists() else None)
+                finally:
+                    os.close(fd)
+        if holder is None and self.remote:  # a driver on another machine
+            holder = self._remote_holder()
+        return holder
+
+    def _remote_holder(self) -> dict[str, Any] | None:
+        """The holder an object-store run folder's lock file names on *another* machine (on
+        this one the mirror's flock decides)."""
+        holder = self._legacy_holder(self.read_text(LOCK_FILE))
+        if holder is None or holder.get("host") == socket.gethostname():
+            return None
+        return holder
+
+    def _legacy_holder(self, text: str | None) -> dict[str, Any] | None:
+        """The holder a lock file names, unless it is on this host and its process is gone."""
         if not text:
             return None
         try:
             holder = json.loads(text)
         except ValueError:
             return None
+        if not isinstance(holder, dict):
+            return None
         if holder.get("host") == socket.gethostname():
             try:
                 os.kill(int(holder["pid"]), 0)
-            except (OSError, ValueError, KeyError):
+            except (OSError, ValueError, KeyError, TypeError):
                 return None  # its driver is gone (a crash): the lock is stale
         return holder
+
+    def _in_use(self, holder: dict[str, Any]) -> RunFolderError:
+        if self.remote and holder.get("host") not in (None, "?", socket.gethostname()):
+            hint = f"wait for it, or delete {LOCK_FILE} there if that driver is gone"
+        else:
+            hint = "wait for it to finish (a driver that dies releases the lock by itself)"
+        return RunFolderError(
+            f"run folder {self.location} is in use by another driver (pid {holder.get('pid')} on {holder.get('host')}); {hint}"
+        )
 
     def check_unlocked(self) -> None:
         holder = self.lock_holder()
         if holder is not None:
-            raise RunFolderError(
-                f"run folder {self.location} is in use by a driver (pid {holder.get('pid')} on {holder.get('host')}); "
-                f"wait for it, or delete {LOCK_FILE} there if that driver is gone"
-            )
+            raise self._in_use(holder)
 
-    def acquire_lock(self) -> None:
-        self.check_unlocked()
-        self.write_text(LOCK_FILE, json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "since": time.time()}))
+    def acquire_lock(self, wait_s: float = 0.5) -> None:
+        """Take the driver lock atomically and hold it until :meth:`release_lock` (or the
+        process ends). Waits up to ``wait_s`` for a lock that is only being looked at; a lock
+        held by a live driver is refused (:class:`RunFolderError`, one line)."""
+        if self._lock_fd is not None:
+            raise RunFolderError(f"run folder {self.location}: this process already holds its driver lock")
+        path = self._lock_path()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        deadline = time.monotonic() + wait_s
+        while True:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                if time.monotonic() >= deadline:
+                    raise self._in_use(self._holder_text(path) or {"pid": "?", "host": "?"}) from None
+                time.sleep(0.02)
+                continue
+            except OSError as exc:
+                os.close(fd)
+                if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL):
+                    self._acquire_unlocked_fs()
+                    return
+                raise
+            # the file we locked must still be the one at the path (a releasing holder unlinks it)
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(path))
+            except FileNotFoundError:
+                same = False
+            if not same:
+                os.close(fd)
+                continue
+            break
+        self._lock_fd = fd
+        holder = json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "since": time.time()}).encode()
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, holder, 0)
+        if self.remote:
+            try:
+                self.check_remote_unlocked()
+                self.write_text(LOCK_FILE, holder.decode())
+            except BaseException:
+                self.release_lock()
+                raise
+
+    def check_remote_unlocked(self) -> None:
+        holder = self._remote_holder()
+        if holder is not None:
+            raise self._in_use(holder)
+
+    def _acquire_unlocked_fs(self) -> None:
+        """A file system without flock: exclusive create, then the holder check (best effort)."""
+        path = self._lock_path()
+        holder = json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "since": time.time()})
+        for _ in range(2):
+            try:
+                fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
+            except FileExistsError:
+                found = self._legacy_holder(path.read_text() if path.exists() else None)
+                if found is not None:
+                    raise self._in_use(found) from None
+                path.unlink(missing_ok=True)  # stale: its driver is gone
+                continue
+            os.write(fd, holder.encode())
+            os.close(fd)
+            self._lock_fd = -1
+            return
+        raise RunFolderError(f"run folder {self.location}: could not take the driver lock {path}")
 
     def release_lock(self) -> None:
-        text = self.read_text(LOCK_FILE)
+        fd = self._lock_fd
+        if fd is None:
+            return
+        self._lock_fd = None
+        if self.remote:
+            try:
+                text = self.read_text(LOCK_FILE)
+                if text and json.loads(text).get("pid") == os.getpid():
+                    self.fs.delete_file(self._p(LOCK_FILE))
+            except Exception:
+                pass
+        path = self._lock_path()
         try:
-            mine = text is not None and json.loads(text).get("pid") == os.getpid()
-        except ValueError:
-            mine = False
-        if mine:
-            if self.remote:
-                self.fs.delete_file(self._p(LOCK_FILE))
+            # unlink while still holding it: a driver that opened the old file finds it gone
+            # (the inode check in acquire_lock) and takes a fresh one
+            if fd >= 0:
+                if os.path.samestat(os.fstat(fd), os.stat(path)):
+                    path.unlink()
             else:
-                (self.path / LOCK_FILE).unlink(missing_ok=True)
+                path.unlink(missing_ok=True)
+        except OSError:
+            pass
+        finally:
+            if fd >= 0:
+                os.close(fd)  # releases the flock
 
     # -- tables ------------------------------------------------------------------------------------
     def part_files(self, table: str) -> list[str]:
@@ -217,45 +406,19 @@ class RunStore:
             return []
         return sorted(str(p) for p in folder.glob("part-*.parquet"))
 
+    def _open_part(self, path: str) -> Any:
+        return self.fs.open_input_file(path) if self.remote else path
+
     def read_table(self, table: str, columns: list[str] | None = None) -> tuple[pa.Table, list[BadPart]]:
-        """Every readable row of ``table`` (optionally a few columns) and the unreadable parts."""
-        schema = arrow_schema(table)
-        if columns is not None:
-            schema = pa.schema([schema.field(c) for c in columns])
-        pieces: list[pa.Table] = []
-        bad: list[BadPart] = []
-        for path in self.part_files(table):
-            try:
-                if self.remote:
-                    with self.fs.open_input_file(path) as fh:
-                        t = pq.read_table(fh, columns=columns)
-                else:
-                    t = pq.read_table(path, columns=columns)
-                pieces.append(t.select(schema.names).cast(schema))
-            except Exception as exc:  # truncated, corrupt, wrong schema
-                bad.append(BadPart(Path(path), f"{type(exc).__name__}: {exc}".splitlines()[0][:300]))
-        if not pieces:
-            return schema.empty_table(), bad
-        return pa.concat_tables(pieces), bad
+        """Every row of ``table``'s good part files (optionally a few columns) and the bad ones,
+        by the one rule every reader applies (``workers.storage.schema_problem``): a part with a
+        missing column or another type is skipped and named, never cast."""
+        return read_parts(self.part_files(table), table, columns, self._open_part if self.remote else None)
 
     def check_parts(self, table: str) -> list[BadPart]:
-        """The unreadable part files of ``table``, found from their footers alone (truncated,
-        corrupt, or without the table's columns) - cheap enough to run over every table."""
-        names = set(arrow_schema(table).names)
-        bad: list[BadPart] = []
-        for path in self.part_files(table):
-            try:
-                if self.remote:
-                    with self.fs.open_input_file(path) as fh:
-                        found = pq.read_schema(fh)
-                else:
-                    found = pq.read_schema(path)
-                missing = sorted(names - set(found.names))
-                if missing:
-                    raise ValueError(f"not a {table} part: missing column(s) {', '.join(missing[:5])}")
-            except Exception as exc:
-                bad.append(BadPart(Path(path), f"{type(exc).__name__}: {exc}".splitlines()[0][:300]))
-        return bad
+        """The bad part files of ``table``, found from their footers alone (truncated, corrupt,
+        or not matching the table's schema) - cheap enough to run over every table."""
+        return inspect_parts(self.part_files(table), table, self._open_part if self.remote else None)[1]
 
     def tables(self) -> list[str]:
         return list(TABLES)

@@ -2,7 +2,12 @@
 
 Both read only the run folder (plan.json + the tables), so they work after a crash, while a run
 is still going, and on a folder copied from a cluster. Unreadable part files are counted and
-named, never fatal.
+named, never fatal; so is a torn or corrupt line of the gateway's ledger journal (one line:
+which file, which line, what to do).
+
+A unit is *done* when it has a terminal row that is neither ``budget_exhausted`` nor an
+infrastructure failure (:func:`pipeline.resume.infra_failure`); units whose latest row is an
+infrastructure failure are counted apart, with the command that retries them.
 """
 
 from __future__ import annotations
@@ -11,8 +16,9 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.resume import infra_failure, journal_issue
 from pipeline.store import PLAN_FILE, RunStore
-from workers.storage import BadPart
+from workers.storage import BadPart, inspect_parts, read_parts
 
 TEST_DOUBLE_LABEL = " (test double)"
 
@@ -25,6 +31,7 @@ class GroupRow:
     done: int = 0
     success: int = 0
     budget_stopped: int = 0
+    failed: int = 0
     steps: int = 0
     calls: int = 0
     cost_usd: float = 0.0
@@ -46,10 +53,20 @@ class StatusReport:
     groups: list[GroupRow] = field(default_factory=list)
     bad_parts: list[BadPart] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    #: units whose latest terminal row is an infrastructure failure (retryable), by kind
+    failed: int = 0
+    failed_kinds: dict[str, int] = field(default_factory=dict)
 
     @property
     def remaining(self) -> int:
         return self.total - self.completed
+
+    def retry_hint(self) -> str | None:
+        if not self.failed:
+            return None
+        kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.failed_kinds.items()))
+        return (f"{self.failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
+                f"then retry them with: recap resume {self.location}")
 
 
 def model_label(name: str, test_double: bool) -> str:
@@ -67,22 +84,38 @@ def collect(store: RunStore) -> StatusReport:
         problems.append(f"{PLAN_FILE} unreadable: {exc}")
     units = plan.get("units", [])
     bad: list[BadPart] = []
-    eps, b = store.read_table("episodes")
+    # one rule with recap sql / recap report: a part without the table's exact columns and
+    # types is skipped and named (workers.storage.schema_problem), never cast and counted
+    opener = store.fs.open_input_file if store.remote else None
+    eps, b = read_parts(store.part_files("episodes"), "episodes", open_file=opener)
     bad += b
     rows = eps.to_pylist()
     latest: dict[str, dict[str, Any]] = {}
+    final: dict[str, dict[str, Any]] = {}  # the latest row that completes its unit
     seen: dict[tuple[str, int], int] = defaultdict(int)
     for r in rows:
         seen[(r["unit_id"], r["attempt"])] += 1
         prev = latest.get(r["unit_id"])
         if prev is None or r["attempt"] > prev["attempt"]:
             latest[r["unit_id"]] = r
+        if r["end_reason"] != "budget_exhausted" and infra_failure(r["end_reason"], r["error"]) is None:
+            prev = final.get(r["unit_id"])
+            if prev is None or r["attempt"] > prev["attempt"]:
+                final[r["unit_id"]] = r
     duplicates = sum(n - 1 for n in seen.values() if n > 1)
-    calls, b = store.read_table("llm_calls", ["cost_usd"])
+    calls, b = read_parts(store.part_files("llm_calls"), "llm_calls", ["cost_usd"], open_file=opener)
     bad += b
     for table in store.tables():  # the other tables: status names every unreadable part
         if table not in ("episodes", "llm_calls"):
-            bad += store.check_parts(table)
+            bad += inspect_parts(store.part_files(table), table, opener)[1]
+    try:
+        issue = journal_issue(store)
+    except Exception as exc:  # status never dies on a damaged folder
+        problems.append(f"ledger journal unreadable: {type(exc).__name__}: {exc}".splitlines()[0])
+    else:
+        if issue is not None:
+            problems.append(issue.describe().replace("<run>", store.location))
+    failed_kinds: dict[str, int] = defaultdict(int)
     spend = float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist())) if calls.num_rows else \
         float(sum(r["cost_usd"] for r in rows))
     groups: dict[tuple[str, str], GroupRow] = {}
@@ -90,13 +123,18 @@ def collect(store: RunStore) -> StatusReport:
         key = (u["method"], u["model"])
         g = groups.setdefault(key, GroupRow(u["method"], u["model"], 0, test_double=u["model"].startswith("offline/")))
         g.units += 1
-        r = latest.get(u["unit_id"])
+        r = final.get(u["unit_id"]) or latest.get(u["unit_id"])
         if r is None:
             continue
         g.test_double = g.test_double or bool(r["test_double"])
         g.cost_usd += r["cost_usd"]
         if r["end_reason"] == "budget_exhausted":
             g.budget_stopped += 1
+            continue
+        kind = infra_failure(r["end_reason"], r["error"])
+        if kind is not None:
+            g.failed += 1
+            failed_kinds[kind] += 1
             continue
         g.done += 1
         g.success += int(r["success"])
@@ -108,31 +146,38 @@ def collect(store: RunStore) -> StatusReport:
         success=sum(g.success for g in groups.values()), budget_stopped=sum(g.budget_stopped for g in groups.values()),
         spend_usd=spend, terminal_rows=len(rows), duplicate_terminal=duplicates,
         groups=list(groups.values()), bad_parts=bad, problems=problems,
+        failed=sum(g.failed for g in groups.values()), failed_kinds=dict(failed_kinds),
     )
 
 
 def render(report: StatusReport, console: Any) -> None:
     """The summary table plus totals (rich)."""
+    from rich.markup import escape
     from rich.table import Table
 
-    t = Table(title=f"run {report.run} ({report.run_id}) - {report.location}")
+    t = Table(title=escape(f"run {report.run} ({report.run_id}) - {report.location}"))
     for col, just in (("method", "left"), ("model", "left"), ("done", "right"), ("success", "right"),
                       ("avg steps", "right"), ("avg calls", "right"), ("cost $", "right")):
         t.add_column(col, justify=just)
     for g in report.groups:
         rate = f"{g.success}/{g.done} ({100 * g.success / g.done:.0f}%)" if g.done else "-"
-        t.add_row(g.method, model_label(g.model, g.test_double), f"{g.done}/{g.units}", rate,
+        t.add_row(escape(g.method), escape(model_label(g.model, g.test_double)), f"{g.done}/{g.units}", rate,
                   f"{g.steps / g.done:.1f}" if g.done else "-", f"{g.calls / g.done:.1f}" if g.done else "-",
                   f"{g.cost_usd:.4f}")
     console.print(t)
+    failed = f"{report.failed} failed on infrastructure, " if report.failed else ""
     console.print(
         f"units {report.completed}/{report.total} done, {report.success} succeeded, "
-        f"{report.budget_stopped} stopped by a budget cap, {report.remaining - report.budget_stopped} not finished; "
+        f"{report.budget_stopped} stopped by a budget cap, {failed}"
+        f"{report.remaining - report.budget_stopped - report.failed} not finished; "
         f"spend ${report.spend_usd:.4f}"
     )
+    hint = report.retry_hint()
+    if hint:
+        console.print(hint, style="red", markup=False, soft_wrap=True)
     if report.duplicate_terminal:
         console.print(f"[red]{report.duplicate_terminal} duplicate terminal rows[/red]")
     for p in report.problems:
-        console.print(f"[yellow]{p}[/yellow]")
+        console.print(p, style="yellow", markup=False, soft_wrap=True)  # one line, however long
     for bp in report.bad_parts:
-        console.print(f"[yellow]unreadable part file {bp.path}: {bp.error}[/yellow]")
+        console.print(f"[yellow]unreadable part file {escape(str(bp.path))}: {escape(str(bp.error))}[/yellow]")

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.errors import SpecError
-from pipeline.spec import EnvSpec, SweepSpec
+from pipeline.spec import SEED_MAX, EnvSpec, SweepSpec
 from recap.config import ConfigError
 from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
 from workers.episode_worker import build_agent
@@ -80,6 +81,31 @@ def unit_hash(*, instance_id: str, method: str, method_config: str, model: str, 
     return hashlib.sha256(_canonical(content).encode()).hexdigest()[:16]
 
 
+#: most units one sweep may expand to (a typo in seeds or a selector must not exhaust memory);
+#: split larger sweeps into several runs
+MAX_UNITS = 200_000
+#: largest seed in a blocksworld instance id (``blocksworld/<n>@<seed>``), like the sweep's seeds
+_BLOCKSWORLD_ID = re.compile(r"^blocksworld/(\d+)@(\d+)$")
+
+
+def canonical_instance_id(instance_id: str, env: Any = None) -> str:
+    """The one spelling of an instance id, so that two spellings of one instance
+    (``blocksworld/3@01`` and ``blocksworld/3@1``, ``robotouille/...@042`` and ``...@42``) name
+    one unit: blocksworld numbers without leading zeros; otherwise the id the benchmark's
+    environment reports for itself (``env.instance_id``) when it is one of that benchmark's."""
+    m = _BLOCKSWORLD_ID.match(instance_id)
+    if m:
+        seed = int(m.group(2))
+        if seed > SEED_MAX:
+            raise UnknownInstanceError(f"blocksworld instance {instance_id!r}: the seed must be within 0..{SEED_MAX}")
+        return f"blocksworld/{int(m.group(1))}@{seed}"
+    bench = instance_id.partition("/")[0]
+    own = getattr(env, "instance_id", None)
+    if isinstance(own, str) and own.startswith(bench + "/") and len(own) > len(bench) + 1:
+        return own
+    return instance_id
+
+
 # --------------------------------------------------------------------------------------------
 def resolve_instances(envs: Sequence[EnvSpec]) -> list[tuple[str, dict[str, Any]]]:
     """Instance ids (with their env options) in spec order, deduplicated; errors name the entry."""
@@ -109,10 +135,15 @@ def resolve_instances(envs: Sequence[EnvSpec]) -> list[tuple[str, dict[str, Any]
                 b, _ = split_id(inst)
                 if b != env.benchmark:
                     raise UnknownInstanceError(f"instance {inst!r} is not a {env.benchmark} instance")
-                bench.make(inst, **env.options).close()
-            except (UnknownInstanceError, DataNotFoundError, EnvError, ValueError) as exc:
+                canon = canonical_instance_id(inst)
+                made = bench.make(canon, **env.options)
+                try:
+                    canon = canonical_instance_id(canon, made)
+                finally:
+                    made.close()
+            except (UnknownInstanceError, DataNotFoundError, EnvError, ValueError, TypeError, OSError) as exc:
                 raise SpecError(f"{where}: {exc}") from None
-            ids.append(inst)
+            ids.append(canon)
         for inst in ids:
             if inst not in seen:
                 seen.add(inst)
@@ -152,6 +183,10 @@ class Plan:
 def expand(spec: SweepSpec) -> Plan:
     """All units of a sweep, in a fixed order (instances, then methods, models, seeds)."""
     instances = resolve_instances(spec.environments)
+    n = len(instances) * len(spec.methods) * len(spec.models) * len(spec.seeds)
+    if n > MAX_UNITS:
+        raise SpecError(f"the sweep expands to {n:,} units ({len(instances)} instances x {len(spec.methods)} methods x "
+                        f"{len(spec.models)} models x {len(spec.seeds)} seeds); at most {MAX_UNITS:,} per run: split it")
     methods_by_benchmark: dict[str, list[tuple[Any, dict[str, Any], str]]] = {}
     units: list[Unit] = []
     seen: dict[str, str] = {}

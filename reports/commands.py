@@ -1,8 +1,11 @@
 """``recap report`` and ``recap sql``: the command-line faces of the reports package.
 
 The pipeline CLI hands its remaining arguments to :func:`report_main` or :func:`sql_main`; both
-return an exit status (0 ok, 1 a problem with the runs or the query, 2 bad usage) and print
-one-line errors, never tracebacks.
+return an exit status and print one-line errors, never tracebacks. ``recap report``: 0 ok, 1 a
+problem with the runs or the options, 2 bad usage. ``recap sql``: 0 ok, 2 for every error (bad
+usage, a missing or invalid run folder, SQL that does not parse or fails, a refused statement,
+an unreadable / binary / non-SQL ``--file``), like the rest of the ``recap`` command; an error
+about a ``--file`` never quotes the file's text.
 
     recap report RUN_DIR [RUN_DIR ...] [--out DIR] [--format md,html,tex,csv]
                  [--episodes ID[,ID...]] [--viewer-max N] [--title TEXT]
@@ -15,16 +18,27 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+import duckdb
+
 from reports.build import FORMATS, ReportOptions, build_report, parse_formats, write_report
 from reports.render_csv import result_csv
 from reports.viewer import DEFAULT_EPISODES
 from reports.views import ReportError, Result, load_sql, open_runs_checked, run_query
+
+#: the longest --file read (a query, not a data file; also stops /dev/zero and the like)
+MAX_QUERY_FILE_BYTES = 1 << 20
+
+# the mains print skipped parts themselves ("warning: ..."); without a handler of the
+# application's, Python's last-resort handler would print each a second time
+logging.getLogger("reports").addHandler(logging.NullHandler())
 
 
 class _Parser(argparse.ArgumentParser):
@@ -95,6 +109,7 @@ def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextI
         args = _sql_parser().parse_args(list(argv))
         if args.file:
             run_dirs, query = args.args, _read_query_file(args.file)
+            _check_query_file(args.file, query)
         else:
             if len(args.args) < 2:
                 raise _UsageError("recap sql: give at least one RUN_DIR and a QUERY")
@@ -107,11 +122,14 @@ def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextI
         finally:
             con.close()
     except _UsageError as exc:
-        print(str(exc), file=err)
+        print(_one_line(str(exc)), file=err)
         return 2
     except ReportError as exc:
         print(f"error: {exc}", file=err)
-        return 1
+        return 2
+    except Exception as exc:  # noqa: BLE001 - the contract is one line and status 2, never a traceback
+        print(_one_line(f"error: {type(exc).__name__}: {_strip_context(str(exc))}"), file=err)
+        return 2
     for s in skipped:
         print(f"warning: {s.line()}", file=err)
     if args.csv:
@@ -124,10 +142,49 @@ def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextI
 
 
 def _read_query_file(path: str) -> str:
+    """The text of a --file query; errors name the file and never quote what is in it."""
     try:
-        return Path(path).read_text()
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_QUERY_FILE_BYTES + 1)
     except OSError as exc:
-        raise ReportError(f"cannot read query file {path}: {exc.strerror or exc}") from None
+        raise ReportError(f"cannot read query file {path}: {exc.strerror or type(exc).__name__}") from None
+    if len(data) > MAX_QUERY_FILE_BYTES:
+        raise ReportError(f"query file {path} is larger than {MAX_QUERY_FILE_BYTES // 1024} KiB; is it a query?")
+    if b"\0" in data:
+        raise ReportError(f"query file {path} is not a text file (it holds NUL bytes)")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ReportError(f"query file {path} is not UTF-8 text (invalid byte at offset {exc.start})") from None
+    return text.removeprefix("\ufeff")
+
+
+_LINE = re.compile(r"\bLINE (\d+):")
+_CONTEXT = re.compile(r"\n\s*LINE \d+:.*", re.DOTALL)
+
+
+def _strip_context(message: str) -> str:
+    """DuckDB's message without the ``LINE n: <query text>`` context it appends."""
+    return _CONTEXT.sub("", message)
+
+
+def _check_query_file(path: str, text: str) -> None:
+    """A --file must parse as SQL; the error says where, never what (the file may be anything)."""
+    con = duckdb.connect(":memory:")
+    try:
+        statements = con.extract_statements(text)
+    except Exception as exc:  # noqa: BLE001 - any parser complaint
+        line = _LINE.search(str(exc))
+        where = f" (syntax error on line {line.group(1)})" if line else ""
+        raise ReportError(f"query file {path} is not valid SQL{where}") from None
+    finally:
+        con.close()
+    if not statements:
+        raise ReportError(f"query file {path} holds no SQL statement")
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
 
 
 def _json_value(v: Any) -> Any:

@@ -6,21 +6,26 @@ view each (``episodes``, ``llm_calls``, ``messages``, ``tree_nodes``, ``steps``,
 ``run``), and ``reports/sql/views.sql`` adds short named views on top (``attempts``,
 ``terminal``, ``calls``, ``nodes``, ``tree_stats``, ``failures``, ...).
 
-Read-only is enforced at two levels:
+Read-only comes from how the data is opened, not from a list of refused statements:
 
-* DuckDB reads the part files natively (fast, with projection and filter pushdown), and once the
-  views exist its file access is switched off except for exactly those part files
-  (``allowed_paths``), extension loading is off and the configuration is locked. ``COPY ... TO``
-  a new file, ``ATTACH``, ``EXPORT``, ``INSTALL``, ``read_csv('/etc/...')`` and ``SET`` all fail.
-  The one write DuckDB's settings cannot block is overwriting one of those exact part files with
-  ``COPY ... TO '<part file>' (USE_TMP_FILE false)`` through the raw connection;
-* every statement that goes through :func:`run_query` (``recap sql``, the report) is parsed first
-  and anything that is not a query is refused with a one-line :class:`ReadOnlyError`.
+* the part files are opened by pyarrow (a ``pyarrow.dataset`` per table, read lazily with
+  projection and filter pushdown) and handed to DuckDB as Arrow streams, so DuckDB itself never
+  holds a path to any part file. Once the views exist DuckDB's file access is switched off
+  entirely (``enable_external_access = false`` with no allowed path or folder), extension
+  install/load is off and the configuration is locked (``lock_configuration``), so no statement
+  can reach any file: ``COPY ... TO``, ``EXPORT``, ``ATTACH``, ``INSTALL``, ``read_csv('/etc/...')``,
+  ``SET`` (including turning access back on) and profiling output all fail. There is no spill
+  folder either (DuckDB would let statements write there), so a query bigger than memory fails;
+* on top, every statement that goes through :func:`run_query` (``recap sql``, the report) is
+  parsed first and anything that is not a query is refused with a one-line
+  :class:`ReadOnlyError`; ``EXPLAIN`` / ``EXPLAIN ANALYZE`` are parsed too and allowed only
+  around a query (``EXPLAIN ANALYZE`` runs its statement).
 
-Broken part files (truncated, corrupt footer) are found with :func:`workers.storage.check_parts`,
-skipped, logged, and listed in the ``bad_parts`` table. A table without readable files is an
-empty view with the table's full schema, and a column missing from every file of an older run
-reads as NULL.
+Part files that are broken (truncated, corrupt footer) or do not match their table's Arrow
+schema in ``schemas/`` (a missing column, a column of another type) are found with
+:func:`workers.storage.check_parts` - the same rule ``recap status`` applies - skipped, logged,
+and listed in the ``bad_parts`` table. A table without good files is an empty view with the
+table's full schema.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from typing import Any
 
 import duckdb
 import pyarrow as pa
+import pyarrow.dataset as ds
 
 from schemas.tables import TABLES
 from workers.storage import check_parts
@@ -44,9 +50,6 @@ log = logging.getLogger(__name__)
 
 SQL_DIR = Path(__file__).resolve().with_name("sql")
 
-#: statement types a read-only query may contain (DESCRIBE, SHOW, SUMMARIZE, VALUES and
-#: ``FROM x`` all parse as SELECT)
-_QUERY_TYPES = {duckdb.StatementType.SELECT, duckdb.StatementType.EXPLAIN}
 #: PRAGMAs that only read (the others set options or import databases)
 _READ_PRAGMAS = {
     "table_info",
@@ -154,23 +157,17 @@ def duckdb_types() -> dict[str, dict[str, str]]:
     return out
 
 
-def _sql_str(text: str) -> str:
-    return "'" + text.replace("'", "''") + "'"
-
-
 def _create_table_view(con: duckdb.DuckDBPyConnection, table: str, files: list[Path]) -> None:
-    """View ``table`` over ``files`` with exactly the declared columns and types."""
-    types = duckdb_types()[table]
-    if not files:
-        cols = ", ".join(f'CAST(NULL AS {t}) AS "{c}"' for c, t in types.items())
-        con.execute(f'CREATE VIEW "{table}" AS SELECT {cols} WHERE false')
-        return
-    source = f"read_parquet([{', '.join(_sql_str(str(f)) for f in files)}], union_by_name = true)"
-    present = {r[0] for r in con.execute(f"SELECT column_name FROM (DESCRIBE SELECT * FROM {source})").fetchall()}
-    cols = ", ".join(
-        f'CAST("{c}" AS {t}) AS "{c}"' if c in present else f'CAST(NULL AS {t}) AS "{c}"' for c, t in types.items()
-    )
-    con.execute(f'CREATE VIEW "{table}" AS SELECT {cols} FROM {source}')
+    """View ``table`` over ``files`` with exactly the declared columns and types.
+
+    The files are read by pyarrow (DuckDB scans the dataset as Arrow, pushing projections and
+    filters down) so that DuckDB's own file access can be switched off completely.
+    """
+    schema = TABLES[table]
+    source: Any = ds.dataset([str(f) for f in files], schema=schema, format="parquet") if files else schema.empty_table()
+    con.register(f"_parts_{table}", source)
+    cols = ", ".join(f'"{c}"' for c in schema.names)
+    con.execute(f'CREATE VIEW "{table}" AS SELECT {cols} FROM "_parts_{table}"')
 
 
 def open_runs(run_dirs: Sequence[str | Path], *, read_only: bool = True) -> duckdb.DuckDBPyConnection:
@@ -186,12 +183,15 @@ def open_runs(run_dirs: Sequence[str | Path], *, read_only: bool = True) -> duck
 def open_runs_checked(
     run_dirs: Sequence[str | Path], *, read_only: bool = True
 ) -> tuple[duckdb.DuckDBPyConnection, list[SkippedPart]]:
-    """:func:`open_runs` that also returns the skipped part files."""
+    """:func:`open_runs` that also returns the skipped part files.
+
+    ``read_only=False`` leaves DuckDB's file access and configuration as they are (a caller that
+    exports on purpose); the part files are still read through pyarrow, never opened by DuckDB.
+    """
     dirs, files, skipped = scan_runs(run_dirs)
     for s in skipped:
         log.warning(s.line())
     con = duckdb.connect(":memory:")
-    con.execute("SET parquet_metadata_cache = true")
     for table, parts in files.items():
         _create_table_view(con, table, parts)
     con.execute("CREATE TABLE bad_parts (run_dir VARCHAR, \"table\" VARCHAR, path VARCHAR, error VARCHAR)")
@@ -205,14 +205,24 @@ def open_runs_checked(
     for statement in split_statements(load_sql("macros")) + split_statements(load_sql("views")):
         con.execute(statement)
     if read_only:
-        allowed = [str(f) for fs in files.values() for f in fs]
-        con.execute("SET allowed_paths = ?", [allowed])
-        con.execute("SET allowed_directories = []")
-        con.execute("SET enable_external_access = false")
-        con.execute("SET autoinstall_known_extensions = false")
-        con.execute("SET autoload_known_extensions = false")
-        con.execute("SET lock_configuration = true")
+        _lock_down(con)
     return con, skipped
+
+
+def _lock_down(con: duckdb.DuckDBPyConnection) -> None:
+    """No file reachable from ``con`` from now on, for reading or writing, and no way back."""
+    # no spill folder: DuckDB would add it to the folders statements may write to (and its
+    # default, '.tmp' in the working folder, may be inside a run folder); a query bigger than
+    # memory fails instead
+    con.execute("SET temp_directory = ''")
+    con.execute("SET allowed_paths = []")
+    con.execute("SET allowed_directories = []")
+    con.execute("SET enable_external_access = false")
+    con.execute("SET autoinstall_known_extensions = false")
+    con.execute("SET autoload_known_extensions = false")
+    con.execute("SET allow_community_extensions = false")
+    con.execute("SET python_enable_replacements = false")
+    con.execute("SET lock_configuration = true")
 
 
 def materialize(con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> None:
@@ -257,11 +267,73 @@ def split_statements(text: str) -> list[str]:
 # -- read-only queries ---------------------------------------------------------------------------
 
 
+_ALLOWED = "allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA"
+_COMMENT_TOKEN = duckdb.token_type.comment
+
+
+def _tokens(text: str) -> list[tuple[int, str, Any]]:
+    """(start, text, kind) of every token of ``text`` except comments."""
+    raw = duckdb.tokenize(text)
+    out = []
+    for i, (start, kind) in enumerate(raw):
+        end = raw[i + 1][0] if i + 1 < len(raw) else len(text)
+        if kind != _COMMENT_TOKEN:
+            out.append((start, text[start:end].strip(), kind))
+    return out
+
+
+def _words(tokens: list[tuple[int, str, Any]], i: int) -> str:
+    return tokens[i][1].lower() if i < len(tokens) else ""
+
+
+def _explained(con: duckdb.DuckDBPyConnection, text: str) -> Any | None:
+    """The one statement inside ``EXPLAIN [ANALYZE] [VERBOSE] [(options)] <statement>``, or None
+    when it cannot be told exactly (then the EXPLAIN is refused)."""
+    try:
+        toks = _tokens(text)
+    except Exception:  # noqa: BLE001 - the tokenizer refusing the text: refuse the statement
+        return None
+    if _words(toks, 0) != "explain":
+        return None
+    i = 1
+    if _words(toks, i) in ("analyze", "analyse"):
+        i += 1
+    if _words(toks, i) == "verbose":
+        i += 1
+    if i >= len(toks):
+        return None
+    starts = [toks[i][0]]
+    if toks[i][2] == duckdb.token_type.operator and toks[i][1].startswith("("):
+        depth, j = 0, i
+        while j < len(toks):
+            if toks[j][2] == duckdb.token_type.operator:
+                depth += toks[j][1].count("(") - toks[j][1].count(")")
+                if depth <= 0:
+                    break
+            j += 1
+        if depth == 0 and j + 1 < len(toks) and toks[j][1].endswith(")"):
+            starts.append(toks[j + 1][0])
+    for start in starts:
+        try:
+            inner = con.extract_statements(text[start:])
+        except duckdb.Error:
+            continue
+        if len(inner) == 1:
+            return inner[0]
+    return None
+
+
+def _refuse(kind: str) -> ReadOnlyError:
+    return ReadOnlyError(f"refused {kind} statement: reports are read-only ({_ALLOWED})")
+
+
 def check_read_only(con: duckdb.DuckDBPyConnection, sql: str) -> int:
     """Raise :class:`ReadOnlyError` unless every statement in ``sql`` only reads.
 
     Returns the number of statements. Allowed: SELECT/WITH/VALUES/FROM, DESCRIBE, SHOW,
-    SUMMARIZE, EXPLAIN and the read-only PRAGMAs.
+    SUMMARIZE, the read-only PRAGMAs, and EXPLAIN / EXPLAIN ANALYZE of a query (EXPLAIN ANALYZE
+    runs its statement, so what it explains is checked like a statement of its own). This is
+    the second line of defence: the connection from :func:`open_runs` cannot reach any file.
     """
     try:
         statements = con.extract_statements(sql)
@@ -270,24 +342,41 @@ def check_read_only(con: duckdb.DuckDBPyConnection, sql: str) -> int:
     if not statements:
         raise QueryError("empty query")
     for st in statements:
-        if st.type in _QUERY_TYPES:
+        if st.type == duckdb.StatementType.SELECT:
             continue
+        if st.type == duckdb.StatementType.EXPLAIN:
+            inner = _explained(con, st.query)
+            if inner is not None and inner.type == duckdb.StatementType.SELECT:
+                continue
+            what = inner.type.name.replace("_", " ") if inner is not None else "an unrecognised"
+            raise _refuse(f"EXPLAIN of {'a ' if inner is not None else ''}{what}")
         if st.type == duckdb.StatementType.PRAGMA:
-            m = re.match(r"\s*pragma\s+([a-z_]+)", st.query, re.IGNORECASE)
-            if m and m.group(1).lower() in _READ_PRAGMAS:
+            try:
+                toks = _tokens(st.query)
+            except Exception:  # noqa: BLE001
+                toks = []
+            # PRAGMA name [(args)] only: 'PRAGMA name = value' is a SET
+            if (_words(toks, 0) == "pragma" and _words(toks, 1) in _READ_PRAGMAS
+                    and not any(t[2] == duckdb.token_type.operator and "=" in t[1] for t in toks)):
                 continue
         kind = st.type.name.replace("_", " ")
         if st.type == duckdb.StatementType.LOAD:  # INSTALL and LOAD parse as LOAD
-            kind = st.query.split(None, 1)[0].upper() if st.query.strip() else kind
-        raise ReadOnlyError(
-            f"refused {kind} statement: reports are read-only "
-            f"(allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)"
-        )
+            try:
+                first = _words(_tokens(st.query), 0)
+            except Exception:  # noqa: BLE001
+                first = ""
+            kind = first.upper() if first in ("install", "load", "force") else kind
+            kind = "INSTALL" if kind == "FORCE" else kind
+        raise _refuse(kind)
     return len(statements)
 
 
+_CONTEXT = re.compile(r"\n\s*LINE \d+:.*", re.DOTALL)
+
+
 def _first_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())
+    """DuckDB's message on one line, without the ``LINE n: <query text>`` context it appends."""
+    return " ".join(_CONTEXT.sub("", str(exc)).split())
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 import uuid
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -73,31 +73,105 @@ def part_files(run_dir: Path, table: str) -> list[Path]:
     return sorted(p for p in folder.glob("part-*.parquet"))
 
 
-def check_parts(run_dir: Path, table: str) -> tuple[list[Path], list[BadPart]]:
-    """Split a table's part files into readable ones and broken ones (truncated, corrupt)."""
-    good: list[Path] = []
+def schema_problem(table: str, found: pa.Schema) -> str | None:
+    """Why a part file whose schema is ``found`` is not a ``table`` part, or None when it is.
+
+    The one rule every reader applies (``recap status``, ``recap sql``, ``recap report``, resume
+    through :func:`read_parts`): a part holds every column of the table's Arrow schema
+    (``schemas/``) with exactly the declared type. Extra columns are ignored. A part that breaks
+    the rule is skipped and named, never cast, so a number stored as text is not counted by one
+    reader and refused by another.
+    """
+    expected = arrow_schema(table)
+    missing = [f.name for f in expected if f.name not in found.names]
+    if missing:
+        more = f" (+{len(missing) - 5} more)" if len(missing) > 5 else ""
+        return f"not a {table} part: missing column(s) {', '.join(sorted(missing)[:5])}{more}"
+    wrong: list[str] = []
+    for f in expected:
+        i = found.get_field_index(f.name)
+        if i < 0:
+            wrong.append(f"{f.name} appears more than once")
+        elif not found.field(i).type.equals(f.type):
+            wrong.append(f"{f.name} is {found.field(i).type}, expected {f.type}")
+    if wrong:
+        more = f" (+{len(wrong) - 3} more)" if len(wrong) > 3 else ""
+        return f"not a {table} part: wrong column type(s): {'; '.join(wrong[:3])}{more}"
+    return None
+
+
+def _error(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
+
+
+def _source(path: Any, open_file: Callable[[str], Any] | None) -> Any:
+    return open_file(str(path)) if open_file is not None else path
+
+
+def inspect_parts(
+    paths: Iterable[Any], table: str, open_file: Callable[[str], Any] | None = None
+) -> tuple[list[Any], list[BadPart]]:
+    """Split part files into good ones and bad ones from their footers alone: unreadable
+    (truncated, corrupt, empty) or not matching the table's schema (:func:`schema_problem`).
+
+    ``open_file`` opens a path of a remote file system (``fs.open_input_file``); local paths
+    are read directly.
+    """
+    good: list[Any] = []
     bad: list[BadPart] = []
-    for p in part_files(run_dir, table):
+    for p in paths:
         try:
-            pq.read_metadata(p)
+            src = _source(p, open_file)
+            try:
+                found = pq.read_schema(src)
+            finally:
+                if src is not p and hasattr(src, "close"):
+                    src.close()
+            problem = schema_problem(table, found)
+            if problem is not None:
+                raise ValueError(problem)
             good.append(p)
         except Exception as exc:  # pyarrow raises several types for broken files
-            bad.append(BadPart(p, f"{type(exc).__name__}: {exc}"))
+            bad.append(BadPart(Path(str(p)), _error(exc)))
     return good, bad
 
 
-def read_table(run_dir: Path, table: str) -> tuple[pa.Table, list[BadPart]]:
-    """All readable rows of ``table`` (empty table with the schema when none), plus bad parts."""
-    good, bad = check_parts(run_dir, table)
+def read_parts(
+    paths: Iterable[Any], table: str, columns: Sequence[str] | None = None,
+    open_file: Callable[[str], Any] | None = None,
+) -> tuple[pa.Table, list[BadPart]]:
+    """The rows of the good part files among ``paths`` (optionally a few columns) and the bad
+    ones (see :func:`inspect_parts`); an empty table with the schema when none is good."""
+    schema = arrow_schema(table)
+    if columns is not None:
+        schema = pa.schema([schema.field(c) for c in columns])
+    good, bad = inspect_parts(paths, table, open_file)
     pieces = []
     for p in good:
         try:
-            pieces.append(pq.read_table(p, schema=arrow_schema(table)))
-        except Exception as exc:
-            bad.append(BadPart(p, f"{type(exc).__name__}: {exc}"))
+            src = _source(p, open_file)
+            try:
+                pieces.append(pq.read_table(src, columns=list(schema.names)).select(schema.names).cast(schema))
+            finally:
+                if src is not p and hasattr(src, "close"):
+                    src.close()
+        except Exception as exc:  # a footer that reads but data pages that do not
+            bad.append(BadPart(Path(str(p)), _error(exc)))
     if not pieces:
-        return arrow_schema(table).empty_table(), bad
+        return schema.empty_table(), bad
     return pa.concat_tables(pieces), bad
+
+
+def check_parts(run_dir: Path, table: str) -> tuple[list[Path], list[BadPart]]:
+    """Split a table's part files into good ones and bad ones (truncated, corrupt, or not
+    matching the table's schema: :func:`schema_problem`)."""
+    return inspect_parts(part_files(run_dir, table), table)
+
+
+def read_table(run_dir: Path, table: str) -> tuple[pa.Table, list[BadPart]]:
+    """All rows of the good part files of ``table`` (empty table with the schema when none),
+    plus the bad parts."""
+    return read_parts(part_files(run_dir, table), table)
 
 
 def known_tables() -> list[str]:

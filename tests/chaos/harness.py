@@ -222,7 +222,8 @@ def plan_ids(out: Path) -> list[str]:
 
 @dataclass
 class Terminal:
-    """The episodes table seen through the completion rule (a row not ``budget_exhausted``)."""
+    """The episodes table seen through the completion rule (a row neither ``budget_exhausted``
+    nor an infrastructure failure, :func:`pipeline.resume.infra_failure`)."""
 
     rows: list[dict[str, Any]]
     plan: list[str]
@@ -230,20 +231,38 @@ class Terminal:
     @property
     def completed(self) -> dict[str, dict[str, Any]]:
         """unit_id -> its (latest) completed terminal row."""
+        from pipeline.resume import is_final
+
         out: dict[str, dict[str, Any]] = {}
         for r in sorted(self.rows, key=lambda r: r["attempt"]):
-            if r["end_reason"] != "budget_exhausted":
+            if is_final(r["end_reason"], r["error"]):
+                out[r["unit_id"]] = r
+        return out
+
+    @property
+    def failed(self) -> dict[str, dict[str, Any]]:
+        """unit_id -> its latest row, for units whose latest row is an infrastructure failure
+        (ended, not done: the next resume retries them)."""
+        from pipeline.resume import infra_failure
+
+        done = self.completed
+        out: dict[str, dict[str, Any]] = {}
+        for r in sorted(self.rows, key=lambda r: r["attempt"]):
+            if r["unit_id"] not in done and infra_failure(r["end_reason"], r["error"]) is not None:
                 out[r["unit_id"]] = r
         return out
 
     @property
     def lost(self) -> list[str]:
-        done = self.completed
-        return [u for u in self.plan if u not in done]
+        """Units without a terminal row that ends them (completed, or failed and retryable)."""
+        done, failed = self.completed, self.failed
+        return [u for u in self.plan if u not in done and u not in failed]
 
     @property
     def duplicated(self) -> int:
-        per_unit = Counter(r["unit_id"] for r in self.rows if r["end_reason"] != "budget_exhausted")
+        from pipeline.resume import is_final
+
+        per_unit = Counter(r["unit_id"] for r in self.rows if is_final(r["end_reason"], r["error"]))
         per_episode = Counter(r["episode_id"] for r in self.rows)
         return sum(n - 1 for n in per_unit.values()) + sum(n - 1 for n in per_episode.values())
 

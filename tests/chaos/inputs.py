@@ -161,6 +161,26 @@ CASES = [
     Case("show an unknown episode", _on_folder("show", "RUN", "no-such-episode"), "no episode 'no-such-episode'"),
     Case("sql that would write a file", _on_folder("sql", "RUN", "COPY (SELECT 1) TO 'DIR/leak.csv'"), "rror"),
     Case("report in an unknown format", _on_folder("report", "RUN", "--format", "pdf"), "unknown report format(s) pdf"),
+    # spec hardening: bounded values, YAML bombs, duplicate keys, labels, addresses, stores
+    Case("seed beyond int64", _spec(("seeds: [0]", "seeds: [9223372036854775808]")), "seeds[0]: integer out of range"),
+    Case("boolean worker count", _spec(("workers: 2", "workers: true")), "workers: must be a number, not true/false"),
+    Case("nan temperature", _spec((MODEL_LINE, MODEL_LINE + "\n    params: {temperature: .nan}")),
+         "models[0].params.temperature: must be a finite number"),
+    Case("infinite model cap", _spec((MODEL_LINE, MODEL_LINE + "\n    cap_usd: .inf")), "models[0].cap_usd: must be a finite number"),
+    Case("overflowing price", _spec((MODEL_LINE, MODEL_LINE + "\n    prices: {input: 1, output: 1e999}")), "models[0].prices.output"),
+    Case("duplicate cap_usd", _spec((MODEL_LINE, MODEL_LINE + "\n    cap_usd: 1\n    cap_usd: 500")), "duplicate key 'cap_usd' at line 8"),
+    Case("alias bomb", _spec(("seeds: [0]", "seeds: [0]\nx0: &a [1, 1, 1, 1, 1, 1, 1, 1, 1]\nx1: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]")),
+         "YAML anchors are not allowed"),
+    Case("markup in a label", _spec((MODEL_LINE, MODEL_LINE + "\n    label: '[bold]x[/]'")), "models[0].label: may hold only"),
+    Case("escape code in a label", _spec((MODEL_LINE, MODEL_LINE + '\n    label: "a\\e[31mb"')), "models[0].label: may hold only"),
+    Case("50 kB label", _spec((MODEL_LINE, MODEL_LINE + "\n    label: " + "x" * 50_000)), "at most 4096"),
+    Case("sweep file is /dev/zero", lambda d, url: ["run", "/dev/zero"], "not a regular file"),
+    Case("2 MB sweep file", _spec(text="# " + "x" * 2_000_000 + "\n"), "at most 1 MiB"),
+    Case("unreachable object store", _spec(out="s3://bucket/runs/x?endpoint_override=127.0.0.1:1&scheme=http"), "cannot connect to 127.0.0.1:1"),
+    Case("unknown output scheme", _spec(out="ftp://host/runs/x"), "unknown URI scheme 'ftp'"),
+    Case("ray address without a port", _spec(("workers: 2", "workers: 2\nray: {address: head-node}")), "ray.address: must be"),
+    Case("--address out of range", _flags("--address", "10.0.0.5:99999"), "ray.address: must be"),
+    Case("--run-cap nan", _flags("--run-cap", "nan"), "run_cap_usd: Input should be a finite number"),
 ]
 
 

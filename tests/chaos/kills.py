@@ -10,6 +10,9 @@
 * driver: ``recap run`` killed at a random moment (once or twice, the second time during
   ``recap resume``), then ``recap resume``: the final tables equal an uninterrupted run's, and
   no unit whose terminal row was on disk is paid for again.
+* sink: the sink actor killed mid-run (once or twice); it comes back and the run goes on - or,
+  with its restarts used up, the driver stops at once - then ``recap resume``: lost 0,
+  duplicated 0, no unit whose episode finished before a kill run or paid again.
 """
 
 from __future__ import annotations
@@ -335,5 +338,133 @@ def driver_kill(lab: Lab, runs: int = 2, units: int = 12) -> ScenarioResult:
         res.notes.append(f"run {r}: killed at {', '.join(kill_points) or '-'}; ${wasted:.4f} paid for "
                          f"killed attempts; {redone} finished episodes re-run (terminal row not yet on disk); "
                          f"{missing_rows} llm_calls rows lost with the gateway buffer")
+        res.end_run()
+    return res
+
+
+# --------------------------------------------------------------------------------------------
+def _sink_killer(driver: Any, out: Path, at_rows: list[int], seen: list[dict[str, Any]]) -> threading.Thread:
+    """SIGKILL the driver's sink actor each time the run folder holds ``at_rows[i]`` terminal
+    rows; ``seen`` gets, per kill, the pid and the units completed on disk at that moment."""
+
+    def go() -> None:
+        for n in at_rows:
+            if not wait_until(lambda: driver.sink is not None and len(terminal_rows(out)) >= n, 180, 0.05):
+                return
+            kill: dict[str, Any] = {"at_rows": n}
+            seen.append(kill)
+            try:
+                pid = _actor_pid(driver.sink)
+                kill["done"] = {r["unit_id"]: r["attempt"] for r in terminal_rows(out)}
+                os.kill(pid, signal.SIGKILL)
+                kill["pid"] = pid
+                kill["new_pid"] = _actor_pid(driver.sink)  # waits for the restart (when there is one)
+            except Exception as exc:
+                kill["error"] = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+                return
+
+    t = threading.Thread(target=go, daemon=True)
+    t.start()
+    return t
+
+
+def terminal_rows(out: Path) -> list[dict[str, Any]]:
+    return rows(out, "episodes", ["unit_id", "attempt", "episode_id"]) if (out / "plan.json").exists() else []
+
+
+def sink_kill(lab: Lab, runs: int = 1, units: int = 12, restarts: bool = True) -> ScenarioResult:
+    """SIGKILL the sink actor mid-run (once or twice), then ``recap resume``.
+
+    ``restarts``: the sink comes back (Ray restarts it, the senders' calls are retried) and the
+    run goes on; without, the driver stops at once, writes what finished itself, and the
+    resume runs only what was never written. Either way: lost 0, duplicated 0, no unit whose
+    episode finished before a kill is run again, no finished unit paid twice."""
+    import workers.sink
+    from pipeline.driver import Driver, Hooks, prepare
+    from pipeline.errors import PipelineError
+    from pipeline.gateway_backend import make_backend
+    from pipeline.spec import parse_spec
+
+    name = "sink SIGKILL" + ("" if restarts else " (no restart: driver stops)")
+    res = ScenarioResult(f"{name} + recap resume")
+    lab.ray_address()
+    server = lab.server(latency_s=0.15, prefix_memory=0)
+    base = lab.folder("sink-kill" if restarts else "sink-gone")
+    ref_out = base / "reference"
+    run_driver(sweep(ref_out, fake_model(server.base_url), blocks(units), run="sink-kill", workers=3, llm_calls=6))
+    reference = terminal(ref_out).completed
+    ref_paid = journal_spend(journal(ref_out))
+    ref_spend = {u: ref_paid[r["episode_id"]] for u, r in reference.items()}
+    old_restarts = workers.sink.SINK_MAX_RESTARTS
+    for r in range(runs):
+        res.begin_run()
+        rng = lab.rng(f"sink-kill-{restarts}-{r}")
+        out = base / f"run-{r}"
+        text = sweep(out, fake_model(server.base_url), blocks(units), run="sink-kill", workers=3, llm_calls=6)
+        first = rng.randint(1, units // 3)
+        at_rows = [first] + ([first + rng.randint(2, units // 3)] if restarts and rng.random() < 0.5 else [])
+        dispatched: list[tuple[str, int]] = []
+        hooks = Hooks(on_dispatch=lambda u, a, actor: dispatched.append((u.unit_id, a)))
+        workers.sink.SINK_MAX_RESTARTS = old_restarts if restarts else 0
+        try:
+            spec = parse_spec(text, "sweep.yaml")
+            driver = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=hooks)
+            seen: list[dict[str, Any]] = []
+            killer = _sink_killer(driver, out, at_rows, seen)
+            error = None
+            try:
+                summary = driver.run()
+            except PipelineError as exc:
+                summary, error = driver.summary, str(exc)
+            killer.join(60)
+        finally:
+            workers.sink.SINK_MAX_RESTARTS = old_restarts
+        landed = [k for k in seen if "pid" in k]
+        res.check("the sink was killed mid-run", landed and all(len(k["done"]) < units for k in landed), seen)
+        if restarts:
+            res.check("the sink came back after each kill", all(k.get("new_pid") not in (None, k["pid"]) for k in landed), seen)
+            res.check("the run went on to the end (exit 0)", error is None and summary.exit_code() == 0,
+                      error or summary.exit_code())
+        else:
+            res.check("the driver stopped at once with one line naming recap resume",
+                      error is not None and "recap resume" in error and "\n" not in error, error)
+        res.check("the sink's death was not read as worker deaths",
+                  summary.worker_restarts == 0 and not events(out, "worker_lost"), summary.worker_restarts)
+        on_disk = {row["unit_id"] for row in terminal_rows(out)}
+        before = set(on_disk)
+        again: list[str] = []
+        summary2, _ = run_driver(text, hooks=Hooks(on_dispatch=lambda u, a, actor: again.append(u.unit_id)))
+        term = terminal(out)
+        done = term.completed
+        res.check("resume exits 0 with every unit done", summary2.exit_code() == 0 and not term.lost,
+                  f"exit {summary2.exit_code()}, not done {len(term.lost)}")
+        res.check("resume ran exactly the units without a terminal row", set(again) == set(reference) - before,
+                  f"ran {len(set(again))}, missing {len(set(reference) - before)}")
+        res.check("same unit set as an uninterrupted run", set(done) == set(reference), f"{len(done)} vs {len(reference)}")
+        diff = [u for u in reference if u in done and any(done[u][c] != reference[u][c] for c in _COMPARED)]
+        res.check("each unit's terminal row equals the uninterrupted run's", not diff, diff[:3])
+        entries = journal(out)
+        paid = journal_spend(entries)
+        reserved = reserved_episodes(entries)
+        repaid_units, repaid_pico = set(), 0
+        for kill in landed:
+            for unit, attempt in kill["done"].items():
+                later = [e for e in reserved if unit_of(e) == unit and attempt_of(e) > attempt]
+                if later:
+                    repaid_units.add(unit)
+                    repaid_pico += sum(paid.get(e, 0) for e in later)
+        res.check("no unit whose episode finished before a kill was run again", not repaid_units, sorted(repaid_units)[:3])
+        res.add_overspend(repaid_pico / 1e12)
+        off = [u for u, row in done.items() if paid.get(row["episode_id"], 0) != ref_spend.get(u, -1)]
+        res.check("each completed attempt paid once, at the uninterrupted run's cost (ledger)", not off, off[:3])
+        if restarts:
+            res.check("one attempt per unit: nothing re-run at all", all(attempt_of(e) == 1 for e in reserved),
+                      sorted(e for e in reserved if attempt_of(e) != 1)[:3])
+        _records_complete(res, out, {row["episode_id"] for row in done.values()})
+        res.lost += len(term.lost)
+        res.duplicated += term.duplicated
+        res.check("lost 0, duplicated 0", not term.lost and term.duplicated == 0, (len(term.lost), term.duplicated))
+        res.notes.append(f"run {r}: sink killed at {[k['at_rows'] for k in landed]} terminal rows; "
+                         f"{len(before)}/{units} units on disk after the first session")
         res.end_run()
     return res

@@ -124,7 +124,7 @@ def test_check_parts_names_truncated_empty_and_foreign_parts(tmp_path):
     hit = damage(out)
     store = RunStore(out)
     assert [(b.path, b.error) for b in store.check_parts("events")] == [
-        (hit["events"], "ValueError: not a events part: missing column(s) detail, episode_id, kind, run_id, severity")]
+        (hit["events"], "ValueError: not a events part: missing column(s) detail, episode_id, kind, run_id, severity (+3 more)")]
     assert [b.error for b in store.check_parts("steps")] == ["ArrowInvalid: Parquet file size is 0 bytes"]
     assert [b.path for b in store.check_parts("messages")] == [hit["messages"]]
     assert store.check_parts("tree_nodes") == []  # the leftover temp file is not a part

@@ -53,7 +53,7 @@ def test_defaults_and_unit_count():
          "sweep.yaml: run: must be letters, digits, '.', '_' or '-' (starting with a letter or digit)"),
         (BASE.replace("seeds: [0, 1]", "seeds: [0, 0]"), "sweep.yaml: seeds: repeated seed"),
         (BASE.replace("run: unit-test\n", ""), "sweep.yaml: run: required field is missing"),
-        (BASE + "methods:\n  - method: recap\n  - method: recap\n",
+        (BASE.replace("  - method: recap\n", "  - method: recap\n  - method: recap\n"),
          "sweep.yaml: methods: two entries are both named 'recap'; give them distinct 'label's"),
     ],
 )

@@ -203,12 +203,14 @@ def test_sql_file_and_row_limit(run_a, tmp_path):
 
 
 def test_sql_refuses_writes_and_bad_input(run_a, tmp_path):
+    # every recap sql error: one line on stderr, exit status 2 (as every other recap command)
     rc, out, err = _run(sql_main, [str(run_a), "DROP VIEW episodes"])
-    assert (rc, out, err) == (1, "", "error: refused DROP statement: reports are read-only (allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)\n")
+    assert (rc, out, err) == (2, "", "error: refused DROP statement: reports are read-only (allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)\n")
     rc, _, err = _run(sql_main, [str(run_a), "SELECT * FROM nosuchtable"])
-    assert rc == 1 and err.startswith("error: query failed: Catalog Error: Table with name nosuchtable does not exist!")
+    assert rc == 2 and err.startswith("error: query failed: Catalog Error: Table with name nosuchtable does not exist!")
+    assert len(err.splitlines()) == 1
     assert _run(sql_main, [str(run_a)])[::2] == (2, "recap sql: give at least one RUN_DIR and a QUERY\n")
-    assert _run(sql_main, [str(run_a), "@nosuch"])[0] == 1
+    assert _run(sql_main, [str(run_a), "@nosuch"])[0] == 2
     assert _run(sql_main, [str(run_a), "--file", str(tmp_path / "none.sql")])[2].startswith("error: cannot read query file")
     assert _run(sql_main, [str(run_a), "SELECT 1", "--csv", "--json"])[0] == 2
 

@@ -88,8 +88,10 @@ def test_table_whose_only_file_is_corrupt_is_empty(run_a, tmp_path):
     assert run_query(con, "SELECT mode FROM episode_modes WHERE episode_id = 'A-react-t2-84-a2'").rows == [("step_cap",)]
 
 
-def test_column_missing_in_older_files_reads_as_null(tmp_path):
-    """A run written before a column existed: the view still has every column (NULL)."""
+def test_part_missing_a_column_is_skipped_and_named(tmp_path):
+    """A part without every column of its table (a foreign file, a run of another schema
+    version) is skipped and named, as ``recap status`` and resume do; the view keeps every
+    column. (Rule: workers.storage.schema_problem - exact column names and Arrow types.)"""
     schema = TABLES["episodes"]
     old = pa.schema([f for f in schema if f.name not in ("test_double", "worker_id")])
     row = {f.name: None for f in old}
@@ -99,10 +101,14 @@ def test_column_missing_in_older_files_reads_as_null(tmp_path):
                completion_tokens=5, cost_usd=0.5, wall_s=1.0, step_cap=40, step_multiplier=4.0, max_depth=0,
                started_at=1.0, ended_at=2.0)
     (tmp_path / "episodes").mkdir()
-    pq.write_table(pa.Table.from_pylist([row], schema=old), tmp_path / "episodes" / "part-old-000001.parquet")
-    con = open_runs([tmp_path])
+    part = tmp_path / "episodes" / "part-old-000001.parquet"
+    pq.write_table(pa.Table.from_pylist([row], schema=old), part)
+    con, skipped = open_runs_checked([tmp_path])
+    assert [(s.table, s.path, s.error) for s in skipped] == [
+        ("episodes", str(part), "ValueError: not a episodes part: missing column(s) test_double, worker_id")]
     assert [c for c, _ in _columns(con, "episodes")] == schema.names
-    assert run_query(con, "SELECT episode_id, test_double, worker_id, model_label, arm FROM terminal").rows == [("e1", None, None, "gpt-4o", "react")]
+    assert run_query(con, "SELECT count(*) FROM terminal").rows == [(0,)]
+    assert run_query(con, "SELECT path FROM bad_parts").rows == [(str(part),)]
 
 
 # -- read-only -------------------------------------------------------------------------------

@@ -40,9 +40,18 @@ no quotas, budget or ledger).
 Guarantees
 ==========
 - RPM/TPM: no window of ``window_s`` (plus ``window_pad_s`` of jitter) holds more than the limit;
-  HTTP 429 halves concurrency and pauses for Retry-After; 5xx and timeouts back off and retry.
-- Budget: a call is sent only after its worst-case cost is reserved within the run cap and the
-  model cap; spend is settled to actual cost; the journal ``RUN_DIR/gateway/ledger.jsonl`` is
+  HTTP 429 halves concurrency and pauses for Retry-After (``stats()["paused_until"]``: epoch
+  seconds, None when not paused) - unless it asks for more than ``max_retry_after_s`` (120 s):
+  then the call fails at once as ``LLMError("rate_limit")`` and nothing is paused; 5xx and
+  timeouts back off and retry. ``stats()`` also gives ``window_requests`` / ``window_tokens``.
+- Budget: a call is sent only after its worst-case cost (prompt upper bound + max_tokens x
+  choices + 2 tokens of slack, at full prices) is reserved within the run cap and the model cap;
+  params that multiply the output (``n``, ``best_of``) must be 1 (DeploymentConfig refuses
+  others). Spend is settled to the actual cost, checked (:mod:`workers.llm.accounting`): never
+  below the floor (our own count of the prompt at the input price + of the reply at the output
+  price), and an answer whose usage is impossible (missing, non-integer, negative, zero, below a
+  quarter of our count, above our bounds, or with a negative/NaN cost figure) is charged its
+  worst case and leaves a ``usage_rejected`` event. The journal ``RUN_DIR/gateway/ledger.jsonl`` is
   fsync'd, so a killed gateway/ledger restarted from the run folder continues from the exact
   spend (open reservations of the dead process are charged at worst case).
 - Idempotency: a repeated ``request.call_key`` returns the recorded response
@@ -51,8 +60,13 @@ Guarantees
 - Records: one ``llm_calls`` row per call, written by the gateway (batched, flushed every
   second and on close) with the agent's context from the request. Errors reach the caller as
   ``LLMError(kind)`` with ``kind`` in ``recap.llm.ERROR_KINDS``; API keys never appear in
-  records, logs or error messages. ``events`` rows (source ``gateway``): ``retry`` / ``call_failed``
-  per failed attempt (detail: kind, status, call_key), ``orphans_charged`` when a restarted
+  records, logs or error messages; a base URL's credentials (``user:password@``, ``key=`` /
+  ``api_key=`` / ``token=`` query parameters) are stripped from every name (``deployment``,
+  file names, ledger owners) while the provider gets the real URL; a reply that echoes the
+  key or those credentials reaches the agent, the ledger, the cache and the records with
+  ``[REDACTED]`` in their place. ``events`` rows (source ``gateway``): ``retry`` / ``call_failed``
+  per failed attempt (detail: kind, status, call_key), ``usage_rejected`` per answer whose usage
+  was impossible (detail: problems, reported figures, charged), ``orphans_charged`` when a restarted
   gateway charges its predecessor's open reservations, ``ledger_restored`` when a restarted
   BudgetActor did.
 - Restarts (pipeline): the actors are created with ``max_restarts=-1`` and a few task

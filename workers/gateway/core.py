@@ -12,10 +12,15 @@ One call (:meth:`DeploymentGateway.complete`):
    identical request: opt-in cache, ``"cache"``; or a refusal: ``LLMError("budget")``; or a
    reservation), later ones reserve again only if the previous reservation was charged;
    then one litellm call. 429 shrinks concurrency and pauses, 5xx/timeouts back off
-   exponentially; context_length, bad_request, auth return at once. A timed-out attempt
-   may have been billed, so its reservation is charged at worst case;
-3. settle the reservation to the actual cost and write the ``llm_calls`` row (agent context
-   from the request + accounting; messages with secrets scrubbed). Every failed attempt also
+   exponentially; context_length, bad_request, auth return at once. An attempt that may have
+   been billed (a timeout, or a 200 reply the client could not read, such as fractional token
+   counts) has its reservation charged at worst case;
+3. check the provider's usage and settle the reservation (:func:`workers.llm.accounting.settle`:
+   never below our own floor; impossible usage charged at the worst case with a
+   ``usage_rejected`` event), redact the deployment's secrets from the reply text, and write
+   the ``llm_calls`` row (agent context from the request + accounting).
+   A 429 whose Retry-After exceeds ``max_retry_after_s`` fails the call at once (``rate_limit``)
+   instead of pausing the deployment. Every failed attempt also
    writes an ``events`` row (``retry`` or, when the call gives up, ``call_failed``, with the
    error class), so faults that retries absorbed stay visible.
 """
@@ -39,14 +44,14 @@ from recap.llm import LLMError, LLMRequest, LLMResponse
 from workers.gateway.call_log import CallLog, run_id_of, writer_name
 from workers.gateway.ledger import BudgetLedger, LocalBudget
 from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
-from workers.llm.accounting import cost_pico, error_record, ok_record, served_from, usage_of
+from workers.llm.accounting import USAGE_REJECTED_EVENT, Settlement, Sizing, error_record, ok_record, served_from
+from workers.llm.accounting import settle, size_request, worst_case_pico
 from workers.llm.calling import Attempt, attempt_async, litellm_kwargs
-from workers.llm.errors import Classified, classify, scrub
+from workers.llm.errors import Classified, classify, redact_known, scrub
 from workers.llm.fingerprint import request_fingerprint
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.pricing import PriceTable, pico_to_usd
-from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provider_messages
-from workers.llm.tokens import count_prompt_tokens, prompt_token_bound
+from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provider_messages, url_secrets
 
 #: extra seconds granted to litellm's own timeout before asyncio cuts the attempt
 _TIMEOUT_BACKSTOP_S = 2.0
@@ -83,6 +88,7 @@ class _Call:
     messages: list[dict[str, str]]
     params: dict[str, Any]
     window_tokens: int
+    sizing: Sizing
     worst: int | None
     cache_key: str | None
     deadline: float
@@ -90,6 +96,7 @@ class _Call:
     begun: bool = False
     attempts: int = 0
     charged: int = 0  # pico charged at worst case for attempts that may have been billed
+    settlement: Settlement | None = None  # the checked usage and cost of the answer
 
 
 class DeploymentGateway:
@@ -183,12 +190,12 @@ class DeploymentGateway:
         self.counts["calls"] += 1
         messages = provider_messages(request.messages)
         params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
-        counted = count_prompt_tokens(cfg.model, messages)
-        max_out = int(params["max_tokens"])
+        sizing = size_request(cfg.model, messages, params)
+        counted = sizing.counted
         call = _Call(
-            request=request, messages=messages, params=params, window_tokens=counted.tokens + max_out,
-            worst=None if self.price is None else self.price.cost_pico(
-                prompt_token_bound(cfg.model, messages, counted), 0, max_out),
+            request=request, messages=messages, params=params,
+            window_tokens=counted.tokens + sizing.max_tokens * sizing.choices, sizing=sizing,
+            worst=worst_case_pico(self.price, sizing),
             cache_key=request_fingerprint(cfg.model, params, messages) if cfg.cache else None,
             deadline=t0 + cfg.total_timeout_s)
         try:
@@ -207,20 +214,30 @@ class DeploymentGateway:
                 await self.budget.charge_worst(call.rid)
             raise
 
-        usage = usage_of(cfg.model, attempt, counted)
-        cost = cost_pico(self.price, usage, attempt.litellm_cost_usd)
-        result = {"text": attempt.text, "finish_reason": attempt.finish_reason, **usage.as_dict()}
-        await self.budget.settle(call.rid, cost, "ok", result, call.cache_key, attempt.litellm_cost_usd)
+        settled = call.settlement or settle(cfg.model, self.price, attempt, call.sizing)
+        usage, cost = settled.usage, settled.cost_pico
+        if settled.rejected:  # impossible usage: charged at the worst case, visible as an event
+            self.counts["usage_rejected"] += 1
+            self.call_log.add_event(USAGE_REJECTED_EVENT, "error", {
+                "deployment": self.deployment, "call_key": request.call_key, **settled.event_detail()},
+                episode_id=request.episode_id)
+        # a reply that echoes the API key or the base URL's credentials is stored and returned
+        # without them (ledger, cache, records and the agent all see the redacted text)
+        secrets = self._secrets()
+        text = redact_known(attempt.text, secrets)
+        finish = None if attempt.finish_reason is None else redact_known(str(attempt.finish_reason), secrets)[:64]
+        result = {"text": text, "finish_reason": finish, **usage.as_dict()}
+        await self.budget.settle(call.rid, cost, "ok", result, call.cache_key, settled.provider_cost_usd)
         total = cost + call.charged
         self.spent_pico += total
         self.counts["ok"] += 1
         resp = LLMResponse(
-            text=attempt.text, model=cfg.model, prompt_tokens=usage.prompt_tokens,
+            text=text, model=cfg.model, prompt_tokens=usage.prompt_tokens,
             cached_prompt_tokens=usage.cached_prompt_tokens, completion_tokens=usage.completion_tokens,
             cost_usd=pico_to_usd(total), latency_s=self._clock() - t0, retries=call.attempts - 1,
             token_count_source=usage.token_count_source, served_from=served_from(cfg.model),
             deployment=self.deployment, test_double=self.test_double,
-            finish_reason=attempt.finish_reason, provider_cost_usd=attempt.litellm_cost_usd)
+            finish_reason=finish, provider_cost_usd=settled.provider_cost_usd)
         self._record(request, resp)
         return resp
 
@@ -303,16 +320,39 @@ class DeploymentGateway:
             self.admission.release(ticket, "cancelled")
             raise
         except Exception as exc:
-            c = classify(exc, secrets=[api_key])
-            self.admission.release(ticket, c.kind, retry_after_s=c.retry_after_s)
+            c = classify(exc, secrets=[api_key, *self._url_secrets])
+            too_long = (c.kind == "rate_limit" and c.retry_after_s is not None
+                        and c.retry_after_s > cfg.max_retry_after_s)
+            # a Retry-After beyond the cap does not pause the deployment (nobody waits an hour)
+            self.admission.release(ticket, c.kind, retry_after_s=c.retry_after_s, pause=not too_long)
             self.errors[c.kind] += 1
-            if c.kind == "timeout" and call.rid is not None:
+            if c.maybe_billed and call.rid is not None:
                 call.charged += await self.budget.charge_worst(call.rid)
                 call.rid = None
+            if too_long:
+                self.counts["retry_after_refused"] += 1
+                raise _Final(dataclasses.replace(c, message=(
+                    f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
+                    f"max_retry_after_s={cfg.max_retry_after_s:g}: the call fails instead of pausing; "
+                    + c.message)[:500])) from None
             raise (_Retryable if c.retryable else _Final)(c) from None
-        reported = (attempt.prompt_tokens or 0) + (attempt.completion_tokens or 0)
-        self.admission.release(ticket, "ok", actual_tokens=reported if attempt.prompt_tokens is not None else None)
+        actual = None  # the token window learns the reported usage only when it is plausible
+        try:
+            call.settlement = settled = settle(cfg.model, self.price, attempt, call.sizing)
+            if not settled.rejected and settled.usage.token_count_source == "provider":
+                actual = settled.usage.prompt_tokens + settled.usage.completion_tokens
+        finally:
+            self.admission.release(ticket, "ok", actual_tokens=actual)
         return attempt
+
+    # ---- secrets ----
+    @property
+    def _url_secrets(self) -> list[str]:
+        return url_secrets(self.config.api_base)
+
+    def _secrets(self) -> list[str]:
+        """The deployment's secret values (API key, base-URL credentials), read now."""
+        return self.config.secrets()
 
     # ---- results and records ----
     def _served(self, request: LLMRequest, result: dict[str, Any], source: str, t0: float) -> LLMResponse:

@@ -9,7 +9,11 @@ sync at least every ``sync_interval_s`` while entries keep coming, and on close 
 crash can only leave a settlement unsynced, which a restart then charges at its (higher)
 reserved amount, so caps still hold. The sync runs inline: a thread hand-off costs more than
 the fdatasync itself on a busy machine. A crash can only tear the last line, which replay
-drops (and truncates away, so later appends stay parseable). An exclusive ``flock`` keeps two
+drops (and truncates away, so later appends stay parseable), keeping the dropped bytes in a
+``<journal>.torn-<time>`` file beside it for the record; a torn line may hold anything - a
+prefix of an entry, garbage, the zero bytes a machine crash leaves. A bad line *before* the
+last one is not a crash's tear: replay refuses it (:class:`JournalError`, naming the file and
+the line) rather than guess the spend. An exclusive ``flock`` keeps two
 live ledgers off one run folder; the kernel releases it when its process dies, so a restart
 after ``kill -9`` just works.
 """
@@ -53,8 +57,18 @@ class Journal:
         self._last_sync = time.monotonic()
         self._dirty = False
 
+    @staticmethod
+    def _parse(line: bytes) -> dict[str, Any] | None:
+        """The entry of a line, or None when the line is not one (torn, garbage, not an object)."""
+        try:
+            entry = json.loads(line)
+        except ValueError:  # JSONDecodeError, and UnicodeDecodeError for garbage / zero bytes
+            return None
+        return entry if isinstance(entry, dict) else None
+
     def replay(self) -> Iterator[dict[str, Any]]:
-        """Every complete entry in order; a torn last line is cut off the file."""
+        """Every complete entry in order; a torn last line is cut off the file (its bytes kept
+        in a ``.torn-`` file beside it)."""
         self._fh.seek(0)
         data = self._fh.read()
         lines = data.split(b"\n")
@@ -64,11 +78,11 @@ class Journal:
             if not line.strip():
                 good_end += len(line) + (0 if is_last else 1)
                 continue
-            try:
-                entry = json.loads(line)
-            except json.JSONDecodeError:
-                if any(rest.strip() for rest in lines[i + 1:]):
-                    raise JournalError(f"{self.path}: line {i + 1} is corrupt and not the last one") from None
+            entry = self._parse(line)
+            if entry is None:
+                if any(rest.strip(b" \t\r\n\x00") for rest in lines[i + 1:]):
+                    raise JournalError(f"{self.path}: line {i + 1} is corrupt and not the last one; "
+                                       "the spend cannot be restored from it (restore the file from a backup)")
                 break
             if is_last:  # complete JSON cut just before its newline
                 self._fh.seek(0, os.SEEK_END)
@@ -80,8 +94,23 @@ class Journal:
             good_end += len(line) + 1
             yield entry
         if good_end < len(data):
+            self._keep_torn(data[good_end:])
             self._fh.truncate(good_end)
             self._fh.flush()
+
+    def _keep_torn(self, torn: bytes) -> None:
+        """The bytes a replay cuts away, kept beside the journal (best effort)."""
+        if not torn.strip(b" \t\r\n\x00"):
+            return
+        try:
+            stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime())
+            dest = self.path.with_name(f"{self.path.name}.torn-{stamp}-{os.getpid()}")
+            with open(dest, "ab") as fh:
+                fh.write(torn)
+                fh.flush()
+                os.fsync(fh.fileno())
+        except OSError:
+            pass
 
     def append(self, entry: dict[str, Any], *, sync: bool = False) -> None:
         """Write one entry now; with ``sync`` also put it on disk before returning."""

@@ -191,8 +191,12 @@ class AdmissionController:
             raise
 
     def release(self, ticket: Ticket, outcome: str, *, actual_tokens: int | None = None,
-                retry_after_s: float | None = None) -> None:
-        """``outcome``: ``ok`` or an error kind. Corrects the token entry on success."""
+                retry_after_s: float | None = None, pause: bool = True) -> None:
+        """``outcome``: ``ok`` or an error kind. Corrects the token entry on success.
+
+        A ``rate_limit`` outcome pauses every new attempt for ``retry_after_s`` (or the default
+        wait) unless ``pause`` is False (a Retry-After beyond the deployment's cap: that call
+        fails instead, and the others are not held for it)."""
         if ticket.released:
             return
         ticket.released = True
@@ -207,8 +211,9 @@ class AdmissionController:
             if now >= self.paused_until:  # one shrink per pause: a burst of 429s halves once
                 self.limit = max(1.0, self.limit / 2.0)
                 self.shrinks += 1
-            wait = self.rate_limit_default_wait_s if retry_after_s is None else retry_after_s
-            self.paused_until = max(self.paused_until, now + wait)
+            if pause:
+                wait = self.rate_limit_default_wait_s if retry_after_s is None else retry_after_s
+                self.paused_until = max(self.paused_until, now + wait)
         self._window_changed.set()  # a finished request may make room in the windows
         self._wake()
 
@@ -245,15 +250,21 @@ class AdmissionController:
         self._wake()
 
     def stats(self) -> dict:
+        """Figures for the progress line. ``window_requests`` / ``window_tokens``: what the
+        request and token windows hold now (per ``window_s + pad_s``); ``paused_until``: epoch
+        seconds until which a provider's Retry-After holds new attempts (None when not paused)."""
         now = self._clock()
-        n_req, n_tok = self.requests.usage(now)
+        n_req, _ = self.requests.usage(now)
+        _, n_tok = self.tokens.usage(now)
+        pause_left = max(0.0, self.paused_until - now)
         return {
             "active": self.active,
             "waiting": len(self._waiters),
             "concurrency_limit": self.limit,
             "max_concurrency": self.max_concurrency,
             "paused": self.paused,
-            "retry_after_pause_s": max(0.0, self.paused_until - now),
+            "retry_after_pause_s": pause_left,
+            "paused_until": time.time() + pause_left if pause_left > 0 else None,
             "window_requests": n_req,
             "window_tokens": n_tok,
             "rpm": self.requests.limit,

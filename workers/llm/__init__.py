@@ -6,8 +6,8 @@
   limits + generation params) and the keyword arguments one litellm call gets.
 - :mod:`workers.llm.calling`        one attempt through ``litellm.acompletion``/``completion``
   (provider SDK retries switched off) and parsing of its usage.
-- :mod:`workers.llm.accounting`     tokens (provider usage, else the offline count) and cost of
-  one answer, and its ``llm_calls`` row.
+- :mod:`workers.llm.accounting`     the worst case of a request; the provider's usage checked
+  (impossible usage -> worst case), the cost of one answer (never below our floor), its row.
 - :mod:`workers.llm.fingerprint`    stable hashes of messages / requests (cache, replay).
 - :mod:`workers.llm.errors`         provider exception -> :data:`recap.llm.ERROR_KINDS`, secret
   scrubbing.

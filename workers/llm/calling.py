@@ -8,12 +8,16 @@ retry layer exists (tenacity, in the callers): litellm's ``num_retries`` and the
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
+from workers.llm.errors import install_log_scrubber
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.providers import DeploymentConfig
+
+install_log_scrubber()  # the HTTP clients log request URLs: never with a base URL's credentials
 
 #: litellm metadata key carrying hints to the offline test doubles (never sent to providers)
 OFFLINE_METADATA_KEY = "recap_offline"
@@ -21,15 +25,26 @@ OFFLINE_METADATA_KEY = "recap_offline"
 
 @dataclass(frozen=True)
 class Attempt:
-    """The parts of a provider answer we keep."""
+    """The parts of a provider answer we keep.
+
+    Token counts are the provider's, as integers, or None when it reported none or something
+    that is not a whole number (``reported`` keeps the raw values, ``malformed`` says what
+    was wrong); whether they are *plausible* is decided in :mod:`workers.llm.accounting`."""
 
     text: str
     finish_reason: str | None
     prompt_tokens: int | None
     cached_prompt_tokens: int
     completion_tokens: int | None
-    #: litellm's own cost estimate (cross-check only), when it knows the model
+    #: litellm's own cost estimate (cross-check only), when it knows the model; may be
+    #: negative or NaN when the provider's usage was (accounting refuses it)
     litellm_cost_usd: float | None
+    #: the raw usage values as the provider sent them (for the event of rejected usage)
+    reported: dict[str, Any] = field(default_factory=dict)
+    #: what was malformed in the usage block (not a whole number, ...)
+    malformed: tuple[str, ...] = ()
+    #: choices in the answer (only the first is read)
+    choices: int = 1
 
 
 def litellm_kwargs(config: DeploymentConfig, messages: list[dict[str, str]], params: Mapping[str, Any],
@@ -61,32 +76,54 @@ def litellm_kwargs(config: DeploymentConfig, messages: list[dict[str, str]], par
     return kwargs
 
 
-def _usage_int(usage: Any, name: str) -> int | None:
-    value = getattr(usage, name, None) if usage is not None else None
-    return int(value) if isinstance(value, (int, float)) else None
+def _whole(value: Any) -> int | None:
+    """``value`` as an int when it is a whole number (a float like 12.0 counts), else None."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        return value
+    if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+        return int(value)
+    return None
 
 
 def parse_response(response: Any) -> Attempt:
-    choice = response.choices[0] if getattr(response, "choices", None) else None
+    choices = getattr(response, "choices", None) or []
+    choice = choices[0] if choices else None
     text = ""
     finish = None
     if choice is not None:
         text = (getattr(choice.message, "content", None) or "") if getattr(choice, "message", None) else ""
         finish = getattr(choice, "finish_reason", None)
     usage = getattr(response, "usage", None)
-    cached = 0
     details = getattr(usage, "prompt_tokens_details", None) if usage is not None else None
-    if details is not None:
-        cached = int(getattr(details, "cached_tokens", None) or 0)
+    raw = {
+        "prompt_tokens": getattr(usage, "prompt_tokens", None) if usage is not None else None,
+        "completion_tokens": getattr(usage, "completion_tokens", None) if usage is not None else None,
+        "cached_tokens": getattr(details, "cached_tokens", None) if details is not None else None,
+    }
+    malformed = []
+    if usage is None:
+        malformed.append("no usage reported")
+    parsed: dict[str, int | None] = {}
+    for name, value in raw.items():
+        parsed[name] = _whole(value)
+        if value is not None and parsed[name] is None:
+            malformed.append(f"{name} {value!r} is not a whole number")
     hidden = getattr(response, "_hidden_params", None) or {}
     cost = hidden.get("response_cost")
+    cost = float(cost) if isinstance(cost, (int, float)) and not isinstance(cost, bool) else None
+    raw["provider_cost_usd"] = cost
     return Attempt(
-        text=text,
+        text=text if isinstance(text, str) else str(text),
         finish_reason=finish,
-        prompt_tokens=_usage_int(usage, "prompt_tokens"),
-        cached_prompt_tokens=cached,
-        completion_tokens=_usage_int(usage, "completion_tokens"),
-        litellm_cost_usd=float(cost) if isinstance(cost, (int, float)) else None,
+        prompt_tokens=parsed["prompt_tokens"],
+        cached_prompt_tokens=parsed["cached_tokens"] or 0,
+        completion_tokens=parsed["completion_tokens"],
+        litellm_cost_usd=cost,
+        reported={k: (v if isinstance(v, (int, float, type(None))) else repr(v)) for k, v in raw.items()},
+        malformed=tuple(malformed),
+        choices=max(1, len(choices)),
     )
 
 

@@ -9,6 +9,8 @@ go to ``record_sink`` (e.g. a :class:`workers.gateway.call_log.CallLog`'s ``add`
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import time
 from collections.abc import Callable
 from typing import Any
@@ -18,13 +20,14 @@ from tenacity import wait_exponential_jitter
 
 from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.records import CallRecord
-from workers.llm.accounting import cost_pico, error_record, ok_record, served_from, usage_of
+from workers.llm.accounting import error_record, ok_record, served_from, settle, size_request
 from workers.llm.calling import Attempt, attempt_sync, litellm_kwargs
-from workers.llm.errors import Classified, classify
+from workers.llm.errors import Classified, classify, redact_known
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.pricing import PriceTable, pico_to_usd
-from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provider_messages
-from workers.llm.tokens import count_prompt_tokens
+from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provider_messages, url_secrets
+
+log = logging.getLogger(__name__)
 
 
 class _Failed(Exception):
@@ -52,7 +55,8 @@ class LiteLLMClient:
         deadline = t0 + cfg.total_timeout_s
         messages = provider_messages(request.messages)
         params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
-        counted = count_prompt_tokens(cfg.model, messages)
+        sizing = size_request(cfg.model, messages, params)
+        counted = sizing.counted
         attempts = 0
         backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
 
@@ -79,7 +83,12 @@ class LiteLLMClient:
             except DeploymentConfigError as exc:
                 raise _Failed(Classified("auth", str(exc))) from None
             except Exception as exc:
-                c = classify(exc, secrets=[api_key])
+                c = classify(exc, secrets=[api_key, *url_secrets(cfg.api_base)])
+                if c.kind == "rate_limit" and c.retry_after_s is not None and c.retry_after_s > cfg.max_retry_after_s:
+                    raise _Failed(dataclasses.replace(c, message=(
+                        f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
+                        f"max_retry_after_s={cfg.max_retry_after_s:g}: the call fails instead of pausing; "
+                        + c.message)[:500])) from None
                 raise (_Retry if c.retryable else _Failed)(c) from None
 
         try:
@@ -93,14 +102,20 @@ class LiteLLMClient:
                     latency_s=time.monotonic() - t0, retries=attempts - 1, token_count_source=counted.source,
                     deployment=cfg.deployment_name, test_double=self.test_double))
             raise LLMError(c.kind, c.message, retries=attempts - 1) from None
-        usage = usage_of(cfg.model, attempt, counted)
+        settled = settle(cfg.model, self.price, attempt, sizing)
+        usage = settled.usage
+        if settled.rejected:
+            log.warning("%s: provider usage rejected (%s); charged the worst case $%.6f",
+                        cfg.deployment_name, "; ".join(settled.problems), pico_to_usd(settled.cost_pico))
         resp = LLMResponse(
-            text=attempt.text, model=cfg.model, prompt_tokens=usage.prompt_tokens,
+            text=redact_known(attempt.text, cfg.secrets()), model=cfg.model, prompt_tokens=usage.prompt_tokens,
             cached_prompt_tokens=usage.cached_prompt_tokens, completion_tokens=usage.completion_tokens,
-            cost_usd=pico_to_usd(cost_pico(self.price, usage, attempt.litellm_cost_usd)),
+            cost_usd=pico_to_usd(settled.cost_pico),
             latency_s=time.monotonic() - t0, retries=attempts - 1, token_count_source=usage.token_count_source,
             served_from=served_from(cfg.model), deployment=cfg.deployment_name, test_double=self.test_double,
-            finish_reason=attempt.finish_reason, provider_cost_usd=attempt.litellm_cost_usd)
+            finish_reason=None if attempt.finish_reason is None else
+            redact_known(str(attempt.finish_reason), cfg.secrets())[:64],
+            provider_cost_usd=settled.provider_cost_usd)
         if self.record_sink is not None:
             self.record_sink(ok_record(request, resp))
         return resp

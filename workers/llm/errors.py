@@ -21,20 +21,34 @@ MAX_MESSAGE_CHARS = 500
 
 _SECRET_PATTERNS = (
     re.compile(r"\b(sk|pk|rk)-[A-Za-z0-9_\-*]{6,}"),  # OpenAI/DeepSeek/Anthropic style
-    re.compile(r"(?i)(bearer\s+)[A-Za-z0-9._\-~+/=*]{8,}"),
+    re.compile(r"(?i)((?:bearer|basic)\s+)[A-Za-z0-9._\-~+/=*]{8,}"),
     re.compile(r"(?i)((?:api[_-]?key|authorization|x-api-key|token)[\"']?\s*[:=]\s*[\"']?)[^\s\"',}]{6,}"),
+    # credentials inside a URL: scheme://user:password@host, ?key=... / &token=...
+    re.compile(r"(?i)\b([a-z][a-z0-9+.\-]*://)[^/\s@]+@"),
+    re.compile(r"(?i)([?&](?:key|api[_-]?key|apikey|token|access_token|auth|secret|password|sig|signature|code)=)[^&\s\"'#]+"),
 )
 
 
-def scrub(text: str, secrets: Iterable[str | None] = ()) -> str:
-    """``text`` with the given secrets and anything that looks like an API key replaced."""
+def redact_known(text: str, secrets: Iterable[str | None] = ()) -> str:
+    """``text`` with each given secret (4+ characters; longest first) replaced by ``[REDACTED]``.
+
+    For model replies: only the deployment's own secrets are removed (an API key or base-URL
+    credential the provider echoed), never text that merely looks like a key."""
     out = str(text)
-    for secret in secrets:
-        if secret and len(secret) >= 4:
-            out = out.replace(secret, "[REDACTED]")
+    for secret in sorted({s for s in secrets if s and len(s) >= 4}, key=len, reverse=True):
+        out = out.replace(secret, "[REDACTED]")
+    return out
+
+
+def scrub(text: str, secrets: Iterable[str | None] = ()) -> str:
+    """``text`` with the given secrets and anything that looks like an API key (or a
+    credential inside a URL) replaced."""
+    out = redact_known(text, secrets)
     out = _SECRET_PATTERNS[0].sub("[REDACTED]", out)
     out = _SECRET_PATTERNS[1].sub(r"\1[REDACTED]", out)
     out = _SECRET_PATTERNS[2].sub(r"\1[REDACTED]", out)
+    out = _SECRET_PATTERNS[3].sub(r"\1[REDACTED]@", out)
+    out = _SECRET_PATTERNS[4].sub(r"\1[REDACTED]", out)
     return out
 
 
@@ -45,6 +59,10 @@ class Classified:
     #: seconds the provider asked us to wait (Retry-After), if it said
     retry_after_s: float | None = None
     status_code: int | None = None
+    #: the provider may have generated (and billed) an answer we could not use: a timeout, a
+    #: reply body the client could not read (e.g. fractional token counts), a dropped connection.
+    #: Such an attempt is charged at its reservation (the worst case), never at zero.
+    maybe_billed: bool = False
 
     @property
     def retryable(self) -> bool:
@@ -82,8 +100,24 @@ def retry_after_seconds(exc: BaseException) -> float | None:
             try:
                 return max(0.0, float(s))
             except ValueError:
-                pass  # an HTTP date: ignore, the backoff applies
+                when = _http_date(s)
+                if when is not None:
+                    return when
     return None
+
+
+def _http_date(value: str) -> float | None:
+    """Seconds from now until an HTTP-date Retry-After (0 when past), None when unparseable."""
+    import email.utils
+    import time
+
+    try:
+        when = email.utils.parsedate_to_datetime(value.strip())
+    except (TypeError, ValueError, IndexError):
+        return None
+    if when is None:
+        return None
+    return max(0.0, when.timestamp() - time.time())
 
 
 _CONTEXT_MARKERS = ("context_length_exceeded", "maximum context length", "context window",
@@ -108,11 +142,17 @@ def _kind_of_status(status: int | None, text: str) -> str | None:
     return None
 
 
+#: litellm's words when an HTTP 200 reply could not be turned into a response (it then raises a
+#: 500-class error although the provider answered, and may have billed, the request)
+_UNREADABLE_REPLY_MARKERS = ("Invalid response object", "convert_to_model_response_object")
+
+
 def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classified:
     """The error class of an exception raised by one litellm call."""
     from workers.llm.litellm_setup import get_litellm
 
     litellm = get_litellm()
+    unreadable = False
     message = scrub(f"{type(exc).__name__}: {exc}", secrets)[:MAX_MESSAGE_CHARS]
     status = getattr(exc, "status_code", None)
     status = status if isinstance(status, int) else None
@@ -136,4 +176,36 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
         if kind is None:
             # unknown failure inside the client (malformed body, dropped connection): transient
             kind = "server_error"
-    return Classified(kind, message, retry_after_seconds(exc) if kind == "rate_limit" else None, status)
+            unreadable = True
+    billed = kind == "timeout" or unreadable or any(m in str(exc) for m in _UNREADABLE_REPLY_MARKERS)
+    return Classified(kind, message, retry_after_seconds(exc) if kind == "rate_limit" else None, status,
+                      maybe_billed=billed)
+
+
+#: loggers of the HTTP clients under litellm that print request URLs (and so a base URL's
+#: credentials) at DEBUG/INFO
+URL_LOGGERS = ("openai._base_client", "httpx", "httpcore", "aiohttp.client", "LiteLLM", "LiteLLM Router")
+
+
+class ScrubFilter:
+    """A logging filter that scrubs a record's message (URL credentials, key-like strings)."""
+
+    def filter(self, record: Any) -> bool:
+        try:
+            message = record.getMessage()
+        except Exception:
+            return True
+        clean = scrub(message)
+        if clean != message:
+            record.msg, record.args = clean, ()
+        return True
+
+
+def install_log_scrubber() -> None:
+    """Scrub what the HTTP client loggers print (idempotent)."""
+    import logging
+
+    for name in URL_LOGGERS:
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, ScrubFilter) for f in logger.filters):
+            logger.addFilter(ScrubFilter())

@@ -13,8 +13,15 @@ HTTP exchange through litellm's own client, without a paid provider. The server:
 - injects latency, 5xx, hangs (timeouts), empty and malformed bodies - at random with
   ``fault_rates`` (seeded) or per request with a directive in the last message:
   ``FAKE:<mode>`` (always) or ``FAKE:<mode>*<n>`` (the first n arrivals of that exact request),
-  modes: 429 500 502 503 hang empty malformed ctx 400 401;
-- replies with a fixed, configurable text (truncated at ``max_tokens``, finish_reason length);
+  modes: 429 500 502 503 hang empty malformed ctx 400 401, and the lying-provider modes
+  ``retrylong`` (429 with ``Retry-After: long_retry_after_s``, 3600 by default), ``echokey`` (the
+  reply text repeats the API key the request carried), ``negusage`` / ``zerousage`` /
+  ``hugeusage`` / ``fracusage`` / ``nousage`` / ``negcached`` (the usage block reports negative, zero,
+  huge, non-integer or no token counts, or negative cached tokens; the reply itself is normal);
+- replies with a fixed, configurable text (truncated at ``max_tokens``, finish_reason length),
+  one choice per ``n`` of the request (usage counts every choice, like OpenAI);
+- ``usage_override`` replaces fields of every reply's usage block (``None`` drops a field);
+  ``retry_after_s`` replaces the Retry-After of every 429;
 - with ``require_api_key`` set, answers 401 echoing the wrong key it got (tests that keys are
   scrubbed before anything is written);
 - keeps a log of every arrival (``GET /fake/log``), so tests check windows server-side.
@@ -43,7 +50,17 @@ from workers.llm.tokens import estimate_prompt_tokens, estimate_text_tokens
 
 HOST = "127.0.0.1"
 DEFAULT_REPLY = '{"think": "fake server reply", "action": "wait"}'
-FAULT_MODES = ("429", "500", "502", "503", "hang", "empty", "malformed", "ctx", "400", "401")
+FAULT_MODES = ("429", "500", "502", "503", "hang", "empty", "malformed", "ctx", "400", "401",
+               "retrylong", "echokey", "negusage", "zerousage", "hugeusage", "fracusage", "nousage", "negcached")
+#: usage blocks of the lying-provider modes (None: the field is left out)
+_USAGE_FAULTS: dict[str, dict[str, Any]] = {
+    "negusage": {"prompt_tokens": -1_000_000, "completion_tokens": -1_000_000},
+    "zerousage": {"prompt_tokens": 0, "completion_tokens": 0},
+    "hugeusage": {"prompt_tokens": 50_000_000, "completion_tokens": 50_000_000},
+    "fracusage": {"prompt_tokens": 10.5, "completion_tokens": 2.25},
+    "nousage": {"prompt_tokens": None, "completion_tokens": None, "cached_tokens": None},
+    "negcached": {"cached_tokens": -1_000_000},
+}
 _DIRECTIVE = re.compile(r"FAKE:([a-z0-9]+)(?:\*(\d+))?")
 
 
@@ -65,6 +82,13 @@ class FakeServerConfig:
     prefix_memory: int = 64
     #: keep every request body (``FakeServer.bodies``), for tests of what reaches a provider
     keep_bodies: bool = False
+    #: the Retry-After (seconds) of every 429, instead of the time the window needs
+    retry_after_s: float | None = None
+    #: the Retry-After of the ``retrylong`` mode
+    long_retry_after_s: float = 3600.0
+    #: fields replacing those of every reply's usage block (prompt_tokens, completion_tokens,
+    #: cached_tokens, total_tokens; None leaves the field out)
+    usage_override: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         bad = set(self.fault_rates) - set(FAULT_MODES)
@@ -294,12 +318,23 @@ class FakeServer:
             completion_tokens = estimate_text_tokens(reply)
             finish = "length"
 
+        n_choices = body.get("n") or 1
+        n_choices = n_choices if isinstance(n_choices, int) and n_choices >= 1 else 1
+        completion_tokens *= n_choices
+        if mode == "echokey":
+            got = request.headers.get("Authorization", "").removeprefix("Bearer ").strip()
+            reply = f"your key is {got} and {got}"
+            completion_tokens = estimate_text_tokens(reply) * n_choices
+
         admitted = prompt_tokens + completion_tokens  # what the windows count for this request
-        wait = self._admit(now, admitted) if mode != "429" else 1.0
+        forced = {"429": 1.0, "retrylong": cfg.long_retry_after_s}.get(mode)
+        wait = self._admit(now, admitted) if forced is None else forced
         if wait is not None:
-            self._record(now, 429, "429" if mode == "429" else "rate_limited", model,
+            self._record(now, 429, mode if forced is not None else "rate_limited", model,
                          prompt_tokens, 0, 0, max_tokens, 0)
             wait = max(wait, 0.001)
+            if cfg.retry_after_s is not None and mode != "retrylong":
+                wait = cfg.retry_after_s
             return web.json_response(
                 _error_body("Rate limit reached for requests (fake server)", "requests", "rate_limit_exceeded"),
                 status=429,
@@ -342,18 +377,31 @@ class FakeServer:
         common = max((_lcp(flat, p) for p in self._prompts), default=0)
         self._prompts.append(flat)
         cached = min(prompt_tokens, common // 4)
-        self._record(now, 200, "ok", model, prompt_tokens, completion_tokens, cached, max_tokens, admitted)
-        return web.json_response({
+        self._record(now, 200, mode if mode in _USAGE_FAULTS or mode == "echokey" else "ok", model,
+                     prompt_tokens, completion_tokens, cached, max_tokens, admitted)
+        usage: dict[str, Any] = {"prompt_tokens": prompt_tokens, "completion_tokens": completion_tokens,
+                                 "total_tokens": prompt_tokens + completion_tokens, "cached_tokens": cached}
+        for source in (_USAGE_FAULTS.get(mode), cfg.usage_override):
+            for name, value in (source or {}).items():
+                usage[name] = value
+                if name in ("prompt_tokens", "completion_tokens") and "total_tokens" not in source:
+                    usage["total_tokens"] = None if None in (usage["prompt_tokens"], usage["completion_tokens"]) \
+                        else usage["prompt_tokens"] + usage["completion_tokens"]
+        cached_reported = usage.pop("cached_tokens")
+        usage = {k: v for k, v in usage.items() if v is not None}
+        if cached_reported is not None:
+            usage["prompt_tokens_details"] = {"cached_tokens": cached_reported}
+        payload: dict[str, Any] = {
             "id": f"chatcmpl-fake-{len(self.log)}",
             "object": "chat.completion",
             "created": int(time.time()),
             "model": model,
-            "choices": [{"index": 0, "message": {"role": "assistant", "content": reply},
-                         "finish_reason": finish}],
-            "usage": {"prompt_tokens": prompt_tokens, "completion_tokens": completion_tokens,
-                      "total_tokens": prompt_tokens + completion_tokens,
-                      "prompt_tokens_details": {"cached_tokens": cached}},
-        })
+            "choices": [{"index": i, "message": {"role": "assistant", "content": reply},
+                         "finish_reason": finish} for i in range(n_choices)],
+        }
+        if usage:
+            payload["usage"] = usage
+        return web.json_response(payload)
 
 
 def main(argv: list[str] | None = None) -> None:

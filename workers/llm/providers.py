@@ -8,9 +8,11 @@ it, read at call time, so no config, record or log line can carry a key.
 
 from __future__ import annotations
 
+import base64
 import os
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal
+from urllib.parse import parse_qsl, unquote, urlencode, urlsplit, urlunsplit
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -21,6 +23,9 @@ ALLOWED_PARAMS = frozenset(
     {"temperature", "max_tokens", "top_p", "seed", "stop", "presence_penalty",
      "frequency_penalty", "response_format", "n", "logit_bias"}
 )
+#: params that multiply the output a provider generates and bills (choices per call). Agents
+#: read one choice and the budget reserves one, so any value but 1 is refused at config time.
+SINGLE_CHOICE_PARAMS = ("n", "best_of")
 DEFAULT_MAX_TOKENS = 1024
 OFFLINE_PREFIX = "offline/"
 
@@ -36,6 +41,9 @@ _NUMERIC_PARAMS: dict[str, tuple[bool, float | None, float | None]] = {
 
 def _param_problem(name: str, value: Any) -> str | None:
     """What is wrong with one generation param's value (None when nothing is)."""
+    if name in SINGLE_CHOICE_PARAMS and (isinstance(value, bool) or value != 1):
+        return ("must be 1: the gateway sends one choice per call (agents read one, and the budget "
+                "reserves the worst case of one); leave it out")
     if name in _NUMERIC_PARAMS:
         integer, low, high = _NUMERIC_PARAMS[name]
         kind = "an integer" if integer else "a number"
@@ -47,6 +55,65 @@ def _param_problem(name: str, value: Any) -> str | None:
     if name == "stop" and not (isinstance(value, str) or (isinstance(value, list) and all(isinstance(x, str) for x in value))):
         return "must be a string or a list of strings"
     return None
+
+
+#: query parameters of a base URL that carry credentials (dropped from every displayed name)
+SECRET_QUERY_PARAMS = frozenset({"key", "api_key", "apikey", "api-key", "token", "access_token",
+                                 "auth", "auth_token", "secret", "password", "sig", "signature", "code"})
+
+
+def _is_secret_param(name: str) -> bool:
+    n = name.lower()
+    return n in SECRET_QUERY_PARAMS or n.endswith(("_key", "-key", "_token", "-token", "secret", "password"))
+
+
+def redact_url(url: str) -> str:
+    """``url`` without credentials: no ``user:password@`` and no ``key=``/``api_key=``/``token=``
+    (...) query parameters. Used for every name, record and log line that shows a base URL;
+    the provider still gets the real URL. A URL without credentials comes back unchanged."""
+    try:
+        parts = urlsplit(url)
+    except ValueError:
+        return "[unparseable api_base]"
+    netloc = parts.netloc
+    if "@" in netloc:
+        netloc = netloc.rsplit("@", 1)[1]
+    query = parts.query
+    if query:
+        pairs = parse_qsl(query, keep_blank_values=True)
+        kept = [(k, v) for k, v in pairs if not _is_secret_param(k)]
+        if len(kept) != len(pairs):
+            query = urlencode(kept)
+    if netloc == parts.netloc and query == parts.query:
+        return url
+    return urlunsplit((parts.scheme, netloc, parts.path, query, parts.fragment))
+
+
+def url_secrets(url: str | None) -> list[str]:
+    """The credentials inside a base URL, in every form a reply or an error could echo them:
+    the password, ``user:password`` (raw and percent-decoded), its HTTP Basic base64 form, a
+    lone user name (a token), and the values of credential query parameters."""
+    if not url:
+        return []
+    try:
+        parts = urlsplit(url)
+    except ValueError:
+        return []
+    out: list[str] = []
+    if "@" in parts.netloc:
+        userinfo = parts.netloc.rsplit("@", 1)[0]
+        user, has_password, password = userinfo.partition(":")
+        for raw in (userinfo, unquote(userinfo)):
+            out.append(raw)
+            out.append(base64.b64encode(raw.encode()).decode())
+        if has_password:
+            out += [password, unquote(password)]
+        else:
+            out += [user, unquote(user)]
+    for k, v in parse_qsl(parts.query, keep_blank_values=True):
+        if _is_secret_param(k) and v:
+            out += [v, unquote(v)]
+    return sorted({s for s in out if s and len(s) >= 4}, key=len, reverse=True)
 
 
 class DeploymentConfigError(ValueError):
@@ -90,6 +157,9 @@ class DeploymentConfig(BaseModel):
     backoff_max_s: float = Field(default=30.0, ge=0)
     #: wait after a 429 that carried no Retry-After header
     rate_limit_default_wait_s: float = Field(default=5.0, ge=0)
+    #: the longest Retry-After the gateway honours: a 429 asking for more fails the call at
+    #: once as ``LLMError("rate_limit")`` (and does not pause the deployment) instead of sleeping
+    max_retry_after_s: float = Field(default=120.0, ge=0)
     params: dict[str, Any] = Field(default_factory=dict)
     price: Price | None = None
     #: serve identical requests (model, params, messages) from the ledger's response cache
@@ -108,6 +178,9 @@ class DeploymentConfig(BaseModel):
     @field_validator("params")
     @classmethod
     def _known_params(cls, v: dict[str, Any]) -> dict[str, Any]:
+        for name in SINGLE_CHOICE_PARAMS:  # before the unknown check: best_of gets this message too
+            if name in v and (isinstance(v[name], bool) or v[name] != 1):
+                raise ValueError(f"{name} {_param_problem(name, v[name])}, got {v[name]!r}")
         unknown = set(v) - ALLOWED_PARAMS
         if unknown:
             raise ValueError(f"unknown generation param(s) {sorted(unknown)}; allowed: {sorted(ALLOWED_PARAMS)}")
@@ -130,15 +203,25 @@ class DeploymentConfig(BaseModel):
             raise ValueError("offline/replay needs api_base = the run folder to replay")
         return self
 
+    def __repr_args__(self) -> Any:  # reprs and validation errors never show URL credentials
+        for name, value in super().__repr_args__():
+            yield name, (redact_url(value) if name == "api_base" and isinstance(value, str) else value)
+
     # ---- derived ----
     @property
+    def display_api_base(self) -> str | None:
+        """The base URL without credentials (what names, records and logs show)."""
+        return None if self.api_base is None else redact_url(self.api_base)
+
+    @property
     def deployment_name(self) -> str:
-        """Stable id of the deployment (model + base URL + key *name*), used in records."""
+        """Stable id of the deployment (model + base URL without credentials + key *name*),
+        used in records, file names and the ledger."""
         if self.name:
             return self.name
         parts = [self.model]
         if self.api_base:
-            parts.append(f"@{self.api_base}")
+            parts.append(f"@{self.display_api_base}")
         if self.api_key_env:
             parts.append(f"#{self.api_key_env}")
         return "".join(parts)
@@ -161,6 +244,16 @@ class DeploymentConfig(BaseModel):
             return True
         price = resolve_price(self.model, None, table or default_prices())
         return bool(price and price.test_double)
+
+    def secrets(self) -> list[str]:
+        """Every secret value of this deployment (the API key, if set, and the base URL's
+        credentials), longest first: what redaction removes from stored and returned text."""
+        out = url_secrets(self.api_base)
+        if self.api_key_env:
+            key = os.environ.get(self.api_key_env)
+            if key and len(key) >= 4:
+                out.append(key)
+        return sorted(set(out), key=len, reverse=True)
 
     def api_key(self) -> str | None:
         """The key, read from the environment now (never stored)."""
