@@ -185,10 +185,19 @@ def cap_attacks(lab: Lab, cap_usd: float = 0.001) -> ScenarioResult:
         spent, bill = int(stats["spent_pico"]), true_bill_pico(server)
         over, under = max(0, spent - cap_pico, bill - cap_pico), max(0, bill - spent)
         worst_over, worst_under = max(worst_over, over), max(worst_under, under)
-        res.check(f"{name}: the provider answered", len(ok) >= (1 if "n" in attack else 2), f"{len(ok)} answers")
+        # fractional counts: litellm cannot read the reply at all, so the agent gets a
+        # server_error, and each such attempt is charged at its reservation
+        unreadable = attack.get("mode") == "fracusage"
+        expected_errors = {"budget", "server_error"} if unreadable else {"budget"}
+        if unreadable:
+            res.check(f"{name}: every unreadable reply charged a positive amount",
+                      all(e.cost_usd > 0 for e in errors if e.kind == "server_error"),
+                      sorted({e.cost_usd for e in errors})[:3])
+        else:
+            res.check(f"{name}: the provider answered", len(ok) >= (1 if "n" in attack else 2), f"{len(ok)} answers")
         res.check(f"{name}: the budget refused in the end, no other error",
                   bool(out) and isinstance(out[-1], LLMError) and out[-1].kind == "budget"
-                  and {e.kind for e in errors} == {"budget"}, sorted({e.kind for e in errors}))
+                  and {e.kind for e in errors} <= expected_errors, sorted({e.kind for e in errors}))
         res.check(f"{name}: ledger spend within the cap, nothing reserved, no overrun",
                   spent <= cap_pico and stats["reserved_usd"] == 0 and stats["overruns"] == 0,
                   f"spent ${pico_to_usd(spent):.6f} of ${cap_usd}, reserved {stats['reserved_usd']}, "
@@ -199,7 +208,8 @@ def cap_attacks(lab: Lab, cap_usd: float = 0.001) -> ScenarioResult:
                   sorted({r.cost_usd for r in ok})[:3])
         if "mode" in attack:
             lied = sum(1 for c in server.log if c.status == 200 and c.mode == attack["mode"])
-            res.check(f"{name}: the provider lied on every answer", lied == len(ok) == len(server.log), (lied, len(ok)))
+            answered = len(server.log) if unreadable else len(ok)
+            res.check(f"{name}: the provider lied on every answer", lied == answered == len(server.log), (lied, answered))
         elif "n" in attack:
             res.check(f"{name}: n choices reached the provider", {b.get("n") for b in server.bodies} == {attack["n"]},
                       sorted({str(b.get("n")) for b in server.bodies}))
