@@ -2,7 +2,9 @@
 
 Every user error is one line on stderr (``recap: error: ...``) and exit status 2, raised before
 any model call and before anything is written. Exit status of ``run``/``resume``: 0 when every
-unit is done, 3 when work remains (a cap stopped it), 130 when interrupted.
+unit is done, 3 when work remains (a cap stopped it), 4 when a unit ended in an infrastructure
+failure, 130 when interrupted. Every command's ``--help`` (stdout, status 0) lists its options
+and examples; ``recap`` alone prints its usage line and a hint on stderr, status 2.
 """
 
 from __future__ import annotations
@@ -78,7 +80,12 @@ def _render(render: Any, *args: Any) -> None:
 
 class _OneLineParser(argparse.ArgumentParser):
     """argparse whose usage errors are one line like every other error (``recap: error: ...``),
-    exit status 2, instead of a usage block followed by the message."""
+    exit status 2, instead of a usage block followed by the message. Help keeps the layout of
+    its description and epilog (examples, exit statuses) and goes to stdout."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> "NoReturn":  # type: ignore[override]
         where = self.prog.removeprefix("recap").strip()
@@ -86,57 +93,232 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, one_line(f"recap: error: {where + ': ' if where else ''}{message} (see {hint})") + "\n")
 
 
+#: the commands in the order ``recap --help`` lists them
+COMMANDS = ("run", "resume", "status", "estimate", "show", "sql", "report", "env", "data")
+
+_MAIN_EPILOG = """\
+examples:
+  recap estimate examples/demo.yaml         units, calls, tokens and a cost range; spends nothing
+  recap run examples/demo.yaml              run the sweep (local Ray); prints the run folder
+  recap status runs/demo                    done/total, success, spend (also mid-run)
+  recap resume runs/demo --run-cap 60       finish after a crash or with a higher cap
+  recap sql runs/demo @failure_modes        read-only SQL over the run's tables
+  recap report runs/demo                    Markdown/HTML/LaTeX/CSV report under runs/demo/report
+
+Each command's options and examples: recap COMMAND --help. Every error is one line on stderr.
+"""
+
+_RUN_EXIT = """\
+exit status:
+  0    all units done
+  2    bad input, the run folder in use by another driver, or the sink lost
+       (then recap resume RUN re-runs only what was never written)
+  3    a cap stopped it, work remains: recap resume RUN --run-cap USD
+  4    a unit ended in an infrastructure failure (provider unreachable, key refused,
+       rate-limited too long, a worker kept dying): fix the cause, then retry with
+       recap resume RUN
+  130  interrupted (Ctrl-C or SIGTERM): continue with recap resume RUN
+
+A torn last line in the ledger journal (a crash mid-write; recap status names it) is cut by
+recap resume RUN --repair (a backup is kept; a corrupt line in the middle is refused).
+"""
+
+_RUN_EPILOG = """\
+examples:
+  recap run examples/demo.yaml --dry-run              check the sweep and show the plan, run nothing
+  recap run examples/demo.yaml --workers 8 --run-cap 5
+  recap run --progress lines examples/demo.yaml       options go before or after SPEC
+  recap run ~/my-sweep.yaml --address auto            join the Ray cluster this machine is in
+  recap run examples/demo.yaml --output runs/demo-2   another output folder than the spec's
+
+Running a sweep again on its output folder prints what changed and runs only units without a
+result.
+
+""" + _RUN_EXIT
+
+_RESUME_EPILOG = """\
+examples:
+  recap resume runs/demo                     finish the remaining units (spec saved in the folder)
+  recap resume runs/demo --run-cap 60        continue with a higher run cap
+  recap resume --repair runs/demo            cut a torn last ledger line first, then resume
+  recap resume runs/demo --retry errors      also re-run units that ended env_error / llm_error
+  recap resume s3://bucket/runs/demo --address auto
+
+""" + _RUN_EXIT
+
+_STATUS_EPILOG = """\
+examples:
+  recap status runs/demo
+  recap status s3://bucket/runs/demo
+
+Works mid-run and after a crash; names unreadable part files and a torn ledger line.
+exit status: 0 shown; 2 not a run folder (or unreadable)
+"""
+
+_ESTIMATE_EPILOG = """\
+examples:
+  recap estimate examples/real-model.yaml
+  recap estimate examples/demo.yaml
+
+Reads the sweep file only: no model is called, nothing is written.
+exit status: 0 shown; 2 bad sweep file
+"""
+
+_SHOW_EPILOG = """\
+examples:
+  recap show runs/demo 3f9c0a1b2d4e5f60       an episode id or a unit id (its latest attempt)
+  recap show runs/demo 3f9c                   an unambiguous prefix of either
+
+Find ids with: recap sql runs/demo "select episode_id, unit_id, arm, success from terminal"
+exit status: 0 shown; 2 unknown or ambiguous EPISODE, or not a run folder
+"""
+
+_SQL_FALLBACK_EPILOG = """\
+examples:
+  recap sql runs/demo "select arm, count(*) n, avg(success::int) ok from terminal group by 1"
+
+This is the minimal form, used when the reports package is not installed (no --csv/--json,
+--file, @NAME or several run folders). exit status: 0 ok; 2 any error
+"""
+
+_ENV_EPILOG = """\
+examples:
+  recap env list blocksworld 4
+  recap env play blocksworld/3@1
+  recap env replay trajectory.json
+
+No model is involved. Each action's options and examples: recap env ACTION --help.
+"""
+
+_ENV_LIST_EPILOG = """\
+examples:
+  recap env list blocksworld                  every instance id
+  recap env list blocksworld 4                the ids of 4-block problems
+  recap env list robotouille asynchronous
+  recap env list alfworld heat
+
+The ids go to stdout, one a line, and their count to stderr. exit status: 0 ok; 2 unknown
+benchmark or selector, or its data is missing (recap data --help)
+"""
+
+_ENV_PLAY_EPILOG = """\
+examples:
+  recap env play blocksworld/3@1
+  recap env play robotouille/synchronous/0_cheese_sandwich@42 --step-multiplier 2
+
+Type an action (any letter case) or its number in the list; quit, exit or q to stop.
+exit status: 0 played; 2 unknown instance or missing data
+"""
+
+_ENV_REPLAY_EPILOG = """\
+examples:
+  recap env replay trajectory.json
+
+exit status: 0 every observation identical; 1 a difference (printed); 2 unreadable trajectory
+"""
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = _OneLineParser(prog="recap", description="Run and inspect ReCAP evaluation sweeps.")
-    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
-    sub.add_parser("data", help="list, check or fetch the benchmark data folders (recap data --help)", add_help=False)
+    p = _OneLineParser(prog="recap", description="Run and inspect ReCAP evaluation sweeps.", epilog=_MAIN_EPILOG)
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND", title="commands",
+                           help="one of the commands below; recap COMMAND --help for its options and examples")
 
     def run_flags(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument("--address", help="join an existing Ray cluster (e.g. 10.0.0.5:6379 or auto)")
-        sp.add_argument("--workers", type=int, help="number of episode workers")
-        sp.add_argument("--run-cap", type=float, dest="run_cap", help="run dollar cap (USD)")
-        sp.add_argument("--progress", choices=("auto", "live", "lines", "off"), default="auto")
+        sp.add_argument("--address", metavar="ADDRESS",
+                        help="join an existing Ray cluster (e.g. 10.0.0.5:6379 or auto) instead of starting a local one")
+        sp.add_argument("--workers", type=int, metavar="N", help="number of episode workers (overrides the spec's)")
+        sp.add_argument("--run-cap", type=float, dest="run_cap", metavar="USD", help="run dollar cap in USD (overrides the spec's)")
+        sp.add_argument("--progress", choices=("auto", "live", "lines", "off"), default="auto",
+                        help="progress display: live (a terminal), lines (a line every few seconds), off; "
+                             "auto (default) is live on a terminal, lines otherwise")
 
-    r = sub.add_parser("run", help="run a sweep file")
-    r.add_argument("spec")
+    r = sub.add_parser("run", help="run a sweep file", epilog=_RUN_EPILOG,
+                       description="Run a sweep file: every (instance, method, model, seed) unit without a result.")
+    r.add_argument("spec", help="the sweep file (YAML)")
     run_flags(r)
-    r.add_argument("--output", help="output folder (overrides the spec's)")
+    r.add_argument("--output", metavar="DIR", help="output folder or s3:// URI (overrides the spec's)")
     r.add_argument("--dry-run", action="store_true", help="check the spec and show the plan, run nothing")
 
-    rs = sub.add_parser("resume", help="finish a run after a crash or with a higher cap")
-    rs.add_argument("run_dir")
+    rs = sub.add_parser("resume", help="finish a run after a crash or with a higher cap", epilog=_RESUME_EPILOG,
+                        description="Finish a run from the spec saved in its folder; finished units never re-run.")
+    rs.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
     run_flags(rs)
     rs.add_argument("--repair", action="store_true",
                     help="first cut a torn last line off the ledger journal (a backup is kept); refuses a corrupt line in the middle")
+    rs.add_argument("--retry", choices=("infra", "errors"), default="infra",
+                    help="what to run again besides unfinished units: infra (default) - units whose latest attempt failed on "
+                         "infrastructure; errors - also units that ended env_error or llm_error (a data folder or a param "
+                         "fixed since); earlier rows are kept, the new attempt gets the next number")
 
-    st = sub.add_parser("status", help="units done/total, success, spend of a run folder")
-    st.add_argument("run_dir")
+    st = sub.add_parser("status", help="units done/total, success, spend of a run folder", epilog=_STATUS_EPILOG,
+                        description="Units done/total, success, spend and problems of a run folder.")
+    st.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
 
-    es = sub.add_parser("estimate", help="units, calls, tokens and a cost range of a sweep file")
-    es.add_argument("spec")
+    es = sub.add_parser("estimate", help="units, calls, tokens and a cost range of a sweep file", epilog=_ESTIMATE_EPILOG,
+                        description="Units, model calls, tokens and a cost range of a sweep file, before anything is spent.")
+    es.add_argument("spec", help="the sweep file (YAML)")
 
-    sh = sub.add_parser("show", help="one episode's ReCAP context tree")
-    sh.add_argument("run_dir")
-    sh.add_argument("episode")
+    sh = sub.add_parser("show", help="one episode's ReCAP context tree", epilog=_SHOW_EPILOG,
+                        description="One episode's ReCAP context tree (or a flat method's actions) in the terminal.")
+    sh.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
+    sh.add_argument("episode", help="an episode id, a unit id (its latest attempt), or an unambiguous prefix")
 
-    q = sub.add_parser("sql", help="read-only SQL over a run's tables")
-    q.add_argument("run_dir")
-    q.add_argument("query")
+    # sql and report are read by reports.commands (see main); these entries list them in
+    # recap --help, and sql's is the minimal fallback when the reports package is missing
+    q = sub.add_parser("sql", help="read-only SQL over the tables of one or more run folders (--csv, --json, --file, @NAME)",
+                       epilog=_SQL_FALLBACK_EPILOG, description="Read-only SQL over a run's tables.")
+    q.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
+    q.add_argument("query", help="the SQL query")
 
-    rp = sub.add_parser("report", help="build the report of one or more runs", add_help=False)
-    rp.add_argument("args", nargs=argparse.REMAINDER)
+    sub.add_parser("report", help="build the report (Markdown, HTML, LaTeX, CSV) of one or more runs", add_help=False)
 
-    env = sub.add_parser("env", help="list, play or replay benchmark instances")
-    esub = env.add_subparsers(dest="env_cmd", required=True, metavar="ACTION")
-    el = esub.add_parser("list", help="instance ids of a benchmark")
-    el.add_argument("bench")
-    el.add_argument("selector", nargs="?")
-    ep = esub.add_parser("play", help="play an instance by hand")
-    ep.add_argument("instance_id")
-    ep.add_argument("--step-multiplier", type=_finite_positive, default=4.0)
-    er = esub.add_parser("replay", help="replay a recorded Robotouille trajectory")
-    er.add_argument("trajectory")
+    env = sub.add_parser("env", help="list, play or replay benchmark instances (no model)", epilog=_ENV_EPILOG,
+                         description="Look at the benchmarks without any model.")
+    esub = env.add_subparsers(dest="env_cmd", required=True, metavar="ACTION", title="actions",
+                              help="one of the actions below; recap env ACTION --help for its options and examples")
+    el = esub.add_parser("list", help="instance ids of a benchmark", epilog=_ENV_LIST_EPILOG,
+                         description="The instance ids of a benchmark that a sweep file can name.")
+    el.add_argument("bench", help="blocksworld, robotouille or alfworld")
+    el.add_argument("selector", nargs="?",
+                    help="only the ids it selects: a size (blocksworld), a split or task (robotouille, alfworld)")
+    ep = esub.add_parser("play", help="play an instance by hand", epilog=_ENV_PLAY_EPILOG,
+                         description="Play an instance by hand: see the observation, type actions, watch the step count.")
+    ep.add_argument("instance_id", help="an instance id as recap env list prints it (e.g. blocksworld/3@1)")
+    ep.add_argument("--step-multiplier", type=_finite_positive, default=4.0, metavar="X",
+                    help="step cap = X times the optimal plan's length (default 4; ALFWorld's cap is fixed)")
+    er = esub.add_parser("replay", help="replay a recorded Robotouille trajectory", epilog=_ENV_REPLAY_EPILOG,
+                         description="Re-run a recorded Robotouille trajectory on our engine and compare every observation.")
+    er.add_argument("trajectory", help="the recorded trajectory (JSON)")
+
+    sub.add_parser("data", help="list, check or fetch the benchmark data folders (recap data --help)", add_help=False)
     return p
+
+
+def command_parsers() -> dict[tuple[str, ...], argparse.ArgumentParser]:
+    """The parser that reads each command's arguments (and prints its ``--help``), by command
+    path: ``()`` is ``recap`` itself, ``("env", "list")`` is ``recap env list``. ``sql`` and
+    ``report`` are the reports package's parsers when it is installed; ``data`` is left out
+    (:mod:`pipeline.data` builds its own)."""
+    found: dict[tuple[str, ...], argparse.ArgumentParser] = {}
+
+    def walk(path: tuple[str, ...], parser: argparse.ArgumentParser) -> None:
+        found[path] = parser
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, child in action.choices.items():
+                    walk((*path, name), child)
+
+    walk((), _parser())
+    del found[("data",)]
+    try:
+        from reports.commands import _report_parser, _sql_parser
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("reports", "reports.commands"):
+            raise
+        del found[("report",)]
+    else:
+        found[("sql",)], found[("report",)] = _sql_parser(), _report_parser()
+    return found
 
 
 # --------------------------------------------------------------------------------------------
@@ -182,7 +364,8 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
 
     console = _console()
     backend = backend if backend is not None else _backend(prepared.spec)
-    driver = Driver(prepared, backend, command=command, progress=args.progress, address=args.address)
+    driver = Driver(prepared, backend, command=command, progress=args.progress, address=args.address,
+                    retry=getattr(args, "retry", "infra"))
     summary = driver.run()
     _render(render, collect(prepared.store))
     if summary.stopped:
@@ -191,6 +374,9 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
         console.print(_plain(f"continue with a higher cap: recap resume {prepared.store.location} --run-cap <USD>"))
     if summary.interrupted:
         console.print(_styled(f"interrupted; continue with: recap resume {prepared.store.location}", "yellow"))
+    if summary.retried_errors:
+        console.print(_plain(f"--retry errors: {summary.retried_errors} units that had ended in env_error or llm_error "
+                             "were queued again (their earlier rows are kept)"))
     if summary.abandoned:
         console.print(_styled(f"{summary.abandoned} units gave up after {prepared.spec.max_attempts} failed attempts (see the events table)", "red"))
     console.print(_plain(f"run folder: {prepared.store.location}   report: recap report {prepared.store.location}"))
@@ -218,6 +404,9 @@ def _prepare(spec: Any, text: str) -> tuple[Any, Any]:
     _check_location(spec.output)
     try:
         prepared = prepare(spec, text)
+        from pipeline.preflight import check_plan
+
+        check_plan(prepared.plan)  # every (task kind, method) builds, renders its demo and opens: before any call
         return prepared, _backend(spec)
     except OSError as exc:
         detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
@@ -296,8 +485,12 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     from pipeline.spec import load_spec
     from pipeline.units import expand
 
+    from pipeline.preflight import check_plan
+
     spec, _ = load_spec(args.spec)
-    plan = expand(spec)
+    with _named(Path(args.spec).name):
+        plan = expand(spec)
+        check_plan(plan)
     _render(render, plan, estimate(plan))
     return 0
 
@@ -373,7 +566,10 @@ def cmd_sql_delegated(argv: list[str]) -> int | None:
     delegate = _delegate()
     if delegate is None:
         return None
-    return int(delegate(_local_run_args(argv)) or 0)
+    return int(delegate(argv if _HELP & set(argv) else _local_run_args(argv)) or 0)
+
+
+_HELP = {"-h", "--help"}  # help only: no object-store run folder is pulled first
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -383,10 +579,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         from pipeline.data import data_main
 
         return data_main(argv[1:], sys.stdout, sys.stderr)
-    if argv and argv[0] in ("report", "sql") and not {"-h", "--help"} & set(argv[1:2]):
+    if not argv:
+        usage = _parser().format_usage().strip()
+        print(f"{usage}  (COMMAND: {', '.join(COMMANDS)}; see recap --help)", file=sys.stderr)
+        return EXIT_USAGE
+    if argv[0] in ("report", "sql"):  # --help included: the reports package's parsers say it all
         try:
             if argv[0] == "report":
-                return cmd_report(_local_run_args(argv[1:]))
+                return cmd_report(argv[1:] if _HELP & set(argv) else _local_run_args(argv[1:]))
             code = cmd_sql_delegated(argv[1:])
             if code is not None:
                 return code

@@ -61,11 +61,12 @@ from pipeline.errors import PipelineError, RunFolderError
 from pipeline.preflight import preflight
 from pipeline.progress import ProgressView, Snapshot
 from pipeline.raysetup import PROJECT_ROOT, init_ray
-from pipeline.resume import INFRA_ERROR_KINDS, Pending, RunState, UnitQueue, check_journal, infra_failure, is_final, load_state
+from pipeline.resume import (INFRA_ERROR_KINDS, RETRY_MODES, Pending, Retry, RunState, UnitQueue, check_journal, infra_failure,
+                             is_final, load_state)
 from pipeline.spec import SweepSpec, text_hash
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
 from pipeline.summary import TEST_DOUBLE_LABEL
-from pipeline.units import Plan, PlanDiff, Unit, diff_plans, expand
+from pipeline.units import Plan, PlanDiff, Unit, diff_plans, expand, order_units
 from schemas.records import EpisodeRecord, EventRecord, RunRecord
 
 _EPS = 1e-12
@@ -121,7 +122,9 @@ def _git_revision() -> str | None:
     rev = r.stdout.strip()
     if r.returncode != 0 or not rev:
         return None
-    dirty = subprocess.run(["git", "status", "--porcelain"], cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=10)
+    # tracked changes only: a run folder (or any output) inside the checkout is not a code change
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=PROJECT_ROOT,
+                           capture_output=True, text=True, timeout=10)
     return rev + ("+dirty" if dirty.stdout.strip() else "")
 
 
@@ -150,6 +153,9 @@ class RunSummary:
     infra_kinds: dict[str, int] = field(default_factory=dict)
     #: rows the sink had logged but not written when a session began (a crash), now written
     recovered_rows: int = 0
+    #: units queued again because their latest completing row ended env_error / llm_error
+    #: (``retry="errors"``, ``recap resume RUN --retry errors``)
+    retried_errors: int = 0
 
     @property
     def all_done(self) -> bool:
@@ -204,8 +210,12 @@ class Driver:
     SINK_WAIT_S = 120.0
 
     def __init__(self, prepared: Prepared, backend: ModelBackend, *, command: str = "", progress: str = "auto",
-                 hooks: Hooks | None = None, address: str | None = None) -> None:
+                 hooks: Hooks | None = None, address: str | None = None, retry: Retry = "infra") -> None:
+        if retry not in RETRY_MODES:
+            raise PipelineError(f"--retry must be one of {', '.join(RETRY_MODES)}, got {retry!r}")
         self.p = prepared
+        #: what this session re-runs besides unfinished units (see :func:`pipeline.resume.load_state`)
+        self.retry: Retry = retry
         self.spec = prepared.spec
         self.backend = backend
         self.command = command
@@ -396,7 +406,7 @@ class Driver:
     def _check_caps(self, spend: Spend) -> None:
         cap = self.spec.run_cap_usd
         if self.run_stopped is None and cap is not None and spend.total_usd >= cap - _EPS:
-            self._stop_run(f"run cap ${cap:.2f} reached (spent ${spend.total_usd:.4f})")
+            self._stop_run(f"run cap ${cap:.2f} reached")  # the spend figure is the live one beside it
         for m in self.spec.models:
             if m.cap_usd is not None and m.name not in self.stopped_models and spend.by_model.get(m.name, 0.0) >= m.cap_usd - _EPS:
                 self._stop_model(m.name, f"model cap ${m.cap_usd:.2f} of {m.name} reached")
@@ -477,12 +487,16 @@ class Driver:
         infra = lost_to if lost_to in ("worker_lost", "client") else None
         marker = f" (infrastructure: {infra})" if infra else ""
         msg = f"gave up after {n} failed attempts{marker}; last: {error}"[:2000]
-        self.records_out.append(self._episode_record(unit, attempt, out, end_reason=reason, error=msg,
-                                                     worker_id=fl.slot.worker_id, started=fl.started))
+        rec = self._episode_record(unit, attempt, out, end_reason=reason, error=msg, worker_id=fl.slot.worker_id,
+                                   started=fl.started)
+        self.records_out.append(rec)
         self._event("unit_abandoned", severity="error", unit=unit, attempt=attempt, failures=n)
         self.summary.abandoned += 1
-        if infra:
-            self._infra_failed(unit, attempt, infra)
+        # the rule resume and status apply to the row (a last error naming a dead actor is
+        # worker_lost too): what they will retry, this session counts as failed (exit 4)
+        kind = infra or infra_failure(rec.end_reason, rec.error)
+        if kind:
+            self._infra_failed(unit, attempt, kind)
         else:
             self.summary.finished_now += 1
 
@@ -643,7 +657,7 @@ class Driver:
         self.run_id = ident.run_id
         # rows a sink had acknowledged when the last session died with it (a driver kill)
         recovered = recover_wal(store.path) if self.p.identity is not None else None
-        state: RunState = load_state(store)
+        state: RunState = load_state(store, retry=self.retry)
         started_ray = init_ray(spec.ray, self.address)
         try:
             node_id = ray.get_runtime_context().get_node_id()
@@ -704,7 +718,9 @@ class Driver:
         self.summary = RunSummary(location=self.p.store.location, run=spec.run, run_id=ident.run_id,
                                   total=len(plan.units), completed_before=completed_before)
         self.success_before = self._success_before(plan_ids)
-        self.queue = UnitQueue(plan.units, state)
+        # the start order (spec.order): interleaved over arms by default, so a cap that binds
+        # early leaves a balanced subsample; the same spec gives the same order on every resume
+        self.queue = UnitQueue(order_units(plan.units, spec), state)
         self.failures = {k: v for k, v in state.failures.items() if k in plan_ids}
         self.records_out: list[EpisodeRecord] = []
         self.done_times: list[float] = []
@@ -714,9 +730,14 @@ class Driver:
             started_at=time.time(), spec_yaml=self.p.spec_text, spec_hash=text_hash(self.p.spec_text),
             package_versions=_versions(), git_revision=_git_revision(), host=socket.gethostname(), command=self.command)])
         retrying = {u: k for u, k in state.infra_failed.items() if u in plan_ids}
+        # --retry errors: units whose latest completing row ended env_error / llm_error run again
+        self.retrying_errors = {u: r for u, r in state.errored.items()
+                                if u in plan_ids and u not in state.completed and u not in retrying}
+        self.summary.retried_errors = len(self.retrying_errors)
         self._event("run_resumed" if resumed else "run_started", units=len(plan.units), completed=completed_before,
-                    pending=len(self.queue), run_cap_usd=spec.run_cap_usd, workers=spec.workers,
-                    **({"retrying_failed": len(retrying)} if retrying else {}))
+                    pending=len(self.queue), run_cap_usd=spec.run_cap_usd, workers=spec.workers, order=spec.order,
+                    **({"retrying_failed": len(retrying)} if retrying else {}),
+                    **({"retrying_errors": len(self.retrying_errors)} if self.retrying_errors else {}))
         self._check_caps(self.backend.spend())
         self.n_workers = max(1, min(spec.workers, len(self.queue))) if len(self.queue) else 0
         self.slots = [self._new_slot() for _ in range(self.n_workers)]

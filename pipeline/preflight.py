@@ -1,17 +1,26 @@
 """Checks that must pass before a sweep spends anything: API keys present, prices known for
-every model a dollar cap applies to.
+every model a dollar cap applies to (:func:`preflight`), and every unit able to start its
+episode: data folder found, the method's demonstration renders for the task kind
+(:func:`check_plan`).
 
 Why before everything: a missing key discovered at the first call of the first episode would
 turn a night's run into hundreds of ``auth`` failures; a cap on a model whose calls cannot be
-priced cannot be enforced at all. Both are reported as one line, before any write.
+priced cannot be enforced at all; a method whose demonstration cannot render for a task kind
+would fail every attempt of every unit and be stored as a 0 % result. Each is reported as one
+line, before any write.
 """
 
 from __future__ import annotations
 
 import os
+import re
+from typing import TYPE_CHECKING, Any
 
 from pipeline.errors import PreflightError
 from pipeline.spec import ModelSpec, SweepSpec
+
+if TYPE_CHECKING:
+    from pipeline.units import Plan
 
 
 def _litellm_missing_keys(m: ModelSpec) -> list[str]:
@@ -71,3 +80,128 @@ def check_prices(spec: SweepSpec) -> None:
 def preflight(spec: SweepSpec) -> None:
     check_prices(spec)
     check_keys(spec)
+
+
+# --------------------------------------------------------------------------------------------
+# the plan: every (benchmark, task kind, method configuration) can start an episode
+# --------------------------------------------------------------------------------------------
+#: longest message :func:`check_plan` raises (the CLI adds the sweep file's name in front)
+MESSAGE_MAX = 280
+
+
+def _clip(text: str, room: int) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= room else text[: max(room - 3, 0)].rstrip() + "..."
+
+
+def _fit(head: str, reason: str, tail: str = "") -> str:
+    """``head + reason + tail`` with ``reason`` shortened so the whole is at most MESSAGE_MAX."""
+    return head + _clip(reason, MESSAGE_MAX - len(head) - len(tail)) + tail
+
+
+def _reason(exc: BaseException) -> str:
+    from recap.agent import DemonstrationError
+
+    text = " ".join(str(exc).split())
+    if isinstance(exc, DemonstrationError) and text:
+        return text
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def _canonical(obj: Any) -> str:
+    import json
+
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def check_plan(plan: "Plan") -> None:
+    """Every unit of ``plan`` can start its episode, checked without a model call, before
+    anything is written: raises :class:`~pipeline.errors.SpecError` (one line) otherwise.
+
+    For each distinct (benchmark, task kind, method configuration, environment options, step
+    multiplier) of the plan, the agent is built exactly as the episode worker builds it
+    (:func:`workers.episode_worker.build_agent` and :func:`~workers.episode_worker.env_options_for`),
+    one instance of that task kind is opened with the unit's options and step multiplier
+    (:func:`workers.envs.registry.make_env`: the data folder must be found) and the agent
+    renders its demonstration for it (``agent.demonstration_text(env)``). One environment is
+    opened per distinct (task kind, options, step multiplier) and serves every method
+    configuration that shares it, so a sweep over many instances opens a handful: ALFWorld's
+    134 games under 3 methods open at most 6 task types x 2 option sets.
+
+    Why: a unit that cannot start would otherwise fail at run time on every attempt, be stored
+    as ``env_error``, count as done and show up in the report as a 0 % method.
+    """
+    from pipeline.errors import SpecError
+    from pipeline.units import stratum
+    from recap.env import DataNotFoundError
+    from workers.envs import registry
+    from workers.episode_worker import build_agent, env_options_for
+
+    spec = plan.spec
+    method_index = {m.name: i for i, m in enumerate(spec.methods)}
+
+    def env_index(benchmark: str, options: Any) -> int:
+        same = [i for i, e in enumerate(spec.environments) if e.benchmark == benchmark]
+        for i in same:
+            if dict(spec.environments[i].options) == dict(options or {}):
+                return i
+        return same[0] if same else 0
+
+    # group the units: environment key -> (first unit, its options) and method keys -> (unit, agent)
+    agents: dict[tuple[str, str, str], Any] = {}
+    envs: dict[tuple[str, str, float], dict[str, Any]] = {}
+    seen: set[tuple[str, str, str, str, float]] = set()
+    for u in plan.units:
+        kind = stratum(u.instance_id)
+        pre = (kind, u.method, u.method_config, _canonical(u.env_options), float(u.step_multiplier))
+        if pre in seen:
+            continue
+        seen.add(pre)
+        akey = (u.method, u.method_config, u.benchmark)
+        if akey not in agents:
+            # settled by expand() already (resolve_methods); built again as the worker builds it
+            agents[akey] = build_agent(u.method, profile=u.profile, ablation=u.ablation, settings=dict(u.settings),
+                                       benchmark=u.benchmark)
+        agent = agents[akey]
+        options = env_options_for({"instance_id": u.instance_id, "env_options": dict(u.env_options)}, agent)
+        ekey = (kind, _canonical(options), float(u.step_multiplier))
+        entry = envs.setdefault(ekey, {"unit": u, "options": options, "methods": []})
+        entry["methods"].append((u, agent))
+
+    def data_error(u: Any, exc: BaseException) -> SpecError:
+        b = u.benchmark
+        head = f"environments[{env_index(b, u.env_options)}] ({b}): cannot find its data: "
+        reason = " ".join(str(exc).split())
+        tail = "; `recap data list` shows where it looks"
+        if "recap data fetch" not in reason:
+            tail += f", `recap data fetch {b}` gets it"
+        if len(head) + len(reason) + len(tail) > MESSAGE_MAX:  # the folders looked in: recap data list shows them
+            reason = re.sub(r"\s*\(looked in .*\)$", "", reason)
+        return SpecError(_fit(head, reason, tail))
+
+    for entry in envs.values():
+        first = entry["unit"]
+        try:
+            env = registry.make_env(first.instance_id, step_multiplier=first.step_multiplier, **entry["options"])
+        except DataNotFoundError as exc:
+            raise data_error(first, exc) from None
+        except Exception as exc:
+            b = first.benchmark
+            head = f"environments[{env_index(b, first.env_options)}] ({b}): cannot open {first.instance_id}: "
+            raise SpecError(_fit(head, _reason(exc))) from None
+        try:
+            for u, agent in entry["methods"]:
+                try:
+                    agent.episode_config(env)
+                    agent.demonstration_text(env)
+                except DataNotFoundError as exc:
+                    raise data_error(u, exc) from None
+                except Exception as exc:
+                    i = method_index.get(u.method_label)
+                    head = f"methods[{i}] ({u.method_label}) cannot run on {stratum(u.instance_id)}: "
+                    raise SpecError(_fit(head, _reason(exc))) from None
+        finally:
+            try:
+                env.close()
+            except Exception:
+                pass

@@ -14,6 +14,9 @@ from typing import Any
 
 from pipeline.backend import RateStats
 
+#: how the driver marks a test-double model's label in the rates (see pipeline.summary)
+TEST_DOUBLE_MARK = "(test double)"
+
 
 @dataclass
 class Snapshot:
@@ -35,6 +38,16 @@ def paused_text(until: float | None, now: float | None = None) -> str:
     if until is None or until <= now:
         return ""
     return "  paused until " + time.strftime("%H:%M:%S", time.localtime(until))
+
+
+def eta_text(s: "Snapshot") -> str:
+    """No ETA once a cap has stopped new work: what is left waits for a resume."""
+    return "-- (stopped)" if s.stopped else fmt_duration(s.eta_s)
+
+
+def nominal(s: "Snapshot") -> str:
+    """Spend of test-double models is a nominal price, not money: say so beside the figure."""
+    return " (nominal: test doubles)" if s.rates and all(TEST_DOUBLE_MARK in m for m in s.rates) else ""
 
 
 def fmt_duration(seconds: float | None) -> str:
@@ -59,7 +72,7 @@ def status_line(s: Snapshot) -> str:
     rate = "; ".join(f"{m}: rpm {_pct(r.rpm, r.rpm_limit)} tpm {_pct(r.tpm, r.tpm_limit)}{paused_text(r.paused_until)}"
                      for m, r in s.rates.items())
     line = (f"units {s.done}/{s.total} | success {s.success}/{s.done} | running {s.running} | "
-            f"spend ${s.spend_usd:.4f}{cap} | ETA {fmt_duration(s.eta_s)}")
+            f"spend ${s.spend_usd:.4f}{cap}{nominal(s)} | ETA {eta_text(s)}")
     if s.restarts:
         line += f" | worker restarts {s.restarts}"
     if rate:
@@ -113,12 +126,12 @@ class ProgressView:
         rate = f"{100 * s.success / s.done:.1f}%" if s.done else "--"
         t.add_row("success", f"{s.success}/{s.done}  {rate}")
         cap = f" of ${s.run_cap_usd:.2f} cap ({100 * s.spend_usd / s.run_cap_usd:.0f}%)" if s.run_cap_usd else ""
-        t.add_row("spend", f"${s.spend_usd:.4f}{cap}")
+        t.add_row("spend", f"${s.spend_usd:.4f}{cap}{nominal(s)}")
         for m, r in s.rates.items():
             t.add_row(escape(f"{m}"), f"rpm {_pct(r.rpm, r.rpm_limit)}  tpm {_pct(r.tpm, r.tpm_limit)}"
                       + (f"  in flight {r.in_flight}" if r.in_flight is not None else "")
                       + paused_text(r.paused_until))
-        t.add_row("ETA", fmt_duration(s.eta_s))
+        t.add_row("ETA", eta_text(s))
         if s.restarts:
             t.add_row("restarts", str(s.restarts))
         if s.stopped:

@@ -15,6 +15,14 @@ attempt killed within a second of its calls has no rows yet, only journal lines)
 attempt never shares an ``episode_id`` with an old one (nor its call keys, which the ledger
 would otherwise answer with the killed attempt's recorded replies). Only attempts that *failed* (worker lost, worker error) count against
 ``max_attempts``; an attempt cut short by a driver crash does not.
+
+``recap resume RUN --retry errors`` (``retry="errors"``, see :data:`RETRY_MODES`) re-runs, on
+top, every unit whose latest completing row ended ``env_error`` or ``llm_error`` of any kind (a
+data folder fixed since, a ``bad_request`` fixed by a param change, an agent crash the driver
+gave up on): :func:`load_state` counts them as not completed (``RunState.errored``), so they
+are queued under the next attempt number like an infrastructure failure, their earlier rows
+kept for the record. Without it (``retry="infra"``, the default) only infrastructure failures
+are retried.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Literal
 
 from pipeline.errors import RunFolderError
 from pipeline.store import RunStore
@@ -83,6 +92,14 @@ def infra_failure(end_reason: str | None, error: str | None) -> str | None:
     return None
 
 
+#: what a resume re-runs besides unfinished units: ``infra`` - units whose latest row is an
+#: infrastructure failure (always); ``errors`` - also units that ended ``env_error``/``llm_error``
+Retry = Literal["infra", "errors"]
+RETRY_MODES: tuple[str, ...] = ("infra", "errors")
+#: end reasons ``--retry errors`` re-runs
+ERROR_END_REASONS = ("env_error", "llm_error")
+
+
 def is_final(end_reason: str | None, error: str | None) -> bool:
     """A terminal row that completes its unit (not cut by a cap, not an infrastructure failure)."""
     return end_reason != "budget_exhausted" and infra_failure(end_reason, error) is None
@@ -105,20 +122,32 @@ class RunState:
     failures: dict[str, int] = field(default_factory=dict)
     terminal_rows: int = 0
     bad_parts: list[BadPart] = field(default_factory=list)
+    #: unit -> the end reason (env_error / llm_error) of its latest completing row; with
+    #: ``retry="errors"`` these units are not in ``completed`` (they run again)
+    errored: dict[str, str] = field(default_factory=dict)
+    #: what this state was read for (see :data:`Retry`)
+    retry: str = "infra"
 
     def _seen(self, unit_id: str, attempt: int) -> None:
         if attempt > self.last_attempt.get(unit_id, 0):
             self.last_attempt[unit_id] = attempt
 
 
-def load_state(store: RunStore) -> RunState:
-    state = RunState()
+def load_state(store: RunStore, retry: Retry = "infra") -> RunState:
+    """What the run folder says is done. ``retry="errors"``: units whose latest completing row
+    ended ``env_error``/``llm_error`` count as not completed (listed in ``errored``), so a
+    resume runs them again."""
+    if retry not in RETRY_MODES:
+        raise ValueError(f"retry must be one of {', '.join(RETRY_MODES)}, got {retry!r}")
+    state = RunState(retry=retry)
     cols = ("unit_id", "attempt", "end_reason", "error")
     eps, bad = store.read_table("episodes", list(cols))
     state.bad_parts += bad
     state.terminal_rows = eps.num_rows
     #: unit -> (attempt, infra kind) of its latest infrastructure-failure row
     infra: dict[str, tuple[int, str]] = {}
+    #: unit -> (attempt, end reason) of its latest completing row
+    final: dict[str, tuple[int, str]] = {}
     #: unit -> the highest attempt of any terminal row (failures before it are spent)
     ended: dict[str, int] = {}
     for unit_id, attempt, reason, error in zip(*(eps.column(c).to_pylist() for c in cols)):
@@ -132,7 +161,13 @@ def load_state(store: RunStore) -> RunState:
                 infra[unit_id] = (attempt, kind)
         else:
             state.completed.add(unit_id)
-    state.infra_failed = {u: k for u, (_, k) in infra.items() if u not in state.completed}
+            if attempt >= final.get(unit_id, (0, ""))[0]:
+                final[unit_id] = (attempt, reason or "")
+    state.errored = {u: r for u, (_, r) in final.items() if r in ERROR_END_REASONS}
+    if retry == "errors":
+        state.completed -= set(state.errored)
+    # an infrastructure failure after the latest completing row (a --retry errors attempt) counts
+    state.infra_failed = {u: k for u, (a, k) in infra.items() if u not in state.completed and a > final.get(u, (0, ""))[0]}
     state.budget_stopped -= state.completed
     state.budget_stopped -= set(state.infra_failed)
     events, bad = store.read_table("events", ["kind", "unit_id", "detail"])

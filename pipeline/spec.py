@@ -33,6 +33,7 @@ Example::
     run_cap_usd: 5.0
     workers: 8
     max_attempts: 3
+    order: interleaved                # start order: interleaved (default; balanced under a cap) or plan
 
 Hardening (every rule fails as one line before any model call or write):
 
@@ -75,7 +76,7 @@ import re
 import stat
 import unicodedata
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import (
@@ -407,6 +408,11 @@ class SweepSpec(_Strict):
     run_cap_usd: Usd | None = None
     workers: _int(gt=0, le=WORKERS_MAX) = 4
     max_attempts: _int(gt=0, le=ATTEMPTS_MAX) = 3
+    #: the order units start in (not part of any unit hash): ``interleaved`` (default) takes the
+    #: arms (method x model) in turn and, within an arm, instances in a shuffle seeded by the run
+    #: name, so a cap that binds early leaves a balanced subsample; ``plan`` is the plan's own
+    #: order (instances, then methods, models, seeds). See :func:`pipeline.units.order_units`.
+    order: Literal["interleaved", "plan"] = "interleaved"
     ray: RaySpec = Field(default_factory=RaySpec)
 
     @field_validator("run")

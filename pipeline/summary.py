@@ -8,6 +8,12 @@ which file, which line, what to do).
 A unit is *done* when it has a terminal row that is neither ``budget_exhausted`` nor an
 infrastructure failure (:func:`pipeline.resume.infra_failure`); units whose latest row is an
 infrastructure failure are counted apart, with the command that retries them.
+
+Per arm (method x model) the table says what was planned and where each planned unit stands:
+done, stopped by a cap (its latest row ``budget_exhausted``), failed on infrastructure, not
+started - a run that a cap stopped early shows at a glance which arms were sampled. Units that
+ended ``env_error``/``llm_error`` count as done; the line under the table says how many and
+that ``recap resume RUN --retry errors`` runs them again.
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
 
-from pipeline.resume import infra_failure, journal_issue
+from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue
 from pipeline.store import PLAN_FILE, RunStore
 from workers.storage import BadPart, inspect_parts, read_parts
 
@@ -36,6 +42,17 @@ class GroupRow:
     calls: int = 0
     cost_usd: float = 0.0
     test_double: bool = False
+    #: done units whose completing row ended env_error / llm_error (``--retry errors`` re-runs them)
+    errored: int = 0
+
+    @property
+    def planned(self) -> int:
+        return self.units
+
+    @property
+    def not_started(self) -> int:
+        """Planned units without any terminal row."""
+        return self.units - self.done - self.budget_stopped - self.failed
 
 
 @dataclass
@@ -56,10 +73,19 @@ class StatusReport:
     #: units whose latest terminal row is an infrastructure failure (retryable), by kind
     failed: int = 0
     failed_kinds: dict[str, int] = field(default_factory=dict)
+    #: done units whose completing row ended env_error / llm_error (not infrastructure)
+    errored: int = 0
 
     @property
     def remaining(self) -> int:
         return self.total - self.completed
+
+    def errors_hint(self) -> str | None:
+        """One line on the units ``--retry errors`` would run again, or None."""
+        if not self.errored:
+            return None
+        return (f"{self.errored} done units ended in env_error or llm_error; once the cause is fixed, "
+                f"run them again with: recap resume {self.location} --retry errors")
 
     def retry_hint(self) -> str | None:
         if not self.failed:
@@ -137,6 +163,7 @@ def collect(store: RunStore) -> StatusReport:
             failed_kinds[kind] += 1
             continue
         g.done += 1
+        g.errored += int(r["end_reason"] in ERROR_END_REASONS)
         g.success += int(r["success"])
         g.steps += r["steps"]
         g.calls += r["llm_calls"]
@@ -147,6 +174,7 @@ def collect(store: RunStore) -> StatusReport:
         spend_usd=spend, terminal_rows=len(rows), duplicate_terminal=duplicates,
         groups=list(groups.values()), bad_parts=bad, problems=problems,
         failed=sum(g.failed for g in groups.values()), failed_kinds=dict(failed_kinds),
+        errored=sum(g.errored for g in groups.values()),
     )
 
 
@@ -156,12 +184,14 @@ def render(report: StatusReport, console: Any) -> None:
     from rich.table import Table
 
     t = Table(title=escape(f"run {report.run} ({report.run_id}) - {report.location}"))
-    for col, just in (("method", "left"), ("model", "left"), ("done", "right"), ("success", "right"),
+    for col, just in (("method", "left"), ("model", "left"), ("planned", "right"), ("done", "right"),
+                      ("success", "right"), ("capped", "right"), ("infra failed", "right"), ("not started", "right"),
                       ("avg steps", "right"), ("avg calls", "right"), ("cost $", "right")):
         t.add_column(col, justify=just)
     for g in report.groups:
         rate = f"{g.success}/{g.done} ({100 * g.success / g.done:.0f}%)" if g.done else "-"
-        t.add_row(escape(g.method), escape(model_label(g.model, g.test_double)), f"{g.done}/{g.units}", rate,
+        t.add_row(escape(g.method), escape(model_label(g.model, g.test_double)), str(g.planned), str(g.done), rate,
+                  str(g.budget_stopped), str(g.failed), str(g.not_started),
                   f"{g.steps / g.done:.1f}" if g.done else "-", f"{g.calls / g.done:.1f}" if g.done else "-",
                   f"{g.cost_usd:.4f}")
     console.print(t)
@@ -175,6 +205,9 @@ def render(report: StatusReport, console: Any) -> None:
     hint = report.retry_hint()
     if hint:
         console.print(hint, style="red", markup=False, soft_wrap=True)
+    errors = report.errors_hint()
+    if errors:
+        console.print(errors, markup=False, soft_wrap=True)
     if report.duplicate_terminal:
         console.print(f"[red]{report.duplicate_terminal} duplicate terminal rows[/red]")
     for p in report.problems:

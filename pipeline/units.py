@@ -238,3 +238,75 @@ def diff_plans(old: Mapping[str, Any] | None, plan: Plan) -> PlanDiff:
             changed.append(u.key)
     removed = [k for k in old_by_key if k not in new_keys]
     return PlanDiff(new, unchanged, changed, removed)
+
+
+# --------------------------------------------------------------------------------------------
+# the order units start in
+# --------------------------------------------------------------------------------------------
+def order_seed(spec: SweepSpec) -> int:
+    """The seed of the interleaved order: the first 8 bytes of sha256("recap-order:" + run
+    name). The same run name gives the same order, whatever the output folder or the caps."""
+    return int.from_bytes(hashlib.sha256(f"recap-order:{spec.run}".encode()).digest()[:8], "big")
+
+
+def stratum(instance_id: str) -> str:
+    """The group an instance is spread over in the interleaved order: the benchmark and the
+    second part of its id (a split, task type or size: ``robotouille/synchronous``,
+    ``alfworld/heat``, ``blocksworld/3``)."""
+    parts = instance_id.split("/")
+    return "/".join([parts[0], parts[1].split("@", 1)[0]]) if len(parts) > 1 else parts[0]
+
+
+def order_units(units: Sequence[Unit], spec: SweepSpec) -> list[Unit]:
+    """The order the driver starts ``units`` in (``spec.order``); unit ids are untouched.
+
+    ``plan``: the units as given (the plan's order: instances, then methods, models, seeds).
+
+    ``interleaved`` (default), so that a cap that binds early leaves a balanced subsample:
+
+    1. one sequence of (instance, seed) pairs, shared by every arm: seeds in spec order, the
+       slowest; for each seed every instance once, taking the strata (:func:`stratum`) in turn
+       and, within a stratum, its instances in a shuffle seeded by :func:`order_seed`. Any
+       prefix thus covers as many instances as it can before it repeats one with another seed,
+       spread over benchmarks and splits;
+    2. arms (method label x model label, in spec order) take turns: round ``r`` gives each arm
+       its next pair of the sequence, starting at arm ``r mod A`` (a cap never favours the same
+       arm). After any prefix of ``k`` units the per-arm counts differ by at most 1 (while no arm
+       has run out), and in a full plan every arm gets the same pairs first, so the units a
+       capped run finished are paired across methods and models.
+
+    Deterministic: the same units and spec give the same order; a resume keeps it (what is
+    done is skipped, the rest keeps its relative order).
+    """
+    import random
+    from collections import defaultdict
+
+    if spec.order == "plan":
+        return list(units)
+    rng = random.Random(order_seed(spec))
+    by_stratum: dict[str, list[str]] = defaultdict(list)
+    for inst in sorted({u.instance_id for u in units}):
+        by_stratum[stratum(inst)].append(inst)
+    strata = sorted(by_stratum)
+    for s in strata:
+        rng.shuffle(by_stratum[s])
+    rng.shuffle(strata)
+    instances: list[str] = []
+    for i in range(max((len(v) for v in by_stratum.values()), default=0)):
+        instances += [by_stratum[s][i] for s in strata if i < len(by_stratum[s])]
+    seed_rank = {s: i for i, s in enumerate(spec.seeds)}
+    inst_rank = {inst: i for i, inst in enumerate(instances)}
+    arm_rank = {(m.name, o.name): i * len(spec.models) + j for i, m in enumerate(spec.methods) for j, o in enumerate(spec.models)}
+    arms: dict[tuple[str, str], list[Unit]] = defaultdict(list)
+    for u in units:
+        arms[(u.method_label, u.model_label)].append(u)
+    queues = [sorted(arms[a], key=lambda u: (seed_rank.get(u.seed, len(seed_rank)), u.seed, inst_rank[u.instance_id]))
+              for a in sorted(arms, key=lambda a: (arm_rank.get(a, len(arm_rank)), a))]
+    out: list[Unit] = []
+    n = len(queues)
+    for r in range(max((len(q) for q in queues), default=0)):
+        for j in range(n):
+            q = queues[(r + j) % n]
+            if r < len(q):
+                out.append(q[r])
+    return out

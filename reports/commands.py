@@ -12,6 +12,9 @@ about a ``--file`` never quotes the file's text.
     recap sql RUN_DIR [RUN_DIR ...] "QUERY" [--csv | --json] [--max-rows N]
     recap sql RUN_DIR [RUN_DIR ...] --file QUERY.sql
     recap sql RUN_DIR "@failure_modes"        # a report query from reports/sql/ by name
+
+Options may come before, between or after the positional arguments (``parse_intermixed_args``);
+``--help`` prints to stdout and returns 0.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import duckdb
 from reports.build import FORMATS, ReportOptions, build_report, parse_formats, write_report
 from reports.render_csv import result_csv
 from reports.viewer import DEFAULT_EPISODES
-from reports.views import ReportError, Result, load_sql, open_runs_checked, run_query
+from reports.views import ReportError, Result, load_sql, open_runs_checked, run_query, sql_names
 
 #: the longest --file read (a query, not a data file; also stops /dev/zero and the like)
 MAX_QUERY_FILE_BYTES = 1 << 20
@@ -42,31 +45,68 @@ logging.getLogger("reports").addHandler(logging.NullHandler())
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that raises instead of exiting, so the mains can return a status."""
+    """argparse that raises instead of exiting, so the mains can return a status; ``--help``
+    prints to ``out`` (stdout by default) and ends the main with status 0."""
+
+    def __init__(self, *args: Any, out: TextIO | None = None, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
+        super().__init__(*args, **kwargs)
+        self.out = out
 
     def error(self, message: str) -> None:  # type: ignore[override]
         raise _UsageError(f"{self.prog}: {message}")
+
+    def exit(self, status: int = 0, message: str | None = None) -> None:  # type: ignore[override]
+        if message:
+            (self.out or sys.stdout).write(message)
+        raise _Exit(status)
+
+    def print_help(self, file: TextIO | None = None) -> None:
+        (file or self.out or sys.stdout).write(self.format_help())
+
+    def print_usage(self, file: TextIO | None = None) -> None:
+        (file or self.out or sys.stdout).write(self.format_usage())
 
 
 class _UsageError(Exception):
     pass
 
 
-def _report_parser() -> _Parser:
-    p = _Parser(prog="recap report", description="Write a report (Markdown, HTML, LaTeX, CSV) over one or more run folders.")
+class _Exit(Exception):
+    """``--help`` was given: the help is printed, the main returns ``status``."""
+
+    def __init__(self, status: int) -> None:
+        super().__init__(status)
+        self.status = status
+
+
+_REPORT_EPILOG = """examples:
+  recap report runs/demo                            all formats under runs/demo/report
+  recap report runs/demo --format md,html --title "Demo sweep"
+  recap report runs/a runs/b --out reports/ab       two runs in one report (--out required)
+  recap report runs/demo --episodes 3f9c0a1b,77d2e0aa --format html
+  recap report --viewer-max 0 runs/demo             options go before or after the run folders
+
+exit status: 0 written; 1 a problem with the run folders or the option values; 2 bad usage
+"""
+
+
+def _report_parser(out: TextIO | None = None) -> _Parser:
+    p = _Parser(prog="recap report", out=out, epilog=_REPORT_EPILOG,
+                description="Write a report (Markdown, HTML, LaTeX, CSV) over one or more run folders.")
     p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run folder(s); several are reported together")
     p.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/report for one run; required for several)")
     p.add_argument("--format", default=",".join(FORMATS), metavar="LIST", help=f"comma-separated formats among {','.join(FORMATS)} (default: all)")
     p.add_argument("--episodes", metavar="IDS", help="comma-separated episode ids to show in the HTML viewer (default: a sample)")
     p.add_argument("--viewer-max", type=int, default=DEFAULT_EPISODES, metavar="N", help=f"episodes in the viewer sample (default {DEFAULT_EPISODES}; 0 = none)")
-    p.add_argument("--title", default="recap-eval report", help="report title")
+    p.add_argument("--title", default="recap-eval report", metavar="TEXT", help="report title (default: recap-eval report)")
     return p
 
 
 def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
     out, err = stdout or sys.stdout, stderr or sys.stderr
     try:
-        args = _report_parser().parse_args(list(argv))
+        args = _report_parser(out).parse_intermixed_args(list(argv))
         formats = parse_formats(args.format)
         if args.viewer_max < 0:
             raise ReportError("--viewer-max must be >= 0")
@@ -77,8 +117,10 @@ def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: Te
         report = build_report(args.run_dirs, options)
         out_dir = Path(args.out) if args.out else Path(args.run_dirs[0]) / "report"
         written = write_report(report, out_dir, formats)
+    except _Exit as exc:
+        return exc.status
     except _UsageError as exc:
-        print(str(exc), file=err)
+        print(_one_line(str(exc)), file=err)
         return 2
     except ReportError as exc:
         print(f"error: {exc}", file=err)
@@ -92,13 +134,47 @@ def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: Te
     return 0
 
 
-def _sql_parser() -> _Parser:
-    p = _Parser(prog="recap sql", description="Run a read-only SQL query over the tables and views of one or more run folders.")
-    p.add_argument("args", nargs="+", metavar="RUN_DIR ... QUERY", help="run folder(s), then the query (or @name for reports/sql/name.sql)")
-    p.add_argument("--file", metavar="SQL", help="read the query from this file (then every positional is a run folder)")
+_SQL_USAGE = """\
+%(prog)s [-h] [--csv | --json] [--max-rows N] RUN_DIR [RUN_DIR ...] QUERY
+       %(prog)s [-h] [--csv | --json] [--max-rows N] RUN_DIR [RUN_DIR ...] @NAME
+       %(prog)s [-h] [--csv | --json] [--max-rows N] --file QUERY.sql RUN_DIR [RUN_DIR ...]"""
+
+_SQL_DESCRIPTION = """\
+Run one read-only SQL query (DuckDB) over the tables and views of one or more run folders
+(several folders are read as one set of tables; run_id tells them apart). The query is the
+last positional argument: SQL text, or @NAME for the report query reports/sql/NAME.sql; with
+--file every positional argument is a run folder. Anything but a query is refused."""
+
+
+def _sql_epilog() -> str:
+    import textwrap
+
+    names = ", ".join(n for n in sql_names() if not n.startswith(("viewer_", "views", "macros")))
+    names = textwrap.fill(f"named queries (@NAME): {names}", width=92, subsequent_indent="  ")
+    return f"""\
+examples:
+  recap sql runs/demo "select arm, count(*) n, avg(success::int) ok from terminal group by 1"
+  recap sql runs/demo --csv "select * from failures"    options go before or after the query
+  recap sql runs/a runs/b "select run_id, count(*) from terminal group by 1" --json
+  recap sql runs/demo @failure_modes                     a report query by name
+  recap sql --file long_query.sql runs/a runs/b --max-rows 500
+
+{names}
+tables: episodes, llm_calls, messages, tree_nodes, steps, events, run, bad_parts;
+views: attempts, terminal, calls, nodes, tree_stats, step_patterns, episode_modes, failures
+
+exit status: 0 ok; 2 any error (bad usage, a missing run folder, SQL that fails or is refused)
+"""
+
+
+def _sql_parser(out: TextIO | None = None) -> _Parser:
+    p = _Parser(prog="recap sql", out=out, usage=_SQL_USAGE, description=_SQL_DESCRIPTION, epilog=_sql_epilog())
+    p.add_argument("args", nargs="+", metavar="RUN_DIR ... QUERY",
+                   help="run folder(s), then the query: SQL text or @NAME (reports/sql/NAME.sql)")
+    p.add_argument("--file", metavar="QUERY.sql", help="read the query from this file (then every positional is a run folder)")
     fmt = p.add_mutually_exclusive_group()
-    fmt.add_argument("--csv", action="store_true", help="print CSV")
-    fmt.add_argument("--json", action="store_true", help="print a JSON array of objects")
+    fmt.add_argument("--csv", action="store_true", help="print CSV (every row)")
+    fmt.add_argument("--json", action="store_true", help="print a JSON array of objects (every row)")
     p.add_argument("--max-rows", type=int, default=100, metavar="N", help="rows printed in table output (default 100)")
     return p
 
@@ -106,7 +182,7 @@ def _sql_parser() -> _Parser:
 def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
     out, err = stdout or sys.stdout, stderr or sys.stderr
     try:
-        args = _sql_parser().parse_args(list(argv))
+        args = _sql_parser(out).parse_intermixed_args(list(argv))
         if args.file:
             run_dirs, query = args.args, _read_query_file(args.file)
             _check_query_file(args.file, query)
@@ -121,6 +197,8 @@ def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextI
             result = run_query(con, query)
         finally:
             con.close()
+    except _Exit as exc:
+        return exc.status
     except _UsageError as exc:
         print(_one_line(str(exc)), file=err)
         return 2

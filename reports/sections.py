@@ -8,6 +8,7 @@ the paper's layout (methods x splits) happens here; the long results themselves 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any
 
 import duckdb
@@ -21,7 +22,9 @@ Query = Callable[[str], Result]
 
 
 def make_query(con: duckdb.DuckDBPyConnection, results: dict[str, Result]) -> Query:
-    """Run each named SQL file once; keep every result for the CSV output."""
+    """Run each named SQL file once; keep every result for the CSV output. The run folders'
+    plans are loaded first (:func:`load_plans`), for the coverage table."""
+    load_plans(con)
 
     def q(name: str) -> Result:
         if name not in results:
@@ -29,6 +32,70 @@ def make_query(con: duckdb.DuckDBPyConnection, results: dict[str, Result]) -> Qu
         return results[name]
 
     return q
+
+
+#: the plan a run folder keeps (pipeline.store.PLAN_FILE) and its sweep file (SPEC_FILE)
+PLAN_FILE = "plan.json"
+SPEC_FILE = "spec.yaml"
+#: the model-string prefix of the pipeline's test-double models (pipeline.spec.OFFLINE_PREFIX)
+_TEST_DOUBLE_PREFIX = "offline/"
+
+
+def _test_double_models(run_dir: Path) -> dict[str, bool]:
+    """Model label -> test double, from the run folder's sweep file ({} when it cannot be read)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load((run_dir / SPEC_FILE).read_text(encoding="utf-8"))
+        out = {}
+        for m in data.get("models") or []:
+            model = str(m["model"])
+            out[str(m.get("label") or model)] = model.startswith(_TEST_DOUBLE_PREFIX)
+        return out
+    except Exception:  # noqa: BLE001 - no sweep file, or not one: the episode rows tell instead
+        return {}
+
+
+def load_plans(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
+    """Fill ``planned_units`` (reports/sql/views.sql) from each run folder's plan.json, read
+    here in Python (the connection itself reaches no file). Returns run folder -> how its plan
+    was read (``plan.json``, ``no plan.json``, ``unreadable plan.json: ...``). Done once per
+    connection; a folder without a readable plan is left to the coverage query's fallback."""
+    import json
+
+    import pyarrow as pa
+
+    if con.execute("SELECT count(*) FROM planned_units").fetchone()[0]:
+        return {}
+    cols: dict[str, list[Any]] = {k: [] for k in ("run_dir", "run_id", "unit_id", "method", "model", "instance_id", "seed", "test_double")}
+    how: dict[str, str] = {}
+    for run_dir, run_id in con.execute("SELECT run_dir, run_json_id FROM run_dirs ORDER BY run_dir").fetchall():
+        path = Path(run_dir) / PLAN_FILE
+        try:
+            units = json.loads(path.read_text(encoding="utf-8"))["units"]
+            rows = [(str(u["unit_id"]), str(u["method"]), str(u["model"]), str(u.get("instance_id") or ""), u.get("seed"))
+                    for u in units]
+        except FileNotFoundError:
+            how[run_dir] = f"no {PLAN_FILE}"
+            continue
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            how[run_dir] = f"unreadable {PLAN_FILE}: {type(exc).__name__}"
+            continue
+        doubles = _test_double_models(Path(run_dir))
+        how[run_dir] = PLAN_FILE
+        for uid, method, model, inst, seed in rows:
+            for k, v in zip(cols, (run_dir, run_id, uid, method, model, inst,
+                                   seed if isinstance(seed, int) and not isinstance(seed, bool) else None, doubles.get(model))):
+                cols[k].append(v)
+    if cols["unit_id"]:
+        types = {"seed": pa.int64(), "test_double": pa.bool_()}
+        table = pa.table({k: pa.array(v, type=types.get(k, pa.string())) for k, v in cols.items()})  # noqa: F841
+        con.register("_planned_units", table)
+        try:
+            con.execute("INSERT INTO planned_units SELECT * FROM _planned_units")
+        finally:
+            con.unregister("_planned_units")
+    return how
 
 
 def _unique(values: Iterable[Any]) -> list[Any]:
@@ -88,6 +155,31 @@ def overview(q: Query) -> Section:
             "runs",
         )
     )
+    coverage = q("coverage").dicts()
+    if coverage:
+        derived = sorted({r["run_id"] or "?" for r in coverage if r["planned_from"] != "plan.json"})
+        note = ("capped: the latest attempt ended budget_exhausted (a cap stopped it); infra failed: the latest attempt "
+                "ended in an infrastructure failure (recap resume retries it); not started: no episode row. "
+                "Finished counts env_error and llm_error outcomes.")
+        if derived:
+            note += (f" No readable plan.json for run {', '.join(derived)}: planned is derived from the episode rows "
+                     "(units never started are not counted).")
+        sec.tables.append(
+            Table(
+                "coverage",
+                "Coverage: planned and finished units per arm",
+                [
+                    Column("run_id", "run"), Column("model_label", "model"), Column("method", "method"),
+                    Column("planned", "planned", "int"), Column("finished", "finished", "int"),
+                    Column("successes", "successes", "int"), Column("capped", "capped", "int"),
+                    Column("infra_failed", "infra failed", "int"), Column("not_started", "not started", "int"),
+                    Column("planned_from", "planned from"),
+                ],
+                coverage,
+                "coverage",
+                note,
+            )
+        )
     skipped = q("skipped_parts").dicts()
     if skipped:
         sec.tables.append(

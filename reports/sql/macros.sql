@@ -27,3 +27,25 @@ CREATE MACRO mcnemar_p(b, c) AS (
 -- "gpt-4o" or "scripted (test double)": every table labels test-double models.
 CREATE MACRO model_label(model, test_double) AS
   coalesce(nullif(model, ''), '(unknown model)') || CASE WHEN test_double THEN ' (test double)' ELSE '' END;
+
+-- The infrastructure failure a terminal episode row records ('server_error', 'auth',
+-- 'not_found', 'worker_lost', 'client' ...), or NULL when the row is a real outcome: the rule of
+-- pipeline.resume.infra_failure (keep the two in step). Such a unit is not done: resume retries it.
+CREATE MACRO infra_failure_kind(end_reason, error) AS
+  CASE
+    WHEN starts_with(trim(coalesce(error, '')), 'gave up after') THEN
+      CASE
+        WHEN regexp_matches(error, '\(infrastructure: \w+\)') THEN regexp_extract(error, '\(infrastructure: (\w+)\)', 1)
+        WHEN starts_with(trim(CASE WHEN contains(error, '; last:') THEN substr(error, position('; last:' IN error) + 7) ELSE '' END), 'client:')
+          THEN 'client'
+        WHEN regexp_matches(CASE WHEN contains(error, '; last:') THEN substr(error, position('; last:' IN error) + 7) ELSE '' END,
+                            'ActorDiedError|RayActorError|ActorUnavailableError|WorkerCrashedError|worker lost')
+          THEN 'worker_lost'
+      END
+    WHEN coalesce(end_reason, '') <> 'llm_error' THEN NULL
+    WHEN trim(split_part(trim(coalesce(error, '')), ':', 1)) IN ('rate_limit', 'timeout', 'server_error', 'auth', 'connection', 'not_found')
+      THEN trim(split_part(trim(coalesce(error, '')), ':', 1))
+    WHEN trim(split_part(trim(coalesce(error, '')), ':', 1)) = 'bad_request'
+         AND regexp_matches(coalesce(error, ''), 'NotFoundError|\b404\b|[Nn]ot [Ff]ound')
+      THEN 'not_found'
+  END;

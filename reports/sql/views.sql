@@ -191,3 +191,10 @@ LEFT JOIN last_error le ON le.run_id = t.run_id AND le.episode_id = t.episode_id
 -- failures: the terminal episodes that did not succeed.
 CREATE VIEW failures AS
 SELECT * FROM episode_modes WHERE mode <> 'success';
+
+-- planned_units: the units each run folder's plan.json lists (run_id from its run.json), with
+-- whether its model is a test double (from the folder's spec.yaml; NULL when unknown). Filled by
+-- the report builder (reports.sections.load_plans); empty in a plain `recap sql` session, where
+-- the coverage query falls back to the units that have episode rows.
+CREATE TABLE planned_units (run_dir VARCHAR, run_id VARCHAR, unit_id VARCHAR, method VARCHAR, model VARCHAR,
+  instance_id VARCHAR, seed BIGINT, test_double BOOLEAN);

@@ -27,7 +27,7 @@ def report_dir(run_a, tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
     rc, stdout, stderr = _run(report_main, [str(run_a), "--out", str(out)])
     assert (rc, stderr) == (0, "")
-    assert stdout.startswith(f"wrote 49 files to {out} (md, html, tex, csv)\n")
+    assert stdout.startswith(f"wrote 51 files to {out} (md, html, tex, csv)\n")
     return out
 
 
@@ -38,8 +38,8 @@ def test_report_files(report_dir):
         "plots/context_by_call.svg", "plots/cost_per_episode.svg", "plots/failure_modes.svg", "plots/success_by_split.svg",
         "plots/tree_branching_factor.svg", "plots/tree_leaf_failures.svg", "plots/tree_levels.svg",
     ]
-    assert len([n for n in names if n.startswith("csv/")]) == 23
-    assert len([n for n in names if n.startswith("tex/")]) == 17  # 16 tables + report.tex
+    assert len([n for n in names if n.startswith("csv/")]) == 24
+    assert len([n for n in names if n.startswith("tex/")]) == 18  # 17 tables + report.tex
     assert not [n for n in names if ".tmp-" in n]
 
 
@@ -72,8 +72,8 @@ def test_test_doubles_are_labelled_everywhere(report_dir):
         assert not unlabelled.search(text), f"unlabelled test double in {path.name}"
     md = (report_dir / "report.md").read_text()
     tables_with_models = [t for t in md.split("### ")[1:] if "| model |" in t]
-    assert len(tables_with_models) == 11
-    assert sum("scripted (test double)" in t for t in tables_with_models) == 10  # all but the tree table (no tree)
+    assert len(tables_with_models) == 12
+    assert sum("scripted (test double)" in t for t in tables_with_models) == 11  # all but the tree table (no tree)
     # the per-task table of ALFWorld names models in its column headers
     assert "| task | react · gpt-4o | recap · gpt-4o | react · scripted (test double) | recap · scripted (test double) |" in md
 
@@ -163,7 +163,7 @@ def test_report_over_a_run_with_a_corrupt_part(run_a, tmp_path):
     rc, out, err = _run(report_main, [str(run)])
     assert rc == 0
     assert err.startswith(f"warning: skipped unreadable part file {bad} (llm_calls): ")
-    assert out.startswith(f"wrote 50 files to {run / 'report'} ")  # + the skipped-parts LaTeX table
+    assert out.startswith(f"wrote 52 files to {run / 'report'} ")  # + the skipped-parts LaTeX table
     html = (run / "report" / "report.html").read_text()
     assert "<strong>Unreadable part files were skipped:</strong>" in html and str(bad) in html
     md = (run / "report" / "report.md").read_text()
