@@ -16,9 +16,11 @@ The data never lives in this repository. Three benchmark folders exist: ``roboto
   folder in use (both caches and ``../shared/data`` put it there).
 * ``recap data check [BENCH] [--data-dir DIR]`` - verifies each folder against the sha256
   manifest this repository carries (``pipeline/manifests/<bench>.sha256``, ``sha256sum`` format:
-  metadata, not data); one line per benchmark: path, files checked, OK / N missing / N mismatched.
+  metadata, not data; Robotouille's generated instances may match ``robotouille-generated.sha256``
+  instead, see below); one line per benchmark: path, files checked, OK / N missing / N mismatched.
 * ``recap data fetch [BENCH] [--mirror URL_OR_DIR] [--dest DIR]`` - downloads what can be
-  downloaded, verifies every file against the manifest, and only then moves the folder into
+  downloaded, verifies every file against the manifest, generates what is generated
+  (Robotouille's instances) and verifies it too, and only then moves the folder into
   place (staged in a hidden folder next to the destination, renamed at the end; a failure
   removes the stage, so no half-written folder is ever left). Default destination:
   recap-eval's cache; ``--dest`` names the folder for one benchmark, or the parent of the three
@@ -48,21 +50,20 @@ archives itself (default URLs above, checked against the installed script's cons
 tests) and keeps only the files it verifies.
 
 Robotouille's 200 benchmark instances (``instances/``) and the two demonstration instances
-(``instances_train/``) are not in the upstream repository: they are the output of upstream's
-seeded generator (``environments/env_generator/procedural_generator.py``,
-``randomize_environment(env_json, seed)``) run by the real engine, retried with seed+1, ... on
-failure (33 of 200 used another seed). Reproducing them here was investigated and is not
-feasible with this project's engine: the generator is a sequence of Python ``random`` calls
-(``random.seed(seed)``, then ``randrange``/``choice``/``shuffle`` over the grid, over the
-upstream code's own ``Item``/``Station`` enumerations, with reachability checks, deep copies,
-retries on exceptions) whose exact output depends on every call and its order. Our engine is a
-clean-room interpreter of the benchmark's *data* and contains no generator; matching
-``generated_environment_json`` byte for byte would mean porting upstream's generator code,
-enum order included, which is neither data nor in the data folder. So ``fetch`` gets everything
-else, and ``check`` reports ``instances/`` and ``instances_train/`` as missing with that reason:
-copy them from a complete Robotouille data folder. ``trajectories/`` (recorded on the real
-engine; read only by ``recap env replay`` and the tests) are optional: their absence is noted,
-not a failure.
+(``instances_train/``) are not in the upstream repository: the real engine makes them at load
+time with its seeded generator (``randomize_environment(env_json, seed)``, retried with
+seed+1, ... on failure: 38 of the 200 use another seed). ``fetch`` *generates* them, after the
+download, from the fetched problem files and domain with
+:mod:`workers.envs.robotouille.generator` (our re-implementation of that generator: same ``random`` draws in the same order; it reproduces the
+recorded ``generated_environment_json`` and ``used_seed`` of all 200 + 2 instances, see
+``bench/robotouille_generator.py``), plus the first observation and goal-set count from our
+engine. The recorded files also hold the real engine's build times, which no machine can
+reproduce, so a generated file cannot have the recorded file's sha256: the repository pins both
+digests, ``robotouille.sha256`` (the recorded files, e.g. copied from a complete data folder) and
+``robotouille-generated.sha256`` (the bytes ``fetch`` writes), and ``check`` accepts a file of
+those two groups when it matches either one (its line says how many were generated).
+``trajectories/`` (recorded on the real engine; read only by ``recap env replay`` and the tests)
+are optional: their absence is noted, not a failure.
 
 Exit status: 0 - every benchmark asked about has a folder and it verifies (``fetch``: every
 benchmark was fetched and verified, or was already there and verifies); 1 - a check failed: a
@@ -141,6 +142,8 @@ class Group:
     fetchable: bool
     required: bool = True
     note: str = ""
+    #: made by ``Benchmark.generate`` after the download, not taken from a source
+    generated: bool = False
 
     def holds(self, rel: str) -> bool:
         return rel == self.prefix or (self.prefix.endswith("/") and rel.startswith(self.prefix))
@@ -173,10 +176,17 @@ class Benchmark:
     #: member name in an archive -> path in the folder (None: not wanted)
     member_path: Callable[[str], str | None]
     after_fetch: str = ""  # printed after a successful fetch
+    #: writes the ``generated`` groups into a folder holding the downloaded files; returns their paths
+    generate: Callable[[Path], list[str]] | None = None
 
     @property
     def manifest_file(self) -> Path:
         return MANIFEST_DIR / f"{self.name}.sha256"
+
+    @property
+    def generated_manifest_file(self) -> Path:
+        """sha256 of the files ``generate`` writes (they differ from the recorded ones)."""
+        return MANIFEST_DIR / f"{self.name}-generated.sha256"
 
     def group_of(self, rel: str) -> Group:
         for group in self.groups:
@@ -201,9 +211,18 @@ def _alfworld_member(member: str) -> str | None:
 
 
 _INSTANCES_NOTE = (
-    "made by the real engine's seeded generator, not stored upstream, not reproducible by our "
-    "engine: copy instances/ and instances_train/ from a complete Robotouille data folder"
+    "not stored upstream: `recap data fetch robotouille` generates them (recap-eval's "
+    "re-implementation of the real engine's seeded generator), or copy them from a complete "
+    "Robotouille data folder"
 )
+
+
+def _generate_robotouille(folder: Path) -> list[str]:
+    """instances/ and instances_train/ from the fetched problem files and domain."""
+    from workers.envs.robotouille.generator import write_instances
+
+    return write_instances(folder, folder)
+
 
 ROBOTOUILLE = Benchmark(
     name="robotouille",
@@ -214,17 +233,18 @@ ROBOTOUILLE = Benchmark(
         Group("environments/", fetchable=True),
         Group("agents/", fetchable=True),
         Group("conf/", fetchable=True),
-        Group("instances/", fetchable=False, note=_INSTANCES_NOTE),
-        Group("instances_train/", fetchable=False, note=_INSTANCES_NOTE),
+        Group("instances/", fetchable=True, note=_INSTANCES_NOTE, generated=True),
+        Group("instances_train/", fetchable=True, note=_INSTANCES_NOTE, generated=True),
         Group("trajectories/", fetchable=False, required=False,
               note="recorded on the real engine; only `recap env replay` and the tests read them"),
     ),
     sources=(Source(f"{ROBOTOUILLE_COMMIT}.tar.gz", f"{ROBOTOUILLE_REPO_ARCHIVES}/{ROBOTOUILLE_COMMIT}.tar.gz", "tar.gz"),),
     member_path=_strip_top_folder,
     after_fetch=(
-        "instances/ and instances_train/ are not downloadable (" + _INSTANCES_NOTE + "); "
-        "`recap data check robotouille` fails until they are there"
+        "instances/ and instances_train/ were generated here (recap-eval's re-implementation of the "
+        "real engine's seeded generator; they match the pinned digests of generated files)"
     ),
+    generate=_generate_robotouille,
 )
 
 ALFWORLD = Benchmark(
@@ -369,6 +389,7 @@ class CheckResult:
     missing: dict[str, int] = field(default_factory=dict)  # group prefix -> count (required)
     optional_missing: dict[str, int] = field(default_factory=dict)
     mismatched: list[str] = field(default_factory=list)
+    generated: int = 0  # files that match the digest of a generated file, not the recorded one
 
     @property
     def ok(self) -> bool:
@@ -383,6 +404,8 @@ class CheckResult:
             groups = ", ".join(f"{g} ({n})" for g, n in self.optional_missing.items())
             notes = "; ".join(dict.fromkeys(self.bench.group_of(g).note for g in self.optional_missing))
             optional = f" ({sum(self.optional_missing.values())} optional files absent: {groups}: {notes})"
+        if self.generated:
+            optional = f" ({self.generated} of them generated by recap-eval)" + optional
         if self.ok:
             return head + "OK" + optional
         parts = [f"{n_missing} missing", f"{len(self.mismatched)} mismatched"]
@@ -405,6 +428,7 @@ class CheckResult:
 def check_folder(bench: Benchmark, folder: Path, only: Callable[[Group], bool] = lambda g: True) -> CheckResult:
     """``folder`` against the repository's manifest of ``bench`` (files of groups ``only`` keeps)."""
     manifest = read_manifest(bench.manifest_file)
+    generated = read_manifest(bench.generated_manifest_file) if bench.generate is not None else {}
     result = CheckResult(bench, folder)
     for rel, digest in manifest.items():
         group = bench.group_of(rel)
@@ -415,7 +439,13 @@ def check_folder(bench: Benchmark, folder: Path, only: Callable[[Group], bool] =
         if not path.is_file():
             bucket = result.missing if group.required else result.optional_missing
             bucket[group.prefix] = bucket.get(group.prefix, 0) + 1
-        elif sha256_file(path) != digest:
+            continue
+        actual = sha256_file(path)
+        if actual == digest:
+            continue
+        if group.generated and actual == generated.get(rel):
+            result.generated += 1
+        else:
             result.mismatched.append(rel)
     return result
 
@@ -535,7 +565,8 @@ def _stage(bench: Benchmark, mirror: str | None, stage: Path, out: TextIO) -> di
     """Fetch every fetchable manifest file of ``bench`` into ``stage/data``; verify each one.
     Returns the files written with their sha256."""
     manifest = read_manifest(bench.manifest_file)
-    wanted = {rel: d for rel, d in manifest.items() if bench.group_of(rel).fetchable}
+    wanted = {rel: d for rel, d in manifest.items()
+              if bench.group_of(rel).fetchable and not bench.group_of(rel).generated}
     data, downloads = stage / "data", stage / "downloads"
     data.mkdir()
     downloads.mkdir()
@@ -570,7 +601,34 @@ def _stage(bench: Benchmark, mirror: str | None, stage: Path, out: TextIO) -> di
                 f"{rel} from {origin[rel]} does not match the manifest (sha256 {got[rel][:12]}..., "
                 f"expected {wanted[rel][:12]}...): corrupted download or wrong mirror"
             )
+    if bench.generate is not None:
+        got.update(_generate(bench, bench.generate, data, out))
     write_manifest(data / MANIFEST_NAME, got)
+    return got
+
+
+def _generate(bench: Benchmark, generate: Callable[[Path], list[str]], data: Path, out: TextIO) -> dict[str, str]:
+    """Run ``bench.generate`` on the verified download; every file it must write is checked
+    against the pinned digests of generated files. Returns the files with their sha256."""
+    pinned = read_manifest(bench.generated_manifest_file)
+    expected = {rel for rel in read_manifest(bench.manifest_file) if bench.group_of(rel).generated}
+    if set(pinned) != expected:
+        raise DataError(f"{bench.generated_manifest_file.name} does not list the files of the generated groups")
+    print(f"  generating {', '.join(g.prefix for g in bench.groups if g.generated)}", file=out, flush=True)
+    try:
+        written = set(generate(data))
+    except Exception as exc:  # any failure of the generator is a failed fetch with one line, not a traceback
+        raise DataError(f"cannot generate the {bench.title} instances: {one_line(exc) or type(exc).__name__}") from None
+    if written != expected:
+        raise DataError(f"the generator wrote {len(written)} files, expected {len(expected)}")
+    got = {}
+    for rel in sorted(expected):
+        got[rel] = sha256_file(data / rel)
+        if got[rel] != pinned[rel]:
+            raise DataError(
+                f"{rel} as generated here does not match {bench.generated_manifest_file.name} (sha256 "
+                f"{got[rel][:12]}..., expected {pinned[rel][:12]}...): the problem files, the generator or the engine changed"
+            )
     return got
 
 

@@ -83,12 +83,12 @@ def read_json(path: Path) -> Any:
 
 
 def _instances_hint(path: Path) -> str:
-    """Why an instance file can be missing from a fetched folder (they cannot be downloaded)."""
+    """Why an instance file can be missing from a data folder (they are generated, not downloaded)."""
     if INSTANCES_DIR in path.parts or TRAIN_INSTANCES_DIR in path.parts:
         return (
-            "; the benchmark instances are made by the real engine's seeded generator and cannot "
-            "be downloaded: copy instances/ and instances_train/ from a complete Robotouille data "
-            "folder (`recap data check robotouille` lists what is missing)"
+            "; the benchmark instances are not stored upstream: `recap data fetch robotouille` "
+            "generates instances/ and instances_train/ into a new folder, or copy them from a "
+            "complete Robotouille data folder (`recap data check robotouille` lists what is missing)"
         )
     return ""
 
