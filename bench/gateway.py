@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/gateway.py            # both parts (about 2 minutes)
     .venv/bin/python bench/gateway.py --no-ray   # skip the Ray-actor overhead figure
+    .venv/bin/python bench/gateway.py --skip-quota --calls 400   # overhead only (about 75 s)
 
 Part 1 - utilisation. A fake provider (``python -m workers.llm.fake_server``, own process)
 enforces RPM or TPM over a scaled window (``--window-s``, default 5 s for 60 s); 32 callers
@@ -10,11 +11,17 @@ accepted rate divided by the limit's rate, measured from the first arrival to th
 arrival at least ``--windows`` windows later (exact for bursty and for smooth traffic).
 Target: >= 95 % of the binding limit and 0 requests refused with 429.
 
-Part 2 - overhead. One caller, the same fake server without limits or latency; interleaved
-calls through (a) ``litellm.acompletion`` directly, (b) the in-process gateway core,
-(c) a GatewayClient -> Ray GatewayActor (+ BudgetActor). Reports p50 latencies and the
-gateway's overhead over (a); also (b') the core alone with the HTTP call stubbed out.
-Target: (b) - (a) <= 2 ms at p50.
+Part 2 - overhead. The same fake server without limits or latency (so any latency above (a)
+is ours); one caller, every path interleaved call by call: (a) ``litellm.acompletion``
+directly, (b) the in-process gateway core, (c) a GatewayClient -> Ray GatewayActor with the
+ledger inside it (``budget="local"``) and with a shared BudgetActor (the pipeline's path), and
+(r) a bare Ray actor echoing the request, and (r2) a bare async actor that only calls litellm
+(the actor hop any actor-hosted client pays: (c) - (r2) is the gateway's own part). Each gateway
+path runs *before* (one inline fdatasync per reservation) and *after* (group commit,
+:meth:`workers.gateway.journal.Journal.commit`), printed as p50/p95, overhead over (a), and
+after/before ratios. Then ``--concurrent`` callers (default 8) at once, where group commit
+shares one fdatasync among the reservations of a batch, and (b') the core alone with the HTTP
+call stubbed out. Targets: (b) - (a) <= 2 ms and (c) - (a) <= 2 ms at p50.
 """
 
 from __future__ import annotations
@@ -117,14 +124,41 @@ def pct(xs: list[float], q: float) -> float:
     return sorted(xs)[min(len(xs) - 1, int(q * len(xs)))] * 1e3
 
 
-async def overhead_run(n: int, use_ray: bool) -> None:
+def _line(label: str, xs: list[float], base: float | None, note: str = "") -> None:
+    over = "" if base is None else f"   overhead p50 {pct(xs, 0.5) - base:+6.2f} ms"
+    print(f"  {label:<34} p50 {pct(xs, 0.5):6.2f} ms  p95 {pct(xs, 0.95):6.2f} ms{over}{note}")
+
+
+def _ratio(label: str, before: list[float], after: list[float], base: float) -> None:
+    b, a = pct(before, 0.5) - base, pct(after, 0.5) - base
+    ratio = f"{a / b:5.2f}" if a > 0 and b > 0 else "  n/a"  # an overhead at or below 0 is noise
+    print(f"  {label:<34} overhead p50 before {b:+6.2f} ms  after {a:+6.2f} ms  after/before "
+          f"{ratio}   latency p50 after/before {pct(after, 0.5) / pct(before, 0.5):5.2f}"
+          f"   p95 after/before {pct(after, 0.95) / pct(before, 0.95):5.2f}")
+
+
+def _budget(run_dir: Path, group_commit: bool) -> object:
+    from workers.gateway.ledger import BudgetLedger, LocalBudget
+
+    return LocalBudget(BudgetLedger(run_dir), group_commit=group_commit)
+
+
+async def overhead_run(n: int, use_ray: bool, callers: int) -> None:
+    """Single caller, every path interleaved call by call (the machine's noise hits all paths
+    alike); ``before`` = one inline fdatasync per reservation, ``after`` = group commit."""
     server = ServerProcess()
     lit = get_litellm()
     run_dir = Path(tempfile.mkdtemp(prefix="bench-gw-"))
-    cfg = DeploymentConfig(model=MODEL, api_base=server.url, max_concurrency=8, params={"max_tokens": 50})
-    gw = DeploymentGateway(cfg, run_dir=run_dir / "core", run_id="bench")
-    gw_kill_safe = DeploymentGateway(cfg, run_dir=run_dir / "core2", run_id="bench", durable_reservations=False)
-    client = None
+    cfg = DeploymentConfig(model=MODEL, api_base=server.url, max_concurrency=max(8, callers), params={"max_tokens": 50})
+    cores = {"core before": DeploymentGateway(cfg, run_dir=run_dir / "cb", run_id="bench",
+                                              budget=_budget(run_dir / "cb", False)),
+             "core after": DeploymentGateway(cfg, run_dir=run_dir / "ca", run_id="bench",
+                                             budget=_budget(run_dir / "ca", True)),
+             "core kill-safe": DeploymentGateway(cfg, run_dir=run_dir / "ck", run_id="bench",
+                                                 durable_reservations=False)}
+    clients: dict[str, object] = {}
+    groups: list = []
+    noop = None
     if use_ray:
         import ray
 
@@ -132,8 +166,13 @@ async def overhead_run(n: int, use_ray: bool) -> None:
 
         os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)
         ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-        gws = RunGateways([cfg], run_dir / "ray", "bench")
-        client = gws.client(MODEL)
+        for name, budget, gc in (("ray local before", "local", False), ("ray local after", "local", True),
+                                 ("ray shared before", "shared", False), ("ray shared after", "shared", True)):
+            g = RunGateways([cfg], run_dir / name.replace(" ", "-"), "bench", budget=budget, group_commit=gc)
+            groups.append(g)
+            clients[name] = g.client(MODEL)
+        noop = _echo_actor().remote()  # type: ignore[attr-defined]
+        bare = _litellm_actor().remote(server.url)  # type: ignore[attr-defined]
     text = "Where is the onion? " * 10
 
     async def direct(i: int) -> None:
@@ -141,22 +180,56 @@ async def overhead_run(n: int, use_ray: bool) -> None:
                               num_retries=0, max_retries=0, max_tokens=50,
                               messages=[{"role": "user", "content": f"{i} {text}"}])
 
-    times: dict[str, list[float]] = {"a": [], "b": [], "b2": [], "c": []}
+    labels = ["direct", *cores, *clients] + (["ray echo", "ray litellm"] if noop is not None else [])
+    times: dict[str, list[float]] = {k: [] for k in labels}
     for i in range(-20, n):  # 20 warm-up rounds
-        for label in ("a", "b", "b2", "c") if client else ("a", "b", "b2"):
+        for k, label in enumerate(labels):
+            req = request(100_000 * (k + 1) + i, f"{i} {text}")
             t = time.perf_counter()
-            if label == "a":
+            if label == "direct":
                 await direct(i)
-            elif label == "b":
-                await gw.complete(request(10_000 + i, f"{i} {text}"))
-            elif label == "b2":
-                await gw_kill_safe.complete(request(10_000 + i, f"{i} {text}"))
+            elif label in cores:
+                await cores[label].complete(req)
+            elif label == "ray echo":
+                await noop.echo.remote(req)  # type: ignore[union-attr]
+            elif label == "ray litellm":
+                await bare.complete.remote(req)  # type: ignore[union-attr]
             else:
-                await client.acomplete(request(20_000 + i, f"{i} {text}"))
+                await clients[label].acomplete(req)  # type: ignore[attr-defined]
             if i >= 0:
                 times[label].append(time.perf_counter() - t)
-    await gw.aclose()
-    await gw_kill_safe.aclose()
+    for gw in cores.values():
+        await gw.aclose()
+    base = pct(times["direct"], 0.5)
+    print(f"  -- one caller, {n} calls per path, p50/p95 latency and overhead over (a) --")
+    _line("(a) litellm direct", times["direct"], None)
+    _line("(b) core in process, before", times["core before"], base, "  (an inline fdatasync per reservation)")
+    _line("(b) core in process, after", times["core after"], base, "  (group commit)")
+    _line("(b2) core, kill-safe only", times["core kill-safe"], base, "  (reservation written, not fsync'd)")
+    if noop is not None:
+        _line("(r) Ray echo of the request", times["ray echo"], None, "  (a bare actor round trip)")
+        _line("(r2) litellm in a bare actor", times["ray litellm"], base,
+              "  (the actor hop alone: the floor of (c))")
+        for name in clients:
+            _line(f"(c) {name}", times[name], base)
+    print("  -- after/before (overhead = p50 minus (a)'s p50) --")
+    _ratio("(b) core in process", times["core before"], times["core after"], base)
+    if noop is not None:
+        _ratio("(c) Ray, gateway keeps the ledger", times["ray local before"], times["ray local after"], base)
+        _ratio("(c) Ray, shared BudgetActor", times["ray shared before"], times["ray shared after"], base)
+        hop50, hop95 = pct(times["ray litellm"], 0.5), pct(times["ray litellm"], 0.95)
+        for name in ("ray local before", "ray local after", "ray shared before", "ray shared after"):
+            print(f"  {name:<20} the gateway's own overhead beyond the actor hop (c) - (r2): p50 "
+                  f"{pct(times[name], 0.5) - hop50:+6.2f} ms  p95 {pct(times[name], 0.95) - hop95:+6.2f} ms")
+
+    if callers > 1:
+        await concurrent_run(cfg, run_dir, callers, n, clients)
+    for g in groups:
+        g.close()
+    if use_ray:
+        import ray
+
+        ray.shutdown()
 
     # (b') the core alone: the litellm call replaced by an instant answer
     import workers.gateway.core as core
@@ -167,33 +240,108 @@ async def overhead_run(n: int, use_ray: bool) -> None:
 
     real = core.attempt_async
     core.attempt_async = instant
-    stub = DeploymentGateway(cfg, run_dir=run_dir / "stub", run_id="bench")
-    only: list[float] = []
+    stubs = {gc: DeploymentGateway(cfg, run_dir=run_dir / f"stub{gc}", run_id="bench",
+                                   budget=_budget(run_dir / f"stub{gc}", gc)) for gc in (False, True)}
+    only: dict[bool, list[float]] = {False: [], True: []}
     for i in range(-20, n):
-        t = time.perf_counter()
-        await stub.complete(request(30_000 + i, f"{i} {text}"))
-        if i >= 0:
-            only.append(time.perf_counter() - t)
-    await stub.aclose()
+        for gc, stub in stubs.items():
+            t = time.perf_counter()
+            await stub.complete(request(30_000 + i, f"{i} {text}"))
+            if i >= 0:
+                only[gc].append(time.perf_counter() - t)
+    for stub in stubs.values():
+        await stub.aclose()
     core.attempt_async = real
-
-    a50, b50 = pct(times["a"], 0.5), pct(times["b"], 0.5)
-    print(f"  (a) litellm direct      p50 {a50:6.2f} ms  p90 {pct(times['a'], 0.9):6.2f} ms")
-    b2 = pct(times["b2"], 0.5)
-    print(f"  (b) gateway core        p50 {b50:6.2f} ms  p90 {pct(times['b'], 0.9):6.2f} ms"
-          f"   overhead p50 {b50 - a50:+.2f} ms  (default: reservation fsync'd before sending)")
-    print(f"  (b2) core, kill-safe    p50 {b2:6.2f} ms  p90 {pct(times['b2'], 0.9):6.2f} ms"
-          f"   overhead p50 {b2 - a50:+.2f} ms  (durable_reservations=False: written, not fsync'd)")
-    if client:
-        c50 = pct(times["c"], 0.5)
-        print(f"  (c) Ray GatewayClient   p50 {c50:6.2f} ms  p90 {pct(times['c'], 0.9):6.2f} ms"
-              f"   overhead p50 {c50 - a50:+.2f} ms")
-        gws.close()
-        ray.shutdown()
-    print(f"  (b') core, HTTP stubbed p50 {pct(only, 0.5):6.2f} ms  p90 {pct(only, 0.9):6.2f} ms"
-          "   (the gateway's own work per call, incl. the fsync'd reservation)")
+    print("  -- the gateway's own work per call (HTTP stubbed out), incl. the durable reservation --")
+    _line("(b') core, HTTP stubbed, before", only[False], None)
+    _line("(b') core, HTTP stubbed, after", only[True], None)
     print(f"  fdatasync on this disk  p50 {fsync_p50(run_dir):6.2f} ms   (the floor of (b) - (b2))")
     server.close()
+
+
+async def concurrent_run(cfg: DeploymentConfig, run_dir: Path, callers: int, n: int, clients: dict) -> None:
+    """``callers`` concurrent callers: where group commit pays (one fdatasync per batch).
+    Rounds alternate before/after so both see the same noise."""
+    import statistics
+
+    from workers.gateway.ledger import BudgetLedger, LocalBudget
+
+    paths: dict[str, tuple] = {}
+    for gc in (False, True):
+        led = BudgetLedger(run_dir / f"conc{gc}")
+        paths[f"core {'after' if gc else 'before'}"] = (
+            DeploymentGateway(cfg, run_dir=run_dir / f"conc{gc}", run_id="bench",
+                              budget=LocalBudget(led, group_commit=gc)), led)
+    for name in ("ray shared before", "ray shared after"):
+        if name in clients:
+            paths[name] = (clients[name], None)
+    lat: dict[str, list[float]] = {k: [] for k in paths}
+    rate: dict[str, list[float]] = {k: [] for k in paths}
+    text = "Where is the onion? " * 10
+    rounds = max(3, n // 25)
+    counter = iter(range(10**9))
+    for r in range(rounds + 1):  # round 0 warms up
+        for name, (gw, _led) in paths.items():
+            async def caller() -> None:
+                for _ in range(5):
+                    req = request(500_000 + next(counter), f"{text} {r}")
+                    t = time.perf_counter()
+                    await (gw.complete(req) if name.startswith("core") else gw.acomplete(req))
+                    if r:
+                        lat[name].append(time.perf_counter() - t)
+
+            t0 = time.perf_counter()
+            await asyncio.gather(*[caller() for _ in range(callers)])
+            if r:
+                rate[name].append(callers * 5 / (time.perf_counter() - t0))
+    print(f"  -- {callers} concurrent callers, {rounds} rounds of {callers * 5} calls per path --")
+    for name, (gw, led) in paths.items():
+        per = None if led is None else led.stats()["journal_syncs"] / max(1, led.settled)
+        syncs = "" if per is None else f"   fdatasyncs per reservation {per:4.2f}"
+        print(f"  {name:<34} p50 {pct(lat[name], 0.5):6.2f} ms  p95 {pct(lat[name], 0.95):6.2f} ms  "
+              f"calls/s median {statistics.median(rate[name]):7.1f}{syncs}")
+    for kind in ("core", "ray shared"):
+        if f"{kind} after" in lat:
+            b, a = lat[f"{kind} before"], lat[f"{kind} after"]
+            print(f"  {kind}: latency p50 after/before {pct(a, 0.5) / pct(b, 0.5):5.2f}  p95 after/before "
+                  f"{pct(a, 0.95) / pct(b, 0.95):5.2f}  calls/s after/before "
+                  f"{statistics.median(rate[f'{kind} after']) / statistics.median(rate[f'{kind} before']):5.2f}")
+    for name, (gw, _led) in paths.items():
+        if name.startswith("core"):
+            await gw.aclose()
+
+
+def _echo_actor() -> object:
+    import ray
+
+    @ray.remote(num_cpus=0)
+    class Echo:
+        """A bare async actor: the Ray round trip of a request, with nothing behind it."""
+
+        async def echo(self, req: LLMRequest) -> LLMRequest:
+            return req
+
+    return Echo
+
+
+def _litellm_actor() -> object:
+    import ray
+
+    @ray.remote(num_cpus=0)
+    class BareLitellm:
+        """litellm called from an async actor, nothing else: what any actor-hosted client pays."""
+
+        def __init__(self, url: str):
+            self.url = url
+            self.lit = get_litellm()
+
+        async def complete(self, req: LLMRequest) -> tuple:
+            await self.lit.acompletion(model=MODEL, api_base=self.url, api_key="no-key", timeout=120.0,
+                                       num_retries=0, max_retries=0, max_tokens=50,
+                                       messages=[{"role": "user", "content": req.messages[0].content}])
+            return ("ok", None)
+
+    return BareLitellm
 
 
 def fsync_p50(folder: Path) -> float:
@@ -218,6 +366,7 @@ def main() -> None:
     p.add_argument("--windows", type=int, default=4)
     p.add_argument("--callers", type=int, default=32)
     p.add_argument("--calls", type=int, default=200, help="calls per path in the overhead part")
+    p.add_argument("--concurrent", type=int, default=8, help="callers of the concurrent overhead part (1: skip it)")
     p.add_argument("--no-ray", action="store_true")
     p.add_argument("--skip-quota", action="store_true")
     args = p.parse_args()
@@ -228,8 +377,8 @@ def main() -> None:
                               40, 60, "requests", args.window_s, args.windows, args.callers))
         asyncio.run(quota_run("TPM-bound", ["--rpm", "100000", "--tpm", "20000"], {"rpm": 100_000, "tpm": 20_000},
                               1200, 20_000, "tokens", args.window_s, args.windows, args.callers))
-    print(f"[2] overhead per call, 1 caller, {args.calls} calls per path, interleaved")
-    asyncio.run(overhead_run(args.calls, not args.no_ray))
+    print(f"[2] overhead per call, {args.calls} calls per path, interleaved; zero-latency fake server")
+    asyncio.run(overhead_run(args.calls, not args.no_ray, args.concurrent))
 
 
 if __name__ == "__main__":

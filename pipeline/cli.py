@@ -94,7 +94,7 @@ class _OneLineParser(argparse.ArgumentParser):
 
 
 #: the commands in the order ``recap --help`` lists them
-COMMANDS = ("run", "resume", "status", "estimate", "show", "sql", "report", "env", "data")
+COMMANDS = ("run", "resume", "status", "estimate", "show", "sql", "report", "view", "env", "data")
 
 _MAIN_EPILOG = """\
 examples:
@@ -104,6 +104,7 @@ examples:
   recap resume runs/demo --run-cap 60       finish after a crash or with a higher cap
   recap sql runs/demo @failure_modes        read-only SQL over the run's tables
   recap report runs/demo                    Markdown/HTML/LaTeX/CSV report under runs/demo/report
+  recap view runs/demo                      browse every episode on http://127.0.0.1:8765/
 
 Each command's options and examples: recap COMMAND --help. Every error is one line on stderr.
 """
@@ -271,6 +272,7 @@ def _parser() -> argparse.ArgumentParser:
     q.add_argument("query", help="the SQL query")
 
     sub.add_parser("report", help="build the report (Markdown, HTML, LaTeX, CSV) of one or more runs", add_help=False)
+    sub.add_parser("view", help="browse every episode of one or more runs in a local web viewer (read-only)", add_help=False)
 
     env = sub.add_parser("env", help="list, play or replay benchmark instances (no model)", epilog=_ENV_EPILOG,
                          description="Look at the benchmarks without any model.")
@@ -316,8 +318,12 @@ def command_parsers() -> dict[tuple[str, ...], argparse.ArgumentParser]:
         if exc.name not in ("reports", "reports.commands"):
             raise
         del found[("report",)]
+        del found[("view",)]
     else:
         found[("sql",)], found[("report",)] = _sql_parser(), _report_parser()
+        from reports.webview.server import view_parser
+
+        found[("view",)] = view_parser()
     return found
 
 
@@ -505,6 +511,17 @@ def cmd_report(argv: list[str]) -> int:
     return int(report_main(argv) or 0)
 
 
+def cmd_view(argv: list[str]) -> int:
+    """``recap view``: the reports package's web viewer (local run folders only)."""
+    try:
+        from reports.webview.server import view_main
+    except ModuleNotFoundError as exc:
+        if exc.name in ("reports", "reports.webview", "reports.webview.server"):
+            raise PipelineError("the viewer is not available (reports.webview is not installed)") from None
+        raise
+    return int(view_main(argv) or 0)
+
+
 def dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
     command = "recap " + " ".join(argv)
     if args.cmd == "run":
@@ -583,8 +600,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         usage = _parser().format_usage().strip()
         print(f"{usage}  (COMMAND: {', '.join(COMMANDS)}; see recap --help)", file=sys.stderr)
         return EXIT_USAGE
-    if argv[0] in ("report", "sql"):  # --help included: the reports package's parsers say it all
+    if argv[0] in ("report", "sql", "view"):  # --help included: the reports package's parsers say it all
         try:
+            if argv[0] == "view":
+                return cmd_view(argv[1:])
             if argv[0] == "report":
                 return cmd_report(argv[1:] if _HELP & set(argv) else _local_run_args(argv[1:]))
             code = cmd_sql_delegated(argv[1:])

@@ -17,10 +17,11 @@ Caps: the model backend refuses calls that would pass a cap (episodes then end w
 ``budget_exhausted``); the driver stops *starting* episodes of a model (or all of them) once its
 spend reaches its cap or an episode was refused for lack of budget.
 
-Infrastructure failures: a unit whose episode ended ``llm_error`` because the model service
-failed (connection, auth, rate limit, timeout, server error, not found - see
+Infrastructure failures: a unit whose episode ended because the model service failed
+(connection, auth, rate limit, timeout, server error, not found - see
 :func:`pipeline.resume.infra_failure`), or that the driver gave up on after its workers died,
-gets its terminal row like any other but does not count as done: ``recap resume`` (or ``recap
+gets its terminal row like any other - end reason ``infra_error``, its split, task and the
+spend the ledger journal recorded for the attempt - but does not count as done: ``recap resume`` (or ``recap
 run`` of the same sweep, say with the ``api_base`` fixed) runs it again under the next attempt
 number. Such a failure ends the unit for this session (the gateway already retried transient
 errors); the session's exit status says so.
@@ -61,12 +62,13 @@ from pipeline.errors import PipelineError, RunFolderError
 from pipeline.preflight import preflight
 from pipeline.progress import ProgressView, Snapshot
 from pipeline.raysetup import PROJECT_ROOT, init_ray
-from pipeline.resume import (INFRA_ERROR_KINDS, RETRY_MODES, Pending, Retry, RunState, UnitQueue, check_journal, infra_failure,
-                             is_final, load_state)
+from pipeline.resume import (INFRA_ERROR, INFRA_ERROR_KINDS, RETRY_MODES, Pending, Retry, RunState, UnitQueue, attempt_spend,
+                             check_journal, infra_failure, is_final, load_state)
 from pipeline.spec import SweepSpec, text_hash
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
 from pipeline.summary import TEST_DOUBLE_LABEL
 from pipeline.units import Plan, PlanDiff, Unit, diff_plans, expand, order_units
+from schemas.labels import place_of
 from schemas.records import EpisodeRecord, EventRecord, RunRecord
 
 _EPS = 1e-12
@@ -437,6 +439,11 @@ class Driver:
     # -- terminal rows ----------------------------------------------------------------------------
     def _episode_record(self, unit: Unit, attempt: int, out: dict[str, Any] | None, *, end_reason: str | None = None,
                         error: str | None = None, worker_id: str | None = None, started: float = 0.0) -> EpisodeRecord:
+        """The terminal row of an attempt (schema version 2): the arm's method, label, profile
+        and ablation apart; the place from :func:`schemas.labels.place_of` (ALFWorld one split,
+        a row without an environment still has its split and task); an infrastructure failure
+        ends ``infra_error`` with its kind first in the error; an attempt without a result (a
+        unit given up on) gets the spend the ledger journal recorded for it."""
         res = (out or {}).get("result") or {}
         env = (out or {}).get("env") or {}
         now = time.time()
@@ -448,21 +455,35 @@ class Driver:
             # failure recognisable (and retryable) from the table alone
             if reason == "llm_error" and kind in INFRA_ERROR_KINDS and not (error or "").startswith(f"{kind}:"):
                 error = f"{kind}: {error or ''}".rstrip()
+        if infra_failure(reason, error) is not None:
+            reason = INFRA_ERROR
+        spend = res if res else self._journal_spend(f"{unit.unit_id}-{attempt}")
+        bench, split, task = place_of(unit.instance_id, env.get("split") or None, env.get("task") or None)
         return EpisodeRecord(
             episode_id=f"{unit.unit_id}-{attempt}", unit_id=unit.unit_id, attempt=attempt,
-            benchmark=env.get("benchmark") or unit.benchmark, split=env.get("split") or "", task=env.get("task") or "",
-            instance_id=unit.instance_id, seed=unit.seed, method=unit.method_label, method_config=unit.method_config,
+            benchmark=env.get("benchmark") or bench, split=split, task=task,
+            instance_id=unit.instance_id, seed=unit.seed, method=unit.method, method_config=unit.method_config,
             model=unit.model_label, end_reason=reason, success=bool(res.get("success", False)),
-            steps=int(res.get("steps", 0)), llm_calls=int(res.get("llm_calls", 0)),
-            prompt_tokens=int(res.get("prompt_tokens", 0)), cached_prompt_tokens=int(res.get("cached_prompt_tokens", 0)),
-            completion_tokens=int(res.get("completion_tokens", 0)), cost_usd=float(res.get("cost_usd", 0.0)),
+            steps=int(res.get("steps", 0)), llm_calls=int(spend.get("llm_calls", 0)),
+            prompt_tokens=int(spend.get("prompt_tokens", 0)), cached_prompt_tokens=int(spend.get("cached_prompt_tokens", 0)),
+            completion_tokens=int(spend.get("completion_tokens", 0)), cost_usd=float(spend.get("cost_usd", 0.0)),
             wall_s=float((out or {}).get("wall_s", now - started if started else 0.0)),
             step_cap=int(env.get("max_steps") or 0), step_multiplier=unit.step_multiplier,
             optimal_steps=env.get("optimal_steps"), max_depth=int(res.get("max_depth", 0)),
             error=error, worker_id=(out or {}).get("worker_id") or worker_id,
             started_at=float((out or {}).get("started_at", started)), ended_at=float((out or {}).get("ended_at", now)),
             test_double=bool((out or {}).get("test_double", unit.model.startswith("offline/"))),
+            label=unit.method_label, profile=unit.profile, ablation=unit.ablation_name, provider_model=unit.model,
         )
+
+    def _journal_spend(self, episode_id: str) -> dict[str, Any]:
+        """An attempt's calls, tokens and cost by the ledger journal (its worker is gone)."""
+        try:
+            s = attempt_spend(self.work, episode_id)
+        except Exception:  # the row matters more than its spend
+            return {}
+        return {"llm_calls": s.calls, "prompt_tokens": s.prompt_tokens, "cached_prompt_tokens": s.cached_prompt_tokens,
+                "completion_tokens": s.completion_tokens, "cost_usd": s.cost_usd}
 
     def _infra_failed(self, unit: Unit, attempt: int, kind: str) -> None:
         """A unit ended in an infrastructure failure: not done, retried by the next resume."""
@@ -482,9 +503,11 @@ class Driver:
         if n < self.spec.max_attempts:
             self.queue.retry(unit)
             return
-        reason = "llm_error" if source == "client" else "env_error"
         lost_to = self.last_failure[unit.unit_id]
         infra = lost_to if lost_to in ("worker_lost", "client") else None
+        # an agent that crashed on every attempt is an outcome (env_error); a lost worker or a
+        # failing model client is infrastructure (infra_error, retried by recap resume)
+        reason = INFRA_ERROR if infra else ("llm_error" if source == "client" else "env_error")
         marker = f" (infrastructure: {infra})" if infra else ""
         msg = f"gave up after {n} failed attempts{marker}; last: {error}"[:2000]
         rec = self._episode_record(unit, attempt, out, end_reason=reason, error=msg, worker_id=fl.slot.worker_id,

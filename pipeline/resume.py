@@ -3,9 +3,10 @@
 Resume reads everything from the tables, never from the driver's memory: a unit is *completed*
 when it has a terminal ``episodes`` row whose end reason is neither ``budget_exhausted`` (an
 episode cut by a cap is unfinished work that a resume with a higher cap continues) nor an
-*infrastructure failure* (:func:`infra_failure`: ``llm_error`` of a failed model service -
-connection, auth, rate limit, timeout, server error, not found - or a unit the driver gave up
-on after its workers died or its client failed). Such a unit is *retryable*: the next ``recap
+*infrastructure failure* (:func:`infra_failure`: end reason ``infra_error`` - a failed model
+service (connection, auth, rate limit, timeout, server error, not found) or a unit the driver
+gave up on after its workers died or its client failed; runs of schema version 1 wrote these as
+``llm_error``/``env_error`` and the same rule recognises them from the row's error). Such a unit is *retryable*: the next ``recap
 resume`` (or ``recap run`` of the same sweep, e.g. with the ``api_base`` corrected) runs it
 again under the next attempt number; its earlier rows stay for the record, and its failed
 attempts before that row no longer count against ``max_attempts``. Attempt numbers
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import shutil
 import time
 from collections import deque
@@ -41,6 +41,7 @@ from pipeline.errors import RunFolderError
 from pipeline.store import RunStore
 from pipeline.units import Unit
 from workers.gateway.ledger import JOURNAL_NAME
+from schemas.labels import GAVE_UP_PREFIX, INFRA_ERROR, INFRA_ERROR_KINDS, infra_failure
 from workers.storage import BadPart
 
 #: event kinds that record a failed attempt of a unit
@@ -50,46 +51,9 @@ _ID_TABLES = ("messages", "steps", "tree_nodes", "llm_calls")
 JOURNAL_FILE = JOURNAL_NAME
 
 
-#: ``llm_error`` kinds (the first word of the row's error) that say the model service failed
-INFRA_ERROR_KINDS = ("rate_limit", "timeout", "server_error", "auth", "connection", "not_found")
-#: how the driver's row for a unit it gave up on begins
-GAVE_UP_PREFIX = "gave up after"
-_GAVE_UP_INFRA = re.compile(r"\(infrastructure: (\w+)\)")
-#: what the last error of a give-up row written before the marker existed says of a lost worker
-_WORKER_DEATHS = ("ActorDiedError", "RayActorError", "ActorUnavailableError", "WorkerCrashedError", "worker lost")
-
-
-def infra_failure(end_reason: str | None, error: str | None) -> str | None:
-    """The infrastructure failure a terminal row records (``server_error``, ``auth``,
-    ``not_found``, ``worker_lost`` ...), or None when the row is a real outcome.
-
-    * ``llm_error`` rows: the error text starts with the LLM error kind (``"auth: ..."``); a
-      ``bad_request`` that is a 404 (a wrong ``api_base`` path or model name) is ``not_found``;
-      ``context_length`` and other bad requests are outcomes of the agent's own requests.
-    * rows of units the driver gave up on (``"gave up after N failed attempts ..."``): infra
-      when the attempts were lost to dying workers or a failing model client (the row says
-      ``(infrastructure: KIND)``), not when the agent itself crashed.
-    """
-    text = (error or "").strip()
-    if text.startswith(GAVE_UP_PREFIX):
-        m = _GAVE_UP_INFRA.search(text)
-        if m:
-            return m.group(1)
-        head = text.split("; last:", 1)
-        last = head[1].strip() if len(head) > 1 else ""
-        if last.startswith("client:"):
-            return "client"
-        if any(s in last for s in _WORKER_DEATHS):
-            return "worker_lost"
-        return None
-    if end_reason != "llm_error":
-        return None
-    kind = text.split(":", 1)[0].strip()
-    if kind in INFRA_ERROR_KINDS:
-        return kind
-    if kind == "bad_request" and re.search(r"NotFoundError|\b404\b|[Nn]ot [Ff]ound", text):
-        return "not_found"
-    return None
+# the rule itself lives with the row labels (schemas.labels), so that the reader of an old
+# part derives ``infra_error`` by the same rule; it is re-exported here for the pipeline
+__all__ = ["GAVE_UP_PREFIX", "INFRA_ERROR", "INFRA_ERROR_KINDS", "infra_failure"]
 
 
 #: what a resume re-runs besides unfinished units: ``infra`` - units whose latest row is an
@@ -209,6 +173,43 @@ def journal_episode_ids(store: RunStore) -> set[str]:
         if isinstance(key, str) and "#" in key:
             out.add(key.rsplit("#", 1)[0])
     return out
+
+
+@dataclass(frozen=True)
+class AttemptSpend:
+    """What the ledger journal says one attempt paid: its settled calls, their tokens and cost."""
+
+    calls: int = 0
+    prompt_tokens: int = 0
+    cached_prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cost_usd: float = 0.0
+
+
+def attempt_spend(store: RunStore, episode_id: str) -> AttemptSpend:
+    """The spend of ``episode_id`` by the gateway's ledger journal (call keys
+    ``<episode_id>#<call>``): every settled reservation counts as a call at its settled cost
+    (failed calls at 0, cut ones at their worst case), tokens from the recorded replies. For the
+    row of a unit the driver gave up on: its worker died with the counts, the journal kept them."""
+    from workers.llm.pricing import pico_to_usd
+
+    data = store.read_bytes(JOURNAL_FILE)
+    prefix = episode_id + "#"
+    calls = prompt = cached = completion = pico = 0
+    for line in (data or b"").decode("utf-8", errors="replace").splitlines():
+        try:
+            e = json.loads(line)
+        except ValueError:
+            continue  # a torn (or corrupt) line
+        if not isinstance(e, dict) or e.get("op") != "settle" or not str(e.get("key", "")).startswith(prefix):
+            continue
+        calls += 1
+        pico += int(e.get("pico") or 0)
+        r = e.get("result") if isinstance(e.get("result"), dict) else {}
+        prompt += int(r.get("prompt_tokens") or 0)
+        cached += int(r.get("cached_prompt_tokens") or 0)
+        completion += int(r.get("completion_tokens") or 0)
+    return AttemptSpend(calls, prompt, cached, completion, pico_to_usd(pico))
 
 
 @dataclass

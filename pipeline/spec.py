@@ -13,7 +13,7 @@ Example::
         options: {invalid_action_rate: 0.1}   # test-double knobs (part of the unit hash)
         params: {max_tokens: 512}     # generation params (part of the unit hash)
         rpm: 600                      # transport settings: not part of the unit hash
-        prices: {input: 2.5, output: 10, cached_input: 1.25}   # USD per million tokens
+        prices: {input: 2.5, output: 10, cached_input: 1.25}   # USD per million tokens (+ cache_write)
         cap_usd: 2.0                  # per-model dollar cap
     methods:
       - method: recap
@@ -223,11 +223,13 @@ class _Strict(BaseModel):
 
 
 class PriceSpec(_Strict):
-    """USD per million tokens; ``cached_input`` defaults to ``input``."""
+    """USD per million tokens; ``cached_input`` (cache reads) and ``cache_write`` (tokens written
+    to an explicit-breakpoint cache, Anthropic style) default to ``input``."""
 
     input: Price
     output: Price
     cached_input: Price | None = None
+    cache_write: Price | None = None
 
 
 class ModelSpec(_Strict):

@@ -4,7 +4,8 @@ A run folder is a local path or an object-store URI (anything ``pyarrow.fs`` und
 ``run.json`` is written once when the run starts and names the run; pointing a *different* run
 at the folder is an error, so two sweeps can never interleave their rows. Reads skip part files
 that cannot be read and report them (a crash can leave a truncated temp file; a reader must not
-die on it).
+die on it). Parts written under an earlier schema version are mapped to the current one as they
+are read (:mod:`schemas.versions`); a run folder of another version is read, not continued.
 
 One driver at a time: ``driver.lock`` is taken with an exclusive ``flock`` on an open file,
 atomically, and held for the driver's whole session; the kernel releases it when the driver's
@@ -173,7 +174,14 @@ class RunStore:
                 "choose another output folder or use the same run name"
             )
         if ident.schema_version != SCHEMA_VERSION:
-            raise RunFolderError(f"output folder {self.location} was written with schema version {ident.schema_version}, this is {SCHEMA_VERSION}")
+            # readers map the parts of an earlier version (schemas.versions), so status, sql,
+            # show and report read such a run; a run is not continued under another version
+            # (its units would be written in two shapes)
+            older = ident.schema_version < SCHEMA_VERSION
+            raise RunFolderError(
+                f"output folder {self.location} was written with schema version {ident.schema_version}, this recap writes "
+                f"{SCHEMA_VERSION}: " + ("its rows stay readable (recap status, sql, show, report); continue the sweep in a new "
+                                         "output folder" if older else "use the recap version that wrote it"))
         return ident
 
     def _only_lock(self) -> bool:

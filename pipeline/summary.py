@@ -5,15 +5,17 @@ is still going, and on a folder copied from a cluster. Unreadable part files are
 named, never fatal; so is a torn or corrupt line of the gateway's ledger journal (one line:
 which file, which line, what to do).
 
-A unit is *done* when it has a terminal row that is neither ``budget_exhausted`` nor an
-infrastructure failure (:func:`pipeline.resume.infra_failure`); units whose latest row is an
-infrastructure failure are counted apart, with the command that retries them.
+A unit is *done* (finished on its own merits) when it has a terminal row that is neither
+``budget_exhausted`` nor an infrastructure failure (:func:`pipeline.resume.infra_failure`: end
+reason ``infra_error``); units whose latest row is an infrastructure failure *gave up* and are
+counted apart, with the command that retries them. Success rates count done units only.
 
-Per arm (method x model) the table says what was planned and where each planned unit stands:
-done, stopped by a cap (its latest row ``budget_exhausted``), failed on infrastructure, not
-started - a run that a cap stopped early shows at a glance which arms were sampled. Units that
-ended ``env_error``/``llm_error`` count as done; the line under the table says how many and
-that ``recap resume RUN --retry errors`` runs them again.
+Per arm (the arm's label x model) the table says what was planned and where each planned unit
+stands: done, stopped by a cap (its latest row ``budget_exhausted``), gave up (infrastructure),
+not started - a run that a cap stopped early shows at a glance which arms were sampled. The
+report's coverage table (``reports/sql/coverage.sql``) applies the same rules and gives the same
+numbers for the same run. Units that ended ``env_error``/``llm_error`` count as done; the line
+under the table says how many and that ``recap resume RUN --retry errors`` runs them again.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ TEST_DOUBLE_LABEL = " (test double)"
 
 @dataclass
 class GroupRow:
+    #: the arm's label (plan.json's "method")
     method: str
     model: str
     units: int
@@ -184,8 +187,8 @@ def render(report: StatusReport, console: Any) -> None:
     from rich.table import Table
 
     t = Table(title=escape(f"run {report.run} ({report.run_id}) - {report.location}"))
-    for col, just in (("method", "left"), ("model", "left"), ("planned", "right"), ("done", "right"),
-                      ("success", "right"), ("capped", "right"), ("infra failed", "right"), ("not started", "right"),
+    for col, just in (("arm", "left"), ("model", "left"), ("planned", "right"), ("done", "right"),
+                      ("success", "right"), ("capped", "right"), ("gave up", "right"), ("not started", "right"),
                       ("avg steps", "right"), ("avg calls", "right"), ("cost $", "right")):
         t.add_column(col, justify=just)
     for g in report.groups:

@@ -22,6 +22,7 @@ from pipeline.errors import SpecError
 from pipeline.spec import SEED_MAX, EnvSpec, SweepSpec
 from recap.config import ConfigError
 from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
+from schemas.labels import ablation_of_config, place_of
 from workers.episode_worker import build_agent
 
 HASH_VERSION = 1
@@ -53,6 +54,11 @@ class Unit:
         return self.instance_id.split("/", 1)[0]
 
     @property
+    def ablation_name(self) -> str | None:
+        """The ablation the episode rows name (:func:`resolve_ablation`)."""
+        return resolve_ablation(self.ablation, self.method_config)
+
+    @property
     def key(self) -> str:
         return f"{self.instance_id} | {self.method_label} | {self.model_label} | seed {self.seed}"
 
@@ -67,9 +73,26 @@ class Unit:
         }
 
     def summary(self) -> dict[str, Any]:
-        """What plan.json keeps per unit (enough for status and diffs without the benchmarks)."""
+        """What plan.json keeps per unit (enough for status, the report's coverage table and
+        diffs without the benchmarks). ``method`` is the arm's label there (as in every
+        plan.json so far: status groups by it), ``method_name`` the method itself; the place
+        (benchmark, split, task) is the one its episode rows will have."""
+        bench, split, task = place_of(self.instance_id)
         return {"unit_id": self.unit_id, "key": self.key, "instance_id": self.instance_id,
-                "method": self.method_label, "model": self.model_label, "seed": self.seed}
+                "method": self.method_label, "model": self.model_label, "seed": self.seed,
+                "method_name": self.method, "profile": self.profile, "ablation": self.ablation_name,
+                "provider_model": self.model, "benchmark": bench, "split": split, "task": task}
+
+
+def resolve_ablation(ablation: str | None, method_config: str) -> str | None:
+    """The ablation an arm's episode rows name: the sweep's ``ablation`` when it names one
+    (``no_think``, ``level_3`` ...; ``original`` is none), else what its settings amount to
+    (``settings: {think: none}`` is ``no_think``; :func:`schemas.labels.ablation_of_config`),
+    None for the original method. The context window is not an ablation: reports tell window
+    variants apart by ``method_config.window``."""
+    if ablation is not None:
+        return None if ablation == "original" else ablation
+    return ablation_of_config(method_config)
 
 
 def unit_hash(*, instance_id: str, method: str, method_config: str, model: str, params: Mapping[str, Any],

@@ -28,10 +28,13 @@ from typing import Any, Literal
 
 PROFILES: dict[str, dict[str, Any]] = {
     # the paper: K = 64 unpinned messages, T = 0.5; demonstrations show the example's first
-    # observation and leave later ones out on Robotouille (see demo_observations)
-    "paper": {"window": 64, "temperature": 0.5},
-    # the released code: K = 128 counted over the whole history (pins included), provider default T
-    "released": {"window": 128, "temperature": None, "window_counts_pins": True},
+    # observation and leave later ones out on Robotouille (see demo_observations). Trimming stays
+    # the paper's ``pair`` although ``block`` is cheaper under every provider's prompt caching
+    # (bench/cost.py; the README's "Cheap runs" says when to set window_mode: block instead)
+    "paper": {"window": 64, "temperature": 0.5, "window_mode": "pair"},
+    # the released code: K = 128 counted over the whole history (pins included), provider default T;
+    # it trims by the oldest messages too (``pair``)
+    "released": {"window": 128, "temperature": None, "window_counts_pins": True, "window_mode": "pair"},
 }
 
 #: how a demonstration shows the example's observations (see recap.agent.ElidedObservations)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from reports import sections
 from reports.model import Report
+from reports.paper_section import paper_section
 from reports.render_csv import result_csv
 from reports.render_html import render_html
 from reports.render_md import render_md
@@ -31,6 +32,8 @@ class ReportOptions:
     episodes: tuple[str, ...] | None = None
     viewer_max: int = DEFAULT_EPISODES
     title: str = "recap-eval report"
+    #: only the paper section (``recap report --paper``)
+    paper_only: bool = False
 
 
 def parse_formats(text: str) -> tuple[str, ...]:
@@ -48,7 +51,9 @@ def build_report(run_dirs: Sequence[str | Path], options: ReportOptions = Report
         results: dict[str, Result] = {}
         q = sections.make_query(con, results)
         ids = select_episodes(con, list(options.episodes) if options.episodes else None, options.viewer_max) if "html" in options.formats else []
-        secs = [sections.overview(q), sections.success(q), sections.costs(q), sections.context(q), sections.trees(q), sections.failures(q)]
+        paper = paper_section(q, results)
+        secs = [paper] if options.paper_only else [
+            sections.overview(q), sections.success(q), sections.costs(q), sections.context(q), sections.trees(q), sections.failures(q), paper]
         viewer_html = build_viewer(con, ids, results) if ids else ""
         dirs = [str(r[0]) for r in con.execute("SELECT run_dir FROM run_dirs").fetchall()]
     finally:

@@ -8,7 +8,7 @@ an unreadable / binary / non-SQL ``--file``), like the rest of the ``recap`` com
 about a ``--file`` never quotes the file's text.
 
     recap report RUN_DIR [RUN_DIR ...] [--out DIR] [--format md,html,tex,csv]
-                 [--episodes ID[,ID...]] [--viewer-max N] [--title TEXT]
+                 [--episodes ID[,ID...]] [--viewer-max N] [--title TEXT] [--paper]
     recap sql RUN_DIR [RUN_DIR ...] "QUERY" [--csv | --json] [--max-rows N]
     recap sql RUN_DIR [RUN_DIR ...] --file QUERY.sql
     recap sql RUN_DIR "@failure_modes"        # a report query from reports/sql/ by name
@@ -86,6 +86,8 @@ _REPORT_EPILOG = """examples:
   recap report runs/a runs/b --out reports/ab       two runs in one report (--out required)
   recap report runs/demo --episodes 3f9c0a1b,77d2e0aa --format html
   recap report --viewer-max 0 runs/demo             options go before or after the run folders
+  recap report runs/paper-main runs/paper-main-x3 --paper --out reports/paper
+                                                    only the paper's tables (examples/paper/)
 
 exit status: 0 written; 1 a problem with the run folders or the option values; 2 bad usage
 """
@@ -100,6 +102,7 @@ def _report_parser(out: TextIO | None = None) -> _Parser:
     p.add_argument("--episodes", metavar="IDS", help="comma-separated episode ids to show in the HTML viewer (default: a sample)")
     p.add_argument("--viewer-max", type=int, default=DEFAULT_EPISODES, metavar="N", help=f"episodes in the viewer sample (default {DEFAULT_EPISODES}; 0 = none)")
     p.add_argument("--title", default="recap-eval report", metavar="TEXT", help="report title (default: recap-eval report)")
+    p.add_argument("--paper", action="store_true", help="only the paper section: the ReCAP paper's tables beside ours")
     return p
 
 
@@ -113,7 +116,8 @@ def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: Te
         if args.out is None and len(args.run_dirs) > 1:
             raise ReportError("--out is required when reporting several run folders")
         episodes = tuple(e.strip() for e in args.episodes.split(",") if e.strip()) if args.episodes else None
-        options = ReportOptions(formats=formats, episodes=episodes, viewer_max=args.viewer_max, title=args.title)
+        options = ReportOptions(formats=formats, episodes=episodes, viewer_max=args.viewer_max, title=args.title,
+                                paper_only=args.paper)
         report = build_report(args.run_dirs, options)
         out_dir = Path(args.out) if args.out else Path(args.run_dirs[0]) / "report"
         written = write_report(report, out_dir, formats)

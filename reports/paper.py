@@ -1,12 +1,27 @@
-"""The numbers the ReCAP paper reports (docs/recap-reference-notes.md), shown next to ours.
+"""The numbers the ReCAP paper reports, and the protocol each of its tables was run under.
 
-Only numbers live here; a report matches them to its rows by benchmark, split, method, model and
-ablation name, and leaves the reference empty where nothing matches.
+Only numbers and protocols live here (checked against ``ReCAP.tex`` and the reference notes);
+:mod:`reports.paper_section` matches them to a run's arms and shows a paper number only beside an
+arm run under the same protocol (:func:`mismatch` says why not, in one short phrase).
+
+Why a protocol per table: the paper's tables come from different runs - the main and per-task
+tables from the full benchmarks, the cross-model table from synchronous tasks 2, 4, 6 with a
+64-message window, the ablations (and, we take it, the task-tree analysis and the task-6 cost,
+"20 runs" of task 6) with a 128-message window. The step caps follow the authors' released
+configs: optimal steps x 4, but x 3 for synchronous tasks 2, 4 and 6 (Robotouille data README).
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+#: display names of the methods (the paper's spelling)
+METHOD_NAMES = {"recap": "ReCAP", "adapt": "ADaPT", "react": "ReAct", "cot": "CoT", "act": "Act", "standard": "Standard"}
+#: column order of the main table (Table 1) and of the per-task tables (appendix)
+MAIN_ORDER = ("recap", "adapt", "react", "cot", "act", "standard")
+TASK_ORDER = ("recap", "react", "adapt", "act", "cot", "standard")
 
 #: pass@1 (%) by (benchmark, split or None for any split) and method, GPT-4o unless noted
 MAIN: dict[tuple[str, str | None], dict[str, float]] = {
@@ -15,8 +30,30 @@ MAIN: dict[tuple[str, str | None], dict[str, float]] = {
     ("alfworld", None): {"recap": 91.0, "react": 84.0, "act": 74.0, "adapt": 71.6},
     ("fever", None): {"recap": 63.5, "react": 63.5, "cot": 58.5, "act": 58.5, "standard": 53.5},
 }
+#: main-table numbers that are not the paper's own GPT-4o runs: never comparable, with the reason
+FOREIGN: dict[tuple[str, str], str] = {
+    ("alfworld", "adapt"): "the paper's ADaPT ALFWorld number (71.6) is GPT-3.5, quoted from the ADaPT paper",
+}
 
-#: Robotouille sync tasks 2, 4, 6 (64-message cap): model name fragment -> {method: %}
+#: per-task pass@1 (%), GPT-4o (appendix tables): split -> task index -> method -> %
+_TASK_COLUMNS = ("recap", "react", "adapt", "act", "cot", "standard")
+_SYNC_ROWS = ((100, 60, 70, 90, 40, 50), (80, 30, 70, 30, 30, 20), (80, 40, 50, 10, 10, 10), (80, 60, 50, 30, 10, 0),
+              (90, 80, 80, 70, 10, 10), (70, 60, 60, 30, 30, 30), (70, 50, 20, 20, 0, 0), (60, 0, 0, 0, 0, 0),
+              (50, 0, 0, 10, 10, 0), (20, 0, 0, 20, 0, 0))
+_ASYNC_ROWS = ((50, 20, 20, 20, 10, 10), (80, 40, 40, 20, 10, 10), (90, 10, 10, 0, 20, 0), (40, 40, 20, 20, 0, 0),
+               (50, 10, 0, 0, 10, 0), (80, 60, 50, 10, 0, 0), (70, 30, 0, 0, 0, 0), (40, 30, 0, 10, 0, 0),
+               (20, 0, 0, 0, 0, 0), (10, 0, 0, 0, 0, 0))
+PER_TASK: dict[str, dict[int, dict[str, float]]] = {
+    split: {i: {m: float(v) for m, v in zip(_TASK_COLUMNS, row)} for i, row in enumerate(rows)}
+    for split, rows in (("synchronous", _SYNC_ROWS), ("asynchronous", _ASYNC_ROWS))
+}
+#: the per-task tables' "Average" row (= the mean of the ten rows, and the main table's values)
+PER_TASK_AVERAGE: dict[str, dict[str, float]] = {
+    "synchronous": {"recap": 70.0, "react": 38.0, "adapt": 40.0, "act": 31.0, "cot": 14.0, "standard": 12.0},
+    "asynchronous": {"recap": 53.0, "react": 24.0, "adapt": 14.0, "act": 8.0, "cot": 5.0, "standard": 2.0},
+}
+
+#: Robotouille sync tasks 2, 4, 6 (64-message cap): the paper's model column -> {method: %}
 CROSS_MODEL: dict[str, dict[str, float]] = {
     "gpt-4o": {"react": 63.0, "recap": 90.0},
     "qwen2.5-32b": {"react": 10.0, "recap": 33.0},
@@ -24,8 +61,10 @@ CROSS_MODEL: dict[str, dict[str, float]] = {
     "llama-4": {"react": 37.0, "recap": 60.0},
     "deepseek-v3": {"react": 57.0, "recap": 87.0},
 }
+CROSS_MODEL_NAMES = {"gpt-4o": "GPT-4o", "qwen2.5-32b": "Qwen2.5-32B", "qwen2.5-72b": "Qwen2.5-72B",
+                     "llama-4": "LLaMA-4 (400B)", "deepseek-v3": "DeepSeek-V3 (671B)"}
 
-#: Robotouille sync task 6, 128-message context
+#: Robotouille sync task 6, 128-message context, in the paper's column order
 ABLATIONS: dict[str, float] = {
     "original": 80.0, "think_many": 70.0, "no_think": 60.0, "name_only": 55.0,
     "level_5": 70.0, "level_4": 60.0, "level_3": 10.0, "level_2": 0.0,
@@ -36,6 +75,132 @@ COSTS = {
     "robotouille_sync_task6": {"calls_per_episode": 74.95, "calls_sd": 27.87, "usd_per_episode": 7.77, "usd_sd": 3.45},
     "alfworld_134_games_usd": {"recap": 118.40, "react": 37.89},
 }
+#: ALFWorld's unseen split as the paper ran it
+ALFWORLD_GAMES = 134
+ALFWORLD_TYPES = ("clean", "cool", "examine", "heat", "put", "puttwo")
+
+
+def step_multiplier(split: str, task_index: int | None) -> float:
+    """The step-cap multiplier of the authors' released Robotouille configs for one task."""
+    return 3.0 if split == "synchronous" and task_index in (2, 4, 6) else 4.0
+
+
+def task_index(task: str | None) -> int | None:
+    """``6_lettuce_tomato_cheeseburger`` -> 6 (Robotouille tasks start with their number)."""
+    m = re.match(r"^(\d+)_", task or "")
+    return int(m.group(1)) if m else None
+
+
+def paper_model(provider_model: str | None) -> str | None:
+    """The paper's model a provider model string is (``openai/gpt-4o-2024-08-06`` -> ``gpt-4o``),
+    or None. Provider prefixes, ``-instruct`` and ``-turbo`` are ignored; GPT-4o must be the
+    paper's snapshot (2024-08-06) or the bare alias; ``gpt-4o-mini`` is not GPT-4o."""
+    name = (provider_model or "").lower().rsplit("/", 1)[-1]
+    if name in ("gpt-4o", "gpt-4o-2024-08-06"):
+        return "gpt-4o"
+    name = re.sub(r"-(instruct|turbo)$", "", re.sub(r"-(instruct|turbo)$", "", name))
+    if name in ("qwen2.5-32b", "qwen2.5-72b", "deepseek-v3"):
+        return name
+    if name == "deepseek-chat":  # DeepSeek's API name of V3
+        return "deepseek-v3"
+    if name.startswith("llama-4-maverick"):
+        return "llama-4"
+    return None
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """What an arm must have run for a paper number to stand beside it."""
+
+    table: str
+    models: tuple[str, ...]  # paper model names (paper_model)
+    window: int
+    profile: str = "paper"
+    #: "split:task_index" keys of the Robotouille tasks, or ALFWorld task types; None: every task of the split
+    tasks: tuple[str, ...] | None = None
+
+
+PROTOCOLS = {
+    "main": Protocol("main", ("gpt-4o",), 64),
+    "per_task": Protocol("per_task", ("gpt-4o",), 64),
+    "cross_model": Protocol("cross_model", tuple(CROSS_MODEL), 64, tasks=("synchronous:2", "synchronous:4", "synchronous:6")),
+    "ablations": Protocol("ablations", ("gpt-4o",), 128, tasks=("synchronous:6",)),
+    "costs_alfworld": Protocol("costs_alfworld", ("gpt-4o",), 64),
+    "costs_task6": Protocol("costs_task6", ("gpt-4o",), 128, tasks=("synchronous:6",)),
+    "trees": Protocol("trees", ("gpt-4o",), 128, tasks=("synchronous:6",)),
+}
+
+ROBOTOUILLE_TASKS = 10
+
+
+@dataclass(frozen=True)
+class ArmProtocol:
+    """What an arm ran in one cell's scope (read from its episode rows)."""
+
+    provider_model: str | None
+    test_double: bool
+    profile: str | None
+    windows: tuple[int | None, ...]
+    benchmark: str
+    split: str
+    #: (task, step multipliers seen on it)
+    tasks: tuple[tuple[str, tuple[float, ...]], ...]
+
+
+def _task_key(split: str, task: str) -> str:
+    i = task_index(task)
+    return f"{split}:{i}" if i is not None else task
+
+
+def mismatch(protocol: Protocol, arm: ArmProtocol, expected_tasks: Iterable[str] | None = None) -> str | None:
+    """None when ``arm`` ran ``protocol``; else the first difference, as a footnote phrase.
+
+    ``expected_tasks``: the task keys the cell covers (``synchronous:6``, ``heat``); default: the
+    protocol's own tasks, or every task of the split (10 per Robotouille split, 6 ALFWorld types).
+    """
+    if arm.test_double:
+        return "a test double, not a language model"
+    model = paper_model(arm.provider_model)
+    if model not in protocol.models:
+        wanted = " or ".join(CROSS_MODEL_NAMES[m] for m in protocol.models)
+        return f"model {arm.provider_model or '?'}, the paper used {wanted}"
+    if arm.profile != protocol.profile:
+        return f"profile {arm.profile or 'none'}, the paper's runs are profile {protocol.profile}"
+    windows = sorted({w for w in arm.windows if w is not None})
+    if windows != [protocol.window]:
+        return f"window {', '.join(map(str, windows)) or '?'} messages, the paper used {protocol.window}"
+    got = {_task_key(arm.split, t) for t, _ in arm.tasks}
+    if expected_tasks is not None:
+        want = set(expected_tasks)
+    elif protocol.tasks is not None:
+        want = set(protocol.tasks)
+    elif arm.benchmark == "robotouille":
+        want = {f"{arm.split}:{i}" for i in range(ROBOTOUILLE_TASKS)}
+    elif arm.benchmark == "alfworld":
+        want = set(ALFWORLD_TYPES)
+    else:
+        want = got
+    if got != want:
+        missing = sorted(want - got, key=_natural)
+        extra = sorted(got - want, key=_natural)
+        parts = ([f"{len(got & want)} of the paper's {len(want)} tasks (missing {', '.join(missing)})"] if missing else []) + (
+            [f"tasks the paper's number leaves out ({', '.join(extra)})"] if extra else [])
+        return "ran " + "; ".join(parts)
+    if arm.benchmark == "robotouille":
+        for task, mults in arm.tasks:
+            want_m = step_multiplier(arm.split, task_index(task))
+            if sorted(set(mults)) != [want_m]:
+                got_m = ", ".join(f"x{m:g}" for m in sorted(set(mults)))
+                return f"step cap {got_m} on {_task_key(arm.split, task)}, the released configs use x{want_m:g}"
+    return None
+
+
+def _natural(key: str) -> tuple[str, int]:
+    head, _, tail = key.partition(":")
+    return (head, int(tail)) if tail.isdigit() else (key, -1)
+
+
+# -- lookups kept for the general success section ----------------------------------------------------
 
 
 def main_reference(env_split: str, method: str) -> float | None:

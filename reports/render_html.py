@@ -2,7 +2,8 @@
 of JavaScript (no network, no external files), so a report can be mailed or archived as is.
 
 The page records script errors in ``<body data-js-errors>`` and sets ``data-report-ready`` when
-its script has run; the headless-browser test reads both.
+its script has run, with what it measured of the laid-out plots (``data-plots-rendered``,
+``data-legend-overlaps``, ``data-zero-bars-visible``); the headless-browser test reads them.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from html import escape
 
 from reports.model import Report, Table, format_value
 from reports.viewer import anchor
+from reports.webview import DEFAULT_PORT as VIEWER_PORT
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#222;background:#fafafa}
@@ -95,22 +97,73 @@ SCRIPT = """
       target.click();
     }
   }
-  var rendered = 0;
+  var rendered = 0, overlaps = 0, zeros = 0;
+  function hit(a, b) { return a.left < b.right && b.left < a.right && a.top < b.bottom && b.top < a.bottom; }
   document.querySelectorAll('svg.chart').forEach(function (el) {
     var r = el.getBoundingClientRect();
     if (r.width > 0 && r.height > 0 && el.querySelectorAll('.bar, .line').length > 0) rendered++;
+    // layout checks read by the browser test: legend entries (as laid out, real text widths)
+    // that touch a bar or each other, and 0 bars that are painted at least 2px tall
+    var bars = Array.prototype.map.call(el.querySelectorAll('.bar'), function (b) { return b.getBoundingClientRect(); });
+    var entries = [];
+    el.querySelectorAll('g.legend rect.legend-key').forEach(function (key) {
+      var k = key.getBoundingClientRect(), t = key.nextElementSibling.getBoundingClientRect();
+      entries.push({left: k.left, top: Math.min(k.top, t.top), right: t.right, bottom: Math.max(k.bottom, t.bottom)});
+    });
+    entries.forEach(function (e, i) {
+      bars.forEach(function (b) { if (hit(e, b)) overlaps++; });
+      entries.slice(i + 1).forEach(function (o) { if (hit(e, o)) overlaps++; });
+    });
+    el.querySelectorAll('.bar.zero').forEach(function (b) {
+      var z = b.getBoundingClientRect();
+      if (z.height >= 2 && z.width >= 1) zeros++;
+    });
   });
   document.body.setAttribute('data-plots-rendered', String(rendered));
+  document.body.setAttribute('data-legend-overlaps', String(overlaps));
+  document.body.setAttribute('data-zero-bars-visible', String(zeros));
   document.body.setAttribute('data-report-ready', '1');
 })();
 """
 
 
+#: episode ids (``.ep-link``) point at ``recap view`` once a ping to it answers: the port on
+#: ``<body data-viewer-port>`` (the viewer's default) or ``?viewer=PORT`` in the page's URL, or the
+#: page's own origin when the viewer serves it (``/report``). An image ping, so a report opened
+#: from a file needs no CORS; without a viewer the links stay as they are (static report).
+VIEWER_LINKS = """
+(function () {
+  var links = document.querySelectorAll('.ep-link');
+  if (!links.length) return;
+  var m = /[?&]viewer=(\\d{1,5})(?:&|$)/.exec(window.location.search);
+  var served = /^https?:$/.test(location.protocol) && location.pathname === '/report';
+  var base = served ? location.origin + '/' : 'http://127.0.0.1:' + (m ? m[1] : document.body.getAttribute('data-viewer-port')) + '/';
+  var img = new Image();
+  img.onload = function () {
+    links.forEach(function (el) {
+      var run = el.getAttribute('data-run');
+      var a = el.querySelector('a');
+      if (!a) { a = document.createElement('a'); a.textContent = el.textContent; el.textContent = ''; el.appendChild(a); }
+      a.href = base + 'episode?id=' + encodeURIComponent(el.getAttribute('data-episode')) + (run ? '&run=' + encodeURIComponent(run) : '');
+    });
+    document.body.setAttribute('data-viewer', base);
+  };
+  img.onerror = function () { document.body.setAttribute('data-viewer', 'none'); };
+  img.src = base + 'ping.gif?t=' + Date.now();
+})();
+"""
+
+
+def _episode_link(episode_id: str, in_viewer: bool) -> str:
+    inner = f'<a href="#{anchor(episode_id)}">{escape(episode_id)}</a>' if in_viewer else escape(episode_id)
+    return f'<span class="ep-link" data-episode="{escape(episode_id)}">{inner}</span>'
+
+
 def _cell(kind: str, value: object, viewer: set[str]) -> str:
     if kind == "list" and isinstance(value, list):
-        return ", ".join(
-            f'<a href="#{anchor(str(v))}">{escape(str(v))}</a>' if str(v) in viewer else escape(str(v)) for v in value
-        )
+        # every episode id is a link: to the report's own viewer when the episode is in it, and to
+        # `recap view` when one runs (VIEWER_LINKS); plain text otherwise
+        return ", ".join(_episode_link(str(v), str(v) in viewer) for v in value)
     return escape(format_value(kind, value))
 
 
@@ -142,7 +195,7 @@ def render_html(report: Report) -> str:
         '<html lang="en"><head><meta charset="utf-8">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         f"<title>{escape(report.title)}</title><style>{CSS}</style><script>{ERROR_HOOK}</script></head>",
-        "<body><main>",
+        f'<body data-viewer-port="{VIEWER_PORT}"><main>',
         f"<h1>{escape(report.title)}</h1>",
         '<p class="intro">Run folders: ' + ", ".join(f"<code>{escape(d)}</code>" for d in report.run_dirs) + "</p>",
     ]
@@ -163,5 +216,5 @@ def render_html(report: Report) -> str:
         parts.append("</section>")
     if report.viewer_html:
         parts.append(report.viewer_html)
-    parts.append(f"</main><script>{SCRIPT}</script></body></html>")
+    parts.append(f"</main><script>{SCRIPT}</script><script>{VIEWER_LINKS}</script></body></html>")
     return "\n".join(parts)

@@ -15,7 +15,7 @@ import duckdb
 
 from reports import paper, svg
 from reports.model import Column, Plot, Section, Table
-from reports.stats import paired_permutation_p
+from reports.stats import comparisons, holm, paired_permutation_p
 from reports.views import Result, named_query
 
 Query = Callable[[str], Result]
@@ -67,14 +67,16 @@ def load_plans(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
 
     if con.execute("SELECT count(*) FROM planned_units").fetchone()[0]:
         return {}
-    cols: dict[str, list[Any]] = {k: [] for k in ("run_dir", "run_id", "unit_id", "method", "model", "instance_id", "seed", "test_double")}
+    cols: dict[str, list[Any]] = {k: [] for k in ("run_dir", "run_id", "unit_id", "label", "method", "model", "instance_id", "seed",
+                                                  "test_double")}
     how: dict[str, str] = {}
     for run_dir, run_id in con.execute("SELECT run_dir, run_json_id FROM run_dirs ORDER BY run_dir").fetchall():
         path = Path(run_dir) / PLAN_FILE
         try:
             units = json.loads(path.read_text(encoding="utf-8"))["units"]
-            rows = [(str(u["unit_id"]), str(u["method"]), str(u["model"]), str(u.get("instance_id") or ""), u.get("seed"))
-                    for u in units]
+            # plan.json's "method" is the arm's label; "method_name" the method (schema version 2)
+            rows = [(str(u["unit_id"]), str(u["method"]), u.get("method_name"), str(u["model"]), str(u.get("instance_id") or ""),
+                     u.get("seed")) for u in units]
         except FileNotFoundError:
             how[run_dir] = f"no {PLAN_FILE}"
             continue
@@ -83,8 +85,8 @@ def load_plans(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
             continue
         doubles = _test_double_models(Path(run_dir))
         how[run_dir] = PLAN_FILE
-        for uid, method, model, inst, seed in rows:
-            for k, v in zip(cols, (run_dir, run_id, uid, method, model, inst,
+        for uid, label, method, model, inst, seed in rows:
+            for k, v in zip(cols, (run_dir, run_id, uid, label, method if isinstance(method, str) else None, model, inst,
                                    seed if isinstance(seed, int) and not isinstance(seed, bool) else None, doubles.get(model))):
                 cols[k].append(v)
     if cols["unit_id"]:
@@ -132,7 +134,8 @@ def overview(q: Query) -> Section:
         "run_folders": "run folders",
         "runs": "runs (run ids with episodes)",
         "attempts": "episode rows (attempts)",
-        "units": "units (latest attempt each; the rows every table counts)",
+        "units": "units with an episode row (one row each: its latest finished attempt, else its latest)",
+        "finished_units": "finished units (the rows every success rate counts; the rest: coverage table)",
         "successes": "successes",
         "test_double_units": "units run by a test-double model",
         "llm_calls": "LLM calls (all attempts)",
@@ -158,9 +161,10 @@ def overview(q: Query) -> Section:
     coverage = q("coverage").dicts()
     if coverage:
         derived = sorted({r["run_id"] or "?" for r in coverage if r["planned_from"] != "plan.json"})
-        note = ("capped: the latest attempt ended budget_exhausted (a cap stopped it); infra failed: the latest attempt "
-                "ended in an infrastructure failure (recap resume retries it); not started: no episode row. "
-                "Finished counts env_error and llm_error outcomes.")
+        note = ("finished: the units every success rate counts (they finished on their own merits; env_error and "
+                "llm_error outcomes count). capped: the latest attempt ended budget_exhausted (a cap stopped it); "
+                "gave up: the latest attempt ended in an infrastructure failure (infra_error: the model service failed or "
+                "the workers died; recap resume retries it); not started: no episode row. The same counts as recap status.")
         if derived:
             note += (f" No readable plan.json for run {', '.join(derived)}: planned is derived from the episode rows "
                      "(units never started are not counted).")
@@ -169,10 +173,10 @@ def overview(q: Query) -> Section:
                 "coverage",
                 "Coverage: planned and finished units per arm",
                 [
-                    Column("run_id", "run"), Column("model_label", "model"), Column("method", "method"),
+                    Column("run_id", "run"), Column("model_label", "model"), Column("arm", "arm"),
                     Column("planned", "planned", "int"), Column("finished", "finished", "int"),
                     Column("successes", "successes", "int"), Column("capped", "capped", "int"),
-                    Column("infra_failed", "infra failed", "int"), Column("not_started", "not started", "int"),
+                    Column("gave_up", "gave up", "int"), Column("not_started", "not started", "int"),
                     Column("planned_from", "planned from"),
                 ],
                 coverage,
@@ -205,6 +209,11 @@ def overview(q: Query) -> Section:
     return sec
 
 
+#: Where the paper's numbers are: only the paper section puts them beside an arm, and only after
+#: checking that the arm ran the paper's protocol (model, profile, window, step caps, tasks).
+PAPER_POINTER = "The paper's values stand in the Paper section, beside arms that ran the paper's protocol."
+
+
 # -- success rates -------------------------------------------------------------------------------
 
 
@@ -218,25 +227,15 @@ def success(q: Query) -> Section:
     main = q("success_by_split").dicts()
     splits = _unique(r["env_split"] for r in main)
     keys = sorted(_unique((r["model_label"], r["arm"]) for r in main), key=_row_order)
-    refs = {
-        (r["model_label"], r["arm"], r["env_split"]): paper.main_reference(r["env_split"], r["method"])
-        if r["ablation"] == "original" and not _is_test_double(r["model_label"]) else None
-        for r in main
-    }
-    cols = [Column("model", "model"), Column("arm", "method")]
-    for s in splits:
-        cols.append(Column(s, s, "rate_ci"))
-        if any(refs[(m, a, s)] is not None for (m, a) in keys if (m, a, s) in refs):
-            cols.append(Column(f"{s} paper", "paper", "ref"))
+    cols = [Column("model", "model"), Column("arm", "method")] + [Column(s, s, "rate_ci") for s in splits]
     rows = []
     for m, a in keys:
         row: dict[str, Any] = {"model": m, "arm": a}
         for r in main:
             if (r["model_label"], r["arm"]) == (m, a):
                 row[r["env_split"]] = _rate_ci(r)
-                row[f"{r['env_split']} paper"] = refs[(m, a, r["env_split"])]
         rows.append(row)
-    sec.tables.append(Table("main", "Success rate by method and environment split (paper main table)", cols, rows, "success_by_split", "paper: the ReCAP paper's pass@1 (GPT-4o; ADaPT on ALFWorld GPT-3.5)."))
+    sec.tables.append(Table("main", "Success rate by method and environment split", cols, rows, "success_by_split", PAPER_POINTER))
 
     models = _unique(r["model_label"] for r in main)
     arms = _unique(_series_label(r["model_label"], r["arm"], models) for r in main)
@@ -265,31 +264,21 @@ def success(q: Query) -> Section:
 
     by_model = q("success_by_model").dicts()
     arms_m = _unique(r["arm"] for r in by_model)
-    ref_methods = _unique(
-        r["method"] for r in by_model
-        if r["ablation"] == "original" and not _is_test_double(r["model_label"]) and paper.cross_model_reference(r["model_label"], r["method"]) is not None
-    )
-    cols = [Column("model", "model")] + [Column(a, a, "rate_ci") for a in arms_m] + [Column(f"paper {m}", f"paper {m}", "ref") for m in ref_methods]
+    cols = [Column("model", "model")] + [Column(a, a, "rate_ci") for a in arms_m]
     rows = []
     for m in sorted(_unique(r["model_label"] for r in by_model), key=lambda x: (_is_test_double(x), x)):
         row = {"model": m}
         for r in by_model:
             if r["model_label"] == m:
                 row[r["arm"]] = _rate_ci(r)
-        for meth in ref_methods:
-            row[f"paper {meth}"] = None if _is_test_double(m) else paper.cross_model_reference(m, meth)
         rows.append(row)
-    sec.tables.append(Table("models", "Success rate by model (cross-model table, all tasks of the run)", cols, rows, "success_by_model", "paper: Robotouille sync tasks 2, 4, 6 with a 64-message cap." if ref_methods else ""))
+    sec.tables.append(Table("models", "Success rate by model (cross-model table, all tasks of the run)", cols, rows, "success_by_model", PAPER_POINTER))
 
     abl = q("success_by_ablation").dicts()
     if any(r["ablation"] != "original" for r in abl):
-        for r in abl:
+        for r, adj in zip(abl, holm([r["p_value"] for r in abl])):
+            r["p_holm"] = adj
             r["rate_ci"] = _rate_ci(r)
-            r["paper"] = (
-                paper.ABLATIONS.get(r["ablation"])
-                if r["method"] == "recap" and r["env_split"] == "robotouille/synchronous" and not _is_test_double(r["model_label"])
-                else None
-            )
         sec.tables.append(
             Table(
                 "ablations",
@@ -297,12 +286,13 @@ def success(q: Query) -> Section:
                 [
                     Column("model_label", "model"), Column("method", "method"), Column("env_split", "split"),
                     Column("window_size", "window", "int"), Column("ablation", "ablation"), Column("rate_ci", "success", "rate_ci"),
-                    Column("paper", "paper", "ref"), Column("pairs", "pairs", "int"), Column("original_only", "orig. only", "int"),
-                    Column("variant_only", "variant only", "int"), Column("p_value", "p", "p"),
+                    Column("pairs", "pairs", "int"), Column("original_only", "orig. only", "int"),
+                    Column("variant_only", "variant only", "int"), Column("p_value", "p", "p"), Column("p_holm", "Holm p", "p"),
                 ],
                 abl,
                 "success_by_ablation",
-                "paper: Robotouille sync task 6, 128-message context. orig. only / variant only: paired units only one of the two solved.",
+                "orig. only / variant only: paired units only one of the two solved. " + PAPER_POINTER + " "
+                + _comparisons_note(comparisons([r["p_value"] for r in abl]), "McNemar test"),
             )
         )
 
@@ -311,6 +301,9 @@ def success(q: Query) -> Section:
         r["a_rate"] = r["a_successes"] / r["pairs"]
         r["b_rate"] = r["b_successes"] / r["pairs"]
         r["cost_p"] = paired_permutation_p(r["cost_diffs"])
+    for key in ("p_value", "cost_p"):
+        for r, adj in zip(paired, holm([r[key] for r in paired])):
+            r[f"{key}_holm"] = adj
     sec.tables.append(
         Table(
             "paired",
@@ -319,16 +312,25 @@ def success(q: Query) -> Section:
                 Column("model_label", "model"), Column("env_split", "split"), Column("arm_a", "A"), Column("arm_b", "B"),
                 Column("pairs", "pairs", "int"), Column("a_rate", "A %", "pct"), Column("b_rate", "B %", "pct"),
                 Column("a_only", "A only", "int"), Column("b_only", "B only", "int"), Column("p_value", "McNemar p", "p"),
-                Column("mean_cost_diff", "mean $ A−B", "usd"), Column("cost_p", "cost p (perm.)", "p"),
+                Column("p_value_holm", "Holm p", "p"), Column("mean_cost_diff", "mean $ A−B", "usd"),
+                Column("cost_p", "cost p (perm.)", "p"), Column("cost_p_holm", "Holm cost p", "p"),
             ],
             paired,
             "paired_methods",
             "McNemar: exact two-sided test on the discordant pairs (A only, B only). cost p: paired "
             "permutation (sign-flip) test of the mean cost difference, exact up to 16 non-zero "
-            "differences, else 20,000 random sign patterns.",
+            "differences, else 20,000 random sign patterns. "
+            + _comparisons_note(comparisons([r["p_value"] for r in paired]), "McNemar test")
+            + " " + _comparisons_note(comparisons([r["cost_p"] for r in paired]), "cost test", "Holm cost p"),
         )
     )
     return sec
+
+
+def _comparisons_note(m: int, what: str, column: str = "Holm p") -> str:
+    """How many tests a table's p column holds, and that its Holm column adjusts over them."""
+    noun = what if m == 1 else what + "s"
+    return f"{m} {noun} in this table; {column}: Holm-adjusted over {'it' if m == 1 else f'those {m}'} (family-wise error)."
 
 
 def _slug(text: str) -> str:
@@ -414,7 +416,10 @@ def context(q: Query) -> Section:
         "context",
         "The context bound",
         "Prompt tokens of each call by its position in the episode (successful calls of latest "
-        "attempts). A bounded window keeps the curve flat; slope = least-squares tokens added per call.",
+        "attempts). A bounded window keeps the curve flat once it is full. Growth after the window "
+        "fills, per episode: the least-squares slope of prompt tokens over the calls from the first "
+        "call with the episode's largest window on (when that window reached the arm's window size), "
+        "summarised over those episodes as median [25th, 75th percentile] tokens per call.",
     )
     per_call = q("context_by_call").dicts()
     models = _unique(r["model_label"] for r in per_call)
@@ -430,7 +435,10 @@ def context(q: Query) -> Section:
                 Column("model_label", "model"), Column("arm", "method"), Column("calls", "calls", "int"),
                 Column("mean_prompt_tokens", "mean", "tokens"), Column("median_prompt_tokens", "median", "tokens"),
                 Column("p95_prompt_tokens", "p95", "tokens"), Column("max_prompt_tokens", "max", "int"),
-                Column("max_window_messages", "max window (messages)", "int"), Column("tokens_per_call_slope", "slope (tokens/call)", "float"),
+                Column("max_window_messages", "max window (messages)", "int"),
+                Column("episodes", "episodes", "int"), Column("filled_episodes", "window filled", "int"),
+                Column("slope_median", "growth after fill: median (tokens/call)", "float"),
+                Column("slope_q25", "25th pct.", "float"), Column("slope_q75", "75th pct.", "float"),
             ],
             q("context_summary").dicts(),
             "context_summary",

@@ -1,6 +1,10 @@
 """Small SVG charts written by hand: grouped bars with error whiskers, stacked share bars and
 line charts. Inline SVG keeps the HTML report self-contained (no plotting library, no network)
 and every mark carries a ``<title>`` so hovering shows the exact value.
+
+The legend sits below the plot area in as many rows as it needs (the chart grows taller), so it
+never covers a bar however many arms a sweep has; a bar of 0 is drawn as a thin mark on the axis
+with its value label, so "0 %" reads differently from "not run" (no bar, no label).
 """
 
 from __future__ import annotations
@@ -9,14 +13,24 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from html import escape
 
-#: Tableau 10: distinguishable, colour-blind friendly enough for a handful of series
+#: Tableau 10 (distinguishable, colour-blind friendly enough for a handful of series), then the
+#: other colours of Tableau 20, so that up to 20 arms get a colour each
 PALETTE = (
     "#4e79a7", "#f28e2b", "#e15759", "#76b7b2", "#59a14f",
     "#edc948", "#b07aa1", "#ff9da7", "#9c755f", "#bab0ac",
+    "#a0cbe8", "#ffbe7d", "#8cd17d", "#b6992d", "#499894",
+    "#86bcb6", "#ff9d9a", "#79706e", "#d37295", "#d4a6c8",
 )
 
 WIDTH = 760
+#: height of the chart without its legend (the legend's rows are added below)
 HEIGHT = 330
+#: a bar is at least this tall (pixels), so a value of 0 stays visible on the axis
+MIN_BAR = 3.0
+#: legend layout: left edge, row height, key size, width per character (11px font, generous)
+LEGEND_X = 60.0
+LEGEND_ROW = 16.0
+LEGEND_CHAR = 6.6
 FONT = "font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif"
 
 
@@ -50,24 +64,54 @@ def _fmt_tick(v: float) -> str:
     return f"{v:g}"
 
 
-def _frame(title: str, body: list[str], legend: Sequence[str], height: int = HEIGHT) -> str:
+def legend_items(names: Sequence[str]) -> list[tuple[float, int]]:
+    """(x, row) of each legend entry: left to right, wrapping at the chart's right edge."""
+    out = []
+    x, row = LEGEND_X, 0
+    for name in names:
+        w = 14 + LEGEND_CHAR * len(name)
+        if x > LEGEND_X and x + w > WIDTH - 10:
+            x, row = LEGEND_X, row + 1
+        out.append((x, row))
+        x += w + 12
+    return out
+
+
+def _legend(names: Sequence[str], top: float) -> tuple[list[str], float]:
+    """The legend as one ``<g class="legend">`` below the plot, from ``top``; returns its parts
+    and the height it takes. A ``legend-box`` rectangle covers every entry."""
+    if not names:
+        return [], 0.0
+    items = legend_items(names)
+    rows = items[-1][1] + 1
+    right = max(x + 14 + LEGEND_CHAR * len(n) for (x, _), n in zip(items, names))
+    height = rows * LEGEND_ROW + 8
     parts = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" class="chart" viewBox="0 0 {WIDTH} {height}" '
-        f'width="{WIDTH}" height="{height}" role="img" aria-label="{escape(title)}" style="{FONT};font-size:11px">',
+        '<g class="legend">',
+        f'<rect class="legend-box" x="{LEGEND_X - 6:.1f}" y="{top:.1f}" width="{right - LEGEND_X + 12:.1f}" '
+        f'height="{height:.1f}" fill="#ffffff" stroke="#e5e5e5"/>',
+    ]
+    for i, ((x, row), name) in enumerate(zip(items, names)):
+        y = top + 4 + row * LEGEND_ROW
+        parts.append(f'<rect class="legend-key" x="{x:.1f}" y="{y + 2:.1f}" width="10" height="10" fill="{color(i)}"/>')
+        parts.append(f'<text x="{x + 14:.1f}" y="{y + 11:.1f}">{escape(name)}</text>')
+    parts.append("</g>")
+    return parts, height
+
+
+def _frame(title: str, body: list[str], legend: Sequence[str], height: int = HEIGHT) -> str:
+    """The chart: title, plot body (laid out within ``height``), then the legend below it."""
+    legend_parts, legend_h = _legend(legend, height + 6)
+    total = height + (legend_h + 12 if legend_parts else 0)
+    parts = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" class="chart" viewBox="0 0 {WIDTH} {total:.0f}" '
+        f'width="{WIDTH}" height="{total:.0f}" role="img" aria-label="{escape(title)}" style="{FONT};font-size:11px">',
         f"<title>{escape(title)}</title>",
-        f'<rect x="0" y="0" width="{WIDTH}" height="{height}" fill="#ffffff"/>',
+        f'<rect x="0" y="0" width="{WIDTH}" height="{total:.0f}" fill="#ffffff"/>',
         f'<text x="{WIDTH / 2}" y="16" text-anchor="middle" font-size="13" font-weight="600">{escape(title)}</text>',
     ]
-    # legend in one or two rows under the title
-    x, y = 60.0, 32.0
-    for i, name in enumerate(legend):
-        w = 18 + 6.2 * len(name)
-        if x + w > WIDTH - 10:
-            x, y = 60.0, y + 14
-        parts.append(f'<rect x="{x:.1f}" y="{y - 8:.1f}" width="10" height="10" fill="{color(i)}"/>')
-        parts.append(f'<text x="{x + 14:.1f}" y="{y + 1:.1f}">{escape(name)}</text>')
-        x += w + 10
     parts.extend(body)
+    parts.extend(legend_parts)
     parts.append("</svg>")
     return "\n".join(parts)
 
@@ -110,8 +154,9 @@ def grouped_bars(
     y_max: float | None = None,
     value_fmt: Callable[[float], str] = _fmt_tick,
 ) -> str:
-    """Bars per category, one per series; ``errors`` draws [lo, hi] whiskers."""
-    left, right, top, bottom = 60.0, WIDTH - 10.0, 58.0, HEIGHT - 70.0
+    """Bars per category, one per series; ``errors`` draws [lo, hi] whiskers. Every bar carries its
+    value as a label above it (above its whisker), and is at least MIN_BAR tall, so a 0 shows."""
+    left, right, top, bottom = 60.0, WIDTH - 10.0, 60.0, HEIGHT - 70.0  # room above for value labels
     vals = [v for v in values.values() if v is not None]
     hi = max(vals + [hi for (_, hi) in (errors or {}).values()] + [0.0])
     ticks = nice_ticks(0.0, y_max if y_max is not None else (hi or 1.0))
@@ -131,21 +176,28 @@ def grouped_bars(
             if v is None:
                 continue
             x = x0 + si * bar_w
-            y = y_of(v)
+            y = min(y_of(v), bottom - MIN_BAR)
             tip = f"{cat} / {s}: {value_fmt(v)}"
             err = (errors or {}).get((cat, s))
             if err is not None:
                 tip += f" [{value_fmt(err[0])}, {value_fmt(err[1])}]"
             body.append(
-                f'<rect class="bar" x="{x:.1f}" y="{y:.1f}" width="{bar_w - 1:.1f}" height="{max(bottom - y, 0):.1f}" '
-                f'fill="{color(si)}"><title>{escape(tip)}</title></rect>'
+                f'<rect class="bar{" zero" if v == 0 else ""}" x="{x:.1f}" y="{y:.1f}" width="{bar_w - 1:.1f}" '
+                f'height="{bottom - y:.1f}" fill="{color(si)}"><title>{escape(tip)}</title></rect>'
             )
+            cx = x + (bar_w - 1) / 2
+            label_y = y
             if err is not None:
-                cx = x + (bar_w - 1) / 2
                 y1, y2 = y_of(err[0]), y_of(err[1])
                 body.append(f'<line x1="{cx:.1f}" x2="{cx:.1f}" y1="{y1:.1f}" y2="{y2:.1f}" stroke="#333"/>')
                 for yy in (y1, y2):
                     body.append(f'<line x1="{cx - 3:.1f}" x2="{cx + 3:.1f}" y1="{yy:.1f}" y2="{yy:.1f}" stroke="#333"/>')
+                label_y = min(label_y, y1, y2)
+            # vertical, so that narrow bars of many arms keep their labels apart
+            body.append(
+                f'<text class="value" transform="translate({cx + 3:.1f},{label_y - 3:.1f}) rotate(-90)" '
+                f'font-size="9" fill="#333">{escape(value_fmt(v))}</text>'
+            )
         body.append(_category_label(cat, left + ci * slot + slot / 2, bottom, slot, n_cat))
     body.append(f'<line x1="{left}" x2="{right}" y1="{bottom}" y2="{bottom}" stroke="#333"/>')
     return _frame(title, body, series)
@@ -160,7 +212,7 @@ def stacked_shares(
     y_label: str = "share of episodes (%)",
 ) -> str:
     """One bar per category split into layers by their share of the category's total."""
-    left, right, top, bottom = 60.0, WIDTH - 10.0, 74.0, HEIGHT - 70.0
+    left, right, top, bottom = 60.0, WIDTH - 10.0, 36.0, HEIGHT - 70.0
 
     def y_of(v: float) -> float:
         return bottom - (bottom - top) * v / 100.0
@@ -196,7 +248,7 @@ def lines(
     y_label: str = "",
 ) -> str:
     """One polyline per series (points sorted by x), with dots when there are few points."""
-    left, right, top, bottom = 70.0, WIDTH - 10.0, 58.0, HEIGHT - 45.0
+    left, right, top, bottom = 70.0, WIDTH - 10.0, 36.0, HEIGHT - 45.0
     xs = [x for pts in series.values() for x, _ in pts]
     ys = [y for pts in series.values() for _, y in pts]
     x_ticks = nice_ticks(min(xs, default=0.0), max(xs, default=1.0), 8)

@@ -22,10 +22,15 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from schemas.labels import ALFWORLD_TASK_TYPES
+from schemas.records import SCHEMA_VERSION
 from schemas.tables import arrow_schema
+from schemas.versions import column_defaults
 
 METHODS = ("recap", "react", "act")
-SPLITS = (("robotouille", "synchronous"), ("robotouille", "asynchronous"), ("alfworld", "eval_out_of_distribution"))
+SPLITS = (("robotouille", "synchronous"), ("robotouille", "asynchronous"), ("alfworld", "valid_unseen"))
+#: ALFWorld's tasks are its task types (schemas.labels.ALFWORLD_TASK_TYPES)
+ALFWORLD_TYPES = ALFWORLD_TASK_TYPES
 SUCCESS = {"recap": 0.65, "react": 0.38, "act": 0.3}
 END_FAIL = ("step_cap", "call_cap", "agent_done", "json_failures", "llm_error", "env_error")
 PURPOSES = ("descend", "leaf_done", "leaf_fail", "nonleaf_done", "leaf_judge", "repair")
@@ -50,9 +55,10 @@ class SyntheticSpec:
 def _write(run_dir: Path, table: str, data: pa.Table, writer: str, part_rows: int, row_group_rows: int) -> int:
     """Part files like PartWriter writes them (temporary name, then rename)."""
     schema = arrow_schema(table)
-    for f in schema:  # columns the generator does not model are null (nullable by schema)
+    defaults = column_defaults(table)
+    for f in schema:  # columns the generator does not model: their record's default, else null
         if f.name not in data.column_names:
-            data = data.append_column(f.name, pa.nulls(data.num_rows, f.type))
+            data = data.append_column(f.name, pa.array([defaults.get(f.name)] * data.num_rows, f.type))
     data = data.select(schema.names).cast(schema)
     folder = run_dir / table
     folder.mkdir(parents=True, exist_ok=True)
@@ -237,19 +243,32 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     ok = status == "ok"
     bench = np.array([b for b, _ in SPLITS])[split_i]
     split = np.array([s for _, s in SPLITS])[split_i]
-    task = np.char.add(np.char.add(split_i.astype(str), "_task"), task_i.astype(str))
-    cfg = np.where(method == "recap", json.dumps({"window": spec.window, "think": "latest", "max_level": None, "name_only": False, "shortcut": True}), json.dumps({"window": spec.window}))
-    unit = np.char.add(np.char.add(np.char.add(method, "|"), task), np.char.add("|", seed.astype(str)))
+    # the place as the pipeline writes it (schemas.labels.place_of): Robotouille's task is its
+    # environment's name and its instance id names split, task and seed; ALFWorld is one split
+    # whose tasks are the six task types, one game per instance id
+    robot_task = np.char.add(task_i.astype(str), "_recipe")
+    alf = bench == "alfworld"
+    task = np.where(alf, np.array(ALFWORLD_TYPES)[task_i % len(ALFWORLD_TYPES)], robot_task)
+    instance = np.where(
+        alf, np.char.add(np.char.add(np.char.add("alfworld/", task), "/game-"), task_i.astype(str)),
+        np.char.add(np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"),
+                    seed.astype(str)))
+    # canonical configs, as the driver stores them (recap.config / recap.baselines to_json)
+    from recap.baselines.react import ReActConfig
+    from recap.config import ReCAPConfig
+
+    cfg = np.where(method == "recap", ReCAPConfig(window=spec.window).to_json(), ReActConfig(window=spec.window).to_json())
+    unit = np.char.add(np.char.add(np.char.add(method, "|"), instance), np.char.add("|", seed.astype(str)))
     ended = 1.7e9 + np.arange(n_ep, dtype=np.float64)
     episodes = pa.table({
         "run_id": pa.array([run_id] * n_ep),
         "episode_id": ep_ids,
-        "unit_id": np.char.add(np.char.add(unit, "|"), bench),
+        "unit_id": unit,
         "attempt": np.ones(n_ep, dtype=np.int64),
         "benchmark": bench,
         "split": split,
         "task": task,
-        "instance_id": np.char.add(np.char.add(bench, "/"), task),
+        "instance_id": instance,
         "seed": seed,
         "method": method,
         "method_config": cfg,
@@ -272,11 +291,15 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
         "started_at": ended - 100.0,
         "ended_at": ended,
         "test_double": np.zeros(n_ep, dtype=bool),
+        "label": method,
+        "profile": pa.nulls(n_ep, pa.string()),
+        "ablation": pa.nulls(n_ep, pa.string()),
+        "provider_model": ["openai/gpt-4o-2024-08-06"] * n_ep,
     })
     run = pa.table({
         "run_id": [run_id], "started_at": [1.7e9], "spec_yaml": ["synthetic: true\n"], "spec_hash": ["synthetic"],
         "package_versions": ["{}"], "git_revision": [None], "host": ["bench"], "command": ["python -m reports.synthetic"],
-        "schema_version": [1],
+        "schema_version": [SCHEMA_VERSION],
     })
     counts = {}
     for table, data in (("episodes", episodes), ("llm_calls", calls), ("messages", messages), ("steps", steps), ("tree_nodes", nodes), ("run", run)):

@@ -102,7 +102,7 @@ def _episode_html(ep: dict[str, Any], nodes: list[dict], steps: list[dict], call
     ]
     out = [
         f'<article class="episode" id="{aid}" data-episode="{escape(eid)}">',
-        f"<h3>{escape(eid)} <span class=\"badge {'ok' if ep['success'] else 'fail'}\">{'success' if ep['success'] else escape(ep['mode'] or ep['end_reason'])}</span></h3>",
+        f"<h3><span class=\"ep-link\" data-episode=\"{escape(eid)}\" data-run=\"{escape(ep['run_id'])}\">{escape(eid)}</span> <span class=\"badge {'ok' if ep['success'] else 'fail'}\">{'success' if ep['success'] else escape(ep['mode'] or ep['end_reason'])}</span></h3>",
         '<dl class="meta">' + "".join(f"<dt>{k}</dt><dd>{escape(str(v))}</dd>" for k, v in meta) + "</dl>",
     ]
     if ep["error"]:

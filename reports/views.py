@@ -24,7 +24,8 @@ Read-only comes from how the data is opened, not from a list of refused statemen
 Part files that are broken (truncated, corrupt footer) or do not match their table's Arrow
 schema in ``schemas/`` (a missing column, a column of another type) are found with
 :func:`workers.storage.check_parts` - the same rule ``recap status`` applies - skipped, logged,
-and listed in the ``bad_parts`` table. A table without good files is an empty view with the
+and listed in the ``bad_parts`` table. Parts of an earlier schema version are mapped to the
+current one (:mod:`schemas.versions`) as every reader maps them. A table without good files is an empty view with the
 table's full schema.
 """
 
@@ -42,9 +43,10 @@ from typing import Any
 import duckdb
 import pyarrow as pa
 import pyarrow.dataset as ds
+import pyarrow.parquet as pq
 
 from schemas.tables import TABLES
-from workers.storage import check_parts
+from workers.storage import check_parts, read_part
 
 log = logging.getLogger(__name__)
 
@@ -164,10 +166,18 @@ def _create_table_view(con: duckdb.DuckDBPyConnection, table: str, files: list[P
     filters down) so that DuckDB's own file access can be switched off completely.
     """
     schema = TABLES[table]
-    source: Any = ds.dataset([str(f) for f in files], schema=schema, format="parquet") if files else schema.empty_table()
+    current = [f for f in files if set(schema.names) <= set(pq.read_schema(f).names)]
+    older = [f for f in files if f not in current]
+    source: Any = ds.dataset([str(f) for f in current], schema=schema, format="parquet") if current else schema.empty_table()
     con.register(f"_parts_{table}", source)
     cols = ", ".join(f'"{c}"' for c in schema.names)
-    con.execute(f'CREATE VIEW "{table}" AS SELECT {cols} FROM "_parts_{table}"')
+    body = f'SELECT {cols} FROM "_parts_{table}"'
+    if older:
+        # parts of an earlier schema version, mapped to the current one (schemas.versions): read
+        # into memory here, since their rows need more than a projection
+        con.register(f"_older_{table}", pa.concat_tables([read_part(str(f), table) for f in older]))
+        body += f' UNION ALL SELECT {cols} FROM "_older_{table}"'
+    con.execute(f'CREATE VIEW "{table}" AS {body}')
 
 
 def open_runs(run_dirs: Sequence[str | Path], *, read_only: bool = True) -> duckdb.DuckDBPyConnection:

@@ -10,7 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar, Union
 
-SCHEMA_VERSION = 1
+#: 2: episodes gained ``label``, ``profile``, ``ablation`` and ``provider_model`` (``method`` holds
+#: the method's name, no longer the arm's label), ALFWorld rows are one benchmark split
+#: (``valid_unseen``, task = task type) and infrastructure failures end ``infra_error``; parts
+#: written under version 1 are mapped on read (:mod:`schemas.versions`)
+SCHEMA_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,10 @@ class CallRecord:
     finish_reason: str | None = None
     #: litellm's own cost estimate, kept only as a cross-check of ``cost_usd`` (our price table)
     provider_cost_usd: float | None = None
+    #: prompt tokens written to the provider's prompt cache (billed at the model's cache_write
+    #: price; Anthropic-style caching only, else 0); like ``cached_prompt_tokens``, a part of
+    #: ``prompt_tokens``
+    cache_write_tokens: int = 0
 
 
 @dataclass(frozen=True)
@@ -121,7 +129,24 @@ class StepRecord:
 
 @dataclass(frozen=True)
 class EpisodeRecord:
-    """The terminal row of one attempt at one unit of work."""
+    """The terminal row of one attempt at one unit of work.
+
+    Identity of the arm: ``method`` is the method's name (``recap``, ``react``, ``act``, ``cot``,
+    ``standard``, ``adapt``); ``label`` the arm's label from the sweep (``recap-no-think``,
+    ``recap[paper,level_3]``); ``profile`` the settings profile (``paper``, ``released``) or
+    None; ``ablation`` None for the original method, else the ablation's name
+    (:func:`pipeline.units.resolve_ablation`: ``no_think``, ``level_3`` ...). ``model`` is the
+    model's label in the sweep, ``provider_model`` the model string sent to the provider
+    (``openai/gpt-4o-2024-08-06``, ``offline/expert``).
+
+    Where: ``benchmark``/``split``/``task`` - Robotouille ``synchronous``/``asynchronous`` and
+    the environment's name; ALFWorld one split ``valid_unseen`` (its 134 unseen games) and the
+    task type (``put``, ``clean``, ``heat``, ``cool``, ``examine``, ``puttwo``).
+
+    ``end_reason`` ``infra_error``: the model service or the worker failed (not an outcome of
+    the agent); ``error`` then starts with the failure's kind (``auth: ...``) or says that the
+    driver gave up (``gave up after N failed attempts (infrastructure: worker_lost); ...``).
+    """
 
     table: ClassVar[str] = "episodes"
     episode_id: str
@@ -153,6 +178,10 @@ class EpisodeRecord:
     started_at: float = 0.0
     ended_at: float = 0.0
     test_double: bool = False
+    label: str = ""
+    profile: str | None = None
+    ablation: str | None = None
+    provider_model: str | None = None
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from schemas.tables import TABLES, arrow_schema, record_to_row
+from schemas.versions import missing_fillable, part_version, upgrade
 
 
 @dataclass
@@ -78,12 +79,17 @@ def schema_problem(table: str, found: pa.Schema) -> str | None:
 
     The one rule every reader applies (``recap status``, ``recap sql``, ``recap report``, resume
     through :func:`read_parts`): a part holds every column of the table's Arrow schema
-    (``schemas/``) with exactly the declared type. Extra columns are ignored. A part that breaks
+    (``schemas/``) with exactly the declared type - except a part of an earlier schema version,
+    which may lack the columns added since (:func:`schemas.versions.missing_fillable`; its rows
+    are mapped on read, :func:`schemas.versions.upgrade`). Extra columns are ignored. A part that breaks
     the rule is skipped and named, never cast, so a number stored as text is not counted by one
     reader and refused by another.
     """
     expected = arrow_schema(table)
     missing = [f.name for f in expected if f.name not in found.names]
+    if missing and missing_fillable(table, missing, part_version(found)):
+        expected = pa.schema([f for f in expected if f.name not in missing])  # mapped on read
+        missing = []
     if missing:
         more = f" (+{len(missing) - 5} more)" if len(missing) > 5 else ""
         return f"not a {table} part: missing column(s) {', '.join(sorted(missing)[:5])}{more}"
@@ -142,16 +148,15 @@ def read_parts(
 ) -> tuple[pa.Table, list[BadPart]]:
     """The rows of the good part files among ``paths`` (optionally a few columns) and the bad
     ones (see :func:`inspect_parts`); an empty table with the schema when none is good."""
-    schema = arrow_schema(table)
-    if columns is not None:
-        schema = pa.schema([schema.field(c) for c in columns])
+    full = arrow_schema(table)
+    schema = pa.schema([full.field(c) for c in columns]) if columns is not None else full
     good, bad = inspect_parts(paths, table, open_file)
     pieces = []
     for p in good:
         try:
             src = _source(p, open_file)
             try:
-                pieces.append(pq.read_table(src, columns=list(schema.names)).select(schema.names).cast(schema))
+                pieces.append(read_part(src, table).select(schema.names).cast(schema))
             finally:
                 if src is not p and hasattr(src, "close"):
                     src.close()
@@ -160,6 +165,21 @@ def read_parts(
     if not pieces:
         return schema.empty_table(), bad
     return pa.concat_tables(pieces), bad
+
+
+def read_part(source: Any, table: str) -> pa.Table:
+    """Every row of one good part file, in the table's current schema: a part of an earlier
+    schema version is mapped (:func:`schemas.versions.upgrade`)."""
+    full = arrow_schema(table)
+    found = pq.read_schema(source)
+    missing = [f.name for f in full if f.name not in found.names]
+    if not missing:
+        return pq.read_table(source, columns=list(full.names)).select(full.names).cast(full)
+    present = [f.name for f in full if f.name in found.names]
+    version = part_version(found)
+    if version is None or not missing_fillable(table, missing, version):
+        raise ValueError(f"not a {table} part: missing column(s) {', '.join(sorted(missing)[:5])}")
+    return upgrade(table, pq.read_table(source, columns=present), version)
 
 
 def check_parts(run_dir: Path, table: str) -> tuple[list[Path], list[BadPart]]:

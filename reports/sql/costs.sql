@@ -1,4 +1,4 @@
--- Costs per model, arm and environment split, from the episode rows of the latest attempts:
+-- Costs per model, arm and environment split, from the rows of the finished units (outcomes):
 -- dollars and tokens per episode and per success, LLM calls per episode (mean and sample sd, as
 -- the paper reports them), cached share of prompt tokens and environment steps.
 SELECT model_label, arm, env_split,
@@ -16,6 +16,6 @@ SELECT model_label, arm, env_split,
   stddev_samp(llm_calls) AS calls_sd,
   sum(cached_prompt_tokens) / nullif(sum(prompt_tokens), 0) AS cached_share,
   avg(steps) AS steps_per_episode
-FROM terminal
+FROM outcomes
 GROUP BY model_label, arm, env_split
 ORDER BY env_split, model_label, arm;

@@ -1,12 +1,12 @@
 -- Paired comparisons: every two arms of the same model and environment split, on the units both
--- ran (same task, instance and seed; latest attempts). a_only / b_only are the discordant pairs;
+-- finished (same task, instance and seed; the outcomes view). a_only / b_only are the discordant pairs;
 -- p_value is the exact two-sided McNemar test. cost_diffs (arm_a minus arm_b, per pair, in pair
 -- order) feed the paired permutation test of the mean cost difference.
 WITH per_unit AS (
   SELECT model_label, env_split, arm, task, instance_id, seed,
     arg_max(success, ended_at) AS success,
     arg_max(cost_usd, ended_at) AS cost_usd
-  FROM terminal
+  FROM outcomes
   GROUP BY ALL
 ), counted AS (
   SELECT a.model_label, a.env_split, a.arm AS arm_a, b.arm AS arm_b,

@@ -4,47 +4,70 @@
 -- Rows of different runs are told apart by run_id; episodes join their rows on (run_id, episode_id).
 
 -- attempts: every episode row (one per attempt at a unit) with the labels the tables group by.
---   ablation     ReCAP settings read from method_config: no_think / think_many (think), name_only,
---                level_N (max_level), no_shortcut; several joined with '+'; 'original' when none.
+-- The episode columns are schema version 2 (runs written under version 1 are mapped on read:
+-- schemas/versions.py): method = the method's name, label = the arm's label in the sweep,
+-- profile, ablation, model = the model's label, provider_model = the model string.
+--   ablation     episodes.ablation, 'original' when NULL (the original method): no_think,
+--                think_many, name_only, level_N, no_shortcut (several joined with '+').
 --   window_size  method_config.window (messages kept in the LLM context).
---   arm          method, plus ' [ablation]' unless original, plus ' ctx N' when the same method and
---                ablation appear with several window sizes in the data.
+--   arm          the arm's label, plus ' ctx N' when the same label appears with several window
+--                sizes in the data (several runs in one report).
 --   model_label  the model, with ' (test double)' for test-double models.
+--   env_split    benchmark/split: robotouille/synchronous, robotouille/asynchronous,
+--                alfworld/valid_unseen (ALFWorld is one split; its task types are the tasks).
+--   infra_kind   the infrastructure failure the row records (infra_failure_kind), else NULL.
+--   finished     the attempt finished on its own merits: not cut by a cap (budget_exhausted)
+--                and not an infrastructure failure. env_error / llm_error outcomes finish.
 --   is_latest    the latest attempt of its unit (highest attempt; ties: latest ended_at, run_id,
 --                episode_id). A unit id is the same across runs, so a unit re-run in a later run
 --                counts once.
+--   is_unit_row  the row the unit is counted by, the rule of recap status: its latest finished
+--                attempt, else its latest attempt.
 CREATE VIEW attempts AS
 WITH parsed AS (
   SELECT e.*,
     CASE WHEN json_valid(e.method_config) THEN e.method_config END AS _cfg
   FROM episodes e
 ), settings AS (
-  SELECT p.* EXCLUDE (_cfg),
+  SELECT p.* EXCLUDE (_cfg, ablation),
     TRY_CAST(json_extract_string(_cfg, '$.window') AS BIGINT) AS window_size,
-    coalesce(nullif(concat_ws('+',
-      CASE json_extract_string(_cfg, '$.think') WHEN 'none' THEN 'no_think' WHEN 'many' THEN 'think_many' END,
-      CASE WHEN json_extract_string(_cfg, '$.name_only') = 'true' THEN 'name_only' END,
-      CASE WHEN json_extract_string(_cfg, '$.max_level') IS NOT NULL
-           THEN 'level_' || json_extract_string(_cfg, '$.max_level') END,
-      CASE WHEN json_extract_string(_cfg, '$.shortcut') = 'false' THEN 'no_shortcut' END
-    ), ''), 'original') AS ablation
+    coalesce(p.ablation, 'original') AS ablation,
+    infra_failure_kind(p.end_reason, p.error) AS infra_kind
   FROM parsed p
+), marked AS (
+  SELECT s.*,
+    s.end_reason <> 'budget_exhausted' AND s.infra_kind IS NULL AS finished
+  FROM settings s
 )
 SELECT s.*,
   model_label(s.model, s.test_double) AS model_label,
   s.benchmark || '/' || s.split AS env_split,
-  s.method
-    || CASE WHEN s.ablation <> 'original' THEN ' [' || s.ablation || ']' ELSE '' END
-    || CASE WHEN count(DISTINCT s.window_size) OVER (PARTITION BY s.method, s.ablation) > 1
+  s.label
+    || CASE WHEN count(DISTINCT s.window_size) OVER (PARTITION BY s.label) > 1
             THEN ' ctx ' || coalesce(CAST(s.window_size AS VARCHAR), '?') ELSE '' END AS arm,
   row_number() OVER (
     PARTITION BY s.unit_id ORDER BY s.attempt DESC, s.ended_at DESC, s.run_id DESC, s.episode_id DESC
-  ) = 1 AS is_latest
-FROM settings s;
+  ) = 1 AS is_latest,
+  row_number() OVER (
+    PARTITION BY s.unit_id ORDER BY s.finished DESC, s.attempt DESC, s.ended_at DESC, s.run_id DESC, s.episode_id DESC
+  ) = 1 AS is_unit_row
+FROM marked s;
 
--- terminal: the latest attempt of every unit. Only these rows count in success tables.
+-- terminal: one row per unit that has an episode row (is_unit_row), with where it stands:
+--   state  'finished' (it finished on its own merits), 'capped' (its latest attempt ended
+--          budget_exhausted), 'gave_up' (its latest attempt is an infrastructure failure, the
+--          driver's give-up after worker deaths included; recap resume retries it).
+-- Units without any row are 'not started'; the coverage table counts them from plan.json.
 CREATE VIEW terminal AS
-SELECT * EXCLUDE (is_latest) FROM attempts WHERE is_latest;
+SELECT * EXCLUDE (is_unit_row),
+  CASE WHEN finished THEN 'finished' WHEN end_reason = 'budget_exhausted' THEN 'capped' ELSE 'gave_up' END AS state
+FROM attempts WHERE is_unit_row;
+
+-- outcomes: the units that finished on their own merits - the rows every success rate, cost per
+-- episode, tree and failure-mode table counts (capped, gave-up and not-started units are in the
+-- coverage table instead).
+CREATE VIEW outcomes AS
+SELECT * FROM terminal WHERE state = 'finished';
 
 -- calls: llm_calls with the episode's labels.
 --   latest_attempt  TRUE/FALSE for the call's attempt; NULL when the attempt has no episode row
@@ -150,8 +173,9 @@ FROM per_episode c
 LEFT JOIN invalid_runs r ON r.run_id = c.run_id AND r.episode_id = c.episode_id
 LEFT JOIN invalid_same q ON q.run_id = c.run_id AND q.episode_id = c.episode_id;
 
--- episode_modes: every terminal episode with one failure mode, first match wins:
+-- episode_modes: every unit's row (terminal, any state) with one failure mode, first match wins:
 --   success                     end_reason success
+--   infra_error:<kind>          an infrastructure failure (infra_kind: auth, worker_lost ...)
 --   model_error:<kind>          end_reason llm_error; kind = error_kind of the episode's last failed call
 --   json_failures | truncated | budget_exhausted | episode_limit | env_error    those end reasons
 --                               (truncated: a reply cut at the output cap, never counted as a JSON failure)
@@ -166,8 +190,8 @@ WITH last_error AS (
   FROM llm_calls WHERE status = 'error'
   GROUP BY run_id, episode_id
 )
-SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.ablation, t.env_split,
-  t.task, t.instance_id, t.seed, t.end_reason, t.success, t.steps, t.llm_calls, t.cost_usd, t.error,
+SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.label, t.ablation, t.env_split,
+  t.task, t.instance_id, t.seed, t.end_reason, t.success, t.steps, t.llm_calls, t.cost_usd, t.error, t.state,
   coalesce(p.invalid_loop, false) AS invalid_loop,
   coalesce(p.repeated_loop, false) AS repeated_loop,
   coalesce(p.longest_invalid_run, 0) AS longest_invalid_run,
@@ -176,6 +200,7 @@ SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.abla
   le.last_error_kind,
   CASE
     WHEN t.end_reason = 'success' THEN 'success'
+    WHEN t.infra_kind IS NOT NULL THEN 'infra_error:' || t.infra_kind
     WHEN t.end_reason = 'llm_error' THEN 'model_error:' || coalesce(le.last_error_kind, 'unknown')
     WHEN t.end_reason IN ('json_failures', 'truncated', 'budget_exhausted', 'episode_limit', 'env_error') THEN t.end_reason
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.invalid_loop, false) THEN 'invalid_action_loop'
@@ -188,13 +213,15 @@ FROM terminal t
 LEFT JOIN step_patterns p ON p.run_id = t.run_id AND p.episode_id = t.episode_id
 LEFT JOIN last_error le ON le.run_id = t.run_id AND le.episode_id = t.episode_id;
 
--- failures: the terminal episodes that did not succeed.
+-- failures: the finished units that did not succeed.
 CREATE VIEW failures AS
-SELECT * FROM episode_modes WHERE mode <> 'success';
+SELECT * FROM episode_modes WHERE mode <> 'success' AND state = 'finished';
 
 -- planned_units: the units each run folder's plan.json lists (run_id from its run.json), with
 -- whether its model is a test double (from the folder's spec.yaml; NULL when unknown). Filled by
 -- the report builder (reports.sections.load_plans); empty in a plain `recap sql` session, where
 -- the coverage query falls back to the units that have episode rows.
-CREATE TABLE planned_units (run_dir VARCHAR, run_id VARCHAR, unit_id VARCHAR, method VARCHAR, model VARCHAR,
-  instance_id VARCHAR, seed BIGINT, test_double BOOLEAN);
+-- label is the arm's label (plan.json's "method"), method the method's name ("method_name";
+-- NULL in a plan written before schema version 2).
+CREATE TABLE planned_units (run_dir VARCHAR, run_id VARCHAR, unit_id VARCHAR, label VARCHAR, method VARCHAR,
+  model VARCHAR, instance_id VARCHAR, seed BIGINT, test_double BOOLEAN);

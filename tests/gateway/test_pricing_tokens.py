@@ -62,3 +62,37 @@ def test_other_models_get_the_documented_estimate_without_network():
     assert (counted.tokens, counted.source) == (3 + 14 + 4, "estimate")
     # upper bound for the budget: one token per UTF-8 byte plus template allowance
     assert prompt_token_bound("together_ai/x", messages, counted) == 32 + (16 + 41) + (16 + 2)
+
+
+def test_list_price_bills_with_cache_reads_and_writes_equal_hand_computed_totals():
+    table = default_prices()
+    # GPT-4o: 2M prompt tokens of which 1.5M cached, 100k out:
+    # 0.5 x $2.50 + 1.5 x $1.25 + 0.1 x $10 = $4.125 (writes are free: no write price)
+    gpt = table.get("openai/gpt-4o")
+    assert gpt.cost_usd(2_000_000, 1_500_000, 100_000) == 4.125
+    # Claude Sonnet 4.5: 2M prompt = 1.5M read + 0.4M written + 0.1M plain, 100k out:
+    # 0.1 x $3 + 1.5 x $0.30 + 0.4 x $3.75 + 0.1 x $15 = $3.75
+    claude = table.get("anthropic/claude-sonnet-4-5")
+    assert (claude.input, claude.cached_input, claude.cache_write, claude.output) == (3.0, 0.3, 3.75, 15.0)
+    assert claude.explicit_cache is True and gpt.explicit_cache is False
+    assert claude.cost_usd(2_000_000, 1_500_000, 100_000, 400_000) == 3.75
+    # DeepSeek-chat: 2M prompt, 1.5M cache hits, 100k out: 0.5 x $0.28 + 1.5 x $0.028 + 0.1 x $0.42 = $0.224
+    assert table.get("deepseek/deepseek-chat").cost_usd(2_000_000, 1_500_000, 100_000) == 0.224
+    # one call to the cent: 23,456 prompt tokens (20,000 read, 3,000 written), 512 out on Claude
+    assert round(claude.cost_usd(23_456, 20_000, 512, 3_000), 2) == round(
+        (456 * 3 + 20_000 * 0.3 + 3_000 * 3.75 + 512 * 15) / 1e6, 2) == 0.03
+    assert claude.cost_pico(23_456, 20_000, 512, 3_000) == 456 * 3_000_000 + 20_000 * 300_000 + 3_000 * 3_750_000 + 512 * 15_000_000
+
+
+def test_cache_counts_beyond_the_prompt_are_clamped_in_the_price():
+    price = Price(input=1.0, output=2.0, cached_input=0.1, cache_write=1.25)
+    # reads take precedence, writes fill at most the rest of the prompt
+    assert price.cost_pico(100, 80, 0, 50) == 80 * 100_000 + 20 * 1_250_000
+    assert price.cost_pico(100, 0, 0, 0) == 100 * 1_000_000
+    assert price.write_rate() == 1_250_000 and price.max_input_rate() == 1_250_000
+    assert Price(input=1.0, output=2.0).write_rate() == 1_000_000
+
+
+def test_price_flags_must_be_booleans():
+    with pytest.raises(PriceError, match="explicit_cache must be true or false, got 'no'"):
+        PriceTable({}).with_overrides({"m": {"input": 1.0, "output": 1.0, "explicit_cache": "no"}})

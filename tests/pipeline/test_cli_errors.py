@@ -52,7 +52,7 @@ CASES = [
      "recap: error: sweep.yaml: models[0].prices.output: Input should be greater than or equal to 0"),
     ("missing price with a cap", ("- model: offline/expert", "- model: openai/no-such-model\n    api_key_env: HOME\n    cap_usd: 1"),
      "recap: error: sweep.yaml: models[0] (openai/no-such-model) has a model cap but no price: no price for model(s) "
-     "openai/no-such-model: add them to workers/pricing/prices.yaml or pass a price override (USD per million tokens: input, cached_input, output)"),
+     "openai/no-such-model: add them to workers/pricing/prices.yaml or pass a price override (USD per million tokens: input, cached_input, cache_write, output)"),
     ("unknown offline option", ("- model: offline/expert", "- model: offline/expert\n    options: {error_rate: 0.1}"),
      "recap: error: sweep.yaml: models[0] (offline/expert): unknown offline model option(s) ['error_rate']"),
     ("unknown generation param", ("- model: offline/expert", "- model: offline/expert\n    params: {temprature: 0.1}"),

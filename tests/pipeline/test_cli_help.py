@@ -12,7 +12,7 @@ from pipeline.cli import COMMANDS, command_parsers, main
 from tests.reports.known_run import write_run_a, write_run_b
 
 #: every command path whose --help this file checks (data is pipeline.data's own parser)
-PATHS = [(), ("run",), ("resume",), ("status",), ("estimate",), ("show",), ("sql",), ("report",),
+PATHS = [(), ("run",), ("resume",), ("status",), ("estimate",), ("show",), ("sql",), ("report",), ("view",),
          ("env",), ("env", "list"), ("env", "play"), ("env", "replay")]
 
 

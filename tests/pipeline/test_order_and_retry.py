@@ -154,7 +154,7 @@ environments: [{{benchmark: blocksworld, tasks: ["3", "4", "5"]}}]
 
 def _ep(uid: str, attempt: int, reason: str, error: str | None = None, method: str = "react") -> EpisodeRecord:
     return EpisodeRecord(f"{uid}-{attempt}", uid, attempt, "blocksworld", "", "", "x", 0, method, "{}", "offline/expert",
-                         reason, reason == "success", 0, 0, 0, 0, 0, 0.0, 0.0, 0, 4.0, error=error, test_double=True)
+                         reason, reason == "success", 0, 0, 0, 0, 0, 0.0, 0.0, 0, 4.0, error=error, test_double=True, label=method)
 
 
 def _folder(tmp_path: Path, text: str = SMALL):
@@ -239,7 +239,7 @@ def test_status_shows_planned_and_done_per_arm(tmp_path, capsys):
     assert main(["status", str(out)]) == 0
     lines = capsys.readouterr().out.splitlines()
     header = next(line for line in lines if "┃" in line and "planned" in line)
-    assert [w for w in ("method", "model", "planned", "done", "success", "capped", "infra failed", "not started") if w not in header] == []
+    assert [w for w in ("arm", "model", "planned", "done", "success", "capped", "gave up", "not started") if w not in header] == []
     row = next(line for line in lines if line.strip("│ ").startswith("react"))
     cells = [c.strip() for c in row.strip().strip("│").split("│")]
     assert cells[:8] == ["react", "offline/expert (test double)", "9", "2", "1/2 (50%)", "1", "0", "6"]
@@ -263,19 +263,19 @@ def test_report_coverage_table_reads_the_plan(tmp_path):
     ])
     report = build_report([out])
     table = next(t for s in report.sections for t in s.tables if t.name == "coverage")
-    got = [{k: r[k] for k in ("run_id", "model_label", "method", "planned", "finished", "successes", "capped", "infra_failed",
+    got = [{k: r[k] for k in ("run_id", "model_label", "arm", "planned", "finished", "successes", "capped", "gave_up",
                               "not_started", "planned_from")} for r in table.rows]
     assert got == [
-        {"run_id": run_id, "model_label": "offline/expert (test double)", "method": "cot", "planned": 9, "finished": 1,
-         "successes": 1, "capped": 0, "infra_failed": 2, "not_started": 6, "planned_from": "plan.json"},
-        {"run_id": run_id, "model_label": "offline/expert (test double)", "method": "react", "planned": 9, "finished": 2,
-         "successes": 1, "capped": 1, "infra_failed": 0, "not_started": 6, "planned_from": "plan.json"},
+        {"run_id": run_id, "model_label": "offline/expert (test double)", "arm": "cot", "planned": 9, "finished": 1,
+         "successes": 1, "capped": 0, "gave_up": 2, "not_started": 6, "planned_from": "plan.json"},
+        {"run_id": run_id, "model_label": "offline/expert (test double)", "arm": "react", "planned": 9, "finished": 2,
+         "successes": 1, "capped": 1, "gave_up": 0, "not_started": 6, "planned_from": "plan.json"},
     ]
     assert "No readable plan.json" not in table.note
     # without a plan (a plain `recap sql` session): planned falls back to the units with rows, and says so
     con = open_runs([out])
     rows = named_query(con, "coverage").dicts()
-    assert [(r["method"], r["planned"], r["not_started"], r["planned_from"]) for r in rows] == [
+    assert [(r["arm"], r["planned"], r["not_started"], r["planned_from"]) for r in rows] == [
         ("cot", 3, 0, "episode rows"), ("react", 3, 0, "episode rows")]
     # the SQL rule for infrastructure failures is the pipeline's
     samples = [("llm_error", "server_error: x"), ("llm_error", "auth: y"), ("llm_error", "bad_request: NotFoundError: 404"),
@@ -284,7 +284,11 @@ def test_report_coverage_table_reads_the_plan(tmp_path):
                ("env_error", "gave up after 3 failed attempts; last: ActorDiedError: gone"),
                ("env_error", "gave up after 3 failed attempts; last: client: ClientError"),
                ("env_error", "gave up after 3 failed attempts; last: agent: KeyError"), ("env_error", "FileNotFoundError"),
-               ("success", None), ("budget_exhausted", "run budget spent"), ("llm_error", "rate_limit: slow down")]
+               ("success", None), ("budget_exhausted", "run budget spent"), ("llm_error", "rate_limit: slow down"),
+               # schema version 2 writes infrastructure failures as infra_error
+               ("infra_error", "auth: y"), ("infra_error", "bad_request: NotFoundError: 404"), ("infra_error", "odd"),
+               ("infra_error", "gave up after 1 failed attempts (infrastructure: worker_lost); last: ActorDiedError: x"),
+               ("infra_error", None)]
     got = con.execute("SELECT infra_failure_kind(r, e) FROM (SELECT unnest($1) AS r, unnest($2) AS e)",
                       [[s[0] for s in samples], [s[1] for s in samples]]).fetchall()
     assert [g[0] for g in got] == [infra_failure(r, e) for r, e in samples]

@@ -201,7 +201,7 @@ def test_infrastructure_failures_exit_4_and_a_corrected_rerun_retries_them(ray_a
     assert main(["run", str(spec_file), "--progress", "off"]) == EXIT_INFRA
     said = capsys.readouterr().out
     assert f"3 units ended in an infrastructure failure (server_error 3); fix the cause, then retry them with: recap resume {out}" in said
-    assert q(out, "select count(*), min(end_reason), max(attempt) from episodes") == [(3, "llm_error", 1)]
+    assert q(out, "select count(*), min(end_reason), max(attempt) from episodes") == [(3, "infra_error", 1)]
     assert main(["status", str(out)]) == 0
     assert "units 0/3 done" in capsys.readouterr().out
     assert main(["resume", str(out), "--progress", "off"]) == EXIT_INFRA  # still broken: tried again, still 4
@@ -217,5 +217,5 @@ def test_infrastructure_failures_exit_4_and_a_corrected_rerun_retries_them(ray_a
         server.stop_thread()
     rows = q(out, "select unit_id, attempt, end_reason from episodes order by unit_id, attempt")
     assert len({r[0] for r in rows}) == 3 and len(rows) == 9  # earlier rows stay for the record
-    assert {(a, r == "llm_error") for _, a, r in rows} == {(1, True), (2, True), (3, False)}
+    assert {(a, r == "infra_error") for _, a, r in rows} == {(1, True), (2, True), (3, False)}
     assert "units 3/3 done" in capsys.readouterr().out

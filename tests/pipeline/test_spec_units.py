@@ -95,9 +95,18 @@ def test_transport_settings_do_not_change_unit_ids():
     ids = [u.unit_id for u in expand(spec_of(BASE)).units]
     transport = BASE.replace("- model: offline/expert", "- model: offline/expert\n    rpm: 10\n    tpm: 1000\n    concurrency: 2\n"
                              "    retries: 9\n    timeout_s: 5\n    api_base: http://127.0.0.1:1\n    cap_usd: 3\n"
-                             "    prices: {input: 1, output: 1}") + "workers: 16\nmax_attempts: 5\nrun_cap_usd: 2\n"
+                             "    prices: {input: 1, output: 1, cached_input: 0.1, cache_write: 1.25}") + "workers: 16\nmax_attempts: 5\nrun_cap_usd: 2\n"
     assert [u.unit_id for u in expand(spec_of(transport)).units] == ids
     assert [u.unit_id for u in expand(with_overrides(spec_of(BASE), workers=9, run_cap_usd=1.5)).units] == ids
+
+
+def test_a_price_override_carries_the_cache_write_price():
+    from workers.llm.pricing import resolve_price
+
+    spec = spec_of(BASE.replace("- model: offline/expert", "- model: offline/expert\n    prices: {input: 3, output: 15, cached_input: 0.3, cache_write: 3.75}"))
+    price = resolve_price("offline/expert", spec.models[0].prices.model_dump())
+    # 1,000 prompt tokens: 200 read from the cache, 300 written to it, 500 plain; 100 output tokens
+    assert price.cost_usd(1000, 200, 100, 300) == pytest.approx((500 * 3 + 200 * 0.3 + 300 * 3.75 + 100 * 15) / 1e6, abs=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,5 @@
-"""Run folders with known rows (tests/reports/known_run.py), written once per test session."""
+"""Run folders with known rows (tests/reports/known_run.py), written once per test session, and
+one run folder the pipeline itself wrote (tests/reports/pipeline_run.py)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from typing import Any
 import pytest
 
 from tests.reports.known_run import write_run_a, write_run_b
+from tests.reports.pipeline_run import run_sweep
 
 
 @pytest.fixture(scope="session")
@@ -19,6 +21,13 @@ def run_a(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="session")
 def run_b(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_run_b(tmp_path_factory.mktemp("runs") / "runB")
+
+
+@pytest.fixture(scope="session")
+def pipeline_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, dict[str, Any]]:
+    """``recap run`` of a small sweep on a local Ray (test double, a binding cap, a killed
+    worker): (run folder, exit status, the killed unit)."""
+    return run_sweep(tmp_path_factory.mktemp("pipeline"))
 
 
 def same(actual: Any, expected: Any) -> bool:

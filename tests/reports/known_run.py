@@ -2,7 +2,9 @@
 number is worked out by hand in the tests.
 
 Run A (``runA``): Robotouille sync tasks t2/t6 with recap, react and recap level_3 on gpt-4o;
-ALFWorld ood with recap/react on gpt-4o and on a test-double model. One unit (react t2/84) has a
+ALFWorld (one split, valid_unseen; task = type) with recap/react on gpt-4o and on a test-double
+model. Rows are schema version 2 as the pipeline writes them; level_3 t6/84 was cut by the run
+cap, so it counts in no success rate (it is in the coverage table). One unit (react t2/84) has a
 superseded first attempt. Run B (``runB``) re-runs react t6/42 (same unit id, attempt 2, now a
 success) and adds a recap unit with a 128-message window.
 """
@@ -30,7 +32,9 @@ LEVEL_3 = build_config(ReCAPConfig, ablation="level_3").to_json()
 REACT = AgentConfig().to_json()
 
 SYNC = ("robotouille", "synchronous")
-ALF = ("alfworld", "eval_out_of_distribution")
+#: model label -> the model string sent to the provider
+PROVIDER = {"gpt-4o": "openai/gpt-4o-2024-08-06", "scripted": "offline/expert"}
+ALF = ("alfworld", "valid_unseen")
 
 
 def unit_id(method: str, cfg: str, model: str, bench: tuple[str, str], task: str, inst: str, seed: int) -> str:
@@ -91,6 +95,11 @@ def episode(
         started_at=ended_at - 10.0,
         ended_at=ended_at,
         test_double=test_double,
+        # schema version 2: the arm's label as the pipeline writes an unlabelled arm, the
+        # ablation apart, the provider's model string
+        label="recap[level_3]" if cfg == LEVEL_3 else method,
+        ablation="level_3" if cfg == LEVEL_3 else None,
+        provider_model=PROVIDER[model],
     )
 
 
@@ -160,7 +169,7 @@ RUN_A_EPISODES = [
     episode("A-react-t2-84-a1", "react", REACT, "gpt-4o", SYNC, "t2", "i2", 84, "env_error", cost=1.125, prompt=400, cached=0, completion=20, calls=2, steps=1, ended_at=50.0, error="engine crashed"),
     episode("A-react-t2-84-a2", "react", REACT, "gpt-4o", SYNC, "t2", "i2", 84, "step_cap", attempt=2, cost=0.5, prompt=300, cached=100, completion=20, calls=2, steps=6),
     episode("A-react-t6-42", "react", REACT, "gpt-4o", SYNC, "t6", "i6", 42, "step_cap", cost=1.0, prompt=500, cached=0, completion=50, calls=4, steps=1),
-    episode("A-react-t6-84", "react", REACT, "gpt-4o", SYNC, "t6", "i6", 84, "llm_error", cost=0.25, prompt=100, cached=0, completion=10, calls=3, steps=0, error="rate_limit: slow down"),
+    episode("A-react-t6-84", "react", REACT, "gpt-4o", SYNC, "t6", "i6", 84, "llm_error", cost=0.25, prompt=100, cached=0, completion=10, calls=3, steps=0, error="bad_request: the provider refused the request"),
     episode("A-react-t6-126", "react", REACT, "gpt-4o", SYNC, "t6", "i6", 126, "call_cap", cost=1.5, prompt=700, cached=0, completion=70, calls=6, steps=2),
     # recap level_3, gpt-4o, robotouille sync t6: 1 of 3
     episode("A-lvl3-t6-42", "recap", LEVEL_3, "gpt-4o", SYNC, "t6", "i6", 42, "step_cap", cost=2.0, prompt=900, cached=0, completion=90, calls=9, steps=4),

@@ -15,7 +15,7 @@ from reports.stats import mcnemar_exact, paired_permutation_p, wilson
 from reports.views import named_query, open_runs, run_query
 from tests.reports.conftest import assert_rows
 
-ALF = "alfworld/eval_out_of_distribution"
+ALF = "alfworld/valid_unseen"
 SYNC = "robotouille/synchronous"
 TD = "scripted (test double)"
 
@@ -32,17 +32,24 @@ def rate(model, arm, split, n, k, **extra):
     return {"model_label": model, "arm": arm, "env_split": split, "episodes": n, "successes": k, "success_rate": k / n, "ci_low": lo, "ci_high": hi, **extra}
 
 
+# react sync clusters by instance: i2 1/2 and i6 0/3. MSB = (1/2 - 1/5) / 1 = 0.3, MSW = (1 - 1/2) / 3
+# = 1/6, m0 = 5 - 13/5 = 2.4, rho = (0.3 - 1/6) / (0.3 + 1.4/6) = 0.25, deff = 1 + (5/2 - 1) * 0.25
+# = 1.375: Wilson at n_eff = 5 / 1.375 (recap's 2/2 and 2/3 give rho < 0 -> deff 1, plain Wilson)
+REACT_SYNC_CI = dict(zip(("ci_low", "ci_high"), wilson(1 / 1.375, 5 / 1.375)))
+
+
 def test_main_table(con_a):
     # sync: recap 4/5 (t6/84 agent_done), react 1/5 (only t2/42; t2/84 counts its attempt 2),
-    # level_3 1/3; alfworld: one unit each, the test double recap 1/2
+    # level_3 1/2 (t6/84 was cut by the cap: not finished, so in no rate); alfworld: one unit
+    # each, the test double recap 1/2
     assert_rows(named_query(con_a, "success_by_split").dicts(), [
         rate("gpt-4o", "react", ALF, 1, 0, method="react", ablation="original"),
         rate("gpt-4o", "recap", ALF, 1, 1, method="recap", ablation="original"),
         rate(TD, "react", ALF, 1, 0),
         rate(TD, "recap", ALF, 2, 1),
-        rate("gpt-4o", "react", SYNC, 5, 1),
+        rate("gpt-4o", "react", SYNC, 5, 1, **REACT_SYNC_CI),
         rate("gpt-4o", "recap", SYNC, 5, 4),
-        rate("gpt-4o", "recap [level_3]", SYNC, 3, 1, method="recap", ablation="level_3"),
+        rate("gpt-4o", "recap[level_3]", SYNC, 2, 1, method="recap", ablation="level_3"),
     ])
 
 
@@ -71,7 +78,7 @@ def test_per_task_tables(con_a):
         t(SYNC, "t2", "gpt-4o", "recap", 2, 2),
         t(SYNC, "t6", "gpt-4o", "react", 3, 0),
         t(SYNC, "t6", "gpt-4o", "recap", 3, 2),
-        t(SYNC, "t6", "gpt-4o", "recap [level_3]", 3, 1),
+        t(SYNC, "t6", "gpt-4o", "recap[level_3]", 2, 1),
     ])
 
 
@@ -84,7 +91,7 @@ def test_cross_model_table(con_a):
     assert_rows(named_query(con_a, "success_by_model").dicts(), [
         m("gpt-4o", "react", 6, 1),
         m("gpt-4o", "recap", 6, 5),
-        m("gpt-4o", "recap [level_3]", 3, 1),
+        m("gpt-4o", "recap[level_3]", 2, 1),
         m(TD, "react", 1, 0),
         m(TD, "recap", 2, 1),
     ])
@@ -96,13 +103,14 @@ def test_ablation_table_pairs_with_original(con_a):
         del r["arm"]
         return r
 
-    # level_3 vs original on t6 seeds 42/84/126: original S,F,S; level_3 F,F,S -> 1 discordant pair
+    # level_3 vs original on the t6 seeds both finished, 42/126 (level_3's 84 was capped): original
+    # S,S; level_3 F,S -> 1 discordant pair
     assert_rows(named_query(con_a, "success_by_ablation").dicts(), [
         a("gpt-4o", "react", ALF, "original", 1, 0),
-        a("gpt-4o", "react", SYNC, "original", 5, 1),
+        {**a("gpt-4o", "react", SYNC, "original", 5, 1), **REACT_SYNC_CI},
         a("gpt-4o", "recap", ALF, "original", 1, 1),
         a("gpt-4o", "recap", SYNC, "original", 5, 4),
-        a("gpt-4o", "recap", SYNC, "level_3", 3, 1, 3, 1, 0, 1.0),
+        a("gpt-4o", "recap", SYNC, "level_3", 2, 1, 2, 1, 0, 1.0),
         a(TD, "react", ALF, "original", 1, 0),
         a(TD, "recap", ALF, "original", 2, 1),
     ])
@@ -119,10 +127,11 @@ def test_paired_comparisons(con_a):
         {"model_label": "gpt-4o", "env_split": SYNC, "arm_a": "react", "arm_b": "recap", "pairs": 5, "a_successes": 1, "b_successes": 4,
          "rate_diff": -0.6, "a_only": 0, "b_only": 3, "p_value": 0.25, "mean_cost_diff": -1.65,
          "cost_diffs": [-0.5, -1.5, -2.0, -3.75, -0.5]},
-        {"model_label": "gpt-4o", "env_split": SYNC, "arm_a": "react", "arm_b": "recap [level_3]", "pairs": 3, "a_successes": 0, "b_successes": 1,
-         "rate_diff": -1 / 3, "a_only": 0, "b_only": 1, "p_value": 1.0, "mean_cost_diff": -1.75, "cost_diffs": [-1.0, -4.75, 0.5]},
-        {"model_label": "gpt-4o", "env_split": SYNC, "arm_a": "recap", "arm_b": "recap [level_3]", "pairs": 3, "a_successes": 2, "b_successes": 1,
-         "rate_diff": 1 / 3, "a_only": 1, "b_only": 0, "p_value": 1.0, "mean_cost_diff": 1 / 3, "cost_diffs": [1.0, -1.0, 1.0]},
+        # level_3 finished t6/42 (F, $2) and t6/126 (S, $1): react $1.0/$1.5 both F, recap $3/$2 both S
+        {"model_label": "gpt-4o", "env_split": SYNC, "arm_a": "react", "arm_b": "recap[level_3]", "pairs": 2, "a_successes": 0, "b_successes": 1,
+         "rate_diff": -1 / 2, "a_only": 0, "b_only": 1, "p_value": 1.0, "mean_cost_diff": -0.25, "cost_diffs": [-1.0, 0.5]},
+        {"model_label": "gpt-4o", "env_split": SYNC, "arm_a": "recap", "arm_b": "recap[level_3]", "pairs": 2, "a_successes": 2, "b_successes": 1,
+         "rate_diff": 1 / 2, "a_only": 1, "b_only": 0, "p_value": 1.0, "mean_cost_diff": 1.0, "cost_diffs": [1.0, 1.0]},
     ])
     # the 5 cost differences all have the same sign: only the 2 all-same-sign patterns of 32 reach |sum| 8.25
     assert paired_permutation_p(rows[2]["cost_diffs"]) == 2 / 32
@@ -145,7 +154,8 @@ def test_costs(con_a):
         c("gpt-4o", "react", SYNC, 5, 1, 3.75, 0.5, 3.75, 380.0, 36.0, 2080.0, 3.6, math.sqrt(2.3), 100 / 1900, 2.4),
         # recap: $1, 2, 3, 4, 2 -> sd sqrt(5.2 / 4); calls 4, 8, 12, 16, 10 -> sd sqrt(80 / 4)
         c("gpt-4o", "recap", SYNC, 5, 4, 12.0, math.sqrt(1.3), 3.0, 1196.0, 118.0, 1642.5, 10.0, math.sqrt(20), 1700 / 5980, 5.6),
-        c("gpt-4o", "recap [level_3]", SYNC, 3, 1, 8.0, math.sqrt(13 / 3), 8.0, 3850 / 3, 385 / 3, 4235.0, 34 / 3, math.sqrt(181 / 3), 0.0, 17 / 3),
+        # level_3 finished t6/42 ($2, 900+90 tokens, 9 calls, 4 steps) and t6/126 ($1, 450+45, 5, 6)
+        c("gpt-4o", "recap[level_3]", SYNC, 2, 1, 3.0, math.sqrt(0.5), 3.0, 675.0, 67.5, 1485.0, 7.0, math.sqrt(8), 0.0, 5.0),
     ])
 
 
@@ -186,14 +196,15 @@ def test_context_bound(con_a):
         k("gpt-4o", "recap", 2, 1, 140.0, 140), k("gpt-4o", "recap", 3, 1, 120.0, 120),
         k(TD, "recap", 0, 1, 100.0, 100), k(TD, "recap", 1, 1, 100.0, 100),
     ])
-    # recap: 100, 120, 140, 120 at x = 0..3: p95 = 120 + 0.85 * 20; slope = 40 / 5
+    # recap: 100, 120, 140, 120 at x = 0..3: p95 = 120 + 0.85 * 20. No window reaches K = 64, so no
+    # episode has a growth slope (tests/reports/test_stats_context.py checks those)
     assert_rows(named_query(con_a, "context_summary").dicts(), [
         {"model_label": "gpt-4o", "arm": "react", "calls": 3, "mean_prompt_tokens": 400 / 3, "median_prompt_tokens": 150.0,
-         "p95_prompt_tokens": 150.0, "max_prompt_tokens": 150, "max_window_messages": 4, "tokens_per_call_slope": -25.0},
+         "p95_prompt_tokens": 150.0, "max_prompt_tokens": 150, "max_window_messages": 4, "episodes": 2, "filled_episodes": 0, "slope_median": None},
         {"model_label": "gpt-4o", "arm": "recap", "calls": 4, "mean_prompt_tokens": 120.0, "median_prompt_tokens": 120.0,
-         "p95_prompt_tokens": 137.0, "max_prompt_tokens": 140, "max_window_messages": 6, "tokens_per_call_slope": 8.0},
+         "p95_prompt_tokens": 137.0, "max_prompt_tokens": 140, "max_window_messages": 6, "episodes": 1, "filled_episodes": 0, "slope_median": None},
         {"model_label": TD, "arm": "recap", "calls": 2, "mean_prompt_tokens": 100.0, "median_prompt_tokens": 100.0,
-         "p95_prompt_tokens": 100.0, "max_prompt_tokens": 100, "max_window_messages": 4, "tokens_per_call_slope": 0.0},
+         "p95_prompt_tokens": 100.0, "max_prompt_tokens": 100, "max_window_messages": 4, "episodes": 1, "filled_episodes": 0, "slope_median": None},
     ])
 
 
@@ -245,7 +256,8 @@ def test_failure_mode_of_every_episode(con_a):
         "A-recap-alf-p1": "success", "A-react-alf-p1": "json_failures", "A-recap-alf-p1-td": "success",
         "A-recap-alf-p2-td": "env_error", "A-react-alf-p1-td": "episode_limit",
     }
-    assert run_query(con_a, "SELECT count(*) FROM failures").rows == [(10,)]
+    # failures: the finished units that did not succeed (the capped level_3 t6/84 is not one)
+    assert run_query(con_a, "SELECT count(*) FROM failures").rows == [(9,)]
 
 
 def test_failure_modes_table(con_a):
@@ -253,31 +265,31 @@ def test_failure_modes_table(con_a):
         return {"model_label": model, "mode": mode, "episodes": n, "share": share, "cost_usd": cost, "mean_steps": steps, "mean_calls": calls, "examples": examples}
 
     assert_rows(named_query(con_a, "failure_modes").dicts(), [
-        f("gpt-4o", "success", 7, 7 / 15, 10.25, 36 / 7, 45 / 7, ["A-lvl3-t6-126", "A-react-t2-42", "A-recap-alf-p1"]),
-        f("gpt-4o", "agent_done_early", 1, 1 / 15, 4.0, 3.0, 16.0, ["A-recap-t6-84"]),
-        f("gpt-4o", "budget_exhausted", 1, 1 / 15, 5.0, 7.0, 20.0, ["A-lvl3-t6-84"]),
-        f("gpt-4o", "call_cap", 1, 1 / 15, 1.5, 2.0, 6.0, ["A-react-t6-126"]),
-        f("gpt-4o", "invalid_action_loop", 1, 1 / 15, 1.0, 1.0, 4.0, ["A-react-t6-42"]),
-        f("gpt-4o", "json_failures", 1, 1 / 15, 0.25, 1.0, 2.0, ["A-react-alf-p1"]),
-        f("gpt-4o", "model_error:rate_limit", 1, 1 / 15, 0.25, 0.0, 3.0, ["A-react-t6-84"]),
-        f("gpt-4o", "repeated_action_loop", 1, 1 / 15, 0.5, 6.0, 2.0, ["A-react-t2-84-a2"]),
-        f("gpt-4o", "step_cap", 1, 1 / 15, 2.0, 4.0, 9.0, ["A-lvl3-t6-42"]),
+        # the 14 finished gpt-4o units (level_3 t6/84, capped, is in the coverage table instead)
+        f("gpt-4o", "success", 7, 7 / 14, 10.25, 36 / 7, 45 / 7, ["A-lvl3-t6-126", "A-react-t2-42", "A-recap-alf-p1"]),
+        f("gpt-4o", "agent_done_early", 1, 1 / 14, 4.0, 3.0, 16.0, ["A-recap-t6-84"]),
+        f("gpt-4o", "call_cap", 1, 1 / 14, 1.5, 2.0, 6.0, ["A-react-t6-126"]),
+        f("gpt-4o", "invalid_action_loop", 1, 1 / 14, 1.0, 1.0, 4.0, ["A-react-t6-42"]),
+        f("gpt-4o", "json_failures", 1, 1 / 14, 0.25, 1.0, 2.0, ["A-react-alf-p1"]),
+        f("gpt-4o", "model_error:rate_limit", 1, 1 / 14, 0.25, 0.0, 3.0, ["A-react-t6-84"]),
+        f("gpt-4o", "repeated_action_loop", 1, 1 / 14, 0.5, 6.0, 2.0, ["A-react-t2-84-a2"]),
+        f("gpt-4o", "step_cap", 1, 1 / 14, 2.0, 4.0, 9.0, ["A-lvl3-t6-42"]),
         f(TD, "env_error", 1, 1 / 3, 0.0, 0.0, 1.0, ["A-recap-alf-p2-td"]),
         f(TD, "episode_limit", 1, 1 / 3, 0.0, 4.0, 10.0, ["A-react-alf-p1-td"]),
         f(TD, "success", 1, 1 / 3, 0.0, 2.0, 2.0, ["A-recap-alf-p1-td"]),
     ])
     by_arm = named_query(con_a, "failure_modes_by_arm").rows
-    assert [r[:4] for r in by_arm if r[1] == "recap [level_3]"] == [
-        ("gpt-4o", "recap [level_3]", "budget_exhausted", 1), ("gpt-4o", "recap [level_3]", "step_cap", 1), ("gpt-4o", "recap [level_3]", "success", 1),
+    assert [r[:4] for r in by_arm if r[1] == "recap[level_3]"] == [
+        ("gpt-4o", "recap[level_3]", "step_cap", 1), ("gpt-4o", "recap[level_3]", "success", 1),
     ]
 
 
 def test_overview_and_runs(con_a):
     assert named_query(con_a, "overview").dicts() == [{
-        "run_folders": 1, "runs": 1, "attempts": 19, "units": 18, "successes": 8, "test_double_units": 3,
+        "run_folders": 1, "runs": 1, "attempts": 19, "units": 18, "finished_units": 17, "successes": 8, "test_double_units": 3,
         "llm_calls": 14, "spend_usd": 3.375, "steps": 24, "skipped_part_files": 0,
     }]
-    assert named_query(con_a, "runs").rows == [("runA", 2, "1970-01-01 00:16:40 UTC", "hostA2", "abc123", "hashA", 1, 18, 8)]
+    assert named_query(con_a, "runs").rows == [("runA", 2, "1970-01-01 00:16:40 UTC", "hostA2", "abc123", "hashA", 2, 18, 8)]
     assert named_query(con_a, "events_summary").rows == [("gateway", "retry", "warning", 2, 2), ("pipeline", "worker_restart", "error", 1, 0)]
 
 
@@ -290,10 +302,10 @@ def test_two_runs_together(run_a, run_b):
         ("gpt-4o", "react", ALF): (0, 1), ("gpt-4o", "recap ctx 64", ALF): (1, 1),
         (TD, "react", ALF): (0, 1), (TD, "recap ctx 64", ALF): (1, 2),
         ("gpt-4o", "react", SYNC): (2, 5), ("gpt-4o", "recap ctx 64", SYNC): (4, 5),
-        ("gpt-4o", "recap ctx 128", SYNC): (1, 1), ("gpt-4o", "recap [level_3]", SYNC): (1, 3),
+        ("gpt-4o", "recap ctx 128", SYNC): (1, 1), ("gpt-4o", "recap[level_3]", SYNC): (1, 2),
     }
     assert run_query(con, "SELECT run_id, episode_id FROM terminal WHERE unit_id LIKE 'react-dflt-gpt-4o-sync-t6-i6-42'").rows == [("runB", "B-react-t6-42-a2")]
-    assert named_query(con, "overview").rows[0][:5] == (2, 2, 21, 19, 10)
+    assert named_query(con, "overview").rows[0][:6] == (2, 2, 21, 19, 18, 10)
     con.close()
 
 

@@ -27,7 +27,7 @@ def report_dir(run_a, tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
     rc, stdout, stderr = _run(report_main, [str(run_a), "--out", str(out)])
     assert (rc, stderr) == (0, "")
-    assert stdout.startswith(f"wrote 51 files to {out} (md, html, tex, csv)\n")
+    assert stdout.startswith(f"wrote 64 files to {out} (md, html, tex, csv)\n")  # 13 of the paper section
     return out
 
 
@@ -38,8 +38,8 @@ def test_report_files(report_dir):
         "plots/context_by_call.svg", "plots/cost_per_episode.svg", "plots/failure_modes.svg", "plots/success_by_split.svg",
         "plots/tree_branching_factor.svg", "plots/tree_leaf_failures.svg", "plots/tree_levels.svg",
     ]
-    assert len([n for n in names if n.startswith("csv/")]) == 24
-    assert len([n for n in names if n.startswith("tex/")]) == 18  # 17 tables + report.tex
+    assert len([n for n in names if n.startswith("csv/")]) == 32  # + paper_cells/pairs/trees, 5 paper_table_*
+    assert len([n for n in names if n.startswith("tex/")]) == 23  # 17 tables + 5 paper tables + report.tex
     assert not [n for n in names if ".tmp-" in n]
 
 
@@ -47,18 +47,23 @@ def test_markdown_main_table(report_dir):
     md = (report_dir / "report.md").read_text()
     table = md[md.index("### Success rate by method and environment split"):].split("\n\n")[2]
     assert table.splitlines() == [
-        "| model | method | alfworld/eval_out_of_distribution | paper | robotouille/synchronous | paper |",
-        "|---|---|---:|---:|---:|---:|",
-        "| gpt-4o | react | 0.0 [0.0, 79.3] 0/1 | 84.0 | 20.0 [3.6, 62.4] 1/5 | 38.0 |",
-        "| gpt-4o | recap | 100.0 [20.7, 100.0] 1/1 | 91.0 | 80.0 [37.6, 96.4] 4/5 | 70.0 |",
-        "| gpt-4o | recap [level_3] | – | – | 33.3 [6.1, 79.2] 1/3 | – |",
-        "| scripted (test double) | react | 0.0 [0.0, 79.3] 0/1 | – | – | – |",
-        "| scripted (test double) | recap | 50.0 [9.5, 90.5] 1/2 | – | – | – |",
+        "| model | method | alfworld/valid_unseen | robotouille/synchronous |",
+        "|---|---|---:|---:|",
+        "| gpt-4o | react | 0.0 [0.0, 79.3] 0/1 | 20.0 [2.9, 68.0] 1/5 |",
+        "| gpt-4o | recap | 100.0 [20.7, 100.0] 1/1 | 80.0 [37.6, 96.4] 4/5 |",
+        "| gpt-4o | recap[level_3] | – | 50.0 [9.5, 90.5] 1/2 |",
+        "| scripted (test double) | react | 0.0 [0.0, 79.3] 0/1 | – |",
+        "| scripted (test double) | recap | 50.0 [9.5, 90.5] 1/2 | – |",
     ]
-    assert "| gpt-4o | robotouille/synchronous | react | recap | 5 | 20.0 | 80.0 | 0 | 3 | 0.2500 | -$1.6500 | 0.0625 |" in md
-    assert "| gpt-4o | recap | robotouille/synchronous | 64 | level_3 | 33.3 [6.1, 79.2] 1/3 | 10.0 | 3 | 1 | 0 | 1.0000 |" in md
+    # paper numbers appear only in the paper section, behind the protocol check (the fixture's arms
+    # ran no profile, so every paper cell there is a footnote mark)
+    success = md[md.index("## Success rates"):md.index("## Costs")]
+    assert "paper |" not in success and "84.0" not in success and "91.0" not in success
+    assert "[1] profile none, the paper's runs are profile paper." in md[md.index("## The paper's tables"):]
+    assert "| gpt-4o | robotouille/synchronous | react | recap | 5 | 20.0 | 80.0 | 0 | 3 | 0.2500 | 1.0000 | -$1.6500 | 0.0625 | 0.3125 |" in md
+    assert "| gpt-4o | recap | robotouille/synchronous | 64 | level_3 | 50.0 [9.5, 90.5] 1/2 | 2 | 1 | 0 | 1.0000 | 1.0000 |" in md
     assert "| gpt-4o | recap | robotouille/synchronous | 2 | 3.50 | 2.50 | 0.71 | 1.75 | 0.35 | 3 | 5.50 | 0.50 | 1 | 1.00 |" in md
-    assert "| gpt-4o | invalid_action_loop | 1 | 6.7 | $1.0000 | 1.00 | 4.00 | A-react-t6-42 |" in md
+    assert "| gpt-4o | invalid_action_loop | 1 | 7.1 | $1.0000 | 1.00 | 4.00 | A-react-t6-42 |" in md
     assert "![Success rate by environment split (95% Wilson intervals)](plots/success_by_split.svg)" in md
 
 
@@ -72,8 +77,8 @@ def test_test_doubles_are_labelled_everywhere(report_dir):
         assert not unlabelled.search(text), f"unlabelled test double in {path.name}"
     md = (report_dir / "report.md").read_text()
     tables_with_models = [t for t in md.split("### ")[1:] if "| model |" in t]
-    assert len(tables_with_models) == 12
-    assert sum("scripted (test double)" in t for t in tables_with_models) == 11  # all but the tree table (no tree)
+    assert len(tables_with_models) == 15  # 12 + the paper section's main, ALFWorld cost and cost-ratio tables
+    assert sum("scripted (test double)" in t for t in tables_with_models) == 13  # all but the tree table (no tree) and the cost ratio (gpt-4o only)
     # the per-task table of ALFWorld names models in its column headers
     assert "| task | react · gpt-4o | recap · gpt-4o | react · scripted (test double) | recap · scripted (test double) |" in md
 
@@ -88,8 +93,8 @@ def test_csv_is_the_long_sql_result(report_dir):
 
 def test_latex_tables(report_dir):
     main = (report_dir / "tex" / "main.tex").read_text()
-    assert "model & method & alfworld/eval\\_out\\_of\\_distribution & paper & robotouille/synchronous & paper \\\\" in main
-    assert "gpt-4o & recap [level\\_3] & -- & -- & 33.3 [6.1, 79.2] 1/3 & -- \\\\" in main
+    assert "model & method & alfworld/valid\\_unseen & robotouille/synchronous \\\\" in main
+    assert "gpt-4o & recap[level\\_3] & -- & 50.0 [9.5, 90.5] 1/2 \\\\" in main
     assert main.count("\\toprule") == 1 and main.count("\\bottomrule") == 1
     doc = (report_dir / "tex" / "report.tex").read_text()
     assert doc.startswith("\\documentclass{article}") and doc.rstrip().endswith("\\end{document}")
@@ -107,7 +112,7 @@ def test_html_is_self_contained(report_dir):
     # failure-mode examples link to their episode when (and only when) the viewer shows it
     shown = set(re.findall(r'<article class="episode" id="[^"]+" data-episode="([^"]+)"', html))
     linked = set(re.findall(r'<a href="#ep-([^"]+)">', html))
-    assert linked == shown & {"A-lvl3-t6-126", "A-react-t2-42", "A-recap-alf-p1", "A-recap-t6-84", "A-lvl3-t6-84", "A-react-t6-126",
+    assert linked == shown & {"A-lvl3-t6-126", "A-react-t2-42", "A-recap-alf-p1", "A-recap-t6-84", "A-react-t6-126",
                               "A-react-t6-42", "A-react-alf-p1", "A-react-t6-84", "A-react-t2-84-a2", "A-lvl3-t6-42",
                               "A-recap-alf-p2-td", "A-react-alf-p1-td", "A-recap-alf-p1-td"}
     assert len(linked) >= 6
@@ -163,7 +168,7 @@ def test_report_over_a_run_with_a_corrupt_part(run_a, tmp_path):
     rc, out, err = _run(report_main, [str(run)])
     assert rc == 0
     assert err.startswith(f"warning: skipped unreadable part file {bad} (llm_calls): ")
-    assert out.startswith(f"wrote 52 files to {run / 'report'} ")  # + the skipped-parts LaTeX table
+    assert out.startswith(f"wrote 65 files to {run / 'report'} ")  # + the skipped-parts LaTeX table
     html = (run / "report" / "report.html").read_text()
     assert "<strong>Unreadable part files were skipped:</strong>" in html and str(bad) in html
     md = (run / "report" / "report.md").read_text()

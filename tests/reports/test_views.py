@@ -23,7 +23,7 @@ from reports.views import (
 from schemas.tables import TABLES
 from workers.storage import part_files
 
-NAMED_VIEWS = ["attempts", "terminal", "calls", "nodes", "tree_stats", "step_patterns", "episode_modes", "failures"]
+NAMED_VIEWS = ["attempts", "terminal", "outcomes", "calls", "nodes", "tree_stats", "step_patterns", "episode_modes", "failures"]
 
 
 def _columns(con, name: str) -> list[tuple[str, str]]:
@@ -48,7 +48,7 @@ def test_empty_tables_are_empty_views_with_the_schema(tmp_path):
         assert run_query(con, f'SELECT count(*) FROM "{table}"').rows == [(0,)]
     for view in NAMED_VIEWS:
         assert run_query(con, f"SELECT count(*) FROM {view}").rows == [(0,)]
-    assert named_query(con, "overview").rows == [(1, 0, 0, 0, 0, 0, 0, 0.0, 0, 0)]
+    assert named_query(con, "overview").rows == [(1, 0, 0, 0, 0, 0, 0, 0, 0.0, 0, 0)]
 
 
 def _copy_run(run_a: Path, dest: Path) -> Path:
@@ -99,7 +99,7 @@ def test_part_missing_a_column_is_skipped_and_named(tmp_path):
                task="t1", instance_id="i1", seed=42, method="react", method_config="{}", model="gpt-4o",
                end_reason="success", success=True, steps=3, llm_calls=2, prompt_tokens=10, cached_prompt_tokens=0,
                completion_tokens=5, cost_usd=0.5, wall_s=1.0, step_cap=40, step_multiplier=4.0, max_depth=0,
-               started_at=1.0, ended_at=2.0)
+               started_at=1.0, ended_at=2.0, label="react")
     (tmp_path / "episodes").mkdir()
     part = tmp_path / "episodes" / "part-old-000001.parquet"
     pq.write_table(pa.Table.from_pylist([row], schema=old), part)

@@ -87,9 +87,10 @@ class BudgetActor(LocalBudget):
     concurrency group so they never wait behind requests."""
 
     def __init__(self, run_dir: str, run_cap_usd: float | None = None,
-                 model_caps_usd: Mapping[str, float] | None = None, durable_reservations: bool = True):
+                 model_caps_usd: Mapping[str, float] | None = None, durable_reservations: bool = True,
+                 group_commit: bool = True):
         super().__init__(BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
-                                      durable_reservations=durable_reservations))
+                                      durable_reservations=durable_reservations), group_commit=group_commit)
         _ledger_restored_event(run_dir, self.ledger)
 
     @ray.method(concurrency_group=CONTROL)
@@ -143,11 +144,13 @@ class RemoteBudget:
 class GatewayActor:
     """Hosts one :class:`DeploymentGateway`; ``budget`` is the run's ``BudgetActor`` - a handle,
     or the name of a named one - (or None: the gateway keeps its own ledger in the run folder,
-    for a single-deployment run). ``secret_env``: API keys set in this actor's process only."""
+    for a single-deployment run). ``secret_env``: API keys set in this actor's process only.
+    ``group_commit``: for the own ledger, see :class:`LocalBudget` (False only for benches)."""
 
     def __init__(self, config: DeploymentConfig | Mapping[str, Any], run_dir: str, run_id: str | None = None,
                  budget: Any = None, run_cap_usd: float | None = None,
-                 model_caps_usd: Mapping[str, float] | None = None, secret_env: SecretEnv | None = None):
+                 model_caps_usd: Mapping[str, float] | None = None, secret_env: SecretEnv | None = None,
+                 group_commit: bool = True):
         from workers.gateway.core import DeploymentGateway
 
         if secret_env is not None:  # the API keys, for this actor process only
@@ -156,10 +159,12 @@ class GatewayActor:
             budget = ray.get_actor(budget)  # restarts this actor without an object-store argument
 
         cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
-        self.core = DeploymentGateway(
-            cfg, run_dir=Path(run_dir), run_id=run_id,
-            budget=None if budget is None else RemoteBudget(budget),
-            run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd)
+        if budget is None:  # the gateway keeps the run's ledger itself
+            own = BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd)
+            gate: Any = LocalBudget(own, group_commit=group_commit)
+        else:
+            gate = RemoteBudget(budget)
+        self.core = DeploymentGateway(cfg, run_dir=Path(run_dir), run_id=run_id, budget=gate)
 
     async def complete(self, request: LLMRequest) -> tuple:
         try:
@@ -220,12 +225,13 @@ class RunGateways:
     GatewayActor keeps the ledger itself (no extra round trips per call); ``"auto"`` (default)
     - local for one deployment, shared otherwise; or an existing BudgetActor handle.
     ``client(name)`` gives the :class:`GatewayClient` of a deployment (by deployment name or
-    model, when the model has one deployment).
+    model, when the model has one deployment). ``group_commit``: see :class:`LocalBudget`
+    (False only for the bench's before figures).
     """
 
     def __init__(self, configs: Sequence[DeploymentConfig], run_dir: Path | str, run_id: str,
                  run_cap_usd: float | None = None, model_caps_usd: Mapping[str, float] | None = None,
-                 budget: Any = "auto"):
+                 budget: Any = "auto", group_commit: bool = True):
         self.run_dir = str(run_dir)
         self.run_id = run_id
         self.configs = list(configs)
@@ -239,9 +245,10 @@ class RunGateways:
                 raise ValueError("budget='local' needs exactly one deployment (caps are per run)")
             self.budget = None
             self.actors = {names[0]: GatewayActor.remote(self.configs[0], self.run_dir, run_id, None,
-                                                         run_cap_usd, model_caps_usd)}
+                                                         run_cap_usd, model_caps_usd, group_commit=group_commit)}
             return
-        self.budget = BudgetActor.remote(self.run_dir, run_cap_usd, model_caps_usd) if budget == "shared" else budget
+        self.budget = (BudgetActor.remote(self.run_dir, run_cap_usd, model_caps_usd, group_commit=group_commit)
+                       if budget == "shared" else budget)
         self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget)
                        for c in self.configs}
 

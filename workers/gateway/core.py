@@ -19,6 +19,9 @@ One call (:meth:`DeploymentGateway.complete`):
    never below our own floor; impossible usage charged at the worst case with a
    ``usage_rejected`` event), redact the deployment's secrets from the reply text, and write
    the ``llm_calls`` row (agent context from the request + accounting).
+   For a provider that caches only at explicit breakpoints (``DeploymentConfig.uses_cache_markers``)
+   the messages sent carry ``cache_control`` markers (:mod:`workers.llm.cache_markers`); sizing,
+   fingerprints and records use the plain messages.
    A 429 whose Retry-After exceeds ``max_retry_after_s`` fails the call at once (``rate_limit``)
    instead of pausing the deployment. Every failed attempt also
    writes an ``events`` row (``retry`` or, when the call gives up, ``call_failed``, with the
@@ -46,6 +49,7 @@ from workers.gateway.ledger import BudgetLedger, LocalBudget
 from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
 from workers.llm.accounting import USAGE_REJECTED_EVENT, Settlement, Sizing, error_record, ok_record, served_from
 from workers.llm.accounting import settle, size_request, worst_case_pico
+from workers.llm.cache_markers import BreakpointPlanner, mark
 from workers.llm.calling import Attempt, attempt_async, litellm_kwargs
 from workers.llm.errors import Classified, classify, redact_known, scrub
 from workers.llm.fingerprint import request_fingerprint
@@ -97,6 +101,7 @@ class _Call:
     attempts: int = 0
     charged: int = 0  # pico charged at worst case for attempts that may have been billed
     settlement: Settlement | None = None  # the checked usage and cost of the answer
+    send: list[dict[str, Any]] | None = None  # the messages as sent (cache markers); None: messages
 
 
 class DeploymentGateway:
@@ -115,6 +120,7 @@ class DeploymentGateway:
         self.instance = f"{self.deployment}:{uuid.uuid4().hex[:8]}"
         self.price = config.resolved_price(prices)
         self.test_double = config.is_test_double(prices)
+        self.markers = BreakpointPlanner() if config.uses_cache_markers(prices) else None
         self.budget = budget if budget is not None else LocalBudget(
             BudgetLedger(self.run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
                          durable_reservations=durable_reservations))
@@ -198,6 +204,8 @@ class DeploymentGateway:
             worst=worst_case_pico(self.price, sizing),
             cache_key=request_fingerprint(cfg.model, params, messages) if cfg.cache else None,
             deadline=t0 + cfg.total_timeout_s)
+        if self.markers is not None:
+            call.send = mark(self.markers, request.episode_id, messages)
         try:
             attempt = await self._attempts(call)
         except _Served as served:
@@ -238,7 +246,7 @@ class DeploymentGateway:
             token_count_source=usage.token_count_source, served_from=served_from(cfg.model),
             deployment=self.deployment, test_double=self.test_double,
             finish_reason=finish, provider_cost_usd=settled.provider_cost_usd)
-        self._record(request, resp)
+        self._record(request, resp, usage.cache_write_tokens)
         return resp
 
     async def _attempts(self, call: "_Call") -> Attempt:
@@ -310,7 +318,7 @@ class DeploymentGateway:
         try:
             api_key = cfg.api_key()
             timeout_s = max(0.001, min(cfg.attempt_timeout_s, call.deadline - self._clock()))
-            kwargs = litellm_kwargs(cfg, call.messages, call.params, timeout_s=timeout_s,
+            kwargs = litellm_kwargs(cfg, call.send or call.messages, call.params, timeout_s=timeout_s,
                                     call_key=call.request.call_key, hints=call.request.hints, api_key=api_key)
             attempt = await asyncio.wait_for(attempt_async(kwargs), timeout_s + _TIMEOUT_BACKSTOP_S)
         except DeploymentConfigError as exc:
@@ -390,8 +398,8 @@ class DeploymentGateway:
             deployment=self.deployment, test_double=self.test_double))
         return LLMError(c.kind, message, retries=retries, cost_usd=pico_to_usd(charged))
 
-    def _record(self, request: LLMRequest, resp: LLMResponse) -> None:
-        self.call_log.add(ok_record(request, resp))
+    def _record(self, request: LLMRequest, resp: LLMResponse, cache_write_tokens: int = 0) -> None:
+        self.call_log.add(ok_record(request, resp, cache_write_tokens))
 
     # ---- control ----
     def pause(self) -> None:

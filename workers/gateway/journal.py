@@ -16,10 +16,19 @@ last one is not a crash's tear: replay refuses it (:class:`JournalError`, naming
 the line) rather than guess the spend. An exclusive ``flock`` keeps two
 live ledgers off one run folder; the kernel releases it when its process dies, so a restart
 after ``kill -9`` just works.
+
+Group commit (:meth:`Journal.commit`): an asyncio caller that appends with ``sync=False`` and
+then awaits ``commit()`` is released once an ``fdatasync`` that started after its append has
+returned - the same promise as ``sync=True`` - but every caller that appended within the same
+event-loop tick shares that one ``fdatasync``. Why: an fsync per reservation costs 1-4 ms on
+a shared disk and serialises concurrent callers behind one another; a batch costs one. The
+sync still runs inline on the loop (a thread hand-off costs more than the fdatasync on a busy
+machine, and the loop has nothing else it may do with those reservations meanwhile).
 """
 
 from __future__ import annotations
 
+import asyncio
 import fcntl
 import json
 import os
@@ -56,6 +65,12 @@ class Journal:
         self.sync_interval_s = sync_interval_s
         self._last_sync = time.monotonic()
         self._dirty = False
+        #: entries written so far, and how many of them an fdatasync has put on disk
+        self.written = 0
+        self.synced = 0
+        #: fdatasync calls made (figures for benches and the group-commit tests)
+        self.syncs = 0
+        self._batch: asyncio.Future | None = None  # the commit scheduled for this loop tick
 
     @staticmethod
     def _parse(line: bytes) -> dict[str, Any] | None:
@@ -112,20 +127,68 @@ class Journal:
         except OSError:
             pass
 
-    def append(self, entry: dict[str, Any], *, sync: bool = False) -> None:
-        """Write one entry now; with ``sync`` also put it on disk before returning."""
+    def append(self, entry: dict[str, Any], *, sync: bool = False) -> int:
+        """Write one entry now; with ``sync`` also put it on disk before returning. Returns the
+        entry's sequence number (1, 2, ...), which :meth:`commit` covers once durable."""
         self._fh.seek(0, os.SEEK_END)
         self._fh.write(json.dumps(entry, separators=(",", ":"), ensure_ascii=False).encode() + b"\n")
         self._fh.flush()
         self._dirty = True
+        self.written += 1
+        seq = self.written
         if self._fsync and (sync or time.monotonic() - self._last_sync >= self.sync_interval_s):
             self.sync()
+        return seq
 
     def sync(self) -> None:
-        if self._dirty and not self._fh.closed:
-            os.fdatasync(self._fh.fileno())
+        """Put every entry written so far on disk (one ``fdatasync``)."""
+        if self._fh.closed:
+            return
+        upto = self.written  # entries written after this line may or may not be covered
+        if self._dirty:
             self._dirty = False
+            try:
+                os.fdatasync(self._fh.fileno())
+            except BaseException:
+                self._dirty = True
+                raise
+            self.syncs += 1
             self._last_sync = time.monotonic()
+        self.synced = max(self.synced, upto)
+
+    async def commit(self, seq: int | None = None) -> None:
+        """Return once entry ``seq`` (default: every entry written so far) is on disk.
+
+        Callers that wait within the same event-loop tick share one ``fdatasync``: the first
+        schedules it with ``call_soon`` (after the other ready callbacks of the tick, which may
+        append too), the others await the same future. Without fsync (``fsync=False``) there
+        is nothing to wait for. A failed fdatasync raises in every waiter of its batch."""
+        target = self.written if seq is None else seq
+        if not self._fsync:
+            return
+        loop = asyncio.get_running_loop()
+        while self.synced < target:
+            if self._fh.closed:
+                raise JournalError(f"{self.path} was closed before entry {target} was committed")
+            batch = self._batch
+            if batch is None or batch.done() or batch.get_loop() is not loop:
+                batch = self._batch = loop.create_future()
+                loop.call_soon(self._commit_batch, batch)
+            # shielded: a cancelled waiter must not cancel the batch the others wait for
+            await asyncio.shield(batch)
+
+    def _commit_batch(self, batch: asyncio.Future) -> None:
+        if self._batch is batch:
+            self._batch = None
+        if batch.done():
+            return
+        try:
+            self.sync()
+        except BaseException as exc:
+            batch.set_exception(exc)
+            batch.exception()  # retrieved here: waiters that were cancelled never look
+        else:
+            batch.set_result(None)
 
     def close(self) -> None:
         if self._fh.closed:

@@ -7,12 +7,15 @@ Before a call (:func:`size_request`): the prompt is counted offline, bounded fro
 (:func:`workers.llm.tokens.prompt_token_bound`), and the output is bounded by ``max_tokens``
 x choices (always 1: ``n``/``best_of`` other than 1 are refused by the deployment config; the
 bound still multiplies, should one ever get through) + :data:`COMPLETION_SLACK_TOKENS`. The
-worst case (:func:`worst_case_pico`, what the budget reserves) is that bound at full prices.
+worst case (:func:`worst_case_pico`, what the budget reserves) is that bound at full prices:
+every prompt token at the dearest input price, which is the cache-write price where a provider
+bills writes above the input price (Anthropic: 1.25x), so a cap holds even when a whole prompt
+is written to the cache.
 
 After a call (:func:`settle`), the provider's usage is *checked*. It is **impossible** when:
 - it is missing, or a count is not a whole number (litellm reports missing usage as zeros,
   which the next rule catches);
-- a count is negative, or cached prompt tokens exceed the prompt tokens;
+- a count is negative, or cached (read) + cache-write prompt tokens exceed the prompt tokens;
 - the prompt tokens are below ``ceil(our count / PROMPT_FLOOR_DIVISOR)`` (no tokenizer packs 4x
   more text per token than our count assumes: zero is always impossible) or above our upper
   bound of the prompt;
@@ -26,8 +29,11 @@ gateway writes a ``usage_rejected`` event. Plausible usage is charged
 at the input price (the part the provider reports as cached at the cached price) + our own
 count of the reply text (at least 1 token, at most the output bound) at the output price - so
 under-reported usage never lowers spend. Every settled cost lies between the floor and the
-worst case. A model without a price is charged litellm's figure when that is a valid
-(finite, >= 0) number, else 0 (such a model cannot run under a cap).
+worst case. The provider's usage is priced exactly: uncached prompt tokens at the input
+price, cached (read) ones at the cached price, cache-write ones at the write price, the
+completion at the output price (:meth:`workers.llm.pricing.Price.cost_pico`). A model without
+a price is charged litellm's figure when that is a valid (finite, >= 0) number, else 0 (such a
+model cannot run under a cap).
 """
 
 from __future__ import annotations
@@ -58,6 +64,8 @@ class CallUsage:
     cached_prompt_tokens: int
     completion_tokens: int
     token_count_source: str
+    #: prompt tokens written to the provider's prompt cache (a part of prompt_tokens)
+    cache_write_tokens: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -65,6 +73,7 @@ class CallUsage:
             "cached_prompt_tokens": self.cached_prompt_tokens,
             "completion_tokens": self.completion_tokens,
             "token_count_source": self.token_count_source,
+            "cache_write_tokens": self.cache_write_tokens,
         }
 
 
@@ -104,7 +113,7 @@ def worst_case_pico(price: Price | None, sizing: Sizing) -> int | None:
     """The most a call of this size can cost (what the budget reserves); None without a price."""
     if price is None:
         return None
-    return price.cost_pico(sizing.prompt_bound, 0, sizing.output_bound)
+    return sizing.prompt_bound * price.max_input_rate() + sizing.output_bound * price.rates()[2]
 
 
 def valid_cost_usd(value: Any) -> float | None:
@@ -166,10 +175,15 @@ def usage_problems(attempt: Attempt, sizing: Sizing, reply_tokens: int) -> list[
         elif c > sizing.output_bound:
             problems.append(f"completion_tokens {c} above max_tokens {sizing.max_tokens} x {sizing.choices} "
                             f"choice(s) + {COMPLETION_SLACK_TOKENS}")
+    written = attempt.cache_write_tokens
     if cached < 0:
         problems.append(f"cached prompt tokens {cached} is negative")
     elif p is not None and p >= 0 and cached > p:
         problems.append(f"cached prompt tokens {cached} above prompt_tokens {p}")
+    if written < 0:
+        problems.append(f"cache-write prompt tokens {written} is negative")
+    elif p is not None and p >= 0 and 0 <= cached <= p and cached + written > p:
+        problems.append(f"cached {cached} + cache-write {written} prompt tokens above prompt_tokens {p}")
     cost = attempt.litellm_cost_usd
     if cost is not None and valid_cost_usd(cost) is None:
         problems.append(f"provider cost {cost!r} is not a finite amount >= 0")
@@ -190,19 +204,22 @@ def settle(model: str, price: Price | None, attempt: Attempt, sizing: Sizing) ->
         cost = worst if worst is not None else 0
         return Settlement(usage, cost, tuple(problems), floor, worst, provider_cost, dict(attempt.reported))
     assert attempt.prompt_tokens is not None and attempt.completion_tokens is not None
-    usage = CallUsage(attempt.prompt_tokens, attempt.cached_prompt_tokens, attempt.completion_tokens, "provider")
+    usage = CallUsage(attempt.prompt_tokens, attempt.cached_prompt_tokens, attempt.completion_tokens, "provider",
+                      attempt.cache_write_tokens)
     if price is None:
         cost = usd_to_pico(provider_cost) if provider_cost is not None else 0
         return Settlement(usage, cost, (), 0, None, provider_cost, dict(attempt.reported))
     floor = price.cost_pico(counted.tokens, min(usage.cached_prompt_tokens, counted.tokens), reply_floor)
-    cost = max(price.cost_pico(usage.prompt_tokens, usage.cached_prompt_tokens, usage.completion_tokens), floor)
+    cost = max(price.cost_pico(usage.prompt_tokens, usage.cached_prompt_tokens, usage.completion_tokens,
+                               usage.cache_write_tokens), floor)
     return Settlement(usage, cost, (), floor, worst, provider_cost, dict(attempt.reported))
 
 
 def cost_pico(price: Price | None, usage: CallUsage, litellm_cost_usd: float | None) -> int:
     """The cost of known usage (no checks: :func:`settle` is what calls are charged by)."""
     if price is not None:
-        return price.cost_pico(usage.prompt_tokens, usage.cached_prompt_tokens, usage.completion_tokens)
+        return price.cost_pico(usage.prompt_tokens, usage.cached_prompt_tokens, usage.completion_tokens,
+                               usage.cache_write_tokens)
     valid = valid_cost_usd(litellm_cost_usd)
     return usd_to_pico(valid) if valid is not None else 0
 
@@ -211,8 +228,9 @@ def served_from(model: str) -> str:
     return "replay" if model == REPLAY_MODEL else "provider"
 
 
-def ok_record(request: Any, resp: Any) -> CallRecord:
-    """The ``llm_calls`` row of a successful call (``request``: LLMRequest, ``resp``: LLMResponse)."""
+def ok_record(request: Any, resp: Any, cache_write_tokens: int = 0) -> CallRecord:
+    """The ``llm_calls`` row of a successful call (``request``: LLMRequest, ``resp``: LLMResponse;
+    the response carries no cache writes, so the caller passes them from the settlement)."""
     return CallRecord(
         episode_id=request.episode_id, call_index=request.call_index, call_key=request.call_key,
         purpose=request.purpose, window_seqs=tuple(request.window_seqs), model=resp.model,
@@ -221,7 +239,8 @@ def ok_record(request: Any, resp: Any) -> CallRecord:
         completion_tokens=resp.completion_tokens, cost_usd=resp.cost_usd, latency_s=resp.latency_s,
         retries=resp.retries, token_count_source=resp.token_count_source, served_from=resp.served_from,
         deployment=resp.deployment, test_double=resp.test_double,
-        finish_reason=resp.finish_reason, provider_cost_usd=resp.provider_cost_usd)
+        finish_reason=resp.finish_reason, provider_cost_usd=resp.provider_cost_usd,
+        cache_write_tokens=cache_write_tokens)
 
 
 def error_record(request: Any, *, model: str, kind: str, message: str, cost_usd: float, latency_s: float,

@@ -29,7 +29,13 @@ class Attempt:
 
     Token counts are the provider's, as integers, or None when it reported none or something
     that is not a whole number (``reported`` keeps the raw values, ``malformed`` says what
-    was wrong); whether they are *plausible* is decided in :mod:`workers.llm.accounting`."""
+    was wrong); whether they are *plausible* is decided in :mod:`workers.llm.accounting`.
+
+    Cache counts arrive in each provider's own fields and litellm's ``Usage`` maps them:
+    OpenAI's ``prompt_tokens_details.cached_tokens`` as is, DeepSeek's
+    ``prompt_cache_hit_tokens`` and Anthropic's ``cache_read_input_tokens`` to
+    ``prompt_tokens_details.cached_tokens``, Anthropic's ``cache_creation_input_tokens`` to
+    ``prompt_tokens_details.cache_write_tokens`` (and as an attribute of the usage itself)."""
 
     text: str
     finish_reason: str | None
@@ -45,6 +51,8 @@ class Attempt:
     malformed: tuple[str, ...] = ()
     #: choices in the answer (only the first is read)
     choices: int = 1
+    #: prompt tokens the provider wrote to its prompt cache (Anthropic's cache_creation_input_tokens)
+    cache_write_tokens: int = 0
 
 
 def litellm_kwargs(config: DeploymentConfig, messages: list[dict[str, str]], params: Mapping[str, Any],
@@ -101,6 +109,7 @@ def parse_response(response: Any) -> Attempt:
         "prompt_tokens": getattr(usage, "prompt_tokens", None) if usage is not None else None,
         "completion_tokens": getattr(usage, "completion_tokens", None) if usage is not None else None,
         "cached_tokens": getattr(details, "cached_tokens", None) if details is not None else None,
+        "cache_write_tokens": _cache_writes(usage, details),
     }
     malformed = []
     if usage is None:
@@ -124,7 +133,18 @@ def parse_response(response: Any) -> Attempt:
         reported={k: (v if isinstance(v, (int, float, type(None))) else repr(v)) for k, v in raw.items()},
         malformed=tuple(malformed),
         choices=max(1, len(choices)),
+        cache_write_tokens=parsed["cache_write_tokens"] or 0,
     )
+
+
+def _cache_writes(usage: Any, details: Any) -> Any:
+    """The cache-write count litellm parsed (None when the provider reported none)."""
+    if usage is None:
+        return None
+    value = getattr(details, "cache_write_tokens", None) if details is not None else None
+    if value is None:
+        value = getattr(usage, "cache_creation_input_tokens", None)
+    return value
 
 
 async def attempt_async(kwargs: dict[str, Any]) -> Attempt:

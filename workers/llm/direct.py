@@ -21,6 +21,7 @@ from tenacity import wait_exponential_jitter
 from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.records import CallRecord
 from workers.llm.accounting import error_record, ok_record, served_from, settle, size_request
+from workers.llm.cache_markers import BreakpointPlanner, mark
 from workers.llm.calling import Attempt, attempt_sync, litellm_kwargs
 from workers.llm.errors import Classified, classify, redact_known
 from workers.llm.litellm_setup import get_litellm
@@ -46,6 +47,7 @@ class LiteLLMClient:
         self.config = config
         self.price = config.resolved_price(prices)
         self.test_double = config.is_test_double(prices)
+        self.markers = BreakpointPlanner() if config.uses_cache_markers(prices) else None
         self.record_sink = record_sink
         get_litellm()  # import now (seconds), not inside the first call
 
@@ -57,6 +59,7 @@ class LiteLLMClient:
         params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
         sizing = size_request(cfg.model, messages, params)
         counted = sizing.counted
+        send = mark(self.markers, request.episode_id, messages) if self.markers is not None else messages
         attempts = 0
         backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
 
@@ -77,7 +80,7 @@ class LiteLLMClient:
             try:
                 api_key = cfg.api_key()
                 timeout_s = max(0.001, min(cfg.attempt_timeout_s, deadline - time.monotonic()))
-                return attempt_sync(litellm_kwargs(cfg, messages, params, timeout_s=timeout_s,
+                return attempt_sync(litellm_kwargs(cfg, send, params, timeout_s=timeout_s,
                                                    call_key=request.call_key, hints=request.hints,
                                                    api_key=api_key))
             except DeploymentConfigError as exc:
@@ -117,5 +120,5 @@ class LiteLLMClient:
             redact_known(str(attempt.finish_reason), cfg.secrets())[:64],
             provider_cost_usd=settled.provider_cost_usd)
         if self.record_sink is not None:
-            self.record_sink(ok_record(request, resp))
+            self.record_sink(ok_record(request, resp, usage.cache_write_tokens))
         return resp

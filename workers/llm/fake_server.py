@@ -7,8 +7,14 @@ HTTP exchange through litellm's own client, without a paid provider. The server:
 - enforces RPM/TPM over a sliding window (``window_s``; 60 s like providers, scaled down in
   tests) and answers 429 with ``Retry-After`` (seconds) and ``retry-after-ms``;
 - counts tokens with the documented estimate of :mod:`workers.llm.tokens` and reports usage,
-  including ``prompt_tokens_details.cached_tokens`` = the longest common prefix with earlier
-  prompts (chars / 4);
+  with the prompt cache of a provider's rule (:mod:`workers.llm.prompt_cache`: ``openai``
+  automatic prefixes, ``anthropic`` explicit ``cache_control`` breakpoints with writes and
+  reads, ``deepseek`` hit/miss prefix units; each in that provider's own usage fields, with a
+  TTL so idle episodes lose their cache), chosen per deployment: ``cache_rules`` maps a model
+  name to a rule, other models get ``cache_rule`` (default ``lcp``: the longest common prefix
+  with earlier prompts, chars / 4, in ``prompt_tokens_details.cached_tokens``).
+  ``advance(seconds)`` moves the cache's clock (TTL tests without sleeping); message content
+  may be a string or a list of text blocks (litellm's format for ``cache_control``);
 - answers 400 ``context_length_exceeded`` (OpenAI error shape) above ``max_context_tokens``;
 - injects latency, 5xx, hangs (timeouts), empty and malformed bodies - at random with
   ``fault_rates`` (seeded) or per request with a directive in the last message:
@@ -18,6 +24,8 @@ HTTP exchange through litellm's own client, without a paid provider. The server:
   reply text repeats the API key the request carried), ``negusage`` / ``zerousage`` /
   ``hugeusage`` / ``fracusage`` / ``nousage`` / ``negcached`` (the usage block reports negative, zero,
   huge, non-integer or no token counts, or negative cached tokens; the reply itself is normal);
+  ``usage_override`` and these modes name the cache counts ``cached_tokens`` (reads) and
+  ``cache_write_tokens`` (writes), reported in the rule's own fields;
 - replies with a fixed, configurable text (truncated at ``max_tokens``, finish_reason length),
   one choice per ``n`` of the request (usage counts every choice, like OpenAI);
 - ``usage_override`` replaces fields of every reply's usage block (``None`` drops a field);
@@ -46,6 +54,7 @@ from typing import Any
 
 from aiohttp import web
 
+from workers.llm.prompt_cache import RULES, PromptCache, normalize, usage_fields
 from workers.llm.tokens import estimate_prompt_tokens, estimate_text_tokens
 
 HOST = "127.0.0.1"
@@ -58,7 +67,8 @@ _USAGE_FAULTS: dict[str, dict[str, Any]] = {
     "zerousage": {"prompt_tokens": 0, "completion_tokens": 0},
     "hugeusage": {"prompt_tokens": 50_000_000, "completion_tokens": 50_000_000},
     "fracusage": {"prompt_tokens": 10.5, "completion_tokens": 2.25},
-    "nousage": {"prompt_tokens": None, "completion_tokens": None, "cached_tokens": None},
+    "nousage": {"prompt_tokens": None, "completion_tokens": None, "cached_tokens": None,
+                "cache_write_tokens": None},
     "negcached": {"cached_tokens": -1_000_000},
 }
 _DIRECTIVE = re.compile(r"FAKE:([a-z0-9]+)(?:\*(\d+))?")
@@ -78,8 +88,16 @@ class FakeServerConfig:
     seed: int = 0
     hang_s: float = 3600.0
     require_api_key: str | None = None
-    #: earlier prompts kept to compute cached tokens
+    #: earlier prompts kept to compute cached tokens (rules lcp and deepseek)
     prefix_memory: int = 64
+    #: the prompt-cache rule of models not in ``cache_rules`` (see workers.llm.prompt_cache)
+    cache_rule: str = "lcp"
+    #: model name (as the request names it) -> cache rule: one rule per deployment
+    cache_rules: dict[str, str] = field(default_factory=dict)
+    #: seconds an unused cache entry lives (None: the rule's documented default)
+    cache_ttl_s: float | None = None
+    #: the smallest cacheable prefix (None: the rule's default, 1024 for openai / anthropic)
+    cache_min_tokens: int | None = None
     #: keep every request body (``FakeServer.bodies``), for tests of what reaches a provider
     keep_bodies: bool = False
     #: the Retry-After (seconds) of every 429, instead of the time the window needs
@@ -94,6 +112,12 @@ class FakeServerConfig:
         bad = set(self.fault_rates) - set(FAULT_MODES)
         if bad:
             raise ValueError(f"unknown fault mode(s) {sorted(bad)}; known: {', '.join(FAULT_MODES)}")
+        for rule in (self.cache_rule, *self.cache_rules.values()):
+            if rule not in RULES:
+                raise ValueError(f"unknown cache rule {rule!r}; known: {', '.join(RULES)}")
+
+    def rule_for(self, model: str) -> str:
+        return self.cache_rules.get(model, self.cache_rule)
 
 
 @dataclass(frozen=True)
@@ -110,18 +134,8 @@ class FakeCall:
     max_tokens: int | None
     #: tokens counted against TPM (0 when the request was refused before counting)
     counted_tokens: int
-
-
-def _lcp(a: str, b: str) -> int:
-    """Length of the longest common prefix (binary search on C-level slice compares)."""
-    lo, hi = 0, min(len(a), len(b))
-    while lo < hi:
-        mid = (lo + hi + 1) // 2
-        if a[:mid] == b[:mid]:
-            lo = mid
-        else:
-            hi = mid - 1
-    return lo
+    #: prompt tokens written to the cache (the anthropic rule; 0 otherwise)
+    cache_write_tokens: int = 0
 
 
 def window_maxima(calls: Sequence[FakeCall], window_s: float) -> tuple[int, int]:
@@ -155,7 +169,8 @@ class FakeServer:
         self._window_tokens = 0
         self._rng = random.Random(self.config.seed)
         self._directive_counts: dict[str, int] = {}
-        self._prompts: deque[str] = deque(maxlen=self.config.prefix_memory)
+        self._caches: dict[str, PromptCache] = {}
+        self._clock_offset = 0.0
         self._runner: web.AppRunner | None = None
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -232,8 +247,22 @@ class FakeServer:
         self._window.clear()
         self._window_tokens = 0
         self._directive_counts.clear()
-        self._prompts.clear()
+        self._caches.clear()
+        self._clock_offset = 0.0
         self._rng = random.Random(self.config.seed)
+
+    def advance(self, seconds: float) -> None:
+        """Move the prompt cache's clock forward (entries idle longer than the TTL expire)."""
+        self._clock_offset += seconds
+
+    def cache_for(self, model: str) -> PromptCache:
+        """The prompt cache of ``model``'s rule (one per rule, entries kept per model)."""
+        cfg = self.config
+        rule = cfg.rule_for(model)
+        if rule not in self._caches:
+            self._caches[rule] = PromptCache(rule, ttl_s=cfg.cache_ttl_s, min_tokens=cfg.cache_min_tokens,
+                                             recent_prompts=cfg.prefix_memory)
+        return self._caches[rule]
 
     # ---- handlers ----
     async def _models(self, request: web.Request) -> web.Response:
@@ -281,8 +310,8 @@ class FakeServer:
         return None
 
     def _record(self, now: float, status: int, mode: str, model: str, prompt: int, completion: int,
-                cached: int, max_tokens: int | None, counted: int) -> None:
-        self.log.append(FakeCall(now, status, mode, model, prompt, completion, cached, max_tokens, counted))
+                cached: int, max_tokens: int | None, counted: int, written: int = 0) -> None:
+        self.log.append(FakeCall(now, status, mode, model, prompt, completion, cached, max_tokens, counted, written))
 
     async def _chat(self, request: web.Request) -> web.StreamResponse:
         now = time.monotonic()
@@ -297,7 +326,12 @@ class FakeServer:
         if cfg.keep_bodies:
             self.bodies.append(body)
         max_tokens = body.get("max_tokens") or body.get("max_completion_tokens")
-        prompt_tokens = estimate_prompt_tokens(messages)
+        try:
+            seen = normalize(messages)
+        except Exception:
+            return web.json_response(_error_body("request body is not a chat completion request",
+                                                 "invalid_request_error", None), status=400)
+        prompt_tokens = estimate_prompt_tokens([{"role": m.role, "content": m.text} for m in seen])
         mode = self._mode_of(messages)
 
         if cfg.require_api_key is not None:
@@ -373,14 +407,14 @@ class FakeServer:
             return web.Response(body=b'{"id": "chatcmpl-fake", "choices": [{"mess', status=200,
                                 content_type="application/json")
 
-        flat = "".join(f"{m.get('role')}:{m.get('content')}\n" for m in messages)
-        common = max((_lcp(flat, p) for p in self._prompts), default=0)
-        self._prompts.append(flat)
-        cached = min(prompt_tokens, common // 4)
+        rule = cfg.rule_for(model)
+        outcome = self.cache_for(model).serve(model, seen, now + self._clock_offset, reply=reply)
+        cached, written = outcome.cached_tokens, outcome.cache_write_tokens
         self._record(now, 200, mode if mode in _USAGE_FAULTS or mode == "echokey" else "ok", model,
-                     prompt_tokens, completion_tokens, cached, max_tokens, admitted)
+                     prompt_tokens, completion_tokens, cached, max_tokens, admitted, written)
         usage: dict[str, Any] = {"prompt_tokens": prompt_tokens, "completion_tokens": completion_tokens,
-                                 "total_tokens": prompt_tokens + completion_tokens, "cached_tokens": cached}
+                                 "total_tokens": prompt_tokens + completion_tokens, "cached_tokens": cached,
+                                 "cache_write_tokens": written if rule == "anthropic" else None}
         for source in (_USAGE_FAULTS.get(mode), cfg.usage_override):
             for name, value in (source or {}).items():
                 usage[name] = value
@@ -388,9 +422,10 @@ class FakeServer:
                     usage["total_tokens"] = None if None in (usage["prompt_tokens"], usage["completion_tokens"]) \
                         else usage["prompt_tokens"] + usage["completion_tokens"]
         cached_reported = usage.pop("cached_tokens")
+        written_reported = usage.pop("cache_write_tokens")
         usage = {k: v for k, v in usage.items() if v is not None}
-        if cached_reported is not None:
-            usage["prompt_tokens_details"] = {"cached_tokens": cached_reported}
+        if cached_reported is not None or written_reported is not None:
+            usage.update(usage_fields(rule, usage.get("prompt_tokens"), cached_reported, written_reported))
         payload: dict[str, Any] = {
             "id": f"chatcmpl-fake-{len(self.log)}",
             "object": "chat.completion",
@@ -418,7 +453,16 @@ def main(argv: list[str] | None = None) -> None:
                    help=f"inject a fault at random; modes: {', '.join(FAULT_MODES)}")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--require-api-key")
+    p.add_argument("--cache-rule", default="lcp", choices=RULES,
+                   help="prompt-cache rule of models without --model-cache-rule (default lcp)")
+    p.add_argument("--model-cache-rule", action="append", default=[], metavar="MODEL=RULE",
+                   help="the prompt-cache rule of one model name (repeatable)")
+    p.add_argument("--cache-ttl-s", type=float, help="seconds an unused cache entry lives (default: the rule's)")
     args = p.parse_args(argv)
+    rules = {}
+    for item in args.model_cache_rule:
+        name, _, rule = item.partition("=")
+        rules[name] = rule
     faults = {}
     for item in args.fault:
         mode, _, rate = item.partition("=")
@@ -427,7 +471,8 @@ def main(argv: list[str] | None = None) -> None:
         rpm=args.rpm, tpm=args.tpm, window_s=args.window_s, latency_s=args.latency_s,
         latency_jitter_s=args.latency_jitter_s, reply=args.reply,
         max_context_tokens=args.max_context_tokens, fault_rates=faults, seed=args.seed,
-        require_api_key=args.require_api_key,
+        require_api_key=args.require_api_key, cache_rule=args.cache_rule, cache_rules=rules,
+        cache_ttl_s=args.cache_ttl_s,
     ))
 
     async def serve() -> None:

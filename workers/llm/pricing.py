@@ -2,8 +2,15 @@
 
 Why a table in the repo: a run's cost must be reproducible from its raw token counts, not
 depend on whatever a library version believes a model costs. litellm's own cost is kept only
-as a cross-check. Prices are USD per million tokens (input, cached input, output); a sweep
-may override any model's price.
+as a cross-check. Prices are USD per million tokens (input, cached input, cache write, output);
+a sweep may override any model's price.
+
+Prompt caching: the prompt tokens a provider reports are split three ways - read from its
+cache (``cached_input`` price), written to it (``cache_write`` price: Anthropic bills a
+write at 1.25x the input price; OpenAI and DeepSeek write for free, so their entries leave it
+out and a write costs the plain input price), and the rest (``input`` price). A model whose
+provider caches only at explicit breakpoints (``explicit_cache: true``) gets cache markers
+from the gateway (:mod:`workers.llm.cache_markers`).
 
 Costs are computed in integer pico-dollars (1e-12 USD): sums and cap comparisons are then
 exact, so a restarted ledger restores *exactly* the spend it had, and ``spend <= cap`` is
@@ -45,17 +52,22 @@ def _pico_per_token(value: Any, what: str) -> int:
 
 @dataclass(frozen=True)
 class Price:
-    """USD per million tokens. ``cached_input`` defaults to ``input`` (no cache discount)."""
+    """USD per million tokens. ``cached_input`` and ``cache_write`` default to ``input`` (no
+    cache discount, no write surcharge)."""
 
     input: float
     output: float
     cached_input: float | None = None
     test_double: bool = False
     note: str = ""
+    cache_write: float | None = None
+    #: the provider caches only prefixes ending at explicit ``cache_control`` breakpoints
+    explicit_cache: bool = False
 
     def __post_init__(self) -> None:
         # validate once; the integer rates are derived on demand
         self.rates()
+        self.write_rate()
 
     def rates(self) -> tuple[int, int, int]:
         """(input, cached input, output) in pico-USD per token."""
@@ -66,28 +78,47 @@ class Price:
             _pico_per_token(self.output, "output"),
         )
 
-    def cost_pico(self, prompt_tokens: int, cached_prompt_tokens: int, completion_tokens: int) -> int:
-        """Cost in pico-USD; cached tokens are a part of the prompt tokens."""
-        cached = max(0, min(cached_prompt_tokens, prompt_tokens))
-        r_in, r_cached, r_out = self.rates()
-        return (prompt_tokens - cached) * r_in + cached * r_cached + completion_tokens * r_out
+    def write_rate(self) -> int:
+        """Cache-write price in pico-USD per token (the input price when not set)."""
+        return _pico_per_token(self.input if self.cache_write is None else self.cache_write, "cache_write")
 
-    def cost_usd(self, prompt_tokens: int, cached_prompt_tokens: int, completion_tokens: int) -> float:
-        return pico_to_usd(self.cost_pico(prompt_tokens, cached_prompt_tokens, completion_tokens))
+    def max_input_rate(self) -> int:
+        """The dearest price a prompt token can have (what a worst case reserves per token)."""
+        r_in, r_cached, _ = self.rates()
+        return max(r_in, r_cached, self.write_rate())
+
+    def cost_pico(self, prompt_tokens: int, cached_prompt_tokens: int, completion_tokens: int,
+                  cache_write_tokens: int = 0) -> int:
+        """Cost in pico-USD; cached (read) and cache-write tokens are parts of the prompt tokens
+        (clamped so that together they never exceed it)."""
+        cached = max(0, min(cached_prompt_tokens, prompt_tokens))
+        written = max(0, min(cache_write_tokens, prompt_tokens - cached))
+        r_in, r_cached, r_out = self.rates()
+        return ((prompt_tokens - cached - written) * r_in + cached * r_cached + written * self.write_rate()
+                + completion_tokens * r_out)
+
+    def cost_usd(self, prompt_tokens: int, cached_prompt_tokens: int, completion_tokens: int,
+                 cache_write_tokens: int = 0) -> float:
+        return pico_to_usd(self.cost_pico(prompt_tokens, cached_prompt_tokens, completion_tokens, cache_write_tokens))
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any], what: str) -> "Price":
-        unknown = set(data) - {"input", "output", "cached_input", "test_double", "note"}
+        unknown = set(data) - {"input", "output", "cached_input", "cache_write", "explicit_cache", "test_double", "note"}
         if unknown:
             raise PriceError(f"{what}: unknown price field(s) {sorted(unknown)}")
         for required in ("input", "output"):
             if required not in data:
                 raise PriceError(f"{what}: price needs {required!r} (USD per million tokens)")
+        for flag in ("explicit_cache", "test_double"):
+            if flag in data and not isinstance(data[flag], bool):
+                raise PriceError(f"{what}: {flag} must be true or false, got {data[flag]!r}")
         try:
             return cls(
                 input=float(data["input"]),
                 output=float(data["output"]),
                 cached_input=None if data.get("cached_input") is None else float(data["cached_input"]),
+                cache_write=None if data.get("cache_write") is None else float(data["cache_write"]),
+                explicit_cache=bool(data.get("explicit_cache", False)),
                 test_double=bool(data.get("test_double", False)),
                 note=str(data.get("note", "")),
             )
@@ -173,6 +204,6 @@ def require_prices(models: Iterable[str], overrides: Mapping[str, Any] | None = 
         raise PriceError(
             f"no price for model(s) {', '.join(sorted(set(missing)))}: add them to "
             f"{PRICES_FILE.relative_to(PRICES_FILE.parents[2])} or pass a price override "
-            "(USD per million tokens: input, cached_input, output)"
+            "(USD per million tokens: input, cached_input, cache_write, output)"
         )
     return found

@@ -132,6 +132,9 @@ class DeploymentConfig(BaseModel):
     ``price`` overrides the repo price table for this model.
     ``offline_options`` configures the ``offline/`` test doubles (seed, invalid_action_rate,
     malformed_json_rate, chunk_size); ignored for real providers.
+    ``cache_markers``: mark prompt-cache breakpoints (:mod:`workers.llm.cache_markers`) on the
+    messages sent; None: when the model's price says its provider caches only at explicit
+    breakpoints (``explicit_cache``), False turns the markers off.
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
@@ -167,6 +170,7 @@ class DeploymentConfig(BaseModel):
     #: None: inferred (offline/ models and price-table test doubles are test doubles)
     test_double: bool | None = None
     offline_options: dict[str, Any] = Field(default_factory=dict)
+    cache_markers: bool | None = None
 
     @field_validator("model")
     @classmethod
@@ -236,6 +240,15 @@ class DeploymentConfig(BaseModel):
 
     def resolved_price(self, table: PriceTable | None = None) -> Price | None:
         return resolve_price(self.model, self.price, table)
+
+    def uses_cache_markers(self, table: PriceTable | None = None) -> bool:
+        """Whether the gateway marks cache breakpoints on this deployment's requests."""
+        if self.cache_markers is not None:
+            return self.cache_markers
+        if self.is_offline:
+            return False
+        price = self.resolved_price(table)
+        return bool(price and price.explicit_cache)
 
     def is_test_double(self, table: PriceTable | None = None) -> bool:
         if self.test_double is not None:

@@ -1,0 +1,18 @@
+"""``recap view``: a local web viewer over every episode of one or more run folders.
+
+Stack, and why: Python's own ``http.server`` (``ThreadingHTTPServer``) serving server-rendered
+HTML, one small stylesheet and one small vanilla script shipped with the package
+(``reports/webview/static/``). No framework, no build step, no CDN and no new dependency: the
+viewer is a handful of read-only GET pages on loopback for one user, which the standard library
+serves well, and everything it shows comes from the report's own read-only DuckDB views
+(:mod:`reports.views`, ``reports/sql/``) so the viewer and the report never disagree. A
+framework (Flask, FastAPI, aiohttp's web server) would add a dependency and its release cycle
+for routing we do in a dictionary; a JavaScript front end would need a bundler or a CDN.
+
+Modules: :mod:`~reports.webview.data` (snapshots of the run folders, the queries),
+:mod:`~reports.webview.pages` (the HTML), :mod:`~reports.webview.server` (HTTP, safety rules
+and the ``recap view`` command line).
+"""
+
+#: the port ``recap view`` listens on by default; the HTML report looks for a viewer there
+DEFAULT_PORT = 8765

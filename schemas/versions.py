@@ -1,0 +1,115 @@
+"""Parts written under an earlier schema version, mapped to the current one on read.
+
+Every part file carries its schema version in its Arrow metadata (``recap_eval_schema_version``,
+:func:`part_version`). A reader takes a part of an *earlier* version when it lacks only columns
+added since that version (:func:`missing_fillable`) and maps its rows with :func:`upgrade`, so
+``recap status``, ``recap sql``, ``recap report`` and ``recap show`` read runs written by an
+older recap exactly as they would have read them then, plus what can be derived.
+
+Version 1 -> 2, ``episodes`` (documented mapping; everything else is copied as stored):
+
+* ``label``: the stored ``method`` (version 1 kept the arm's label there);
+* ``method``: the stored value too, except a label in the form a sweep gives an unlabelled arm
+  (``recap``, ``recap[paper]``, ``recap[paper,no_think]``, ``recap[level_3]``), which names
+  the method, and the profile and ablation in its brackets
+  (:func:`schemas.labels.parse_default_label`);
+* ``profile``: from such a label, else null (version 1 did not record it);
+* ``ablation``: from such a label, else what the ReCAP settings of ``method_config`` amount to
+  (:func:`schemas.labels.ablation_of_config`: ``no_think``, ``level_3`` ...), null for none;
+* ``provider_model``: null (version 1 kept only the model's label, in ``model``);
+* ALFWorld rows: ``split`` ``valid_unseen``, ``task`` the task type (version 1 had the type
+  in ``split`` and ALFRED's long type name in ``task``) - :func:`schemas.labels.place_of`;
+* rows without a split (a unit the driver gave up on): ``split``/``task`` from the instance id;
+* ``end_reason`` ``infra_error`` where the row records an infrastructure failure
+  (:func:`schemas.labels.infra_failure`: an ``llm_error`` of a failed model service, a unit given
+  up after its workers died); its ``error`` is kept, so the failure's kind still reads from it.
+
+Any table, any earlier version: a missing column that has a default in its record dataclass (or
+is nullable) is filled with that default (null); a part missing any other column is not readable
+(the reader names it, as for any part that breaks :func:`workers.storage.schema_problem`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import pyarrow as pa
+
+from schemas.labels import INFRA_ERROR, ablation_of_config, infra_failure, parse_default_label, place_of
+from schemas.records import SCHEMA_VERSION
+from schemas.tables import arrow_schema, record_type
+
+VERSION_KEY = b"recap_eval_schema_version"
+
+#: columns each version added, by table (the first version a part may lack them before)
+ADDED: dict[int, dict[str, tuple[str, ...]]] = {
+    2: {"episodes": ("label", "profile", "ablation", "provider_model")},
+}
+
+
+def part_version(schema: pa.Schema) -> int | None:
+    """The schema version a part was written under (None: it does not say)."""
+    raw = (schema.metadata or {}).get(VERSION_KEY)
+    try:
+        return int(raw) if raw is not None else None
+    except ValueError:
+        return None
+
+
+def column_defaults(table: str) -> dict[str, Any]:
+    """Column -> default value of the table's record dataclass (only columns that have one)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(record_type(table)):
+        if f.default is not dataclasses.MISSING:
+            out[f.name] = f.default
+        elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+            out[f.name] = f.default_factory()  # type: ignore[misc]
+    return out
+
+
+def missing_fillable(table: str, missing: list[str], version: int | None) -> bool:
+    """A part of ``version`` that lacks ``missing`` columns can be read: it is of an earlier
+    version and every missing column was added since, or has a default (or is nullable)."""
+    if version is None or version >= SCHEMA_VERSION or not missing:
+        return False
+    schema = arrow_schema(table)
+    defaults = column_defaults(table)
+    added = {c for v, tables in ADDED.items() if v > version for c in tables.get(table, ())}
+    return all(c in added or c in defaults or schema.field(c).nullable for c in missing)
+
+
+def upgrade(table: str, data: pa.Table, version: int) -> pa.Table:
+    """The rows of a part of ``version`` as the current schema has them (see the module doc)."""
+    schema = arrow_schema(table)
+    if version < 2 and table == "episodes":
+        rows = [_episode_v1(r) for r in data.to_pylist()]
+        return pa.Table.from_pylist(rows, schema=schema) if rows else schema.empty_table()
+    defaults = column_defaults(table)
+    cols = []
+    for f in schema:
+        if f.name in data.column_names:
+            cols.append(data.column(f.name).cast(f.type))
+        else:
+            cols.append(pa.array([defaults.get(f.name)] * data.num_rows, type=f.type))
+    return pa.Table.from_arrays(cols, schema=schema)
+
+
+def _episode_v1(row: dict[str, Any]) -> dict[str, Any]:
+    stored = row.get("method") or ""
+    out = dict(row)
+    out["label"] = stored
+    parsed = parse_default_label(stored)
+    if parsed is not None:
+        out["method"], out["profile"], ablation = parsed
+        out["ablation"] = None if ablation in (None, "original") else ablation
+    else:
+        out["profile"] = None
+        out["ablation"] = ablation_of_config(row.get("method_config"))
+    out["provider_model"] = None
+    if row.get("benchmark") == "alfworld" or not row.get("split"):
+        _, out["split"], out["task"] = place_of(row.get("instance_id") or "", row.get("split") or None,
+                                                row.get("task") or None)
+    if infra_failure(row.get("end_reason"), row.get("error")) is not None:
+        out["end_reason"] = INFRA_ERROR
+    return out
