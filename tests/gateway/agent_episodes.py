@@ -5,16 +5,10 @@ Shared by the offline-expert test (default suite) and the real-model check (test
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 from typing import Any
 
 from workers.storage import read_table
-
-
-def agents_available() -> bool:
-    return all(importlib.util.find_spec(m) is not None
-               for m in ("recap.recap_agent", "recap.baselines", "workers.episode_worker"))
 
 
 def play(method: str, instance_id: str, inner: Any, episode_id: str, *, offline: bool,

@@ -7,9 +7,8 @@ import pytest
 from workers.gateway.blocking import BlockingGateway
 from workers.llm.providers import DeploymentConfig
 
-from .agent_episodes import agents_available, assert_every_call_recorded, episode_rows, play
+from .agent_episodes import assert_every_call_recorded, episode_rows, play
 
-pytestmark = pytest.mark.skipif(not agents_available(), reason="the agents are not in this checkout")
 
 
 @pytest.mark.parametrize("method", ["recap", "react", "cot"])

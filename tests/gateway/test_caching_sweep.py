@@ -11,7 +11,6 @@ import pytest
 
 from workers.llm.pricing import default_prices
 
-pytest.importorskip("ray")
 
 SWEEP = """run: caching
 output: {out}
@@ -46,7 +45,6 @@ def ray_address():
         ray.shutdown()
 
 
-@pytest.mark.slow  # a local Ray cluster and a sweep: about a minute on a quiet machine
 def test_sweep_records_cached_tokens_and_bills_them_at_the_cached_prices(ray_address, tmp_path: Path, monkeypatch):
     from pipeline.cli import main
     from pipeline.sqlview import open_tables

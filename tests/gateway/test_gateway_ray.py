@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ray = pytest.importorskip("ray")
+import ray  # noqa: E402
 
 from recap.llm import LLMError  # noqa: E402
 from workers.gateway.actors import RunGateways  # noqa: E402

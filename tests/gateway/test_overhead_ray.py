@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-ray = pytest.importorskip("ray")
+import ray  # noqa: E402
 
 from workers.gateway.actors import RunGateways  # noqa: E402
 from workers.llm.providers import DeploymentConfig  # noqa: E402

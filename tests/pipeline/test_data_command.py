@@ -32,9 +32,16 @@ REPO = Path(__file__).resolve().parents[2]
 SHARED = REPO.parent / "shared" / "data"
 ROB, ALF, ALF212 = SHARED / "robotouille", SHARED / "alfworld", SHARED / "alfworld-2.1.2"
 
-needs_data = pytest.mark.skipif(
-    not (ROB.is_dir() and ALF.is_dir() and ALF212.is_dir()), reason="needs ../shared/data"
-)
+def needs_data(test):
+    """The benchmark data is part of the test environment: a missing folder fails the test (with
+    where it was looked for), it never skips it."""
+
+    @functools.wraps(test)
+    def checked(*args, **kwargs):
+        assert ROB.is_dir() and ALF.is_dir() and ALF212.is_dir(), f"the tests need the benchmark data in {SHARED}"
+        return test(*args, **kwargs)
+
+    return checked
 
 
 def run(*argv: str) -> tuple[int, str, str]:
@@ -250,8 +257,7 @@ def _alfworld_zip(path: Path, root: Path, pattern: str) -> None:
 
 @pytest.fixture(scope="module")
 def mirror(tmp_path_factory):
-    if not (ROB.is_dir() and ALF.is_dir() and ALF212.is_dir()):
-        pytest.skip("needs ../shared/data")
+    assert ROB.is_dir() and ALF.is_dir() and ALF212.is_dir(), f"the tests need the benchmark data in {SHARED}"
     folder = tmp_path_factory.mktemp("mirror")
     _robotouille_archive(folder / f"{ROBOTOUILLE_COMMIT}.tar.gz")
     _alfworld_zip(folder / "json_2.1.1_json.zip", ALF, "traj_data.json")
@@ -411,8 +417,7 @@ def test_default_alfworld_urls_match_the_installed_downloader():
     """The 2.1.1 archives are ALFWorld's release assets, the 2.1.2 games the ones alfworld 0.4.2's
     own `alfworld-download` fetches: keep the constants in step with the installed script."""
     script = Path(sys.executable).parent / "alfworld-download"
-    if not script.is_file():
-        pytest.skip("alfworld is not installed")
+    assert script.is_file(), f"alfworld's downloader is not installed beside {sys.executable}"
     text = script.read_text()
     constants = dict(re.findall(r'^(\w+_URL) = "([^"]+)"', text, re.MULTILINE))
     assert constants["JSON_FILES_URL"] == datacmd.ALFWORLD_JSON_URL

@@ -144,8 +144,8 @@ def test_one_open_per_task_kind_and_option_set(count_opens):
     assert count_opens == ["blocksworld/3@1", "blocksworld/4@1"]
 
 
-@pytest.mark.skipif(not (HAVE_ROBOTOUILLE and HAVE_ALFWORLD), reason="needs ../shared/data/{robotouille,alfworld}")
 def test_all_alfworld_games_open_a_handful(count_opens, monkeypatch):
+    assert HAVE_ROBOTOUILLE and HAVE_ALFWORLD, f"the tests need the benchmark data in {SHARED}"
     monkeypatch.setenv("ROBOTOUILLE_DATA", str(SHARED / "robotouille"))
     monkeypatch.setenv("ALFWORLD_DATA", str(SHARED / "alfworld"))
     envs = "  - benchmark: alfworld\n    tasks: [all]\n" + ROBOTOUILLE.replace("limit: 1", "limit: 3")

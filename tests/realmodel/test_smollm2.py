@@ -29,7 +29,7 @@ from workers.gateway.ledger import JOURNAL_NAME
 from workers.llm.providers import DeploymentConfig
 from workers.storage import read_table
 
-from tests.gateway.agent_episodes import agents_available, assert_every_call_recorded, episode_rows, play
+from tests.gateway.agent_episodes import assert_every_call_recorded, episode_rows, play
 
 pytestmark = pytest.mark.realmodel
 
@@ -122,7 +122,6 @@ def test_calls_tokens_and_end_reasons_are_recorded(server_url, tmp_path):
     assert set(finish) == {f"real#{i}" for i in range(5)} and set(finish.values()) <= {"stop", "length"}
 
 
-@pytest.mark.skipif(not agents_available(), reason="the agents are not in this checkout")
 @pytest.mark.parametrize("method", ["recap", "react"])
 def test_agent_episode_through_the_gateway_records_every_call(server_url, tmp_path, method):
     run_dir = tmp_path / "run"

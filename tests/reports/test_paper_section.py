@@ -194,7 +194,6 @@ def _check_holm(t, keys: list[str]) -> None:
     assert f"; {len(slots)} comparisons (Holm over the table)." in t.note
 
 
-@pytest.mark.slow
 def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
     main_dirs = [paper_runs["main-robotouille-x4"], paper_runs["main-robotouille-x3"], paper_runs["main-alfworld"]]
     report = build_report(main_dirs, ReportOptions(formats=("md",), paper_only=True))
