@@ -40,33 +40,25 @@ CREATE MACRO kish_deff(g, n, k, q, mm) AS
 CREATE MACRO episode_obs(benchmark, split, task, instance_id, success) AS
   {'instance': concat_ws('/', benchmark, split, task, instance_id), 'success': success};
 
+-- Per-instance counts of obs: m episodes and y successes per instance (one row per instance).
+CREATE MACRO instance_counts(obs) AS TABLE
+  SELECT count(*)::DOUBLE AS m, (count(*) FILTER (WHERE o.success))::DOUBLE AS y
+  FROM (SELECT unnest(obs) AS o)
+  GROUP BY o.instance;
+
 CREATE MACRO instance_deff(obs) AS (
-  SELECT kish_deff(count(*)::DOUBLE, sum(m), sum(y), sum(y * y / m), sum(m * m))
-  FROM (
-    SELECT count(*)::DOUBLE AS m, (count(*) FILTER (WHERE o.success))::DOUBLE AS y
-    FROM (SELECT unnest(obs) AS o)
-    GROUP BY o.instance
-  )
+  SELECT kish_deff(count(*)::DOUBLE, sum(m), sum(y), sum(y * y / m), sum(m * m)) FROM instance_counts(obs)
 );
 
+-- The Wilson bound at the effective sample: successes and episodes both divided by the design effect.
 CREATE MACRO cluster_wilson_low(obs) AS (
-  SELECT wilson_low(sum(y) / kish_deff(count(*)::DOUBLE, sum(m), sum(y), sum(y * y / m), sum(m * m)),
-                    sum(m) / kish_deff(count(*)::DOUBLE, sum(m), sum(y), sum(y * y / m), sum(m * m)))
-  FROM (
-    SELECT count(*)::DOUBLE AS m, (count(*) FILTER (WHERE o.success))::DOUBLE AS y
-    FROM (SELECT unnest(obs) AS o)
-    GROUP BY o.instance
-  )
+  SELECT wilson_low(sum(y) / any_value(d), sum(m) / any_value(d))
+  FROM instance_counts(obs), (SELECT instance_deff(obs) AS d)
 );
 
 CREATE MACRO cluster_wilson_high(obs) AS (
-  SELECT wilson_high(sum(y) / kish_deff(count(*)::DOUBLE, sum(m), sum(y), sum(y * y / m), sum(m * m)),
-                     sum(m) / kish_deff(count(*)::DOUBLE, sum(m), sum(y), sum(y * y / m), sum(m * m)))
-  FROM (
-    SELECT count(*)::DOUBLE AS m, (count(*) FILTER (WHERE o.success))::DOUBLE AS y
-    FROM (SELECT unnest(obs) AS o)
-    GROUP BY o.instance
-  )
+  SELECT wilson_high(sum(y) / any_value(d), sum(m) / any_value(d))
+  FROM instance_counts(obs), (SELECT instance_deff(obs) AS d)
 );
 
 -- Exact two-sided McNemar test on the discordant pairs b (only A succeeded) and c (only B):

@@ -6,14 +6,7 @@
 -- effect of several seeds per instance: cluster_wilson_low/high in macros.sql) each row carries
 -- what the arm ran (provider model, test double, profile, windows, step multipliers, tasks), so
 -- the section can decide whether a paper number is comparable, and the cost totals.
-WITH counted AS (
-  SELECT *, coalesce(nullif(arm, ''), method) AS arm_label, ablation AS variant FROM outcomes
-), scoped AS (
-  SELECT *, 'all' AS scope FROM counted
-  UNION ALL
-  SELECT *, 'sync_2_4_6' FROM counted
-  WHERE benchmark = 'robotouille' AND split = 'synchronous' AND split_part(task, '_', 1) IN ('2', '4', '6')
-), cells AS (
+WITH scoped AS (SELECT * FROM paper_scoped), cells AS (
   SELECT scope, model_label, arm_label, benchmark, split, task,
     CASE WHEN GROUPING(task) = 1 THEN 'split' ELSE 'task' END AS level,
     any_value(method) AS method, any_value(variant) AS ablation,

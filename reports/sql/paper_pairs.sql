@@ -4,14 +4,7 @@
 -- (level), and over Robotouille synchronous tasks 2, 4, 6 (scope 'sync_2_4_6', per split only). ref_only / arm_only are the discordant pairs; p_value is the exact two-sided McNemar
 -- test; cost_diffs (arm minus reference, in pair order) feed the paired permutation test of the
 -- cost difference; arm_cost / ref_cost are the two arms' totals over the paired units.
-WITH counted AS (
-  SELECT *, coalesce(nullif(arm, ''), method) AS arm_label, ablation AS variant FROM outcomes
-), scoped AS (
-  SELECT *, 'all' AS scope FROM counted
-  UNION ALL
-  SELECT *, 'sync_2_4_6' FROM counted
-  WHERE benchmark = 'robotouille' AND split = 'synchronous' AND split_part(task, '_', 1) IN ('2', '4', '6')
-), joined AS (
+WITH scoped AS (SELECT * FROM paper_scoped), joined AS (
   SELECT a.scope, a.model_label, a.arm_label, r.arm_label AS ref_label, a.benchmark, a.split, a.task,
     a.instance_id, a.seed, a.success AS a_success, r.success AS r_success, a.cost_usd AS a_cost, r.cost_usd AS r_cost
   FROM scoped a

@@ -217,6 +217,18 @@ LEFT JOIN last_error le ON le.run_id = t.run_id AND le.episode_id = t.episode_id
 CREATE VIEW failures AS
 SELECT * FROM episode_modes WHERE mode <> 'success' AND state = 'finished';
 
+-- paper_scoped: the outcomes rows the paper section counts, once per scope: 'all', and again as
+-- 'sync_2_4_6' for Robotouille synchronous tasks 2, 4 and 6 (the cross-model table's tasks);
+-- arm_label is the arm (its label, else the method), variant the ablation.
+CREATE VIEW paper_scoped AS
+WITH counted AS (
+  SELECT *, coalesce(nullif(arm, ''), method) AS arm_label, ablation AS variant FROM outcomes
+)
+SELECT *, 'all' AS scope FROM counted
+UNION ALL
+SELECT *, 'sync_2_4_6' FROM counted
+WHERE benchmark = 'robotouille' AND split = 'synchronous' AND split_part(task, '_', 1) IN ('2', '4', '6');
+
 -- planned_units: the units each run folder's plan.json lists (run_id from its run.json), with
 -- whether its model is a test double (from the folder's spec.yaml; NULL when unknown). Filled by
 -- the report builder (reports.sections.load_plans); empty in a plain `recap sql` session, where

@@ -39,7 +39,7 @@ class WalkError(AssertionError):
 
 
 def walk_recap(env: Environment, replies: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """Play ``replies`` on ``env`` following notes/AGENT_PROTOCOL.md literally.
+    """Play ``replies`` on ``env`` following recap/recap_agent.py literally.
 
     Returns the number of replies used, the actions executed, the deepest node level and whether
     the episode was won. Written independently of recap/ so the demonstrations are checked

@@ -32,17 +32,6 @@ workers: 2
 """
 
 
-@pytest.fixture(scope="module")
-def ray_address():
-    import ray
-
-    from pipeline.raysetup import init_ray
-    from pipeline.spec import RaySpec
-
-    started = init_ray(RaySpec(num_cpus=2))
-    yield ray.get_runtime_context().gcs_address
-    if started:
-        ray.shutdown()
 
 
 def test_sweep_records_cached_tokens_and_bills_them_at_the_cached_prices(ray_address, tmp_path: Path, monkeypatch):

@@ -46,7 +46,7 @@ class ToyEnv:
 
 
 def drive_recap(env: ToyEnv, knobs: Knobs, max_calls: int = 200) -> list[tuple[str, str, list[str]]]:
-    """A minimal ReCAP loop following the call order of notes/AGENT_PROTOCOL.md."""
+    """A minimal ReCAP loop following the call order of recap/recap_agent.py."""
     calls: list[tuple[str, str, list[str]]] = []
 
     def ask(purpose: str, task: str, depth: int, remaining: list[str]) -> list[str]:

@@ -20,7 +20,7 @@ from pipeline.driver import Driver, prepare
 from pipeline.errors import PipelineError, SpecError
 from pipeline.gateway_backend import make_backend
 from pipeline.resume import RunState, UnitQueue, infra_failure, load_state
-from pipeline.spec import RaySpec, parse_spec, with_overrides
+from pipeline.spec import parse_spec, with_overrides
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
 from pipeline.summary import collect
@@ -298,16 +298,6 @@ def test_report_coverage_table_reads_the_plan(tmp_path):
 # --------------------------------------------------------------------------------------------
 # end to end on a local Ray
 # --------------------------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def ray_address():
-    import ray
-
-    from pipeline.raysetup import init_ray
-
-    started = init_ray(RaySpec(num_cpus=2))
-    yield ray.get_runtime_context().gcs_address
-    if started:
-        ray.shutdown()
 
 
 CAPPED = """models:

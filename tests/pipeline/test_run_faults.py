@@ -19,7 +19,7 @@ import pytest
 from pipeline.cli import main
 from pipeline.driver import EXIT_INFRA, Driver, Hooks, prepare
 from pipeline.errors import PipelineError
-from pipeline.spec import RaySpec, parse_spec
+from pipeline.spec import parse_spec
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
 from tests.pipeline.helpers import TinyBackend
@@ -37,16 +37,6 @@ max_attempts: 3
 INSTANCES = [f"blocksworld/{3 + i % 2}@{1 + i // 2}" for i in range(8)]
 
 
-@pytest.fixture(scope="module")
-def ray_address():
-    import ray
-
-    from pipeline.raysetup import init_ray
-
-    started = init_ray(RaySpec(num_cpus=2))
-    yield ray.get_runtime_context().gcs_address
-    if started:
-        ray.shutdown()
 
 
 def q(out: Path, sql: str):

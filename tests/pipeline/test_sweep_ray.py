@@ -17,7 +17,7 @@ import pytest
 from pipeline.cli import main
 from pipeline.driver import Driver, Hooks, prepare
 from pipeline.gateway_backend import make_backend
-from pipeline.spec import RaySpec, parse_spec, with_overrides
+from pipeline.spec import parse_spec, with_overrides
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
 from tests.pipeline.helpers import TinyBackend
@@ -25,16 +25,6 @@ from tests.pipeline.helpers import TinyBackend
 REPO = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(scope="module")
-def ray_address():
-    import ray
-
-    from pipeline.raysetup import init_ray
-
-    started = init_ray(RaySpec(num_cpus=2))
-    yield ray.get_runtime_context().gcs_address
-    if started:
-        ray.shutdown()
 
 
 def make_spec(out: Path, body: str) -> tuple[str, object]:

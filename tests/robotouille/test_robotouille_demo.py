@@ -56,7 +56,7 @@ def test_flat_styles_solve_the_demo(demo, style):
 
 
 class _ScriptedRecap:
-    """Minimal ReCAP control loop (AGENT_PROTOCOL.md call order) fed with scripted replies.
+    """Minimal ReCAP control loop (the call order of recap/recap_agent.py) fed with scripted replies.
 
     Records every call as (purpose, task) so the test can check the tree the replies describe.
     """

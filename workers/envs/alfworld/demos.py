@@ -9,7 +9,7 @@ commands in 2.1.1 wording. For every task type we give:
   same reasoning in order; ``standard``: the same plan without the think. (The paper does not
   run CoT and Standard on ALFWorld - an open-loop plan cannot look inside closed receptacles -
   but a sweep may, and then they are shown the same episode as every other method.)
-- ``recap``: {"think", "subtasks"} replies in ReCAP's exact call order (notes/AGENT_PROTOCOL.md):
+- ``recap``: {"think", "subtasks"} replies in ReCAP's exact call order (recap/recap_agent.py):
   a root decomposition, a "descend" reply for every child that is not itself a valid action,
   and one "refine" reply for the parent after each child returns, until the winning action.
   The trees are at least two levels deep and show both paths into an action: a subtask that is

@@ -2,14 +2,14 @@
 
 Why: it drives every agent (ReCAP and the flat baselines) to success through the real agent
 code, prompts and records, without a model - the end-to-end check of the pipeline. It reads
-only the hints the episode worker attaches (see notes/AGENT_PROTOCOL.md), never the prompt:
+only the hints the episode worker attaches (see recap/recap_agent.py), never the prompt:
 
 - ``style``: recap | react | act | cot | standard | adapt;
 - ``purpose``: which prompt this is (``task``, ``descend``, refine kinds, ``depth_cap`` ...);
 - ``task``, ``depth``, ``remaining`` (the node's current list), ``valid_actions``;
 - ``expert_plan``: the remaining expert actions from the current environment state.
 
-ReCAP replies (the call order of AGENT_PROTOCOL.md):
+ReCAP replies (the call order of recap/recap_agent.py):
 - root (``task``): the remaining plan grouped into a few subgoal chunks, each named
   ``subgoal <k>: <action>; <action>; ...`` (a one-action chunk is named by the action itself,
   so the agent takes its shortcut);
