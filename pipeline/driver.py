@@ -342,7 +342,7 @@ class Driver:
 
     def _write_direct(self, batches: list[dict[str, list[dict[str, Any]]]]) -> None:
         """Rows written by the driver itself (the sink is lost), terminal rows last."""
-        from workers.storage import PartWriter
+        from schemas.parts import PartWriter
 
         if self._events:
             from workers.sink import records_by_table

@@ -42,7 +42,7 @@ from pipeline.store import RunStore
 from pipeline.units import Unit
 from workers.gateway.ledger import JOURNAL_NAME
 from schemas.labels import GAVE_UP_PREFIX, INFRA_ERROR, INFRA_ERROR_KINDS, infra_failure
-from workers.storage import BadPart
+from schemas.parts import BadPart
 
 #: event kinds that record a failed attempt of a unit
 FAILED_ATTEMPT_EVENTS = ("worker_lost", "attempt_failed")

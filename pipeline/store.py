@@ -35,9 +35,8 @@ from pipeline.errors import RunFolderError
 from schemas.records import SCHEMA_VERSION
 from schemas.tables import TABLES, arrow_schema
 from workers.sink import is_uri
-from workers.storage import BadPart, inspect_parts, read_parts
+from schemas.parts import RUN_FILE, BadPart, inspect_parts, read_parts
 
-RUN_FILE = "run.json"
 LOCK_FILE = "driver.lock"
 PLAN_FILE = "plan.json"
 SPEC_FILE = "spec.yaml"
@@ -419,7 +418,7 @@ class RunStore:
 
     def read_table(self, table: str, columns: list[str] | None = None) -> tuple[pa.Table, list[BadPart]]:
         """Every row of ``table``'s good part files (optionally a few columns) and the bad ones,
-        by the one rule every reader applies (``workers.storage.schema_problem``): a part with a
+        by the one rule every reader applies (``schemas.parts.schema_problem``): a part with a
         missing column or another type is skipped and named, never cast."""
         return read_parts(self.part_files(table), table, columns, self._open_part if self.remote else None)
 

@@ -26,7 +26,7 @@ from typing import Any
 
 from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue
 from pipeline.store import PLAN_FILE, RunStore
-from workers.storage import BadPart, inspect_parts, read_parts
+from schemas.parts import BadPart, inspect_parts, read_parts
 
 TEST_DOUBLE_LABEL = " (test double)"
 
@@ -114,7 +114,7 @@ def collect(store: RunStore) -> StatusReport:
     units = plan.get("units", [])
     bad: list[BadPart] = []
     # one rule with recap sql / recap report: a part without the table's exact columns and
-    # types is skipped and named (workers.storage.schema_problem), never cast and counted
+    # types is skipped and named (schemas.parts.schema_problem), never cast and counted
     opener = store.fs.open_input_file if store.remote else None
     eps, b = read_parts(store.part_files("episodes"), "episodes", open_file=opener)
     bad += b

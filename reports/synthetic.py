@@ -1,7 +1,7 @@
 """Synthetic run folders of any size, for the report benchmark and for trying ``recap report``
 without running a sweep.
 
-The rows follow the schemas (``schemas/tables.py``) and the run layout of ``workers/storage.py``
+The rows follow the schemas (``schemas/tables.py``) and the run layout of ``schemas/parts.py``
 (atomic ``part-<writer>-<n>.parquet`` files per table); the numbers are random but consistent:
 an episode's calls, messages, steps and tree agree with its episode row, windows are bounded
 like a sliding window of ``window`` messages after two pinned ones, and outcomes depend on the

@@ -23,7 +23,7 @@ Read-only comes from how the data is opened, not from a list of refused statemen
 
 Part files that are broken (truncated, corrupt footer) or do not match their table's Arrow
 schema in ``schemas/`` (a missing column, a column of another type) are found with
-:func:`workers.storage.check_parts` - the same rule ``recap status`` applies - skipped, logged,
+:func:`schemas.parts.check_parts` - the same rule ``recap status`` applies - skipped, logged,
 and listed in the ``bad_parts`` table. Parts of an earlier schema version are mapped to the
 current one (:mod:`schemas.versions`) as every reader maps them. A table without good files is an empty view with the
 table's full schema.
@@ -31,7 +31,6 @@ table's full schema.
 
 from __future__ import annotations
 
-import json
 import logging
 import re
 from collections.abc import Mapping, Sequence
@@ -46,7 +45,7 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
 from schemas.tables import TABLES
-from workers.storage import check_parts, read_part
+from schemas.parts import RUN_FILE, check_parts, read_part, read_run_file
 
 log = logging.getLogger(__name__)
 
@@ -117,8 +116,8 @@ def _resolve_run_dirs(run_dirs: Sequence[str | Path]) -> list[Path]:
         if not p.is_dir():
             raise RunDirError(f"run folder {raw} does not exist or is not a folder")
         has_table = any((p / t).is_dir() for t in TABLES)
-        if not has_table and not (p / "run.json").is_file():
-            raise RunDirError(f"{raw} is not a run folder (no run.json and no table folder such as {p / 'episodes'})")
+        if not has_table and not (p / RUN_FILE).is_file():
+            raise RunDirError(f"{raw} is not a run folder (no {RUN_FILE} and no table folder such as {p / 'episodes'})")
         if p not in out:
             out.append(p)
     return out
@@ -126,11 +125,7 @@ def _resolve_run_dirs(run_dirs: Sequence[str | Path]) -> list[Path]:
 
 def _run_identity(run_dir: Path) -> str | None:
     """The run id from run.json when it has one (the pipeline writes it once per run)."""
-    try:
-        data = json.loads((run_dir / "run.json").read_text())
-    except (OSError, ValueError):
-        return None
-    rid = data.get("run_id") if isinstance(data, dict) else None
+    rid = (read_run_file(run_dir) or {}).get("run_id")
     return str(rid) if rid is not None else None
 
 

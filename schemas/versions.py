@@ -26,7 +26,7 @@ Version 1 -> 2, ``episodes`` (documented mapping; everything else is copied as s
 
 Any table, any earlier version: a missing column that has a default in its record dataclass (or
 is nullable) is filled with that default (null); a part missing any other column is not readable
-(the reader names it, as for any part that breaks :func:`workers.storage.schema_problem`).
+(the reader names it, as for any part that breaks :func:`schemas.parts.schema_problem`).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Why one sink: hundreds of episodes each emitting a few hundred small records would otherwise
 produce thousands of tiny files. The sink buffers rows per table and writes a part file per
-table when a buffer is large or old enough, through :class:`workers.storage.PartWriter` (temp
+table when a buffer is large or old enough, through :class:`schemas.parts.PartWriter` (temp
 name, fsync, rename), always into a local folder (a run on an object store writes a local
 mirror that the driver uploads; see :mod:`pipeline.mirror`). The terminal ``episodes`` rows are written after every other table of the same
 flush, so an episode row never precedes the rows it summarises on disk.
@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from schemas.tables import record_to_row
-from workers.storage import PartWriter
+from schemas.parts import PartWriter
 
 #: written last in every flush
 _LAST = ("episodes",)

@@ -20,7 +20,6 @@ sweep wrote a moment ago without waiting for the rebuild. Queries on one snapsho
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import re
@@ -39,6 +38,7 @@ import pyarrow.parquet as pq
 from reports.sections import PLAN_FILE, load_plans
 from reports.stats import mcnemar_exact, paired_permutation_p
 from reports.views import ReportError, Result, materialize, named_query, open_runs_checked, run_query, scan_runs
+from schemas.parts import RUN_FILE, read_run_file
 from schemas.tables import TABLES
 
 log = logging.getLogger(__name__)
@@ -184,7 +184,7 @@ def _fingerprint(run_dirs: Sequence[Path]) -> tuple:
                                if e.name.endswith(".parquet") and not e.name.startswith("."))
             except OSError:
                 continue
-        for name in ("run.json", PLAN_FILE):
+        for name in (RUN_FILE, PLAN_FILE):
             try:
                 st = (d / name).stat()
                 out.append((str(d / name), st.st_size, st.st_mtime_ns))
@@ -323,11 +323,8 @@ def run_spec(snap: Snapshot, run_id: str) -> str:
 
 
 def _run_name(run_dir: Path) -> str:
-    try:
-        data = json.loads((run_dir / "run.json").read_text())
-        return str(data.get("run") or data.get("name") or run_dir.name)
-    except (OSError, ValueError, AttributeError):
-        return run_dir.name
+    data = read_run_file(run_dir) or {}
+    return str(data.get("run") or data.get("name") or run_dir.name)
 
 
 # -- the episode list -------------------------------------------------------------------------------

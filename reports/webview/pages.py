@@ -16,7 +16,7 @@ from html import escape
 from typing import Any
 from urllib.parse import urlencode
 
-from pipeline.show import observation_change
+from reports.observations import observation_change
 from reports.model import format_value
 from reports.viewer import ranges
 from reports.webview import data as D

@@ -25,7 +25,7 @@ from tests.chaos import inputs
 from tests.chaos.folders import damage
 from tests.chaos.procnet import Listener, listeners, parse_address
 from workers.llm.fake_server import FakeServer, FakeServerConfig
-from workers.storage import PartWriter
+from schemas.parts import PartWriter
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from workers.storage import read_table
+from schemas.parts import read_table
 
 
 def play(method: str, instance_id: str, inner: Any, episode_id: str, *, offline: bool,

@@ -22,7 +22,7 @@ from workers.llm.direct import LiteLLMClient
 from workers.llm.prompt_cache import Message, PromptCache, openai_cached
 from workers.llm.pricing import default_prices
 from workers.llm.providers import DeploymentConfig
-from workers.storage import read_table
+from schemas.parts import read_table
 
 REPLY = "r" * 40
 RULES = {"fake-gpt": "openai", "fake-claude": "anthropic", "fake-deepseek": "deepseek"}

@@ -14,7 +14,7 @@ from recap.llm import LLMError
 from workers.gateway.core import DeploymentGateway
 from workers.llm.fake_server import window_maxima
 from workers.llm.providers import DeploymentConfig
-from workers.storage import read_table
+from schemas.parts import read_table
 
 from .conftest import FAKE_KEY_ENV, make_request
 

@@ -27,7 +27,7 @@ from workers.llm.direct import LiteLLMClient
 from workers.llm.pricing import Price, default_prices, pico_to_usd
 from workers.llm.providers import DeploymentConfig, provider_messages, redact_url, url_secrets
 from workers.llm.tokens import TokenCount
-from workers.storage import read_table
+from schemas.parts import read_table
 
 from .conftest import FAKE_KEY_ENV, make_request
 

@@ -16,7 +16,7 @@ from workers.llm.offline.knobs import INVALID_ACTION, MALFORMED_JSON, Knobs
 from workers.llm.offline.provider import offline_text
 from workers.llm.offline.random_model import random_reply
 from workers.llm.providers import DeploymentConfig
-from workers.storage import PartWriter, read_table
+from schemas.parts import PartWriter, read_table
 
 PLAN = ["go to fridge 1", "open fridge 1", "take egg 1 from fridge 1", "go to stove 1", "heat egg 1 with stove 1"]
 

@@ -63,7 +63,7 @@ def test_list_into_a_closed_pipe_ends_quietly(capsys):
 
 
 def test_show_prints_what_each_observation_changed():
-    from pipeline.show import observation_change
+    from reports.observations import observation_change
 
     before = "Station table1:\ntable1 has bread1\n\nPlayer robot1:\nrobot1 is at stove1\nrobot1 is holding nothing"
     after = "Station table1:\ntable1 has bread1\n\nPlayer robot1:\nrobot1 is at table1\nrobot1 is holding nothing"

@@ -16,7 +16,7 @@ from pipeline.store import RunStore
 from pipeline.summary import collect
 from pipeline.units import expand
 from schemas.records import EpisodeRecord, EventRecord
-from workers.storage import PartWriter
+from schemas.parts import PartWriter
 
 SPEC = """run: infra
 output: {out}

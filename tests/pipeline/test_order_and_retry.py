@@ -26,7 +26,7 @@ from pipeline.store import RunStore
 from pipeline.summary import collect
 from pipeline.units import expand, order_seed, order_units, stratum
 from schemas.records import EpisodeRecord, EventRecord
-from workers.storage import PartWriter
+from schemas.parts import PartWriter
 
 MIXED = """run: mixed
 output: /tmp/never-written

@@ -17,7 +17,7 @@ from schemas.tables import record_to_row
 from workers.episode_worker import EpisodeClient, RecordForwarder
 from workers.envs.registry import make_env
 from workers.sink import Sink
-from workers.storage import PartWriter
+from schemas.parts import PartWriter
 
 
 def msg(eid: str, seq: int) -> MessageRecord:

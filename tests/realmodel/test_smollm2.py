@@ -27,7 +27,7 @@ from workers.gateway.blocking import BlockingGateway
 from workers.gateway.core import DeploymentGateway
 from workers.gateway.ledger import JOURNAL_NAME
 from workers.llm.providers import DeploymentConfig
-from workers.storage import read_table
+from schemas.parts import read_table
 
 from tests.gateway.agent_episodes import assert_every_call_recorded, episode_rows, play
 

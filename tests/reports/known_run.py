@@ -24,7 +24,7 @@ from schemas.records import (
     RunRecord,
     StepRecord,
 )
-from workers.storage import PartWriter
+from schemas.parts import PartWriter
 
 RECAP = ReCAPConfig().to_json()
 RECAP_128 = build_config(ReCAPConfig, window=128).to_json()

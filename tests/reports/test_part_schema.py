@@ -1,5 +1,5 @@
 """One rule for a part file whose schema is not its table's: `recap status`, `recap sql` and
-`recap report` all skip it and name it (workers.storage.schema_problem: every column of the
+`recap report` all skip it and name it (schemas.parts.schema_problem: every column of the
 table's Arrow schema in schemas/, with exactly its type; extra columns are ignored).
 
 The run folder is what a finished run of 6 units leaves (run.json, plan.json, parts written by
@@ -22,7 +22,7 @@ from pipeline.store import RunStore
 from pipeline.units import expand
 from schemas.records import CallRecord, EpisodeRecord, MessageRecord, StepRecord
 from schemas.tables import arrow_schema, record_to_row
-from workers.storage import PartWriter, check_parts, schema_problem
+from schemas.parts import PartWriter, check_parts, schema_problem
 
 SPEC = """run: typed
 output: {out}

@@ -15,7 +15,7 @@ from pipeline.summary import collect
 from reports.build import build_report
 from reports.views import named_query, open_runs
 from schemas.labels import ALFWORLD_TASK_TYPES, METHODS
-from workers.storage import read_table
+from schemas.parts import read_table
 
 TD = "expert (test double)"
 

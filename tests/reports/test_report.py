@@ -13,7 +13,7 @@ import pytest
 from reports.commands import format_table, report_main, sql_main
 from reports.viewer import MAX_MESSAGE_CHARS, _cut, ranges
 from reports.views import Result
-from workers.storage import part_files
+from schemas.parts import part_files
 
 
 def _run(main, argv):

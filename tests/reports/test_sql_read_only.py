@@ -25,7 +25,7 @@ import pytest
 from pipeline.cli import main as recap_main
 from reports.commands import main as reports_main
 from reports.views import ReadOnlyError, check_read_only, open_runs, run_query
-from workers.storage import part_files
+from schemas.parts import part_files
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -21,7 +21,7 @@ from reports.views import (
     run_query,
 )
 from schemas.tables import TABLES
-from workers.storage import part_files
+from schemas.parts import part_files
 
 NAMED_VIEWS = ["attempts", "terminal", "outcomes", "calls", "nodes", "tree_stats", "step_patterns", "episode_modes", "failures"]
 
@@ -91,7 +91,7 @@ def test_table_whose_only_file_is_corrupt_is_empty(run_a, tmp_path):
 def test_part_missing_a_column_is_skipped_and_named(tmp_path):
     """A part without every column of its table (a foreign file, a run of another schema
     version) is skipped and named, as ``recap status`` and resume do; the view keeps every
-    column. (Rule: workers.storage.schema_problem - exact column names and Arrow types.)"""
+    column. (Rule: schemas.parts.schema_problem - exact column names and Arrow types.)"""
     schema = TABLES["episodes"]
     old = pa.schema([f for f in schema if f.name not in ("test_double", "worker_id")])
     row = {f.name: None for f in old}

@@ -14,7 +14,7 @@ from pipeline.store import RunStore
 from pipeline.summary import collect
 from reports.views import open_runs, run_query
 from schemas.tables import arrow_schema
-from workers.storage import read_table
+from schemas.parts import read_table
 
 ADDED = ("label", "profile", "ablation", "provider_model")
 RECAP_CFG = json.dumps({"window": 64, "think": "none", "max_level": None, "name_only": False, "shortcut": True})

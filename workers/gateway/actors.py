@@ -67,7 +67,7 @@ def _ledger_restored_event(run_dir: str, ledger: BudgetLedger) -> None:
 
     from schemas.records import EventRecord
     from workers.gateway.call_log import run_id_of
-    from workers.storage import PartWriter
+    from schemas.parts import PartWriter
 
     try:
         run_id = run_id_of(run_dir)

@@ -5,7 +5,7 @@ reservations of a dead gateway charged at restart).
 Why batches: one Parquet part file per call would bury the run folder in tiny files, and a
 part per minute would lose a minute of rows to a crash. Rows are flushed when ``max_rows``
 are pending, at least every ``flush_interval_s`` (1 s) by :meth:`run_periodic_flush`, and on
-close. Part files are atomic (:class:`workers.storage.PartWriter`); a crash loses at most the
+close. Part files are atomic (:class:`schemas.parts.PartWriter`); a crash loses at most the
 last second of rows - the budget itself is in the fsync'd ledger journal, not here.
 """
 
@@ -22,7 +22,7 @@ from typing import Any
 
 from schemas.records import CallRecord, EventRecord
 from schemas.tables import record_to_row
-from workers.storage import PartWriter
+from schemas.parts import RUN_FILE, PartWriter, read_run_file
 
 
 class RunIdentityError(RuntimeError):
@@ -31,11 +31,11 @@ class RunIdentityError(RuntimeError):
 
 def run_id_of(run_dir: Path | str) -> str:
     """The run id in ``RUN_DIR/run.json`` (written once by the pipeline)."""
-    path = Path(run_dir) / "run.json"
-    try:
-        return str(json.loads(path.read_text())["run_id"])
-    except (OSError, ValueError, KeyError) as exc:
-        raise RunIdentityError(f"pass run_id or create {path} with a run_id ({type(exc).__name__})") from None
+    data = read_run_file(run_dir)
+    if data is None or data.get("run_id") is None:
+        why = "no readable run file" if data is None else "no run_id in it"
+        raise RunIdentityError(f"pass run_id or create {Path(run_dir) / RUN_FILE} with a run_id ({why})")
+    return str(data["run_id"])
 
 
 def writer_name(deployment: str) -> str:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from workers.llm.fingerprint import messages_fingerprint
-from workers.storage import read_table
+from schemas.parts import read_table
 
 
 class ReplayError(LookupError):

@@ -1,4 +1,5 @@
-"""Run-folder storage: atomic Parquet part files, one folder per table.
+"""Run-folder part files: atomic Parquet parts, one folder per table, and the one schema rule
+every reader (pipeline, workers, reports) applies to them.
 
 Layout of a run folder::
 
@@ -13,6 +14,7 @@ batch in flight. Readers skip (and report) part files that cannot be read.
 
 from __future__ import annotations
 
+import json
 import os
 import uuid
 from collections.abc import Callable, Iterable, Sequence
@@ -25,6 +27,21 @@ import pyarrow.parquet as pq
 
 from schemas.tables import TABLES, arrow_schema, record_to_row
 from schemas.versions import missing_fillable, part_version, upgrade
+
+
+#: the run folder's identity file: written once by the pipeline when the run starts
+RUN_FILE = "run.json"
+
+
+def read_run_file(run_dir: Path | str) -> dict[str, Any] | None:
+    """The fields of ``RUN_DIR/run.json``, or None when it is missing, unreadable or not an
+    object. The one reader of a local run folder's identity (the pipeline's RunStore also reads
+    it from object stores, through the same file name)."""
+    try:
+        data = json.loads((Path(run_dir) / RUN_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
 
 
 @dataclass
