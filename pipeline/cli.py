@@ -232,6 +232,10 @@ def _parser() -> argparse.ArgumentParser:
         sp.add_argument("--progress", choices=("auto", "live", "lines", "off"), default="auto",
                         help="progress display: live (a terminal), lines (a line every few seconds), off; "
                              "auto (default) is live on a terminal, lines otherwise")
+        sp.add_argument("--executor", choices=("ray", "in-process"), default="ray",
+                        help="where episodes run: ray (default) - one Ray actor per worker; in-process - threads of "
+                             "this process (no actor start-up, debugger breakpoints work; the sink and the gateways "
+                             "stay Ray actors)")
 
     r = sub.add_parser("run", help="run a sweep file", epilog=_RUN_EPILOG,
                        description="Run a sweep file: every (instance, method, model, seed) unit without a result.")
@@ -371,7 +375,7 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
     console = _console()
     backend = backend if backend is not None else _backend(prepared.spec)
     driver = Driver(prepared, backend, command=command, progress=args.progress, address=args.address,
-                    retry=getattr(args, "retry", "infra"))
+                    retry=getattr(args, "retry", "infra"), executor=args.executor)
     summary = driver.run()
     _render(render, collect(prepared.store))
     if summary.stopped:

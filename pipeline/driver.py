@@ -55,23 +55,27 @@ import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import metadata
-from typing import Any
+from typing import Any, Literal
 
 from pipeline.backend import ModelBackend, Spend
+from pipeline.cap_policy import CapPolicy
+from pipeline.episode_rows import episode_record
 from pipeline.errors import PipelineError, RunFolderError
+from pipeline.events import EventBuffer
 from pipeline.preflight import preflight
 from pipeline.progress import ProgressView, Snapshot
 from pipeline.raysetup import PROJECT_ROOT, init_ray
-from pipeline.resume import (INFRA_ERROR, INFRA_ERROR_KINDS, RETRY_MODES, Pending, Retry, RunState, UnitQueue, attempt_spend,
+from pipeline.resume import (INFRA_ERROR, RETRY_MODES, AttemptSpend, Retry, RunState, UnitQueue, attempt_spend,
                              check_journal, infra_failure, is_final, load_state)
+from pipeline.sink_channel import SinkChannel, SinkLost
 from pipeline.spec import SweepSpec, text_hash
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
 from pipeline.summary import TEST_DOUBLE_LABEL
 from pipeline.units import Plan, PlanDiff, Unit, diff_plans, expand, order_units
-from schemas.labels import place_of
-from schemas.records import EpisodeRecord, EventRecord, RunRecord
+from pipeline.worker_pool import Finished, InProcessWorkerPool, RayWorkerPool, WorkerPool
+from schemas.outcomes import EpisodeOutcome
+from schemas.records import EpisodeRecord, RunRecord
 
-_EPS = 1e-12
 #: exit status of a session in which a unit ended in an infrastructure failure
 EXIT_INFRA = 4
 #: exit status of a session that left work undone (a cap stopped it)
@@ -181,43 +185,39 @@ class RunSummary:
 
 @dataclass
 class Hooks:
-    """Test and tooling hooks (all optional)."""
+    """Test and tooling hooks (all optional): ``on_dispatch(unit, attempt, worker handle)`` and
+    ``on_result(unit, attempt, outcome)``."""
 
     on_dispatch: Callable[[Unit, int, Any], None] | None = None
-    on_result: Callable[[Unit, int, dict[str, Any]], None] | None = None
+    on_result: Callable[[Unit, int, EpisodeOutcome], None] | None = None
 
 
-@dataclass
-class _Slot:
-    worker_id: str
-    actor: Any
-    units: int = 0
-
-
-@dataclass
-class _InFlight:
-    slot: _Slot
-    pending: Pending
-    started: float
-
-
-class _SinkLost(Exception):
-    """The sink actor is gone for good (its restarts used up) or does not answer."""
+#: where attempts run: Ray actors (the default), or threads of the driver (``recap run --executor in-process``)
+Executor = Literal["ray", "in-process"]
+EXECUTORS: tuple[Executor, ...] = ("ray", "in-process")
 
 
 class Driver:
-    """One session of a run: start/resume, dispatch units, write terminal rows, stop on caps."""
+    """One session of a run: lock the folder, start what is left, turn each returned attempt
+    into its terminal row or a retry, stop on caps, signals and a lost sink.
 
-    #: how long the driver waits on the sink (a restart included) before it counts it as lost
-    SINK_WAIT_S = 120.0
+    The roles it composes, each tested alone: :class:`pipeline.worker_pool.WorkerPool` (where
+    attempts run), :class:`pipeline.cap_policy.CapPolicy` (what no longer starts),
+    :class:`pipeline.sink_channel.SinkChannel` (rows to the sink, or to the folder when it is
+    lost), :func:`pipeline.episode_rows.episode_record` (the terminal row) and
+    :class:`pipeline.events.EventBuffer`."""
 
     def __init__(self, prepared: Prepared, backend: ModelBackend, *, command: str = "", progress: str = "auto",
-                 hooks: Hooks | None = None, address: str | None = None, retry: Retry = "infra") -> None:
+                 hooks: Hooks | None = None, address: str | None = None, retry: Retry = "infra",
+                 executor: Executor = "ray") -> None:
         if retry not in RETRY_MODES:
             raise PipelineError(f"--retry must be one of {', '.join(RETRY_MODES)}, got {retry!r}")
+        if executor not in EXECUTORS:
+            raise PipelineError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
         self.p = prepared
         #: what this session re-runs besides unfinished units (see :func:`pipeline.resume.load_state`)
         self.retry: Retry = retry
+        self.executor: Executor = executor
         self.spec = prepared.spec
         self.backend = backend
         self.command = command
@@ -226,174 +226,37 @@ class Driver:
         self.address = address
         #: distinguishes worker ids of successive sessions of one run
         self.session = uuid.uuid4().hex[:4]
-        self.slots: list[_Slot] = []
-        self.inflight: dict[Any, _InFlight] = {}
-        self.stopped_models: set[str] = set()
-        self.run_stopped: str | None = None
-        self._worker_seq = 0
-        self._events: list[EventRecord] = []
+        self.events = EventBuffer()
+        self.caps = CapPolicy(self.spec, self.events.add)
+        self.pool: WorkerPool | None = None
+        self.channel: SinkChannel | None = None
         self._last_push = time.monotonic()
         self.work: RunStore = prepared.store
         self.records_out: list[EpisodeRecord] = []
-        self.sink: Any = None
-        #: the sink's writer name: fixed for the session, so a restarted sink finds its log
-        self.sink_writer = f"sink{uuid.uuid4().hex[:10]}"
-        #: (ref, batch hash, rows) of the driver's batches the sink has not acknowledged yet
-        self._unacked: list[tuple[Any, str, dict[str, list[dict[str, Any]]]]] = []
-        #: why the sink is gone for good (None while it lives)
-        self.sink_lost: str | None = None
         #: unit -> what its last failed attempt was lost to ("worker_lost", "client", "agent")
         self.last_failure: dict[str, str] = {}
+        self.failures: dict[str, int] = {}
         self.run_id = ""
+        self.n_workers = 0
+
+    @property
+    def sink(self) -> Any:
+        """The sink actor (None before the session starts it)."""
+        return self.channel.actor if self.channel is not None else None
 
     # -- helpers --------------------------------------------------------------------------------
     def _event(self, kind: str, *, severity: str = "info", unit: Unit | None = None, episode_id: str | None = None,
                **detail: Any) -> None:
-        self._events.append(EventRecord(ts=time.time(), source="driver", kind=kind, severity=severity,
-                                        episode_id=episode_id, unit_id=unit.unit_id if unit else None,
-                                        detail=json.dumps(detail, sort_keys=True, default=str)))
+        self.events.add(kind, severity=severity, unit_id=unit.unit_id if unit else None, episode_id=episode_id,
+                        **detail)
+
+    def _send(self, records: list[Any], *, flush: bool = False) -> None:
+        assert self.channel is not None
+        self.channel.send(records, flush=flush)
 
     def _ship_events(self) -> None:
-        if self._events:
-            events, self._events = self._events, []
-            self._send(events)
-
-    # -- the sink -------------------------------------------------------------------------------
-    def _send(self, records: list[Any], *, flush: bool = False) -> None:
-        """Hand rows to the sink (kept until it acknowledges them); straight to the run folder
-        once the sink is lost."""
-        if not records:
-            return
-        from workers.sink import batch_hash, records_by_table
-
-        rows = records_by_table(records, self.run_id)
-        if self.sink_lost is not None or self.sink is None:
-            self._write_direct([rows])
-            return
-        ref = self.sink.add.remote(rows, flush=flush)
-        self._unacked.append((ref, batch_hash(rows), rows))
-
-    def _check_acks(self, timeout: float | None = 0.0) -> None:
-        """Drop the batches the sink acknowledged; raise :class:`_SinkLost` when one failed
-        (or, with a timeout, when not all were acknowledged in time)."""
-        import ray
-        from ray.exceptions import RayActorError
-
-        if not self._unacked or self.sink_lost is not None:
-            return
-        refs = [r for r, _, _ in self._unacked]
-        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=timeout)
-        done = set(ready)
-        keep, failed = [], None
-        for item in self._unacked:
-            if item[0] not in done:
-                keep.append(item)
-                continue
-            try:
-                ray.get(item[0])
-            except RayActorError as exc:
-                failed = failed or f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
-                keep.append(item)
-            except Exception as exc:  # the sink could not log or write them (a full disk ...)
-                failed = failed or f"{type(exc).__name__}: {str(exc).splitlines()[-1] if str(exc) else ''}"
-                keep.append(item)
-        self._unacked = keep
-        if failed:
-            raise _SinkLost(f"the sink failed: {failed}")
-        if timeout and keep:
-            raise _SinkLost(f"the sink did not acknowledge {len(keep)} batches within {timeout:.0f}s")
-
-    def _sink_gone(self) -> str | None:
-        """Why the sink is gone for good, or None when it answers (after a restart if need be)."""
-        import ray
-        from ray.exceptions import GetTimeoutError, RayActorError
-
-        if self.sink_lost is not None:
-            return self.sink_lost
-        try:
-            ray.get(self.sink.ping.remote(), timeout=self.SINK_WAIT_S)
-            return None
-        except GetTimeoutError:
-            return f"the sink did not answer within {self.SINK_WAIT_S:.0f}s"
-        except RayActorError as exc:
-            return f"the sink died: {type(exc).__name__}"
-
-    def _on_sink_lost(self, why: str) -> None:
-        """The sink is gone: write what its log holds and every batch of the driver it never
-        took (the terminal rows above all) straight into the run folder."""
-        import ray
-
-        from workers.sink import recover_wal
-
-        if self.sink_lost is not None:
-            return
-        self.sink_lost = why
-        try:
-            ray.kill(self.sink, no_restart=True)
-        except Exception:
-            pass
-        time.sleep(1.0)  # its process gone before its log is read
-        found = recover_wal(self.work.path, self.sink_writer)
-        pending = [rows for _, h, rows in self._unacked if h not in found.hashes]
-        self._unacked = []
-        self._event("sink_lost", severity="error", reason=why, recovered_rows=found.rows,
-                    driver_batches=len(pending))
-        self._write_direct(pending)
-
-    def _write_direct(self, batches: list[dict[str, list[dict[str, Any]]]]) -> None:
-        """Rows written by the driver itself (the sink is lost), terminal rows last."""
-        from schemas.parts import PartWriter
-
-        if self._events:
-            from workers.sink import records_by_table
-
-            events, self._events = self._events, []
-            batches = [records_by_table(events, self.run_id)] + list(batches)
-        merged: dict[str, list[dict[str, Any]]] = {}
-        for rows in batches:
-            for table, r in rows.items():
-                merged.setdefault(table, []).extend(r)
-        if not merged:
-            return
-        writer = PartWriter(self.work.path, f"driver{self.session}{uuid.uuid4().hex[:6]}")
-        for table in sorted(merged, key=lambda t: (t == "episodes", t)):
-            writer.write_rows(table, merged[table])
-
-    def _close_sink(self) -> None:
-        """Every driver batch acknowledged, the buffers written, the sink's log removed."""
-        import ray
-        from ray.exceptions import GetTimeoutError, RayActorError
-
-        if self.sink is None or self.sink_lost is not None:
-            return
-        try:
-            self._check_acks(timeout=self.SINK_WAIT_S)
-            ray.get(self.sink.close.remote(), timeout=self.SINK_WAIT_S)
-        except _SinkLost as exc:
-            self._on_sink_lost(str(exc))
-        except (RayActorError, GetTimeoutError) as exc:
-            self._on_sink_lost(f"the sink failed at the end of the session: {type(exc).__name__}")
-
-    # -- workers --------------------------------------------------------------------------------
-    def _new_slot(self) -> _Slot:
-        self._worker_seq += 1
-        wid = f"{self.session}-w{self._worker_seq:03d}"
-        actor = self.worker_cls.remote(wid, self.run_id, self.sink, self.factory)
-        return _Slot(wid, actor)
-
-    @staticmethod
-    def _worker_died(exc: BaseException, fl: _InFlight) -> bool:
-        """The worker process itself is gone (not: its task failed on another actor)."""
-        from ray.exceptions import RayTaskError
-
-        if isinstance(exc, RayTaskError):  # its task raised: the worker lived to report it
-            return False
-        dead = getattr(exc, "actor_id", None)
-        try:
-            mine = fl.slot.actor._actor_id.hex()
-        except Exception:
-            mine = None
-        return not (dead and mine and dead != mine)
+        if self.events:
+            self._send(list(self.events.drain()))
 
     def _is_test_double(self, label: str) -> bool:
         try:
@@ -401,89 +264,10 @@ class Driver:
         except KeyError:
             return False
 
-    def _allowed(self, unit: Unit) -> bool:
-        return self.run_stopped is None and unit.model_label not in self.stopped_models
-
-    # -- caps -------------------------------------------------------------------------------------
-    def _check_caps(self, spend: Spend) -> None:
-        cap = self.spec.run_cap_usd
-        if self.run_stopped is None and cap is not None and spend.total_usd >= cap - _EPS:
-            self._stop_run(f"run cap ${cap:.2f} reached")  # the spend figure is the live one beside it
-        for m in self.spec.models:
-            if m.cap_usd is not None and m.name not in self.stopped_models and spend.by_model.get(m.name, 0.0) >= m.cap_usd - _EPS:
-                self._stop_model(m.name, f"model cap ${m.cap_usd:.2f} of {m.name} reached")
-
-    def _stop_run(self, why: str) -> None:
-        if self.run_stopped is None:
-            self.run_stopped = why
-            self._event("run_cap_reached", severity="warning", reason=why)
-
-    def _stop_model(self, name: str, why: str) -> None:
-        if name not in self.stopped_models:
-            self.stopped_models.add(name)
-            self._event("model_cap_reached", severity="warning", model=name, reason=why)
-
-    def _on_budget_exhausted(self, unit: Unit, error: str | None) -> None:
-        """An episode was refused a call for lack of budget: stop starting more of what hit it
-        (the gateway's refusal names the run budget or the model's)."""
-        m = self.spec.model(unit.model_label)
-        spend = self.backend.spend()
-        run_cap = self.spec.run_cap_usd
-        run_hit = (error or "").startswith("run budget") or m.cap_usd is None
-        if run_hit:
-            self._stop_run(f"run cap ${run_cap:.2f} reached (spent ${spend.total_usd:.4f})" if run_cap is not None
-                           else f"a model call was refused for lack of budget: {error}")
-        else:
-            self._stop_model(m.name, f"model cap ${m.cap_usd:.2f} of {m.name} reached")
-
-    # -- terminal rows ----------------------------------------------------------------------------
-    def _episode_record(self, unit: Unit, attempt: int, out: dict[str, Any] | None, *, end_reason: str | None = None,
-                        error: str | None = None, worker_id: str | None = None, started: float = 0.0) -> EpisodeRecord:
-        """The terminal row of an attempt (schema version 2): the arm's method, label, profile
-        and ablation apart; the place from :func:`schemas.labels.place_of` (ALFWorld one split,
-        a row without an environment still has its split and task); an infrastructure failure
-        ends ``infra_error`` with its kind first in the error; an attempt without a result (a
-        unit given up on) gets the spend the ledger journal recorded for it."""
-        res = (out or {}).get("result") or {}
-        env = (out or {}).get("env") or {}
-        now = time.time()
-        reason = end_reason or res["end_reason"]
-        if error is None:
-            error = res.get("error")
-            kind = res.get("error_kind")
-            # the row's error names the LLM error kind first: what makes an infrastructure
-            # failure recognisable (and retryable) from the table alone
-            if reason == "llm_error" and kind in INFRA_ERROR_KINDS and not (error or "").startswith(f"{kind}:"):
-                error = f"{kind}: {error or ''}".rstrip()
-        if infra_failure(reason, error) is not None:
-            reason = INFRA_ERROR
-        spend = res if res else self._journal_spend(f"{unit.unit_id}-{attempt}")
-        bench, split, task = place_of(unit.instance_id, env.get("split") or None, env.get("task") or None)
-        return EpisodeRecord(
-            episode_id=f"{unit.unit_id}-{attempt}", unit_id=unit.unit_id, attempt=attempt,
-            benchmark=env.get("benchmark") or bench, split=split, task=task,
-            instance_id=unit.instance_id, seed=unit.seed, method=unit.method, method_config=unit.method_config,
-            model=unit.model_label, end_reason=reason, success=bool(res.get("success", False)),
-            steps=int(res.get("steps", 0)), llm_calls=int(spend.get("llm_calls", 0)),
-            prompt_tokens=int(spend.get("prompt_tokens", 0)), cached_prompt_tokens=int(spend.get("cached_prompt_tokens", 0)),
-            completion_tokens=int(spend.get("completion_tokens", 0)), cost_usd=float(spend.get("cost_usd", 0.0)),
-            wall_s=float((out or {}).get("wall_s", now - started if started else 0.0)),
-            step_cap=int(env.get("max_steps") or 0), step_multiplier=unit.step_multiplier,
-            optimal_steps=env.get("optimal_steps"), max_depth=int(res.get("max_depth", 0)),
-            error=error, worker_id=(out or {}).get("worker_id") or worker_id,
-            started_at=float((out or {}).get("started_at", started)), ended_at=float((out or {}).get("ended_at", now)),
-            test_double=bool((out or {}).get("test_double", unit.model.startswith("offline/"))),
-            label=unit.method_label, profile=unit.profile, ablation=unit.ablation_name, provider_model=unit.model,
-        )
-
-    def _journal_spend(self, episode_id: str) -> dict[str, Any]:
+    # -- attempts -------------------------------------------------------------------------------
+    def _journal_spend(self, episode_id: str) -> AttemptSpend:
         """An attempt's calls, tokens and cost by the ledger journal (its worker is gone)."""
-        try:
-            s = attempt_spend(self.work, episode_id)
-        except Exception:  # the row matters more than its spend
-            return {}
-        return {"llm_calls": s.calls, "prompt_tokens": s.prompt_tokens, "cached_prompt_tokens": s.cached_prompt_tokens,
-                "completion_tokens": s.completion_tokens, "cost_usd": s.cost_usd}
+        return attempt_spend(self.work, episode_id)
 
     def _infra_failed(self, unit: Unit, attempt: int, kind: str) -> None:
         """A unit ended in an infrastructure failure: not done, retried by the next resume."""
@@ -492,14 +276,16 @@ class Driver:
         self._event("unit_failed", severity="error", unit=unit, episode_id=f"{unit.unit_id}-{attempt}",
                     attempt=attempt, failure=kind, retry="recap resume")
 
-    def _failed_attempt(self, fl: _InFlight, kind: str, error: str, out: dict[str, Any] | None = None,
+    def _failed_attempt(self, fin: Finished, kind: str, error: str, out: EpisodeOutcome | None = None,
                         source: str = "worker") -> None:
-        unit, attempt = fl.pending.unit, fl.pending.attempt
+        """An attempt without an ending: retried under the next attempt number, or, its
+        attempts used up, given up on with a terminal row saying why."""
+        unit, attempt = fin.pending.unit, fin.pending.attempt
         self.failures[unit.unit_id] = self.failures.get(unit.unit_id, 0) + 1
         self.last_failure[unit.unit_id] = "worker_lost" if kind == "worker_lost" else source
         n = self.failures[unit.unit_id]
         self._event(kind, severity="warning", unit=unit, episode_id=f"{unit.unit_id}-{attempt}", attempt=attempt,
-                    worker_id=fl.slot.worker_id, error=error[:1000], failures=n, max_attempts=self.spec.max_attempts)
+                    worker_id=fin.slot.worker_id, error=error[:1000], failures=n, max_attempts=self.spec.max_attempts)
         if n < self.spec.max_attempts:
             self.queue.retry(unit)
             return
@@ -510,70 +296,59 @@ class Driver:
         reason = INFRA_ERROR if infra else ("llm_error" if source == "client" else "env_error")
         marker = f" (infrastructure: {infra})" if infra else ""
         msg = f"gave up after {n} failed attempts{marker}; last: {error}"[:2000]
-        rec = self._episode_record(unit, attempt, out, end_reason=reason, error=msg, worker_id=fl.slot.worker_id,
-                                   started=fl.started)
+        rec = episode_record(unit, attempt, out, end_reason=reason, error=msg, worker_id=fin.slot.worker_id,
+                             started=fin.started, journal_spend=self._journal_spend)
         self.records_out.append(rec)
         self._event("unit_abandoned", severity="error", unit=unit, attempt=attempt, failures=n)
         self.summary.abandoned += 1
         # the rule resume and status apply to the row (a last error naming a dead actor is
         # worker_lost too): what they will retry, this session counts as failed (exit 4)
-        kind = infra or infra_failure(rec.end_reason, rec.error)
-        if kind:
-            self._infra_failed(unit, attempt, kind)
+        failed = infra or infra_failure(rec.end_reason, rec.error)
+        if failed:
+            self._infra_failed(unit, attempt, failed)
         else:
             self.summary.finished_now += 1
 
-    def _finish(self, ref: Any) -> None:
-        import ray
-        from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError, RayTaskError, WorkerCrashedError
-
-        fl = self.inflight.pop(ref)
-        unit, attempt = fl.pending.unit, fl.pending.attempt
-        try:
-            out = ray.get(ref)
-        except (RayActorError, ActorDiedError, ActorUnavailableError, WorkerCrashedError) as exc:
-            first = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
-            if not self._worker_died(exc, fl):
-                # the worker lives; its task failed on another actor: the sink, when it is gone
-                why = self._sink_gone()
-                if why is not None:
-                    self.inflight[ref] = fl  # not finished: a resume runs it again
-                    raise _SinkLost(why)
-                self._failed_attempt(fl, "attempt_failed", first)
-                self.idle.append(fl.slot)
-                return
+    def _finish(self, key: Any) -> None:
+        """One attempt came back: its terminal row, a retry, or a worker replaced."""
+        assert self.pool is not None and self.channel is not None
+        fin = self.pool.collect(key)
+        unit, attempt = fin.pending.unit, fin.pending.attempt
+        if fin.failure == "elsewhere":
+            # the worker lives; its task failed on another actor: the sink, when it is gone
+            why = self.channel.gone()
+            if why is not None:
+                self.pool.restore(fin)  # not finished: a resume runs it again
+                raise SinkLost(why)
+            self._failed_attempt(fin, "attempt_failed", fin.error)
+            self.pool.release(fin)
+            return
+        if fin.failure == "worker_lost":
             # the worker process is gone: replace it, retry the unit under a new attempt number
             self.summary.worker_restarts += 1
-            self._event("worker_restarted", severity="warning", old_worker=fl.slot.worker_id)
-            self._failed_attempt(fl, "worker_lost", first)
-            try:
-                ray.kill(fl.slot.actor)
-            except Exception:
-                pass
-            self.slots.remove(fl.slot)
+            self._event("worker_restarted", severity="warning", old_worker=fin.slot.worker_id)
+            self._failed_attempt(fin, "worker_lost", fin.error)
             if self.summary.worker_restarts > max(10, 3 * self.n_workers):
-                raise PipelineError(f"episode workers keep dying ({self.summary.worker_restarts} restarts); last: {exc}")
-            slot = self._new_slot()
-            self.slots.append(slot)
-            self.idle.append(slot)
+                raise PipelineError(f"episode workers keep dying ({self.summary.worker_restarts} restarts); last: {fin.error}")
+            self.pool.add_worker()
             return
-        except RayTaskError as exc:
-            self._failed_attempt(fl, "attempt_failed", str(exc).splitlines()[-1][:1000])
-            self.idle.append(fl.slot)
+        if fin.failure == "task_raised":
+            self._failed_attempt(fin, "attempt_failed", fin.error)
             return
-        fl.slot.units += 1
-        self.idle.append(fl.slot)
+        out = fin.outcome
+        assert out is not None
         if self.hooks.on_result:
             self.hooks.on_result(unit, attempt, out)
-        if out.get("crash"):
-            crash = out["crash"]
-            self._failed_attempt(fl, "attempt_failed", f"{crash['source']}: {crash['error']}", out, source=crash["source"])
+        if out.crash is not None:
+            self._failed_attempt(fin, "attempt_failed", f"{out.crash.source}: {out.crash.error}", out,
+                                 source=out.crash.source)
             return
-        rec = self._episode_record(unit, attempt, out)
+        rec = episode_record(unit, attempt, out, journal_spend=self._journal_spend)
         self.records_out.append(rec)
         if rec.end_reason == "budget_exhausted":
             self.summary.budget_stopped += 1
-            self._on_budget_exhausted(unit, rec.error)
+            refusal = out.result.refusal if out.result is not None else None
+            self.caps.on_refusal(unit.model_label, refusal, rec.error, self.backend.spend())
             return
         kind = infra_failure(rec.end_reason, rec.error)
         if kind is not None:
@@ -585,23 +360,23 @@ class Driver:
 
     # -- dispatch ---------------------------------------------------------------------------------
     def _dispatch(self) -> None:
-        while self.idle and self.sink_lost is None:
-            p = self.queue.take(self._allowed)
+        assert self.pool is not None and self.channel is not None
+        while self.pool.has_idle() and self.channel.lost is None:
+            p = self.queue.take(lambda u: self.caps.allows(u.model_label))
             if p is None:
                 return
-            slot = self.idle.pop()
-            ref = slot.actor.run_unit.remote(p.unit.payload(), p.attempt)
-            self.inflight[ref] = _InFlight(slot, p, time.time())
+            slot = self.pool.submit(p)
             if self.hooks.on_dispatch:
-                self.hooks.on_dispatch(p.unit, p.attempt, slot.actor)
+                self.hooks.on_dispatch(p.unit, p.attempt, slot.handle)
 
     def _snapshot(self, spend: Spend) -> Snapshot:
         done = self.summary.completed_before + self.summary.finished_now
+        running = self.pool.in_flight() if self.pool is not None else 0
         eta = None
         if self.done_times:
             elapsed = time.monotonic() - self.t0
             rate = len(self.done_times) / max(elapsed, 1e-6)
-            remaining = len(self.queue) + len(self.inflight)
+            remaining = len(self.queue) + running
             eta = remaining / rate if rate > 0 else None
         try:
             rates = {label + (TEST_DOUBLE_LABEL if self._is_test_double(label) else ""): r
@@ -609,11 +384,10 @@ class Driver:
         except Exception:
             rates = {}
         return Snapshot(total=self.summary.total, done=done, success=self.success_before + self.summary.success_now,
-                        running=len(self.inflight), spend_usd=spend.total_usd, run_cap_usd=self.spec.run_cap_usd,
-                        eta_s=eta, rates=rates, restarts=self.summary.worker_restarts,
-                        stopped=self.run_stopped or (", ".join(sorted(self.stopped_models)) + " capped" if self.stopped_models else None))
+                        running=running, spend_usd=spend.total_usd, run_cap_usd=self.spec.run_cap_usd,
+                        eta_s=eta, rates=rates, restarts=self.summary.worker_restarts, stopped=self.caps.stopped)
 
-    # -- the session ------------------------------------------------------------------------------
+    # -- the run folder ---------------------------------------------------------------------------
     def _write_identity(self) -> RunIdentity:
         store = self.work
         ident = self.p.identity or store.create_identity(self.spec.run)
@@ -647,6 +421,7 @@ class Driver:
             self._last_push = now
             push(self.work.path, self.p.store.location)
 
+    # -- the session ------------------------------------------------------------------------------
     def run(self) -> RunSummary:
         """One session: lock the folder, run what is left, write the terminal rows, unlock."""
         self.p.store.acquire_lock()
@@ -665,11 +440,28 @@ class Driver:
             raise RunFolderError(f"run folder {self.p.store.location} changed while this driver was starting "
                                  "(another driver ran there); run the command again")
 
+    def _make_pool(self, factory: Any) -> WorkerPool:
+        import ray
+
+        assert self.channel is not None
+        if self.executor == "in-process":
+            from workers.episode_worker import EpisodeRunner
+
+            sink = self.channel.actor
+            return InProcessWorkerPool(
+                lambda wid: EpisodeRunner(wid, self.run_id, factory, send=lambda rows: sink.add.remote(rows),
+                                          wait=lambda ref: ray.get(ref)),
+                session=self.session)
+        from workers.episode_worker import worker_actor
+
+        multi_node = len([n for n in ray.nodes() if n.get("Alive")]) > 1
+        worker_cls = worker_actor(num_cpus=self.spec.ray.worker_cpus, spread=multi_node)
+        return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session)
+
     def _run_locked(self) -> RunSummary:
         import ray
 
-        from workers.episode_worker import worker_actor
-        from workers.sink import recover_wal, sink_actor
+        from workers.sink import recover_wal
 
         spec = self.spec
         t_start = time.monotonic()
@@ -682,49 +474,38 @@ class Driver:
         recovered = recover_wal(store.path) if self.p.identity is not None else None
         state: RunState = load_state(store, retry=self.retry)
         started_ray = init_ray(spec.ray, self.address)
+        self.channel = SinkChannel(store.path, self.run_id, self.events, session=self.session)
         try:
             node_id = ray.get_runtime_context().get_node_id()
-            from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
-
-            here = NodeAffinitySchedulingStrategy(node_id=node_id, soft=False)
-            self.sink = sink_actor().options(scheduling_strategy=here).remote(str(store.path), self.run_id,
-                                                                              writer=self.sink_writer)
+            self.channel.start(node_id)
             if recovered is not None and recovered.rows:
                 self._event("sink_log_recovered", severity="warning", rows=recovered.rows)
             self.backend.start(run_dir=str(store.path), run_id=self.run_id, runtime_env=None, node_id=node_id)
             self.backend.set_run_cap(spec.run_cap_usd)
-            self.factory = self.backend.factory()
-            multi_node = len([n for n in ray.nodes() if n.get("Alive")]) > 1
-            self.worker_cls = worker_actor(num_cpus=spec.ray.worker_cpus, spread=multi_node)
+            self.pool = self._make_pool(self.backend.factory())
             summary = self._session(state, ident, t_start)
             summary.recovered_rows = recovered.rows if recovered is not None else 0
             return summary
         finally:
-            if self.sink is not None:
-                if self._events or self.records_out:  # a failure: keep what is known
-                    recs, self._events, self.records_out = self._events + self.records_out, [], []
+            if self.channel.actor is not None:
+                if self.events or self.records_out:  # a failure: keep what is known
+                    recs = [*self.events.drain(), *self.records_out]
+                    self.records_out = []
                     try:
                         self._send(recs, flush=True)
                     except Exception:
                         pass
                 try:
-                    self._close_sink()
+                    self.channel.close()
                 except Exception:
                     pass
             try:
                 self.backend.close()
             except Exception:
                 pass
-            for slot in self.slots:
-                try:
-                    ray.kill(slot.actor)
-                except Exception:
-                    pass
-            if self.sink is not None:
-                try:
-                    ray.kill(self.sink)
-                except Exception:
-                    pass
+            if self.pool is not None:
+                self.pool.shutdown()
+            self.channel.kill()
             if started_ray:
                 ray.shutdown()
             try:
@@ -733,8 +514,7 @@ class Driver:
                 pass
 
     def _session(self, state: RunState, ident: RunIdentity, t_start: float) -> RunSummary:
-        import ray
-
+        assert self.pool is not None and self.channel is not None
         spec, plan = self.spec, self.p.plan
         plan_ids = {u.unit_id for u in plan.units}
         completed_before = len(state.completed & plan_ids)
@@ -745,7 +525,7 @@ class Driver:
         # early leaves a balanced subsample; the same spec gives the same order on every resume
         self.queue = UnitQueue(order_units(plan.units, spec), state)
         self.failures = {k: v for k, v in state.failures.items() if k in plan_ids}
-        self.records_out: list[EpisodeRecord] = []
+        self.records_out = []
         self.done_times: list[float] = []
         self.t0 = time.monotonic()
         resumed = self.p.identity is not None
@@ -761,16 +541,10 @@ class Driver:
                     pending=len(self.queue), run_cap_usd=spec.run_cap_usd, workers=spec.workers, order=spec.order,
                     **({"retrying_failed": len(retrying)} if retrying else {}),
                     **({"retrying_errors": len(self.retrying_errors)} if self.retrying_errors else {}))
-        self._check_caps(self.backend.spend())
+        self.caps.check(self.backend.spend())
         self.n_workers = max(1, min(spec.workers, len(self.queue))) if len(self.queue) else 0
-        self.slots = [self._new_slot() for _ in range(self.n_workers)]
-        try:
-            nodes = ray.get([s.actor.node.remote() for s in self.slots], timeout=300)
-        except Exception as exc:
-            raise PipelineError(f"episode workers failed to start: {str(exc).splitlines()[0]}") from None
-        self._event("workers_started", workers={s.worker_id: n for s, n in zip(self.slots, nodes)},
-                    nodes=len(set(nodes)))
-        self.idle = list(self.slots)
+        nodes = self.pool.start(self.n_workers)
+        self._event("workers_started", workers=nodes, nodes=len(set(nodes.values())))
         interrupted = False
         previous = signal.getsignal(signal.SIGTERM)
 
@@ -789,66 +563,65 @@ class Driver:
                 try:
                     while True:
                         self._dispatch()
-                        if not self.inflight:
+                        if not self.pool.in_flight():
                             break
-                        ready, _ = ray.wait(list(self.inflight), num_returns=1, timeout=0.5)
-                        if ready:
-                            ready, _ = ray.wait(list(self.inflight), num_returns=len(self.inflight), timeout=0)
-                        for ref in ready:
-                            self._finish(ref)
+                        ready = self.pool.wait(0.5)
+                        for key in ready:
+                            self._finish(key)
                         if self.records_out:
                             recs, self.records_out = self.records_out, []
                             # terminal rows are written at once: a unit whose episode finished must not
                             # be re-run (and paid again) because its row was still buffered at a crash
                             terminal = any(isinstance(r, EpisodeRecord) for r in recs)
                             self._send(recs, flush=terminal)
-                        self._check_acks()
+                        self.channel.check_acks()
                         now = time.monotonic()
                         if ready or now - last_tick >= 0.5:
                             last_tick = now
                             spend = self.backend.spend()
-                            self._check_caps(spend)
+                            self.caps.check(spend)
                             self._ship_events()
-                            self.sink.maybe_flush.remote()
+                            self.channel.maybe_flush()
                             view.update(self._snapshot(spend))
                             self._push(force=False)
-                except _SinkLost as exc:
+                except SinkLost as exc:
                     # stop at once: what finished is written (by the driver itself), the rest waits
                     # for a resume; the attempts in flight were cut, not failed
                     self._finish_ready_before_stop()
-                    self._on_sink_lost(str(exc))
+                    self.channel.on_lost(str(exc))
                 spend = self.backend.spend()
-                self._check_caps(spend)
+                self.caps.check(spend)
                 view.update(self._snapshot(spend), force=True)
         except KeyboardInterrupt:
             interrupted = True
-            self._event("interrupted", severity="warning", running=len(self.inflight), pending=len(self.queue))
+            self._event("interrupted", severity="warning", running=self.pool.in_flight(), pending=len(self.queue))
         finally:
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
         self.summary.interrupted = interrupted
-        cut = len(self.inflight) if (interrupted or self.sink_lost is not None) else 0
+        lost = self.channel.lost
+        cut = self.pool.in_flight() if (interrupted or lost is not None) else 0
         self.summary.not_started = len(self.queue) + cut
-        self.summary.stopped = self.run_stopped or (", ".join(sorted(self.stopped_models)) + " capped" if self.stopped_models else None)
+        self.summary.stopped = self.caps.stopped
         if self.records_out:
             self._send(self.records_out, flush=True)
             self.records_out = []
         self.summary.spend_usd = spend.total_usd
         self.summary.wall_s = time.monotonic() - t_start
-        self._event("run_finished" if not (interrupted or self.sink_lost) else "run_stopped",
+        self._event("run_finished" if not (interrupted or lost) else "run_stopped",
                     finished=self.summary.finished_now, not_started=self.summary.not_started,
-                    spend_usd=spend.total_usd, stopped=self.summary.stopped or self.sink_lost,
+                    spend_usd=spend.total_usd, stopped=self.summary.stopped or lost,
                     **({"infra_failed": self.summary.infra_failed} if self.summary.infra_failed else {}))
         self._ship_events()
         try:
             self.backend.flush()
         finally:
-            self._close_sink()
+            self.channel.close()
         self._push()
-        if self.sink_lost is not None:
-            self._write_direct([])  # the last events
+        if self.channel.lost is not None:
+            self.channel.write_direct([])  # the last events
             raise PipelineError(
-                f"the sink actor was lost ({self.sink_lost}); the session stopped: "
+                f"the sink actor was lost ({self.channel.lost}); the session stopped: "
                 f"{self.summary.finished_now} episodes finished this session are written, "
                 f"{self.summary.not_started} units were not finished; continue with: recap resume {self.p.store.location}")
         return self.summary
@@ -856,17 +629,14 @@ class Driver:
     def _finish_ready_before_stop(self) -> None:
         """Results already returned when the sink was lost: their rows were acknowledged by
         the sink (logged), so their terminal rows are written too."""
-        import ray
-
-        if not self.inflight:
+        assert self.pool is not None
+        if not self.pool.in_flight():
             return
-        ready, _ = ray.wait(list(self.inflight), num_returns=len(self.inflight), timeout=0)
-        for ref in ready:
+        for key in self.pool.wait(0):
             try:
-                self._finish(ref)
-            except _SinkLost:
+                self._finish(key)
+            except SinkLost:
                 pass
-        self.idle = []
 
     def _success_before(self, plan_ids: set[str]) -> int:
         cols = ("unit_id", "attempt", "success", "end_reason", "error")

@@ -120,7 +120,7 @@ def check_plan(plan: "Plan") -> None:
 
     For each distinct (benchmark, task kind, method configuration, environment options, step
     multiplier) of the plan, the agent is built exactly as the episode worker builds it
-    (:func:`workers.episode_worker.build_agent` and :func:`~workers.episode_worker.env_options_for`),
+    (:func:`workers.episode_worker.agent_from_config` and :func:`~workers.episode_worker.env_options_for`),
     one instance of that task kind is opened with the unit's options and step multiplier
     (:func:`workers.envs.registry.make_env`: the data folder must be found) and the agent
     renders its demonstration for it (``agent.demonstration_text(env)``). One environment is
@@ -135,7 +135,7 @@ def check_plan(plan: "Plan") -> None:
     from pipeline.units import stratum
     from recap.env import DataNotFoundError
     from workers.envs import registry
-    from workers.episode_worker import build_agent, env_options_for
+    from workers.episode_worker import agent_from_config, env_options_for
 
     spec = plan.spec
     method_index = {m.name: i for i, m in enumerate(spec.methods)}
@@ -159,11 +159,11 @@ def check_plan(plan: "Plan") -> None:
         seen.add(pre)
         akey = (u.method, u.method_config, u.benchmark)
         if akey not in agents:
-            # settled by expand() already (resolve_methods); built again as the worker builds it
-            agents[akey] = build_agent(u.method, profile=u.profile, ablation=u.ablation, settings=dict(u.settings),
-                                       benchmark=u.benchmark)
+            # settled by expand() already (resolve_methods); built again as the worker builds it:
+            # from the unit's resolved settings
+            agents[akey] = agent_from_config(u.method, u.method_config)
         agent = agents[akey]
-        options = env_options_for({"instance_id": u.instance_id, "env_options": dict(u.env_options)}, agent)
+        options = env_options_for(u.work(), agent)
         ekey = (kind, _canonical(options), float(u.step_multiplier))
         entry = envs.setdefault(ekey, {"unit": u, "options": options, "methods": []})
         entry["methods"].append((u, agent))

@@ -23,6 +23,7 @@ from pipeline.spec import SEED_MAX, EnvSpec, SweepSpec
 from recap.config import ConfigError
 from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
 from schemas.labels import ablation_of_config, place_of
+from schemas.outcomes import UnitWork
 from workers.episode_worker import build_agent
 
 HASH_VERSION = 1
@@ -62,15 +63,13 @@ class Unit:
     def key(self) -> str:
         return f"{self.instance_id} | {self.method_label} | {self.model_label} | seed {self.seed}"
 
-    def payload(self) -> dict[str, Any]:
-        """What a worker needs to play the unit (plain data, cheap to ship)."""
-        return {
-            "unit_id": self.unit_id, "instance_id": self.instance_id, "method": self.method,
-            "method_label": self.method_label, "profile": self.profile, "ablation": self.ablation,
-            "settings": dict(self.settings), "method_config": self.method_config,
-            "model_label": self.model_label, "model": self.model, "seed": self.seed,
-            "step_multiplier": self.step_multiplier, "env_options": dict(self.env_options),
-        }
+    def work(self) -> UnitWork:
+        """What a worker needs to play the unit: the resolved settings, not the raw ones."""
+        return UnitWork(
+            unit_id=self.unit_id, instance_id=self.instance_id, method=self.method,
+            method_config=self.method_config, model_label=self.model_label, model=self.model,
+            seed=self.seed, step_multiplier=self.step_multiplier,
+            env_options=tuple(sorted(self.env_options.items())))
 
     def summary(self) -> dict[str, Any]:
         """What plan.json keeps per unit (enough for status, the report's coverage table and

@@ -118,6 +118,27 @@ class AgentConfig:
         """Canonical JSON (sorted keys): part of a unit's content hash and of episode rows."""
         return json.dumps(dataclasses.asdict(self), sort_keys=True)
 
+    @classmethod
+    def from_json(cls, text: str) -> AgentConfig:
+        """The config :meth:`to_json` wrote, exactly (``from_json(c.to_json()) == c``).
+
+        Why: a unit carries its resolved settings as this JSON (it is what its hash covers), so
+        a worker builds the agent from it instead of re-resolving profile + ablation + settings
+        and possibly getting something else. Every field must be present: a unit written by
+        another version of a config class fails here, by name, rather than running with defaults."""
+        try:
+            values = json.loads(text)
+        except ValueError as exc:
+            raise ConfigError(f"{cls.__name__}: resolved settings are not JSON: {exc}") from None
+        if not isinstance(values, dict):
+            raise ConfigError(f"{cls.__name__}: resolved settings must be a JSON object")
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown, missing = sorted(set(values) - names), sorted(names - set(values))
+        if unknown or missing:
+            raise ConfigError(f"{cls.__name__}: resolved settings do not match this version "
+                              f"(unknown: {', '.join(unknown) or '-'}; missing: {', '.join(missing) or '-'})")
+        return cls(**values)
+
 
 @dataclass(frozen=True)
 class ReCAPConfig(AgentConfig):

@@ -12,6 +12,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from schemas.outcomes import BudgetRefusal
+
 #: error classes an agent may see; the gateway classifies provider errors into these
 ERROR_KINDS = (
     "rate_limit",
@@ -27,7 +29,8 @@ ERROR_KINDS = (
 class LLMError(RuntimeError):
     """A failed model call, classified. ``kind`` is one of :data:`ERROR_KINDS`."""
 
-    def __init__(self, kind: str, message: str = "", *, retries: int = 0, cost_usd: float = 0.0):
+    def __init__(self, kind: str, message: str = "", *, retries: int = 0, cost_usd: float = 0.0,
+                 refusal: BudgetRefusal | None = None):
         if kind not in ERROR_KINDS:
             raise ValueError(f"unknown LLM error kind {kind!r}")
         super().__init__(f"{kind}: {message}" if message else kind)
@@ -35,6 +38,8 @@ class LLMError(RuntimeError):
         self.message = message
         self.retries = retries
         self.cost_usd = cost_usd
+        #: for ``budget``: the cap that refused the call (typed, so nobody parses the message)
+        self.refusal = refusal
 
 
 @dataclass(frozen=True)

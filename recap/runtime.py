@@ -24,6 +24,7 @@ from recap.history import History
 from recap.jsonreply import ReplyFormatError, parse_json_object
 from recap.llm import LLMClient, LLMError, LLMRequest
 from schemas.records import CallRecord, Record, StepRecord
+from schemas.outcomes import BudgetRefusal, EpisodeResult
 
 END_REASONS = (
     "success",
@@ -44,30 +45,16 @@ Emit = Callable[[Record], None]
 class EpisodeEnd(Exception):
     """Raised from anywhere inside an episode to end it with a named reason."""
 
-    def __init__(self, reason: str, detail: str = "", *, error_kind: str | None = None):
+    def __init__(self, reason: str, detail: str = "", *, error_kind: str | None = None,
+                 refusal: BudgetRefusal | None = None):
         if reason not in END_REASONS:
             raise ValueError(f"unknown end reason {reason!r}")
         super().__init__(f"{reason}: {detail}" if detail else reason)
         self.reason = reason
         self.detail = detail
         self.error_kind = error_kind
-
-
-@dataclass
-class EpisodeResult:
-    end_reason: str
-    success: bool
-    steps: int
-    llm_calls: int
-    prompt_tokens: int = 0
-    cached_prompt_tokens: int = 0
-    completion_tokens: int = 0
-    cost_usd: float = 0.0
-    max_depth: int = 0
-    invalid_actions: int = 0
-    json_repairs: int = 0
-    error: str | None = None
-    error_kind: str | None = None
+        #: ``budget_exhausted``: the cap that refused the call
+        self.refusal = refusal
 
 
 def repair_prompt(problem: str, expected: str) -> str:
@@ -204,7 +191,7 @@ class Conversation:
                         raise EpisodeEnd("llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind) from None
                     continue
                 if exc.kind == "budget":
-                    raise EpisodeEnd("budget_exhausted", exc.message, error_kind=exc.kind) from None
+                    raise EpisodeEnd("budget_exhausted", exc.message, error_kind=exc.kind, refusal=exc.refusal) from None
                 raise EpisodeEnd("llm_error", str(exc), error_kind=exc.kind) from None
             seq = self.history.add("assistant", "reply", response.text, node_id)
             u = self.usage
@@ -385,4 +372,5 @@ class Episode:
             json_repairs=u.json_repairs,
             error=end.detail or None,
             error_kind=end.error_kind,
+            refusal=end.refusal,
         )

@@ -27,7 +27,7 @@ from recap.config import ConfigError, ReCAPConfig, build_config
 from recap.env import Environment
 from recap.llm import LLMClient, LLMRequest, LLMResponse
 from recap.recap_agent import ReCAPAgent
-from recap.runtime import EpisodeResult
+from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import record_to_row
 
@@ -78,16 +78,16 @@ def build_agent(method: str, *, profile: str | None = None, ablation: str | None
     return ReCAPAgent(build_config(ReCAPConfig, profile, ablation, benchmark, **settings))
 
 
-def env_options_for(unit: Mapping[str, Any], agent: Agent) -> dict[str, Any]:
+def env_options_for(unit: UnitWork, agent: Agent) -> dict[str, Any]:
     """The make() options of a unit's environment: what its benchmark chooses for the agent's
     method (ALFWorld: whether observations list the valid actions), then the sweep's own
     options, which win."""
     from workers.envs.registry import get_benchmark
 
-    bench = get_benchmark(unit["instance_id"].split("/", 1)[0])
+    bench = get_benchmark(unit.benchmark)
     hook = getattr(bench, "options_for_agent", None)
     options = dict(hook(agent.style)) if hook is not None else {}
-    options.update({k: v for k, v in (unit.get("env_options") or {}).items() if v is not None})
+    options.update({k: v for k, v in unit.env_options if v is not None})
     return options
 
 
@@ -205,6 +205,18 @@ def _resident_bytes() -> int:
     return 0
 
 
+def agent_from_config(method: str, method_config: str) -> Agent:
+    """The agent a unit's resolved settings describe (see :meth:`recap.config.AgentConfig.from_json`):
+    the same config the driver hashed, field for field."""
+    from recap.methods import method_classes
+
+    agent_cls, config_cls = method_classes(method)
+    config = config_cls.from_json(method_config)
+    if config.to_json() != method_config:
+        raise ConfigError(f"{method}: resolved settings do not round-trip (the unit was planned by another version)")
+    return agent_cls(config)
+
+
 class EpisodeRunner:
     """Plays units; the Ray actor is a thin shell around this (so it can be tested directly)."""
 
@@ -220,12 +232,12 @@ class EpisodeRunner:
         self._clients: dict[str, LLMClient] = {}
         self.units_done = 0
 
-    def _agent(self, unit: Mapping[str, Any]) -> Agent:
-        key = unit["method_config"] + "|" + unit["method"]
+    def _agent(self, unit: UnitWork) -> Agent:
+        """The unit's agent, built from its resolved settings (cached per settings: an agent
+        renders its demonstration once)."""
+        key = unit.method_config + "|" + unit.method
         if key not in self._agents:
-            self._agents[key] = build_agent(unit["method"], profile=unit.get("profile"), ablation=unit.get("ablation"),
-                                            settings=unit.get("settings") or {},
-                                            benchmark=unit["instance_id"].split("/", 1)[0])
+            self._agents[key] = agent_from_config(unit.method, unit.method_config)
         return self._agents[key]
 
     def _client(self, model_label: str) -> LLMClient:
@@ -233,46 +245,42 @@ class EpisodeRunner:
             self._clients[model_label] = self.factory.client(model_label)
         return self._clients[model_label]
 
-    def run_unit(self, unit: Mapping[str, Any], attempt: int) -> dict[str, Any]:
+    def run_unit(self, unit: UnitWork, attempt: int) -> EpisodeOutcome:
+        """Play one attempt of a unit: an outcome with a result (the episode ended) or a crash
+        (the agent or the model client broke; the driver retries it)."""
         from workers.envs.registry import make_env
 
-        episode_id = f"{unit['unit_id']}-{attempt}"
-        started = time.time()
+        episode_id = f"{unit.unit_id}-{attempt}"
         t0 = time.perf_counter()
-        out: dict[str, Any] = {
-            "unit_id": unit["unit_id"], "attempt": attempt, "episode_id": episode_id,
-            "worker_id": self.worker_id, "pid": os.getpid(), "started_at": started,
-            "env": {"benchmark": unit["instance_id"].split("/", 1)[0], "split": "", "task": "", "optimal_steps": None, "max_steps": 0},
-            "result": None, "crash": None, "model": unit["model"], "test_double": unit["model"].startswith(OFFLINE_PREFIX),
-            "rows_sent": 0,
-        }
+        offline = unit.model.startswith(OFFLINE_PREFIX)
+        out = EpisodeOutcome(unit_id=unit.unit_id, attempt=attempt, episode_id=episode_id, worker_id=self.worker_id,
+                             pid=os.getpid(), started_at=time.time(), env=EnvFacts(unit.benchmark), model=unit.model,
+                             test_double=offline)
         forward = RecordForwarder(self.run_id, self.send, self.wait, skip_calls=bool(self.factory.writes_llm_calls),
                                   batch_rows=self.batch_rows)
         env: Environment | None = None
         try:
             agent = self._agent(unit)
             try:
-                env = make_env(unit["instance_id"], step_multiplier=unit["step_multiplier"], **env_options_for(unit, agent))
+                env = make_env(unit.instance_id, step_multiplier=unit.step_multiplier, **env_options_for(unit, agent))
             except Exception as exc:  # missing data, broken game file: the attempt ends with env_error
-                out["result"] = dataclasses.asdict(EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000]))
+                out.result = EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000])
                 return out
-            out["env"] = {"benchmark": env.benchmark, "split": env.split, "task": env.task,
-                          "optimal_steps": env.optimal_steps, "max_steps": env.max_steps}
-            client = EpisodeClient(self._client(unit["model_label"]), env, seed=int(unit["seed"]),
-                                   offline=unit["model"].startswith(OFFLINE_PREFIX))
+            out.env = EnvFacts(benchmark=env.benchmark, split=env.split, task=env.task,
+                               optimal_steps=env.optimal_steps, max_steps=env.max_steps)
+            client = EpisodeClient(self._client(unit.model_label), env, seed=int(unit.seed), offline=offline)
             try:
                 result = agent.run(env, client, episode_id=episode_id, emit=forward)
             except ClientError as exc:
-                out["crash"] = {"source": "client", "error": str(exc)[:2000]}
+                out.crash = Crash("client", str(exc)[:2000])
                 return out
             except Exception as exc:
-                out["crash"] = {"source": "agent", "error": f"{type(exc).__name__}: {exc}"[:2000],
-                                "traceback": traceback.format_exc()[-4000:]}
+                out.crash = Crash("agent", f"{type(exc).__name__}: {exc}"[:2000], traceback.format_exc()[-4000:])
                 return out
-            out["result"] = dataclasses.asdict(result)
-            out["test_double"] = out["test_double"] or client.test_double
+            out.result = result
+            out.test_double = out.test_double or client.test_double
             if client.models:
-                out["model"] = sorted(client.models)[0]
+                out.model = sorted(client.models)[0]
             return out
         finally:
             if env is not None:
@@ -280,9 +288,9 @@ class EpisodeRunner:
                     env.close()
                 except Exception:
                     pass
-            out["rows_sent"] = forward.close()
-            out["ended_at"] = time.time()
-            out["wall_s"] = time.perf_counter() - t0
+            out.rows_sent = forward.close()
+            out.ended_at = time.time()
+            out.wall_s = time.perf_counter() - t0
             self.units_done += 1
 
 
@@ -312,7 +320,7 @@ class _EpisodeWorker:
         """Resident set size of this worker process, in bytes."""
         return _resident_bytes()
 
-    def run_unit(self, unit: dict[str, Any], attempt: int) -> dict[str, Any]:
+    def run_unit(self, unit: UnitWork, attempt: int) -> EpisodeOutcome:
         return self.runner.run_unit(unit, attempt)
 
 

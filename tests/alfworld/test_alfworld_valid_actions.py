@@ -209,17 +209,24 @@ def test_offline_expert_wins_with_the_lists_shown(bench, style):
     assert any(HEAT_ARRIVE + ARRIVE_LIST in text for text in shown)  # the first step's answer
 
 
+def _work(instance_id, **env_options):
+    from schemas.outcomes import UnitWork
+
+    return UnitWork(unit_id="u", instance_id=instance_id, method="react", method_config="{}", model_label="m",
+                    model="offline/expert", seed=1, step_multiplier=1.0, env_options=tuple(sorted(env_options.items())))
+
+
 def test_the_worker_fills_the_setting_per_method_and_a_sweep_option_wins():
     """The pipeline asks the benchmark what each method runs with: ReCAP sees the valid actions
     on ALFWorld, ReAct does not; a sweep's explicit option overrides either."""
     from recap.methods import make_agent
     from workers.episode_worker import env_options_for
 
-    unit = {"instance_id": "alfworld/heat/x", "env_options": {"data_dir": "d"}}
+    unit = _work("alfworld/heat/x", data_dir="d")
     assert env_options_for(unit, make_agent("recap")) == {"show_valid_actions": True, "data_dir": "d"}
     assert env_options_for(unit, make_agent("react")) == {"show_valid_actions": False, "data_dir": "d"}
     assert env_options_for(unit, make_agent("adapt")) == {"show_valid_actions": False, "data_dir": "d"}
-    forced = {"instance_id": "alfworld/heat/x", "env_options": {"show_valid_actions": True}}
+    forced = _work("alfworld/heat/x", show_valid_actions=True)
     assert env_options_for(forced, make_agent("react")) == {"show_valid_actions": True}
     # other benchmarks choose nothing per method
-    assert env_options_for({"instance_id": "blocksworld/3@1"}, make_agent("recap")) == {}
+    assert env_options_for(_work("blocksworld/3@1"), make_agent("recap")) == {}

@@ -107,8 +107,8 @@ def worker_kill(lab: Lab, runs: int = 1, units: int = 20) -> ScenarioResult:
 
             threading.Thread(target=go, daemon=True).start()
 
-        def on_result(unit: Any, attempt: int, out_: dict[str, Any]) -> None:
-            if not out_.get("crash"):
+        def on_result(unit: Any, attempt: int, out_: Any) -> None:
+            if out_.crash is None:
                 returned.append(f"{unit.unit_id}-{attempt}")
 
         summary, _ = run_driver(text, hooks=Hooks(on_dispatch=on_dispatch, on_result=on_result))

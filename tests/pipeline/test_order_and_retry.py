@@ -430,7 +430,8 @@ max_attempts: 2
 def test_a_give_up_whose_last_error_names_a_dead_actor_counts_as_infrastructure(tmp_path):
     """The worker lived but its task failed on a dead actor (attempt_failed, no marker): the row
     reads as worker_lost to resume and status, so the session counts it as failed (exit 4)."""
-    from pipeline.driver import RunSummary, _InFlight, _Slot
+    from pipeline.driver import RunSummary
+    from pipeline.worker_pool import Finished, Slot
     from pipeline.resume import Pending
 
     out = tmp_path / "one"
@@ -444,7 +445,7 @@ max_attempts: 1
     unit = d.p.plan.units[0]
     d.summary = RunSummary(location=str(out), run="one", run_id="x", total=1, completed_before=0)
     d.failures, d.queue = {}, UnitQueue([], RunState())
-    d._failed_attempt(_InFlight(_Slot("w1", None), Pending(unit, 1), 0.0), "attempt_failed",
+    d._failed_attempt(Finished(Slot("w1", None), Pending(unit, 1), 0.0), "attempt_failed",
                       "ActorDiedError: The actor died unexpectedly before finishing this task.")
     (rec,) = d.records_out
     assert rec.error.startswith("gave up after 1 failed attempts; last: ActorDiedError")

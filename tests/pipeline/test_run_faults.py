@@ -61,7 +61,7 @@ class _Recorder:
         self.dispatched: list[tuple[str, int]] = []
         self.returned: list[tuple[str, int]] = []
         self.hooks = Hooks(on_dispatch=lambda u, a, actor: self.dispatched.append((u.unit_id, a)),
-                           on_result=lambda u, a, o: None if o.get("crash") else self.returned.append((u.unit_id, a)))
+                           on_result=lambda u, a, o: None if o.crash is not None else self.returned.append((u.unit_id, a)))
 
 
 def _kill_sink_when(driver: Driver, out: Path, after_rows: int, seen: dict) -> threading.Thread:

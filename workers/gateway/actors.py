@@ -9,7 +9,8 @@ requests. They are handed to the request loop with ``call_soon_threadsafe`` (asy
 belong to one loop); requests there only await, so a control call waits microseconds.
 
 Requests return an envelope, ``("ok", LLMResponse)`` or ``("error", kind, message, retries,
-cost_usd)``, which :class:`workers.gateway.client.GatewayClient` turns back into a response or
+cost_usd, refusal)`` (``refusal``: the :class:`schemas.outcomes.BudgetRefusal` of a ``budget``
+error, else None), which :class:`workers.gateway.client.GatewayClient` turns back into a response or
 an ``LLMError`` of the same kind (Ray's own exception wrapping would lose the kind).
 """
 
@@ -170,9 +171,9 @@ class GatewayActor:
         try:
             return ("ok", await self.core.complete(request))
         except LLMError as exc:
-            return ("error", exc.kind, exc.message, exc.retries, exc.cost_usd)
+            return ("error", exc.kind, exc.message, exc.retries, exc.cost_usd, exc.refusal)
         except Exception as exc:  # e.g. the budget actor died: transient for the caller
-            return ("error", "server_error", scrub(f"gateway failure: {type(exc).__name__}: {exc}")[:500], 0, 0.0)
+            return ("error", "server_error", scrub(f"gateway failure: {type(exc).__name__}: {exc}")[:500], 0, 0.0, None)
 
     async def _on_core_loop(self, fn: Callable[[], Any]) -> Any:
         loop = self.core.loop

@@ -19,8 +19,8 @@ from recap.llm import LLMError, LLMRequest, LLMResponse
 def _unwrap(envelope: tuple) -> LLMResponse:
     if envelope[0] == "ok":
         return envelope[1]
-    _, kind, message, retries, cost_usd = envelope
-    raise LLMError(kind, message, retries=retries, cost_usd=cost_usd)
+    _, kind, message, retries, cost_usd, refusal = envelope
+    raise LLMError(kind, message, retries=retries, cost_usd=cost_usd, refusal=refusal)
 
 
 class GatewayClient:

@@ -43,6 +43,7 @@ from typing import Any
 from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, stop_after_attempt, stop_after_delay
 from tenacity import wait_exponential_jitter
 
+from schemas.outcomes import BudgetRefusal
 from recap.llm import LLMError, LLMRequest, LLMResponse
 from workers.gateway.call_log import CallLog, run_id_of, writer_name
 from workers.gateway.ledger import BudgetLedger, LocalBudget
@@ -306,7 +307,9 @@ class DeploymentGateway:
         self.admission.cancel(ticket)  # nothing is sent
         if answer["status"] == "recorded":
             raise _Served(answer["result"], answer["served_from"])
-        raise _Final(Classified("budget", answer["message"]))
+        refusal = answer.get("refusal")
+        raise _Final(Classified("budget", answer["message"],
+                                refusal=BudgetRefusal.from_dict(refusal) if refusal is not None else None))
 
     async def _one_attempt(self, call: "_Call") -> Attempt:
         cfg = self.config
@@ -396,7 +399,7 @@ class DeploymentGateway:
             request, model=self.config.model, kind=c.kind, message=message, cost_usd=pico_to_usd(charged),
             latency_s=self._clock() - t0, retries=retries, token_count_source=source,
             deployment=self.deployment, test_double=self.test_double))
-        return LLMError(c.kind, message, retries=retries, cost_usd=pico_to_usd(charged))
+        return LLMError(c.kind, message, retries=retries, cost_usd=pico_to_usd(charged), refusal=c.refusal)
 
     def _record(self, request: LLMRequest, resp: LLMResponse, cache_write_tokens: int = 0) -> None:
         self.call_log.add(ok_record(request, resp, cache_write_tokens))

@@ -34,6 +34,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from schemas.outcomes import BudgetRefusal
 from workers.gateway.journal import Journal
 from workers.llm.pricing import pico_to_usd, usd_to_pico
 
@@ -112,20 +113,19 @@ class BudgetLedger:
         self._journal.append(entry)
         self._settle_state(rid, int(pico), entry)
 
-    def _refusal(self, model: str, worst: int | None) -> str | None:
+    def _refusal(self, model: str, worst: int | None) -> BudgetRefusal | None:
+        """The cap this call would pass (typed: the driver stops the run or only the model by
+        its ``scope``), or None when it fits."""
         if worst is None:
             if self.run_cap is not None or model in self.model_caps:
-                return (f"no price for model {model}: a capped run cannot price its calls "
-                        "(add it to workers/pricing/prices.yaml or pass a price override)")
+                return BudgetRefusal("unpriced", model)
             return None
         if self.run_cap is not None and self.spent + self.reserved + worst > self.run_cap:
-            return (f"run budget: committed ${pico_to_usd(self.spent + self.reserved):.6f} + this call's "
-                    f"worst case ${pico_to_usd(worst):.6f} > cap ${pico_to_usd(self.run_cap):.6f}")
+            return BudgetRefusal("run", model, self.run_cap, self.spent + self.reserved, worst)
         cap = self.model_caps.get(model)
         committed = self.spent_by_model[model] + self.reserved_by_model[model]
         if cap is not None and committed + worst > cap:
-            return (f"{model} budget: committed ${pico_to_usd(committed):.6f} + this call's worst case "
-                    f"${pico_to_usd(worst):.6f} > cap ${pico_to_usd(cap):.6f}")
+            return BudgetRefusal("model", model, cap, committed, worst)
         return None
 
     # ---- public API (all amounts pico-USD; results are plain dicts so they cross Ray) ----
@@ -159,7 +159,7 @@ class BudgetLedger:
         refusal = self._refusal(model, worst_pico)
         if refusal is not None:
             self.refusals += 1
-            return {"status": "refused", "message": refusal}
+            return {"status": "refused", "message": refusal.message, "refusal": refusal.to_dict()}
         rid = self._next_rid
         self._next_rid += 1
         pico = int(worst_pico or 0)

@@ -15,6 +15,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from schemas.outcomes import BudgetRefusal
+
 #: kinds worth another attempt; the others are returned to the caller at once
 RETRYABLE_KINDS = frozenset({"rate_limit", "timeout", "server_error"})
 MAX_MESSAGE_CHARS = 500
@@ -63,6 +65,8 @@ class Classified:
     #: reply body the client could not read (e.g. fractional token counts), a dropped connection.
     #: Such an attempt is charged at its reservation (the worst case), never at zero.
     maybe_billed: bool = False
+    #: a ``budget`` refusal: which cap refused the call (the driver stops the run or the model by it)
+    refusal: BudgetRefusal | None = None
 
     @property
     def retryable(self) -> bool:

@@ -1,0 +1,82 @@
+"""The terminal ``episodes`` row of an attempt, from the unit and its typed outcome.
+
+Why in its own module: the row is the run's ground truth (success tables, resume, status all
+read it), so how it is assembled - the end reason an infrastructure failure gets, the error's
+kind prefix, the spend of an attempt whose worker died - is one pure function, tested alone.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from pipeline.resume import INFRA_ERROR, INFRA_ERROR_KINDS, AttemptSpend, infra_failure
+from pipeline.units import Unit
+from schemas.labels import place_of
+from schemas.outcomes import EnvFacts, EpisodeOutcome, EpisodeResult
+from schemas.records import EpisodeRecord
+
+#: an attempt's spend by the ledger journal (None: not known), for attempts without a result
+JournalSpend = Callable[[str], AttemptSpend | None]
+
+
+def episode_record(unit: Unit, attempt: int, outcome: EpisodeOutcome | None, *, end_reason: str | None = None,
+                   error: str | None = None, worker_id: str | None = None, started: float = 0.0,
+                   journal_spend: JournalSpend | None = None, now: float | None = None) -> EpisodeRecord:
+    """The terminal row of an attempt (schema version 2).
+
+    The arm's method, label, profile and ablation apart; the place from
+    :func:`schemas.labels.place_of` (ALFWorld one split; a row without an environment still has
+    its split and task); an infrastructure failure ends ``infra_error`` with its kind first in
+    the error; an attempt without a result (a unit given up on) gets the spend the ledger
+    journal recorded for it."""
+    res: EpisodeResult | None = outcome.result if outcome is not None else None
+    env = outcome.env if outcome is not None else EnvFacts(unit.benchmark)
+    now = time.time() if now is None else now
+    if end_reason is None:
+        if res is None:
+            raise ValueError(f"attempt {unit.unit_id}-{attempt}: no result and no end reason")
+        end_reason = res.end_reason
+    if error is None and res is not None:
+        error = res.error
+        kind = res.error_kind
+        # the row's error names the LLM error kind first: what makes an infrastructure
+        # failure recognisable (and retryable) from the table alone
+        if end_reason == "llm_error" and kind in INFRA_ERROR_KINDS and not (error or "").startswith(f"{kind}:"):
+            error = f"{kind}: {error or ''}".rstrip()
+    if infra_failure(end_reason, error) is not None:
+        end_reason = INFRA_ERROR
+    if res is not None:
+        calls, prompt, cached, completion, cost = (res.llm_calls, res.prompt_tokens, res.cached_prompt_tokens,
+                                                   res.completion_tokens, res.cost_usd)
+    else:
+        s = _safe(journal_spend, f"{unit.unit_id}-{attempt}")
+        calls, prompt, cached, completion, cost = ((s.calls, s.prompt_tokens, s.cached_prompt_tokens,
+                                                    s.completion_tokens, s.cost_usd) if s is not None else (0, 0, 0, 0, 0.0))
+    bench, split, task = place_of(unit.instance_id, env.split or None, env.task or None)
+    return EpisodeRecord(
+        episode_id=f"{unit.unit_id}-{attempt}", unit_id=unit.unit_id, attempt=attempt,
+        benchmark=env.benchmark or bench, split=split, task=task,
+        instance_id=unit.instance_id, seed=unit.seed, method=unit.method, method_config=unit.method_config,
+        model=unit.model_label, end_reason=end_reason, success=bool(res.success) if res is not None else False,
+        steps=res.steps if res is not None else 0, llm_calls=int(calls),
+        prompt_tokens=int(prompt), cached_prompt_tokens=int(cached),
+        completion_tokens=int(completion), cost_usd=float(cost),
+        wall_s=float(outcome.wall_s if outcome is not None else (now - started if started else 0.0)),
+        step_cap=int(env.max_steps or 0), step_multiplier=unit.step_multiplier,
+        optimal_steps=env.optimal_steps, max_depth=res.max_depth if res is not None else 0,
+        error=error, worker_id=(outcome.worker_id if outcome is not None else None) or worker_id,
+        started_at=float(outcome.started_at if outcome is not None else started),
+        ended_at=float(outcome.ended_at if outcome is not None else now),
+        test_double=outcome.test_double if outcome is not None else unit.model.startswith("offline/"),
+        label=unit.method_label, profile=unit.profile, ablation=unit.ablation_name, provider_model=unit.model,
+    )
+
+
+def _safe(journal_spend: JournalSpend | None, episode_id: str) -> AttemptSpend | None:
+    if journal_spend is None:
+        return None
+    try:
+        return journal_spend(episode_id)
+    except Exception:  # the row matters more than its spend
+        return None

@@ -1,0 +1,40 @@
+"""The driver's ``events`` rows, buffered until the next shipment to the sink.
+
+Why a buffer object: the session, the cap policy and the sink channel all record events (a cap
+reached, a worker restarted, the sink lost); they share this one buffer so the rows leave in the
+order they happened, and the sink channel can take whatever is pending when it must write
+straight to the run folder.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+from schemas.records import EventRecord
+
+
+class EventBuffer:
+    """Driver events not yet handed to the sink."""
+
+    def __init__(self, source: str = "driver") -> None:
+        self.source = source
+        self._events: list[EventRecord] = []
+
+    def add(self, kind: str, *, severity: str = "info", unit_id: str | None = None, episode_id: str | None = None,
+            **detail: Any) -> None:
+        self._events.append(EventRecord(ts=time.time(), source=self.source, kind=kind, severity=severity,
+                                        episode_id=episode_id, unit_id=unit_id,
+                                        detail=json.dumps(detail, sort_keys=True, default=str)))
+
+    def drain(self) -> list[EventRecord]:
+        """Every pending event, oldest first; the buffer is empty afterwards."""
+        events, self._events = self._events, []
+        return events
+
+    def __len__(self) -> int:
+        return len(self._events)
+
+    def __bool__(self) -> bool:
+        return bool(self._events)

@@ -1,0 +1,279 @@
+"""Where attempts run: a pool of episode workers behind one small interface.
+
+Why an interface: the session (:mod:`pipeline.driver`) decides *what* runs - which unit, which
+attempt, when to retry or give up - and must not care *where*. Two pools implement it:
+
+* :class:`RayWorkerPool` - one Ray actor per worker (the production path): a worker process
+  that dies is told apart from a task that failed on another actor, and replaced;
+* :class:`InProcessWorkerPool` - threads in the driver's process, each with its own
+  :class:`workers.episode_worker.EpisodeRunner`: no actor start-up, breakpoints work, and the
+  session logic is testable without a cluster. Its workers cannot die on their own.
+
+Both hand back :class:`Finished` records: the attempt's typed outcome, or why it has none.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import itertools
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
+
+from pipeline.resume import Pending
+from schemas.outcomes import EpisodeOutcome
+
+#: why an attempt has no outcome: its worker process died (``worker_lost``), its task raised
+#: (``task_raised``), or it failed on another actor while the worker lived (``elsewhere``:
+#: the session asks the sink channel whether the sink is the one gone)
+FailureKind = Literal["worker_lost", "task_raised", "elsewhere"]
+
+
+@dataclass
+class Slot:
+    """One worker: its id, its handle (an actor, or the in-process runner) and units played."""
+
+    worker_id: str
+    handle: Any
+    units: int = 0
+
+
+@dataclass
+class Finished:
+    """An attempt that came back: its outcome, or the failure that left it without one."""
+
+    slot: Slot
+    pending: Pending
+    started: float
+    outcome: EpisodeOutcome | None = None
+    failure: FailureKind | None = None
+    error: str = ""
+    #: the key the pool knew the attempt by (for :meth:`WorkerPool.restore`)
+    key: Any = field(default=None, repr=False)
+
+
+class WorkerPool(Protocol):
+    """What the session needs from wherever attempts run."""
+
+    def start(self, n: int) -> dict[str, str]:
+        """Start ``n`` workers; worker id -> node id."""
+
+    def has_idle(self) -> bool: ...
+
+    def submit(self, pending: Pending) -> Slot:
+        """Start an attempt on an idle worker (the caller checked :meth:`has_idle`)."""
+
+    def in_flight(self) -> int: ...
+
+    def wait(self, timeout: float) -> list[Any]:
+        """Keys of attempts that came back (at most ``timeout`` seconds for the first)."""
+
+    def collect(self, key: Any) -> Finished:
+        """The attempt behind ``key``; its worker is idle again unless it died (then replaced
+        only by :meth:`add_worker`) or the failure is ``elsewhere`` (then :meth:`release` or
+        :meth:`restore` decides)."""
+
+    def release(self, fin: Finished) -> None:
+        """The worker of an ``elsewhere`` failure takes work again."""
+
+    def restore(self, fin: Finished) -> None:
+        """Put an attempt back in flight (the session stops; it counts as cut, not failed)."""
+
+    def add_worker(self) -> Slot:
+        """A new idle worker (after one was lost)."""
+
+    def shutdown(self) -> None: ...
+
+
+class RayWorkerPool:
+    """Episode workers as Ray actors (:func:`workers.episode_worker.worker_actor`)."""
+
+    def __init__(self, worker_cls: Any, run_id: str, sink: Any, factory: Any, *, session: str) -> None:
+        self.worker_cls = worker_cls
+        self.run_id = run_id
+        self.sink = sink
+        self.factory = factory
+        self.session = session
+        self.slots: list[Slot] = []
+        self.idle: list[Slot] = []
+        self._inflight: dict[Any, tuple[Slot, Pending, float]] = {}
+        self._seq = itertools.count(1)
+
+    def _new_slot(self) -> Slot:
+        wid = f"{self.session}-w{next(self._seq):03d}"
+        return Slot(wid, self.worker_cls.remote(wid, self.run_id, self.sink, self.factory))
+
+    def start(self, n: int) -> dict[str, str]:
+        import ray
+
+        from pipeline.errors import PipelineError
+
+        self.slots = [self._new_slot() for _ in range(n)]
+        try:
+            nodes = ray.get([s.handle.node.remote() for s in self.slots], timeout=300)
+        except Exception as exc:
+            raise PipelineError(f"episode workers failed to start: {str(exc).splitlines()[0]}") from None
+        self.idle = list(self.slots)
+        return {s.worker_id: node for s, node in zip(self.slots, nodes)}
+
+    def has_idle(self) -> bool:
+        return bool(self.idle)
+
+    def submit(self, pending: Pending) -> Slot:
+        slot = self.idle.pop()
+        ref = slot.handle.run_unit.remote(pending.unit.work(), pending.attempt)
+        self._inflight[ref] = (slot, pending, time.time())
+        return slot
+
+    def in_flight(self) -> int:
+        return len(self._inflight)
+
+    def wait(self, timeout: float) -> list[Any]:
+        import ray
+
+        if not self._inflight:
+            return []
+        ready, _ = ray.wait(list(self._inflight), num_returns=1, timeout=timeout)
+        if ready:
+            ready, _ = ray.wait(list(self._inflight), num_returns=len(self._inflight), timeout=0)
+        return ready
+
+    @staticmethod
+    def _worker_died(exc: BaseException, slot: Slot) -> bool:
+        """The worker process itself is gone (not: its task failed on another actor)."""
+        from ray.exceptions import RayTaskError
+
+        if isinstance(exc, RayTaskError):  # its task raised: the worker lived to report it
+            return False
+        dead = getattr(exc, "actor_id", None)
+        try:
+            mine = slot.handle._actor_id.hex()
+        except Exception:
+            mine = None
+        return not (dead and mine and dead != mine)
+
+    def collect(self, key: Any) -> Finished:
+        import ray
+        from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError, RayTaskError, WorkerCrashedError
+
+        slot, pending, started = self._inflight.pop(key)
+        fin = Finished(slot, pending, started, key=key)
+        try:
+            fin.outcome = ray.get(key)
+        except (RayActorError, ActorDiedError, ActorUnavailableError, WorkerCrashedError) as exc:
+            fin.error = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+            if not self._worker_died(exc, slot):
+                fin.failure = "elsewhere"
+                return fin
+            fin.failure = "worker_lost"
+            try:
+                ray.kill(slot.handle)
+            except Exception:
+                pass
+            self.slots.remove(slot)
+            return fin
+        except RayTaskError as exc:
+            fin.failure, fin.error = "task_raised", str(exc).splitlines()[-1][:1000]
+            self.idle.append(slot)
+            return fin
+        slot.units += 1
+        self.idle.append(slot)
+        return fin
+
+    def release(self, fin: Finished) -> None:
+        self.idle.append(fin.slot)
+
+    def restore(self, fin: Finished) -> None:
+        self._inflight[fin.key] = (fin.slot, fin.pending, fin.started)
+
+    def add_worker(self) -> Slot:
+        slot = self._new_slot()
+        self.slots.append(slot)
+        self.idle.append(slot)
+        return slot
+
+    def shutdown(self) -> None:
+        import ray
+
+        for slot in self.slots:
+            try:
+                ray.kill(slot.handle)
+            except Exception:
+                pass
+        self.idle = []
+
+
+class InProcessWorkerPool:
+    """Episode runners on threads of the driver's process.
+
+    ``make_runner(worker_id)`` builds a :class:`workers.episode_worker.EpisodeRunner` (with the
+    run's model-client factory and a way to send rows to the sink). Each thread owns one
+    runner, so an agent's state is never shared between threads."""
+
+    def __init__(self, make_runner: Callable[[str], Any], *, session: str) -> None:
+        self.make_runner = make_runner
+        self.session = session
+        self.slots: list[Slot] = []
+        self.idle: list[Slot] = []
+        self._inflight: dict[cf.Future[EpisodeOutcome], tuple[Slot, Pending, float]] = {}
+        self._executor: cf.ThreadPoolExecutor | None = None
+        self._seq = itertools.count(1)
+
+    def _new_slot(self) -> Slot:
+        wid = f"{self.session}-t{next(self._seq):03d}"
+        return Slot(wid, self.make_runner(wid))
+
+    def start(self, n: int) -> dict[str, str]:
+        self._executor = cf.ThreadPoolExecutor(max_workers=max(1, n), thread_name_prefix="episode")
+        self.slots = [self._new_slot() for _ in range(n)]
+        self.idle = list(self.slots)
+        return {s.worker_id: "local" for s in self.slots}
+
+    def has_idle(self) -> bool:
+        return bool(self.idle)
+
+    def submit(self, pending: Pending) -> Slot:
+        assert self._executor is not None, "start() first"
+        slot = self.idle.pop()
+        fut = self._executor.submit(slot.handle.run_unit, pending.unit.work(), pending.attempt)
+        self._inflight[fut] = (slot, pending, time.time())
+        return slot
+
+    def in_flight(self) -> int:
+        return len(self._inflight)
+
+    def wait(self, timeout: float) -> list[Any]:
+        if not self._inflight:
+            return []
+        done, _ = cf.wait(list(self._inflight), timeout=timeout, return_when=cf.FIRST_COMPLETED)
+        return [f for f in self._inflight if f.done()] if done else []
+
+    def collect(self, key: Any) -> Finished:
+        slot, pending, started = self._inflight.pop(key)
+        fin = Finished(slot, pending, started, key=key)
+        exc = key.exception()
+        if exc is not None:  # the runner itself raised (it catches the agent's and client's errors)
+            fin.failure, fin.error = "task_raised", f"{type(exc).__name__}: {exc}"[:1000]
+        else:
+            fin.outcome = key.result()
+            slot.units += 1
+        self.idle.append(slot)
+        return fin
+
+    def release(self, fin: Finished) -> None:
+        self.idle.append(fin.slot)
+
+    def restore(self, fin: Finished) -> None:
+        self._inflight[fin.key] = (fin.slot, fin.pending, fin.started)
+
+    def add_worker(self) -> Slot:
+        slot = self._new_slot()
+        self.slots.append(slot)
+        self.idle.append(slot)
+        return slot
+
+    def shutdown(self) -> None:
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
+        self.idle = []

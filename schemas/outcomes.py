@@ -1,0 +1,156 @@
+"""What crosses the worker -> driver seam and the budget -> driver seam, typed.
+
+Why here: the episode worker (``workers/``) produces an attempt's outcome and the driver
+(``pipeline/``) turns it into the terminal ``episodes`` row; the budget (``workers/gateway``)
+refuses a call and the driver decides which cap stopped the run. Both sides import these
+types from ``schemas/`` (the one package every layer may import), so a field renamed on one
+side is a type error on the other, not a silently defaulted ``.get(..., 0)``.
+
+Everything here is a plain frozen dataclass: it pickles across Ray and has no behaviour
+beyond formatting its own message.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+#: which cap refused a call: the run's, the model's, or a capped run that cannot price the model
+RefusalScope = Literal["run", "model", "unpriced"]
+REFUSAL_SCOPES: tuple[RefusalScope, ...] = ("run", "model", "unpriced")
+
+#: where an attempt crashed (not: ended): the model client, or the agent's own code
+CrashSource = Literal["client", "agent"]
+
+_PICO = 10**12
+
+
+def _usd(pico: int) -> str:
+    return f"${pico / _PICO:.6f}"
+
+
+@dataclass(frozen=True)
+class BudgetRefusal:
+    """The budget's answer when a call would pass a cap (amounts in pico-USD, as the ledger
+    keeps them, so the message is exact).
+
+    ``model`` is the provider model string the ledger keys caps by; the driver knows which
+    unit (and so which model label) was refused."""
+
+    scope: RefusalScope
+    model: str
+    cap_pico: int | None = None
+    committed_pico: int = 0
+    worst_pico: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.scope not in REFUSAL_SCOPES:
+            raise ValueError(f"unknown refusal scope {self.scope!r}; known: {', '.join(REFUSAL_SCOPES)}")
+
+    @property
+    def message(self) -> str:
+        """The one line an episode row's ``error`` carries."""
+        if self.scope == "unpriced":
+            return (f"no price for model {self.model}: a capped run cannot price its calls "
+                    "(add it to workers/pricing/prices.yaml or pass a price override)")
+        who = "run" if self.scope == "run" else self.model
+        return (f"{who} budget: committed {_usd(self.committed_pico)} + this call's worst case "
+                f"{_usd(self.worst_pico or 0)} > cap {_usd(self.cap_pico or 0)}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"scope": self.scope, "model": self.model, "cap_pico": self.cap_pico,
+                "committed_pico": self.committed_pico, "worst_pico": self.worst_pico}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> BudgetRefusal:
+        return cls(scope=d["scope"], model=d["model"], cap_pico=d.get("cap_pico"),
+                   committed_pico=int(d.get("committed_pico") or 0), worst_pico=d.get("worst_pico"))
+
+
+@dataclass
+class EpisodeResult:
+    """How an episode ended and what it used, as the agent's runtime counts it
+    (:meth:`recap.runtime.Episode.result`). ``refusal`` is set when the episode ended
+    ``budget_exhausted``: the cap that refused its call."""
+
+    end_reason: str
+    success: bool
+    steps: int
+    llm_calls: int
+    prompt_tokens: int = 0
+    cached_prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cost_usd: float = 0.0
+    max_depth: int = 0
+    invalid_actions: int = 0
+    json_repairs: int = 0
+    error: str | None = None
+    error_kind: str | None = None
+    refusal: BudgetRefusal | None = None
+
+
+@dataclass(frozen=True)
+class EnvFacts:
+    """The episode's place and step budget, as its environment reports them (``split`` and
+    ``task`` empty when the environment could not be built)."""
+
+    benchmark: str
+    split: str = ""
+    task: str = ""
+    optimal_steps: int | None = None
+    max_steps: int = 0
+
+
+@dataclass(frozen=True)
+class Crash:
+    """An attempt that did not end but broke: the driver retries it (up to ``max_attempts``)."""
+
+    source: CrashSource
+    error: str
+    traceback: str = ""
+
+
+@dataclass
+class EpisodeOutcome:
+    """What a worker returns for one attempt of one unit.
+
+    Exactly one of ``result`` (the episode ended, successfully or not) and ``crash`` (it broke)
+    is set once the worker returns; ``model`` is the provider model that answered (the unit's
+    own unless a router chose another)."""
+
+    unit_id: str
+    attempt: int
+    episode_id: str
+    worker_id: str
+    pid: int
+    started_at: float
+    env: EnvFacts
+    model: str
+    test_double: bool
+    result: EpisodeResult | None = None
+    crash: Crash | None = None
+    ended_at: float = 0.0
+    wall_s: float = 0.0
+    rows_sent: int = 0
+
+
+@dataclass(frozen=True)
+class UnitWork:
+    """What the driver hands a worker for one unit: the instance, the method with its
+    *resolved* settings (``method_config``, the canonical JSON the unit's hash covers: the
+    worker builds the agent from it, never from the sweep's raw profile/ablation/settings),
+    the model, the seed and the environment's options."""
+
+    unit_id: str
+    instance_id: str
+    method: str
+    method_config: str
+    model_label: str
+    model: str
+    seed: int
+    step_multiplier: float
+    env_options: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def benchmark(self) -> str:
+        return self.instance_id.split("/", 1)[0]
