@@ -21,6 +21,10 @@ os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 
 from pipeline.errors import PipelineError, one_line  # noqa: E402
+from workers.log_setup import DEFAULT_LEVEL as DEFAULT_LOG_LEVEL  # noqa: E402
+from workers.log_setup import LEVEL_VAR as LOG_LEVEL_VAR  # noqa: E402
+from workers.log_setup import LEVELS as LOG_LEVELS  # noqa: E402
+from workers.log_setup import configure as configure_logging  # noqa: E402
 
 EXIT_USAGE = 2
 
@@ -87,7 +91,7 @@ class _OneLineParser(argparse.ArgumentParser):
         kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
         super().__init__(*args, **kwargs)
 
-    def error(self, message: str) -> "NoReturn":  # type: ignore[override]
+    def error(self, message: str) -> NoReturn:
         where = self.prog.removeprefix("recap").strip()
         hint = f"recap {where} --help" if where else "recap --help"
         self.exit(EXIT_USAGE, one_line(f"recap: error: {where + ': ' if where else ''}{message} (see {hint})") + "\n")
@@ -221,6 +225,9 @@ exit status: 0 every observation identical; 1 a difference (printed); 2 unreadab
 
 def _parser() -> argparse.ArgumentParser:
     p = _OneLineParser(prog="recap", description="Run and inspect ReCAP evaluation sweeps.", epilog=_MAIN_EPILOG)
+    p.add_argument("--log-level", choices=LOG_LEVELS, default=DEFAULT_LOG_LEVEL,
+                   help="diagnostic lines on stderr (and in the Ray workers' logs) from this level up; "
+                        "accepted before or after any command (default: warning, or $RECAP_LOG_LEVEL)")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND", title="commands",
                            help="one of the commands below; recap COMMAND --help for its options and examples")
 
@@ -593,9 +600,36 @@ def cmd_sql_delegated(argv: list[str]) -> int | None:
 _HELP = {"-h", "--help"}  # help only: no object-store run folder is pulled first
 
 
+def _take_log_level(argv: list[str]) -> str | None:
+    """Remove ``--log-level LEVEL`` (or ``--log-level=LEVEL``) from ``argv`` wherever it stands
+    (before or after the command: every command accepts it) and return the level."""
+    level = None
+    for i, arg in enumerate(argv):
+        if arg == "--":
+            break
+        if arg == "--log-level" or arg.startswith("--log-level="):
+            if "=" in arg:
+                level, drop = arg.split("=", 1)[1], 1
+            elif i + 1 < len(argv):
+                level, drop = argv[i + 1], 2
+            else:
+                raise PipelineError(f"--log-level needs a level: {', '.join(LOG_LEVELS)}")
+            if level.lower() not in LOG_LEVELS:
+                raise PipelineError(f"--log-level: unknown level {level!r}; one of {', '.join(LOG_LEVELS)}")
+            del argv[i:i + drop]
+            break
+    return level
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     _CHECKED.clear()
+    try:
+        level = _take_log_level(argv)
+    except PipelineError as exc:
+        print(f"recap: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    configure_logging(level or os.environ.get(LOG_LEVEL_VAR, "").lower() or DEFAULT_LOG_LEVEL)
     if argv and argv[0] == "data":
         from pipeline.data import data_main
 

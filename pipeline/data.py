@@ -546,6 +546,11 @@ def _tar_member(archive: tarfile.TarFile, member: tarfile.TarInfo) -> IO[bytes]:
     return f
 
 
+def _binary_opener(path: Path) -> Callable[[], IO[bytes]]:
+    """Opens ``path`` for reading bytes, when called."""
+    return lambda: path.open("rb")
+
+
 def _save(opener: Callable[[], IO[bytes]], target: Path) -> str:
     """Copy a stream to ``target`` and return its sha256."""
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -576,7 +581,7 @@ def _stage(bench: Benchmark, mirror: str | None, stage: Path, out: TextIO) -> di
         path, where = _obtain(source, mirror, downloads, out)
         if source.kind == "file":
             if source.saves_as in wanted:
-                got[source.saves_as] = _save(partial(path.open, "rb"), data / source.saves_as)
+                got[source.saves_as] = _save(_binary_opener(path), data / source.saves_as)
                 origin[source.saves_as] = where
         else:
             try:
@@ -716,11 +721,11 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
         self.out = out
 
-    def error(self, message: str) -> NoReturn:  # type: ignore[override]
+    def error(self, message: str) -> NoReturn:
         where = self.prog.removeprefix("recap").strip()
         raise UsageError(f"{message} (see recap {where} --help)")
 
-    def exit(self, status: int = 0, message: str | None = None) -> NoReturn:  # type: ignore[override]
+    def exit(self, status: int = 0, message: str | None = None) -> NoReturn:
         if message:
             self.out.write(message)
         raise _Exit(status)
@@ -745,7 +750,7 @@ def _parser(out: TextIO) -> _Parser:
                        "  recap data fetch robotouille --mirror /mnt/mirror\n\n"
                        "exit status: 0 all verified; 1 a check or fetch failed; 2 bad usage")
     sub = p.add_subparsers(dest="action", required=True, metavar="ACTION", help="list, check or fetch",
-                           parser_class=partial(_Parser, out=out))
+                           parser_class=partial(_Parser, out=out))  # type: ignore[call-overload]  # a class with its out bound
     choices = (*BENCHMARKS, "all")
     for name, text in (("list", "where each benchmark's folder is looked for, and which one is used"),
                        ("check", "verify each folder against the sha256 manifest")):

@@ -73,6 +73,7 @@ from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
 from pipeline.summary import TEST_DOUBLE_LABEL
 from pipeline.units import Plan, PlanDiff, Unit, diff_plans, expand, order_units
 from pipeline.worker_pool import Finished, InProcessWorkerPool, RayWorkerPool, WorkerPool
+from schemas.kinds import EventKind, RowEndReason, Severity
 from schemas.outcomes import EpisodeOutcome
 from schemas.records import EpisodeRecord, RunRecord
 
@@ -245,7 +246,7 @@ class Driver:
         return self.channel.actor if self.channel is not None else None
 
     # -- helpers --------------------------------------------------------------------------------
-    def _event(self, kind: str, *, severity: str = "info", unit: Unit | None = None, episode_id: str | None = None,
+    def _event(self, kind: EventKind, *, severity: Severity = "info", unit: Unit | None = None, episode_id: str | None = None,
                **detail: Any) -> None:
         self.events.add(kind, severity=severity, unit_id=unit.unit_id if unit else None, episode_id=episode_id,
                         **detail)
@@ -276,7 +277,7 @@ class Driver:
         self._event("unit_failed", severity="error", unit=unit, episode_id=f"{unit.unit_id}-{attempt}",
                     attempt=attempt, failure=kind, retry="recap resume")
 
-    def _failed_attempt(self, fin: Finished, kind: str, error: str, out: EpisodeOutcome | None = None,
+    def _failed_attempt(self, fin: Finished, kind: Literal["attempt_failed", "worker_lost"], error: str, out: EpisodeOutcome | None = None,
                         source: str = "worker") -> None:
         """An attempt without an ending: retried under the next attempt number, or, its
         attempts used up, given up on with a terminal row saying why."""
@@ -293,7 +294,7 @@ class Driver:
         infra = lost_to if lost_to in ("worker_lost", "client") else None
         # an agent that crashed on every attempt is an outcome (env_error); a lost worker or a
         # failing model client is infrastructure (infra_error, retried by recap resume)
-        reason = INFRA_ERROR if infra else ("llm_error" if source == "client" else "env_error")
+        reason: RowEndReason = INFRA_ERROR if infra else ("llm_error" if source == "client" else "env_error")
         marker = f" (infrastructure: {infra})" if infra else ""
         msg = f"gave up after {n} failed attempts{marker}; last: {error}"[:2000]
         rec = episode_record(unit, attempt, out, end_reason=reason, error=msg, worker_id=fin.slot.worker_id,
@@ -537,10 +538,14 @@ class Driver:
         self.retrying_errors = {u: r for u, r in state.errored.items()
                                 if u in plan_ids and u not in state.completed and u not in retrying}
         self.summary.retried_errors = len(self.retrying_errors)
+        extra: dict[str, Any] = {}
+        if retrying:
+            extra["retrying_failed"] = len(retrying)
+        if self.retrying_errors:
+            extra["retrying_errors"] = len(self.retrying_errors)
         self._event("run_resumed" if resumed else "run_started", units=len(plan.units), completed=completed_before,
                     pending=len(self.queue), run_cap_usd=spec.run_cap_usd, workers=spec.workers, order=spec.order,
-                    **({"retrying_failed": len(retrying)} if retrying else {}),
-                    **({"retrying_errors": len(self.retrying_errors)} if self.retrying_errors else {}))
+                    **extra)
         self.caps.check(self.backend.spend())
         self.n_workers = max(1, min(spec.workers, len(self.queue))) if len(self.queue) else 0
         nodes = self.pool.start(self.n_workers)
@@ -608,10 +613,10 @@ class Driver:
             self.records_out = []
         self.summary.spend_usd = spend.total_usd
         self.summary.wall_s = time.monotonic() - t_start
+        infra: dict[str, Any] = {"infra_failed": self.summary.infra_failed} if self.summary.infra_failed else {}
         self._event("run_finished" if not (interrupted or lost) else "run_stopped",
                     finished=self.summary.finished_now, not_started=self.summary.not_started,
-                    spend_usd=spend.total_usd, stopped=self.summary.stopped or lost,
-                    **({"infra_failed": self.summary.infra_failed} if self.summary.infra_failed else {}))
+                    spend_usd=spend.total_usd, stopped=self.summary.stopped or lost, **infra)
         self._ship_events()
         try:
             self.backend.flush()

@@ -14,13 +14,15 @@ from pipeline.resume import INFRA_ERROR, INFRA_ERROR_KINDS, AttemptSpend, infra_
 from pipeline.units import Unit
 from schemas.labels import place_of
 from schemas.outcomes import EnvFacts, EpisodeOutcome, EpisodeResult
+from schemas.kinds import RowEndReason
 from schemas.records import EpisodeRecord
+from schemas.tables import check_vocabulary
 
 #: an attempt's spend by the ledger journal (None: not known), for attempts without a result
 JournalSpend = Callable[[str], AttemptSpend | None]
 
 
-def episode_record(unit: Unit, attempt: int, outcome: EpisodeOutcome | None, *, end_reason: str | None = None,
+def episode_record(unit: Unit, attempt: int, outcome: EpisodeOutcome | None, *, end_reason: RowEndReason | None = None,
                    error: str | None = None, worker_id: str | None = None, started: float = 0.0,
                    journal_spend: JournalSpend | None = None, now: float | None = None) -> EpisodeRecord:
     """The terminal row of an attempt (schema version 2).
@@ -54,7 +56,7 @@ def episode_record(unit: Unit, attempt: int, outcome: EpisodeOutcome | None, *, 
         calls, prompt, cached, completion, cost = ((s.calls, s.prompt_tokens, s.cached_prompt_tokens,
                                                     s.completion_tokens, s.cost_usd) if s is not None else (0, 0, 0, 0, 0.0))
     bench, split, task = place_of(unit.instance_id, env.split or None, env.task or None)
-    return EpisodeRecord(
+    return check_vocabulary(EpisodeRecord(
         episode_id=f"{unit.unit_id}-{attempt}", unit_id=unit.unit_id, attempt=attempt,
         benchmark=env.benchmark or bench, split=split, task=task,
         instance_id=unit.instance_id, seed=unit.seed, method=unit.method, method_config=unit.method_config,
@@ -70,7 +72,7 @@ def episode_record(unit: Unit, attempt: int, outcome: EpisodeOutcome | None, *, 
         ended_at=float(outcome.ended_at if outcome is not None else now),
         test_double=outcome.test_double if outcome is not None else unit.model.startswith("offline/"),
         label=unit.method_label, profile=unit.profile, ablation=unit.ablation_name, provider_model=unit.model,
-    )
+    ))
 
 
 def _safe(journal_spend: JournalSpend | None, episode_id: str) -> AttemptSpend | None:

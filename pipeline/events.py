@@ -9,24 +9,31 @@ straight to the run folder.
 from __future__ import annotations
 
 import json
+import logging
 import time
 from typing import Any
 
+from schemas.kinds import EventKind, EventSource, Severity
 from schemas.records import EventRecord
+from schemas.tables import check_vocabulary
+
+log = logging.getLogger(__name__)
 
 
 class EventBuffer:
     """Driver events not yet handed to the sink."""
 
-    def __init__(self, source: str = "driver") -> None:
+    def __init__(self, source: EventSource = "driver") -> None:
         self.source = source
         self._events: list[EventRecord] = []
 
-    def add(self, kind: str, *, severity: str = "info", unit_id: str | None = None, episode_id: str | None = None,
+    def add(self, kind: EventKind, *, severity: Severity = "info", unit_id: str | None = None, episode_id: str | None = None,
             **detail: Any) -> None:
-        self._events.append(EventRecord(ts=time.time(), source=self.source, kind=kind, severity=severity,
+        log.info("event %s (%s)%s%s %s", kind, severity, f" unit {unit_id}" if unit_id else "",
+                 f" episode {episode_id}" if episode_id else "", detail)
+        self._events.append(check_vocabulary(EventRecord(ts=time.time(), source=self.source, kind=kind, severity=severity,
                                         episode_id=episode_id, unit_id=unit_id,
-                                        detail=json.dumps(detail, sort_keys=True, default=str)))
+                                        detail=json.dumps(detail, sort_keys=True, default=str))))
 
     def drain(self) -> list[EventRecord]:
         """Every pending event, oldest first; the buffer is empty afterwards."""

@@ -16,10 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.spec import RaySpec
+from workers.log_setup import LEVEL_VAR
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 #: forwarded from the driver's environment to every Ray worker when set
-FORWARDED_VARS = ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "RECAP_EVAL_DATA")
+FORWARDED_VARS = ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "RECAP_EVAL_DATA", LEVEL_VAR)
 
 
 def runtime_env() -> dict[str, Any]:

@@ -10,6 +10,7 @@ into the run folder. None of that depends on how units are scheduled.
 
 from __future__ import annotations
 
+import logging
 import time
 import uuid
 from pathlib import Path
@@ -18,6 +19,8 @@ from typing import Any
 from pipeline.events import EventBuffer
 
 Rows = dict[str, list[dict[str, Any]]]
+
+log = logging.getLogger(__name__)
 
 
 class SinkLost(Exception):
@@ -127,6 +130,7 @@ class SinkChannel:
         if self.lost is not None:
             return
         self.lost = why
+        log.error("the sink is gone (%s): writing its log and the driver's batches into %s directly", why, self.run_dir)
         try:
             ray.kill(self.actor, no_restart=True)
         except Exception:

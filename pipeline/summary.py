@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue
 from pipeline.store import PLAN_FILE, RunStore
@@ -187,9 +187,10 @@ def render(report: StatusReport, console: Any) -> None:
     from rich.table import Table
 
     t = Table(title=escape(f"run {report.run} ({report.run_id}) - {report.location}"))
-    for col, just in (("arm", "left"), ("model", "left"), ("planned", "right"), ("done", "right"),
+    columns: tuple[tuple[str, Literal["left", "right"]], ...] = (("arm", "left"), ("model", "left"), ("planned", "right"), ("done", "right"),
                       ("success", "right"), ("capped", "right"), ("gave up", "right"), ("not started", "right"),
-                      ("avg steps", "right"), ("avg calls", "right"), ("cost $", "right")):
+                      ("avg steps", "right"), ("avg calls", "right"), ("cost $", "right"))
+    for col, just in columns:
         t.add_column(col, justify=just)
     for g in report.groups:
         rate = f"{g.success}/{g.done} ({100 * g.success / g.done:.0f}%)" if g.done else "-"

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import itertools
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,6 +24,8 @@ from typing import Any, Literal, Protocol
 
 from pipeline.resume import Pending
 from schemas.outcomes import EpisodeOutcome
+
+log = logging.getLogger(__name__)
 
 #: why an attempt has no outcome: its worker process died (``worker_lost``), its task raised
 #: (``task_raised``), or it failed on another actor while the worker lived (``elsewhere``:
@@ -123,6 +126,7 @@ class RayWorkerPool:
     def submit(self, pending: Pending) -> Slot:
         slot = self.idle.pop()
         ref = slot.handle.run_unit.remote(pending.unit.work(), pending.attempt)
+        log.debug("unit %s attempt %d -> worker %s", pending.unit.unit_id, pending.attempt, slot.worker_id)
         self._inflight[ref] = (slot, pending, time.time())
         return slot
 
@@ -167,6 +171,8 @@ class RayWorkerPool:
                 fin.failure = "elsewhere"
                 return fin
             fin.failure = "worker_lost"
+            log.warning("worker %s died running unit %s attempt %d: %s", slot.worker_id, pending.unit.unit_id,
+                        pending.attempt, fin.error)
             try:
                 ray.kill(slot.handle)
             except Exception:
@@ -175,6 +181,8 @@ class RayWorkerPool:
             return fin
         except RayTaskError as exc:
             fin.failure, fin.error = "task_raised", str(exc).splitlines()[-1][:1000]
+            log.warning("unit %s attempt %d raised in worker %s: %s", pending.unit.unit_id, pending.attempt,
+                        slot.worker_id, fin.error)
             self.idle.append(slot)
             return fin
         slot.units += 1

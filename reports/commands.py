@@ -61,10 +61,10 @@ class _Parser(argparse.ArgumentParser):
             (self.out or sys.stdout).write(message)
         raise _Exit(status)
 
-    def print_help(self, file: TextIO | None = None) -> None:
+    def print_help(self, file: Any = None) -> None:
         (file or self.out or sys.stdout).write(self.format_help())
 
-    def print_usage(self, file: TextIO | None = None) -> None:
+    def print_usage(self, file: Any = None) -> None:
         (file or self.out or sys.stdout).write(self.format_usage())
 
 

@@ -96,7 +96,7 @@ def _fill_rate(row: dict[str, Any], key: str, cell: dict[str, Any], ref: float |
     if ref is not None and why is None:
         row[f"{key}:paper"] = format_value("ref", ref)
         row[f"{key}:diff"] = 100.0 * cell["successes"] / cell["episodes"] - ref
-    elif ref is not None:
+    elif ref is not None and why is not None:
         row[f"{key}:paper"] = notes.mark(why)
     row[f"{key}:p"] = p
 
@@ -343,7 +343,7 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
                "p": _cost_p(cells, c, pool)}
         if ref is not None and why is None:
             row["paper"], row["diff"] = f"${ref:,.2f}", c["cost_usd"] - ref
-        elif ref is not None:
+        elif ref is not None and why is not None:
             row["paper"] = notes.mark(why)
         rows.append(row)
     totals_t = Table(
@@ -362,7 +362,7 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
             continue
         ref_cell = cells.reference(c, pool)
         pr = cells.pair(c, ref_cell)
-        if pr is None or not pr["arm_cost"]:
+        if ref_cell is None or pr is None or not pr["arm_cost"]:
             continue
         why = paper.mismatch(paper.PROTOCOLS["costs_alfworld"], arm_protocol(c)) or paper.mismatch(paper.PROTOCOLS["costs_alfworld"], arm_protocol(ref_cell))
         row = {"model": c["model_label"], "recap": ref_cell["arm_label"], "react": c["arm_label"], "games": pr["pairs"],

@@ -65,7 +65,7 @@ def load_plans(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
 
     import pyarrow as pa
 
-    if con.execute("SELECT count(*) FROM planned_units").fetchone()[0]:
+    if (con.execute("SELECT count(*) FROM planned_units").fetchone() or (0,))[0]:
         return {}
     cols: dict[str, list[Any]] = {k: [] for k in ("run_dir", "run_id", "unit_id", "label", "method", "model", "instance_id", "seed",
                                                   "test_double")}

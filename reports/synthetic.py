@@ -136,7 +136,7 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
         "status": status,
         "node_id": pa.nulls(n_calls, pa.int64()),
         "response_seq": before,
-        "error_kind": pa.array(np.where(status == "error", "rate_limit", None).tolist(), pa.string()),
+        "error_kind": pa.array(["rate_limit" if s == "error" else None for s in status.tolist()], pa.string()),
         "error_message": pa.nulls(n_calls, pa.string()),
         "prompt_tokens": np.where(status == "ok", prompt, 0),
         "cached_prompt_tokens": np.where(status == "ok", cached, 0),

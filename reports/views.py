@@ -422,11 +422,3 @@ def run_query(
 def named_query(con: duckdb.DuckDBPyConnection, name: str, params: Mapping[str, Any] | None = None) -> Result:
     """Run ``reports/sql/<name>.sql``."""
     return run_query(con, load_sql(name), params)
-
-
-def arrow_query(con: duckdb.DuckDBPyConnection, sql: str, params: Mapping[str, Any] | None = None) -> pa.Table:
-    check_read_only(con, sql)
-    try:
-        return (con.execute(sql, params) if params is not None else con.execute(sql)).fetch_arrow_table()
-    except duckdb.Error as exc:
-        raise QueryError(f"query failed: {_first_line(exc)}") from None

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import re
+from typing import Final
 
 #: ALFWorld's evaluation set: ALFRED ``valid_unseen`` (``eval_out_of_distribution``, 134 games)
 ALFWORLD_SPLIT = "valid_unseen"
@@ -19,7 +20,7 @@ METHODS = ("recap", "react", "act", "cot", "standard", "adapt")
 #: the settings profiles (recap.config.PROFILES)
 PROFILES = ("paper", "released")
 #: the end reason of a row whose unit failed on infrastructure (the model service, a worker)
-INFRA_ERROR = "infra_error"
+INFRA_ERROR: Final = "infra_error"
 #: LLM error kinds (the first word of a row's error) that say the model service failed
 INFRA_ERROR_KINDS = ("rate_limit", "timeout", "server_error", "auth", "connection", "not_found")
 #: how the driver's row for a unit it gave up on begins

@@ -15,6 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from schemas.kinds import EndReason
+
 #: which cap refused a call: the run's, the model's, or a capped run that cannot price the model
 RefusalScope = Literal["run", "model", "unpriced"]
 REFUSAL_SCOPES: tuple[RefusalScope, ...] = ("run", "model", "unpriced")
@@ -73,7 +75,7 @@ class EpisodeResult:
     (:meth:`recap.runtime.Episode.result`). ``refusal`` is set when the episode ended
     ``budget_exhausted``: the cap that refused its call."""
 
-    end_reason: str
+    end_reason: EndReason
     success: bool
     steps: int
     llm_calls: int

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar, Union
 
+from schemas.kinds import CallStatus, EventKind, EventSource, LLMErrorKind, NodeKind, NodeStatus, RowEndReason, Severity
+
 #: 2: episodes gained ``label``, ``profile``, ``ablation`` and ``provider_model`` (``method`` holds
 #: the method's name, no longer the arm's label), ALFWorld rows are one benchmark split
 #: (``valid_unseen``, task = task type) and infrastructure failures end ``infra_error``; parts
@@ -49,10 +51,10 @@ class CallRecord:
     purpose: str
     window_seqs: tuple[int, ...]
     model: str
-    status: str  # "ok" | "error"
+    status: CallStatus
     node_id: int | None = None
     response_seq: int | None = None
-    error_kind: str | None = None
+    error_kind: LLMErrorKind | None = None
     error_message: str | None = None
     prompt_tokens: int = 0
     cached_prompt_tokens: int = 0
@@ -101,8 +103,8 @@ class NodeRecord:
     depth: int
     child_index: int
     task: str
-    kind: str
-    status: str
+    kind: NodeKind
+    status: NodeStatus
     versions: tuple[NodeVersion, ...] = ()
     step_index: int | None = None
 
@@ -160,7 +162,7 @@ class EpisodeRecord:
     method: str
     method_config: str  # canonical JSON of the agent settings
     model: str
-    end_reason: str
+    end_reason: RowEndReason
     success: bool
     steps: int
     llm_calls: int
@@ -190,9 +192,9 @@ class EventRecord:
 
     table: ClassVar[str] = "events"
     ts: float
-    source: str
-    kind: str
-    severity: str = "info"
+    source: EventSource
+    kind: EventKind
+    severity: Severity = "info"
     episode_id: str | None = None
     unit_id: str | None = None
     detail: str = "{}"  # JSON

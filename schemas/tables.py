@@ -8,6 +8,7 @@ below pins the Arrow type of each Python annotation so files stay stable across 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import typing
 from typing import Any
 
@@ -46,9 +47,16 @@ def _arrow_type(annotation: Any) -> tuple[pa.DataType, bool]:
         if item is NodeVersion:
             return pa.list_(_NODE_VERSION), False
         return pa.list_(_arrow_type(item)[0]), False
+    if origin is typing.Literal and args and all(isinstance(a, str) for a in args):
+        return pa.string(), False  # a closed vocabulary (schemas.kinds) is stored as its string
     if annotation in _SCALARS:
         return _SCALARS[annotation], False
     raise TypeError(f"no Arrow type for {annotation!r}")
+
+
+def _table_name(record_type: type) -> str:
+    """The table a record type's rows go to (its ``table`` class attribute)."""
+    return str(record_type.__dict__["table"])
 
 
 def _schema_for(record_type: type) -> pa.Schema:
@@ -60,8 +68,8 @@ def _schema_for(record_type: type) -> pa.Schema:
     return pa.schema(fields, metadata={b"recap_eval_schema_version": str(SCHEMA_VERSION).encode()})
 
 
-TABLES: dict[str, pa.Schema] = {rt.table: _schema_for(rt) for rt in ALL_RECORD_TYPES}
-_TYPE_OF_TABLE: dict[str, type] = {rt.table: rt for rt in ALL_RECORD_TYPES}
+TABLES: dict[str, pa.Schema] = {_table_name(rt): _schema_for(rt) for rt in ALL_RECORD_TYPES}
+_TYPE_OF_TABLE: dict[str, type] = {_table_name(rt): rt for rt in ALL_RECORD_TYPES}
 
 
 def arrow_schema(table: str) -> pa.Schema:
@@ -73,11 +81,43 @@ def arrow_schema(table: str) -> pa.Schema:
 
 
 def table_of(record: Any) -> str:
-    return type(record).table
+    """The table ``record`` belongs to."""
+    return _table_name(type(record))
 
 
 def record_type(table: str) -> type:
+    """The record class of ``table``."""
     return _TYPE_OF_TABLE[table]
+
+
+@functools.cache
+def vocabularies(record_type: Any) -> dict[str, frozenset[str]]:
+    """The closed-vocabulary fields of a record type (``Literal`` annotations, :mod:`schemas.kinds`)
+    and the values each admits."""
+    out: dict[str, frozenset[str]] = {}
+    for name, hint in typing.get_type_hints(record_type).items():
+        args = [a for a in typing.get_args(hint) if a is not type(None)] if typing.get_origin(hint) is not typing.Literal else [hint]
+        for a in args:
+            if typing.get_origin(a) is typing.Literal:
+                out[name] = frozenset(typing.get_args(a))
+    return out
+
+
+class VocabularyError(ValueError):
+    """A record names a kind, status or reason its table does not know (a writer's bug)."""
+
+
+def check_vocabulary(record: Any) -> Any:
+    """``record`` itself, after checking its closed-vocabulary fields: a value outside them raises
+    :class:`VocabularyError`. The pipeline's writers of end reasons and event kinds call this, so a
+    misspelt kind fails where it is made instead of being written and silently missing every
+    report that filters on it. (Readers never check: rows of older versions stay readable.)"""
+    allowed = vocabularies(type(record))  # type: ignore[arg-type]  # record classes hash by identity
+    for name, values in allowed.items():
+        value = getattr(record, name)
+        if value is not None and value not in values:
+            raise VocabularyError(f"{type(record).__name__}.{name}: {value!r} is not one of {sorted(values)}")
+    return record
 
 
 def record_to_row(record: Any, run_id: str) -> dict[str, Any]:

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import pickle
 import re
@@ -42,6 +43,9 @@ from typing import Any
 
 from schemas.tables import record_to_row
 from schemas.parts import PartWriter
+from workers.log_setup import configure_from_env
+
+log = logging.getLogger(__name__)
 
 #: written last in every flush
 _LAST = ("episodes",)
@@ -196,6 +200,8 @@ class Sink:
         self.seg = 1
         if wal:
             self._recover()
+            if self.recovered_rows:
+                log.warning("sink %s restarted: wrote %d rows its previous process had logged", self.name, self.recovered_rows)
 
     # -- the log ----------------------------------------------------------------------------------
     def _recover(self) -> None:
@@ -348,6 +354,14 @@ class Sink:
         }
 
 
+class _SinkActor(Sink):
+    """The sink as a Ray actor: the driver's log level first (:mod:`workers.log_setup`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        configure_from_env()
+        super().__init__(*args, **kwargs)
+
+
 def sink_actor(runtime_env: dict | None = None, *, max_restarts: int | None = None) -> Any:
     """The Sink as a Ray actor (no CPU reservation: it mostly waits on the disk).
 
@@ -360,4 +374,4 @@ def sink_actor(runtime_env: dict | None = None, *, max_restarts: int | None = No
     options: dict[str, Any] = {"num_cpus": 0, "max_restarts": restarts, "max_task_retries": -1 if restarts else 0}
     if runtime_env:
         options["runtime_env"] = runtime_env
-    return ray.remote(**options)(Sink)
+    return ray.remote(**options)(_SinkActor)

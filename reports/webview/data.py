@@ -174,7 +174,7 @@ def build_snapshot(run_dirs: Sequence[Path], index: SearchIndex) -> Snapshot:
 
 def _fingerprint(run_dirs: Sequence[Path]) -> tuple:
     """Names, sizes and times of every part file and run file: changes when a part lands."""
-    out = []
+    out: list[tuple[str, int, int]] = []
     for d in run_dirs:
         for table in TABLES:
             folder = d / table

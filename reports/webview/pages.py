@@ -162,7 +162,7 @@ def episodes_page(snap: D.Snapshot, page: D.EpisodePage) -> str:
             v = r.get(k)
             if k == "episode_id":
                 extra = {"hit": r["first_hit"]} if lq.q and r.get("first_hit") is not None else {}
-                cells.append(f'<td><a class="ep" href="{_e(episode_url(r["run_id"], v, **extra))}">{_e(v)}</a>'
+                cells.append(f'<td><a class="ep" href="{_e(episode_url(r["run_id"], str(v), **extra))}">{_e(v)}</a>'
                              + ("" if r.get("is_latest", True) else ' <span class="tag">superseded</span>') + "</td>")
             elif k == "success":
                 cells.append(f'<td><span class="badge {"ok" if v else "fail"}">{"yes" if v else "no"}</span></td>')
@@ -259,7 +259,7 @@ def observation_diff(prev: str | None, cur: str) -> str:
     if prev is None:
         return _e(cur)
     a, b = prev.splitlines(), cur.splitlines()
-    out = []
+    out: list[str] = []
     for op, i1, i2, j1, j2 in difflib.SequenceMatcher(a=a, b=b, autojunk=False).get_opcodes():
         if op == "equal":
             out.extend(f'<span class="same">{_e(x)}</span>' for x in b[j1:j2])

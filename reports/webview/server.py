@@ -192,6 +192,16 @@ class Handler(BaseHTTPRequestHandler):
         self._send(200, PING_GIF, "image/gif", {"Cross-Origin-Resource-Policy": "cross-origin"})
 
 
+def _static_route(name: str) -> Any:
+    """The route of one static file: no query parameters, then the file."""
+
+    def route(handler: Any, params: dict[str, list[str]]) -> Any:
+        _only(params)
+        return handler.static(name)
+
+    return route
+
+
 def _only(params: dict[str, list[str]], *allowed: str) -> None:
     unknown = sorted(set(params) - set(allowed))
     if unknown:
@@ -218,7 +228,7 @@ ROUTES: dict[str, Any] = {
     "/": Handler.runs, "/runs": Handler.runs, "/spec": Handler.spec, "/report": Handler.report,
     "/episodes": Handler.episodes, "/episode": Handler.episode, "/window": Handler.window, "/compare": Handler.compare,
     "/ping.gif": Handler.ping,
-    **{f"/static/{n}": (lambda h, p, n=n: (_only(p), h.static(n))) for n in STATIC},
+    **{f"/static/{n}": _static_route(n) for n in STATIC},
 }
 
 

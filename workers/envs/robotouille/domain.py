@@ -7,7 +7,7 @@ that refers to an unknown predicate or effect type is rejected with the offendin
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -69,6 +69,9 @@ class Domain:
     object_types: tuple[str, ...]
     predicates: tuple[PredicateDef, ...]
     actions: tuple[ActionDef, ...]
+    #: name -> predicate and name -> position, filled in by __post_init__ (the class is frozen)
+    _by_name: dict[str, PredicateDef] = field(init=False, repr=False, compare=False)
+    _order: dict[str, int] = field(init=False, repr=False, compare=False)
 
     def predicate(self, name: str) -> PredicateDef:
         return self._by_name[name]

@@ -134,10 +134,13 @@ class Planner:
             return move
         if view.held_container:
             return self.act(view, "place-container", c1=view.held_container, s1=station)
+        item = view.held_item
+        assert item is not None, "put() while holding nothing"
         if view.is_free(station):
-            return self.act(view, "place-item", i1=view.held_item, s1=station)
+            return self.act(view, "place-item", i1=item, s1=station)
         top = view.top(station)
-        return self.act(view, "stack", i1=view.held_item, i2=top, s1=station)
+        assert top is not None, f"stack on {station}, which holds nothing"
+        return self.act(view, "stack", i1=item, i2=top, s1=station)
 
     # roles seen from the objects
     def var_of(self, obj: str) -> int | None:
@@ -335,6 +338,7 @@ class Planner:
 
     def handle_held_item(self, view: View) -> Grounding | None:
         obj = view.held_item
+        assert obj is not None
         var = self.var_of(obj)
         if var is not None:
             target = self.prep_target(var, obj, view)
@@ -365,6 +369,7 @@ class Planner:
 
     def handle_held_container(self, view: View) -> Grounding | None:
         c = view.held_container
+        assert c is not None
         for soup in self.recipe.soups:
             water = self.assign[soup.water]
             if c == self.soup_pot(soup, view):

@@ -23,11 +23,11 @@ NOT_INSTALLED = "the real robotouille package is not installed; engine: ours is 
 
 def make_real_env(ref: catalog.InstanceRef, step_multiplier: float = 4.0) -> Environment:
     try:
-        import robotouille  # type: ignore[import-not-found]  # noqa: F401
+        import robotouille  # noqa: F401
     except ImportError:
         raise EnvError(NOT_INSTALLED) from None
     try:
-        from robotouille.robotouille_env import create_robotouille_env  # type: ignore[import-not-found]
+        from robotouille.robotouille_env import create_robotouille_env
     except ImportError as exc:
         raise EnvError(f"the installed robotouille package lacks create_robotouille_env ({exc})") from None
     return RealRobotouilleEnv(ref, step_multiplier, create_robotouille_env)

@@ -91,7 +91,8 @@ def analyze(goal: Goal, item_names: set[str], station_names: set[str]) -> Recipe
     for k, lit in lits:
         if lit.predicate == "item_at" and lit.vars[1] in dishes:
             item, table = lit.vars
-            dish = dishes[table]
+            dish: StackDish | None = dishes[table]
+            assert dish is not None
             if item != dish.base and item not in dish.members:
                 dish.members.append(item)
             handled.add(k)

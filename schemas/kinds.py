@@ -1,0 +1,84 @@
+"""The closed vocabularies of the tables: end reasons, error kinds, statuses, event kinds.
+
+Why one module: each of these strings is written by one layer (the agent, the gateway, the
+driver) and read back by another (resume, reports, SQL). As ``Literal`` types the type checker
+catches a misspelt kind at the writer, and the runtime tuples (``END_REASONS``, ...) are derived
+from the same definition, so a kind cannot be added in one place and forgotten in the other.
+Pure definitions, no I/O.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+#: why an episode ended (``episodes.end_reason``); ``infra_error`` is written by the driver only
+EndReason = Literal[
+    "success",
+    "step_cap",
+    "call_cap",
+    "agent_done",
+    "json_failures",
+    "llm_error",
+    "budget_exhausted",
+    "episode_limit",
+    "env_error",
+    "truncated",
+]
+END_REASONS: tuple[str, ...] = get_args(EndReason)
+
+#: the end reason of a row whose unit failed on infrastructure (the model service, a worker)
+InfraEndReason = Literal["infra_error"]
+#: every value ``episodes.end_reason`` can hold
+RowEndReason = Literal[EndReason, InfraEndReason]
+
+#: the classes a failed model call is sorted into (``llm_calls.error_kind``, ``LLMError.kind``)
+LLMErrorKind = Literal[
+    "rate_limit",
+    "timeout",
+    "server_error",
+    "context_length",
+    "bad_request",
+    "auth",
+    "budget",
+]
+LLM_ERROR_KINDS: tuple[str, ...] = get_args(LLMErrorKind)
+
+#: ``llm_calls.status``
+CallStatus = Literal["ok", "error"]
+
+#: ``tree_nodes.status``: a subtask not yet finished, finished, or given up
+NodeStatus = Literal["open", "done", "failed"]
+#: ``tree_nodes.kind``: the root task, a subtask that is decomposed further, an environment
+#: action, or (ADaPT) a task handed to the executor
+NodeKind = Literal["root", "composite", "primitive", "executor_task"]
+
+#: ``events.severity``
+Severity = Literal["info", "warning", "error"]
+#: ``events.source``: who wrote the row
+EventSource = Literal["driver", "gateway"]
+#: ``events.kind``: what happened
+EventKind = Literal[
+    # the driver's session
+    "run_started",
+    "run_resumed",
+    "workers_started",
+    "run_finished",
+    "run_stopped",
+    "interrupted",
+    "worker_restarted",
+    "worker_lost",
+    "attempt_failed",
+    "unit_failed",
+    "unit_abandoned",
+    "run_cap_reached",
+    "model_cap_reached",
+    "sink_lost",
+    "sink_log_recovered",
+    # the gateway and its budget ledger
+    "retry",
+    "call_failed",
+    "usage_rejected",
+    "orphans_charged",
+    "ledger_restored",
+]
+EVENT_KINDS: tuple[str, ...] = get_args(EventKind)
