@@ -117,7 +117,7 @@ class Lab:
 
     def server(self, **config: Any) -> Any:
         """A loopback fake OpenAI server (stopped by :meth:`close`)."""
-        from workers.llm.fake_server import FakeServer, FakeServerConfig
+        from tests.doubles.fake_server import FakeServer, FakeServerConfig
 
         server = FakeServer(FakeServerConfig(**config))
         server.start_in_thread()

@@ -24,7 +24,7 @@ from schemas.records import EpisodeRecord, MessageRecord, StepRecord
 from tests.chaos import inputs
 from tests.chaos.folders import damage
 from tests.chaos.procnet import Listener, listeners, parse_address
-from workers.llm.fake_server import FakeServer, FakeServerConfig
+from tests.doubles.fake_server import FakeServer, FakeServerConfig
 from schemas.parts import PartWriter
 
 

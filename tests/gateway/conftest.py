@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from recap.llm import ChatMessage, LLMRequest
-from workers.llm.fake_server import FakeServer, FakeServerConfig
+from tests.doubles.fake_server import FakeServer, FakeServerConfig
 from workers.llm.litellm_setup import get_litellm
 
 #: a fake API key; tests check it never reaches a written file

@@ -38,7 +38,7 @@ def test_sweep_records_cached_tokens_and_bills_them_at_the_cached_prices(ray_add
     from pipeline.cli import main
     from pipeline.sqlview import open_tables
     from pipeline.store import RunStore
-    from workers.llm.fake_server import FakeServer, FakeServerConfig
+    from tests.doubles.fake_server import FakeServer, FakeServerConfig
 
     monkeypatch.setenv("RECAP_FAKE_KEY", "not-a-secret")
     # blocksworld prompts are short: the minimum cacheable prefix is lowered for the test

@@ -12,7 +12,7 @@ import pytest
 
 from recap.llm import LLMError
 from workers.gateway.core import DeploymentGateway
-from workers.llm.fake_server import window_maxima
+from tests.doubles.fake_server import window_maxima
 from workers.llm.providers import DeploymentConfig
 from schemas.parts import read_table
 

@@ -182,7 +182,7 @@ workers: 2
 
 
 def test_infrastructure_failures_exit_4_and_a_corrected_rerun_retries_them(ray_address, tmp_path, capsys, monkeypatch):
-    from workers.llm.fake_server import FakeServer, FakeServerConfig
+    from tests.doubles.fake_server import FakeServer, FakeServerConfig
 
     monkeypatch.setenv("RECAP_FAKE_KEY", "not-a-secret")
     out = tmp_path / "infra"

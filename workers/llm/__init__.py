@@ -15,8 +15,8 @@
   integer pico-dollar costs, :func:`require_prices`.
 - :mod:`workers.llm.tokens`         offline prompt-token counts and the worst-case bound.
 - :mod:`workers.llm.offline`        ``offline/expert``, ``offline/random``, ``offline/replay``.
-- :mod:`workers.llm.fake_server`    a loopback OpenAI-compatible server with quotas and faults.
 - :mod:`workers.llm.direct`         :class:`LiteLLMClient`, a Ray-free ``LLMClient``.
 
-The gateway (:mod:`workers.gateway`) builds admission control, budgets and the ledger on top.
+The loopback OpenAI-compatible test server with quotas and faults is a test utility:
+:mod:`tests.doubles.fake_server`. The gateway (:mod:`workers.gateway`) builds admission control, budgets and the ledger on top.
 """

@@ -34,7 +34,7 @@ HTTP exchange through litellm's own client, without a paid provider. The server:
   scrubbed before anything is written);
 - keeps a log of every arrival (``GET /fake/log``), so tests check windows server-side.
 
-Run standalone: ``python -m workers.llm.fake_server --port 0 --rpm 60 --tpm 20000 --window-s 6``.
+Run standalone: ``python -m tests.doubles.fake_server --port 0 --rpm 60 --tpm 20000 --window-s 6``.
 """
 
 from __future__ import annotations
