@@ -58,8 +58,9 @@ class DemoReplies(Mapping[str, Replies]):
     each registered agent class that can derive them."""
 
     def __init__(self, explicit: Mapping[str, Replies] | None = None, script: DemoScript | None = None) -> None:
-        if isinstance(explicit, DemoReplies):
-            explicit, script = explicit.explicit, script or explicit.script
+        if isinstance(explicit, DemoReplies):  # re-wrapped: keep its overrides and its script
+            script = script or explicit.script
+            explicit = explicit.explicit
         self.explicit: dict[str, Replies] = dict(explicit or {})
         self.script = script
 
