@@ -57,11 +57,14 @@ class DemoReplies(Mapping[str, Replies]):
     """Replies by method key: hand-written ones first, then those derived from the script by
     each registered agent class that can derive them."""
 
+    explicit: dict[str, Replies]
+    script: DemoScript | None
+
     def __init__(self, explicit: Mapping[str, Replies] | None = None, script: DemoScript | None = None) -> None:
         if isinstance(explicit, DemoReplies):  # re-wrapped: keep its overrides and its script
             script = script or explicit.script
             explicit = explicit.explicit
-        self.explicit: dict[str, Replies] = dict(explicit or {})
+        self.explicit = dict(explicit or {})
         self.script = script
 
     def _derived(self, key: str) -> Replies | None:
