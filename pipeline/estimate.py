@@ -2,9 +2,11 @@
 
 The estimate is deliberately a *range* from a simple model of each method, not a promise:
 
-* calls per episode: ReCAP makes about one call per environment step when its plans hold and up
-  to ~2.5 per allowed step when it re-plans; ReAct/Act one per step; CoT/Standard one plan call
-  (plus repairs); ADaPT up to ~3 per step. Both ends are clipped to the per-episode call limit.
+* calls per episode: each method's agent class says what to assume
+  (``Agent.estimate_calls_per_step``, ``Agent.one_shot``): ReCAP makes about one call per
+  environment step when its plans hold and up to ~2.5 per allowed step when it re-plans;
+  ReAct/Act one per step; CoT/Standard one plan call (plus repairs); ADaPT up to ~3 per step.
+  Both ends are clipped to the per-episode call limit.
 * prompt tokens per call: the pinned prompt (rules, demonstration, first observation - measured
   on the instance itself, at 4 characters per token) plus the sliding window, which fills with
   one observation and one reply per step up to its size K.
@@ -21,10 +23,9 @@ from typing import Any
 
 from pipeline.spec import SweepSpec
 from pipeline.units import Plan
+from recap.agent import Agent
+from recap.methods import METHODS
 
-#: (low, high) calls per allowed environment step, per method family
-CALLS_PER_STEP = {"recap": (1.0, 2.5), "react": (1.0, 1.0), "act": (1.0, 1.0), "adapt": (1.0, 3.0)}
-ONE_SHOT = {"cot", "standard"}
 COMPLETION_TOKENS = (60, 250)
 DEFAULT_OPTIMAL = 20
 
@@ -84,6 +85,13 @@ class GroupEstimate:
         self.calls, self.tokens = Range(), Range()
 
 
+def call_shape(method: str) -> tuple[bool, tuple[float, float]]:
+    """(one call per episode?, (low, high) calls per allowed step) as the method's agent class
+    declares them; a name nothing registers gets the base class's assumption."""
+    agent_cls = METHODS[method][0] if method in METHODS else Agent
+    return agent_cls.one_shot, agent_cls.estimate_calls_per_step
+
+
 def _price(spec: SweepSpec, model_label: str) -> Any:
     from workers.llm.pricing import PriceError, resolve_price
 
@@ -105,10 +113,10 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
         cfg = json.loads(u.method_config)
         max_calls = int(cfg.get("max_llm_calls") or 10**9)  # None: derived from the step cap (c_high below)
         window = int(cfg.get("window") or 64)
-        if u.method in ONE_SHOT:
+        one_shot, (lo, hi) = call_shape(u.method)
+        if one_shot:
             c_low, c_high = 1.0, float(min(max_calls, 1 + int(cfg.get("max_json_repairs", 3))))
         else:
-            lo, hi = CALLS_PER_STEP.get(u.method, (1.0, 2.5))
             c_low = min(max_calls, max(1.0, shape.optimal * lo + 1))
             c_high = min(max_calls, max(c_low, shape.max_steps * hi + 1))
         per_msg = shape.obs_tokens + COMPLETION_TOKENS[1] // 2

@@ -21,6 +21,7 @@ from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 from recap.config import OMITTED_OBSERVATION, AgentConfig
+from recap.demo_script import DemoScript
 from recap.env import Demonstration, Environment, Reset, Step
 from recap.llm import LLMClient
 from recap.runtime import Conversation, EnvDriver, Emit, Episode, EpisodeEnd, EpisodeResult
@@ -78,14 +79,34 @@ class ElidedObservations(Environment):
 
 
 class Agent(ABC):
+    """A method. Everything that differs between methods is declared here, by the class:
+
+    * ``style``: the method's key (its name in ``recap.methods.METHODS``, its key for
+      hand-written demonstration replies, the ``style`` hint);
+    * ``expected_format`` / :meth:`reply_format`: the reply shape shown in repair messages, and
+      ``reply_fields``: the same shape as field names, sent to offline test-double models in
+      ``hints["reply_fields"]`` so they can answer any method without knowing its name;
+    * :meth:`demo_replies`: the method's demonstration replies, built from a benchmark's
+      method-neutral :class:`~recap.demo_script.DemoScript`;
+    * ``calls_per_step`` / ``call_overhead``: the derived call cap; ``one_shot`` and
+      ``estimate_calls_per_step``: what ``recap estimate`` assumes before a run.
+    """
+
     #: key into Demonstration.replies and the ``style`` hint for offline models
     style: ClassVar[str]
     config_cls: ClassVar[type[AgentConfig]] = AgentConfig
     #: the reply shape, as shown to the model in repair messages
     expected_format: ClassVar[str]
+    #: the reply's fields, in order (``think``, ``subtasks``, ``action``, ``actions``), as the
+    #: offline test doubles fill them
+    reply_fields: ClassVar[tuple[str, ...]] = ("think", "subtasks")
     #: the derived call cap: ceil(calls_per_step x step cap) + call_overhead + max_json_repairs
     calls_per_step: ClassVar[float] = 2.0
     call_overhead: ClassVar[int] = 10
+    #: one call answers the whole episode (the estimate counts one call plus repairs)
+    one_shot: ClassVar[bool] = False
+    #: (low, high) calls per allowed environment step that ``recap estimate`` assumes
+    estimate_calls_per_step: ClassVar[tuple[float, float]] = (1.0, 2.5)
 
     def __init__(self, config: AgentConfig | None = None) -> None:
         self.config = config if config is not None else self.config_cls()
@@ -119,6 +140,7 @@ class Agent(ABC):
             style=self.style,
             emit=emit,
             expected_format=self.reply_format(),
+            reply_fields=self.reply_fields,
         )
         ep = Episode(conv=conv, driver=EnvDriver(env, episode_id, emit), env=env, emit=emit)
         try:
@@ -158,6 +180,13 @@ class Agent(ABC):
         """Emit whatever the agent keeps until the end (the ReCAP tree)."""
 
     # -- demonstrations ----------------------------------------------------------------------
+    @classmethod
+    def demo_replies(cls, script: DemoScript) -> list[dict[str, Any]] | None:
+        """This method's model replies, in call order, that solve the demonstration ``script``
+        describes; None when the method cannot derive them (it then needs replies written for
+        its key in the Demonstration, or renders its demonstration another way)."""
+        return None
+
     def shape_demo_reply(self, reply: Any) -> Any:
         """A demonstration reply in this configuration's reply format (ablations drop fields)."""
         return reply

@@ -13,6 +13,7 @@ import random
 import re
 from dataclasses import dataclass
 
+from recap.demo_script import DemoScript
 from recap.env import Demonstration, Environment, InvalidActionError, Reset, Step, UnknownInstanceError
 
 RULES = (
@@ -215,36 +216,34 @@ def _demo_env() -> BlocksworldEnv:
     return BlocksworldEnv([["A", "C"], ["B"]], ["A", "B", "C"], instance_id="blocksworld/demo", demo=False)
 
 
-_DEMO_ACTIONS = ["unstack C from A", "put down C", "pick up B", "stack B on A", "pick up C", "stack C on B"]
+_DEMO_ACTIONS = ("unstack C from A", "put down C", "pick up B", "stack B on A", "pick up C", "stack C on B")
 
-DEMONSTRATION = Demonstration(
-    name="blocksworld/demo",
-    make_env=_demo_env,
-    replies={
-        "recap": [
-            {"think": "A must be the base, but C is sitting on it. First clear A, then build B and C on top.", "subtasks": ["clear block A", "build B on A and C on B"]},
-            {"think": "Only C is on A, so moving C to the table clears it.", "subtasks": ["unstack C from A", "put down C"]},
-            {"think": "I hold C; putting it down leaves A clear.", "subtasks": ["put down C"]},
-            {"think": "C is on the table and A has nothing on it, so A is clear.", "subtasks": []},
-            {"think": "A is clear on the table; what is left is building the tower.", "subtasks": ["build B on A and C on B"]},
-            {"think": "B and C are both alone on the table: move B onto A, then C onto B.", "subtasks": ["pick up B", "stack B on A", "pick up C", "stack C on B"]},
-            {"think": "I hold B; it goes on A next.", "subtasks": ["stack B on A", "pick up C", "stack C on B"]},
-            {"think": "B is on A. Now C.", "subtasks": ["pick up C", "stack C on B"]},
-            {"think": "I hold C; stacking it on B finishes the tower.", "subtasks": ["stack C on B"]},
-        ],
-        "react": [
-            {"think": "A must be the base but C is on it, so C has to move first.", "action": "unstack C from A"},
-            {"think": "I hold C; put it on the table for now.", "action": "put down C"},
-            {"think": "A is clear. B goes on A next.", "action": "pick up B"},
-            {"think": "I hold B.", "action": "stack B on A"},
-            {"think": "Now C on top of B.", "action": "pick up C"},
-            {"think": "I hold C; this completes the tower.", "action": "stack C on B"},
-        ],
-        "act": [{"action": a} for a in _DEMO_ACTIONS],
-        "cot": [{"think": "C blocks A, so move C to the table, then stack B on A and C on B.", "actions": _DEMO_ACTIONS}],
-        "standard": [{"actions": _DEMO_ACTIONS}],
-    },
+#: the example written once; every method derives its own replies from it (recap.demo_script)
+DEMO_SCRIPT = DemoScript(
+    actions=_DEMO_ACTIONS,
+    step_thoughts=(
+        "A must be the base but C is on it, so C has to move first.",
+        "I hold C; put it on the table for now.",
+        "A is clear. B goes on A next.",
+        "I hold B.",
+        "Now C on top of B.",
+        "I hold C; this completes the tower.",
+    ),
+    plan_thought="C blocks A, so move C to the table, then stack B on A and C on B.",
+    decomposition=(
+        ("A must be the base, but C is sitting on it. First clear A, then build B and C on top.", ("clear block A", "build B on A and C on B")),
+        ("Only C is on A, so moving C to the table clears it.", ("unstack C from A", "put down C")),
+        ("I hold C; putting it down leaves A clear.", ("put down C",)),
+        ("C is on the table and A has nothing on it, so A is clear.", ()),
+        ("A is clear on the table; what is left is building the tower.", ("build B on A and C on B",)),
+        ("B and C are both alone on the table: move B onto A, then C onto B.", ("pick up B", "stack B on A", "pick up C", "stack C on B")),
+        ("I hold B; it goes on A next.", ("stack B on A", "pick up C", "stack C on B")),
+        ("B is on A. Now C.", ("pick up C", "stack C on B")),
+        ("I hold C; stacking it on B finishes the tower.", ("stack C on B",)),
+    ),
 )
+
+DEMONSTRATION = Demonstration(name="blocksworld/demo", make_env=_demo_env, script=DEMO_SCRIPT)
 
 
 class _Benchmark:

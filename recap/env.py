@@ -14,6 +14,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from recap.demo_script import DemoReplies, DemoScript
+
 
 class EnvError(RuntimeError):
     """The environment failed (engine error, missing data, broken game file)."""
@@ -47,20 +49,36 @@ class Step:
     info: Mapping[str, Any] = field(default_factory=dict)
 
 
-@dataclass(frozen=True)
 class Demonstration:
     """A one-shot demonstration, rendered by running the agent itself on a scripted model.
 
     ``make_env`` builds a fresh environment at the demonstration's start (for Robotouille the
     training kitchen on our engine; for ALFWorld a replay of recorded observations).
-    ``replies`` maps an agent style (``recap``, ``react``, ``act``, ``cot``, ``standard``,
-    ``adapt``) to the model replies, in call order, that solve it. Rendering with the agent keeps
-    the demonstration in exactly the format of the agent's own prompts, for every ablation.
+    ``script`` is the solved example written once (:class:`~recap.demo_script.DemoScript`);
+    each agent class derives its own model replies from it. ``replies`` given here are
+    hand-written replies for one method's key (``Agent.style``), in call order; they win over
+    what the script would derive. Reading ``replies`` gives both (a
+    :class:`~recap.demo_script.DemoReplies`). Rendering with the agent keeps the demonstration in
+    exactly the format of the agent's own prompts, for every ablation.
     """
 
-    name: str
-    make_env: Callable[[], "Environment"]
-    replies: Mapping[str, Sequence[Mapping[str, Any]]]
+    __slots__ = ("name", "make_env", "replies", "script")
+
+    def __init__(
+        self,
+        name: str,
+        make_env: Callable[[], "Environment"],
+        replies: Mapping[str, Sequence[Mapping[str, Any]]] | None = None,
+        *,
+        script: DemoScript | None = None,
+    ) -> None:
+        self.name = name
+        self.make_env = make_env
+        self.script = script
+        self.replies = DemoReplies(replies, script)
+
+    def __repr__(self) -> str:
+        return f"Demonstration(name={self.name!r})"
 
 
 class Environment(ABC):

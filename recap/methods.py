@@ -3,10 +3,18 @@ agent from a method name, a profile, an ablation and explicit settings.
 
 The pipeline names methods in run specs (``method: react``); this is the single place that maps
 those names to code, so an unknown name fails the same way everywhere.
+
+Everything else about a method is declared by its agent class (reply fields for the offline
+test doubles, demonstration replies derived from a benchmark's script, call-cap and estimate
+assumptions), so a new method is its module, its prompts, its tests and one
+:func:`register_method` call (for a built-in: one line in :data:`METHODS` and its name in
+``schemas.labels.METHODS``, which a test keeps in step).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from recap.agent import Agent
@@ -31,6 +39,39 @@ METHODS: dict[str, tuple[type[Agent], type[AgentConfig]]] = {
     "standard": (StandardAgent, PlanConfig),
     "adapt": (ADaPTAgent, ADaPTConfig),
 }
+
+
+def register_method(name: str, agent_cls: type[Agent], config_cls: type[AgentConfig]) -> None:
+    """Make ``name`` a method: run specs, workers and demonstrations then find it like a built-in.
+
+    The agent class's ``style`` must be ``name`` (its key for demonstration replies and the
+    hints), and ``config_cls`` must be the agent's own config class or a subclass of it."""
+    if name in METHODS:
+        raise ConfigError(f"method {name!r} is already registered")
+    if not (isinstance(agent_cls, type) and issubclass(agent_cls, Agent)):
+        raise ConfigError(f"method {name!r}: {agent_cls!r} is not an Agent subclass")
+    if getattr(agent_cls, "style", None) != name:
+        raise ConfigError(f"method {name!r}: {agent_cls.__name__}.style must be {name!r}")
+    if not (isinstance(config_cls, type) and issubclass(config_cls, agent_cls.config_cls)):
+        raise ConfigError(f"method {name!r}: {config_cls!r} is not a {agent_cls.config_cls.__name__}")
+    METHODS[name] = (agent_cls, config_cls)
+
+
+def unregister_method(name: str) -> None:
+    """Undo :func:`register_method` (for tests and plug-ins that go away)."""
+    if name not in METHODS:
+        raise ConfigError(f"method {name!r} is not registered")
+    del METHODS[name]
+
+
+@contextmanager
+def registered_method(name: str, agent_cls: type[Agent], config_cls: type[AgentConfig]) -> Iterator[None]:
+    """:func:`register_method` for the duration of a ``with`` block."""
+    register_method(name, agent_cls, config_cls)
+    try:
+        yield
+    finally:
+        unregister_method(name)
 
 
 def method_classes(method: str) -> tuple[type[Agent], type[AgentConfig]]:

@@ -30,6 +30,7 @@ from typing import Any
 from recap import recap_prompts as P
 from recap.agent import Agent
 from recap.config import ReCAPConfig
+from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
 from recap.jsonreply import recap_reply
 from recap.runtime import Episode, EpisodeEnd
@@ -43,6 +44,16 @@ class ReCAPAgent(Agent):
     config: ReCAPConfig
     #: a descend and a return per action, plus room for leaf failures and decompositions
     calls_per_step = 3.0
+    #: every call asks for a (refined) subtask list. Kept with the think under ``no_think``: the
+    #: parser then ignores it, and the offline test doubles' replies stay what they always were
+    reply_fields = ("think", "subtasks")
+    #: about one call per step while plans hold, up to ~2.5 per allowed step when it re-plans
+    estimate_calls_per_step = (1.0, 2.5)
+
+    @classmethod
+    def demo_replies(cls, script: DemoScript) -> list[dict[str, Any]]:
+        """The script's decomposition, one ``{"think", "subtasks"}`` reply per call."""
+        return [{"think": think, "subtasks": list(subtasks)} for think, subtasks in script.decomposition]
 
     def reply_format(self) -> str:
         return P.reply_format(self.config.think != "none")

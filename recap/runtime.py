@@ -86,6 +86,7 @@ class Conversation:
         style: str,
         emit: Emit,
         expected_format: str,
+        reply_fields: tuple[str, ...] = (),
         usage: "Usage | None" = None,
         history: History | None = None,
     ) -> None:
@@ -95,6 +96,8 @@ class Conversation:
         self.style = style
         self.emit = emit
         self.expected_format = expected_format
+        #: the reply's fields (``Agent.reply_fields``), told to offline test doubles in the hints
+        self.reply_fields = tuple(reply_fields)
         self.history = history if history is not None else History(
             episode_id,
             config.history_window(),
@@ -105,7 +108,8 @@ class Conversation:
         )
         self.usage = usage if usage is not None else Usage()
 
-    def fork(self, *, expected_format: str | None = None, style: str | None = None) -> "Conversation":
+    def fork(self, *, expected_format: str | None = None, style: str | None = None,
+             reply_fields: tuple[str, ...] | None = None) -> "Conversation":
         """A separate, empty context for the same episode (ADaPT's isolated planner/executor
         prompts): usage, caps and message numbering are shared, the history is not."""
         cfg = self.config
@@ -116,6 +120,7 @@ class Conversation:
             style=style or self.style,
             emit=self.emit,
             expected_format=expected_format or self.expected_format,
+            reply_fields=self.reply_fields if reply_fields is None else reply_fields,
             usage=self.usage,
             history=History(
                 self.episode_id,
@@ -179,7 +184,7 @@ class Conversation:
                 temperature=self.config.temperature,
                 max_tokens=self.config.max_tokens,
                 json_mode=self.config.json_mode,
-                hints={"style": self.style, "purpose": purpose, **context},
+                hints={"style": self.style, "purpose": purpose, "reply_fields": self.reply_fields, **context},
             )
             started = time.perf_counter()
             try:

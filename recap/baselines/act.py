@@ -15,3 +15,4 @@ class ActAgent(ReActAgent):
     style = "act"
     expected_format = P.action_format(False)
     with_think = False
+    reply_fields = ("action",)

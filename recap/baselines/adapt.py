@@ -39,11 +39,16 @@ happen at depths 1 and 2. Subtasks are created and run only when reached (as nee
   trajectory under the same step budget, and a rollback would replay steps outside it. Later
   executors and planners start from the state the failed attempt left, which their prompts show.
 * Demonstrations: the executor's is rendered by running this agent on the demonstration
-  environment with ``replies["adapt_executor"]`` if present, else the ReAct replies (the root
-  executor solves the demo); the planner's is one planner call at the demonstration's start,
-  replying ``replies["adapt_planner"][0]`` if present, else ReCAP's root decomposition
-  (``replies["recap"][0]``: think and subtasks) with ``"logic": "and"``. A demonstration given
-  as a string is pinned as is in every executor and planner context.
+  environment with hand-written ``replies["adapt_executor"]`` if present, else the ReAct
+  replies (derived from the demonstration's script: the root executor solves the demo); the
+  planner's is one planner call at the demonstration's start, replying
+  ``replies["adapt_planner"][0]`` if present, else ReCAP's root decomposition
+  (``replies["recap"][0]``: the script's first decomposition, think and subtasks) with
+  ``"logic": "and"``. ADaPT derives no single reply list of its own
+  (:meth:`~recap.agent.Agent.demo_replies` is None). A demonstration given as a string is
+  pinned as is in every executor and planner context.
+* Offline test doubles: executor contexts declare ``reply_fields`` ``("think", "action")``,
+  planner contexts ``("think", "subtasks")`` (repairs included), see ``hints["reply_fields"]``.
 * Records: messages of every context (one shared seq counter), calls, steps (``node_id`` = the
   task node), and one tree node per task: ``root``, ``composite`` (decomposed) or
   ``primitive`` (left to the executor), status ``done`` / ``failed`` / ``open``, with the
@@ -71,12 +76,20 @@ from recap.config import AgentConfig, ConfigError
 from recap.env import Demonstration, Environment, InvalidActionError, Reset
 from recap.history import History
 from recap.jsonreply import ReplyFormatError, action_reply, recap_reply
+from recap.baselines.react import ReActAgent
+from recap.recap_agent import ReCAPAgent
 from recap.runtime import Conversation, Episode, EpisodeEnd
 from recap.scripted import ScriptedClient
 from recap.tree import Node
 from schemas.records import MessageRecord, NodeVersion
 
 _DEMOS: dict[tuple[str, ...], str] = {}
+#: the fields of an executor's and a planner's reply, as the offline test doubles fill them
+EXECUTOR_REPLY_FIELDS = ("think", "action")
+PLANNER_REPLY_FIELDS = ("think", "subtasks")
+#: keys of hand-written ADaPT replies in a Demonstration (they win over the derived ones)
+EXECUTOR_DEMO_KEY = "adapt_executor"
+PLANNER_DEMO_KEY = "adapt_planner"
 
 
 @dataclass(frozen=True)
@@ -103,14 +116,14 @@ class ADaPTConfig(AgentConfig):
             raise ConfigError(f"executor_patience must be >= 1 or null, got {self.executor_patience}")
 
 
-def fork(conv: Conversation, expected_format: str) -> Conversation:
+def fork(conv: Conversation, expected_format: str, reply_fields: tuple[str, ...]) -> Conversation:
     """``conv.fork()`` with the message counter really shared.
 
     Works around ``Conversation.__init__`` taking ``history or History(...)``: an empty History
     has length 0, is falsy, and the fork's counter-sharing history is replaced by a fresh one
     (message seqs would restart at 0). A no-op once that is fixed.
     """
-    forked = conv.fork(expected_format=expected_format)
+    forked = conv.fork(expected_format=expected_format, reply_fields=reply_fields)
     if forked.history.counter is not conv.history.counter:
         h = conv.history
         forked.history = History(conv.episode_id, h.window, mode=h.mode, block=h.block, emit=conv.emit, counter=h.counter,
@@ -165,6 +178,10 @@ class ADaPTAgent(Agent):
     config: ADaPTConfig
     #: an executor call per action, plus planner calls, status replies and rejected actions
     calls_per_step = 3.0
+    estimate_calls_per_step = (1.0, 3.0)
+    #: executor calls ask for the next action (the offline doubles never report a status);
+    #: planner calls (their own contexts) for subtasks
+    reply_fields = EXECUTOR_REPLY_FIELDS
 
     def __init__(self, config: ADaPTConfig | None = None) -> None:
         super().__init__(config)
@@ -241,19 +258,20 @@ class ADaPTAgent(Agent):
         valid = ep.driver.valid_actions
         return {"role": role, "task": node.task, "depth": node.depth, "valid_actions": list(valid) if valid is not None else None}
 
-    def _open(self, ep: Episode, node: TaskNode | None, demo: str | None, expected_format: str) -> Conversation:
+    def _open(self, ep: Episode, node: TaskNode | None, demo: str | None, expected_format: str,
+              reply_fields: tuple[str, ...]) -> Conversation:
         """The root executor works in the episode's main context (its demonstration is already
         pinned there); every other executor run and every planner call gets a fresh one."""
         if node is not None and node.parent is None:
             return ep.conv
-        conv = fork(ep.conv, expected_format)
+        conv = fork(ep.conv, expected_format, reply_fields)
         if demo:
             conv.pin("demonstration", demo)
         return conv
 
     def _execute(self, ep: Episode, node: TaskNode) -> bool:
         cfg, st, d = self.config, ep.extra, ep.driver
-        conv = self._open(ep, node, st["executor_demo"], P.EXECUTOR_FORMAT)
+        conv = self._open(ep, node, st["executor_demo"], P.EXECUTOR_FORMAT, EXECUTOR_REPLY_FIELDS)
         conv.pin("executor_task", P.executor_task_prompt(task=node.task, **self._situation(ep, "executor")))
         prompt: str | None = None
         kind = "executor_task"
@@ -279,7 +297,7 @@ class ADaPTAgent(Agent):
 
     # -- planner ----------------------------------------------------------------------------------
     def _plan(self, ep: Episode, node: TaskNode) -> tuple[tuple[str, ...], str]:
-        conv = self._open(ep, None, ep.extra["planner_demo"], P.PLANNER_FORMAT)
+        conv = self._open(ep, None, ep.extra["planner_demo"], P.PLANNER_FORMAT, PLANNER_REPLY_FIELDS)
         conv.pin("planner_task", P.planner_task_prompt(task=node.task, **self._situation(ep, "planner")))
         reply, seq = conv.ask(None, "planner_task", planner_reply, node_id=node.node_id, context=self._context(ep, node, "planner"))
         node.versions.append(NodeVersion(len(node.versions), reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq))
@@ -315,7 +333,7 @@ class ADaPTAgent(Agent):
     def render_demonstration(self, demo: Demonstration) -> str:
         key = self._key("executor", demo)
         if key not in _DEMOS:
-            replies = demo.replies.get("adapt_executor") or demo.replies.get("react")
+            replies = demo.replies.get(EXECUTOR_DEMO_KEY) or demo.replies.get(ReActAgent.style)
             if replies is None:
                 raise DemonstrationError(f"demonstration {demo.name!r} has no 'adapt_executor' or 'react' replies for the ADaPT executor")
             messages, result = self._render_run(demo, list(replies), "executor")
@@ -362,9 +380,9 @@ class ADaPTAgent(Agent):
 def planner_demo_reply(demo: Demonstration) -> dict[str, Any]:
     """The planner's demonstration reply: ``adapt_planner`` if the demonstration has one, else
     ReCAP's root decomposition of the same goal, combined with AND."""
-    if demo.replies.get("adapt_planner"):
-        return dict(demo.replies["adapt_planner"][0])
-    recap = demo.replies.get("recap")
+    if demo.replies.get(PLANNER_DEMO_KEY):
+        return dict(demo.replies[PLANNER_DEMO_KEY][0])
+    recap = demo.replies.get(ReCAPAgent.style)
     if not recap:
         raise DemonstrationError(f"demonstration {demo.name!r} has no 'adapt_planner' or 'recap' replies to derive the ADaPT planner's example")
     first = recap[0]

@@ -22,12 +22,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import partial
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
 from recap.baselines.react import flat_context
 from recap.config import AgentConfig, ConfigError
+from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
 from recap.jsonreply import plan_reply
 from recap.runtime import Episode, EpisodeEnd
@@ -57,7 +58,16 @@ class CoTAgent(Agent):
     #: one call (plus JSON repairs), whatever the step cap
     calls_per_step = 0.0
     call_overhead = 1
+    one_shot = True
+    reply_fields = ("think", "actions")
     config: PlanConfig
+
+    @classmethod
+    def demo_replies(cls, script: DemoScript) -> list[dict[str, Any]]:
+        """The whole plan in one reply, after the plan's reasoning (Standard: the plan alone)."""
+        if cls.with_think:
+            return [{"think": script.plan_thought, "actions": list(script.actions)}]
+        return [{"actions": list(script.actions)}]
 
     def reply_format(self) -> str:
         return P.plan_format(self.with_think)

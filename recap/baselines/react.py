@@ -36,6 +36,7 @@ from typing import Any, ClassVar, Literal
 from recap.agent import Agent
 from recap.baselines import prompts as P
 from recap.config import AgentConfig, ConfigError
+from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
 from recap.jsonreply import action_reply
 from recap.runtime import Episode, EpisodeEnd
@@ -94,7 +95,17 @@ class ReActAgent(Agent):
     expected_format = P.action_format(True)
     #: Act is ReAct without the think field
     with_think: ClassVar[bool] = True
+    reply_fields = ("think", "action")
+    #: one call per step
+    estimate_calls_per_step = (1.0, 1.0)
     config: ReActConfig
+
+    @classmethod
+    def demo_replies(cls, script: DemoScript) -> list[dict[str, Any]]:
+        """One reply per action, with the thought written before it (Act: the action alone)."""
+        if cls.with_think:
+            return [{"think": t, "action": a} for t, a in zip(script.step_thoughts, script.actions, strict=True)]
+        return [{"action": a} for a in script.actions]
 
     def reply_format(self) -> str:
         return P.action_format(self.with_think)

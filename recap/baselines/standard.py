@@ -14,3 +14,4 @@ class StandardAgent(CoTAgent):
     style = "standard"
     expected_format = P.plan_format(False)
     with_think = False
+    reply_fields = ("actions",)

@@ -9,6 +9,7 @@ import json
 import pytest
 
 from recap.llm import ChatMessage, LLMError, LLMRequest
+from recap.methods import METHODS
 from schemas.records import CallRecord, MessageRecord
 from workers.gateway.core import DeploymentGateway
 from workers.llm.offline.expert import chunk_actions, expert_reply, group_plan
@@ -18,6 +19,8 @@ from workers.llm.offline.random_model import random_reply
 from workers.llm.providers import DeploymentConfig
 from schemas.parts import PartWriter, read_table
 
+#: the reply fields each method's agent sends in its hints (the offline models read these, not the name)
+FIELDS = {name: agent_cls.reply_fields for name, (agent_cls, _config_cls) in METHODS.items()}
 PLAN = ["go to fridge 1", "open fridge 1", "take egg 1 from fridge 1", "go to stove 1", "heat egg 1 with stove 1"]
 
 
@@ -129,7 +132,7 @@ def test_expert_drives_flat_styles_one_action_per_call(style):
     for i in range(20):
         if env.done:
             break
-        reply = expert_reply({"style": style, "purpose": "act", "expert_plan": env.plan(),
+        reply = expert_reply({"style": style, "reply_fields": FIELDS[style], "purpose": "act", "expert_plan": env.plan(),
                               "valid_actions": env.valid()}, Knobs(), f"ep#{i}")
         assert set(reply) == ({"action"} if style == "act" else {"think", "action"})
         env.step(reply["action"])
@@ -138,7 +141,7 @@ def test_expert_drives_flat_styles_one_action_per_call(style):
 
 @pytest.mark.parametrize("style,keys", [("cot", {"think", "actions"}), ("standard", {"actions"})])
 def test_expert_gives_the_whole_plan_for_open_loop_styles(style, keys):
-    reply = expert_reply({"style": style, "purpose": "plan", "expert_plan": PLAN}, Knobs(), "ep#0")
+    reply = expert_reply({"style": style, "reply_fields": FIELDS[style], "purpose": "plan", "expert_plan": PLAN}, Knobs(), "ep#0")
     assert set(reply) == keys and reply["actions"] == PLAN
 
 
@@ -147,7 +150,7 @@ def test_injection_is_deterministic_per_call_key_and_seed():
         out = set()
         for i in range(200):
             meta = {"recap_offline": {"call_key": f"ep#{i}", "options": {"seed": seed, "malformed_json_rate": rate},
-                                      "hints": {"style": "act", "expert_plan": PLAN}}}
+                                      "hints": {"style": "act", "reply_fields": FIELDS["act"], "expert_plan": PLAN}}}
             text = offline_text("expert", [{"role": "user", "content": "x"}], meta, None)
             if text == MALFORMED_JSON:
                 out.add(f"ep#{i}")
@@ -164,7 +167,7 @@ def test_injection_is_deterministic_per_call_key_and_seed():
 
 def test_random_model_picks_a_valid_action_deterministically():
     valid = ["north", "south", "east", "west"]
-    picks = {random_reply({"style": "react", "valid_actions": valid}, Knobs(seed=1), f"k{i}")["action"]
+    picks = {random_reply({"style": "react", "reply_fields": FIELDS["react"], "valid_actions": valid}, Knobs(seed=1), f"k{i}")["action"]
              for i in range(40)}
     assert picks == set(valid)
     one = random_reply({"style": "recap", "valid_actions": valid}, Knobs(seed=1), "k0")
@@ -182,7 +185,7 @@ def test_offline_expert_takes_the_provider_path_and_is_labelled_a_test_double(ru
 
     async def go():
         gw = DeploymentGateway(cfg, run_dir=run_dir, run_id="r")
-        hints = {"style": "react", "purpose": "act", "expert_plan": PLAN}
+        hints = {"style": "react", "reply_fields": FIELDS["react"], "purpose": "act", "expert_plan": PLAN}
         resp = await gw.complete(_request(0, "what next?", hints))
         await gw.aclose()
         return resp

@@ -83,7 +83,8 @@ def test_executor_alone_solves_the_task_without_planning():
     assert run.nodes == [node(0, None, 0, 0, GOAL, "root", "open")]
     assert [s.node_id for s in run.steps] == [0] * 6
     assert run.client.requests[0].hints == {
-        "style": "adapt", "purpose": "executor_task", "role": "executor", "task": GOAL, "depth": 0, "valid_actions": ["pick up B", "unstack C from A"],
+        "style": "adapt", "purpose": "executor_task", "reply_fields": ("think", "action"), "role": "executor", "task": GOAL, "depth": 0,
+        "valid_actions": ["pick up B", "unstack C from A"],
     }
 
 

@@ -94,7 +94,9 @@ def test_react_and_act_full_episode(agent, script, system):
     assert [c.purpose for c in run.calls] == ["task"] + ["observation"] * 5
     assert [c.response_seq for c in run.calls] == [1, 3, 5, 7, 9, 11]
     hints = run.client.requests[1].hints
-    assert hints == {"style": agent.style, "purpose": "observation", "task": GOAL, "depth": 0, "valid_actions": ["put down C", "stack C on A", "stack C on B"]}
+    assert hints == {"style": agent.style, "purpose": "observation", "reply_fields": agent.reply_fields, "task": GOAL, "depth": 0,
+                     "valid_actions": ["put down C", "stack C on A", "stack C on B"]}
+    assert agent.reply_fields == (("think", "action") if agent.with_think else ("action",))
 
 
 def test_act_rejects_nothing_extra_but_react_requires_think():

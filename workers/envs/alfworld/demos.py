@@ -2,18 +2,21 @@
 
 The paper uses one training game per task type; ALFWorld's training games are not in our data,
 so each demonstration is an invented household episode (see :mod:`household`) solved with
-commands in 2.1.1 wording. For every task type we give:
+commands in 2.1.1 wording. For every task type we write the episode once, as a method-neutral
+:class:`~recap.demo_script.DemoScript`; each agent class derives its replies from it:
 
-- ``react``: one {"think", "action"} reply per step; ``act``: the same actions without thinks;
-- ``cot``: the whole episode as one plan, {"think", "actions"}, whose think walks through the
-  same reasoning in order; ``standard``: the same plan without the think. (The paper does not
-  run CoT and Standard on ALFWorld - an open-loop plan cannot look inside closed receptacles -
-  but a sweep may, and then they are shown the same episode as every other method.)
-- ``recap``: {"think", "subtasks"} replies in ReCAP's exact call order (recap/recap_agent.py):
-  a root decomposition, a "descend" reply for every child that is not itself a valid action,
-  and one "refine" reply for the parent after each child returns, until the winning action.
-  The trees are at least two levels deep and show both paths into an action: a subtask that is
-  already an exact valid action (executed without a call) and a one-item descend reply.
+- ``steps``: each action with the thought that leads to it (ReAct's replies; Act's are the
+  actions alone);
+- the plan's thought (:func:`plan_think`) walks through the same reasoning in order (CoT's one
+  reply, with every action; Standard's without the think). The paper does not run CoT and
+  Standard on ALFWorld - an open-loop plan cannot look inside closed receptacles - but a sweep
+  may, and then they are shown the same episode as every other method;
+- ``recap``: the decomposition as (think, subtasks) in ReCAP's exact call order
+  (recap/recap_agent.py): a root decomposition, a "descend" reply for every child that is not
+  itself a valid action, and one "refine" reply for the parent after each child returns, until
+  the winning action. The trees are at least two levels deep and show both paths into an
+  action: a subtask that is already an exact valid action (executed without a call) and a
+  one-item descend reply.
 
 For game-file version 2.1.2 the same episodes are recorded in 2.1.2 wording and the command
 strings in the replies are rewritten (``put X in/on Y`` -> ``move X to Y``).
@@ -25,6 +28,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from recap.demo_script import DemoReplies, DemoScript
 from recap.env import Demonstration
 from workers.envs.alfworld.household import Place, Scene, record
 from workers.envs.alfworld.replay import Recording, ReplayEnvironment
@@ -32,8 +36,8 @@ from workers.envs.alfworld.rules import failure_hints_text, rules_text
 from workers.envs.alfworld.task_types import TASK_TYPES
 from workers.envs.alfworld.wording import to_version
 
-#: agent styles that have ALFWorld demonstrations (the paper runs ReCAP, ReAct and Act here;
-#: ADaPT's executor uses the ReAct replies)
+#: the methods whose replies the scripts yield today (the paper runs ReCAP, ReAct and Act here;
+#: ADaPT's executor uses the ReAct replies). Derived by the agent classes, not listed anywhere else.
 STYLES = ("recap", "react", "act", "cot", "standard")
 
 
@@ -487,20 +491,23 @@ def recording_for(short_type: str, version: str = "2.1.1") -> Recording:
     )
 
 
-def replies_for(short_type: str, version: str = "2.1.1") -> dict[str, list[dict[str, Any]]]:
-    """The scripted model replies per agent style, commands in ``version`` wording."""
+def script_for(short_type: str, version: str = "2.1.1") -> DemoScript:
+    """The demonstration for ``short_type`` written once, commands in ``version`` wording."""
     demo = _demo(short_type)
-    actions = [to_version(a, version) for a, _ in demo.steps]
-    return {
-        "recap": [
-            {"think": think, "subtasks": [to_version(s, version) for s in subtasks]}
-            for think, subtasks in demo.recap
-        ],
-        "react": [{"think": t, "action": a} for a, (_, t) in zip(actions, demo.steps, strict=True)],
-        "act": [{"action": a} for a in actions],
-        "cot": [{"think": plan_think(demo), "actions": actions}],
-        "standard": [{"actions": actions}],
-    }
+    return DemoScript(
+        actions=tuple(to_version(a, version) for a, _ in demo.steps),
+        step_thoughts=tuple(t for _, t in demo.steps),
+        plan_thought=plan_think(demo),
+        decomposition=tuple(
+            (think, tuple(to_version(s, version) for s in subtasks)) for think, subtasks in demo.recap
+        ),
+    )
+
+
+def replies_for(short_type: str, version: str = "2.1.1") -> dict[str, list[dict[str, Any]]]:
+    """The model replies per method key, as the registered agent classes derive them from the
+    script (commands in ``version`` wording)."""
+    return {k: [dict(r) for r in v] for k, v in DemoReplies(script=script_for(short_type, version)).items()}
 
 
 def plan_think(demo: _Demo) -> str:
@@ -539,7 +546,7 @@ def demonstration_for(
     return Demonstration(
         name=demonstration_name(short_type, version, show_valid_actions),
         make_env=make_env,
-        replies=replies_for(short_type, version),
+        script=script_for(short_type, version),
     )
 
 

@@ -2,11 +2,12 @@
 
 As in the paper, every Robotouille agent (sync and async) is shown the same solved training task:
 ``instances_train/synchronous_train/0_cheese_onion_sandwich_26.json``, read at run time from the
-user's data folder and run on our engine. The replies below are the model outputs, in call order,
-that solve it in 22 actions; the agent renders them by running itself on ``make_env()`` with a
-scripted model, so the demonstration always has the exact format of the agent's own prompts.
+user's data folder and run on our engine. The example is written once (:func:`script`): its 22
+actions with the thought before each, the plan's thought, and the goal's decomposition. Each agent
+class derives its model replies from it, and renders them by running itself on ``make_env()``
+with a scripted model, so the demonstration always has the exact format of the agent's own prompts.
 
-The ReCAP replies form a three-level tree: the root splits the recipe into four dish steps, the
+The decomposition (ReCAP's replies, in call order) forms a three-level tree: the root splits the recipe into four dish steps, the
 first of which ("prepare a cut onion") splits again into clearing a board, fetching the onion and
 cutting it, each of which lists its primitive actions. All thinks are this project's own words.
 """
@@ -14,9 +15,12 @@ cutting it, each of which lists its primitive actions. All thinks are this proje
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
+from recap.demo_script import DemoScript
 from recap.env import Demonstration, Environment
+
+#: one decomposition reply: (think, subtasks)
+Step = tuple[str, tuple[str, ...]]
 
 DEMO_NAME = "robotouille/onion_cheese_sandwich"
 DEMO_SPLIT = "synchronous"
@@ -56,7 +60,7 @@ TOP_BREAD = [
 ]
 ACTIONS = CLEAR_BOARD + FETCH_ONION + CUT_ONION + STACK_ONION + STACK_CHEESE + TOP_BREAD
 
-# --------------------------------------------------------------------------- ReCAP (tree)
+# --------------------------------------------------------------------------- the decomposition
 PREPARE = "Prepare a cut onion on board1"
 STACK_ONION_TASK = "Stack the cut onion on bread1 at table1"
 CHEESE_TASK = "Stack cheese1 on top of the onion"
@@ -66,11 +70,11 @@ FETCH_TASK = "Bring onion1 onto board1"
 CUT_TASK = "Cut onion1 three times"
 
 
-def _reply(think: str, subtasks: list[str]) -> dict[str, Any]:
-    return {"think": think, "subtasks": list(subtasks)}
+def _reply(think: str, subtasks: list[str]) -> Step:
+    return (think, tuple(subtasks))
 
 
-def _action_list_node(descend_think: str, actions: list[str], thinks: list[str], closing: str | None) -> list[dict]:
+def _action_list_node(descend_think: str, actions: list[str], thinks: list[str], closing: str | None) -> list[Step]:
     """Descend reply listing ``actions``, then one refine reply after each action.
 
     ``thinks[k]`` is the think after action k (the remaining actions follow); ``closing`` is the
@@ -85,9 +89,10 @@ def _action_list_node(descend_think: str, actions: list[str], thinks: list[str],
     return replies
 
 
-def recap_replies() -> list[dict[str, Any]]:
+def decomposition() -> list[Step]:
+    """The goal's decomposition as (think, subtasks), in ReCAP's call order."""
     root_plan = [PREPARE, STACK_ONION_TASK, CHEESE_TASK, BREAD_TASK]
-    r: list[dict[str, Any]] = []
+    r: list[Step] = []
     # call 0: root decomposition
     r.append(_reply(
         "The sandwich needs a bottom slice of bread directly on a table, a cut onion and cheese1 on it, "
@@ -190,7 +195,7 @@ def recap_replies() -> list[dict[str, Any]]:
     return r
 
 
-# --------------------------------------------------------------------------- flat agents
+# --------------------------------------------------------------- the thought before each action, the plan
 REACT_THINKS = [
     "Cutting needs an empty board; board1 is taken by lettuce1, which this sandwich does not use. I go to board1.",
     "I pick up lettuce1 to free the board.",
@@ -224,16 +229,11 @@ PLAN_THINK = (
 )
 
 
-def replies() -> dict[str, list[dict[str, Any]]]:
-    assert len(REACT_THINKS) == len(ACTIONS)
-    return {
-        "recap": recap_replies(),
-        "react": [{"think": t, "action": a} for t, a in zip(REACT_THINKS, ACTIONS)],
-        "act": [{"action": a} for a in ACTIONS],
-        "cot": [{"think": PLAN_THINK, "actions": list(ACTIONS)}],
-        "standard": [{"actions": list(ACTIONS)}],
-    }
+def script() -> DemoScript:
+    """The example written once; every method derives its own replies from it."""
+    return DemoScript(actions=tuple(ACTIONS), step_thoughts=tuple(REACT_THINKS), plan_thought=PLAN_THINK,
+                      decomposition=tuple(decomposition()))
 
 
 def make_demonstration(make_env: Callable[[], Environment]) -> Demonstration:
-    return Demonstration(name=DEMO_NAME, make_env=make_env, replies=replies())
+    return Demonstration(name=DEMO_NAME, make_env=make_env, script=script())

@@ -2,14 +2,16 @@
 
 Why: it drives every agent (ReCAP and the flat baselines) to success through the real agent
 code, prompts and records, without a model - the end-to-end check of the pipeline. It reads
-only the hints the episode worker attaches (see recap/recap_agent.py), never the prompt:
+only the hints the agent and the episode worker attach (see recap/runtime.py), never the prompt,
+and never the method's name:
 
-- ``style``: recap | react | act | cot | standard | adapt;
+- ``reply_fields``: the reply's fields, in order, as the agent class declares them
+  (``think``, ``subtasks``, ``action``, ``actions``);
 - ``purpose``: which prompt this is (``task``, ``descend``, refine kinds, ``depth_cap`` ...);
 - ``task``, ``depth``, ``remaining`` (the node's current list), ``valid_actions``;
 - ``expert_plan``: the remaining expert actions from the current environment state.
 
-ReCAP replies (the call order of recap/recap_agent.py):
+``subtasks`` (the call order of recap/recap_agent.py):
 - root (``task``): the remaining plan grouped into a few subgoal chunks, each named
   ``subgoal <k>: <action>; <action>; ...`` (a one-action chunk is named by the action itself,
   so the agent takes its shortcut);
@@ -33,8 +35,12 @@ CHUNK_PREFIX = "subgoal"
 _CHUNK_RE = re.compile(rf"^{CHUNK_PREFIX} (\d+): (.+)$")
 ACTION_SEPARATOR = "; "
 MAX_ROOT_CHUNKS = 4
-#: action used by flat styles when the plan is empty and no valid actions are known
+#: action used for ``action`` / ``actions`` fields when the plan is empty and no valid actions are known
 FALLBACK_ACTION = "look"
+#: the reply fields the offline models fill (agents declare theirs: ``recap.agent.Agent.reply_fields``)
+FIELDS = ("think", "subtasks", "action", "actions")
+#: what a request that names no reply fields gets
+DEFAULT_REPLY_FIELDS = ("think", "subtasks")
 
 
 def chunk_name(index: int, actions: Sequence[str]) -> str:
@@ -120,27 +126,38 @@ def _next_action(hints: Mapping[str, Any]) -> str:
     return valid[0] if valid else FALLBACK_ACTION
 
 
+def reply_fields_of(hints: Mapping[str, Any]) -> tuple[str, ...]:
+    """The reply's fields the agent asked for (``hints["reply_fields"]``, declared by each agent
+    class); a request that names none gets a decomposition, as requests always did."""
+    fields = hints.get("reply_fields")
+    return tuple(str(f) for f in fields) if fields else DEFAULT_REPLY_FIELDS
+
+
 def expert_reply(hints: Mapping[str, Any], knobs: Knobs, call_key: str) -> dict[str, Any]:
-    """The reply object (before JSON encoding) for one call, invalid-action injection applied."""
-    style = str(hints.get("style", "recap"))
-    purpose = str(hints.get("purpose", ""))
+    """The reply object (before JSON encoding) for one call, invalid-action injection applied.
+
+    Each field the agent asked for is filled the same way whatever the method: ``think`` says
+    how much plan is left, ``subtasks`` follows the ReCAP call order above, ``action`` is the
+    next expert action, ``actions`` the whole remaining plan. Injection replaces the first
+    subtask, the action, or the plan's first action."""
     plan = list(hints.get("expert_plan") or [])
     inject = knobs.invalid_action_rate > 0 and draw(call_key, knobs.seed, "invalid") < knobs.invalid_action_rate
-    think = f"Expert plan: {len(plan)} action(s) left."
-    if style == "recap" or (style == "adapt" and "plan" in purpose):
-        subtasks = recap_subtasks(hints, knobs)
-        if inject and subtasks:
-            subtasks = [INVALID_ACTION] + subtasks[1:]
-        reply: dict[str, Any] = {"think": think, "subtasks": subtasks}
-        if hints.get("think") is False:
-            del reply["think"]
-        return reply
-    if style in ("react", "act", "adapt"):
-        action = INVALID_ACTION if inject else _next_action(hints)
-        return {"action": action} if style == "act" else {"think": think, "action": action}
-    if style in ("cot", "standard"):
-        actions = plan[:] if plan else [_next_action(hints)]
-        if inject:
-            actions[0] = INVALID_ACTION
-        return {"actions": actions} if style == "standard" else {"think": think, "actions": actions}
-    raise ValueError(f"offline/expert: unknown style {style!r}")
+    reply: dict[str, Any] = {}
+    for name in reply_fields_of(hints):
+        if name == "think":
+            reply[name] = f"Expert plan: {len(plan)} action(s) left."
+        elif name == "subtasks":
+            subtasks = recap_subtasks(hints, knobs)
+            if inject and subtasks:
+                subtasks = [INVALID_ACTION] + subtasks[1:]
+            reply[name] = subtasks
+        elif name == "action":
+            reply[name] = INVALID_ACTION if inject else _next_action(hints)
+        elif name == "actions":
+            actions = plan[:] if plan else [_next_action(hints)]
+            if inject:
+                actions[0] = INVALID_ACTION
+            reply[name] = actions
+        else:
+            raise ValueError(f"offline/expert: cannot fill reply field {name!r}; it fills {', '.join(FIELDS)}")
+    return reply

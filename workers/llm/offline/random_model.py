@@ -1,4 +1,5 @@
-"""TEST DOUBLE ``offline/random``: a random valid action in the agent's reply format.
+"""TEST DOUBLE ``offline/random``: a random valid action in the reply fields the agent asks for
+(``hints["reply_fields"]``, see :mod:`workers.llm.offline.expert`).
 
 Why: a lower bound for success rates and a stress test of long episodes (step caps, context
 trimming) at no cost. The choice depends only on (seed, call_key), like every offline model.
@@ -10,24 +11,24 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from workers.llm.offline.expert import FIELDS, reply_fields_of
 from workers.llm.offline.knobs import Knobs, call_rng
 
 OPEN_SPACE_ACTION = "look"
 
 
 def random_reply(hints: Mapping[str, Any], knobs: Knobs, call_key: str) -> dict[str, Any]:
-    style = str(hints.get("style", "recap"))
+    """Every field the agent asked for holds the one random action (``think`` a fixed text)."""
     valid = list(hints.get("valid_actions") or [])
     action = call_rng(call_key, knobs.seed, "random").choice(valid) if valid else OPEN_SPACE_ACTION
-    think = "Picking an action at random."
-    if style == "recap" or (style == "adapt" and "plan" in str(hints.get("purpose", ""))):
-        return {"think": think, "subtasks": [action]}
-    if style == "act":
-        return {"action": action}
-    if style in ("react", "adapt"):
-        return {"think": think, "action": action}
-    if style == "standard":
-        return {"actions": [action]}
-    if style == "cot":
-        return {"think": think, "actions": [action]}
-    raise ValueError(f"offline/random: unknown style {style!r}")
+    reply: dict[str, Any] = {}
+    for name in reply_fields_of(hints):
+        if name == "think":
+            reply[name] = "Picking an action at random."
+        elif name == "action":
+            reply[name] = action
+        elif name in ("subtasks", "actions"):
+            reply[name] = [action]
+        else:
+            raise ValueError(f"offline/random: cannot fill reply field {name!r}; it fills {', '.join(FIELDS)}")
+    return reply
