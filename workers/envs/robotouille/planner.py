@@ -508,8 +508,8 @@ class Planner:
         return best[1]
 
     def start_slow(self, view: View) -> Grounding | None:
-        """Start the slow processes first (soups, cooking, frying - they run on their own once started), the
-        closest candidate first."""
+        """A step towards starting a slow process (a soup, cooking, frying: they run on their own once started),
+        the job picked by :meth:`_closest`."""
         options: list[tuple[str, Grounding | None]] = []
         for soup in self.recipe.soups:
             options.append(("soup", self.soup_step(soup, view)))
@@ -587,7 +587,7 @@ class Planner:
         return self._closest(options, view)
 
     def cut_jobs(self, view: View) -> Grounding | None:
-        """The closest item whose next preparation is cutting, a step towards cutting it."""
+        """A step towards cutting an item whose next preparation is cutting (the job picked by :meth:`_closest`)."""
         options = []
         for var in self.recipe.item_vars:
             obj = self.assign[var]
