@@ -64,11 +64,13 @@ class CapPolicy:
             self.stop_model(m.name, f"model cap ${m.cap_usd:.2f} of {m.name} reached")
 
     def stop_run(self, why: str) -> None:
+        """Stop starting any unit (recorded once, with ``why``, as a ``run_cap_reached`` event); running episodes go on."""
         if self.run_stopped is None:
             self.run_stopped = why
             self._event("run_cap_reached", severity="warning", reason=why)
 
     def stop_model(self, name: str, why: str) -> None:
+        """Stop starting units of model ``name`` (recorded once as a ``model_cap_reached`` event); other models go on."""
         if name not in self.stopped_models:
             self.stopped_models.add(name)
             self._event("model_cap_reached", severity="warning", model=name, reason=why)

@@ -439,6 +439,8 @@ def _check_ray_address(spec: Any) -> None:
 
 
 def cmd_run(args: argparse.Namespace, command: str) -> int:
+    """``recap run SPEC``: expand and check the spec, print the plan, then run it (``--dry-run`` stops after the
+    plan, before any Ray connection or model call)."""
     from pipeline.spec import load_spec, with_overrides
 
     spec, text = load_spec(args.spec)
@@ -455,6 +457,8 @@ def cmd_run(args: argparse.Namespace, command: str) -> int:
 
 
 def cmd_resume(args: argparse.Namespace, command: str) -> int:
+    """``recap resume RUN_DIR``: continue a run from the spec.yaml saved in its folder (``--repair`` first);
+    refuses a folder whose spec names another run than run.json."""
     from pipeline.errors import RunFolderError
     from pipeline.spec import parse_spec, with_overrides
     from pipeline.store import SPEC_FILE, RunStore
@@ -481,6 +485,7 @@ def cmd_resume(args: argparse.Namespace, command: str) -> int:
 
 
 def cmd_status(args: argparse.Namespace) -> int:
+    """``recap status RUN_DIR``: the run's summary table; a damaged folder is one error line, never a traceback."""
     from pipeline.store import RunStore
     from pipeline.summary import collect, render
 
@@ -498,6 +503,7 @@ def cmd_status(args: argparse.Namespace) -> int:
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
+    """``recap estimate SPEC``: the plan and its expected cost, without connecting to Ray or calling any model."""
     from pipeline.estimate import estimate, render
     from pipeline.spec import load_spec
     from pipeline.units import expand
@@ -513,6 +519,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 
 def cmd_report(argv: list[str]) -> int:
+    """``recap report ...``: handed to the reports package; a one-line error when it is not installed."""
     try:
         from reports.commands import report_main
     except ModuleNotFoundError as exc:
@@ -534,6 +541,8 @@ def cmd_view(argv: list[str]) -> int:
 
 
 def dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """Run the parsed subcommand (everything except data/report/view, which ``main`` hands off first); the
+    command line is recorded with the run."""
     command = "recap " + " ".join(argv)
     if args.cmd == "run":
         return cmd_run(args, command)
@@ -622,6 +631,8 @@ def _take_log_level(argv: list[str]) -> str | None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``recap``: returns the exit status (see the module docstring) instead of raising, so user
+    errors stay one line."""
     argv = list(sys.argv[1:] if argv is None else argv)
     _CHECKED.clear()
     try:

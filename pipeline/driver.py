@@ -89,6 +89,9 @@ EXIT_INTERRUPTED = 130
 # --------------------------------------------------------------------------------------------
 @dataclass
 class Prepared:
+    """A sweep checked and ready to start: its expanded plan and output store. ``identity`` and ``diff`` are None
+    for a fresh folder; for an existing run they are its run.json and how the new plan differs from the stored
+    one."""
     spec: SweepSpec
     spec_text: str
     plan: Plan
@@ -140,6 +143,8 @@ def _git_revision() -> str | None:
 # --------------------------------------------------------------------------------------------
 @dataclass
 class RunSummary:
+    """What one driver session did (counts are for this session unless named ``*_before``); the CLI prints it and
+    turns it into the exit status."""
     location: str
     run: str
     run_id: str
@@ -166,6 +171,7 @@ class RunSummary:
 
     @property
     def all_done(self) -> bool:
+        """True when every unit of the plan has a finished row, this session or an earlier one."""
         return self.completed_before + self.finished_now >= self.total
 
     def retry_hint(self) -> str | None:
@@ -177,6 +183,8 @@ class RunSummary:
                 f"then retry them with: recap resume {self.location}")
 
     def exit_code(self) -> int:
+        """The process exit status: interrupted beats an infrastructure failure, which beats work left (a cap
+        stopped it); 0 only when all is done."""
         if self.interrupted:
             return EXIT_INTERRUPTED
         if self.infra_failed:

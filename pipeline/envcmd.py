@@ -21,6 +21,8 @@ def _registry_error(exc: Exception) -> PipelineError:
 
 
 def list_main(bench: str, selector: str | None, out: TextIO) -> int:
+    """``recap env list BENCH [SELECTOR]``: instance ids one a line on stdout, the count on stderr; quiet when
+    the reader closes the pipe early."""
     from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
     from workers.envs.registry import get_benchmark
 
@@ -76,6 +78,8 @@ def _show(obs: str, valid: Any, out: TextIO) -> None:
 
 
 def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float = 4.0) -> int:
+    """``recap env play ID``: play one instance by hand from ``inp`` (action text or its number; quit/exit/q or
+    end of input stops); 0 whatever the outcome."""
     from recap.env import DataNotFoundError, EnvError, InvalidActionError, UnknownInstanceError
     from workers.envs.registry import make_env
 
@@ -123,6 +127,8 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
 
 
 def replay_main(path: str, out: TextIO) -> int:
+    """``recap env replay FILE``: replay a saved Robotouille trajectory; exit 0 when it replays as recorded, 1
+    when it does not."""
     try:
         from workers.envs.robotouille.replay import replay_file
     except ModuleNotFoundError as exc:

@@ -21,6 +21,8 @@ MUTABLE = ("run.json", "plan.json", "spec.yaml", "gateway/ledger.jsonl")
 
 
 def mirror_dir(uri: str) -> Path:
+    """The local mirror folder of an object-store run ``uri``: stable per URI (hash), under ``$RECAP_EVAL_CACHE``
+    or ~/.cache/recap-eval."""
     base = Path(os.environ.get("RECAP_EVAL_CACHE", Path.home() / ".cache" / "recap-eval"))
     return base / "mirror" / hashlib.sha256(uri.encode()).hexdigest()[:16]
 

@@ -50,6 +50,8 @@ def key_variables(m: ModelSpec) -> list[str]:
 
 
 def check_keys(spec: SweepSpec) -> None:
+    """Every real model's API key is set (its ``api_key_env``, else the variables litellm expects); test doubles
+    need none. Raises PreflightError."""
     for i, m in enumerate(spec.models):
         if m.test_double:
             continue
@@ -78,6 +80,7 @@ def check_prices(spec: SweepSpec) -> None:
 
 
 def preflight(spec: SweepSpec) -> None:
+    """The spend checks of a sweep (prices, then keys); raises PreflightError on the first failure."""
     check_prices(spec)
     check_keys(spec)
 

@@ -20,6 +20,8 @@ TEST_DOUBLE_MARK = "(test double)"
 
 @dataclass
 class Snapshot:
+    """The figures one progress refresh shows; ``eta_s`` and ``run_cap_usd`` are None when unknown or uncapped,
+    ``stopped`` names the cap that stopped new work."""
     total: int
     done: int
     success: int
@@ -51,6 +53,7 @@ def nominal(s: "Snapshot") -> str:
 
 
 def fmt_duration(seconds: float | None) -> str:
+    """A duration as ``1h05m`` or ``4m07s`` (rounded to the second); ``--`` when unknown."""
     if seconds is None:
         return "--"
     seconds = int(round(seconds))
@@ -68,6 +71,8 @@ def _pct(used: float | None, limit: float | None) -> str:
 
 
 def status_line(s: Snapshot) -> str:
+    """The one-line form of a snapshot (the ``lines`` mode and logs): units, success, spend vs cap, ETA,
+    restarts, per-model rate use."""
     cap = f" / cap ${s.run_cap_usd:.2f}" if s.run_cap_usd is not None else ""
     rate = "; ".join(f"{m}: rpm {_pct(r.rpm, r.rpm_limit)} tpm {_pct(r.tpm, r.tpm_limit)}{paused_text(r.paused_until)}"
                      for m, r in s.rates.items())
@@ -139,6 +144,8 @@ class ProgressView:
         return Panel(t, title=escape(self.title))
 
     def update(self, s: Snapshot, *, force: bool = False) -> None:
+        """Show ``s``: the live panel at once; in ``lines`` mode a line at most every ``line_every_s`` seconds
+        unless ``force`` (the final line)."""
         if self.mode == "live" and self._live is not None:
             self._live.update(self._render(s))
         elif self.mode == "lines":

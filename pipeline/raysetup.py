@@ -24,6 +24,8 @@ FORWARDED_VARS = ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "RECAP_EVAL_DATA", LEVEL_
 
 
 def runtime_env() -> dict[str, Any]:
+    """The Ray ``runtime_env`` for every worker: litellm offline, no usage stats, the data and log-level
+    variables forwarded, the project root on PYTHONPATH."""
     env_vars = {"LITELLM_LOCAL_MODEL_COST_MAP": "True", "RAY_USAGE_STATS_ENABLED": "0"}
     for name in FORWARDED_VARS:
         if os.environ.get(name):

@@ -17,6 +17,8 @@ from reports.observations import observation_change
 
 
 def resolve_episode(store: RunStore, ref: str) -> dict[str, Any]:
+    """The episode row ``ref`` names: an exact episode id, else a unit id (its latest attempt), else an
+    unambiguous prefix (attempts of one unit count as one). Raises PipelineError when none or several match."""
     eps, _ = store.read_table("episodes")
     rows = eps.to_pylist()
     exact = [r for r in rows if r["episode_id"] == ref]
@@ -38,6 +40,8 @@ def resolve_episode(store: RunStore, ref: str) -> dict[str, Any]:
 
 
 def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list[dict[str, Any]]) -> Any:
+    """A rich Tree of one episode: a title line, then the ReCAP nodes with their versions and leaf actions, or
+    for a flat method its steps in order; observations shown as changes since the step before."""
     from rich.markup import escape
     from rich.tree import Tree
 
@@ -85,6 +89,7 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
 
 
 def show_main(run_dir: str, ref: str, console: Any) -> int:
+    """``recap show``: print the tree of one episode (and its end reason when it ended in an error); exit status 0."""
     import pyarrow.compute as pc
 
     store = RunStore(run_dir)

@@ -72,6 +72,7 @@ class SinkChannel:
         self._unacked.append((ref, batch_hash(rows), rows))
 
     def maybe_flush(self) -> None:
+        """Ask the sink to write its buffers if they are due (fire and forget); nothing once the sink is lost."""
         if self.actor is not None and self.lost is None:
             self.actor.maybe_flush.remote()
 
@@ -178,6 +179,7 @@ class SinkChannel:
             self.on_lost(f"the sink failed at the end of the session: {type(exc).__name__}")
 
     def kill(self) -> None:
+        """End the sink actor at the end of the session (after :meth:`close`); errors are ignored, the rows are already safe."""
         if self.actor is not None:
             import ray
 

@@ -42,6 +42,8 @@ def _delegate() -> Any | None:
 
 
 def sql_main(run_dir: str, query: str, console: Any) -> int:
+    """``recap sql``: run ``query`` over the run's tables (a fresh mirror for an object-store run); the reports
+    package's sql when installed, else this read-only fallback."""
     store = RunStore(run_dir)
     store.require_identity()
     if store.remote:  # query a fresh local copy of an object-store run

@@ -44,6 +44,8 @@ SPEC_FILE = "spec.yaml"
 
 @dataclass(frozen=True)
 class RunIdentity:
+    """The content of run.json: which run owns the folder (``run`` is the spec's name, ``run_id`` unique per
+    folder) and the schema version its rows were written under."""
     run_id: str
     run: str
     created_at: float
@@ -77,6 +79,7 @@ class RunStore:
         return f"{self.root}/{name}" if self.remote else str(self.path / name)
 
     def exists(self, name: str = "") -> bool:
+        """Whether ``name`` (or, with no name, the folder itself) exists in the run folder."""
         if self.remote:
             import pyarrow.fs as pafs
 
@@ -85,6 +88,7 @@ class RunStore:
         return (self.path / name).exists() if name else self.path.exists()
 
     def is_empty(self) -> bool:
+        """True when the folder is missing or holds nothing (a fresh run may start there)."""
         if self.remote:
             import pyarrow.fs as pafs
 
@@ -95,6 +99,7 @@ class RunStore:
         return not self.path.exists() or (self.path.is_dir() and not any(self.path.iterdir()))
 
     def read_text(self, name: str) -> str | None:
+        """The text of ``name`` in the folder; None when it is missing or cannot be read."""
         try:
             if self.remote:
                 with self.fs.open_input_stream(self._p(name)) as fh:
@@ -104,6 +109,7 @@ class RunStore:
             return None
 
     def read_bytes(self, name: str) -> bytes | None:
+        """The bytes of ``name`` in the folder; None when it is missing or cannot be read."""
         try:
             if self.remote:
                 with self.fs.open_input_stream(self._p(name)) as fh:
@@ -146,6 +152,7 @@ class RunStore:
 
     # -- identity --------------------------------------------------------------------------------
     def identity(self) -> RunIdentity | None:
+        """The run.json of this folder, or None when there is none; a malformed one raises RunFolderError."""
         text = self.read_text(RUN_FILE)
         if text is None:
             return None
@@ -209,11 +216,13 @@ class RunStore:
             raise RunFolderError(f"output folder {self.location} cannot be created: {parent} is not writable")
 
     def create_identity(self, run_name: str) -> RunIdentity:
+        """Name the folder for a new run: a fresh random ``run_id`` written to run.json."""
         ident = RunIdentity(run_id=uuid.uuid4().hex[:16], run=run_name, created_at=time.time())
         self.write_text(RUN_FILE, ident.to_json() + "\n")
         return ident
 
     def require_identity(self) -> RunIdentity:
+        """The run.json of an existing run folder; RunFolderError (one line) when the folder is missing or is not a run folder."""
         if not self.exists():
             raise RunFolderError(f"run folder {self.location} does not exist")
         ident = self.identity()
@@ -299,6 +308,7 @@ class RunStore:
         )
 
     def check_unlocked(self) -> None:
+        """Raise RunFolderError when a live driver holds this folder's lock (a stale lock passes); takes nothing."""
         holder = self.lock_holder()
         if holder is not None:
             raise self._in_use(holder)
@@ -350,6 +360,7 @@ class RunStore:
                 raise
 
     def check_remote_unlocked(self) -> None:
+        """Raise RunFolderError when the holder file on the object store names a live driver (best effort between machines)."""
         holder = self._remote_holder()
         if holder is not None:
             raise self._in_use(holder)
@@ -374,6 +385,7 @@ class RunStore:
         raise RunFolderError(f"run folder {self.location}: could not take the driver lock {path}")
 
     def release_lock(self) -> None:
+        """Give the driver lock back (the object store's holder file too, when it is ours); a no-op when not held."""
         fd = self._lock_fd
         if fd is None:
             return
@@ -402,6 +414,7 @@ class RunStore:
 
     # -- tables ------------------------------------------------------------------------------------
     def part_files(self, table: str) -> list[str]:
+        """Paths of the table's part files (``part-*.parquet``), sorted; temp files and other names are not parts."""
         if self.remote:
             import pyarrow.fs as pafs
 
@@ -428,8 +441,10 @@ class RunStore:
         return inspect_parts(self.part_files(table), table, self._open_part if self.remote else None)[1]
 
     def tables(self) -> list[str]:
+        """The run tables' names (schemas.tables), whether or not this folder has parts for them."""
         return list(TABLES)
 
     def read_json(self, name: str) -> Any:
+        """The parsed JSON file ``name``, or None when it is missing; malformed JSON raises ValueError."""
         text = self.read_text(name)
         return None if text is None else json.loads(text)

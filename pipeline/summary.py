@@ -33,6 +33,8 @@ TEST_DOUBLE_LABEL = " (test double)"
 
 @dataclass
 class GroupRow:
+    """One line of the status table: an arm (label x model) and where its planned units stand (done, stopped by a
+    cap, gave up, not started)."""
     #: the arm's label (plan.json's "method")
     method: str
     model: str
@@ -50,6 +52,7 @@ class GroupRow:
 
     @property
     def planned(self) -> int:
+        """Units the plan holds for this arm (the table's "planned" column)."""
         return self.units
 
     @property
@@ -60,6 +63,8 @@ class GroupRow:
 
 @dataclass
 class StatusReport:
+    """What ``recap status`` and the end-of-run summary show: totals, the per-arm rows, and every unreadable part
+    or journal problem found on the way."""
     location: str
     run: str
     run_id: str
@@ -81,6 +86,7 @@ class StatusReport:
 
     @property
     def remaining(self) -> int:
+        """Planned units not yet done (stopped by a cap, gave up, or not started)."""
         return self.total - self.completed
 
     def errors_hint(self) -> str | None:
@@ -91,6 +97,7 @@ class StatusReport:
                 f"run them again with: recap resume {self.location} --retry errors")
 
     def retry_hint(self) -> str | None:
+        """One line on the units that gave up in an infrastructure failure and the command that retries them, or None."""
         if not self.failed:
             return None
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.failed_kinds.items()))
@@ -99,6 +106,7 @@ class StatusReport:
 
 
 def model_label(name: str, test_double: bool) -> str:
+    """The model's name as the tables show it: test doubles marked, so their nominal spend is not read as money."""
     return name + (TEST_DOUBLE_LABEL if test_double else "")
 
 

@@ -35,6 +35,9 @@ def _canonical(obj: Any) -> str:
 
 @dataclass(frozen=True, eq=False)
 class Unit:
+    """One unit of work: one episode to play (instance, method with resolved settings, model with params, seed).
+    ``unit_id`` is the content hash of :func:`unit_hash`; ``method_label``/``model_label`` are the spec's
+    names for the arm, ``method``/``model`` what actually runs."""
     unit_id: str
     instance_id: str
     method_label: str
@@ -52,6 +55,7 @@ class Unit:
 
     @property
     def benchmark(self) -> str:
+        """The benchmark name: the instance id up to its first ``/``."""
         return self.instance_id.split("/", 1)[0]
 
     @property
@@ -61,6 +65,7 @@ class Unit:
 
     @property
     def key(self) -> str:
+        """The unit's human identity (instance, method label, model label, seed); stable across spec edits, unlike ``unit_id``."""
         return f"{self.instance_id} | {self.method_label} | {self.model_label} | seed {self.seed}"
 
     def work(self) -> UnitWork:
@@ -96,6 +101,8 @@ def resolve_ablation(ablation: str | None, method_config: str) -> str | None:
 
 def unit_hash(*, instance_id: str, method: str, method_config: str, model: str, params: Mapping[str, Any],
               seed: int, step_multiplier: float) -> str:
+    """The ``unit_id``: 16 hex digits of a sha256 over what changes what an episode does (see the module
+    docstring); ``HASH_VERSION`` is inside, so a new hashing never collides with an old one."""
     content = {
         "v": HASH_VERSION, "instance": instance_id, "method": method, "config": json.loads(method_config),
         "model": model, "params": dict(params), "seed": seed, "step_multiplier": float(step_multiplier),
@@ -192,13 +199,16 @@ def resolve_methods(spec: SweepSpec, benchmark: str | None = None) -> list[tuple
 
 @dataclass
 class Plan:
+    """A sweep expanded into its units, in the fixed order of :func:`expand`."""
     spec: SweepSpec
     units: list[Unit]
 
     def by_id(self) -> dict[str, Unit]:
+        """The units keyed by ``unit_id``."""
         return {u.unit_id: u for u in self.units}
 
     def to_json(self) -> str:
+        """The plan.json text: the hash version and each unit's :meth:`Unit.summary`."""
         return json.dumps({"hash_version": HASH_VERSION, "units": [u.summary() for u in self.units]}, indent=1)
 
 
@@ -233,12 +243,15 @@ def expand(spec: SweepSpec) -> Plan:
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PlanDiff:
+    """How a new plan compares with the stored one, as lists of unit keys: ``changed`` keys hash differently now
+    (their settings changed), ``removed`` keys are in the old plan only."""
     new: list[str]
     unchanged: list[str]
     changed: list[str]
     removed: list[str]
 
     def describe(self) -> str:
+        """The diff in one line for the plan printout, e.g. "3 new, 10 unchanged, 0 changed"."""
         return (f"{len(self.new)} new, {len(self.unchanged)} unchanged, {len(self.changed)} changed"
                 + (f", {len(self.removed)} no longer in the spec" if self.removed else ""))
 

@@ -108,6 +108,7 @@ class RayWorkerPool:
         return Slot(wid, self.worker_cls.remote(wid, self.run_id, self.sink, self.factory))
 
     def start(self, n: int) -> dict[str, str]:
+        """Start ``n`` actors and wait (up to 300 s) until each reports its node; PipelineError when they cannot start."""
         import ray
 
         from pipeline.errors import PipelineError
@@ -134,6 +135,8 @@ class RayWorkerPool:
         return len(self._inflight)
 
     def wait(self, timeout: float) -> list[Any]:
+        """Every attempt that is ready once the first one is (at most ``timeout`` seconds), so a burst is
+        collected in one round."""
         import ray
 
         if not self._inflight:
@@ -158,6 +161,9 @@ class RayWorkerPool:
         return not (dead and mine and dead != mine)
 
     def collect(self, key: Any) -> Finished:
+        """The attempt behind ``key``: an actor error is ``worker_lost`` only when that actor is dead (it is
+        killed and dropped from the pool), else ``elsewhere``; a task that raised is ``task_raised`` and its
+        worker stays."""
         import ray
         from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError, RayTaskError, WorkerCrashedError
 
@@ -202,6 +208,7 @@ class RayWorkerPool:
         return slot
 
     def shutdown(self) -> None:
+        """Kill every actor (errors ignored: an actor may already be gone)."""
         import ray
 
         for slot in self.slots:
@@ -233,6 +240,7 @@ class InProcessWorkerPool:
         return Slot(wid, self.make_runner(wid))
 
     def start(self, n: int) -> dict[str, str]:
+        """Start a thread pool of ``n`` runners; every worker reports node "local"."""
         self._executor = cf.ThreadPoolExecutor(max_workers=max(1, n), thread_name_prefix="episode")
         self.slots = [self._new_slot() for _ in range(n)]
         self.idle = list(self.slots)
@@ -258,6 +266,8 @@ class InProcessWorkerPool:
         return [f for f in self._inflight if f.done()] if done else []
 
     def collect(self, key: Any) -> Finished:
+        """The attempt behind ``key``: a runner that raised is ``task_raised``; a thread never dies, so the
+        worker is always idle again."""
         slot, pending, started = self._inflight.pop(key)
         fin = Finished(slot, pending, started, key=key)
         exc = key.exception()
@@ -282,6 +292,7 @@ class InProcessWorkerPool:
         return slot
 
     def shutdown(self) -> None:
+        """Stop the threads without waiting: queued attempts are cancelled, a running one finishes unseen."""
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
         self.idle = []

@@ -27,6 +27,8 @@ FORMATS = ("md", "html", "tex", "csv")
 
 @dataclass(frozen=True)
 class ReportOptions:
+    """What ``recap report`` asks for: output formats, the viewer's episodes, the title, and whether only the
+    paper section is built."""
     formats: tuple[str, ...] = FORMATS
     #: episodes to show in the viewer; None = a sample of ``viewer_max``
     episodes: tuple[str, ...] | None = None
@@ -37,6 +39,8 @@ class ReportOptions:
 
 
 def parse_formats(text: str) -> tuple[str, ...]:
+    """The ``--format`` list (comma-separated, any case, duplicates dropped) as known formats in the order given;
+    ReportError for an unknown or empty list."""
     wanted = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
     bad = [f for f in wanted if f not in FORMATS]
     if bad or not wanted:
@@ -45,6 +49,8 @@ def parse_formats(text: str) -> tuple[str, ...]:
 
 
 def build_report(run_dirs: Sequence[str | Path], options: ReportOptions = ReportOptions()) -> Report:
+    """Open the runs read-only and run every section's SQL (and the episode viewer when HTML is wanted); the
+    connection is closed before returning, so a Report holds only values."""
     con, skipped = open_runs_checked(run_dirs)
     try:
         materialize(con, ("attempts", "episode_modes"))
@@ -70,6 +76,8 @@ def _write(path: Path, text: str) -> None:
 
 
 def write_report(report: Report, out_dir: str | Path, formats: Sequence[str] = FORMATS) -> list[Path]:
+    """Write the formats asked for under ``out_dir`` (report.md with plots/*.svg, report.html, tex/*.tex,
+    csv/*.csv); returns the paths written."""
     out = Path(out_dir)
     written: list[Path] = []
     if "md" in formats:

@@ -107,6 +107,8 @@ def _report_parser(out: TextIO | None = None) -> _Parser:
 
 
 def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+    """``recap report``: build and write the report (to RUN_DIR/report unless ``--out``); exit 0, 1 for a problem
+    with the runs or options, 2 for bad usage."""
     out, err = stdout or sys.stdout, stderr or sys.stderr
     try:
         args = _report_parser(out).parse_intermixed_args(list(argv))
@@ -184,6 +186,8 @@ def _sql_parser(out: TextIO | None = None) -> _Parser:
 
 
 def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+    """``recap sql``: run one query (text, ``@name`` of a stored query, or ``--file``) over the runs and print a
+    table, CSV or JSON; every error is one line and exit status 2."""
     out, err = stdout or sys.stdout, stderr or sys.stderr
     try:
         args = _sql_parser(out).parse_intermixed_args(list(argv))

@@ -18,6 +18,8 @@ KINDS = ("text", "int", "float", "ref", "pct", "usd", "tokens", "p", "list", "ra
 
 @dataclass(frozen=True)
 class Column:
+    """One column of a displayed table: the row key it shows, its header, and its value ``kind`` (one of KINDS),
+    which decides how every renderer formats it."""
     key: str
     header: str
     kind: str = "text"
@@ -41,6 +43,7 @@ class Table:
 
 @dataclass
 class Plot:
+    """One figure of a section, as finished SVG text; ``source`` names the SQL file its numbers come from."""
     name: str
     title: str
     svg: str
@@ -50,6 +53,7 @@ class Plot:
 
 @dataclass
 class Section:
+    """One part of the report (overview, success, costs, ...): an introduction, then its tables and plots."""
     key: str
     title: str
     intro: str = ""
@@ -59,6 +63,8 @@ class Section:
 
 @dataclass
 class Report:
+    """A built report: every section with its numbers already computed, ready for any renderer; ``skipped`` lists
+    part files that could not be read."""
     title: str
     run_dirs: list[str]
     skipped: list[SkippedPart]

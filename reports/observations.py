@@ -6,6 +6,7 @@ from __future__ import annotations
 
 
 def first_line(text: str | None, width: int = 120) -> str:
+    """The first line of ``text`` (leading blank lines skipped), cut to ``width`` characters (with "..."); "" for no text."""
     line = (text or "").strip().splitlines()[0] if (text or "").strip() else ""
     return line if len(line) <= width else line[: width - 1] + "..."
 

@@ -204,6 +204,8 @@ def _natural(key: str) -> tuple[str, int]:
 
 
 def main_reference(env_split: str, method: str) -> float | None:
+    """The paper's main-table success rate (%) for ``method`` on ``env_split`` ("robotouille/synchronous",
+    "alfworld", ...); None when the paper has none."""
     bench, _, split = env_split.partition("/")
     for key in ((bench, split), (bench, None)):
         if key in MAIN and method in MAIN[key]:

@@ -50,10 +50,12 @@ class Footnotes:
         self.reasons: dict[str, int] = {}
 
     def mark(self, reason: str) -> str:
+        """The footnote mark for ``reason`` ("[1]", "[2]", ...): one number per distinct reason, in first-use order."""
         n = self.reasons.setdefault(reason, len(self.reasons) + 1)
         return f"[{n}]"
 
     def text(self) -> str:
+        """The table note listing every reason under its mark; "" when none was used."""
         return " ".join(f"[{n}] {r}." for r, n in self.reasons.items())
 
 
@@ -81,6 +83,7 @@ def arm_protocol(cell: dict[str, Any]) -> paper.ArmProtocol:
 
 
 def rate_ci(cell: dict[str, Any]) -> tuple[int, int, float, float]:
+    """A cell's ``rate_ci`` value: (successes, episodes, CI low, CI high) as the renderers expect it."""
     return (cell["successes"], cell["episodes"], cell["ci_low"], cell["ci_high"])
 
 
@@ -167,6 +170,8 @@ def _p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]]) -> float
 
 
 def main_table(cells: _Cells) -> Table | str:
+    """Paper Table 1 (pass@1 per benchmark and method) from the arms without an ablation; or, when no arm fits,
+    the one line that says why it is left out."""
     pool = [c for c in cells.select(level="split") if c["ablation"] == "original" and (
         c["benchmark"] == "alfworld" or (c["benchmark"], c["split"]) in (("robotouille", "synchronous"), ("robotouille", "asynchronous")))]
     if not pool:
@@ -197,6 +202,8 @@ def main_table(cells: _Cells) -> Table | str:
 
 
 def per_task_tables(cells: _Cells, split: str) -> list[Table] | str:
+    """Paper Table 5 or 6 (per-task pass@1 on Robotouille ``split``), one table per model; or the one line that
+    says why they are left out."""
     pool_task = [c for c in cells.select(level="task", benchmark="robotouille", split=split) if c["ablation"] == "original"]
     pool_split = [c for c in cells.select(level="split", benchmark="robotouille", split=split) if c["ablation"] == "original"]
     if not pool_task:
@@ -242,6 +249,8 @@ def per_task_tables(cells: _Cells, split: str) -> list[Table] | str:
 
 
 def cross_model_table(cells: _Cells) -> Table | str:
+    """Paper Table 2 (ReAct and ReCAP across models on synchronous tasks 2, 4, 6, 64-message window); or the one
+    line that says why it is left out."""
     pool = [c for c in cells.select(scope="sync_2_4_6", level="split") if c["method"] in ("react", "recap")
             and c["ablation"] == "original" and list(c["windows"]) == [64]]
     if not pool:
@@ -283,6 +292,8 @@ def cross_model_table(cells: _Cells) -> Table | str:
 
 
 def ablation_table(cells: _Cells) -> Table | str:
+    """Paper Table 3 (ReCAP ablations on synchronous task 6, 128-message window), each variant against the
+    original; or the one line that says why it is left out."""
     pool = [c for c in cells.select(level="task", benchmark="robotouille", split="synchronous")
             if c["method"] == "recap" and paper.task_index(c["task"]) == 6 and list(c["windows"]) == [128]]
     if not any(c["ablation"] != "original" for c in pool):
@@ -326,6 +337,8 @@ def _cost_p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]]) -> 
 
 
 def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
+    """The ALFWorld cost tables (totals per method, and the ReCAP/ReAct ratio on the games both ran); or the one
+    line that says why they are left out."""
     pool = [c for c in cells.select(level="split", benchmark="alfworld") if c["ablation"] == "original"]
     if not pool:
         return "ALFWorld costs: no arm without an ablation ran ALFWorld."
@@ -387,6 +400,8 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
 
 
 def task6_cost_table(cells: _Cells) -> Table | str:
+    """The task-6 cost table (calls, tokens and dollars per episode on synchronous task 6); or the one line that
+    says why it is left out."""
     pool = [c for c in cells.select(level="task", benchmark="robotouille", split="synchronous")
             if paper.task_index(c["task"]) == 6 and c["ablation"] == "original"]
     if not pool:
@@ -424,6 +439,8 @@ def task6_cost_table(cells: _Cells) -> Table | str:
 
 
 def tree_table(q: Query) -> Table | str:
+    """The task-tree statistics (depth and branching of ReCAP's trees on synchronous task 6) beside the paper's;
+    or the one line that says why it is left out."""
     trees = [t for t in q("paper_trees").dicts() if t["method"] == "recap" and t["ablation"] == "original"]
     if not trees:
         return "Tree statistics: no ReCAP arm without an ablation has task trees on Robotouille synchronous task 6."

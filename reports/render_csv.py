@@ -21,6 +21,7 @@ def _plain(v: Any) -> Any:
 
 
 def result_csv(result: Result) -> str:
+    """The result as CSV text: a header row of its columns, then every row (lists and dicts as JSON)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(result.columns)

@@ -168,6 +168,8 @@ def _cell(kind: str, value: object, viewer: set[str]) -> str:
 
 
 def table_html(t: Table, viewer: set[str]) -> str:
+    """One table as HTML: its title and note, then the table (tagged with its SQL source); episode ids in
+    ``viewer`` link to the page's own viewer."""
     head = "".join(f"<th>{escape(c.header)}</th>" for c in t.columns)
     body = []
     for row in t.rows:
@@ -186,6 +188,7 @@ def table_html(t: Table, viewer: set[str]) -> str:
 
 
 def render_html(report: Report) -> str:
+    """The whole report as one self-contained HTML page (no external files or network)."""
     viewer = set(report.viewer_episodes)
     nav = "".join(f'<li><a href="#s-{s.key}">{escape(s.title)}</a></li>' for s in report.sections)
     if report.viewer_html:

@@ -10,6 +10,7 @@ def _escape(text: str) -> str:
 
 
 def table_md(t: Table) -> str:
+    """One table as a Markdown heading, its note in italics, and a pipe table (numbers right-aligned); "(no rows)" when empty."""
     lines = [f"### {t.title}", ""]
     if t.note:
         lines += [f"_{_escape(t.note)}_", ""]

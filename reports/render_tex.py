@@ -12,10 +12,13 @@ _SPECIAL = {
 
 
 def tex_escape(text: str) -> str:
+    """``text`` with the characters LaTeX treats as special escaped, so titles and cells print as written."""
     return "".join(_SPECIAL.get(ch, ch) for ch in text)
 
 
 def table_tex(t: Table) -> str:
+    """One table as a booktabs ``table`` environment (labelled ``tab:<name>``, shrunk to the line width when
+    wider), its note below."""
     align = "".join("l" if c.kind in ("text", "list") else "r" for c in t.columns)
     lines = [
         "\\begin{table}[ht]",

@@ -128,6 +128,8 @@ def _series_label(model: str, arm: str, models: list[str]) -> str:
 
 
 def overview(q: Query) -> Section:
+    """The overview section: what the report covers, the runs, each arm's coverage (done, capped, gave up, not
+    started), skipped part files and the events summary."""
     sec = Section("overview", "Overview")
     ov = q("overview").dicts()[0]
     labels = {
@@ -218,6 +220,8 @@ PAPER_POINTER = "The paper's values stand in the Paper section, beside arms that
 
 
 def success(q: Query) -> Section:
+    """The success section: pass@1 by method and split (table and plot), per task, per model and per ablation,
+    and paired tests between methods."""
     sec = Section(
         "success",
         "Success rates",
@@ -341,6 +345,8 @@ def _slug(text: str) -> str:
 
 
 def costs(q: Query) -> Section:
+    """The costs section: calls, tokens and dollars per episode and per success, spend per model, and the spend
+    of attempts that did not count."""
     c = paper.COSTS["robotouille_sync_task6"]
     sec = Section(
         "costs",
@@ -412,6 +418,8 @@ def costs(q: Query) -> Section:
 
 
 def context(q: Query) -> Section:
+    """The context-bound section: mean prompt tokens by call index (plot) and how fast prompts still grow once
+    the window is full."""
     sec = Section(
         "context",
         "The context bound",
@@ -451,6 +459,8 @@ def context(q: Query) -> Section:
 
 
 def trees(q: Query) -> Section:
+    """The task-tree section: depth, branching and leaf failures of the trees, beside the paper's figures, with
+    their distributions plotted."""
     t = paper.TREE
     sec = Section(
         "trees",
@@ -508,6 +518,8 @@ MODE_NOTE = (
 
 
 def failures(q: Query) -> Section:
+    """The failure-mode section: one mode per episode (first match wins, see MODE_NOTE) with cost and example
+    episodes, overall and by method."""
     sec = Section("failures", "Failure modes", MODE_NOTE)
     rows = q("failure_modes").dicts()
     for r in rows:

@@ -35,6 +35,7 @@ FONT = "font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif"
 
 
 def color(i: int) -> str:
+    """The palette colour of series ``i``; wraps around after the palette's last colour."""
     return PALETTE[i % len(PALETTE)]
 
 

@@ -42,6 +42,8 @@ WORDS = np.array(
 
 @dataclass(frozen=True)
 class SyntheticSpec:
+    """The shape of a synthetic run: about ``messages`` message rows, ``mean_calls`` LLM calls per episode, a
+    sliding window of ``window`` messages, and the random ``seed``."""
     messages: int = 1_000_000
     mean_calls: int = 120
     window: int = 64
@@ -309,6 +311,7 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m reports.synthetic OUT_DIR``: write a synthetic run folder and print its rows per table."""
     p = argparse.ArgumentParser(prog="python -m reports.synthetic", description="Write a synthetic run folder.")
     p.add_argument("out_dir")
     p.add_argument("--messages", type=int, default=SyntheticSpec.messages)

@@ -63,6 +63,8 @@ def ranges(seqs: list[int]) -> str:
 
 
 def anchor(episode_id: str) -> str:
+    """The HTML id of an episode in the viewer: ``ep-`` then the id with every character that is not safe in an
+    id spelled as ``_<hex>_`` (ids stay distinct)."""
     return "ep-" + "".join(c if c.isalnum() or c in "-_" else f"_{ord(c):x}_" for c in episode_id)
 
 

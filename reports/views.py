@@ -99,6 +99,7 @@ class SkippedPart:
     error: str
 
     def line(self) -> str:
+        """The one-line warning the report and ``recap sql`` print for a skipped part file."""
         return f"skipped unreadable part file {self.path} ({self.table}): {self.error}"
 
 
@@ -257,6 +258,7 @@ def load_sql(name: str) -> str:
 
 
 def sql_names() -> list[str]:
+    """Names of the stored queries (the ``reports/sql/*.sql`` files), sorted: what ``@name`` and the report can run."""
     return sorted(p.stem for p in SQL_DIR.glob("*.sql"))
 
 
@@ -392,9 +394,11 @@ class Result:
     rows: list[tuple[Any, ...]]
 
     def dicts(self) -> list[dict[str, Any]]:
+        """The rows as dicts keyed by column name."""
         return [dict(zip(self.columns, r)) for r in self.rows]
 
     def column(self, name: str) -> list[Any]:
+        """The values of column ``name``, in row order; ValueError for an unknown column."""
         i = self.columns.index(name)
         return [r[i] for r in self.rows]
 

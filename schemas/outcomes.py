@@ -60,11 +60,13 @@ class BudgetRefusal:
                 f"{_usd(self.worst_pico or 0)} > cap {_usd(self.cap_pico or 0)}")
 
     def to_dict(self) -> dict[str, Any]:
+        """The refusal as plain JSON types, as the ledger answers a gateway's reservation (:meth:`from_dict` reads it back)."""
         return {"scope": self.scope, "model": self.model, "cap_pico": self.cap_pico,
                 "committed_pico": self.committed_pico, "worst_pico": self.worst_pico}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> BudgetRefusal:
+        """The refusal from :meth:`to_dict`'s form; a missing committed amount reads as 0, an unknown scope raises ValueError."""
         return cls(scope=d["scope"], model=d["model"], cap_pico=d.get("cap_pico"),
                    committed_pico=int(d.get("committed_pico") or 0), worst_pico=d.get("worst_pico"))
 
@@ -155,4 +157,5 @@ class UnitWork:
 
     @property
     def benchmark(self) -> str:
+        """The benchmark name: the instance id up to its first ``/``."""
         return self.instance_id.split("/", 1)[0]

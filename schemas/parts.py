@@ -56,6 +56,8 @@ class PartWriter:
         self.run_dir = Path(self.run_dir)
 
     def write_rows(self, table: str, rows: Sequence[dict[str, Any]]) -> Path | None:
+        """Write ``rows`` as one new part file of ``table`` (temp name, fsync, rename); returns its path, or None
+        when there are no rows (no empty parts)."""
         if not rows:
             return None
         data = pa.Table.from_pylist(list(rows), schema=arrow_schema(table))
@@ -80,11 +82,14 @@ class PartWriter:
 
 @dataclass(frozen=True)
 class BadPart:
+    """A part file a reader skipped, and why (one line)."""
     path: Path
     error: str
 
 
 def part_files(run_dir: Path, table: str) -> list[Path]:
+    """The part files of ``table`` in a local run folder (``part-*.parquet``, sorted; temp files are not parts);
+    [] when the table has no folder."""
     folder = Path(run_dir) / table
     if not folder.is_dir():
         return []
@@ -212,4 +217,5 @@ def read_table(run_dir: Path, table: str) -> tuple[pa.Table, list[BadPart]]:
 
 
 def known_tables() -> list[str]:
+    """The names of the run tables (schemas.tables), in their declared order."""
     return list(TABLES)

@@ -294,10 +294,13 @@ class Sink:
         return self._buffered
 
     def add_records(self, records: Iterable[Any], flush: bool = False) -> int:
+        """Add typed records (grouped by table and stamped with the run id) like :meth:`add`; returns rows buffered."""
         return self.add(records_by_table(records, self.run_id), flush=flush)
 
     # -- output ---------------------------------------------------------------------------------
     def maybe_flush(self) -> int:
+        """Flush when a buffer is due (``flush_rows`` rows, or rows older than ``flush_s`` seconds); returns the
+        rows written, 0 when nothing was due."""
         if self._buffered >= self.flush_rows or (self._buffered and time.monotonic() - self._last_flush >= self.flush_s):
             return self.flush()
         return 0
@@ -337,12 +340,16 @@ class Sink:
         return n
 
     def ping(self) -> str:
+        """The sink's name: the driver's liveness check (an answer after a restart counts)."""
         return self.name
 
     def pid(self) -> int:
+        """The actor's process id (tests kill it to check durability)."""
         return os.getpid()
 
     def stats(self) -> dict[str, Any]:
+        """Counters for the end-of-run summary and tests: rows and files written, rows buffered, write time, rows
+        per table, rows recovered from the log, the current segment."""
         return {
             "rows_written": self.rows_written,
             "files_written": self.files_written,

@@ -78,6 +78,8 @@ class SearchIndex:
         self._parts: dict[tuple[str, int, int], pa.Table] = {}
 
     def table(self, files: Sequence[Path]) -> pa.Table:
+        """The search column (run_id, episode_id, seq, lower-cased text) over ``files``: parts already read are
+        reused, new ones read, and parts no longer listed forgotten."""
         keep: dict[tuple[str, int, int], pa.Table] = {}
         for f in files:
             try:
@@ -139,19 +141,24 @@ class Snapshot:
             return name
 
     def query(self, sql: str, params: dict[str, Any] | None = None) -> Result:
+        """Run a read-only query on this snapshot (serialised: the connection is not shared between threads)."""
         with self.lock:
             return run_query(self.con, sql, params)
 
     def named(self, name: str, params: dict[str, Any] | None = None) -> Result:
+        """Run a stored query (``reports/sql/<name>.sql``) on this snapshot, serialised like :meth:`query`."""
         with self.lock:
             return named_query(self.con, name, params)
 
     def close(self) -> None:
+        """Close the connection once no query holds the lock (the snapshot was replaced)."""
         with self.lock:
             self.con.close()
 
 
 def build_snapshot(run_dirs: Sequence[Path], index: SearchIndex) -> Snapshot:
+    """A fresh snapshot of ``run_dirs``: the views, the in-memory episode list and search column, and the values
+    each filter can take. Reads only."""
     dirs, files, _ = scan_runs(run_dirs)
     con, skipped = open_runs_checked(dirs)
     try:
@@ -210,6 +217,7 @@ class Catalog:
 
     @property
     def snap(self) -> Snapshot:
+        """The snapshot to query now; the refresher swaps it whole, so a caller keeps a consistent one."""
         return self._snap
 
     def refresh(self) -> bool:
@@ -231,6 +239,7 @@ class Catalog:
                 log.warning("recap view: refresh failed, keeping the last snapshot: %s", exc)
 
     def close(self) -> None:
+        """Stop the refresher (waiting up to 5 s) and close the current snapshot."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
@@ -316,6 +325,7 @@ _COVERAGE_COUNTS = ("planned", "finished", "successes", "capped", "gave_up", "in
 
 
 def run_spec(snap: Snapshot, run_id: str) -> str:
+    """The sweep file the run was started with (its latest session), secrets redacted; a 404 when none was recorded."""
     r = snap.query("SELECT arg_max(spec_yaml, started_at) AS s FROM run WHERE run_id = $r", {"r": run_id}).rows
     if not r or r[0][0] is None:
         raise BadRequest(f"no sweep file recorded for run {run_id!r}", 404)
@@ -332,6 +342,8 @@ def _run_name(run_dir: Path) -> str:
 
 @dataclass(frozen=True)
 class ListQuery:
+    """The episode list's checked URL parameters: column filters, a message search ``q``, sort column and
+    direction, page (1-based) and page size, and whether only the counted (latest) row of each unit is shown."""
     filters: dict[str, str]
     q: str = ""
     sort: str = "episode_id"
@@ -385,6 +397,7 @@ def parse_list_query(params: dict[str, list[str]], snap: Snapshot) -> ListQuery:
 
 @dataclass
 class EpisodePage:
+    """One page of the episode list, the total matching rows across pages, and how long the query took (ms)."""
     rows: list[dict[str, Any]]
     total: int
     query: ListQuery
@@ -397,6 +410,8 @@ _LIST_COLUMNS = ("run_id", "episode_id", "unit_id", "attempt", "is_latest", "mod
 
 
 def episode_list(snap: Snapshot, lq: ListQuery) -> EpisodePage:
+    """The page of episode rows ``lq`` asks for (filters, search hits, sort, page); ties are broken by episode
+    and run id so pages never overlap."""
     t0 = time.perf_counter()
     where, params = [], {}
     for i, (param, value) in enumerate(lq.filters.items()):
@@ -433,6 +448,8 @@ def _count(snap: Snapshot, where: list[str], hits: str, params: dict[str, Any]) 
 
 @dataclass
 class Episode:
+    """One episode as the viewer shows it: its row and the rows of its tree nodes, steps, calls and messages, and
+    the query time (ms)."""
     meta: dict[str, Any]
     nodes: list[dict[str, Any]]
     steps: list[dict[str, Any]]
@@ -498,6 +515,8 @@ def call_window(snap: Snapshot, run_id: str, episode_id: str, call_index: int) -
 
 @dataclass
 class Comparison:
+    """Two runs or two arms (``kind``) compared on the units both ran: successes, discordant pairs with the exact
+    McNemar p, cost difference (a minus b) with a permutation p, overall and per task."""
     kind: str  # "run" or "arm"
     a: str
     b: str
@@ -538,6 +557,8 @@ def _side_sql(kind: str, columns: set[str]) -> str:
 
 
 def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
+    """Compare ``a`` with ``b`` (two run ids or two arm labels) on paired units (see :func:`_side_sql`); a 400
+    for an unknown kind, an unknown side or the same side twice."""
     t0 = time.perf_counter()
     if kind not in ("run", "arm"):
         raise BadRequest("compare what? kind must be run or arm")
@@ -584,5 +605,6 @@ def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
 
 
 def compare_choices(snap: Snapshot) -> dict[str, list[str]]:
+    """The run ids and arm labels a comparison can choose from, sorted."""
     return {"run": [str(v) for v in snap.query("SELECT DISTINCT run_id FROM _episode_list ORDER BY 1").column("run_id")],
             "arm": [str(v) for v in snap.query("SELECT DISTINCT arm FROM _episode_list ORDER BY 1").column("arm")]}

@@ -43,15 +43,20 @@ def _num(v: Any) -> str:
 
 
 def url(path: str, **params: Any) -> str:
+    """``path`` with ``params`` as its query string; None and "" are left out and booleans spelled true/false, so
+    a page's state stays a short, bookmarkable URL."""
     clean = {k: ("true" if v is True else "false" if v is False else v) for k, v in params.items() if v not in (None, "")}
     return path + ("?" + urlencode(clean) if clean else "")
 
 
 def episode_url(run_id: str, episode_id: str, **extra: Any) -> str:
+    """The URL of one episode's page (``extra``: e.g. ``hit``, the message to open at)."""
     return url("/episode", run=run_id, id=episode_id, **extra)
 
 
 def layout(title: str, body: str, *, page: str, snap: D.Snapshot | None = None) -> str:
+    """A whole page: head, the navigation (``page`` marks the current entry) and ``body``; with ``snap``, a
+    footer saying how fresh the data is and how many part files were skipped."""
     nav = "".join(f'<a href="{h}"{" class=current" if h == page else ""}>{t}</a>' for h, t in NAV)
     foot = ""
     if snap is not None:
@@ -74,6 +79,7 @@ def _clock(ts: float) -> str:
 
 
 def error_page(status: int, message: str) -> str:
+    """The page for a refused request: the status and its one-line message."""
     return layout(f"Error {status}", f'<h1>Error {status}</h1><p class="error" id="error">{_e(message)}</p>', page="")
 
 
@@ -81,6 +87,8 @@ def error_page(status: int, message: str) -> str:
 
 
 def runs_page(snap: D.Snapshot, runs: list[dict[str, Any]], reports: set[str]) -> str:
+    """The runs page: one row per run (success over finished units, caps, spend) with links to its episodes,
+    sweep file and report (when ``reports`` holds its folder)."""
     rows = []
     for r in runs:
         rate = f"{100 * r['successes'] / r['finished']:.1f}%" if r.get("finished") else "–"
@@ -108,6 +116,7 @@ def runs_page(snap: D.Snapshot, runs: list[dict[str, Any]], reports: set[str]) -
 
 
 def spec_page(snap: D.Snapshot, run_id: str, text: str) -> str:
+    """The page showing a run's sweep file (already redacted by :func:`reports.webview.data.run_spec`)."""
     body = (f"<h1>Sweep file of <code>{_e(run_id)}</code></h1><p class=\"note\">As recorded at the latest start; values "
             f"under secret-like keys are replaced by &lt;redacted&gt;.</p><pre class=\"spec\">{_e(text)}</pre>")
     return layout("Spec", body, page="/", snap=snap)
@@ -123,6 +132,7 @@ _HEADERS = (("episode_id", "episode"), ("run_id", "run"), ("model_label", "model
 
 
 def episodes_page(snap: D.Snapshot, page: D.EpisodePage) -> str:
+    """The episode list: filters, message search, sortable headers and page links, all carried in the URL."""
     lq = page.query
     state = {**lq.filters, "q": lq.q, "per": lq.per if lq.per != 50 else None, "latest": "1" if lq.latest else None}
     sort_state = {"sort": lq.sort if lq.sort != "episode_id" else None, "dir": "desc" if lq.desc else None}
@@ -192,6 +202,8 @@ def episodes_page(snap: D.Snapshot, page: D.EpisodePage) -> str:
 
 
 def episode_page(snap: D.Snapshot, ep: D.Episode, hit: int | None = None) -> str:
+    """One episode: its metadata, context tree, actions with observation changes, LLM calls and messages (opened
+    at message ``hit`` when given)."""
     m = ep.meta
     rid, eid = m["run_id"], m["episode_id"]
     meta = [("run", rid), ("model", m.get("model_label")), ("method", m.get("arm")), ("label", m.get("label")),
@@ -222,6 +234,8 @@ def episode_page(snap: D.Snapshot, ep: D.Episode, hit: int | None = None) -> str
 
 
 def tree_html(nodes: list[dict[str, Any]], steps: list[dict[str, Any]]) -> str:
+    """The context tree as nested ``<details>``: each node's versions (think and subtasks, and the call that made
+    them) and, for a leaf, the action it ran."""
     ids = {n["node_id"] for n in nodes}
     children: dict[int | None, list[dict[str, Any]]] = defaultdict(list)
     for n in nodes:
@@ -270,6 +284,7 @@ def observation_diff(prev: str | None, cur: str) -> str:
 
 
 def steps_html(steps: list[dict[str, Any]]) -> str:
+    """The step table: each action, whether it was valid, and what its observation changed (a full diff on request)."""
     if not steps:
         return "<p>No steps.</p>"
     rows, prev = [], None
@@ -286,6 +301,7 @@ def steps_html(steps: list[dict[str, Any]]) -> str:
 
 
 def calls_html(run_id: str, episode_id: str, calls: list[dict[str, Any]]) -> str:
+    """The call table: purpose, status, tokens, cost and the message seqs of each call's window, linked to the window page."""
     if not calls:
         return "<p>No LLM calls.</p>"
     rows = []
@@ -313,12 +329,15 @@ def _message_li(m: dict[str, Any], *, hit: bool = False) -> str:
 
 
 def messages_html(messages: list[dict[str, Any]], hit: int | None = None) -> str:
+    """The messages as a list, the one with seq ``hit`` marked (the search hit the page was opened at)."""
     if not messages:
         return "<p>No messages.</p>"
     return '<ol class="messages">' + "".join(_message_li(m, hit=m["seq"] == hit) for m in messages) + "</ol>"
 
 
 def window_fragment(run_id: str, episode_id: str, call: dict[str, Any], msgs: list[dict[str, Any]]) -> str:
+    """A call's window as an HTML fragment: a summary line, then the messages it was sent in order (seqs missing
+    from the messages table shown as such). The episode page loads it in place."""
     seqs = list(call["window_seqs"])
     head = (f'<p class="window-head">Window of call {call["call_index"]} ({_e(call["purpose"])}): {len(seqs)} messages '
             f'({_e(ranges(seqs))})' + (f'; reply stored as message {call["response_seq"]}' if call["response_seq"] is not None else "")
@@ -336,6 +355,7 @@ def window_fragment(run_id: str, episode_id: str, call: dict[str, Any], msgs: li
 
 
 def window_page(snap: D.Snapshot, run_id: str, episode_id: str, call: dict[str, Any], msgs: list[dict[str, Any]]) -> str:
+    """The stand-alone page of a call's window (the fragment with a link back to its episode)."""
     body = (f'<p><a href="{_e(episode_url(run_id, episode_id))}">← episode {_e(episode_id)}</a></p>'
             + window_fragment(run_id, episode_id, call, msgs))
     return layout(f"Call {call['call_index']} of {episode_id}", body, page="/window", snap=snap)
@@ -345,6 +365,8 @@ def window_page(snap: D.Snapshot, run_id: str, episode_id: str, call: dict[str, 
 
 
 def compare_page(snap: D.Snapshot, choices: dict[str, list[str]], cmp: D.Comparison | None, kind: str, a: str, b: str) -> str:
+    """The compare page: the two choice forms and, once a comparison ``cmp`` is made, its totals, per-task table
+    and discordant pairs (at most MAX_DISCORDANT)."""
     forms = []
     for k, title in (("run", "two runs"), ("arm", "two arms (methods)")):
         def sel(name: str, chosen: str, k: str = k) -> str:

@@ -39,6 +39,8 @@ CSP = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; 
 
 
 class ViewServer(ThreadingHTTPServer):
+    """The viewer's HTTP server: bound to 127.0.0.1 (``port`` 0 = any free port), one thread per request, all
+    serving one :class:`reports.webview.data.Catalog`."""
     daemon_threads = True
 
     def __init__(self, catalog: D.Catalog, port: int = 0) -> None:
@@ -47,15 +49,18 @@ class ViewServer(ThreadingHTTPServer):
 
     @property
     def url(self) -> str:
+        """The viewer's base URL (with the port actually bound)."""
         return f"http://{HOST}:{self.server_address[1]}/"
 
 
 class Handler(BaseHTTPRequestHandler):
+    """One request: the host check, routing to a fixed route, and one-line errors (see the module docstring's safety rules)."""
     server: ViewServer
     server_version = "recap-view"
     sys_version = ""
 
     def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - quiet: one line per error only
+        """Silenced: the standard per-request access log would flood the terminal; errors are printed by :meth:`do_GET`."""
         return
 
     # -- plumbing -------------------------------------------------------------------------------------
@@ -80,9 +85,12 @@ class Handler(BaseHTTPRequestHandler):
         self._html(pages.error_page(status, message), status)
 
     def do_HEAD(self) -> None:  # noqa: N802
+        """HEAD is GET without the body (``_send`` leaves it out)."""
         self.do_GET()
 
     def do_GET(self) -> None:  # noqa: N802
+        """Serve a GET: refuse a foreign ``Host``, route by path, and turn every error into a status and one line
+        (400/404/409 for refused requests, 500 otherwise)."""
         try:
             if not self._host_ok():
                 self._error(400, "this viewer answers only on its loopback address")
@@ -120,6 +128,7 @@ class Handler(BaseHTTPRequestHandler):
 
     # -- routes ---------------------------------------------------------------------------------------
     def runs(self, params: dict[str, list[str]]) -> None:
+        """The runs page; a run links its report only when ``report/report.html`` exists in its folder."""
         _only(params)
         snap = self.server.catalog.snap
         rows = D.runs(snap)
@@ -127,12 +136,15 @@ class Handler(BaseHTTPRequestHandler):
         self._html(pages.runs_page(snap, rows, reports))
 
     def spec(self, params: dict[str, list[str]]) -> None:
+        """A run's sweep file (``run=``), secrets redacted."""
         _only(params, "run")
         snap = self.server.catalog.snap
         run_id = _one(params, "run")
         self._html(pages.spec_page(snap, run_id, D.run_spec(snap, run_id)))
 
     def report(self, params: dict[str, list[str]]) -> None:
+        """A run's own ``report/report.html`` (``run=``), served under a policy that lets its inline script and
+        style run; 404 when there is none."""
         _only(params, "run")
         snap = self.server.catalog.snap
         run_id = _one(params, "run")
@@ -156,11 +168,13 @@ class Handler(BaseHTTPRequestHandler):
             self.wfile.write(body)
 
     def episodes(self, params: dict[str, list[str]]) -> None:
+        """The episode list (filters, search, sort and page from the URL)."""
         snap = self.server.catalog.snap
         lq = D.parse_list_query(params, snap)
         self._html(pages.episodes_page(snap, D.episode_list(snap, lq)))
 
     def episode(self, params: dict[str, list[str]]) -> None:
+        """One episode (``id=``, ``run=`` when several runs hold it, ``hit=`` to open a message)."""
         _only(params, "id", "run", "hit")
         snap = self.server.catalog.snap
         run_id, eid = D.find_episode(snap, _one(params, "id"), _one(params, "run", required=False) or None)
@@ -168,6 +182,7 @@ class Handler(BaseHTTPRequestHandler):
         self._html(pages.episode_page(snap, D.episode(snap, run_id, eid), hit))
 
     def window(self, params: dict[str, list[str]]) -> None:
+        """One call's window (``id``, ``run``, ``call``); ``fragment=1`` returns just the HTML the episode page inserts."""
         _only(params, "id", "run", "call", "fragment")
         snap = self.server.catalog.snap
         run_id, eid = D.find_episode(snap, _one(params, "id"), _one(params, "run", required=False) or None)
@@ -178,6 +193,7 @@ class Handler(BaseHTTPRequestHandler):
             self._html(pages.window_page(snap, run_id, eid, call, msgs))
 
     def compare(self, params: dict[str, list[str]]) -> None:
+        """The compare page (``kind`` run or arm, default run); it compares only once ``a`` or ``b`` is given."""
         _only(params, "kind", "a", "b")
         snap = self.server.catalog.snap
         kind = _one(params, "kind", required=False) or "run"
@@ -186,9 +202,11 @@ class Handler(BaseHTTPRequestHandler):
         self._html(pages.compare_page(snap, D.compare_choices(snap), cmp, kind, a, b))
 
     def static(self, name: str) -> None:
+        """One file of the fixed static list (the caller checked the name)."""
         self._send(200, (STATIC_DIR / name).read_bytes(), STATIC[name], {"Cache-Control": "max-age=60"})
 
     def ping(self, params: dict[str, list[str]]) -> None:
+        """A 1x1 GIF that other origins may load: the HTML report uses it to learn that a viewer is running and link to it."""
         self._send(200, PING_GIF, "image/gif", {"Cross-Origin-Resource-Policy": "cross-origin"})
 
 
@@ -249,6 +267,7 @@ def serve(run_dirs: Sequence[str | Path], port: int = DEFAULT_PORT, *, poll_s: f
 
 
 def stop(server: ViewServer, thread: threading.Thread) -> None:
+    """Stop a viewer started by :func:`serve`: the server, its thread (up to 5 s), its socket and the catalog's refresher."""
     server.shutdown()
     thread.join(timeout=5)
     server.server_close()
@@ -270,6 +289,7 @@ exit status: 0 stopped with Ctrl-C; 2 bad usage, a missing run folder, or the po
 
 
 def view_parser(out: TextIO | None = None) -> Any:
+    """The ``recap view`` argument parser (``out``: where ``--help`` goes)."""
     from reports.commands import _Parser
 
     p = _Parser(prog="recap view", out=out, epilog=_EPILOG,
@@ -283,6 +303,8 @@ def view_parser(out: TextIO | None = None) -> Any:
 
 
 def view_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+    """``recap view``: serve the run folders until Ctrl-C; exit 0, or 2 with one line for bad usage, unreadable
+    runs or a port it cannot listen on."""
     from reports.commands import _Exit, _one_line, _UsageError
 
     out, err = stdout or sys.stdout, stderr or sys.stderr

@@ -15,16 +15,21 @@ from workers.envs.alfworld.wording import to_version
 
 
 class WalkthroughExpert:
+    """The walkthrough of one game as an expert: the winning commands (in the game version's wording) not yet executed."""
     def __init__(self, walkthrough: Sequence[str], version: str):
         self.plan = tuple(to_version(a, version) for a in walkthrough)
         self._next = 0
 
     def reset(self) -> None:
+        """Start the walkthrough over (a new episode of the same game)."""
         self._next = 0
 
     def observe(self, action: str) -> None:
+        """Advance past the next walkthrough command when ``action`` is that command; any other action leaves the
+        plan where it was."""
         if self._next < len(self.plan) and action == self.plan[self._next]:
             self._next += 1
 
     def remaining(self) -> list[str]:
+        """The walkthrough commands not yet executed, in order."""
         return list(self.plan[self._next :])

@@ -28,6 +28,8 @@ from workers.envs.alfworld.wording import extract_goal, strip_banner
 
 
 class AlfworldEnvironment(Environment):
+    """One ALFWorld game file as an Environment: any command costs a step (an inadmissible one changes nothing),
+    success is the game's ``won`` flag, the episode ends on a win or at ``max_steps``."""
     benchmark = "alfworld"
     invalid_action_mode = "step"
     partially_observed = True
@@ -60,6 +62,8 @@ class AlfworldEnvironment(Environment):
 
     # -- episode -------------------------------------------------------------------------------
     def reset(self) -> Reset:
+        """Start the game over: the opening text without its banner, the admissible commands and the goal;
+        EnvError when the text states no goal."""
         obs, info = self._engine(lambda: self._env.reset())
         text = strip_banner(obs)
         goal = extract_goal(text)
@@ -73,6 +77,8 @@ class AlfworldEnvironment(Environment):
         return Reset(observation=render_observation(text, valid, self.show_valid_actions), valid_actions=valid, goal=goal)
 
     def step(self, action: str) -> Step:
+        """Send ``action`` to the game (admissible or not: either way it uses a step); InvalidActionError only
+        for a non-string, EnvError before reset or after the end."""
         if not isinstance(action, str):
             raise InvalidActionError(f"an ALFWorld action is a string, got {type(action).__name__}")
         if not self._started:
@@ -111,20 +117,25 @@ class AlfworldEnvironment(Environment):
 
     # -- prompt material ---------------------------------------------------------------------------
     def rules(self) -> str:
+        """The rules text for this game version and step cap."""
         return rules_text(self.version, self.max_steps)
 
     def failure_hints(self) -> str:
+        """The same general hints for every game: ALFWorld answers "Nothing happens." without saying what was wrong."""
         return failure_hints_text()
 
     def demonstration(self) -> Demonstration:
+        """The one-shot demonstration for this game's split and version, showing the valid actions exactly when this game does."""
         # the demonstration keeps the default cap: a game played with a tight cap still needs
         # its full demonstration episode to render; it shows the valid actions iff the episode does
         return demonstration_for(self.split, self.version, show_valid_actions=self.show_valid_actions)
 
     def expert_plan(self) -> list[str] | None:
+        """The walkthrough's remaining commands; None when the game file has no walkthrough."""
         return None if self._expert is None else self._expert.remaining()
 
     def close(self) -> None:
+        """Close the game engine; the environment cannot be used afterwards (closing twice is harmless)."""
         env, self._env = self._env, None
         if env is not None:
             close_game(env)

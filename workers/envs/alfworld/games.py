@@ -44,6 +44,7 @@ class Game:
 
     @property
     def instance_id(self) -> str:
+        """The stable id of the game: ``alfworld/<task type>/<game folder>/<trial>``."""
         return f"{BENCHMARK_NAME}/{self.short_type}/{self.game_dir}/{self.trial}"
 
     @property
@@ -52,6 +53,7 @@ class Game:
         return SPLIT_DIR / self.game_dir / self.trial
 
     def game_file(self, data_dir: Path) -> Path:
+        """The game file (game.tw-pddl) of this trial under ``data_dir``."""
         return data_dir / self.relpath / GAME_FILE
 
 

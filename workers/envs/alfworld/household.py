@@ -24,6 +24,8 @@ _FIXED_OBJECTS = ("desklamp",)  # usable in place, never picked up
 
 @dataclass(frozen=True)
 class Place:
+    """A receptacle of a demonstration scene: its name with number, the loc number shown on arrival, what it
+    holds, and whether it opens (then its contents are hidden until opened)."""
     name: str  # "fridge 1"
     loc: int  # the number shown on arrival in 2.1.1 ("You arrive at loc 16.")
     contents: tuple[str, ...] = ()
@@ -32,6 +34,7 @@ class Place:
 
 @dataclass(frozen=True)
 class Scene:
+    """An invented household for one demonstration: its receptacles, and the task sentence (without its final period)."""
     places: tuple[Place, ...]
     goal: str  # the task sentence without its final period
 

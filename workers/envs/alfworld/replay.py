@@ -24,6 +24,7 @@ NOTHING_HAPPENS = "Nothing happens."
 
 @dataclass(frozen=True)
 class RecordedStep:
+    """One recorded step: the command, the game's reply, the valid actions after it, and whether it won the game."""
     action: str
     observation: str
     valid_actions: tuple[str, ...]
@@ -32,6 +33,8 @@ class RecordedStep:
 
 @dataclass(frozen=True)
 class Recording:
+    """A written demonstration episode: its task type (``split`` short, ``task`` ALFRED's), the opening text,
+    goal and valid actions, and the recorded steps."""
     name: str
     split: str  # short task type, "heat"
     task: str  # ALFRED task type
@@ -42,10 +45,13 @@ class Recording:
 
     @property
     def actions(self) -> list[str]:
+        """The recorded commands in order (the winning command list)."""
         return [s.action for s in self.steps]
 
 
 class ReplayEnvironment(Environment):
+    """A recording played back as an Environment with a real game's rules: an invalid command gets "Nothing
+    happens." and uses a step; a valid command other than the recorded one raises EnvError."""
     benchmark = "alfworld"
     invalid_action_mode = "step"
     partially_observed = True
@@ -76,6 +82,7 @@ class ReplayEnvironment(Environment):
         self._done = False
 
     def reset(self) -> Reset:
+        """Start the recording over: its opening text, valid actions and goal."""
         self._next = 0
         self._steps_taken = 0
         self._valid = self.recording.valid_actions
@@ -84,6 +91,8 @@ class ReplayEnvironment(Environment):
         return Reset(observation, self._valid, self.recording.goal)
 
     def step(self, action: str) -> Step:
+        """The recorded reply when ``action`` is the next recorded command; "Nothing happens." (a step used) when
+        it is not valid; EnvError when it is valid but not the recorded one."""
         if not isinstance(action, str):
             raise InvalidActionError(f"an ALFWorld action is a string, got {type(action).__name__}")
         if not self._started:
@@ -125,9 +134,11 @@ class ReplayEnvironment(Environment):
         return self._hints
 
     def demonstration(self) -> Demonstration | None:
+        """None: a demonstration has no demonstration of its own."""
         return None
 
     def expert_plan(self) -> list[str] | None:
+        """The recorded commands not yet played, when built with ``expert=True``; else None."""
         if not self._expert:
             return None
         return [s.action for s in self.recording.steps[self._next :]]

@@ -39,8 +39,12 @@ _HINTS = """\
 
 
 def rules_text(version: str, max_steps: int) -> str:
+    """The rules text in the wording of game-file ``version`` (its put/move command form) with the step cap
+    ``max_steps``; ValueError for an unknown version."""
     return _RULES.format(put_form=_PUT_FORM[check_version(version)], max_steps=max_steps)
 
 
 def failure_hints_text() -> str:
+    """Hints shown after an invalid action; one text for every game and version (the game never says why a
+    command did nothing)."""
     return _HINTS

@@ -50,16 +50,19 @@ _ID = re.compile(r"^(?P<split>[a-z]+)/(?P<task>[0-9A-Za-z_.]+)@(?P<seed>-?\d+)$"
 
 @dataclass(frozen=True)
 class InstanceRef:
+    """One benchmark instance (split, task, seed), the parsed form of an instance id."""
     split: str
     task: str
     seed: int
 
     @property
     def instance_id(self) -> str:
+        """The instance's id, ``robotouille/<split>/<task>@<seed>``."""
         return f"{BENCHMARK_NAME}/{self.split}/{self.task}@{self.seed}"
 
     @property
     def optimal_steps(self) -> int:
+        """The optimal number of steps of the instance's task (the step cap is a multiple of it)."""
         return OPTIMAL_STEPS[self.split][self.task]
 
 
@@ -68,10 +71,12 @@ def _task_number(task: str) -> float:
 
 
 def tasks(split: str) -> list[str]:
+    """The benchmark tasks of ``split``, ordered by task number (2 before 10); KeyError for an unknown split."""
     return sorted(OPTIMAL_STEPS[split], key=_task_number)
 
 
 def all_refs() -> list[InstanceRef]:
+    """Every instance of the benchmark (both splits, every task, every seed), in the catalog's fixed order."""
     return [InstanceRef(split, task, seed) for split in SPLITS for task in tasks(split) for seed in SEEDS]
 
 

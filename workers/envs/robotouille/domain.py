@@ -18,6 +18,7 @@ EFFECT_KINDS = ("immediate", "delayed", "repetitive", "conditional", "creation",
 
 @dataclass(frozen=True)
 class PredicateDef:
+    """A predicate of the domain: its argument types and, per argument, the sentence that describes it from that object's side."""
     name: str
     param_types: tuple[str, ...]
     #: sentence template per argument position ("{0} is at {1}")
@@ -35,6 +36,7 @@ class Literal:
 
 @dataclass(frozen=True)
 class CreatedObject:
+    """The object a creation effect makes: its name, type, and the action parameter it is made from."""
     name: str
     type: str
     param: str
@@ -54,6 +56,7 @@ class EffectSpec:
 
 @dataclass(frozen=True)
 class ActionDef:
+    """An action of the domain: its parameters, preconditions, immediate and special effects, and its language description."""
     name: str
     #: (parameter, object type) in order of first appearance
     params: tuple[tuple[str, str], ...]
@@ -65,6 +68,8 @@ class ActionDef:
 
 @dataclass(frozen=True)
 class Domain:
+    """A parsed domain file: object types, predicates (in file order, which orders the sentences of an
+    observation) and actions. Immutable, shared by every state."""
     name: str
     object_types: tuple[str, ...]
     predicates: tuple[PredicateDef, ...]
@@ -74,9 +79,11 @@ class Domain:
     _order: dict[str, int] = field(init=False, repr=False, compare=False)
 
     def predicate(self, name: str) -> PredicateDef:
+        """The predicate named ``name``; KeyError for a name not in the domain."""
         return self._by_name[name]
 
     def predicate_index(self, name: str) -> int:
+        """The position of predicate ``name`` in the domain file: the order its sentences take in an object's description."""
         return self._order[name]
 
     def __post_init__(self) -> None:
@@ -147,6 +154,8 @@ def _action_params(precons, fx, sfx, preds) -> tuple[tuple[str, str], ...]:
 
 
 def parse_domain(raw: Any, source: str = "domain") -> Domain:
+    """Parse a domain JSON (``source`` names it in errors); DataFileError for a malformed one or one that names
+    an unknown predicate or effect type."""
     try:
         preds: dict[str, PredicateDef] = {}
         ordered = []

@@ -71,6 +71,7 @@ class RobotouilleEnv(Environment):
     # ------------------------------------------------------------ properties
     @property
     def goal_description(self) -> str:
+        """The goal sentence of the instance, as the observation ends with it."""
         return self._problem.goal_description
 
     @property
@@ -85,16 +86,20 @@ class RobotouilleEnv(Environment):
 
     @property
     def done(self) -> bool:
+        """Whether the episode is over (solved, or ``max_steps`` taken)."""
         return self._done
 
     def observation(self) -> str:
+        """The current observation text: objects, valid actions and the goal, exactly as the engine writes it."""
         return self._problem.state.observation(self._problem.goal_description)
 
     def valid_actions(self) -> tuple[str, ...]:
+        """The actions valid in the current state, in the engine's order."""
         return self._problem.state.valid_actions()
 
     # ------------------------------------------------------------ episode
     def reset(self) -> Reset:
+        """Rebuild the state from the raw problem (unless it is still untouched) and return the first observation."""
         if not self._pristine:
             self._problem = build_problem(self._domain, self._problem_json, self._source)
         self._pristine = False
@@ -113,6 +118,8 @@ class RobotouilleEnv(Environment):
         raise InvalidActionError(f"invalid action {action!r}: not one of the {n} valid actions")
 
     def step(self, action: str) -> Step:
+        """Apply ``action``, which must be exactly one of the valid actions (InvalidActionError otherwise, no
+        step used); ``info`` says whether the step cap cut the episode (``truncated``)."""
         if not self._started:
             raise EnvError(f"{self.instance_id}: step() before reset()")
         if self._done:
@@ -137,9 +144,11 @@ class RobotouilleEnv(Environment):
 
     # ------------------------------------------------------------ helpers
     def rules(self) -> str:
+        """The rules text for this instance's split."""
         return rules_text(self.split)
 
     def failure_hints(self) -> str:
+        """The general hints, plus the closest valid action to the last rejected one when there is a close match."""
         hints = failure_hints()
         if self._last_rejected:
             close = difflib.get_close_matches(self._last_rejected, self.valid_actions(), n=1, cutoff=0.6)
@@ -148,6 +157,7 @@ class RobotouilleEnv(Environment):
         return hints
 
     def demonstration(self) -> Demonstration | None:
+        """The one-shot demonstration, built on first use; None when this environment was made without one."""
         return self._demonstration() if self._demonstration else None
 
     def expert_plan(self) -> list[str] | None:
@@ -157,4 +167,5 @@ class RobotouilleEnv(Environment):
         return expert_plan(self._problem.state, self._problem.goal)
 
     def goal_holds(self) -> bool:
+        """Whether the goal holds in the current state."""
         return self._problem.goal.holds(self._problem.state)

@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 @dataclass(frozen=True)
 class GoalLiteral:
+    """One goal entry: a predicate over goal ids, and whether it must hold or must not."""
     predicate: str
     vars: tuple[int, ...]  # goal ids
     is_true: bool = True
@@ -34,6 +35,8 @@ class GoalLiteral:
 
 @dataclass(frozen=True)
 class Goal:
+    """A parsed goal: its entries and, per goal id, the object name it stands for and the objects it may be
+    assigned (distinct ids take distinct objects)."""
     literals: tuple[GoalLiteral, ...]
     #: goal id -> object name it stands for (``bread``)
     var_names: dict[int, str]
@@ -54,10 +57,14 @@ class Goal:
         return _search(self, state, dict(pinned or {}))
 
     def holds(self, state: "State") -> bool:
+        """Whether ``state`` satisfies the goal: some injective assignment makes every entry true."""
         return self.find_assignment(state) is not None
 
 
 def parse_goal(raw: Any, state: "State", source: str) -> Goal:
+    """The goal of a problem JSON against its initial ``state``: each id takes the first name it appears under; a
+    name with no object yet ranges over the objects it will create. DataFileError for a malformed goal or
+    unknown predicate."""
     if not isinstance(raw, list):
         raise DataFileError(f"{source}: goal must be a list of entries")
     var_names: dict[int, str] = {}

@@ -75,13 +75,16 @@ class View:
             self._scan(nested, station, active)
 
     def true(self, pred: str, *args: str) -> bool:
+        """Whether the fact ``pred(*args)`` holds in the state."""
         return args in self.st.facts[pred]
 
     def top(self, station: str) -> str | None:
+        """The object on top of ``station``'s stack; None when nothing is on it."""
         stack = self.stacks.get(station)
         return stack[-1] if stack else None
 
     def is_free(self, station: str) -> bool:
+        """Whether ``station`` holds nothing (``station_empty``)."""
         return self.true("station_empty", station)
 
 

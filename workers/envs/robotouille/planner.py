@@ -58,12 +58,16 @@ class Planner:
 
     # ------------------------------------------------------------ roles
     def needs(self, var: int, obj: str, view: View) -> list[str]:
+        """The preparations ``obj`` still needs to play item variable ``var`` (see :meth:`RoleChooser.needs`)."""
         return self.roles.needs(var, obj, view)
 
     def ready(self, var: int, obj: str, view: View) -> bool:
+        """Whether ``obj`` needs no more preparation to play item variable ``var``."""
         return self.roles.ready(var, obj, view)
 
     def choose_roles(self, view: View) -> bool:
+        """Choose the objects for every goal variable from ``view``; False when some role can no longer be filled
+        (the goal is out of reach)."""
         assign = self.roles.choose(view)
         if assign is None:
             return False
@@ -73,6 +77,9 @@ class Planner:
 
     # ---------------------------------------------------------------- policy
     def plan(self, state: State, limit: int) -> list[str] | None:
+        """The actions that reach the goal from ``state`` (simulated on a clone; ``state`` is untouched), [] when
+        it already holds; None when roles cannot be filled, the policy gets stuck or ``limit`` actions are not
+        enough (``failure`` says which)."""
         sim = state.clone()
         if self.goal.holds(sim):
             return []
@@ -108,6 +115,7 @@ class Planner:
         return Grounding(action, tuple(binding[p] for p in params), text)
 
     def goto(self, view: View, station: str) -> Grounding | None:
+        """The move to ``station``; None when the robot is already there (or cannot move now)."""
         if view.loc == station:
             return None
         return self.act(view, "move", s1=view.loc, s2=station)
@@ -144,6 +152,7 @@ class Planner:
 
     # roles seen from the objects
     def var_of(self, obj: str) -> int | None:
+        """The goal variable ``obj`` plays; None for an object in no role."""
         return self.role.get(obj)
 
     def reserved(self, view: View) -> set[str]:
@@ -166,6 +175,7 @@ class Planner:
         return out
 
     def free_station(self, view: View, pred: str, prefer_loc: bool = True) -> str | None:
+        """A free, unreserved station of kind ``pred`` (the robot's own first when ``prefer_loc``); None when there is none."""
         reserved = self.reserved(view)
         free = [s for s in self.kind_stations[pred] if view.is_free(s) and s not in reserved]
         if not free:
@@ -175,6 +185,8 @@ class Planner:
         return free[0]
 
     def demand(self, view: View) -> dict[str, int]:
+        """Stations of each kind (board, stove, fryer, sink) that the preparations still to come will need:
+        parking must leave that many free."""
         need = {"isboard": 0, "isstove": 0, "isfryer": 0, "issink": 0}
         for v in self.recipe.item_vars:
             obj = self.assign.get(v)
@@ -209,6 +221,8 @@ class Planner:
         return self.need_rank(obj)
 
     def dish_order(self, dish: StackDish) -> list[int]:
+        """The dish's variables in stacking order: the base, the ``atop`` chain upward from it, the loose
+        members, and the top item last."""
         chain = [dish.base]
         below_of = {b: a for a, b in dish.below.items()}
         while chain[-1] in below_of:
@@ -272,6 +286,7 @@ class Planner:
         return None if best is None else view.st.objects["station"][best[2]]
 
     def park(self, view: View) -> Grounding | None:
+        """Put down what the robot holds at :meth:`park_station` (moving there first); None when there is nowhere."""
         station = self.park_station(view)
         return None if station is None else self.put(view, station)
 
@@ -305,6 +320,8 @@ class Planner:
         return []
 
     def soup_pot(self, soup: Soup, view: View) -> str | None:
+        """The pot holding (or being filled with) the soup's water, else an empty pot to use; None once the water
+        has left the pot or no pot is free."""
         water = self.assign[soup.water]
         holder = view.meal_in.get(water)
         pots = [c for c in view.st.objects["container"] if view.true("ispot", c)]
@@ -320,6 +337,8 @@ class Planner:
 
     # ------------------------------------------------------------- the policy
     def next_action(self, view: View) -> Grounding | None:
+        """The policy's next action: deal with what the robot holds, else the first of start slow work, lay
+        bases, cut, assemble, pour, wait that has something to do; None when stuck."""
         if view.held_item is not None:
             return self.handle_held_item(view)
         if view.held_container is not None:
@@ -337,6 +356,8 @@ class Planner:
         return None
 
     def handle_held_item(self, view: View) -> Grounding | None:
+        """Where the held item goes: to its next preparation station, onto its dish or into its soup when it is
+        next, else parked."""
         obj = view.held_item
         assert obj is not None
         var = self.var_of(obj)
@@ -368,6 +389,7 @@ class Planner:
         return self.park(view)
 
     def handle_held_container(self, view: View) -> Grounding | None:
+        """Where a held container goes: the soup's pot onto a sink (to fill) or a stove (to boil), or poured into its bowl; the bowl onto its table; else parked."""
         c = view.held_container
         assert c is not None
         for soup in self.recipe.soups:
@@ -454,6 +476,7 @@ class Planner:
         return self.fetch(view, obj)
 
     def clear_station(self, view: View, station: str) -> Grounding | None:
+        """Step towards emptying ``station``: fetch its top item, else its container; None when it is already free."""
         top = view.top(station)
         if top is not None:
             return self.fetch(view, top)
@@ -485,6 +508,8 @@ class Planner:
         return best[1]
 
     def start_slow(self, view: View) -> Grounding | None:
+        """A step towards starting a slow process (a soup, cooking, frying: they run on their own once started),
+        the job picked by :meth:`_closest`."""
         options: list[tuple[str, Grounding | None]] = []
         for soup in self.recipe.soups:
             options.append(("soup", self.soup_step(soup, view)))
@@ -531,6 +556,7 @@ class Planner:
         return None
 
     def lay_bases(self, view: View) -> Grounding | None:
+        """Clear each dish's table of wrong items and lay its prepared base; bring each soup's bowl to its table."""
         options = []
         for dish in self.recipe.dishes:
             good, bad = self.dish_state(dish, view)
@@ -561,6 +587,7 @@ class Planner:
         return self._closest(options, view)
 
     def cut_jobs(self, view: View) -> Grounding | None:
+        """A step towards cutting an item whose next preparation is cutting (the job picked by :meth:`_closest`)."""
         options = []
         for var in self.recipe.item_vars:
             obj = self.assign[var]
@@ -569,6 +596,7 @@ class Planner:
         return self._closest(options, view)
 
     def assemble(self, view: View) -> Grounding | None:
+        """Fetch the next ready item of a dish, or a ready ingredient for a soup whose pot stands on a station."""
         options = []
         for dish in self.recipe.dishes:
             for var in self.dish_next(dish, view):
@@ -590,6 +618,7 @@ class Planner:
         return self._closest(options, view)
 
     def pour(self, view: View) -> Grounding | None:
+        """Fetch a finished soup's pot (boiled if required, every ingredient added) to pour it into its bowl."""
         for soup in self.recipe.soups:
             water = self.assign[soup.water]
             pot = self.soup_pot(soup, view)
@@ -607,6 +636,7 @@ class Planner:
         return None
 
     def wait(self, view: View) -> Grounding | None:
+        """While a timer runs: go to where the soonest result appears, else do nothing for a step; None when no timer runs."""
         running = [p for p in view.pending.values() if p.progressing]
         if not running:
             return None

@@ -22,6 +22,8 @@ NOT_INSTALLED = "the real robotouille package is not installed; engine: ours is 
 
 
 def make_real_env(ref: catalog.InstanceRef, step_multiplier: float = 4.0) -> Environment:
+    """The real engine on instance ``ref`` (``engine: real``); EnvError when the robotouille package or its env
+    factory is missing."""
     try:
         import robotouille  # noqa: F401
     except ImportError:
@@ -34,6 +36,8 @@ def make_real_env(ref: catalog.InstanceRef, step_multiplier: float = 4.0) -> Env
 
 
 class RealRobotouilleEnv(Environment):
+    """The original Robotouille package behind our Environment interface, for cross-checks: invalid actions are
+    rejected (no step used), success is the real engine's ``done``."""
     benchmark = "robotouille"
     invalid_action_mode = "reject"
 
@@ -58,6 +62,8 @@ class RealRobotouilleEnv(Environment):
         return obs if isinstance(obs, str) else str(obs)
 
     def reset(self) -> Reset:
+        """Create the real environment afresh (no noisy randomization) and return its first observation, valid
+        actions and goal."""
         created = self._factory(f"{self.split}/{self.task}", self.seed, noisy_randomization=False)
         self._env = created[0] if isinstance(created, tuple) else created
         obs, _info = self._env.reset()
@@ -70,6 +76,8 @@ class RealRobotouilleEnv(Environment):
         return str(text)
 
     def step(self, action: str) -> Step:
+        """Take one valid action (InvalidActionError for any other, nothing used); the episode ends on success or
+        at ``max_steps``."""
         if self._env is None:
             raise EnvError(f"{self.instance_id}: step() before reset()")
         if self._done:
@@ -86,10 +94,13 @@ class RealRobotouilleEnv(Environment):
         return Step(self._observation(obs), tuple(t for _, t in self._valid()), self._done, success, info)
 
     def rules(self) -> str:
+        """The same rules text our engine gives for this split."""
         return rules_text(self.split)
 
     def failure_hints(self) -> str:
+        """The same failure hints our engine gives."""
         return failure_hints()
 
     def demonstration(self):
+        """None: this cross-check path runs without a demonstration."""
         return None

@@ -35,9 +35,11 @@ class RoleChooser:
         self.soup_of: dict[int, Soup] = {v: s for s in recipe.soups for v in s.ingredients}
 
     def needs(self, var: int, obj: str, view: View) -> list[str]:
+        """The preparations (cut, cook, fry, in that order) that ``obj`` still needs to fill item variable ``var``."""
         return [p for p in PREP_ORDER if p in self.recipe.needs.get(var, ()) and not view.true(p, obj)]
 
     def ready(self, var: int, obj: str, view: View) -> bool:
+        """Whether ``obj`` already has every preparation item variable ``var`` needs."""
         return not self.needs(var, obj, view)
 
     def match_stack(self, dish: StackDish, stack: list[str], view: View, fixed: dict[int, str]) -> dict[int, str]:

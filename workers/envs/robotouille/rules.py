@@ -70,4 +70,5 @@ The last action was rejected. Common causes:
 
 
 def failure_hints() -> str:
+    """The hints shown after a rejected action (the same for both splits)."""
     return _HINTS
