@@ -123,10 +123,8 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
 
 
 def replay_main(path: str, out: TextIO) -> int:
-    try:
-        from workers.envs.robotouille.replay import replay_file
-    except ModuleNotFoundError as exc:
-        raise PipelineError(f"trajectory replay is not available ({exc})") from None
+    from workers.envs.robotouille.replay import replay_file
+
     try:
         ok, message = replay_file(path)
     except (EnvError, OSError, ValueError) as exc:  # unreadable or malformed trajectory, missing data
