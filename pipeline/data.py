@@ -303,17 +303,11 @@ def sha256_file(path: Path) -> str:
 
 
 def _location(bench: Benchmark) -> data_paths.DataLocation:
-    if bench is ROBOTOUILLE:
-        from workers.envs.robotouille.data import LOCATION
+    """How the folder is recognised and its variable: declared by the benchmark that reads it
+    (:meth:`workers.envs.registry.Benchmark.data_locations`)."""
+    from workers.envs.registry import data_location
 
-        return LOCATION
-    from workers.envs.alfworld.games import LOCATION as ALF
-
-    if bench is ALFWORLD:
-        return ALF
-    from workers.envs.alfworld.games import DATA_ENV_2_1_2
-
-    return data_paths.DataLocation(name=bench.name, title=bench.title, env_var=DATA_ENV_2_1_2, marker=ALF.marker)
+    return data_location(bench.name)
 
 
 def search(bench: Benchmark, data_dir: str | None) -> tuple[list[data_paths.Rung], data_paths.Rung | None]:

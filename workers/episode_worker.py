@@ -60,9 +60,7 @@ def env_options_for(unit: UnitWork, agent: Agent) -> dict[str, Any]:
     options, which win."""
     from workers.envs.registry import get_benchmark
 
-    bench = get_benchmark(unit.benchmark)
-    hook = getattr(bench, "options_for_agent", None)
-    options = dict(hook(agent.style)) if hook is not None else {}
+    options = dict(get_benchmark(unit.benchmark).options_for_agent(agent.style))
     options.update({k: v for k, v in unit.env_options if v is not None})
     return options
 

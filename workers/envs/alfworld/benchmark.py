@@ -26,12 +26,15 @@ Options of :meth:`AlfworldBenchmark.make`:
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from typing import Any
 
 from recap.env import Environment
 from workers.envs.alfworld.game_env import AlfworldEnvironment
 from workers.envs.alfworld.games import (
     BENCHMARK_NAME,
+    DATA_ENV_2_1_2,
+    LOCATION,
     Game,
     discover_games,
     load_walkthrough,
@@ -41,13 +44,18 @@ from workers.envs.alfworld.games import (
 from workers.envs.alfworld.observation import check_show_valid_actions
 from workers.envs.alfworld.task_types import SHORT_NAMES, TASK_TYPES
 from workers.envs.alfworld.wording import DEFAULT_VERSION, check_version
-from workers.envs.registry import DataNotFoundError, UnknownInstanceError
+from workers.envs.data_paths import DataLocation
+from workers.envs.registry import Benchmark, DataNotFoundError, UnknownInstanceError
 
 DEFAULT_MAX_STEPS = 50
 #: the make() option that appends the valid actions to every observation (True / False / None)
 SHOW_VALID_ACTIONS = "show_valid_actions"
 #: agent styles whose ALFWorld observations list the valid actions (see show_valid_actions_for)
 STYLES_SHOWING_VALID_ACTIONS = frozenset({"recap"})
+#: the optional 2.1.2 folder (same games, 2.1.2 wording, walkthroughs); ``recap data`` lists it
+#: by this name, and finds it by its own rule (games.resolve_data_dir_2_1_2), not the shared one
+LOCATION_2_1_2 = DataLocation(name="alfworld-2.1.2", title="ALFWorld (game files 2.1.2)",
+                              env_var=DATA_ENV_2_1_2, marker=LOCATION.marker)
 
 
 def show_valid_actions_for(style: str) -> bool:
@@ -65,7 +73,7 @@ def show_valid_actions_for(style: str) -> bool:
 _ALL = ("all", "eval_out_of_distribution", "valid_unseen")
 
 
-class AlfworldBenchmark:
+class AlfworldBenchmark(Benchmark):
     name = BENCHMARK_NAME
 
     def __init__(self, data_dir: str | os.PathLike[str] | None = None):
@@ -74,6 +82,10 @@ class AlfworldBenchmark:
     def options_for_agent(self, style: str) -> dict[str, Any]:
         """make() options an agent style runs with unless a sweep sets them (the pipeline asks)."""
         return {SHOW_VALID_ACTIONS: show_valid_actions_for(style)}
+
+    def data_locations(self) -> Mapping[str, DataLocation]:
+        """The primary (2.1.1) folder and the optional 2.1.2 one."""
+        return {LOCATION.name: LOCATION, LOCATION_2_1_2.name: LOCATION_2_1_2}
 
     # -- listing --------------------------------------------------------------------------------
     def games(self, selector: str | None = None, *, data_dir: Any = None) -> list[Game]:

@@ -8,13 +8,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from recap.env import Demonstration, Environment
+from workers.envs.data_paths import DataLocation
+from workers.envs.registry import Benchmark
 
 from . import catalog
-from .data import DataFileError, instance_path, read_json, require, resolve_data_dir, train_instance_path
+from .data import LOCATION, DataFileError, instance_path, read_json, require, resolve_data_dir, train_instance_path
 from .demo import DEMO_SEED, DEMO_SPLIT, DEMO_TASK, make_demonstration
 from .domain import load_domain
 from .env import RobotouilleEnv
@@ -24,8 +27,11 @@ ENGINES = ("ours", "real")
 DEMO_MAX_STEPS = 100
 
 
-class RobotouilleBenchmark:
+class RobotouilleBenchmark(Benchmark):
     name = catalog.BENCHMARK_NAME
+
+    def data_locations(self) -> Mapping[str, DataLocation]:
+        return {LOCATION.name: LOCATION}
 
     def list_instances(self, selector: str | None = None) -> list[str]:
         return [ref.instance_id for ref in catalog.select(selector)]
