@@ -13,13 +13,14 @@ A real new benchmark ``<name>`` touches:
   rules, demonstration, expert_plan for the offline expert), a ``benchmark.py`` with a
   :class:`workers.envs.registry.Benchmark` subclass exposed as ``BENCHMARK`` (``list_instances``,
   ``make``, and only the hooks it needs: ``options_for_agent`` for per-method ``make()``
-  options, ``data_locations`` when it reads a data folder, so ``recap data list`` and the Ray
-  workers' environment follow), and its demonstration and rules texts;
+  options, ``data_folders`` when it reads a data folder: how it is found, its file groups and
+  download sources, so ``recap data list/check/fetch`` and the Ray workers' environment
+  follow), and its demonstration and rules texts;
 * ``workers/envs/registry.py`` - one ``register_benchmark("<name>", "workers.envs.<name>")``
   line among the built-ins (Ray workers import the registry, not the test's registration);
 * ``tests/<name>/`` - its tests;
-* only if it has downloadable data: its sources in ``pipeline/data.py`` and its manifest in
-  ``pipeline/manifests/<name>.sha256`` (``recap data fetch``/``check``);
+* only if it has downloadable data: its sha256 manifest ``pipeline/manifests/<folder>.sha256``
+  (``recap data check``/``fetch`` verify against it);
 * only if reports should split its results by something other than what the environment
   reports as ``split``/``task``: ``schemas/labels.py`` ``place_of``.
 """
@@ -221,7 +222,7 @@ def test_registration_is_lazy_named_once_and_undone(corridor):
         registry.get_benchmark("tunnel")
     # the declared hooks' defaults: no per-method options, no data folder, nothing to forward
     bench = registry.get_benchmark(NAME)
-    assert (bench.options_for_agent("react"), dict(bench.data_locations()), bench.data_env_vars()) == ({}, {}, ())
+    assert (bench.options_for_agent("react"), dict(bench.data_folders()), bench.data_env_vars()) == ({}, {}, ())
     assert registry.make_env(f"{NAME}/2", step_multiplier=1.5).max_steps == 3
 
 
@@ -231,7 +232,8 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
         with pytest.raises(ModuleNotFoundError):
             registry.get_benchmark("ghost")
         assert registry.data_env_vars() == ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "ALFWORLD_DATA_2_1_2")
-        assert registry.data_location("alfworld-2.1.2").env_var == "ALFWORLD_DATA_2_1_2"
+        assert list(registry.data_folders()) == ["robotouille", "alfworld", "alfworld-2.1.2"]
+        assert registry.data_folder("alfworld-2.1.2").location.env_var == "ALFWORLD_DATA_2_1_2"
         assert registry.make_env("blocksworld/3@1").instance_id == "blocksworld/3@1"
     finally:
         unregister_benchmark("ghost")

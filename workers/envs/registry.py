@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
-from workers.envs.data_paths import DataLocation
+from workers.envs.data_sources import DataFolder
 
 __all__ = [
     "DataNotFoundError",
@@ -35,7 +35,8 @@ __all__ = [
     "make_env",
     "split_id",
     "benchmark_names",
-    "data_location",
+    "data_folder",
+    "data_folders",
     "data_env_vars",
 ]
 
@@ -64,16 +65,16 @@ class Benchmark:
         sweep sets them (ALFWorld: whether observations list the valid actions). Default: none."""
         return {}
 
-    def data_locations(self) -> Mapping[str, DataLocation]:
-        """The data folders this benchmark reads, by folder name (``recap data`` and the shared
-        resolver of :mod:`workers.envs.data_paths` find them). Default: none (generated
-        instances, like blocksworld)."""
+    def data_folders(self) -> Mapping[str, DataFolder]:
+        """The data folders this benchmark reads, by folder name: how each is found, what it
+        holds and where its files come from (``recap data list/check/fetch`` work on these).
+        Default: none (generated instances, like blocksworld)."""
         return {}
 
     def data_env_vars(self) -> tuple[str, ...]:
         """Environment variables that point at this benchmark's data; the driver forwards them
-        to Ray workers. Default: the variables of :meth:`data_locations`."""
-        return tuple(loc.env_var for loc in self.data_locations().values())
+        to Ray workers. Default: the variables of :meth:`data_folders`."""
+        return tuple(folder.location.env_var for folder in self.data_folders().values())
 
 
 #: what register_benchmark accepts: "package.module" (exposing BENCHMARK), a Benchmark, or a factory
@@ -158,18 +159,27 @@ def make_env(instance_id: str, **options: Any) -> Environment:
     return get_benchmark(bench).make(instance_id, **options)
 
 
-def data_location(folder: str) -> DataLocation:
-    """The data folder named ``folder`` (``robotouille``, ``alfworld-2.1.2``...) of whichever
-    registered benchmark declares it. Imports the benchmarks it asks; one that cannot be
-    imported here declares nothing."""
+def data_folders() -> dict[str, DataFolder]:
+    """Every registered benchmark's data folders by name, in registration order. Imports the
+    benchmarks; one that cannot be imported here declares nothing."""
+    out: dict[str, DataFolder] = {}
     for name in benchmark_names():
         try:
-            locations = get_benchmark(name).data_locations()
+            folders = get_benchmark(name).data_folders()
         except ImportError:
             continue
-        if folder in locations:
-            return locations[folder]
-    raise KeyError(f"no registered benchmark reads a data folder {folder!r}")
+        for key, folder in folders.items():
+            out.setdefault(key, folder)
+    return out
+
+
+def data_folder(name: str) -> DataFolder:
+    """The data folder ``name`` (``robotouille``, ``alfworld-2.1.2``...) of whichever registered
+    benchmark declares it."""
+    try:
+        return data_folders()[name]
+    except KeyError:
+        raise KeyError(f"no registered benchmark reads a data folder {name!r}") from None
 
 
 def data_env_vars() -> tuple[str, ...]:

@@ -33,8 +33,6 @@ from recap.env import Environment
 from workers.envs.alfworld.game_env import AlfworldEnvironment
 from workers.envs.alfworld.games import (
     BENCHMARK_NAME,
-    DATA_ENV_2_1_2,
-    LOCATION,
     Game,
     discover_games,
     load_walkthrough,
@@ -44,7 +42,8 @@ from workers.envs.alfworld.games import (
 from workers.envs.alfworld.observation import check_show_valid_actions
 from workers.envs.alfworld.task_types import SHORT_NAMES, TASK_TYPES
 from workers.envs.alfworld.wording import DEFAULT_VERSION, check_version
-from workers.envs.data_paths import DataLocation
+from workers.envs.alfworld.data_folders import FOLDER, FOLDER_2_1_2
+from workers.envs.data_sources import DataFolder
 from workers.envs.registry import Benchmark, DataNotFoundError, UnknownInstanceError
 
 DEFAULT_MAX_STEPS = 50
@@ -52,10 +51,6 @@ DEFAULT_MAX_STEPS = 50
 SHOW_VALID_ACTIONS = "show_valid_actions"
 #: agent styles whose ALFWorld observations list the valid actions (see show_valid_actions_for)
 STYLES_SHOWING_VALID_ACTIONS = frozenset({"recap"})
-#: the optional 2.1.2 folder (same games, 2.1.2 wording, walkthroughs); ``recap data`` lists it
-#: by this name, and finds it by its own rule (games.resolve_data_dir_2_1_2), not the shared one
-LOCATION_2_1_2 = DataLocation(name="alfworld-2.1.2", title="ALFWorld (game files 2.1.2)",
-                              env_var=DATA_ENV_2_1_2, marker=LOCATION.marker)
 
 
 def show_valid_actions_for(style: str) -> bool:
@@ -83,9 +78,9 @@ class AlfworldBenchmark(Benchmark):
         """make() options an agent style runs with unless a sweep sets them (the pipeline asks)."""
         return {SHOW_VALID_ACTIONS: show_valid_actions_for(style)}
 
-    def data_locations(self) -> Mapping[str, DataLocation]:
-        """The primary (2.1.1) folder and the optional 2.1.2 one."""
-        return {LOCATION.name: LOCATION, LOCATION_2_1_2.name: LOCATION_2_1_2}
+    def data_folders(self) -> Mapping[str, DataFolder]:
+        """The primary (2.1.1) folder and the optional 2.1.2 one (:mod:`.data_folders`)."""
+        return {FOLDER.name: FOLDER, FOLDER_2_1_2.name: FOLDER_2_1_2}
 
     # -- listing --------------------------------------------------------------------------------
     def games(self, selector: str | None = None, *, data_dir: Any = None) -> list[Game]:
