@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import importlib
 import threading
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -41,23 +42,23 @@ __all__ = [
 ]
 
 
-class Benchmark:
+class Benchmark(ABC):
     """What the pipeline needs from a benchmark: two duties and hooks with defaults.
 
-    Subclasses must set ``name`` and implement :meth:`list_instances` and :meth:`make`; the
-    hooks below return "nothing special" unless overridden, so a new benchmark only writes
-    the ones it has something to say about.
+    Subclasses set ``name`` and implement :meth:`list_instances` and :meth:`make`; the hooks
+    below return "nothing special" unless overridden, so a new benchmark only writes the ones
+    it has something to say about.
     """
 
     name: str = ""
 
+    @abstractmethod
     def list_instances(self, selector: str | None = None) -> list[str]:
         """Instance ids in a fixed order; ``selector`` narrows (split, task, task type...)."""
-        raise NotImplementedError(f"{type(self).__name__}.list_instances")
 
+    @abstractmethod
     def make(self, instance_id: str, **options: Any) -> Environment:
         """A fresh environment for ``instance_id`` (options: step_multiplier, data_dir...)."""
-        raise NotImplementedError(f"{type(self).__name__}.make")
 
     # -- hooks ----------------------------------------------------------------------------------
     def options_for_agent(self, style: str) -> dict[str, Any]:
@@ -78,14 +79,14 @@ class Benchmark:
 
 
 #: what register_benchmark accepts: "package.module" (exposing BENCHMARK), a Benchmark, or a factory
-Source = str | Benchmark | Callable[[], Benchmark]
+BenchmarkSource = str | Benchmark | Callable[[], Benchmark]
 
 _lock = threading.Lock()
-_SOURCES: dict[str, Source] = {}
+_SOURCES: dict[str, BenchmarkSource] = {}
 _RESOLVED: dict[str, Benchmark] = {}
 
 
-def register_benchmark(name: str, source: Source) -> None:
+def register_benchmark(name: str, source: BenchmarkSource) -> None:
     """Make ``name`` addressable (``name/...`` instance ids). ``source`` is resolved on first
     use. A name is registered once; :func:`unregister_benchmark` first to replace it."""
     if not name or "/" in name:
@@ -112,7 +113,7 @@ def benchmark_names() -> list[str]:
     return list(_SOURCES)
 
 
-def _resolve(name: str, source: Source) -> Benchmark:
+def _resolve(name: str, source: BenchmarkSource) -> Benchmark:
     if isinstance(source, Benchmark):
         bench = source
     elif isinstance(source, str):

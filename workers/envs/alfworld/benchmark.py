@@ -30,6 +30,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from recap.env import Environment
+from workers.envs.alfworld.data_folders import FOLDER, FOLDER_2_1_2
 from workers.envs.alfworld.game_env import AlfworldEnvironment
 from workers.envs.alfworld.games import (
     BENCHMARK_NAME,
@@ -42,7 +43,6 @@ from workers.envs.alfworld.games import (
 from workers.envs.alfworld.observation import check_show_valid_actions
 from workers.envs.alfworld.task_types import SHORT_NAMES, TASK_TYPES
 from workers.envs.alfworld.wording import DEFAULT_VERSION, check_version
-from workers.envs.alfworld.data_folders import FOLDER, FOLDER_2_1_2
 from workers.envs.data_sources import DataFolder
 from workers.envs.registry import Benchmark, DataNotFoundError, UnknownInstanceError
 
