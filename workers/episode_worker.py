@@ -22,11 +22,11 @@ import traceback
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+import recap.methods as methods
 from recap.agent import Agent
 from recap.config import ConfigError
 from recap.env import Environment
 from recap.llm import LLMClient, LLMRequest, LLMResponse
-import recap.methods as methods
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import record_to_row
