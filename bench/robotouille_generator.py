@@ -53,13 +53,14 @@ def compare(root: Path, path: Path) -> str | None:
 
 
 def write_generated_manifest(root: Path) -> None:
-    from pipeline.data import ROBOTOUILLE, sha256_file, write_manifest
+    from pipeline.data import generated_manifest_file, sha256_file, write_manifest
+    from workers.envs.robotouille.data_folders import FOLDER as ROBOTOUILLE
     from workers.envs.robotouille.generator import write_instances
 
     with tempfile.TemporaryDirectory() as tmp:
         written = write_instances(root, Path(tmp))
-        write_manifest(ROBOTOUILLE.generated_manifest_file, {rel: sha256_file(Path(tmp) / rel) for rel in written})
-    print(f"wrote {ROBOTOUILLE.generated_manifest_file} ({len(written)} files)")
+        write_manifest(generated_manifest_file(ROBOTOUILLE), {rel: sha256_file(Path(tmp) / rel) for rel in written})
+    print(f"wrote {generated_manifest_file(ROBOTOUILLE)} ({len(written)} files)")
 
 
 def main() -> int:

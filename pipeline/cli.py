@@ -178,14 +178,6 @@ Find ids with: recap sql runs/demo "select episode_id, unit_id, arm, success fro
 exit status: 0 shown; 2 unknown or ambiguous EPISODE, or not a run folder
 """
 
-_SQL_FALLBACK_EPILOG = """\
-examples:
-  recap sql runs/demo "select arm, count(*) n, avg(success::int) ok from terminal group by 1"
-
-This is the minimal form, used when the reports package is not installed (no --csv/--json,
---file, @NAME or several run folders). exit status: 0 ok; 2 any error
-"""
-
 _ENV_EPILOG = """\
 examples:
   recap env list blocksworld 4
@@ -275,13 +267,9 @@ def _parser() -> argparse.ArgumentParser:
     sh.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
     sh.add_argument("episode", help="an episode id, a unit id (its latest attempt), or an unambiguous prefix")
 
-    # sql and report are read by reports.commands (see main); these entries list them in
-    # recap --help, and sql's is the minimal fallback when the reports package is missing
-    q = sub.add_parser("sql", help="read-only SQL over the tables of one or more run folders (--csv, --json, --file, @NAME)",
-                       epilog=_SQL_FALLBACK_EPILOG, description="Read-only SQL over a run's tables.")
-    q.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
-    q.add_argument("query", help="the SQL query")
-
+    # sql, report and view are read by the reports package (see main); these entries list them in recap --help
+    sub.add_parser("sql", help="read-only SQL over the tables of one or more run folders (--csv, --json, --file, @NAME)",
+                   add_help=False)
     sub.add_parser("report", help="build the report (Markdown, HTML, LaTeX, CSV) of one or more runs", add_help=False)
     sub.add_parser("view", help="browse every episode of one or more runs in a local web viewer (read-only)", add_help=False)
 
@@ -309,8 +297,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def command_parsers() -> dict[tuple[str, ...], argparse.ArgumentParser]:
     """The parser that reads each command's arguments (and prints its ``--help``), by command
-    path: ``()`` is ``recap`` itself, ``("env", "list")`` is ``recap env list``. ``sql`` and
-    ``report`` are the reports package's parsers when it is installed; ``data`` is left out
+    path: ``()`` is ``recap`` itself, ``("env", "list")`` is ``recap env list``. ``sql``,
+    ``report`` and ``view`` are the reports package's parsers; ``data`` is left out
     (:mod:`pipeline.data` builds its own)."""
     found: dict[tuple[str, ...], argparse.ArgumentParser] = {}
 
@@ -323,18 +311,10 @@ def command_parsers() -> dict[tuple[str, ...], argparse.ArgumentParser]:
 
     walk((), _parser())
     del found[("data",)]
-    try:
-        from reports.commands import _report_parser, _sql_parser
-    except ModuleNotFoundError as exc:
-        if exc.name not in ("reports", "reports.commands"):
-            raise
-        del found[("report",)]
-        del found[("view",)]
-    else:
-        found[("sql",)], found[("report",)] = _sql_parser(), _report_parser()
-        from reports.webview.server import view_parser
+    from reports.commands import _report_parser, _sql_parser
+    from reports.webview.server import view_parser
 
-        found[("view",)] = view_parser()
+    found[("sql",)], found[("report",)], found[("view",)] = _sql_parser(), _report_parser(), view_parser()
     return found
 
 
@@ -519,24 +499,16 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 
 def cmd_report(argv: list[str]) -> int:
-    """``recap report ...``: handed to the reports package; a one-line error when it is not installed."""
-    try:
-        from reports.commands import report_main
-    except ModuleNotFoundError as exc:
-        if exc.name in ("reports", "reports.commands"):
-            raise PipelineError("reports are not available (reports.commands is not installed)") from None
-        raise
+    """``recap report ...``: handed to the reports package."""
+    from reports.commands import report_main
+
     return int(report_main(argv) or 0)
 
 
 def cmd_view(argv: list[str]) -> int:
     """``recap view``: the reports package's web viewer (local run folders only)."""
-    try:
-        from reports.webview.server import view_main
-    except ModuleNotFoundError as exc:
-        if exc.name in ("reports", "reports.webview", "reports.webview.server"):
-            raise PipelineError("the viewer is not available (reports.webview is not installed)") from None
-        raise
+    from reports.webview.server import view_main
+
     return int(view_main(argv) or 0)
 
 
@@ -552,16 +524,11 @@ def dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
         return cmd_status(args)
     if args.cmd == "estimate":
         return cmd_estimate(args)
-    if args.cmd in ("show", "sql"):
-        _check_location(args.run_dir)
     if args.cmd == "show":
+        _check_location(args.run_dir)
         from pipeline.show import show_main
 
         return show_main(args.run_dir, args.episode, _console())
-    if args.cmd == "sql":
-        from pipeline.sqlview import sql_main
-
-        return sql_main(args.run_dir, args.query, _console())
     if args.cmd == "env":
         from pipeline import envcmd
 
@@ -595,15 +562,12 @@ def _local_run_args(args: list[str]) -> list[str]:
     return out
 
 
-def cmd_sql_delegated(argv: list[str]) -> int | None:
+def cmd_sql(argv: list[str]) -> int:
     """``recap sql ...`` handed whole to reports.commands.sql_main (several run folders,
-    --csv/--json, named queries); None when the reports package is not installed."""
-    from pipeline.sqlview import _delegate
+    --csv/--json, named queries); object-store run folders are pulled to a local copy first."""
+    from reports.commands import sql_main
 
-    delegate = _delegate()
-    if delegate is None:
-        return None
-    return int(delegate(argv if _HELP & set(argv) else _local_run_args(argv)) or 0)
+    return int(sql_main(argv if _HELP & set(argv) else _local_run_args(argv)) or 0)
 
 
 _HELP = {"-h", "--help"}  # help only: no object-store run folder is pulled first
@@ -655,9 +619,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return cmd_view(argv[1:])
             if argv[0] == "report":
                 return cmd_report(argv[1:] if _HELP & set(argv) else _local_run_args(argv[1:]))
-            code = cmd_sql_delegated(argv[1:])
-            if code is not None:
-                return code
+            return cmd_sql(argv[1:])
         except PipelineError as exc:
             print(f"recap: error: {exc}", file=sys.stderr)
             return EXIT_USAGE

@@ -27,7 +27,9 @@ The data never lives in this repository. Three benchmark folders exist: ``roboto
   folders when no benchmark is named. A destination that exists is verified, not overwritten.
 
 Sources (``--mirror`` replaces the base of every URL below with a folder or a URL prefix holding
-the same file names; ``file://`` URLs work):
+the same file names; ``file://`` URLs work). Each benchmark declares its folders, their file
+groups and these sources itself (``Benchmark.data_folders``: ``workers/envs/<bench>/data_folders.py``);
+this command works on whatever the registered benchmarks declare:
 
 * Robotouille: the archive of the upstream repository at the pinned commit,
   ``https://github.com/portal-cornell/robotouille/archive/<commit>.tar.gz``; only the data paths
@@ -95,6 +97,7 @@ from typing import IO, Any, NoReturn, TextIO
 
 from pipeline.errors import one_line
 from workers.envs import data_paths
+from workers.envs.data_sources import DataFolder, Group, Source, is_url
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -102,19 +105,6 @@ EXIT_USAGE = 2
 
 MANIFEST_DIR = Path(__file__).resolve().parent / "manifests"
 MANIFEST_NAME = "MANIFEST.sha256"
-BENCHMARKS = ("robotouille", "alfworld", "alfworld-2.1.2")
-
-#: Robotouille: upstream repository and the commit the data folder was taken from
-ROBOTOUILLE_REPO_ARCHIVES = "https://github.com/portal-cornell/robotouille/archive"
-ROBOTOUILLE_COMMIT = "c8236a2e3afa75354475ade9147dc38a7e589944"
-#: ALFWorld release assets (the URLs of alfworld-download; 2.1.1 games: ALFWorld 0.3.x's, 2.1.2: 0.4.2's)
-ALFWORLD_RELEASES = "https://github.com/alfworld/alfworld/releases/download"
-ALFWORLD_JSON_URL = f"{ALFWORLD_RELEASES}/0.2.2/json_2.1.1_json.zip"
-ALFWORLD_PDDL_URL = f"{ALFWORLD_RELEASES}/0.2.2/json_2.1.1_pddl.zip"
-ALFWORLD_TW_PDDL_2_1_1_URL = f"{ALFWORLD_RELEASES}/0.2.2/json_2.1.1_tw-pddl.zip"
-ALFWORLD_TW_PDDL_2_1_2_URL = f"{ALFWORLD_RELEASES}/0.4.0/json_2.1.2_tw-pddl.zip"
-#: alfworld 0.3.5's package data: the PDDL domain and grammar in 2.1.1 wording (the manifest's logic/)
-ALFWORLD_LOGIC_BASE = "https://raw.githubusercontent.com/alfworld/alfworld/0.3.5/alfworld/data"
 
 _CHUNK = 1 << 20
 _TIMEOUT_S = 60
@@ -131,145 +121,24 @@ class DataError(Exception):
 
 
 # ---------------------------------------------------------------------------------------------
-# what each benchmark folder holds
+# what each benchmark folder holds: declared by the benchmarks (Benchmark.data_folders)
 
 
-@dataclass(frozen=True)
-class Group:
-    """Files of a benchmark folder sharing a path prefix and a story (where they come from)."""
+def folders() -> dict[str, DataFolder]:
+    """Every data folder the registered benchmarks declare, by name (``robotouille``,
+    ``alfworld``, ``alfworld-2.1.2``), in registration order."""
+    from workers.envs.registry import data_folders
 
-    prefix: str  # "instances/", or a file name ("LICENSE")
-    fetchable: bool
-    required: bool = True
-    note: str = ""
-    #: made by ``Benchmark.generate`` after the download, not taken from a source
-    generated: bool = False
-
-    def holds(self, rel: str) -> bool:
-        return rel == self.prefix or (self.prefix.endswith("/") and rel.startswith(self.prefix))
+    return data_folders()
 
 
-@dataclass(frozen=True)
-class Source:
-    """One file to download: its name at a mirror, its default URL, and how its content maps
-    onto the folder (``archive``: zip or tar.gz members; else a single file saved as ``saves_as``)."""
-
-    name: str
-    url: str
-    kind: str  # "zip", "tar.gz" or "file"
-    saves_as: str = ""
-
-    def location(self, mirror: str | None) -> str:
-        if mirror is None:
-            return self.url
-        if _is_url(mirror):
-            return mirror.rstrip("/") + "/" + self.name
-        return str(Path(mirror).expanduser() / self.name)
+def manifest_file(bench: DataFolder) -> Path:
+    return MANIFEST_DIR / f"{bench.name}.sha256"
 
 
-@dataclass(frozen=True)
-class Benchmark:
-    name: str
-    title: str
-    groups: tuple[Group, ...]
-    sources: tuple[Source, ...]
-    #: member name in an archive -> path in the folder (None: not wanted)
-    member_path: Callable[[str], str | None]
-    after_fetch: str = ""  # printed after a successful fetch
-    #: writes the ``generated`` groups into a folder holding the downloaded files; returns their paths
-    generate: Callable[[Path], list[str]] | None = None
-
-    @property
-    def manifest_file(self) -> Path:
-        return MANIFEST_DIR / f"{self.name}.sha256"
-
-    @property
-    def generated_manifest_file(self) -> Path:
-        """sha256 of the files ``generate`` writes (they differ from the recorded ones)."""
-        return MANIFEST_DIR / f"{self.name}-generated.sha256"
-
-    def group_of(self, rel: str) -> Group:
-        for group in self.groups:
-            if group.holds(rel):
-                return group
-        return Group("", fetchable=False)
-
-
-def _strip_top_folder(member: str) -> str | None:
-    """``robotouille-<commit>/domain/x.json`` -> ``domain/x.json`` (GitHub archives' layout)."""
-    _top, sep, rest = member.partition("/")
-    return rest if sep and rest else None
-
-
-_VALID_UNSEEN = re.compile(r"(?:^|/)(valid_unseen/.+)$")
-
-
-def _alfworld_member(member: str) -> str | None:
-    """Any ``.../valid_unseen/<game>/<trial>/<file>`` member -> ``json_2.1.1/valid_unseen/...``."""
-    match = _VALID_UNSEEN.search(member)
-    return f"json_2.1.1/{match.group(1)}" if match else None
-
-
-_INSTANCES_NOTE = (
-    "not stored upstream: `recap data fetch robotouille` generates them (recap-eval's "
-    "re-implementation of the real engine's seeded generator), or copy them from a complete "
-    "Robotouille data folder"
-)
-
-
-def _generate_robotouille(folder: Path) -> list[str]:
-    """instances/ and instances_train/ from the fetched problem files and domain."""
-    from workers.envs.robotouille.generator import write_instances
-
-    return write_instances(folder, folder)
-
-
-ROBOTOUILLE = Benchmark(
-    name="robotouille",
-    title="Robotouille",
-    groups=(
-        Group("LICENSE", fetchable=True),
-        Group("domain/", fetchable=True),
-        Group("environments/", fetchable=True),
-        Group("agents/", fetchable=True),
-        Group("conf/", fetchable=True),
-        Group("instances/", fetchable=True, note=_INSTANCES_NOTE, generated=True),
-        Group("instances_train/", fetchable=True, note=_INSTANCES_NOTE, generated=True),
-        Group("trajectories/", fetchable=False, required=False,
-              note="recorded on the real engine; only `recap env replay` and the tests read them"),
-    ),
-    sources=(Source(f"{ROBOTOUILLE_COMMIT}.tar.gz", f"{ROBOTOUILLE_REPO_ARCHIVES}/{ROBOTOUILLE_COMMIT}.tar.gz", "tar.gz"),),
-    member_path=_strip_top_folder,
-    after_fetch=(
-        "instances/ and instances_train/ were generated here (recap-eval's re-implementation of the "
-        "real engine's seeded generator; they match the pinned digests of generated files)"
-    ),
-    generate=_generate_robotouille,
-)
-
-ALFWORLD = Benchmark(
-    name="alfworld",
-    title="ALFWorld (game files 2.1.1)",
-    groups=(Group("json_2.1.1/", fetchable=True), Group("logic/", fetchable=True)),
-    sources=(
-        Source("json_2.1.1_json.zip", ALFWORLD_JSON_URL, "zip"),
-        Source("json_2.1.1_pddl.zip", ALFWORLD_PDDL_URL, "zip"),
-        Source("json_2.1.1_tw-pddl.zip", ALFWORLD_TW_PDDL_2_1_1_URL, "zip"),
-        Source("alfred.pddl", f"{ALFWORLD_LOGIC_BASE}/alfred.pddl", "file", "logic/alfred.pddl"),
-        Source("alfred.twl2", f"{ALFWORLD_LOGIC_BASE}/alfred.twl2", "file", "logic/alfred.twl2"),
-    ),
-    member_path=_alfworld_member,
-)
-
-ALFWORLD_2_1_2 = Benchmark(
-    name="alfworld-2.1.2",
-    title="ALFWorld (game files 2.1.2)",
-    groups=(Group("json_2.1.1/", fetchable=True),),
-    sources=(Source("json_2.1.2_tw-pddl.zip", ALFWORLD_TW_PDDL_2_1_2_URL, "zip"),),
-    member_path=_alfworld_member,
-)
-
-_BY_NAME = {b.name: b for b in (ROBOTOUILLE, ALFWORLD, ALFWORLD_2_1_2)}
+def generated_manifest_file(bench: DataFolder) -> Path:
+    """sha256 of the files ``generate`` writes (they differ from the recorded ones)."""
+    return MANIFEST_DIR / f"{bench.name}-generated.sha256"
 
 
 def read_manifest(path: Path) -> dict[str, str]:
@@ -302,49 +171,11 @@ def sha256_file(path: Path) -> str:
 # where (list)
 
 
-def _location(bench: Benchmark) -> data_paths.DataLocation:
-    if bench is ROBOTOUILLE:
-        from workers.envs.robotouille.data import LOCATION
-
-        return LOCATION
-    from workers.envs.alfworld.games import LOCATION as ALF
-
-    if bench is ALFWORLD:
-        return ALF
-    from workers.envs.alfworld.games import DATA_ENV_2_1_2
-
-    return data_paths.DataLocation(name=bench.name, title=bench.title, env_var=DATA_ENV_2_1_2, marker=ALF.marker)
-
-
-def search(bench: Benchmark, data_dir: str | None) -> tuple[list[data_paths.Rung], data_paths.Rung | None]:
+def search(bench: DataFolder, data_dir: str | None) -> tuple[list[data_paths.Rung], data_paths.Rung | None]:
     """Every rung of the search for ``bench`` and the one whose folder is used (None: none)."""
-    if bench is not ALFWORLD_2_1_2:
-        rungs = data_paths.search(_location(bench), data_dir, stop_at_first=False)
-        return rungs, data_paths.chosen(rungs)
-    return _search_2_1_2(data_dir)
-
-
-def _search_2_1_2(data_dir: str | None) -> tuple[list[data_paths.Rung], data_paths.Rung | None]:
-    """The 2.1.2 rule (games.resolve_data_dir_2_1_2), rung by rung: option, variable, sibling."""
-    from workers.envs.alfworld.games import DATA_ENV_2_1_2, SIBLING_2_1_2, SPLIT_DIR
-
-    def rung(step: str, raw: str | None, explicit: bool, unset: str) -> data_paths.Rung:
-        if not raw:
-            return data_paths.Rung(step, None, explicit, unset)
-        path = Path(raw).expanduser()
-        ok = (path / SPLIT_DIR).is_dir()
-        bad = ("invalid: " if explicit else "") + ("absent" if not path.is_dir() else f"no {SPLIT_DIR.as_posix()}")
-        return data_paths.Rung(step, path, explicit, "found" if ok else bad)
-
-    rungs = [
-        rung("data_dir", data_dir, True, "not given"),
-        rung(f"${DATA_ENV_2_1_2}", os.environ.get(DATA_ENV_2_1_2), True, "not set"),
-    ]
-    primary = data_paths.chosen(search(ALFWORLD, None)[0])
-    if primary is None or primary.path is None:
-        rungs.append(data_paths.Rung("next to ALFWorld", None, False, "no ALFWorld folder"))
-    else:
-        rungs.append(rung("next to ALFWorld", str(primary.path.resolve().parent / SIBLING_2_1_2), False, ""))
+    if bench.search is not None:
+        return bench.search(data_dir)
+    rungs = data_paths.search(bench.location, data_dir, stop_at_first=False)
     return rungs, data_paths.chosen(rungs)
 
 
@@ -352,7 +183,7 @@ def _describe(rung: data_paths.Rung) -> str:
     return f"{rung.path} ({rung.step})"
 
 
-def cmd_list(benches: list[Benchmark], data_dir: str | None, out: TextIO) -> list[str]:
+def cmd_list(benches: list[DataFolder], data_dir: str | None, out: TextIO) -> list[str]:
     failures = []
     for bench in benches:
         rungs, used = search(bench, data_dir)
@@ -369,7 +200,7 @@ def cmd_list(benches: list[Benchmark], data_dir: str | None, out: TextIO) -> lis
     return failures
 
 
-def _not_found(bench: Benchmark, rungs: list[data_paths.Rung]) -> str:
+def _not_found(bench: DataFolder, rungs: list[data_paths.Rung]) -> str:
     bad = data_paths.first_explicit_error(rungs)
     if bad is not None:
         return f"{bad.path} (from {bad.step}) is not a {bench.title} folder: {bad.status.removeprefix('invalid: ')}"
@@ -382,7 +213,7 @@ def _not_found(bench: Benchmark, rungs: list[data_paths.Rung]) -> str:
 
 @dataclass
 class CheckResult:
-    bench: Benchmark
+    bench: DataFolder
     folder: Path
     source: str = ""  # the rung it was found on ("checkout", "$ROBOTOUILLE_DATA", ...)
     checked: int = 0
@@ -425,10 +256,10 @@ class CheckResult:
         return text + optional + ": FAILED"
 
 
-def check_folder(bench: Benchmark, folder: Path, only: Callable[[Group], bool] = lambda g: True) -> CheckResult:
+def check_folder(bench: DataFolder, folder: Path, only: Callable[[Group], bool] = lambda g: True) -> CheckResult:
     """``folder`` against the repository's manifest of ``bench`` (files of groups ``only`` keeps)."""
-    manifest = read_manifest(bench.manifest_file)
-    generated = read_manifest(bench.generated_manifest_file) if bench.generate is not None else {}
+    manifest = read_manifest(manifest_file(bench))
+    generated = read_manifest(generated_manifest_file(bench)) if bench.generate is not None else {}
     result = CheckResult(bench, folder)
     for rel, digest in manifest.items():
         group = bench.group_of(rel)
@@ -450,7 +281,7 @@ def check_folder(bench: Benchmark, folder: Path, only: Callable[[Group], bool] =
     return result
 
 
-def cmd_check(benches: list[Benchmark], data_dir: str | None, out: TextIO) -> list[str]:
+def cmd_check(benches: list[DataFolder], data_dir: str | None, out: TextIO) -> list[str]:
     failures = []
     for bench in benches:
         rungs, used = search(bench, data_dir)
@@ -476,13 +307,9 @@ def cmd_check(benches: list[Benchmark], data_dir: str | None, out: TextIO) -> li
 # fetch
 
 
-def _is_url(text: str) -> bool:
-    return bool(re.match(r"^[A-Za-z][A-Za-z0-9+.-]*://", text))
-
-
 def _local_path(location: str) -> Path | None:
     """The local file a location names (a path or a file:// URL), None for a remote URL."""
-    if not _is_url(location):
+    if not is_url(location):
         return Path(location)
     parsed = urllib.parse.urlparse(location)
     if parsed.scheme == "file":
@@ -566,10 +393,10 @@ def _save(opener: Callable[[], IO[bytes]], target: Path) -> str:
     return digest.hexdigest()
 
 
-def _stage(bench: Benchmark, mirror: str | None, stage: Path, out: TextIO) -> dict[str, str]:
+def _stage(bench: DataFolder, mirror: str | None, stage: Path, out: TextIO) -> dict[str, str]:
     """Fetch every fetchable manifest file of ``bench`` into ``stage/data``; verify each one.
     Returns the files written with their sha256."""
-    manifest = read_manifest(bench.manifest_file)
+    manifest = read_manifest(manifest_file(bench))
     wanted = {rel: d for rel, d in manifest.items()
               if bench.group_of(rel).fetchable and not bench.group_of(rel).generated}
     data, downloads = stage / "data", stage / "downloads"
@@ -612,13 +439,13 @@ def _stage(bench: Benchmark, mirror: str | None, stage: Path, out: TextIO) -> di
     return got
 
 
-def _generate(bench: Benchmark, generate: Callable[[Path], list[str]], data: Path, out: TextIO) -> dict[str, str]:
+def _generate(bench: DataFolder, generate: Callable[[Path], list[str]], data: Path, out: TextIO) -> dict[str, str]:
     """Run ``bench.generate`` on the verified download; every file it must write is checked
     against the pinned digests of generated files. Returns the files with their sha256."""
-    pinned = read_manifest(bench.generated_manifest_file)
-    expected = {rel for rel in read_manifest(bench.manifest_file) if bench.group_of(rel).generated}
+    pinned = read_manifest(generated_manifest_file(bench))
+    expected = {rel for rel in read_manifest(manifest_file(bench)) if bench.group_of(rel).generated}
     if set(pinned) != expected:
-        raise DataError(f"{bench.generated_manifest_file.name} does not list the files of the generated groups")
+        raise DataError(f"{generated_manifest_file(bench).name} does not list the files of the generated groups")
     print(f"  generating {', '.join(g.prefix for g in bench.groups if g.generated)}", file=out, flush=True)
     try:
         written = set(generate(data))
@@ -631,13 +458,13 @@ def _generate(bench: Benchmark, generate: Callable[[Path], list[str]], data: Pat
         got[rel] = sha256_file(data / rel)
         if got[rel] != pinned[rel]:
             raise DataError(
-                f"{rel} as generated here does not match {bench.generated_manifest_file.name} (sha256 "
+                f"{rel} as generated here does not match {generated_manifest_file(bench).name} (sha256 "
                 f"{got[rel][:12]}..., expected {pinned[rel][:12]}...): the problem files, the generator or the engine changed"
             )
     return got
 
 
-def fetch_one(bench: Benchmark, dest: Path, mirror: str | None, out: TextIO) -> None:
+def fetch_one(bench: DataFolder, dest: Path, mirror: str | None, out: TextIO) -> None:
     """Fetch ``bench`` into ``dest`` (must not exist, or be empty); DataError on any failure,
     leaving ``dest`` and its parents as they were."""
     dest = dest.expanduser().absolute()
@@ -679,24 +506,24 @@ def fetch_one(bench: Benchmark, dest: Path, mirror: str | None, out: TextIO) -> 
     _note_precedence(bench, dest, out)
 
 
-def _note_precedence(bench: Benchmark, dest: Path, out: TextIO) -> None:
+def _note_precedence(bench: DataFolder, dest: Path, out: TextIO) -> None:
     """Say so when the resolver will not pick the folder just fetched."""
     _rungs, used = search(bench, None)
     if used is not None and used.path is not None and used.path.resolve() == dest.resolve():
         return
-    env_var = _location(bench).env_var
+    env_var = bench.location.env_var
     where = f"{_describe(used)} is used instead" if used is not None else "it is not on the search path"
     print(f"{bench.name}: note: {where}; set {env_var}={dest} to use this folder", file=out)
 
 
-def default_dest(bench: Benchmark, dest: str | None, several: bool) -> Path:
+def default_dest(bench: DataFolder, dest: str | None, several: bool) -> Path:
     if dest is None:
         return data_paths.recap_cache_root() / bench.name
     root = Path(dest).expanduser()
     return root / bench.name if several else root
 
 
-def cmd_fetch(benches: list[Benchmark], dest: str | None, mirror: str | None, out: TextIO) -> list[str]:
+def cmd_fetch(benches: list[DataFolder], dest: str | None, mirror: str | None, out: TextIO) -> list[str]:
     check_mirror(mirror)
     failures = []
     for bench in benches:
@@ -751,7 +578,7 @@ def _parser(out: TextIO) -> _Parser:
                        "exit status: 0 all verified; 1 a check or fetch failed; 2 bad usage")
     sub = p.add_subparsers(dest="action", required=True, metavar="ACTION", help="list, check or fetch",
                            parser_class=partial(_Parser, out=out))  # type: ignore[call-overload]  # a class with its out bound
-    choices = (*BENCHMARKS, "all")
+    choices = (*folders(), "all")
     for name, text in (("list", "where each benchmark's folder is looked for, and which one is used"),
                        ("check", "verify each folder against the sha256 manifest")):
         sp = sub.add_parser(name, help=text, description=text, formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -775,7 +602,8 @@ def data_main(argv: list[str], stdout: TextIO, stderr: TextIO) -> int:
     """``recap data ...``: returns the exit status (0 ok, 1 check/fetch failed, 2 bad usage)."""
     try:
         args = _parser(stdout).parse_args(argv)
-        benches = list(_BY_NAME.values()) if args.bench == "all" else [_BY_NAME[args.bench]]
+        by_name = folders()
+        benches = list(by_name.values()) if args.bench == "all" else [by_name[args.bench]]
         if getattr(args, "data_dir", None) is not None and args.bench == "all":
             raise UsageError("--data-dir names one benchmark's folder: give BENCH too")
         if args.action == "list":

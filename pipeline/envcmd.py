@@ -129,10 +129,8 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
 def replay_main(path: str, out: TextIO) -> int:
     """``recap env replay FILE``: replay a saved Robotouille trajectory; exit 0 when it replays as recorded, 1
     when it does not."""
-    try:
-        from workers.envs.robotouille.replay import replay_file
-    except ModuleNotFoundError as exc:
-        raise PipelineError(f"trajectory replay is not available ({exc})") from None
+    from workers.envs.robotouille.replay import replay_file
+
     try:
         ok, message = replay_file(path)
     except (EnvError, OSError, ValueError) as exc:  # unreadable or malformed trajectory, missing data

@@ -19,15 +19,23 @@ from pipeline.spec import RaySpec
 from workers.log_setup import LEVEL_VAR
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
-#: forwarded from the driver's environment to every Ray worker when set
-FORWARDED_VARS = ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "RECAP_EVAL_DATA", LEVEL_VAR)
+
+
+def forwarded_vars() -> tuple[str, ...]:
+    """Forwarded from the driver's environment to every Ray worker when set: each registered
+    benchmark's data variables (its ``data_env_vars`` hook) and recap-eval's cache folder and the log level (:mod:`workers.log_setup`), so a
+    worker finds the data by the same rule as the driver (workers/envs/data_paths.py)."""
+    from workers.envs.data_paths import CACHE_ENV
+    from workers.envs.registry import data_env_vars
+
+    return (*data_env_vars(), CACHE_ENV, LEVEL_VAR)
 
 
 def runtime_env() -> dict[str, Any]:
     """The Ray ``runtime_env`` for every worker: litellm offline, no usage stats, the data and log-level
     variables forwarded, the project root on PYTHONPATH."""
     env_vars = {"LITELLM_LOCAL_MODEL_COST_MAP": "True", "RAY_USAGE_STATS_ENABLED": "0"}
-    for name in FORWARDED_VARS:
+    for name in forwarded_vars():
         if os.environ.get(name):
             env_vars[name] = os.environ[name]
     path = [str(PROJECT_ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]

@@ -22,11 +22,11 @@ import traceback
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+import recap.methods as methods
 from recap.agent import Agent
-from recap.config import ConfigError, ReCAPConfig, build_config
+from recap.config import ConfigError
 from recap.env import Environment
 from recap.llm import LLMClient, LLMRequest, LLMResponse
-from recap.recap_agent import ReCAPAgent
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import record_to_row
@@ -37,45 +37,21 @@ OFFLINE_PREFIX = "offline/"
 # --------------------------------------------------------------------------------------------
 # agents
 # --------------------------------------------------------------------------------------------
-def _methods_module() -> Any | None:
-    try:
-        import recap.methods as methods
-    except ModuleNotFoundError as exc:
-        if exc.name == "recap.methods":
-            return None
-        raise
-    return methods
-
-
-def known_methods() -> list[str]:
-    mod = _methods_module()
-    if mod is None:
-        return ["recap"]
-    return sorted(getattr(mod, "METHODS", {"recap": None}))
-
-
 def build_agent(method: str, *, profile: str | None = None, ablation: str | None = None,
                 settings: Mapping[str, Any] | None = None, benchmark: str | None = None) -> Agent:
-    """The agent for a method name + profile + ablation + settings.
+    """The agent for a method name + profile + ablation + settings (``recap.methods.make_agent``).
 
-    Uses ``recap.methods.make_agent`` (ReCAP and the baselines) when present; otherwise only
-    ReCAP is available. Unknown methods or settings raise :class:`recap.config.ConfigError`.
+    Unknown methods or settings raise :class:`recap.config.ConfigError` (a bad setting's
+    KeyError/TypeError/ValueError is translated, so callers report one error type).
     """
-    settings = dict(settings or {})
-    mod = _methods_module()
-    if mod is not None and hasattr(mod, "make_agent"):
-        methods = getattr(mod, "METHODS", None)
-        if methods is not None and method not in methods:
-            raise ConfigError(f"unknown method {method!r}; known: {', '.join(sorted(methods))}")
-        try:
-            return mod.make_agent(method, profile=profile, ablation=ablation, benchmark=benchmark, **settings)
-        except ConfigError:
-            raise
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ConfigError(str(exc).strip("'\"")) from None
-    if method != "recap":
-        raise ConfigError(f"unknown method {method!r}; known: recap (the baselines module is not installed)")
-    return ReCAPAgent(build_config(ReCAPConfig, profile, ablation, benchmark, **settings))
+    if method not in methods.METHODS:  # read at call time: methods may be registered later
+        raise ConfigError(f"unknown method {method!r}; known: {', '.join(sorted(methods.METHODS))}")
+    try:
+        return methods.make_agent(method, profile=profile, ablation=ablation, benchmark=benchmark, **dict(settings or {}))
+    except ConfigError:
+        raise
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ConfigError(str(exc).strip("'\"")) from None
 
 
 def env_options_for(unit: UnitWork, agent: Agent) -> dict[str, Any]:
@@ -84,9 +60,7 @@ def env_options_for(unit: UnitWork, agent: Agent) -> dict[str, Any]:
     options, which win."""
     from workers.envs.registry import get_benchmark
 
-    bench = get_benchmark(unit.benchmark)
-    hook = getattr(bench, "options_for_agent", None)
-    options = dict(hook(agent.style)) if hook is not None else {}
+    options = dict(get_benchmark(unit.benchmark).options_for_agent(agent.style))
     options.update({k: v for k, v in unit.env_options if v is not None})
     return options
 
@@ -208,9 +182,7 @@ def _resident_bytes() -> int:
 def agent_from_config(method: str, method_config: str) -> Agent:
     """The agent a unit's resolved settings describe (see :meth:`recap.config.AgentConfig.from_json`):
     the same config the driver hashed, field for field."""
-    from recap.methods import method_classes
-
-    agent_cls, config_cls = method_classes(method)
+    agent_cls, config_cls = methods.method_classes(method)
     config = config_cls.from_json(method_config)
     if config.to_json() != method_config:
         raise ConfigError(f"{method}: resolved settings do not round-trip (the unit was planned by another version)")

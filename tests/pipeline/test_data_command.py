@@ -22,11 +22,14 @@ from pathlib import Path
 import pytest
 
 from pipeline import data as datacmd
-from pipeline.data import ROBOTOUILLE_COMMIT, data_main
+from pipeline.data import data_main
 from recap.env import DataNotFoundError
 from workers.envs import data_paths
 from workers.envs.alfworld import games as alf_games
+from workers.envs.alfworld import data_folders as alf_folders
 from workers.envs.robotouille import data as rob_data
+from workers.envs.robotouille.data_folders import COMMIT as ROBOTOUILLE_COMMIT
+from workers.envs.robotouille.data_folders import FOLDER as ROB_FOLDER
 
 REPO = Path(__file__).resolve().parents[2]
 SHARED = REPO.parent / "shared" / "data"
@@ -420,10 +423,10 @@ def test_default_alfworld_urls_match_the_installed_downloader():
     assert script.is_file(), f"alfworld's downloader is not installed beside {sys.executable}"
     text = script.read_text()
     constants = dict(re.findall(r'^(\w+_URL) = "([^"]+)"', text, re.MULTILINE))
-    assert constants["JSON_FILES_URL"] == datacmd.ALFWORLD_JSON_URL
-    assert constants["PDDL_FILES_URL"] == datacmd.ALFWORLD_PDDL_URL
-    assert constants["TW_PDDL_FILES_URL"] == datacmd.ALFWORLD_TW_PDDL_2_1_2_URL
-    assert datacmd.ALFWORLD_TW_PDDL_2_1_1_URL == datacmd.ALFWORLD_PDDL_URL.replace("_pddl.zip", "_tw-pddl.zip")
+    assert constants["JSON_FILES_URL"] == alf_folders.JSON_URL
+    assert constants["PDDL_FILES_URL"] == alf_folders.PDDL_URL
+    assert constants["TW_PDDL_FILES_URL"] == alf_folders.TW_PDDL_2_1_2_URL
+    assert alf_folders.TW_PDDL_2_1_1_URL == alf_folders.PDDL_URL.replace("_pddl.zip", "_tw-pddl.zip")
 
 
 @needs_data
@@ -433,12 +436,12 @@ def test_repository_manifests_match_the_data_folders_own():
             folder / "MANIFEST.sha256")
     rob = datacmd.read_manifest(datacmd.MANIFEST_DIR / "robotouille.sha256")
     assert len(rob) == 300 and "README.md" not in rob
-    assert {datacmd.ROBOTOUILLE.group_of(rel).prefix for rel in rob} == {
-        g.prefix for g in datacmd.ROBOTOUILLE.groups}
+    assert {ROB_FOLDER.group_of(rel).prefix for rel in rob} == {
+        g.prefix for g in ROB_FOLDER.groups}
     # the digests of generated files cover exactly the generated groups, and every one differs
     # from the recorded file's (those hold the real engine's build times)
-    made = datacmd.read_manifest(datacmd.ROBOTOUILLE.generated_manifest_file)
-    assert set(made) == {rel for rel in rob if datacmd.ROBOTOUILLE.group_of(rel).generated}
+    made = datacmd.read_manifest(datacmd.generated_manifest_file(ROB_FOLDER))
+    assert set(made) == {rel for rel in rob if ROB_FOLDER.group_of(rel).generated}
     assert len(made) == 206 and all(made[rel] != rob[rel] for rel in made)
 
 

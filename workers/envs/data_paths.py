@@ -36,8 +36,6 @@ from recap.env import DataNotFoundError
 CHECKOUT_DATA_ROOT = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 #: moves recap-eval's cache (shared with the run-folder mirror, pipeline/mirror.py)
 CACHE_ENV = "RECAP_EVAL_CACHE"
-#: ALFWorld's own default download folder (alfworld/info.py: os.path.expanduser("~/.cache/alfworld"))
-ALFWORLD_UPSTREAM_CACHE = "~/.cache/alfworld"
 
 
 def recap_cache_root() -> Path:

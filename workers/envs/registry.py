@@ -1,52 +1,148 @@
 """One registry of benchmarks, so the CLI and the pipeline address any instance by id.
 
 An instance id is ``<benchmark>/<rest>``, e.g. ``robotouille/asynchronous/5_potato_soup@42`` or
-``alfworld/pick_heat_then_place_in_recep/...``. Each benchmark package exposes a ``BENCHMARK``
-object with ``list_instances(selector)`` and ``make(instance_id, **options)``; the registry
-imports it only when first used, so a missing optional dependency (alfworld) affects only
-that benchmark.
+``alfworld/pick_heat_then_place_in_recep/...``. A benchmark is a :class:`Benchmark`: it lists
+and makes its instances, and answers the few questions the pipeline has about it through
+declared hooks with defaults (which options an agent style runs with, where its data lives),
+so no caller switches on a benchmark's name or probes for optional attributes.
+
+Benchmarks are registered by name with :func:`register_benchmark`, given a module path (the
+module exposes ``BENCHMARK``), a :class:`Benchmark` or a zero-argument factory returning one.
+Nothing is imported or built until the benchmark is first used, so a missing optional
+dependency (alfworld's ``textworld``) affects only that benchmark. The built-in benchmarks
+are registered at the end of this module, in one place; Ray workers import this module too,
+so a benchmark that runs on a cluster is registered there (a registration made at run time in
+the driver process exists only in that process: the in-process executor and tests).
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping
-from typing import Any, Protocol
+import threading
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from typing import Any
 
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
+from workers.envs.data_sources import DataFolder
 
-__all__ = ["DataNotFoundError", "UnknownInstanceError", "Benchmark", "get_benchmark", "make_env", "split_id", "benchmark_names"]
+__all__ = [
+    "DataNotFoundError",
+    "UnknownInstanceError",
+    "Benchmark",
+    "register_benchmark",
+    "unregister_benchmark",
+    "get_benchmark",
+    "make_env",
+    "split_id",
+    "benchmark_names",
+    "data_folder",
+    "data_folders",
+    "data_env_vars",
+]
 
 
-class Benchmark(Protocol):
-    name: str
+class Benchmark(ABC):
+    """What the pipeline needs from a benchmark: two duties and hooks with defaults.
 
+    Subclasses set ``name`` and implement :meth:`list_instances` and :meth:`make`; the hooks
+    below return "nothing special" unless overridden, so a new benchmark only writes the ones
+    it has something to say about.
+    """
+
+    name: str = ""
+
+    @abstractmethod
     def list_instances(self, selector: str | None = None) -> list[str]:
         """Instance ids in a fixed order; ``selector`` narrows (split, task, task type...)."""
 
+    @abstractmethod
     def make(self, instance_id: str, **options: Any) -> Environment:
         """A fresh environment for ``instance_id`` (options: step_multiplier, data_dir...)."""
 
+    # -- hooks ----------------------------------------------------------------------------------
+    def options_for_agent(self, style: str) -> dict[str, Any]:
+        """``make()`` options an agent ``style`` (``recap``, ``react``...) runs with unless the
+        sweep sets them (ALFWorld: whether observations list the valid actions). Default: none."""
+        return {}
 
-_MODULES: Mapping[str, str] = {
-    "blocksworld": "recap.blocksworld",
-    "robotouille": "workers.envs.robotouille",
-    "alfworld": "workers.envs.alfworld",
-}
+    def data_folders(self) -> Mapping[str, DataFolder]:
+        """The data folders this benchmark reads, by folder name: how each is found, what it
+        holds and where its files come from (``recap data list/check/fetch`` work on these).
+        Default: none (generated instances, like blocksworld)."""
+        return {}
+
+    def data_env_vars(self) -> tuple[str, ...]:
+        """Environment variables that point at this benchmark's data; the driver forwards them
+        to Ray workers. Default: the variables of :meth:`data_folders`."""
+        return tuple(folder.location.env_var for folder in self.data_folders().values())
+
+
+#: what register_benchmark accepts: "package.module" (exposing BENCHMARK), a Benchmark, or a factory
+BenchmarkSource = str | Benchmark | Callable[[], Benchmark]
+
+_lock = threading.Lock()
+_SOURCES: dict[str, BenchmarkSource] = {}
+_RESOLVED: dict[str, Benchmark] = {}
+
+
+def register_benchmark(name: str, source: BenchmarkSource) -> None:
+    """Make ``name`` addressable (``name/...`` instance ids). ``source`` is resolved on first
+    use. A name is registered once; :func:`unregister_benchmark` first to replace it."""
+    if not name or "/" in name:
+        raise ValueError(f"benchmark name {name!r} must be non-empty and contain no '/'")
+    if not isinstance(source, (str, Benchmark)) and not callable(source):
+        raise TypeError(f"benchmark {name!r}: register a module path, a Benchmark or a factory, not {source!r}")
+    with _lock:
+        if name in _SOURCES:
+            raise ValueError(f"benchmark {name!r} is already registered")
+        _SOURCES[name] = source
+
+
+def unregister_benchmark(name: str) -> None:
+    """Forget ``name`` (tests register toy benchmarks and remove them again)."""
+    with _lock:
+        if name not in _SOURCES:
+            raise KeyError(name)
+        del _SOURCES[name]
+        _RESOLVED.pop(name, None)
 
 
 def benchmark_names() -> list[str]:
-    return list(_MODULES)
+    """Registered names, in registration order (built-ins first)."""
+    return list(_SOURCES)
+
+
+def _resolve(name: str, source: BenchmarkSource) -> Benchmark:
+    if isinstance(source, Benchmark):
+        bench = source
+    elif isinstance(source, str):
+        bench = importlib.import_module(source).BENCHMARK
+    else:
+        bench = source()
+    if not isinstance(bench, Benchmark):
+        raise TypeError(f"benchmark {name!r} resolved to {bench!r}, which is not a workers.envs.registry.Benchmark")
+    if bench.name != name:
+        raise ValueError(f"benchmark registered as {name!r} calls itself {bench.name!r}")
+    return bench
 
 
 def get_benchmark(name: str) -> Benchmark:
+    """The benchmark registered as ``name`` (imported/built on first use)."""
+    found = _RESOLVED.get(name)
+    if found is not None:
+        return found
     try:
-        module = _MODULES[name]
+        source = _SOURCES[name]
     except KeyError:
         raise UnknownInstanceError(
-            f"unknown benchmark {name!r}; known: {', '.join(_MODULES)}"
+            f"unknown benchmark {name!r}; known: {', '.join(_SOURCES)}"
         ) from None
-    return importlib.import_module(module).BENCHMARK
+    bench = _resolve(name, source)
+    with _lock:
+        if _SOURCES.get(name) is source:  # not unregistered meanwhile
+            bench = _RESOLVED.setdefault(name, bench)
+    return bench
 
 
 def split_id(instance_id: str) -> tuple[str, str]:
@@ -54,7 +150,7 @@ def split_id(instance_id: str) -> tuple[str, str]:
     if not sep or not rest:
         raise UnknownInstanceError(
             f"instance id {instance_id!r} must look like <benchmark>/<instance>, "
-            f"benchmarks: {', '.join(_MODULES)}"
+            f"benchmarks: {', '.join(_SOURCES)}"
         )
     return bench, rest
 
@@ -62,3 +158,44 @@ def split_id(instance_id: str) -> tuple[str, str]:
 def make_env(instance_id: str, **options: Any) -> Environment:
     bench, _ = split_id(instance_id)
     return get_benchmark(bench).make(instance_id, **options)
+
+
+def data_folders() -> dict[str, DataFolder]:
+    """Every registered benchmark's data folders by name, in registration order. Imports the
+    benchmarks; one that cannot be imported here declares nothing."""
+    out: dict[str, DataFolder] = {}
+    for name in benchmark_names():
+        try:
+            folders = get_benchmark(name).data_folders()
+        except ImportError:
+            continue
+        for key, folder in folders.items():
+            out.setdefault(key, folder)
+    return out
+
+
+def data_folder(name: str) -> DataFolder:
+    """The data folder ``name`` (``robotouille``, ``alfworld-2.1.2``...) of whichever registered
+    benchmark declares it."""
+    try:
+        return data_folders()[name]
+    except KeyError:
+        raise KeyError(f"no registered benchmark reads a data folder {name!r}") from None
+
+
+def data_env_vars() -> tuple[str, ...]:
+    """Every registered benchmark's data variables, in registration order, without repeats
+    (a benchmark that cannot be imported here contributes none)."""
+    out: list[str] = []
+    for name in benchmark_names():
+        try:
+            out.extend(get_benchmark(name).data_env_vars())
+        except ImportError:
+            continue
+    return tuple(dict.fromkeys(out))
+
+
+# -- the built-in benchmarks: the one place they are named ----------------------------------------
+register_benchmark("blocksworld", "workers.envs.blocksworld")
+register_benchmark("robotouille", "workers.envs.robotouille")
+register_benchmark("alfworld", "workers.envs.alfworld")

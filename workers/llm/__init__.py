@@ -1,7 +1,8 @@
 """Everything about talking to one model provider, without Ray.
 
-- :mod:`workers.llm.litellm_setup`  imports litellm offline and quiet, registers the ``offline/``
-  test-double provider (every call, real or fake, takes litellm's path).
+- :mod:`workers.llm.litellm_import` imports litellm offline and quiet (readers of its types use it).
+- :mod:`workers.llm.litellm_setup`  that import plus the ``offline/`` test-double provider
+  registered (every call, real or fake, takes litellm's path).
 - :mod:`workers.llm.providers`      :class:`DeploymentConfig` (model + base URL + key env name +
   limits + generation params) and the keyword arguments one litellm call gets.
 - :mod:`workers.llm.calling`        one attempt through ``litellm.acompletion``/``completion``

@@ -15,12 +15,10 @@ from typing import Any
 
 from workers.llm.errors import install_log_scrubber
 from workers.llm.litellm_setup import get_litellm
+from workers.llm.offline.wire import OFFLINE_METADATA_KEY
 from workers.llm.providers import DeploymentConfig
 
 install_log_scrubber()  # the HTTP clients log request URLs: never with a base URL's credentials
-
-#: litellm metadata key carrying hints to the offline test doubles (never sent to providers)
-OFFLINE_METADATA_KEY = "recap_offline"
 
 
 @dataclass(frozen=True)

@@ -153,9 +153,9 @@ _UNREADABLE_REPLY_MARKERS = ("Invalid response object", "convert_to_model_respon
 
 def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classified:
     """The error class of an exception raised by one litellm call."""
-    from workers.llm.litellm_setup import get_litellm
+    from workers.llm.litellm_import import import_litellm
 
-    litellm = get_litellm()
+    litellm = import_litellm()
     unreadable = False
     message = scrub(f"{type(exc).__name__}: {exc}", secrets)[:MAX_MESSAGE_CHARS]
     status = getattr(exc, "status_code", None)

@@ -1,44 +1,33 @@
-"""Import litellm once per process: offline, quiet, with the ``offline/`` provider registered.
+"""litellm ready for calls: imported offline and quiet, with the ``offline/`` provider registered.
 
-Why a module for this: litellm fetches its model cost map from the internet on import (and
-retries for seconds without network) unless ``LITELLM_LOCAL_MODEL_COST_MAP`` is set first, and
-it prints help banners on errors. Every process that makes model calls (driver, Ray actors)
-imports litellm through :func:`get_litellm` so those settings are never forgotten, and so the
-test doubles are registered as a litellm custom provider before the first call.
+Why a module for this: every process that makes model calls (driver, Ray actors) gets litellm
+through :func:`get_litellm` so the test doubles are registered as a litellm custom provider
+before the first call. The import itself (offline cost map, quiet logging) is
+:mod:`workers.llm.litellm_import`; this module only adds the registration, so the offline
+provider can use the token counters (which read litellm too) without an import cycle.
 """
 
 from __future__ import annotations
 
-import logging
-import os
 import threading
 from typing import Any
 
-os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
+from workers.llm.litellm_import import import_litellm
 
 _lock = threading.Lock()
-_litellm: Any = None
+_ready: Any = None
 
 
 def get_litellm() -> Any:
-    """The configured litellm module (imported on first use)."""
-    global _litellm
-    if _litellm is not None:
-        return _litellm
+    """The configured litellm module with the offline provider registered (on first use)."""
+    global _ready
+    if _ready is not None:
+        return _ready
     with _lock:
-        if _litellm is None:
-            import litellm
-            # importing this module points TIKTOKEN_CACHE_DIR at litellm's bundled encodings
-            import litellm.litellm_core_utils.default_encoding  # noqa: F401
-
-            litellm.suppress_debug_info = True
-            litellm.telemetry = False
-            # never try to download a Hugging Face tokenizer (no network at run time)
-            litellm.disable_hf_tokenizer_download = True
-            logging.getLogger("LiteLLM").setLevel(logging.ERROR)
-
+        if _ready is None:
+            litellm = import_litellm()
             from workers.llm.offline.provider import register_offline_provider
 
             register_offline_provider(litellm)
-            _litellm = litellm
-    return _litellm
+            _ready = litellm
+    return _ready

@@ -75,9 +75,9 @@ def _bundled_encoding_available(name: str) -> bool:
 @lru_cache(maxsize=64)
 def _encoding_for(model: str) -> Any:
     """The tiktoken encoding of an OpenAI model name, or None (not OpenAI / not bundled)."""
-    from workers.llm.litellm_setup import get_litellm
+    from workers.llm.litellm_import import import_litellm
 
-    get_litellm()  # sets TIKTOKEN_CACHE_DIR to the bundled encodings
+    import_litellm()  # sets TIKTOKEN_CACHE_DIR to the bundled encodings
     base = model
     for prefix in _OPENAI_PREFIXES:
         if base.startswith(prefix):

@@ -26,9 +26,11 @@ Options of :meth:`AlfworldBenchmark.make`:
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from typing import Any
 
 from recap.env import Environment
+from workers.envs.alfworld.data_folders import FOLDER, FOLDER_2_1_2
 from workers.envs.alfworld.game_env import AlfworldEnvironment
 from workers.envs.alfworld.games import (
     BENCHMARK_NAME,
@@ -41,7 +43,8 @@ from workers.envs.alfworld.games import (
 from workers.envs.alfworld.observation import check_show_valid_actions
 from workers.envs.alfworld.task_types import SHORT_NAMES, TASK_TYPES
 from workers.envs.alfworld.wording import DEFAULT_VERSION, check_version
-from workers.envs.registry import DataNotFoundError, UnknownInstanceError
+from workers.envs.data_sources import DataFolder
+from workers.envs.registry import Benchmark, DataNotFoundError, UnknownInstanceError
 
 DEFAULT_MAX_STEPS = 50
 #: the make() option that appends the valid actions to every observation (True / False / None)
@@ -65,7 +68,7 @@ def show_valid_actions_for(style: str) -> bool:
 _ALL = ("all", "eval_out_of_distribution", "valid_unseen")
 
 
-class AlfworldBenchmark:
+class AlfworldBenchmark(Benchmark):
     name = BENCHMARK_NAME
 
     def __init__(self, data_dir: str | os.PathLike[str] | None = None):
@@ -74,6 +77,10 @@ class AlfworldBenchmark:
     def options_for_agent(self, style: str) -> dict[str, Any]:
         """make() options an agent style runs with unless a sweep sets them (the pipeline asks)."""
         return {SHOW_VALID_ACTIONS: show_valid_actions_for(style)}
+
+    def data_folders(self) -> Mapping[str, DataFolder]:
+        """The primary (2.1.1) folder and the optional 2.1.2 one (:mod:`.data_folders`)."""
+        return {FOLDER.name: FOLDER, FOLDER_2_1_2.name: FOLDER_2_1_2}
 
     # -- listing --------------------------------------------------------------------------------
     def games(self, selector: str | None = None, *, data_dir: Any = None) -> list[Game]:

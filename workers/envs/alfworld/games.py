@@ -31,6 +31,8 @@ SPLIT_DIR = Path("json_2.1.1") / "valid_unseen"
 GAME_FILE = "game.tw-pddl"
 TRAJ_FILE = "traj_data.json"
 BENCHMARK_NAME = "alfworld"
+#: ALFWorld's own default download folder (alfworld/info.py: os.path.expanduser("~/.cache/alfworld"))
+UPSTREAM_CACHE = "~/.cache/alfworld"
 
 
 @dataclass(frozen=True)
@@ -115,7 +117,7 @@ LOCATION = data_paths.DataLocation(
     title="ALFWorld",
     env_var=DATA_ENV,
     marker=SPLIT_DIR.as_posix(),
-    upstream_cache=data_paths.ALFWORLD_UPSTREAM_CACHE,
+    upstream_cache=UPSTREAM_CACHE,
     probe=_probe_2_1_1,
 )
 

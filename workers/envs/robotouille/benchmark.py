@@ -8,12 +8,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from recap.env import Demonstration, Environment
+from workers.envs.data_sources import DataFolder
+from workers.envs.registry import Benchmark
 
 from . import catalog
+from .data_folders import FOLDER
 from .data import DataFileError, instance_path, read_json, require, resolve_data_dir, train_instance_path
 from .demo import DEMO_SEED, DEMO_SPLIT, DEMO_TASK, make_demonstration
 from .domain import load_domain
@@ -24,8 +28,12 @@ ENGINES = ("ours", "real")
 DEMO_MAX_STEPS = 100
 
 
-class RobotouilleBenchmark:
+class RobotouilleBenchmark(Benchmark):
     name = catalog.BENCHMARK_NAME
+
+    def data_folders(self) -> Mapping[str, DataFolder]:
+        """The data folder (:mod:`.data_folders`): found by the shared rule, fetched from upstream."""
+        return {FOLDER.name: FOLDER}
 
     def list_instances(self, selector: str | None = None) -> list[str]:
         return [ref.instance_id for ref in catalog.select(selector)]

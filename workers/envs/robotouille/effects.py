@@ -63,12 +63,27 @@ The other kinds under the same reading:
 from __future__ import annotations
 
 import re
-from typing import TYPE_CHECKING
+from collections.abc import Iterable
+from typing import Protocol
 
-from .domain import EffectSpec
+from .domain import EffectSpec, Literal
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .state import State
+
+class EffectTarget(Protocol):
+    """What an effect reads and changes on the engine state (``state.State`` is one).
+
+    Declared here rather than importing ``State``: the state module imports this one to
+    register effects, so naming the few methods an effect uses keeps the two modules out of
+    an import cycle.
+    """
+
+    def holds(self, lit: Literal, binding: dict[str, str]) -> bool: ...
+
+    def apply_literals(self, literals: Iterable[Literal], binding: dict[str, str], negate: bool = False) -> None: ...
+
+    def create_object(self, name: str, obj_type: str) -> str: ...
+
+    def delete_object(self, name: str) -> None: ...
 
 _TRAILING_DIGITS = re.compile(r"\d+$")
 
@@ -130,7 +145,7 @@ class ActiveEffect:
         new.nested = [n.copy() for n in self.nested]
         return new
 
-    def update(self, state: "State", active: bool) -> None:
+    def update(self, state: EffectTarget, active: bool) -> None:
         if self.completed:
             return
         kind = self.spec.kind
@@ -177,7 +192,7 @@ class ActiveEffect:
         # immediate
         self._fire(state, self.binding, active)
 
-    def _fire(self, state: "State", binding: dict[str, str], active: bool) -> None:
+    def _fire(self, state: EffectTarget, binding: dict[str, str], active: bool) -> None:
         state.apply_literals(self.spec.fx, binding)
         for nested in self.nested:
             nested.update(state, active)

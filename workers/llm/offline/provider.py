@@ -12,11 +12,11 @@ import json
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from workers.llm.calling import OFFLINE_METADATA_KEY
 from workers.llm.offline.expert import expert_reply
 from workers.llm.offline.knobs import MALFORMED_JSON, Knobs, OfflineOptionsError, draw
 from workers.llm.offline.random_model import random_reply
 from workers.llm.offline.replay import ReplayError, replay_index
+from workers.llm.offline.wire import OFFLINE_METADATA_KEY
 from workers.llm.tokens import estimate_prompt_tokens, estimate_text_tokens
 
 PROVIDER = "offline"

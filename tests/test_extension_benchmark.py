@@ -1,0 +1,247 @@
+"""A new benchmark is a package of its own plus one registration: proved with a toy one.
+
+The corridor below (rooms 0..N in a row; ``walk forward`` / ``walk back``; the goal is the last
+room) is defined in this file only. It is registered with
+:func:`workers.envs.registry.register_benchmark` and played through the episode worker
+(:meth:`workers.episode_worker.EpisodeRunner.run_unit`) by an existing method (ReAct) against
+the offline expert model, which follows the environment's ``expert_plan()``. Nothing in the
+repository names it, and running it writes nothing into the repository.
+
+A real new benchmark ``<name>`` touches:
+
+* ``workers/envs/<name>/`` - its own package: the :class:`recap.env.Environment` (reset, step,
+  rules, demonstration, expert_plan for the offline expert), a ``benchmark.py`` with a
+  :class:`workers.envs.registry.Benchmark` subclass exposed as ``BENCHMARK`` (``list_instances``,
+  ``make``, and only the hooks it needs: ``options_for_agent`` for per-method ``make()``
+  options, ``data_folders`` when it reads a data folder: how it is found, its file groups and
+  download sources, so ``recap data list/check/fetch`` and the Ray workers' environment
+  follow), and its demonstration and rules texts;
+* ``workers/envs/registry.py`` - one ``register_benchmark("<name>", "workers.envs.<name>")``
+  line among the built-ins (Ray workers import the registry, not the test's registration);
+* ``tests/<name>/`` - its tests;
+* only if it has downloadable data: its sha256 manifest ``pipeline/manifests/<folder>.sha256``
+  (``recap data check``/``fetch`` verify against it);
+* only if reports should split its results by something other than what the environment
+  reports as ``split``/``task``: ``schemas/labels.py`` ``place_of``.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from recap.env import Demonstration, Environment, InvalidActionError, Reset, Step
+from schemas.outcomes import EnvFacts, EpisodeResult, UnitWork
+from workers.envs import registry
+from workers.envs.registry import Benchmark, UnknownInstanceError, register_benchmark, unregister_benchmark
+
+REPO = Path(__file__).resolve().parents[1]
+NAME = "corridor"
+
+
+class Corridor(Environment):
+    """Rooms 0..length in a row; the agent starts in room 0 and must reach the last room."""
+
+    benchmark = NAME
+    split = "straight"
+
+    def __init__(self, length: int, step_multiplier: float) -> None:
+        self.length = length
+        self.instance_id = f"{NAME}/{length}"
+        self.task = f"length {length}"
+        self.optimal_steps = length
+        self.max_steps = math.ceil(length * step_multiplier)
+        self.room = 0
+        self._steps_taken = 0
+
+    def _valid(self) -> tuple[str, ...]:
+        return ("walk forward", "walk back") if self.room > 0 else ("walk forward",)
+
+    def _observation(self) -> str:
+        return f"You are in room {self.room} of rooms 0 to {self.length}."
+
+    def reset(self) -> Reset:
+        self.room, self._steps_taken = 0, 0
+        return Reset(self._observation(), self._valid(), f"reach room {self.length}")
+
+    def step(self, action: str) -> Step:
+        if action not in self._valid():
+            raise InvalidActionError(action)
+        self.room += 1 if action == "walk forward" else -1
+        self._steps_taken += 1
+        done = self.room == self.length
+        return Step(self._observation(), self._valid(), done, done)
+
+    def rules(self) -> str:
+        return "Rooms are in a row. 'walk forward' enters the next room; 'walk back' returns to the previous one."
+
+    def demonstration(self) -> Demonstration | None:
+        return None
+
+    def expert_plan(self) -> list[str]:
+        return ["walk forward"] * (self.length - self.room)
+
+
+class CorridorBenchmark(Benchmark):
+    name = NAME
+
+    def list_instances(self, selector: str | None = None) -> list[str]:
+        return [f"{NAME}/{n}" for n in (2, 3)]
+
+    def make(self, instance_id: str, *, step_multiplier: float = 4.0, **options: object) -> Environment:
+        if instance_id not in self.list_instances() or options:
+            raise UnknownInstanceError(f"unknown corridor {instance_id!r} or options {sorted(options)}")
+        return Corridor(int(instance_id.split("/")[1]), step_multiplier)
+
+
+class ExpertFactory:
+    """The worker's client factory, in-process: every model label is the offline expert."""
+
+    writes_llm_calls = False
+
+    def client(self, model: str):
+        from workers.llm.direct import LiteLLMClient
+        from workers.llm.providers import DeploymentConfig
+
+        return LiteLLMClient(DeploymentConfig(model="offline/expert"))
+
+
+@pytest.fixture
+def corridor():
+    register_benchmark(NAME, CorridorBenchmark)  # a factory: built on first use
+    try:
+        yield
+    finally:
+        unregister_benchmark(NAME)
+
+
+def _git_status() -> str | None:
+    try:
+        done = subprocess.run(["git", "status", "--porcelain", "--untracked-files=all"], cwd=REPO,
+                              capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return done.stdout if done.returncode == 0 else None
+
+
+TASK_PROMPT = (
+    "You are an agent that reaches a goal in an environment one action at a time. At every turn you think "
+    "about the latest observation, then choose exactly one action; I carry it out and show you what happened. "
+    "An action that is not one of the valid actions is not carried out, and I tell you so.\n\n"
+    "Answer every time with one JSON object and nothing else:\n"
+    '{"think": "<your reasoning>", "action": "<one valid action>"}\n'
+    '- "think": your reasoning before acting: what the goal still needs, what the latest observation and your '
+    "earlier steps tell you, and why the action you choose moves you towards the goal. If your last action was "
+    "rejected, first work out why it was not valid.\n"
+    '- "action": the single next action, written exactly as it appears among the valid actions.\n\n'
+    "Rules of the environment:\n"
+    "Rooms are in a row. 'walk forward' enters the next room; 'walk back' returns to the previous one.\n\n"
+    "Initial observation:\nYou are in room 0 of rooms 0 to 3.\n\n"
+    "Your goal:\nreach room 3\n\n"
+    "Reply with your first action."
+)
+
+
+def test_a_benchmark_defined_in_a_test_plays_an_episode_through_the_worker(corridor):
+    from recap.methods import make_agent
+    from workers.episode_worker import EpisodeRunner
+
+    before = _git_status()
+    config = make_agent("react", benchmark=NAME).config.to_json()
+    unit = UnitWork("u1", f"{NAME}/3", "react", config, "expert", "offline/expert", seed=0, step_multiplier=2.0)
+    batches: list[dict[str, list[dict]]] = []
+    runner = EpisodeRunner("w1", "run1", ExpertFactory(), send=batches.append, wait=lambda ref: None)
+
+    out = runner.run_unit(unit, 1)
+
+    assert out.crash is None
+    assert out.env == EnvFacts(benchmark=NAME, split="straight", task="length 3", optimal_steps=3, max_steps=6)
+    assert (out.episode_id, out.model, out.test_double) == ("u1-1", "offline/expert", True)
+    result = out.result
+    assert isinstance(result, EpisodeResult)
+    assert (result.end_reason, result.success, result.steps, result.llm_calls, result.invalid_actions,
+            result.json_repairs, result.error) == ("success", True, 3, 3, 0, 0, None)
+
+    rows: dict[str, list[dict]] = {}
+    for batch in batches:
+        for table, part in batch.items():
+            rows.setdefault(table, []).extend(part)
+    assert out.rows_sent == sum(len(v) for v in rows.values()) == 6 + 3 + 3
+    messages = [(m["seq"], m["role"], m["kind"], m["content"], m["pinned"]) for m in rows["messages"]]
+    assert messages == [
+        (0, "user", "task", TASK_PROMPT, True),
+        (1, "assistant", "reply", '{"think": "Expert plan: 3 action(s) left.", "action": "walk forward"}', False),
+        (2, "user", "observation", "Observation:\nYou are in room 1 of rooms 0 to 3.", False),
+        (3, "assistant", "reply", '{"think": "Expert plan: 2 action(s) left.", "action": "walk forward"}', False),
+        (4, "user", "observation", "Observation:\nYou are in room 2 of rooms 0 to 3.", False),
+        (5, "assistant", "reply", '{"think": "Expert plan: 1 action(s) left.", "action": "walk forward"}', False),
+    ]
+    steps = [(s["index"], s["env_step"], s["action"], s["valid"], s["observation"], s["done"], s["success"])
+             for s in rows["steps"]]
+    assert steps == [
+        (0, 1, "walk forward", True, "You are in room 1 of rooms 0 to 3.", False, False),
+        (1, 2, "walk forward", True, "You are in room 2 of rooms 0 to 3.", False, False),
+        (2, 3, "walk forward", True, "You are in room 3 of rooms 0 to 3.", True, True),
+    ]
+    calls = [(c["call_index"], c["purpose"], c["window_seqs"], c["response_seq"], c["status"], c["model"])
+             for c in rows["llm_calls"]]
+    assert calls == [
+        (0, "task", [0], 1, "ok", "offline/expert"),
+        (1, "observation", [0, 1, 2], 3, "ok", "offline/expert"),
+        (2, "observation", [0, 1, 2, 3, 4], 5, "ok", "offline/expert"),
+    ]
+
+    # no repository file names the corridor, and playing it wrote nothing into the checkout
+    sources = [p for pkg in ("recap", "workers", "pipeline", "schemas", "reports") for p in (REPO / pkg).rglob("*.py")]
+    assert [str(p) for p in sources if NAME in p.read_text()] == []
+    assert _git_status() == before
+
+
+def test_registration_is_lazy_named_once_and_undone(corridor):
+    built: list[str] = []
+
+    def factory() -> Benchmark:
+        built.append("tunnel")
+        bench = CorridorBenchmark()
+        bench.name = "tunnel"
+        return bench
+
+    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", NAME]
+    register_benchmark("tunnel", factory)
+    try:
+        assert built == []
+        assert registry.get_benchmark("tunnel") is registry.get_benchmark("tunnel") and built == ["tunnel"]
+        with pytest.raises(ValueError, match="^benchmark 'tunnel' is already registered$"):
+            register_benchmark("tunnel", CorridorBenchmark)
+    finally:
+        unregister_benchmark("tunnel")
+    with pytest.raises(UnknownInstanceError, match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, corridor$"):
+        registry.get_benchmark("tunnel")
+    # the declared hooks' defaults: no per-method options, no data folder, nothing to forward
+    bench = registry.get_benchmark(NAME)
+    assert (bench.options_for_agent("react"), dict(bench.data_folders()), bench.data_env_vars()) == ({}, {}, ())
+    assert registry.make_env(f"{NAME}/2", step_multiplier=1.5).max_steps == 3
+
+
+def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
+    register_benchmark("ghost", "tests.no_such_benchmark_module")
+    try:
+        with pytest.raises(ModuleNotFoundError):
+            registry.get_benchmark("ghost")
+        assert registry.data_env_vars() == ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "ALFWORLD_DATA_2_1_2")
+        assert list(registry.data_folders()) == ["robotouille", "alfworld", "alfworld-2.1.2"]
+        assert registry.data_folder("alfworld-2.1.2").location.env_var == "ALFWORLD_DATA_2_1_2"
+        assert registry.make_env("blocksworld/3@1").instance_id == "blocksworld/3@1"
+    finally:
+        unregister_benchmark("ghost")
+    register_benchmark("plain", lambda: object())  # type: ignore[arg-type,return-value]
+    try:
+        with pytest.raises(TypeError, match=r"^benchmark 'plain' resolved to <object object at .*>, which is not a "
+                                            r"workers.envs.registry.Benchmark$"):
+            registry.get_benchmark("plain")
+    finally:
+        unregister_benchmark("plain")
+    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld"]
