@@ -206,6 +206,8 @@ class Agent(ABC):
         if key in _DEMO_CACHE:
             return _DEMO_CACHE[key]
         replies = demo.replies.get(self.style)
+        if replies is None and demo.script is not None:  # this class derives its own, registered or not
+            replies = type(self).demo_replies(demo.script)
         if replies is None:
             raise DemonstrationError(f"demonstration {demo.name!r} has no replies for style {self.style!r}")
         agent = type(self)(self.demo_config())

@@ -45,12 +45,25 @@ class DemoScript:
             raise ValueError("a demonstration script needs at least one action")
 
 
-def _agent_classes() -> list[Any]:
-    """The registered agent classes, in registration order (imported late: recap.methods
-    imports the agents, which import this module's users)."""
-    from recap.methods import METHODS
+#: the agent classes that derive replies from a script, by method key, in registration order.
+#: :mod:`recap.methods` fills it (the built-ins when it is imported, then ``register_method``), so
+#: this module imports no agent: the agents import it.
+_DERIVERS: dict[str, Any] = {}
 
-    return [agent_cls for agent_cls, _config_cls in METHODS.values()]
+
+def register_deriver(key: str, agent_cls: Any) -> None:
+    """Let ``agent_cls`` (its ``demo_replies``) answer for ``key`` in every :class:`DemoReplies`."""
+    _DERIVERS[key] = agent_cls
+
+
+def unregister_deriver(key: str) -> None:
+    """Undo :func:`register_deriver`."""
+    _DERIVERS.pop(key, None)
+
+
+def _agent_classes() -> list[Any]:
+    """The registered agent classes, in registration order."""
+    return list(_DERIVERS.values())
 
 
 class DemoReplies(Mapping[str, Replies]):

@@ -29,6 +29,7 @@ from recap.baselines import (
     StandardAgent,
 )
 from recap.config import AgentConfig, ConfigError, ReCAPConfig, build_config
+from recap.demo_script import register_deriver, unregister_deriver
 from recap.recap_agent import ReCAPAgent
 
 METHODS: dict[str, tuple[type[Agent], type[AgentConfig]]] = {
@@ -39,6 +40,8 @@ METHODS: dict[str, tuple[type[Agent], type[AgentConfig]]] = {
     "standard": (StandardAgent, PlanConfig),
     "adapt": (ADaPTAgent, ADaPTConfig),
 }
+for _agent_cls, _ in METHODS.values():
+    register_deriver(_agent_cls.style, _agent_cls)
 
 
 def register_method(name: str, agent_cls: type[Agent], config_cls: type[AgentConfig]) -> None:
@@ -55,6 +58,7 @@ def register_method(name: str, agent_cls: type[Agent], config_cls: type[AgentCon
     if not (isinstance(config_cls, type) and issubclass(config_cls, agent_cls.config_cls)):
         raise ConfigError(f"method {name!r}: {config_cls!r} is not a {agent_cls.config_cls.__name__}")
     METHODS[name] = (agent_cls, config_cls)
+    register_deriver(name, agent_cls)
 
 
 def unregister_method(name: str) -> None:
@@ -62,6 +66,7 @@ def unregister_method(name: str) -> None:
     if name not in METHODS:
         raise ConfigError(f"method {name!r} is not registered")
     del METHODS[name]
+    unregister_deriver(name)
 
 
 @contextmanager

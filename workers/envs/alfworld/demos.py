@@ -28,6 +28,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import recap.methods  # noqa: F401  (registers the agents that derive this script's replies)
 from recap.demo_script import DemoReplies, DemoScript
 from recap.env import Demonstration
 from workers.envs.alfworld.household import Place, Scene, record
