@@ -12,24 +12,17 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from schemas.kinds import LLM_ERROR_KINDS, LLMErrorKind
 from schemas.outcomes import BudgetRefusal
 
 #: error classes an agent may see; the gateway classifies provider errors into these
-ERROR_KINDS = (
-    "rate_limit",
-    "timeout",
-    "server_error",
-    "context_length",
-    "bad_request",
-    "auth",
-    "budget",
-)
+ERROR_KINDS = LLM_ERROR_KINDS
 
 
 class LLMError(RuntimeError):
     """A failed model call, classified. ``kind`` is one of :data:`ERROR_KINDS`."""
 
-    def __init__(self, kind: str, message: str = "", *, retries: int = 0, cost_usd: float = 0.0,
+    def __init__(self, kind: LLMErrorKind, message: str = "", *, retries: int = 0, cost_usd: float = 0.0,
                  refusal: BudgetRefusal | None = None):
         if kind not in ERROR_KINDS:
             raise ValueError(f"unknown LLM error kind {kind!r}")

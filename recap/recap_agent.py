@@ -61,7 +61,9 @@ class ReCAPAgent(Agent):
     def demo_config(self) -> ReCAPConfig:
         """Demonstrations are written for the full method: no depth cap, shortcut on (the depth
         and shortcut ablations change how the agent runs, not the example it is shown)."""
-        return dataclasses.replace(super().demo_config(), max_level=None, shortcut=True, reminder_period=None)
+        base = super().demo_config()
+        assert isinstance(base, ReCAPConfig)
+        return dataclasses.replace(base, max_level=None, shortcut=True, reminder_period=None)
 
     def shape_demo_reply(self, reply: Any) -> Any:
         if self.config.think == "none":

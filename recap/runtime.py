@@ -24,20 +24,12 @@ from recap.history import History
 from recap.jsonreply import ReplyFormatError, parse_json_object
 from recap.llm import LLMClient, LLMError, LLMRequest
 from schemas.records import CallRecord, Record, StepRecord
+from schemas import kinds
+from schemas.kinds import EndReason, LLMErrorKind
 from schemas.outcomes import BudgetRefusal, EpisodeResult
 
-END_REASONS = (
-    "success",
-    "step_cap",
-    "call_cap",
-    "agent_done",
-    "json_failures",
-    "llm_error",
-    "budget_exhausted",
-    "episode_limit",
-    "env_error",
-    "truncated",
-)
+#: why an episode can end (:data:`schemas.kinds.EndReason`)
+END_REASONS = kinds.END_REASONS
 
 Emit = Callable[[Record], None]
 
@@ -45,7 +37,7 @@ Emit = Callable[[Record], None]
 class EpisodeEnd(Exception):
     """Raised from anywhere inside an episode to end it with a named reason."""
 
-    def __init__(self, reason: str, detail: str = "", *, error_kind: str | None = None,
+    def __init__(self, reason: EndReason, detail: str = "", *, error_kind: LLMErrorKind | None = None,
                  refusal: BudgetRefusal | None = None):
         if reason not in END_REASONS:
             raise ValueError(f"unknown end reason {reason!r}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from schemas.kinds import NodeKind, NodeStatus
 from schemas.records import NodeRecord, NodeVersion
 
 
@@ -17,8 +18,8 @@ class Node:
     depth: int
     child_index: int
     task: str
-    kind: str = "composite"
-    status: str = "open"
+    kind: NodeKind = "composite"
+    status: NodeStatus = "open"
     versions: list[NodeVersion] = field(default_factory=list)
     step_index: int | None = None
     n_children: int = 0

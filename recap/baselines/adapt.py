@@ -81,6 +81,7 @@ from recap.recap_agent import ReCAPAgent
 from recap.runtime import Conversation, Episode, EpisodeEnd
 from recap.scripted import ScriptedClient
 from recap.tree import Node
+from schemas.kinds import NodeKind
 from schemas.records import MessageRecord, NodeVersion
 
 _DEMOS: dict[tuple[str, ...], str] = {}
@@ -167,7 +168,7 @@ def planner_reply(obj: Mapping[str, Any]) -> dict[str, Any]:
 class TaskNode(Node):
     """An ADaPT task: executed first, decomposed (with AND/OR logic) only when it fails."""
 
-    kind: str = "primitive"
+    kind: NodeKind = "primitive"
     logic: str | None = None
 
 

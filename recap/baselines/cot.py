@@ -59,7 +59,7 @@ class CoTAgent(Agent):
     calls_per_step = 0.0
     call_overhead = 1
     one_shot = True
-    reply_fields = ("think", "actions")
+    reply_fields: ClassVar[tuple[str, ...]] = ("think", "actions")
     config: PlanConfig
 
     @classmethod

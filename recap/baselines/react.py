@@ -95,7 +95,7 @@ class ReActAgent(Agent):
     expected_format = P.action_format(True)
     #: Act is ReAct without the think field
     with_think: ClassVar[bool] = True
-    reply_fields = ("think", "action")
+    reply_fields: ClassVar[tuple[str, ...]] = ("think", "action")
     #: one call per step
     estimate_calls_per_step = (1.0, 1.0)
     config: ReActConfig

@@ -130,10 +130,11 @@ def search(loc: DataLocation, data_dir: str | os.PathLike[str] | None = None, *,
         ("recap-eval cache", recap_cache_root() / loc.name),
         ("checkout", checkout_data_root() / loc.name),
     ]
-    for step, path in probed:
-        if path is None:
+    for step, probe_path in probed:
+        if probe_path is None:
             rungs.append(Rung(step, None, False, loc.upstream_note))
             continue
+        path = probe_path
         problem = _layout_problem(loc, path)
         if problem is None and loc.probe is not None:
             reason = loc.probe(path)

@@ -43,6 +43,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from schemas.kinds import LLMErrorKind
 from schemas.records import CallRecord
 from workers.llm.calling import Attempt
 from workers.llm.pricing import Price, usd_to_pico
@@ -243,7 +244,7 @@ def ok_record(request: Any, resp: Any, cache_write_tokens: int = 0) -> CallRecor
         cache_write_tokens=cache_write_tokens)
 
 
-def error_record(request: Any, *, model: str, kind: str, message: str, cost_usd: float, latency_s: float,
+def error_record(request: Any, *, model: str, kind: LLMErrorKind, message: str, cost_usd: float, latency_s: float,
                  retries: int, token_count_source: str, deployment: str | None,
                  test_double: bool) -> CallRecord:
     """The ``llm_calls`` row of a failed call (message already scrubbed)."""

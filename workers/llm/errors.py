@@ -15,6 +15,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from schemas.kinds import LLMErrorKind
 from schemas.outcomes import BudgetRefusal
 
 #: kinds worth another attempt; the others are returned to the caller at once
@@ -56,7 +57,7 @@ def scrub(text: str, secrets: Iterable[str | None] = ()) -> str:
 
 @dataclass(frozen=True)
 class Classified:
-    kind: str
+    kind: LLMErrorKind
     message: str
     #: seconds the provider asked us to wait (Retry-After), if it said
     retry_after_s: float | None = None
@@ -128,7 +129,7 @@ _CONTEXT_MARKERS = ("context_length_exceeded", "maximum context length", "contex
                     "too many tokens", "prompt is too long")
 
 
-def _kind_of_status(status: int | None, text: str) -> str | None:
+def _kind_of_status(status: int | None, text: str) -> LLMErrorKind | None:
     if status is None:
         return None
     if status == 429:
@@ -160,7 +161,7 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
     message = scrub(f"{type(exc).__name__}: {exc}", secrets)[:MAX_MESSAGE_CHARS]
     status = getattr(exc, "status_code", None)
     status = status if isinstance(status, int) else None
-    kind: str | None
+    kind: LLMErrorKind | None
     if isinstance(exc, litellm.ContextWindowExceededError):
         kind = "context_length"
     elif isinstance(exc, litellm.RateLimitError):
