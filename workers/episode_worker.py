@@ -16,6 +16,7 @@ the client wrapper, the record forwarder) are usable and testable without a clus
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import time
 import traceback
@@ -30,6 +31,9 @@ from recap.llm import LLMClient, LLMRequest, LLMResponse
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import record_to_row
+from workers.log_setup import configure_from_env
+
+log = logging.getLogger(__name__)
 
 OFFLINE_PREFIX = "offline/"
 
@@ -236,6 +240,7 @@ class EpisodeRunner:
             try:
                 env = make_env(unit.instance_id, step_multiplier=unit.step_multiplier, **env_options_for(unit, agent))
             except Exception as exc:  # missing data, broken game file: the attempt ends with env_error
+                log.warning("%s: no environment for %s: %s: %s", episode_id, unit.instance_id, type(exc).__name__, exc)
                 out.result = EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000])
                 return out
             out.env = EnvFacts(benchmark=env.benchmark, split=env.split, task=env.task,
@@ -244,9 +249,11 @@ class EpisodeRunner:
             try:
                 result = agent.run(env, client, episode_id=episode_id, emit=forward)
             except ClientError as exc:
+                log.warning("%s: the model client failed: %s", episode_id, exc)
                 out.crash = Crash("client", str(exc)[:2000])
                 return out
             except Exception as exc:
+                log.exception("%s: the agent crashed", episode_id)
                 out.crash = Crash("agent", f"{type(exc).__name__}: {exc}"[:2000], traceback.format_exc()[-4000:])
                 return out
             out.result = result
@@ -264,6 +271,8 @@ class EpisodeRunner:
             out.ended_at = time.time()
             out.wall_s = time.perf_counter() - t0
             self.units_done += 1
+            log.debug("%s done in %.2fs: %s", episode_id, out.wall_s,
+                      out.result.end_reason if out.result is not None else "no result")
 
 
 # --------------------------------------------------------------------------------------------
@@ -272,6 +281,8 @@ class EpisodeRunner:
 class _EpisodeWorker:
     def __init__(self, worker_id: str, run_id: str, sink: Any, factory: ClientFactory, batch_rows: int = 500) -> None:
         import ray
+
+        configure_from_env()
 
         self._sink = sink
         self.runner = EpisodeRunner(worker_id, run_id, factory, send=lambda rows: sink.add.remote(rows),
