@@ -87,5 +87,5 @@ def test_the_views_and_status_read_a_version_1_run(v1_run):
 
 
 def test_a_version_1_run_is_read_not_continued(v1_run):
-    with pytest.raises(RunFolderError, match=r"written with schema version 1, this recap writes 2: its rows stay readable"):
+    with pytest.raises(RunFolderError, match=r"written with schema version 1, this recap writes 3: its rows stay readable"):
         RunStore(v1_run).check_can_hold("old")
