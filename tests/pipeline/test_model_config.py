@@ -150,3 +150,58 @@ def test_resume_reads_episode_ids_and_attempt_spend_through_the_journal_format(t
     assert attempt_spend(store, "u1-1") == AttemptSpend(1, 20, 4, 5, 300 / PICO)
     assert attempt_spend(store, "u2-1") == AttemptSpend()  # reserved, never settled
     assert attempt_spend(store, "nope") == AttemptSpend()
+
+
+# -- end to end: a sweep on Ray through the gateway ------------------------------------------------
+E2E = """run: {name}
+output: {out}
+models:
+  - model: offline/expert
+    label: expert-a
+    options: {{seed: 1}}
+    cap_usd: {cap}
+  - model: offline/expert
+    label: expert-b
+    options: {{seed: 2}}
+    cap_usd: 1.0
+methods: [{{method: react}}]
+environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
+workers: 2
+order: plan
+"""
+
+
+def test_a_sweep_keeps_spend_and_caps_apart_for_two_names_on_one_model_string(ray_address, tmp_path):
+    from pipeline.driver import Driver, prepare
+    from pipeline.gateway_backend import make_backend
+    from pipeline.sqlview import open_tables
+
+    out = tmp_path / "e2e"
+    cap = 0.012  # about two thirds of what the three episodes of expert-a need
+    text = E2E.format(name="e2e", out=out, cap=cap)
+    spec = parse_spec(text, "sweep.yaml")
+    summary = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert (summary.total, summary.stopped) == (6, "expert-a capped")
+    con, bad = open_tables(RunStore(out))
+    assert bad == []
+    q = lambda sql: con.execute(sql).fetchall()  # noqa: E731
+    # the cap on expert-a did not stop expert-b, which shares its model string
+    assert q("select end_reason, count(*) from episodes where model = 'expert-b' group by 1") == [("success", 3)]
+    a_rows = q("select end_reason from episodes where model = 'expert-a'")
+    assert a_rows.count(("success",)) < 3 and not summary.all_done
+    # every call carries both names; each name's spend is its own
+    assert q("select distinct model, model_name, deployment from llm_calls order by 2") == [
+        ("offline/expert", "expert-a", "expert-a"), ("offline/expert", "expert-b", "expert-b")]
+    spent = dict(q("select model_name, sum(cost_usd) from llm_calls group by 1"))
+    assert 0 < spent["expert-a"] <= cap and spent["expert-b"] > cap
+    # episodes and their calls agree on the model's name and on what each attempt paid
+    assert q("""select count(*) from episodes e join llm_calls c using (episode_id)
+                where c.model_name <> e.model or c.model <> e.provider_model""") == [(0,)]
+    assert q("""select count(*) from episodes e where abs(e.cost_usd -
+                (select coalesce(sum(c.cost_usd), 0) from llm_calls c where c.episode_id = e.episode_id)) > 1e-9""") == [(0,)]
+    assert q("select detail->>'model' from events where kind = 'model_cap_reached'") == [("expert-a",)]
+    # the ledger journal keeps the same split, by name
+    journal = [json.loads(x) for x in (out / JOURNAL_NAME).read_text().splitlines()]
+    assert {e["name"] for e in journal} == {"expert-a", "expert-b"} and not any("model" in e for e in journal)
+    by_name = {n: sum(e["pico"] for e in journal if e["op"] == "settle" and e["name"] == n) / PICO for n in spent}
+    assert by_name == pytest.approx(spent, abs=1e-9)
