@@ -42,6 +42,7 @@ from pipeline.store import RunStore
 from pipeline.units import Unit
 from workers.gateway import entries
 from workers.gateway.entries import AttemptSpend, LedgerKeyError
+from workers.gateway.journal import scan
 from workers.gateway.ledger import JOURNAL_NAME
 from schemas.labels import GAVE_UP_PREFIX, INFRA_ERROR, INFRA_ERROR_KINDS, infra_failure
 from schemas.parts import BadPart
@@ -240,32 +241,11 @@ class JournalIssue:
                 f"(recap resume --repair only cuts a torn last line)")
 
 
-def _entry_ok(line: bytes) -> bool:
-    try:
-        return isinstance(json.loads(line), dict)
-    except ValueError:  # JSONDecodeError, UnicodeDecodeError (garbage or zero-filled bytes)
-        return False
-
-
-def _blank(line: bytes) -> bool:
-    return not line.strip(b" \t\r\n\x00")
-
-
 def scan_journal(data: bytes, path: str = JOURNAL_FILE) -> JournalIssue | None:
     """The first line of a journal's bytes that is not a complete entry (its line number as an
-    editor shows it), or None."""
-    lines = data.split(b"\n")
-    n_lines = len(lines) - (1 if data.endswith(b"\n") else 0)
-    good_end = 0
-    for i, line in enumerate(lines):
-        last = i == len(lines) - 1
-        if not line.strip(b" \t\r") or _entry_ok(line):  # an entry, or plain whitespace
-            good_end += len(line) + (0 if last else 1)
-            continue
-        # a torn or garbage line: torn when nothing but blanks / zero bytes follow it
-        torn = all(_blank(r) for r in lines[i + 1:])
-        return JournalIssue(path, i + 1, max(n_lines, i + 1), torn, good_end, len(data))
-    return None
+    editor shows it), or None (:func:`workers.gateway.journal.scan`, where the format lives)."""
+    bad = scan(data)
+    return None if bad is None else JournalIssue(path, bad.line, bad.lines, bad.torn, bad.good_end, bad.size)
 
 
 def journal_issue(store: RunStore) -> JournalIssue | None:

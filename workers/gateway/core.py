@@ -14,13 +14,14 @@ One call (:meth:`DeploymentGateway.complete`):
    then one litellm call. 429 shrinks concurrency and pauses, 5xx/timeouts back off
    exponentially; context_length, bad_request, auth return at once. An attempt that may have
    been billed (a timeout, or a 200 reply the client could not read, such as fractional token
-   counts) has its reservation charged at worst case;
-   The budget keeps this deployment's spend and cap under its name (``deployment_name``),
-   never under the model string another deployment may share;
+   counts) has its reservation charged at worst case. The budget keeps this deployment's
+   reservations, spend and cap under its name (``deployment_name``), never under the model
+   string another deployment may share;
 3. check the provider's usage and settle the reservation (:func:`workers.llm.accounting.settle`:
    never below our own floor; impossible usage charged at the worst case with a
    ``usage_rejected`` event), redact the deployment's secrets from the reply text, and write
-   the ``llm_calls`` row (agent context from the request + accounting).
+   the ``llm_calls`` row (agent context from the request + accounting; the provider model
+   string in ``model``, the deployment's name - the sweep's model name - in ``model_name``).
    For a provider that caches only at explicit breakpoints (``DeploymentConfig.uses_cache_markers``)
    the messages sent carry ``cache_control`` markers (:mod:`workers.llm.cache_markers`); sizing,
    fingerprints and records use the plain messages.

@@ -81,7 +81,8 @@ def attempt_spend(data: bytes | None, episode_id: str) -> AttemptSpend:
             continue
         calls += 1
         pico += int(e.get("pico") or 0)
-        r = e.get("result") if isinstance(e.get("result"), dict) else {}
+        result = e.get("result")
+        r: dict[str, Any] = result if isinstance(result, dict) else {}
         prompt += int(r.get("prompt_tokens") or 0)
         cached += int(r.get("cached_prompt_tokens") or 0)
         completion += int(r.get("completion_tokens") or 0)
