@@ -205,3 +205,12 @@ def test_a_sweep_keeps_spend_and_caps_apart_for_two_names_on_one_model_string(ra
     assert {e["name"] for e in journal} == {"expert-a", "expert-b"} and not any("model" in e for e in journal)
     by_name = {n: sum(e["pico"] for e in journal if e["op"] == "settle" and e["name"] == n) / PICO for n in spent}
     assert by_name == pytest.approx(spent, abs=1e-9)
+
+    # the same journal as recap wrote it before (keyed by model string): the two labels' spend
+    # cannot be told apart any more, so a resume is refused, in one line, before anything starts
+    legacy = [{("model" if k == "name" else k): ("offline/expert" if k == "name" else v) for k, v in e.items()}
+              for e in journal]
+    (out / JOURNAL_NAME).write_text("".join(json.dumps(e) + "\n" for e in legacy))
+    with pytest.raises(RunFolderError) as err:
+        prepare(spec, text)
+    assert str(err.value) == AMBIGUOUS.format(where=f"ledger journal {out}/{JOURNAL_NAME}")
