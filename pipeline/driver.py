@@ -109,7 +109,8 @@ def prepare(spec: SweepSpec, spec_text: str, *, check_keys: bool = True) -> Prep
     store.check_unlocked()  # first: a driver starting in a fresh folder has only its lock there
     ident = store.check_can_hold(spec.run)
     if ident is not None:
-        check_journal(store)  # a corrupt ledger journal: one line now, not a traceback later
+        # a corrupt ledger journal, or an old one whose spend this sweep cannot split: one line now
+        check_journal(store, {m.name: m.model for m in spec.models})
     diff = diff_plans(store.read_json(PLAN_FILE), plan) if ident is not None else None
     return Prepared(spec, spec_text, plan, store, ident, diff)
 

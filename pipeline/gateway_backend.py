@@ -3,8 +3,14 @@
 One ``BudgetActor`` per run (the dollar caps, journalled under ``RUN_DIR/gateway/``) and one
 ``GatewayActor`` per model of the sweep (rate limits, retries, the ``llm_calls`` rows). Both
 write into the run folder, so they are pinned to the driver's node. Each sweep model entry
-becomes a :class:`workers.llm.providers.DeploymentConfig`; building those configs validates
-params and test-double options, so a bad entry fails before anything is written.
+becomes a :class:`workers.llm.providers.DeploymentConfig` (:data:`pipeline.spec.DEPLOYMENT_FIELDS`,
+the one mapping); building those configs validates params and test-double options, so a bad
+entry fails before anything is written.
+
+One key: a model's deployment is named after the model's name in the sweep
+(:attr:`pipeline.spec.ModelSpec.name`), and caps, spend and the ledger journal are kept by that
+name, so two entries on one model string (two option sets of a test double, one model behind
+two base URLs) never share a cap or a spend figure.
 """
 
 from __future__ import annotations
@@ -36,21 +42,8 @@ def deployment_config(m: ModelSpec, where: str) -> Any:
             Knobs.from_options(m.options)
         except OfflineOptionsError as exc:
             raise SpecError(f"{where} ({m.name}): {exc}") from None
-    kwargs: dict[str, Any] = {"model": m.model, "api_base": m.api_base, "api_key_env": m.api_key_env,
-                              "name": m.label, "rpm": m.rpm, "tpm": m.tpm, "params": dict(m.params),
-                              "offline_options": dict(m.options)}
-    if m.window_s is not None:
-        kwargs["window_s"] = m.window_s
-    if m.concurrency is not None:
-        kwargs["max_concurrency"] = m.concurrency
-    if m.retries is not None:
-        kwargs["max_attempts"] = m.retries + 1
-    if m.timeout_s is not None:
-        kwargs["attempt_timeout_s"] = m.timeout_s
-    if m.prices is not None:
-        kwargs["price"] = m.prices.model_dump()
     try:
-        return DeploymentConfig(**kwargs)
+        return DeploymentConfig(**m.deployment_fields())
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(x) for x in err.get("loc", ()))
@@ -60,15 +53,14 @@ def deployment_config(m: ModelSpec, where: str) -> Any:
 
 
 def model_caps(spec: SweepSpec) -> dict[str, float]:
-    """Per-model caps keyed by model string (the gateway ledger's key)."""
-    caps: dict[str, float] = {}
-    for i, m in enumerate(spec.models):
-        if m.cap_usd is None:
-            continue
-        if m.model in caps and caps[m.model] != m.cap_usd:
-            raise SpecError(f"models[{i}] ({m.name}): another entry of {m.model} has a different cap_usd; a model cap applies per model string")
-        caps[m.model] = m.cap_usd
-    return caps
+    """Per-model caps keyed by the model's name in the sweep (the gateway ledger's key)."""
+    return {m.name: m.cap_usd for m in spec.models if m.cap_usd is not None}  # type: ignore[misc]
+
+
+def provider_models(spec: SweepSpec) -> dict[str, str]:
+    """Model name -> provider model string, for the ledger to read a journal written before
+    spend was kept by name (:class:`workers.gateway.entries.KeyMap`)."""
+    return {m.name: m.model for m in spec.models}
 
 
 @dataclass
@@ -109,7 +101,8 @@ class GatewayBackend:
         # named, so that the gateways find it by name: a handle among an actor's arguments makes
         # Ray warn at every start that a restart depends on the object store
         budget_name = f"recap-budget-{run_id}-{uuid.uuid4().hex[:8]}"
-        self.budget = BudgetActor.options(name=budget_name, **opts).remote(str(run_dir), self.spec.run_cap_usd, self.caps)
+        self.budget = BudgetActor.options(name=budget_name, **opts).remote(
+            str(run_dir), self.spec.run_cap_usd, self.caps, provider_models=provider_models(self.spec))
         keys = self._api_keys()
         for label, cfg in self.configs.items():
             actor = GatewayActor.options(**opts).remote(cfg, str(run_dir), run_id, budget_name, secret_env=keys)
@@ -149,7 +142,7 @@ class GatewayBackend:
 
         stats = ray.get(self.budget.stats.remote())
         by_model = stats.get("by_model_spent_usd", {})
-        return Spend(float(stats.get("spent_usd", 0.0)), {label: float(by_model.get(cfg.model, 0.0)) for label, cfg in self.configs.items()})
+        return Spend(float(stats.get("spent_usd", 0.0)), {label: float(by_model.get(label, 0.0)) for label in self.configs})
 
     def rate_stats(self) -> dict[str, RateStats]:
         import ray

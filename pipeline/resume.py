@@ -33,13 +33,16 @@ import os
 import shutil
 import time
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
 from pipeline.errors import RunFolderError
 from pipeline.store import RunStore
 from pipeline.units import Unit
+from workers.gateway import entries
+from workers.gateway.entries import AttemptSpend, LedgerKeyError
+from workers.gateway.journal import scan
 from workers.gateway.ledger import JOURNAL_NAME
 from schemas.labels import GAVE_UP_PREFIX, INFRA_ERROR, INFRA_ERROR_KINDS, infra_failure
 from schemas.parts import BadPart
@@ -53,7 +56,7 @@ JOURNAL_FILE = JOURNAL_NAME
 
 # the rule itself lives with the row labels (schemas.labels), so that the reader of an old
 # part derives ``infra_error`` by the same rule; it is re-exported here for the pipeline
-__all__ = ["GAVE_UP_PREFIX", "INFRA_ERROR", "INFRA_ERROR_KINDS", "infra_failure"]
+__all__ = ["GAVE_UP_PREFIX", "INFRA_ERROR", "INFRA_ERROR_KINDS", "AttemptSpend", "infra_failure"]
 
 
 #: what a resume re-runs besides unfinished units: ``infra`` - units whose latest row is an
@@ -163,53 +166,14 @@ def load_state(store: RunStore, retry: Retry = "infra") -> RunState:
 
 def journal_episode_ids(store: RunStore) -> set[str]:
     """Episode ids named by the call keys (``<episode_id>#<call>``) of the ledger journal."""
-    data = store.read_bytes(JOURNAL_FILE)
-    out: set[str] = set()
-    for line in (data or b"").decode("utf-8", errors="replace").splitlines():
-        try:
-            key = json.loads(line).get("key")
-        except (ValueError, AttributeError):
-            continue  # a torn (or corrupt) line
-        if isinstance(key, str) and "#" in key:
-            out.add(key.rsplit("#", 1)[0])
-    return out
-
-
-@dataclass(frozen=True)
-class AttemptSpend:
-    """What the ledger journal says one attempt paid: its settled calls, their tokens and cost."""
-
-    calls: int = 0
-    prompt_tokens: int = 0
-    cached_prompt_tokens: int = 0
-    completion_tokens: int = 0
-    cost_usd: float = 0.0
+    return entries.episode_ids(store.read_bytes(JOURNAL_FILE))
 
 
 def attempt_spend(store: RunStore, episode_id: str) -> AttemptSpend:
-    """The spend of ``episode_id`` by the gateway's ledger journal (call keys
-    ``<episode_id>#<call>``): every settled reservation counts as a call at its settled cost
-    (failed calls at 0, cut ones at their worst case), tokens from the recorded replies. For the
-    row of a unit the driver gave up on: its worker died with the counts, the journal kept them."""
-    from workers.llm.pricing import pico_to_usd
-
-    data = store.read_bytes(JOURNAL_FILE)
-    prefix = episode_id + "#"
-    calls = prompt = cached = completion = pico = 0
-    for line in (data or b"").decode("utf-8", errors="replace").splitlines():
-        try:
-            e = json.loads(line)
-        except ValueError:
-            continue  # a torn (or corrupt) line
-        if not isinstance(e, dict) or e.get("op") != "settle" or not str(e.get("key", "")).startswith(prefix):
-            continue
-        calls += 1
-        pico += int(e.get("pico") or 0)
-        r = e.get("result") if isinstance(e.get("result"), dict) else {}
-        prompt += int(r.get("prompt_tokens") or 0)
-        cached += int(r.get("cached_prompt_tokens") or 0)
-        completion += int(r.get("completion_tokens") or 0)
-    return AttemptSpend(calls, prompt, cached, completion, pico_to_usd(pico))
+    """The spend of ``episode_id`` by the gateway's ledger journal
+    (:func:`workers.gateway.entries.attempt_spend`). For the row of a unit the driver gave up
+    on: its worker died with the counts, the journal kept them."""
+    return entries.attempt_spend(store.read_bytes(JOURNAL_FILE), episode_id)
 
 
 @dataclass
@@ -277,32 +241,11 @@ class JournalIssue:
                 f"(recap resume --repair only cuts a torn last line)")
 
 
-def _entry_ok(line: bytes) -> bool:
-    try:
-        return isinstance(json.loads(line), dict)
-    except ValueError:  # JSONDecodeError, UnicodeDecodeError (garbage or zero-filled bytes)
-        return False
-
-
-def _blank(line: bytes) -> bool:
-    return not line.strip(b" \t\r\n\x00")
-
-
 def scan_journal(data: bytes, path: str = JOURNAL_FILE) -> JournalIssue | None:
     """The first line of a journal's bytes that is not a complete entry (its line number as an
-    editor shows it), or None."""
-    lines = data.split(b"\n")
-    n_lines = len(lines) - (1 if data.endswith(b"\n") else 0)
-    good_end = 0
-    for i, line in enumerate(lines):
-        last = i == len(lines) - 1
-        if not line.strip(b" \t\r") or _entry_ok(line):  # an entry, or plain whitespace
-            good_end += len(line) + (0 if last else 1)
-            continue
-        # a torn or garbage line: torn when nothing but blanks / zero bytes follow it
-        torn = all(_blank(r) for r in lines[i + 1:])
-        return JournalIssue(path, i + 1, max(n_lines, i + 1), torn, good_end, len(data))
-    return None
+    editor shows it), or None (:func:`workers.gateway.journal.scan`, where the format lives)."""
+    bad = scan(data)
+    return None if bad is None else JournalIssue(path, bad.line, bad.lines, bad.torn, bad.good_end, bad.size)
 
 
 def journal_issue(store: RunStore) -> JournalIssue | None:
@@ -314,12 +257,21 @@ def journal_issue(store: RunStore) -> JournalIssue | None:
     return scan_journal(data, where)
 
 
-def check_journal(store: RunStore) -> None:
+def check_journal(store: RunStore, provider_models: Mapping[str, str] | None = None) -> None:
     """Refuse (one line, before anything starts) a journal corrupt before its last line; a
-    torn last line is left to the ledger, which cuts it when it opens the journal."""
+    torn last line is left to the ledger, which cuts it when it opens the journal. With the
+    sweep's ``provider_models`` (model name -> model string), also a journal written before
+    spend was kept by model name whose model strings this sweep's entries share
+    (:func:`workers.gateway.entries.check_keys`)."""
     issue = journal_issue(store)
     if issue is not None and not issue.torn:
         raise RunFolderError(issue.describe())
+    if provider_models is not None:
+        where = f"ledger journal {store.location.rstrip('/')}/{JOURNAL_FILE}"
+        try:
+            entries.check_keys(store.read_bytes(JOURNAL_FILE), provider_models, where)
+        except LedgerKeyError as exc:
+            raise RunFolderError(str(exc)) from None
 
 
 def repair_run(store: RunStore) -> str:

@@ -232,6 +232,24 @@ class PriceSpec(_Strict):
     cache_write: Price | None = None
 
 
+#: The one mapping between a sweep model entry and the gateway's deployment
+#: (:class:`workers.llm.providers.DeploymentConfig`): spec field -> config field. The sweep file
+#: keeps its documented spellings; the config keeps the gateway's. ``label`` becomes the
+#: config's ``name`` through :attr:`ModelSpec.name` (label, else the model string), so the
+#: deployment's name - what caps, spend, the ledger journal and ``llm_calls.model_name`` are
+#: kept by - is the model's unique name in the sweep. ``retries`` counts attempts after the
+#: first: ``max_attempts = retries + 1``. Every ModelSpec field is here or in
+#: :data:`SPEC_ONLY_FIELDS` (tests/pipeline/test_model_config.py checks it).
+DEPLOYMENT_FIELDS: dict[str, str] = {
+    "model": "model", "label": "name", "params": "params", "options": "offline_options",
+    "rpm": "rpm", "tpm": "tpm", "concurrency": "max_concurrency", "window_s": "window_s",
+    "retries": "max_attempts", "timeout_s": "attempt_timeout_s", "prices": "price",
+    "api_base": "api_base", "api_key_env": "api_key_env",
+}
+#: model entry fields the gateway's deployment does not carry (the ledger takes the caps)
+SPEC_ONLY_FIELDS = frozenset({"cap_usd"})
+
+
 class ModelSpec(_Strict):
     model: Annotated[str, Field(min_length=1, max_length=LONG_MAX), AfterValidator(_model_string)]
     label: Label | None = None
@@ -260,6 +278,24 @@ class ModelSpec(_Strict):
     @property
     def test_double(self) -> bool:
         return self.model.startswith(OFFLINE_PREFIX)
+
+    def deployment_fields(self) -> dict[str, Any]:
+        """The arguments of this entry's ``DeploymentConfig`` (:data:`DEPLOYMENT_FIELDS`); a
+        transport setting left out keeps the config's default."""
+        out: dict[str, Any] = {}
+        for spec_field, config_field in DEPLOYMENT_FIELDS.items():
+            value = getattr(self, spec_field)
+            if spec_field == "label":
+                value = self.name
+            elif spec_field == "retries" and value is not None:
+                value = value + 1
+            elif spec_field == "prices" and value is not None:
+                value = value.model_dump()
+            elif isinstance(value, dict):
+                value = dict(value)
+            if value is not None:
+                out[config_field] = value
+        return out
 
     @field_validator("params")
     @classmethod

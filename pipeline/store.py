@@ -34,6 +34,7 @@ import pyarrow.parquet as pq
 from pipeline.errors import RunFolderError
 from schemas.records import SCHEMA_VERSION
 from schemas.tables import TABLES, arrow_schema
+from schemas.versions import continues
 from workers.sink import is_uri
 from schemas.parts import RUN_FILE, BadPart, inspect_parts, read_parts
 
@@ -179,10 +180,11 @@ class RunStore:
                 f"output folder {self.location} holds run {ident.run!r} (run_id {ident.run_id}), not {run_name!r}; "
                 "choose another output folder or use the same run name"
             )
-        if ident.schema_version != SCHEMA_VERSION:
+        if not continues(ident.schema_version):
             # readers map the parts of an earlier version (schemas.versions), so status, sql,
             # show and report read such a run; a run is not continued under another version
-            # (its units would be written in two shapes)
+            # (its units would be written in two shapes) unless that version's parts differ
+            # only by columns filled on read (schemas.versions.continues)
             older = ident.schema_version < SCHEMA_VERSION
             raise RunFolderError(
                 f"output folder {self.location} was written with schema version {ident.schema_version}, this recap writes "

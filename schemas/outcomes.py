@@ -36,8 +36,9 @@ class BudgetRefusal:
     """The budget's answer when a call would pass a cap (amounts in pico-USD, as the ledger
     keeps them, so the message is exact).
 
-    ``model`` is the provider model string the ledger keys caps by; the driver knows which
-    unit (and so which model label) was refused."""
+    ``model`` is the name the ledger keys caps by: the deployment's name, which in a sweep is
+    the model's name (its label, else its model string); the driver also knows which unit (and
+    so which model) was refused."""
 
     scope: RefusalScope
     model: str

@@ -15,8 +15,11 @@ from schemas.kinds import CallStatus, EventKind, EventSource, LLMErrorKind, Node
 #: 2: episodes gained ``label``, ``profile``, ``ablation`` and ``provider_model`` (``method`` holds
 #: the method's name, no longer the arm's label), ALFWorld rows are one benchmark split
 #: (``valid_unseen``, task = task type) and infrastructure failures end ``infra_error``; parts
-#: written under version 1 are mapped on read (:mod:`schemas.versions`)
-SCHEMA_VERSION = 2
+#: written under version 1 are mapped on read (:mod:`schemas.versions`).
+#: 3: ``llm_calls`` gained ``model_name``, the model's name in the sweep (what ``episodes.model``
+#: holds) beside ``model``, the provider model string; parts written under version 2 get it
+#: derived from their ``deployment`` on read
+SCHEMA_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -42,7 +45,11 @@ class MessageRecord:
 
 @dataclass(frozen=True)
 class CallRecord:
-    """One LLM call: the window it saw (by message seq), its accounting and its outcome."""
+    """One LLM call: the window it saw (by message seq), its accounting and its outcome.
+
+    ``model`` is the provider model string the call was sent as; ``model_name`` the model's
+    unique name in the sweep (its label, else its model string: ``episodes.model``), which
+    spend and caps are kept by. Two sweep entries may share a model string, never a name."""
 
     table: ClassVar[str] = "llm_calls"
     episode_id: str
@@ -74,6 +81,8 @@ class CallRecord:
     #: price; Anthropic-style caching only, else 0); like ``cached_prompt_tokens``, a part of
     #: ``prompt_tokens``
     cache_write_tokens: int = 0
+    #: the model's name in the sweep (null: a call made outside a sweep, by an unnamed deployment)
+    model_name: str | None = None
 
 
 @dataclass(frozen=True)

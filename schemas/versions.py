@@ -24,6 +24,21 @@ Version 1 -> 2, ``episodes`` (documented mapping; everything else is copied as s
   (:func:`schemas.labels.infra_failure`: an ``llm_error`` of a failed model service, a unit given
   up after its workers died); its ``error`` is kept, so the failure's kind still reads from it.
 
+Version 2 -> 3, ``llm_calls``:
+
+* ``model_name`` (the model's name in the sweep, ``episodes.model``): derived from the stored
+  ``deployment``, which version 2 named after the model's label when it had one, else after the
+  model string (``model``, ``model@<api_base>``, ``model#<key variable>``, or both): a
+  ``deployment`` that is the row's ``model`` or begins with ``model@`` / ``model#`` gives the
+  model string (an unlabelled entry's name), any other the label itself; null without a
+  deployment (a failed call recorded by the agent, ``model`` empty). A label that itself begins
+  with its model string and ``@`` or ``#`` reads as the model string: the one case version 2 did
+  not keep apart.
+
+A run folder of version 2 may be continued by this version (:func:`continues`): its parts
+differ from the current ones only by ``model_name``, filled on read, so parts of both versions
+side by side read as one table. A version 1 run is read, never continued.
+
 Any table, any earlier version: a missing column that has a default in its record dataclass (or
 is nullable) is filled with that default (null); a part missing any other column is not readable
 (the reader names it, as for any part that breaks :func:`schemas.parts.schema_problem`).
@@ -45,7 +60,17 @@ VERSION_KEY = b"recap_eval_schema_version"
 #: columns each version added, by table (the first version a part may lack them before)
 ADDED: dict[int, dict[str, tuple[str, ...]]] = {
     2: {"episodes": ("label", "profile", "ablation", "provider_model")},
+    3: {"llm_calls": ("model_name",)},
 }
+
+#: earlier versions whose run folders this version continues (their parts only lack columns
+#: that are filled on read, row by row, the same way whichever session wrote them)
+CONTINUED: frozenset[int] = frozenset({2})
+
+
+def continues(version: int) -> bool:
+    """May a run folder written under ``version`` be continued (resumed) by this version?"""
+    return version == SCHEMA_VERSION or version in CONTINUED
 
 
 def part_version(schema: pa.Schema) -> int | None:
@@ -85,6 +110,12 @@ def upgrade(table: str, data: pa.Table, version: int) -> pa.Table:
     if version < 2 and table == "episodes":
         rows = [_episode_v1(r) for r in data.to_pylist()]
         return pa.Table.from_pylist(rows, schema=schema) if rows else schema.empty_table()
+    if version < 3 and table == "llm_calls" and "model_name" not in data.column_names:
+        n = data.num_rows
+        models = data.column("model").to_pylist() if "model" in data.column_names else [None] * n
+        deployments = data.column("deployment").to_pylist() if "deployment" in data.column_names else [None] * n
+        names = [model_name_v2(m, d) for m, d in zip(models, deployments)]
+        data = data.append_column("model_name", pa.array(names, type=pa.string()))
     defaults = column_defaults(table)
     cols = []
     for f in schema:
@@ -93,6 +124,15 @@ def upgrade(table: str, data: pa.Table, version: int) -> pa.Table:
         else:
             cols.append(pa.array([defaults.get(f.name)] * data.num_rows, type=f.type))
     return pa.Table.from_arrays(cols, schema=schema)
+
+
+def model_name_v2(model: str | None, deployment: str | None) -> str | None:
+    """The sweep name of a version 2 ``llm_calls`` row's model (see the module doc)."""
+    if not deployment:
+        return None
+    if model and (deployment == model or deployment.startswith((model + "@", model + "#"))):
+        return model
+    return deployment
 
 
 def _episode_v1(row: dict[str, Any]) -> dict[str, Any]:

@@ -289,7 +289,7 @@ def test_overview_and_runs(con_a):
         "run_folders": 1, "runs": 1, "attempts": 19, "units": 18, "finished_units": 17, "successes": 8, "test_double_units": 3,
         "llm_calls": 14, "spend_usd": 3.375, "steps": 24, "skipped_part_files": 0,
     }]
-    assert named_query(con_a, "runs").rows == [("runA", 2, "1970-01-01 00:16:40 UTC", "hostA2", "abc123", "hashA", 2, 18, 8)]
+    assert named_query(con_a, "runs").rows == [("runA", 2, "1970-01-01 00:16:40 UTC", "hostA2", "abc123", "hashA", 3, 18, 8)]
     assert named_query(con_a, "events_summary").rows == [("gateway", "retry", "warning", 2, 2), ("pipeline", "worker_restart", "error", 1, 0)]
 
 

@@ -21,6 +21,9 @@ def test_each_table_has_run_id_then_the_record_fields_and_a_version():
     calls = arrow_schema("llm_calls")
     assert calls.field("window_seqs").type == pa.list_(pa.int64())
     assert calls.field("node_id").nullable and not calls.field("call_index").nullable
+    # the provider model string and the model's name in the sweep (schema version 3), side by side
+    assert (calls.field("model").type, calls.field("model").nullable) == (pa.string(), False)
+    assert (calls.field("model_name").type, calls.field("model_name").nullable) == (pa.string(), True)
     with pytest.raises(KeyError, match="unknown table 'nope'"):
         arrow_schema("nope")
 

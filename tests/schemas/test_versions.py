@@ -87,5 +87,49 @@ def test_the_views_and_status_read_a_version_1_run(v1_run):
 
 
 def test_a_version_1_run_is_read_not_continued(v1_run):
-    with pytest.raises(RunFolderError, match=r"written with schema version 1, this recap writes 2: its rows stay readable"):
+    with pytest.raises(RunFolderError, match=r"written with schema version 1, this recap writes 3: its rows stay readable"):
         RunStore(v1_run).check_can_hold("old")
+
+
+# -- version 2 -> 3: llm_calls gained model_name --------------------------------------------------
+V2_CALLS = [
+    # (model, deployment) as version 2 wrote them -> the model's name in the sweep
+    ("offline/expert", "expert-a", "expert-a"),                       # labelled: deployment = label
+    ("offline/expert", "offline/expert", "offline/expert"),           # unlabelled
+    ("openai/gpt-4o", "openai/gpt-4o@http://h:1/v1#KEY", "openai/gpt-4o"),  # unlabelled, base URL + key
+    ("openai/gpt-4o", "openai/gpt-4o#KEY", "openai/gpt-4o"),
+    ("", None, None),                                                 # a failed call the agent recorded
+]
+
+
+@pytest.fixture()
+def v2_run(tmp_path):
+    """A run folder as recap wrote it under schema version 2, with an llm_calls part."""
+    from schemas.records import CallRecord
+    from schemas.tables import record_to_row
+
+    (tmp_path / "run.json").write_text(json.dumps({"run_id": "old", "run": "old", "created_at": 1.0, "schema_version": 2}))
+    current = arrow_schema("llm_calls")
+    v2 = pa.schema([f for f in current if f.name != "model_name"], metadata={b"recap_eval_schema_version": b"2"})
+    rows = []
+    for i, (model, deployment, _) in enumerate(V2_CALLS):
+        row = record_to_row(CallRecord("e-1", i, f"e-1#{i}", "task", (0,), model, "ok", deployment=deployment), "old")
+        del row["model_name"]
+        rows.append(row)
+    (tmp_path / "llm_calls").mkdir()
+    pq.write_table(pa.Table.from_pylist(rows, schema=v2), tmp_path / "llm_calls" / "part-old-000001.parquet")
+    return tmp_path
+
+
+def test_version_2_calls_get_the_model_name_from_their_deployment(v2_run):
+    table, bad = read_table(v2_run, "llm_calls")
+    assert bad == [] and table.schema == arrow_schema("llm_calls")
+    assert [(r["model"], r["deployment"], r["model_name"]) for r in table.to_pylist()] == V2_CALLS
+    con = open_runs([v2_run])
+    assert run_query(con, "SELECT model_name FROM llm_calls ORDER BY call_index").rows == [(n,) for _, _, n in V2_CALLS]
+    con.close()
+
+
+def test_a_version_2_run_is_continued(v2_run):
+    ident = RunStore(v2_run).check_can_hold("old")
+    assert (ident.run_id, ident.schema_version) == ("old", 2)

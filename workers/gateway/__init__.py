@@ -19,7 +19,9 @@ default for a single deployment - the ledger inside the one GatewayActor)::
 
     gws = RunGateways(configs, run_dir, run_id, run_cap_usd=50.0, model_caps_usd={"openai/gpt-4o": 40},
                       budget="auto")           # "shared" | "local" | "auto" | a BudgetActor handle
-    # or by hand: BudgetActor.remote(run_dir, run_cap_usd, model_caps_usd)
+    # caps and spend are kept by deployment name (DeploymentConfig.deployment_name: its ``name``,
+    # else model[@api_base][#key_env]), never by a model string two deployments may share
+    # or by hand: BudgetActor.remote(run_dir, run_cap_usd, model_caps_usd, provider_models=...)
     #             GatewayActor.remote(config, run_dir, run_id, budget_actor)
     client = gws.client("openai/gpt-4o")   # GatewayClient, a recap.llm.LLMClient (picklable)
     resp = client.complete(request)        # LLMResponse, or raises LLMError(kind)

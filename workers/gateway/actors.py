@@ -89,9 +89,10 @@ class BudgetActor(LocalBudget):
 
     def __init__(self, run_dir: str, run_cap_usd: float | None = None,
                  model_caps_usd: Mapping[str, float] | None = None, durable_reservations: bool = True,
-                 group_commit: bool = True):
+                 group_commit: bool = True, provider_models: Mapping[str, str] | None = None):
         super().__init__(BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
-                                      durable_reservations=durable_reservations), group_commit=group_commit)
+                                      durable_reservations=durable_reservations, provider_models=provider_models),
+                         group_commit=group_commit)
         _ledger_restored_event(run_dir, self.ledger)
 
     @ray.method(concurrency_group=CONTROL)
@@ -111,11 +112,11 @@ class RemoteBudget:
         self.handle = handle
         self._unconfirmed: list[Any] = []  # settlements sent without waiting
 
-    async def begin(self, call_key, model, worst_pico, cache_key, owner):  # type: ignore[no-untyped-def]
-        return await self.handle.begin.remote(call_key, model, worst_pico, cache_key, owner)
+    async def begin(self, call_key, name, worst_pico, cache_key, owner):  # type: ignore[no-untyped-def]
+        return await self.handle.begin.remote(call_key, name, worst_pico, cache_key, owner)
 
-    async def reserve(self, call_key, model, worst_pico, owner):  # type: ignore[no-untyped-def]
-        return await self.handle.reserve.remote(call_key, model, worst_pico, owner)
+    async def reserve(self, call_key, name, worst_pico, owner):  # type: ignore[no-untyped-def]
+        return await self.handle.reserve.remote(call_key, name, worst_pico, owner)
 
     async def settle(self, rid, cost_pico, status, result, cache_key, litellm_cost_usd):  # type: ignore[no-untyped-def]
         # not awaited: the reservation already bounds this call's cost, so the caller need
@@ -161,7 +162,8 @@ class GatewayActor:
 
         cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
         if budget is None:  # the gateway keeps the run's ledger itself
-            own = BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd)
+            own = BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
+                               provider_models={cfg.deployment_name: cfg.model})
             gate: Any = LocalBudget(own, group_commit=group_commit)
         else:
             gate = RemoteBudget(budget)
@@ -226,7 +228,8 @@ class RunGateways:
     GatewayActor keeps the ledger itself (no extra round trips per call); ``"auto"`` (default)
     - local for one deployment, shared otherwise; or an existing BudgetActor handle.
     ``client(name)`` gives the :class:`GatewayClient` of a deployment (by deployment name or
-    model, when the model has one deployment). ``group_commit``: see :class:`LocalBudget`
+    model, when the model has one deployment). ``model_caps_usd`` is keyed by deployment name,
+    as the ledger keeps spend. ``group_commit``: see :class:`LocalBudget`
     (False only for the bench's before figures).
     """
 
@@ -248,7 +251,9 @@ class RunGateways:
             self.actors = {names[0]: GatewayActor.remote(self.configs[0], self.run_dir, run_id, None,
                                                          run_cap_usd, model_caps_usd, group_commit=group_commit)}
             return
-        self.budget = (BudgetActor.remote(self.run_dir, run_cap_usd, model_caps_usd, group_commit=group_commit)
+        providers = {c.deployment_name: c.model for c in self.configs}
+        self.budget = (BudgetActor.remote(self.run_dir, run_cap_usd, model_caps_usd, group_commit=group_commit,
+                                          provider_models=providers)
                        if budget == "shared" else budget)
         self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget)
                        for c in self.configs}

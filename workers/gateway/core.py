@@ -14,11 +14,14 @@ One call (:meth:`DeploymentGateway.complete`):
    then one litellm call. 429 shrinks concurrency and pauses, 5xx/timeouts back off
    exponentially; context_length, bad_request, auth return at once. An attempt that may have
    been billed (a timeout, or a 200 reply the client could not read, such as fractional token
-   counts) has its reservation charged at worst case;
+   counts) has its reservation charged at worst case. The budget keeps this deployment's
+   reservations, spend and cap under its name (``deployment_name``), never under the model
+   string another deployment may share;
 3. check the provider's usage and settle the reservation (:func:`workers.llm.accounting.settle`:
    never below our own floor; impossible usage charged at the worst case with a
    ``usage_rejected`` event), redact the deployment's secrets from the reply text, and write
-   the ``llm_calls`` row (agent context from the request + accounting).
+   the ``llm_calls`` row (agent context from the request + accounting; the provider model
+   string in ``model``, the deployment's name - the sweep's model name - in ``model_name``).
    For a provider that caches only at explicit breakpoints (``DeploymentConfig.uses_cache_markers``)
    the messages sent carry ``cache_control`` markers (:mod:`workers.llm.cache_markers`); sizing,
    fingerprints and records use the plain messages.
@@ -44,6 +47,7 @@ from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, sto
 from tenacity import wait_exponential_jitter
 
 from schemas.outcomes import BudgetRefusal
+from schemas.records import CallRecord
 from recap.llm import LLMError, LLMRequest, LLMResponse
 from workers.gateway.call_log import CallLog, run_id_of, writer_name
 from workers.gateway.ledger import BudgetLedger, LocalBudget
@@ -124,7 +128,8 @@ class DeploymentGateway:
         self.markers = BreakpointPlanner() if config.uses_cache_markers(prices) else None
         self.budget = budget if budget is not None else LocalBudget(
             BudgetLedger(self.run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
-                         durable_reservations=durable_reservations))
+                         durable_reservations=durable_reservations,
+                         provider_models={self.deployment: config.model}))
         self.admission = AdmissionController(
             rpm=config.rpm, tpm=config.tpm, window_s=config.window_s, pad_s=config.window_pad_s,
             max_concurrency=config.max_concurrency,
@@ -292,10 +297,10 @@ class DeploymentGateway:
         key = call.request.call_key
         try:
             if not call.begun:
-                answer = await self.budget.begin(key, cfg.model, call.worst, call.cache_key, self.instance)
+                answer = await self.budget.begin(key, self.deployment, call.worst, call.cache_key, self.instance)
                 call.begun = True
             elif call.rid is None:
-                answer = await self.budget.reserve(key, cfg.model, call.worst, self.instance)
+                answer = await self.budget.reserve(key, self.deployment, call.worst, self.instance)
             else:
                 return ticket
         except BaseException:
@@ -395,14 +400,21 @@ class DeploymentGateway:
         self.spent_pico += charged
         message = scrub(c.message)
         retries = max(0, attempts - 1)
-        self.call_log.add(error_record(
+        self._add(error_record(
             request, model=self.config.model, kind=c.kind, message=message, cost_usd=pico_to_usd(charged),
             latency_s=self._clock() - t0, retries=retries, token_count_source=source,
             deployment=self.deployment, test_double=self.test_double))
         return LLMError(c.kind, message, retries=retries, cost_usd=pico_to_usd(charged), refusal=c.refusal)
 
     def _record(self, request: LLMRequest, resp: LLMResponse, cache_write_tokens: int = 0) -> None:
-        self.call_log.add(ok_record(request, resp, cache_write_tokens))
+        self._add(ok_record(request, resp, cache_write_tokens))
+
+    def _add(self, record: CallRecord) -> None:
+        """One ``llm_calls`` row, with the model's name in the sweep beside its model string
+        (``model_name``: what ``episodes.model`` holds; null for a deployment without a name)."""
+        if self.config.name is not None:
+            record = dataclasses.replace(record, model_name=self.config.name)
+        self.call_log.add(record)
 
     # ---- control ----
     def pause(self) -> None:

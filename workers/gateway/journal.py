@@ -34,12 +34,54 @@ import json
 import os
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 
 class JournalError(RuntimeError):
     """The journal is locked by another live ledger, or corrupt before its last line."""
+
+
+@dataclass(frozen=True)
+class BadLine:
+    """The first line of a journal's bytes that is not a complete entry: ``line`` (1-based, as
+    an editor shows it) of ``lines``; ``torn`` when nothing but blanks or zero bytes follow it
+    (a crash mid-write: safe to cut at ``good_end``), else corrupt in the middle; ``size`` of
+    the bytes scanned."""
+
+    line: int
+    lines: int
+    torn: bool
+    good_end: int
+    size: int
+
+
+def _entry_ok(line: bytes) -> bool:
+    try:
+        return isinstance(json.loads(line), dict)
+    except ValueError:  # JSONDecodeError, UnicodeDecodeError (garbage or zero-filled bytes)
+        return False
+
+
+def _blank(line: bytes) -> bool:
+    return not line.strip(b" \t\r\n\x00")
+
+
+def scan(data: bytes) -> BadLine | None:
+    """The first line of ``data`` (a journal's bytes, read without opening a :class:`Journal`)
+    that is not a complete entry, or None: what ``recap status`` reports and ``--repair`` cuts."""
+    lines = data.split(b"\n")
+    n_lines = len(lines) - (1 if data.endswith(b"\n") else 0)
+    good_end = 0
+    for i, line in enumerate(lines):
+        last = i == len(lines) - 1
+        if not line.strip(b" \t\r") or _entry_ok(line):  # an entry, or plain whitespace
+            good_end += len(line) + (0 if last else 1)
+            continue
+        torn = all(_blank(r) for r in lines[i + 1:])
+        return BadLine(i + 1, max(n_lines, i + 1), torn, good_end, len(data))
+    return None
 
 
 class Journal:

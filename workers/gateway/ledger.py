@@ -23,6 +23,12 @@ served again with ``served_from="ledger"``) and for the opt-in response cache (r
 fingerprint -> response, ``served_from="cache"``). One ledger serves all deployments of a run
 (in-process via :class:`LocalBudget`, or behind the Ray ``BudgetActor``). Amounts are integer
 pico-dollars (see :mod:`workers.llm.pricing`).
+
+One key: caps, reservations, settlements and spend are kept by the deployment's *name*
+(``DeploymentConfig.deployment_name``: the model's unique name in the sweep), never by the
+provider model string, so two sweep entries on one model string (two option sets of
+``offline/expert``, one model behind two base URLs) have their own caps and spend. Journals
+written before name their entries by model string; :mod:`workers.gateway.entries` maps those.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from schemas.outcomes import BudgetRefusal
+from workers.gateway.entries import NAME_FIELD, KeyMap
 from workers.gateway.journal import Journal
 from workers.llm.pricing import pico_to_usd, usd_to_pico
 
@@ -42,18 +49,24 @@ JOURNAL_NAME = "gateway/ledger.jsonl"
 
 
 class BudgetLedger:
-    """Budget caps, reservations, settlements and recorded results of one run."""
+    """Budget caps, reservations, settlements and recorded results of one run.
+
+    ``model_caps_usd`` and every ``name`` argument: deployment names. ``provider_models``
+    (deployment name -> provider model string, every deployment of the run) lets a journal
+    written before entries were kept by name be replayed (:class:`workers.gateway.entries.KeyMap`;
+    None: such entries keep their model string)."""
 
     def __init__(self, run_dir: Path | str, *, run_cap_usd: float | None = None,
                  model_caps_usd: Mapping[str, float] | None = None, fsync: bool = True,
-                 durable_reservations: bool = True, lock_timeout_s: float = 10.0):
+                 durable_reservations: bool = True, lock_timeout_s: float = 10.0,
+                 provider_models: Mapping[str, str] | None = None):
         self.run_dir = Path(run_dir)
         self._lock = threading.RLock()
         self.run_cap = None if run_cap_usd is None else usd_to_pico(run_cap_usd)
         self.model_caps = {m: usd_to_pico(c) for m, c in (model_caps_usd or {}).items()}
         self.spent = 0
         self.spent_by_model: dict[str, int] = defaultdict(int)
-        #: rid -> (call_key, model, reserved pico, owner)
+        #: rid -> (call_key, deployment name, reserved pico, owner)
         self.open: dict[int, tuple[str, str, int, str]] = {}
         self.reserved = 0
         self.reserved_by_model: dict[str, int] = defaultdict(int)
@@ -68,14 +81,19 @@ class BudgetLedger:
         #: False once written (process-kill safe; synced with later entries within a second)
         self.durable_reservations = durable_reservations and fsync
         self._journal = Journal(self.run_dir / JOURNAL_NAME, fsync=fsync, lock_timeout_s=lock_timeout_s)
-        self.restored_orphans = self._restore()
+        self._keys = KeyMap(provider_models, str(self.run_dir / JOURNAL_NAME))
+        try:
+            self.restored_orphans = self._restore()
+        except BaseException:
+            self._journal.close()  # a refused journal must not stay locked
+            raise
 
     # ---- restore ----
     def _restore(self) -> int:
         for e in self._journal.replay():
             op = e.get("op")
             if op == "reserve":
-                self._open(e["rid"], e["key"], e["model"], e["pico"], e.get("owner", ""))
+                self._open(e["rid"], e["key"], self._keys.name_of(e), e["pico"], e.get("owner", ""))
             elif op == "settle":
                 self._settle_state(e["rid"], e["pico"], e)
             self._next_rid = max(self._next_rid, int(e.get("rid", 0)) + 1)
@@ -86,17 +104,17 @@ class BudgetLedger:
         return len(orphans)
 
     # ---- state changes (callers hold the lock) ----
-    def _open(self, rid: int, key: str, model: str, pico: int, owner: str) -> None:
-        self.open[rid] = (key, model, pico, owner)
+    def _open(self, rid: int, key: str, name: str, pico: int, owner: str) -> None:
+        self.open[rid] = (key, name, pico, owner)
         self.reserved += pico
-        self.reserved_by_model[model] += pico
+        self.reserved_by_model[name] += pico
 
     def _settle_state(self, rid: int, pico: int, entry: Mapping[str, Any]) -> None:
-        key, model, reserved, _owner = self.open.pop(rid)
+        key, name, reserved, _owner = self.open.pop(rid)
         self.reserved -= reserved
-        self.reserved_by_model[model] -= reserved
+        self.reserved_by_model[name] -= reserved
         self.spent += pico
-        self.spent_by_model[model] += pico
+        self.spent_by_model[name] += pico
         self.settled += 1
         if pico > reserved:
             self.overruns += 1
@@ -107,29 +125,29 @@ class BudgetLedger:
                 self.cache[entry["cache_key"]] = result
 
     def _write_settle(self, rid: int, pico: int, status: str, **extra: Any) -> None:
-        key, model, _reserved, _owner = self.open[rid]
-        entry = {"op": "settle", "rid": rid, "key": key, "model": model, "pico": int(pico),
+        key, name, _reserved, _owner = self.open[rid]
+        entry = {"op": "settle", "rid": rid, "key": key, NAME_FIELD: name, "pico": int(pico),
                  "status": status, "t": time.time(), **extra}
         self._journal.append(entry)
         self._settle_state(rid, int(pico), entry)
 
-    def _refusal(self, model: str, worst: int | None) -> BudgetRefusal | None:
+    def _refusal(self, name: str, worst: int | None) -> BudgetRefusal | None:
         """The cap this call would pass (typed: the driver stops the run or only the model by
         its ``scope``), or None when it fits."""
         if worst is None:
-            if self.run_cap is not None or model in self.model_caps:
-                return BudgetRefusal("unpriced", model)
+            if self.run_cap is not None or name in self.model_caps:
+                return BudgetRefusal("unpriced", name)
             return None
         if self.run_cap is not None and self.spent + self.reserved + worst > self.run_cap:
-            return BudgetRefusal("run", model, self.run_cap, self.spent + self.reserved, worst)
-        cap = self.model_caps.get(model)
-        committed = self.spent_by_model[model] + self.reserved_by_model[model]
+            return BudgetRefusal("run", name, self.run_cap, self.spent + self.reserved, worst)
+        cap = self.model_caps.get(name)
+        committed = self.spent_by_model[name] + self.reserved_by_model[name]
         if cap is not None and committed + worst > cap:
-            return BudgetRefusal("model", model, cap, committed, worst)
+            return BudgetRefusal("model", name, cap, committed, worst)
         return None
 
     # ---- public API (all amounts pico-USD; results are plain dicts so they cross Ray) ----
-    def begin(self, call_key: str, model: str, worst_pico: int | None, cache_key: str | None = None,
+    def begin(self, call_key: str, name: str, worst_pico: int | None, cache_key: str | None = None,
               owner: str = "", *, defer_sync: bool = False) -> dict[str, Any]:
         """A recorded result for this call (idempotency / cache), or a reservation, or a refusal.
 
@@ -140,13 +158,13 @@ class BudgetLedger:
                 return {"status": "recorded", "served_from": "ledger", "result": self.results[call_key]}
             if cache_key is not None and cache_key in self.cache:
                 return {"status": "recorded", "served_from": "cache", "result": self.cache[cache_key]}
-            return self._reserve(call_key, model, worst_pico, owner, defer_sync)
+            return self._reserve(call_key, name, worst_pico, owner, defer_sync)
 
-    def reserve(self, call_key: str, model: str, worst_pico: int | None, owner: str = "", *,
+    def reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str = "", *,
                 defer_sync: bool = False) -> dict[str, Any]:
         """Another reservation for the same call (the previous attempt's was charged)."""
         with self._lock:
-            return self._reserve(call_key, model, worst_pico, owner, defer_sync)
+            return self._reserve(call_key, name, worst_pico, owner, defer_sync)
 
     async def commit(self) -> None:
         """Return once every reservation written so far is on disk (group commit: concurrent
@@ -154,19 +172,19 @@ class BudgetLedger:
         if self.durable_reservations:
             await self._journal.commit()
 
-    def _reserve(self, call_key: str, model: str, worst_pico: int | None, owner: str,
+    def _reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str,
                  defer_sync: bool = False) -> dict[str, Any]:
-        refusal = self._refusal(model, worst_pico)
+        refusal = self._refusal(name, worst_pico)
         if refusal is not None:
             self.refusals += 1
             return {"status": "refused", "message": refusal.message, "refusal": refusal.to_dict()}
         rid = self._next_rid
         self._next_rid += 1
         pico = int(worst_pico or 0)
-        self._journal.append({"op": "reserve", "rid": rid, "key": call_key, "model": model,
+        self._journal.append({"op": "reserve", "rid": rid, "key": call_key, NAME_FIELD: name,
                               "pico": pico, "owner": owner, "t": time.time()},
                              sync=self.durable_reservations and not defer_sync)
-        self._open(rid, call_key, model, pico, owner)
+        self._open(rid, call_key, name, pico, owner)
         return {"status": "reserved", "rid": rid}
 
     def settle(self, rid: int, cost_pico: int, status: str, result: Mapping[str, Any] | None = None,
@@ -256,17 +274,17 @@ class LocalBudget:
         self.owned = owned
         self.group_commit = group_commit
 
-    async def begin(self, call_key: str, model: str, worst_pico: int | None, cache_key: str | None,
+    async def begin(self, call_key: str, name: str, worst_pico: int | None, cache_key: str | None,
                     owner: str) -> Mapping[str, Any]:
         if not self.group_commit:
-            return self.ledger.begin(call_key, model, worst_pico, cache_key, owner)
-        return await self._durable(self.ledger.begin(call_key, model, worst_pico, cache_key, owner,
+            return self.ledger.begin(call_key, name, worst_pico, cache_key, owner)
+        return await self._durable(self.ledger.begin(call_key, name, worst_pico, cache_key, owner,
                                                      defer_sync=True))
 
-    async def reserve(self, call_key: str, model: str, worst_pico: int | None, owner: str) -> Mapping[str, Any]:
+    async def reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str) -> Mapping[str, Any]:
         if not self.group_commit:
-            return self.ledger.reserve(call_key, model, worst_pico, owner)
-        return await self._durable(self.ledger.reserve(call_key, model, worst_pico, owner, defer_sync=True))
+            return self.ledger.reserve(call_key, name, worst_pico, owner)
+        return await self._durable(self.ledger.reserve(call_key, name, worst_pico, owner, defer_sync=True))
 
     async def _durable(self, answer: dict[str, Any]) -> dict[str, Any]:
         """The answer, once its reservation is on disk. If the commit fails or the caller is
