@@ -196,7 +196,9 @@ def open_runs_checked(
     """
     dirs, files, skipped = scan_runs(run_dirs)
     for s in skipped:
-        log.warning(s.line())
+        # info, not warning: the caller gets the skipped parts back and reports them (recap sql,
+        # report and status print one warning line each; a second copy from logging would double it)
+        log.info(s.line())
     con = duckdb.connect(":memory:")
     for table, parts in files.items():
         _create_table_view(con, table, parts)
