@@ -107,7 +107,7 @@ class Bill:
     pico: int = 0
     pico_uncached: int = 0
 
-    def add(self, other: "Bill") -> None:
+    def add(self, other: Bill) -> None:
         for k in self.__dataclass_fields__:
             setattr(self, k, getattr(self, k) + getattr(other, k))
 

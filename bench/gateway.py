@@ -295,7 +295,7 @@ async def concurrent_run(cfg: DeploymentConfig, run_dir: Path, callers: int, n: 
             if r:
                 rate[name].append(callers * 5 / (time.perf_counter() - t0))
     print(f"  -- {callers} concurrent callers, {rounds} rounds of {callers * 5} calls per path --")
-    for name, (gw, led) in paths.items():
+    for name, (_gw, led) in paths.items():
         per = None if led is None else led.stats()["journal_syncs"] / max(1, led.settled)
         syncs = "" if per is None else f"   fdatasyncs per reservation {per:4.2f}"
         print(f"  {name:<34} p50 {pct(lat[name], 0.5):6.2f} ms  p95 {pct(lat[name], 0.95):6.2f} ms  "

@@ -96,9 +96,9 @@ def main() -> None:
     lengths = [int(x) for x in args.lengths.split(",")]
     K = args.window
     variants = [
-        ("ReCAP K=%d pair" % K, "recap", K, "pair"),
-        ("ReCAP K=%d block" % K, "recap", K, "block"),
-        ("ReAct K=%d pair" % K, "react", K, "pair"),
+        (f"ReCAP K={K} pair", "recap", K, "pair"),
+        (f"ReCAP K={K} block", "recap", K, "block"),
+        (f"ReAct K={K} pair", "react", K, "pair"),
         ("ReAct full history", "react", 10**9, "pair"),
     ]
     print(f"Max prompt size per call (estimated tokens = chars/4) vs episode length (environment steps), window K={K} messages")

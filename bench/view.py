@@ -106,7 +106,7 @@ def main() -> int:
                     requests.append(("filter", f"{param} = {v}", "episodes?" + urlencode({param: v})))
             arms = snap.options.get("arm") or []
             if len(arms) >= 2:
-                requests.append(("filter", f"arm + success + sort", "episodes?" + urlencode({"arm": arms[0], "success": "false", "sort": "steps"})))
+                requests.append(("filter", "arm + success + sort", "episodes?" + urlencode({"arm": arms[0], "success": "false", "sort": "steps"})))
             for phrase in (words[0], " ".join(words[1:4]), words[2] + " [12345]", "no such text anywhere"):
                 requests.append(("search", f"search {phrase!r}", "episodes?" + urlencode({"q": phrase})))
             for run_id, eid, calls in pick:

@@ -485,10 +485,9 @@ def cmd_status(args: argparse.Namespace) -> int:
 def cmd_estimate(args: argparse.Namespace) -> int:
     """``recap estimate SPEC``: the plan and its expected cost, without connecting to Ray or calling any model."""
     from pipeline.estimate import estimate, render
+    from pipeline.preflight import check_plan
     from pipeline.spec import load_spec
     from pipeline.units import expand
-
-    from pipeline.preflight import check_plan
 
     spec, _ = load_spec(args.spec)
     with _named(Path(args.spec).name):
@@ -543,10 +542,9 @@ def dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
 def _local_run_args(args: list[str]) -> list[str]:
     """Object-store run folders among ``args`` replaced by freshly pulled local mirrors (the
     reports package reads local folders)."""
+    from pipeline.spec import URI_SCHEMES
     from pipeline.store import RUN_FILE, RunStore
     from workers.sink import is_uri
-
-    from pipeline.spec import URI_SCHEMES
 
     out = []
     for a in args:

@@ -65,8 +65,19 @@ from pipeline.events import EventBuffer
 from pipeline.preflight import preflight
 from pipeline.progress import ProgressView, Snapshot
 from pipeline.raysetup import PROJECT_ROOT, init_ray
-from pipeline.resume import (INFRA_ERROR, RETRY_MODES, AttemptSpend, Retry, RunState, UnitQueue, attempt_spend,
-                             check_journal, infra_failure, is_final, load_state)
+from pipeline.resume import (
+    INFRA_ERROR,
+    RETRY_MODES,
+    AttemptSpend,
+    Retry,
+    RunState,
+    UnitQueue,
+    attempt_spend,
+    check_journal,
+    infra_failure,
+    is_final,
+    load_state,
+)
 from pipeline.sink_channel import SinkChannel, SinkLost
 from pipeline.spec import SweepSpec, text_hash
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore

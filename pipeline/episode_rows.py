@@ -12,9 +12,9 @@ from collections.abc import Callable
 
 from pipeline.resume import INFRA_ERROR, INFRA_ERROR_KINDS, AttemptSpend, infra_failure
 from pipeline.units import Unit
+from schemas.kinds import RowEndReason
 from schemas.labels import place_of
 from schemas.outcomes import EnvFacts, EpisodeOutcome, EpisodeResult
-from schemas.kinds import RowEndReason
 from schemas.records import EpisodeRecord
 from schemas.tables import check_vocabulary
 

@@ -102,6 +102,15 @@ def _price(spec: SweepSpec, model_label: str) -> Any:
         return None
 
 
+def _prompt_total(calls: float, shape: InstanceShape, window: int) -> float:
+    """Prompt tokens over ``calls`` calls: call i sees the pinned prompt and min(window, 2i)
+    messages of about an observation plus half the completion budget each."""
+    per_msg = shape.obs_tokens + COMPLETION_TOKENS[1] // 2
+    full = max(0.0, calls - window / 2)
+    ramp = min(calls, window / 2)
+    return calls * shape.pinned_tokens + per_msg * (ramp * ramp + full * window)
+
+
 def estimate(plan: Plan) -> list[GroupEstimate]:
     spec = plan.spec
     shapes: dict[str, InstanceShape] = {}
@@ -119,15 +128,7 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
         else:
             c_low = min(max_calls, max(1.0, shape.optimal * lo + 1))
             c_high = min(max_calls, max(c_low, shape.max_steps * hi + 1))
-        per_msg = shape.obs_tokens + COMPLETION_TOKENS[1] // 2
-
-        def prompt_total(calls: float) -> float:
-            # call i sees the pinned prompt + min(window, 2i) messages of ~per_msg tokens
-            full = max(0.0, calls - window / 2)
-            ramp = min(calls, window / 2)
-            return calls * shape.pinned_tokens + per_msg * (ramp * ramp + full * window)
-
-        p_low, p_high = prompt_total(c_low), prompt_total(c_high)
+        p_low, p_high = _prompt_total(c_low, shape, window), _prompt_total(c_high, shape, window)
         o_low, o_high = c_low * COMPLETION_TOKENS[0], c_high * COMPLETION_TOKENS[1]
         g = groups.setdefault((u.method_label, u.model_label),
                               GroupEstimate(u.method_label, u.model_label, u.model.startswith("offline/")))

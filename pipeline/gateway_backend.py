@@ -54,7 +54,7 @@ def deployment_config(m: ModelSpec, where: str) -> Any:
 
 def model_caps(spec: SweepSpec) -> dict[str, float]:
     """Per-model caps keyed by the model's name in the sweep (the gateway ledger's key)."""
-    return {m.name: m.cap_usd for m in spec.models if m.cap_usd is not None}  # type: ignore[misc]
+    return {m.name: m.cap_usd for m in spec.models if m.cap_usd is not None}
 
 
 def provider_models(spec: SweepSpec) -> dict[str, str]:

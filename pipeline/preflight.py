@@ -117,7 +117,7 @@ def _canonical(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
 
 
-def check_plan(plan: "Plan") -> None:
+def check_plan(plan: Plan) -> None:
     """Every unit of ``plan`` can start its episode, checked without a model call, before
     anything is written: raises :class:`~pipeline.errors.SpecError` (one line) otherwise.
 

@@ -42,12 +42,12 @@ def paused_text(until: float | None, now: float | None = None) -> str:
     return "  paused until " + time.strftime("%H:%M:%S", time.localtime(until))
 
 
-def eta_text(s: "Snapshot") -> str:
+def eta_text(s: Snapshot) -> str:
     """No ETA once a cap has stopped new work: what is left waits for a resume."""
     return "-- (stopped)" if s.stopped else fmt_duration(s.eta_s)
 
 
-def nominal(s: "Snapshot") -> str:
+def nominal(s: Snapshot) -> str:
     """Spend of test-double models is a nominal price, not money: say so beside the figure."""
     return " (nominal: test doubles)" if s.rates and all(TEST_DOUBLE_MARK in m for m in s.rates) else ""
 
@@ -100,7 +100,7 @@ class ProgressView:
         self._last_line = 0.0
         self._live: Any = None
 
-    def __enter__(self) -> "ProgressView":
+    def __enter__(self) -> ProgressView:
         if self.mode == "live":
             from rich.console import Console
             from rich.live import Live

@@ -40,12 +40,12 @@ from typing import Literal
 from pipeline.errors import RunFolderError
 from pipeline.store import RunStore
 from pipeline.units import Unit
+from schemas.labels import GAVE_UP_PREFIX, INFRA_ERROR, INFRA_ERROR_KINDS, infra_failure
+from schemas.parts import BadPart
 from workers.gateway import entries
 from workers.gateway.entries import AttemptSpend, LedgerKeyError
 from workers.gateway.journal import scan
 from workers.gateway.ledger import JOURNAL_NAME
-from schemas.labels import GAVE_UP_PREFIX, INFRA_ERROR, INFRA_ERROR_KINDS, infra_failure
-from schemas.parts import BadPart
 
 #: event kinds that record a failed attempt of a unit
 FAILED_ATTEMPT_EVENTS = ("worker_lost", "attempt_failed")

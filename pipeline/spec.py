@@ -146,12 +146,8 @@ def _not_bool(v: Any) -> Any:
     return v
 
 
-def _int(*, ge: int | None = None, gt: int | None = None, le: int) -> Any:
-    return Annotated[int, BeforeValidator(_not_bool), Field(ge=ge, gt=gt, le=le)]
-
-
-def _float(*, ge: float | None = None, gt: float | None = None, le: float) -> Any:
-    return Annotated[float, BeforeValidator(_not_bool), Field(ge=ge, gt=gt, le=le, allow_inf_nan=False)]
+#: numbers in a sweep file are numbers: YAML's true/false are refused, not read as 1/0
+_NOT_BOOL = BeforeValidator(_not_bool)
 
 
 def _unprintable(v: str) -> str | None:
@@ -187,10 +183,10 @@ def _model_string(v: str) -> str:
 Name = Annotated[str, Field(min_length=1, max_length=NAME_MAX), AfterValidator(_printable)]
 Label = Annotated[str, Field(min_length=1, max_length=NAME_MAX), AfterValidator(_label)]
 Selector = Annotated[str, Field(min_length=1, max_length=SELECTOR_MAX), AfterValidator(_printable)]
-Seed = _int(ge=0, le=SEED_MAX)
-Usd = _float(ge=0, le=USD_MAX)
-Price = _float(ge=0, le=PRICE_MAX)
-Seconds = _float(gt=0, le=SECONDS_MAX)
+Seed = Annotated[int, _NOT_BOOL, Field(ge=0, le=SEED_MAX)]
+Usd = Annotated[float, _NOT_BOOL, Field(ge=0, le=USD_MAX, allow_inf_nan=False)]
+Price = Annotated[float, _NOT_BOOL, Field(ge=0, le=PRICE_MAX, allow_inf_nan=False)]
+Seconds = Annotated[float, _NOT_BOOL, Field(gt=0, le=SECONDS_MAX, allow_inf_nan=False)]
 
 
 def _local_path(v: str) -> str:
@@ -259,12 +255,12 @@ class ModelSpec(_Strict):
     #: chunk_size); part of the unit hash
     options: dict[str, Any] = Field(default_factory=dict)
     # --- transport: never part of a unit's identity ---
-    rpm: _int(gt=0, le=RPM_MAX) | None = None
-    tpm: _int(gt=0, le=TPM_MAX) | None = None
-    concurrency: _int(gt=0, le=CONCURRENCY_MAX) | None = None
+    rpm: Annotated[int, _NOT_BOOL, Field(gt=0, le=RPM_MAX)] | None = None
+    tpm: Annotated[int, _NOT_BOOL, Field(gt=0, le=TPM_MAX)] | None = None
+    concurrency: Annotated[int, _NOT_BOOL, Field(gt=0, le=CONCURRENCY_MAX)] | None = None
     #: the quota window rpm/tpm count over (60 s for real providers; shorter for test servers)
     window_s: Seconds | None = None
-    retries: _int(ge=0, le=RETRIES_MAX) | None = None
+    retries: Annotated[int, _NOT_BOOL, Field(ge=0, le=RETRIES_MAX)] | None = None
     timeout_s: Seconds | None = None
     prices: PriceSpec | None = None
     api_base: Annotated[str, Field(min_length=1, max_length=LONG_MAX), AfterValidator(_printable)] | None = None
@@ -370,7 +366,7 @@ class EnvSpec(_Strict):
     #: explicit instance ids
     instances: list[Selector] = Field(default_factory=list, max_length=INSTANCES_MAX)
     #: at most this many instances per selector (in the benchmark's fixed order)
-    limit: _int(gt=0, le=LIMIT_MAX) | None = None
+    limit: Annotated[int, _NOT_BOOL, Field(gt=0, le=LIMIT_MAX)] | None = None
     #: options for the benchmark's make() (data_dir ...); not part of the unit hash. Path
     #: options (data_dir, *_dir) are resolved here (~ expanded, made absolute).
     options: dict[str, Any] = Field(default_factory=dict)
@@ -390,9 +386,9 @@ class LimitsSpec(_Strict):
     """Per-episode limits, mapped onto AgentConfig max_llm_calls / max_episode_tokens /
     max_episode_cost_usd (a method's own settings win)."""
 
-    llm_calls: _int(gt=0, le=LLM_CALLS_MAX) | None = None
-    tokens: _int(gt=0, le=TOKENS_MAX) | None = None
-    usd: _float(gt=0, le=USD_MAX) | None = None
+    llm_calls: Annotated[int, _NOT_BOOL, Field(gt=0, le=LLM_CALLS_MAX)] | None = None
+    tokens: Annotated[int, _NOT_BOOL, Field(gt=0, le=TOKENS_MAX)] | None = None
+    usd: Annotated[float, _NOT_BOOL, Field(gt=0, le=USD_MAX, allow_inf_nan=False)] | None = None
 
     def agent_settings(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -415,7 +411,7 @@ def check_ray_address(v: str) -> str:
         return v
     m = _ADDRESS.match(v)
     ok = m is not None and 1 <= int(m["port"]) <= 65535
-    if ok and m["host"].startswith("["):
+    if m is not None and ok and m["host"].startswith("["):
         try:
             ipaddress.IPv6Address(m["host"][1:-1])
         except ValueError:
@@ -427,11 +423,11 @@ def check_ray_address(v: str) -> str:
 
 class RaySpec(_Strict):
     address: Annotated[str, Field(max_length=NAME_MAX), AfterValidator(check_ray_address)] | None = None
-    num_cpus: _int(gt=0, le=NUM_CPUS_MAX) | None = None
+    num_cpus: Annotated[int, _NOT_BOOL, Field(gt=0, le=NUM_CPUS_MAX)] | None = None
     dashboard: bool = False
-    object_store_mb: _int(ge=64, le=OBJECT_STORE_MB_MAX) = 256
+    object_store_mb: Annotated[int, _NOT_BOOL, Field(ge=64, le=OBJECT_STORE_MB_MAX)] = 256
     #: CPU share of one episode worker actor (small: workers wait on the model)
-    worker_cpus: _float(ge=0, le=WORKER_CPUS_MAX) = 0.05
+    worker_cpus: Annotated[float, _NOT_BOOL, Field(ge=0, le=WORKER_CPUS_MAX, allow_inf_nan=False)] = 0.05
 
 
 class SweepSpec(_Strict):
@@ -441,11 +437,11 @@ class SweepSpec(_Strict):
     methods: list[MethodSpec] = Field(min_length=1, max_length=LIST_MAX)
     environments: list[EnvSpec] = Field(min_length=1, max_length=LIST_MAX)
     seeds: list[Seed] = Field(default_factory=lambda: [0], min_length=1, max_length=SEEDS_MAX)
-    step_multiplier: _float(gt=0, le=STEP_MULTIPLIER_MAX) = 4.0
+    step_multiplier: Annotated[float, _NOT_BOOL, Field(gt=0, le=STEP_MULTIPLIER_MAX, allow_inf_nan=False)] = 4.0
     limits: LimitsSpec = Field(default_factory=LimitsSpec)
     run_cap_usd: Usd | None = None
-    workers: _int(gt=0, le=WORKERS_MAX) = 4
-    max_attempts: _int(gt=0, le=ATTEMPTS_MAX) = 3
+    workers: Annotated[int, _NOT_BOOL, Field(gt=0, le=WORKERS_MAX)] = 4
+    max_attempts: Annotated[int, _NOT_BOOL, Field(gt=0, le=ATTEMPTS_MAX)] = 3
     #: the order units start in (not part of any unit hash): ``interleaved`` (default) takes the
     #: arms (method x model) in turn and, within an arm, instances in a shuffle seeded by the run
     #: name, so a cap that binds early leaves a balanced subsample; ``plan`` is the plan's own
@@ -480,7 +476,7 @@ class SweepSpec(_Strict):
         return v
 
     @model_validator(mode="after")
-    def _unique(self) -> "SweepSpec":
+    def _unique(self) -> SweepSpec:
         for what, names in (("models", [m.name for m in self.models]), ("methods", [m.name for m in self.methods])):
             seen: set[str] = set()
             for n in names:

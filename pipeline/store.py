@@ -29,14 +29,13 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from pipeline.errors import RunFolderError
+from schemas.parts import RUN_FILE, BadPart, inspect_parts, read_parts
 from schemas.records import SCHEMA_VERSION
-from schemas.tables import TABLES, arrow_schema
+from schemas.tables import TABLES
 from schemas.versions import continues
 from workers.sink import is_uri
-from schemas.parts import RUN_FILE, BadPart, inspect_parts, read_parts
 
 LOCK_FILE = "driver.lock"
 PLAN_FILE = "plan.json"

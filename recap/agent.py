@@ -24,7 +24,7 @@ from recap.config import OMITTED_OBSERVATION, AgentConfig
 from recap.demo_script import DemoScript
 from recap.env import Demonstration, Environment, Reset, Step
 from recap.llm import LLMClient
-from recap.runtime import Conversation, EnvDriver, Emit, Episode, EpisodeEnd, EpisodeResult
+from recap.runtime import Conversation, Emit, EnvDriver, Episode, EpisodeEnd, EpisodeResult
 from recap.scripted import ScriptedClient
 from schemas.records import MessageRecord
 

@@ -67,7 +67,7 @@ class Demonstration:
     def __init__(
         self,
         name: str,
-        make_env: Callable[[], "Environment"],
+        make_env: Callable[[], Environment],
         replies: Mapping[str, Sequence[Mapping[str, Any]]] | None = None,
         *,
         script: DemoScript | None = None,

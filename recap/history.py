@@ -62,7 +62,7 @@ class History:
         mode: WindowMode = "pair",
         block: int | None = None,
         emit: Callable[[MessageRecord], None] | None = None,
-        counter: "SeqCounter | None" = None,
+        counter: SeqCounter | None = None,
         counts_pins: bool = False,
     ) -> None:
         if window < 2:
@@ -149,7 +149,7 @@ class History:
         return self._counter.value
 
     @property
-    def counter(self) -> "SeqCounter":
+    def counter(self) -> SeqCounter:
         return self._counter
 
     def entries(self) -> list[Entry]:

@@ -19,14 +19,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from recap.config import AgentConfig
-from recap.env import Environment, EnvError, InvalidActionError, Reset, Step
+from recap.env import EnvError, Environment, InvalidActionError, Reset, Step
 from recap.history import History
 from recap.jsonreply import ReplyFormatError, parse_json_object
 from recap.llm import LLMClient, LLMError, LLMRequest
-from schemas.records import CallRecord, Record, StepRecord
 from schemas import kinds
 from schemas.kinds import EndReason, LLMErrorKind
 from schemas.outcomes import BudgetRefusal, EpisodeResult
+from schemas.records import CallRecord, Record, StepRecord
 
 #: why an episode can end (:data:`schemas.kinds.EndReason`)
 END_REASONS = kinds.END_REASONS
@@ -79,7 +79,7 @@ class Conversation:
         emit: Emit,
         expected_format: str,
         reply_fields: tuple[str, ...] = (),
-        usage: "Usage | None" = None,
+        usage: Usage | None = None,
         history: History | None = None,
     ) -> None:
         self.episode_id = episode_id
@@ -101,7 +101,7 @@ class Conversation:
         self.usage = usage if usage is not None else Usage()
 
     def fork(self, *, expected_format: str | None = None, style: str | None = None,
-             reply_fields: tuple[str, ...] | None = None) -> "Conversation":
+             reply_fields: tuple[str, ...] | None = None) -> Conversation:
         """A separate, empty context for the same episode (ADaPT's isolated planner/executor
         prompts): usage, caps and message numbering are shared, the history is not."""
         cfg = self.config

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any, Union
+from typing import Any
 
 from recap.llm import LLMError, LLMRequest, LLMResponse
 
 #: a reply text, a JSON object, an error to raise, a whole response (e.g. one cut at the output
 #: cap), or a function of the request returning any of these
-Item = Union[str, Mapping[str, Any], LLMError, LLMResponse, Callable[[LLMRequest], Any]]
+Item = str | Mapping[str, Any] | LLMError | LLMResponse | Callable[[LLMRequest], Any]
 
 
 class ScriptExhausted(RuntimeError):

@@ -14,7 +14,7 @@ class Node:
     """One subtask: its place in the tree, its kind and status, and its plan versions."""
 
     node_id: int
-    parent: "Node | None"
+    parent: Node | None
     depth: int
     child_index: int
     task: str

@@ -35,7 +35,7 @@ import logging
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -44,8 +44,8 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
-from schemas.tables import TABLES
 from schemas.parts import RUN_FILE, check_parts, read_part, read_run_file
+from schemas.tables import TABLES
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +143,7 @@ def scan_runs(run_dirs: Sequence[str | Path]) -> tuple[list[Path], dict[str, lis
     return dirs, files, skipped
 
 
-@lru_cache(maxsize=None)
+@cache
 def duckdb_types() -> dict[str, dict[str, str]]:
     """DuckDB's type for every column of every table, from the Arrow schemas."""
     con = duckdb.connect(":memory:")
@@ -249,7 +249,7 @@ def materialize(con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> None:
 # -- SQL files -----------------------------------------------------------------------------------
 
 
-@lru_cache(maxsize=None)
+@cache
 def load_sql(name: str) -> str:
     """The text of ``reports/sql/<name>.sql``."""
     path = SQL_DIR / f"{name}.sql"

@@ -28,7 +28,6 @@ import pyarrow.parquet as pq
 from schemas.tables import TABLES, arrow_schema, record_to_row
 from schemas.versions import missing_fillable, part_version, upgrade
 
-
 #: the run folder's identity file: written once by the pipeline when the run starts
 RUN_FILE = "run.json"
 

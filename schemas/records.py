@@ -8,7 +8,7 @@ when it writes, so the method stays unaware of where its records go.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar, Union
+from typing import ClassVar
 
 from schemas.kinds import CallStatus, EventKind, EventSource, LLMErrorKind, NodeKind, NodeStatus, RowEndReason, Severity
 
@@ -224,9 +224,7 @@ class RunRecord:
     schema_version: int = SCHEMA_VERSION
 
 
-Record = Union[
-    MessageRecord, CallRecord, NodeRecord, StepRecord, EpisodeRecord, EventRecord, RunRecord
-]
+Record = MessageRecord | CallRecord | NodeRecord | StepRecord | EpisodeRecord | EventRecord | RunRecord
 
 ALL_RECORD_TYPES: tuple[type, ...] = (
     MessageRecord,

@@ -33,7 +33,13 @@ export LITELLM_LOCAL_MODEL_COST_MAP=True
 export RAY_USAGE_STATS_ENABLED=0
 marker="not slow and not realmodel"
 if [ "${1:-}" = "slow" ]; then marker="slow"; shift; fi
+# the habits (pyproject.toml [tool.ruff], [tool.mypy]): lint, format and types, before the tests
+lint=0
+.venv/bin/ruff check . || { echo "ruff check: findings above (ruff check --fix fixes the marked ones)" >&2; lint=1; }
+.venv/bin/ruff format --check . >/dev/null || { .venv/bin/ruff format --check . >&2; echo "ruff format: run '.venv/bin/ruff format .'" >&2; lint=1; }
+.venv/bin/mypy || { echo "mypy: type errors above" >&2; lint=1; }
 .venv/bin/python -m pytest -m "$marker" -q "$@"
 rc=$?
 if [ $rc -eq 5 ]; then echo "no tests were collected: failing" >&2; exit 1; fi
+if [ $rc -eq 0 ] && [ $lint -ne 0 ]; then echo "tests passed, but lint/format/type checks failed (above)" >&2; exit 1; fi
 exit $rc

@@ -41,8 +41,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from schemas.tables import record_to_row
 from schemas.parts import PartWriter
+from schemas.tables import record_to_row
 from workers.log_setup import configure_from_env
 
 log = logging.getLogger(__name__)

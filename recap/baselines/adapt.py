@@ -72,11 +72,11 @@ from typing import Any
 
 from recap.agent import Agent, DemonstrationError, format_transcript
 from recap.baselines import prompts as P
+from recap.baselines.react import ReActAgent
 from recap.config import AgentConfig, ConfigError
 from recap.env import Demonstration, Environment, InvalidActionError, Reset
 from recap.history import History
 from recap.jsonreply import ReplyFormatError, action_reply, recap_reply
-from recap.baselines.react import ReActAgent
 from recap.recap_agent import ReCAPAgent
 from recap.runtime import Conversation, Episode, EpisodeEnd
 from recap.scripted import ScriptedClient

@@ -16,8 +16,8 @@ from html import escape
 from typing import Any
 from urllib.parse import urlencode
 
-from reports.observations import observation_change
 from reports.model import format_value
+from reports.observations import observation_change
 from reports.viewer import ranges
 from reports.webview import data as D
 
@@ -137,7 +137,7 @@ def episodes_page(snap: D.Snapshot, page: D.EpisodePage) -> str:
     state = {**lq.filters, "q": lq.q, "per": lq.per if lq.per != 50 else None, "latest": "1" if lq.latest else None}
     sort_state = {"sort": lq.sort if lq.sort != "episode_id" else None, "dir": "desc" if lq.desc else None}
     selects = []
-    for param, col in D.FILTERS:
+    for param, _col in D.FILTERS:
         if param not in snap.options:
             continue
         opts = snap.options[param] if param != "success" else ["true", "false"]

@@ -19,7 +19,6 @@ placeholders, the hostile-provider gateway config and loop, the lock race.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import dataclasses
 import hashlib
@@ -138,13 +137,12 @@ def _run_dir(lab: Lab, name: str) -> Path:
 def cap_attacks(lab: Lab, cap_usd: float = 0.001) -> ScenarioResult:
     """A hostile provider against a small run cap: overspend and under-billing both $0."""
     import workers.gateway.core as core
+    from recap.llm import LLMError
     from tests.gateway.test_hostile_provider import config, events, spend_until_refused, true_bill_pico
     from workers.gateway.core import DeploymentGateway
     from workers.llm.accounting import USAGE_REJECTED_EVENT
     from workers.llm.litellm_setup import get_litellm
     from workers.llm.pricing import pico_to_usd, usd_to_pico
-
-    from recap.llm import LLMError
 
     get_litellm()
     res = ScenarioResult("cap attacks")

@@ -20,12 +20,12 @@ from pipeline.spec import parse_spec
 from pipeline.store import RunStore
 from pipeline.units import expand
 from recap.llm import ChatMessage, LLMError, LLMRequest
+from schemas.parts import PartWriter
 from schemas.records import EpisodeRecord, MessageRecord, StepRecord
 from tests.chaos import inputs
 from tests.chaos.folders import damage
 from tests.chaos.procnet import Listener, listeners, parse_address
 from tests.doubles.fake_server import FakeServer, FakeServerConfig
-from schemas.parts import PartWriter
 
 
 @pytest.fixture(scope="module")

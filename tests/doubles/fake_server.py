@@ -234,7 +234,7 @@ class FakeServer:
             self._thread.join(10)
             self._thread = None
 
-    def __enter__(self) -> "FakeServer":
+    def __enter__(self) -> FakeServer:
         self.start_in_thread()
         return self
 

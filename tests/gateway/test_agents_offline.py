@@ -10,7 +10,6 @@ from workers.llm.providers import DeploymentConfig
 from .agent_episodes import assert_every_call_recorded, episode_rows, play
 
 
-
 @pytest.mark.parametrize("method", ["recap", "react", "cot"])
 def test_expert_drives_each_agent_to_success_and_every_call_is_recorded(run_dir, method):
     with BlockingGateway(DeploymentConfig(model="offline/expert"), run_dir=run_dir) as gw:

@@ -14,15 +14,15 @@ import asyncio
 import pytest
 
 from recap.llm import ChatMessage, LLMRequest
+from schemas.parts import read_table
 from workers.gateway.core import DeploymentGateway
 from workers.llm.accounting import Sizing, settle, size_request, usage_problems, worst_case_pico
 from workers.llm.cache_markers import BreakpointPlanner, with_markers
 from workers.llm.calling import Attempt
 from workers.llm.direct import LiteLLMClient
-from workers.llm.prompt_cache import Message, PromptCache, openai_cached
 from workers.llm.pricing import default_prices
+from workers.llm.prompt_cache import Message, PromptCache, openai_cached
 from workers.llm.providers import DeploymentConfig
-from schemas.parts import read_table
 
 REPLY = "r" * 40
 RULES = {"fake-gpt": "openai", "fake-claude": "anthropic", "fake-deepseek": "deepseek"}

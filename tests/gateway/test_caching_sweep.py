@@ -11,7 +11,6 @@ import pytest
 
 from workers.llm.pricing import default_prices
 
-
 SWEEP = """run: caching
 output: {out}
 models:

@@ -11,10 +11,10 @@ import logging
 import pytest
 
 from recap.llm import LLMError
-from workers.gateway.core import DeploymentGateway
-from tests.doubles.fake_server import window_maxima
-from workers.llm.providers import DeploymentConfig
 from schemas.parts import read_table
+from tests.doubles.fake_server import window_maxima
+from workers.gateway.core import DeploymentGateway
+from workers.llm.providers import DeploymentConfig
 
 from .conftest import FAKE_KEY_ENV, make_request
 

@@ -9,13 +9,12 @@ import time
 from pathlib import Path
 
 import pytest
-
 import ray  # noqa: E402
 
 from recap.llm import LLMError  # noqa: E402
+from schemas.parts import read_table  # noqa: E402
 from workers.gateway.actors import RunGateways  # noqa: E402
 from workers.llm.providers import DeploymentConfig  # noqa: E402
-from schemas.parts import read_table  # noqa: E402
 
 from .conftest import make_request  # noqa: E402
 from .test_restart import _journal_spend  # noqa: E402

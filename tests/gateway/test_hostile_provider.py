@@ -16,18 +16,17 @@ import time
 import pytest
 
 from recap.llm import LLMError
+from schemas.parts import read_table
 from workers.gateway.call_log import CallLog
 from workers.gateway.core import DeploymentGateway
 from workers.gateway.ledger import JOURNAL_NAME
 from workers.gateway.limits import AdmissionController
-from workers.llm.accounting import (COMPLETION_SLACK_TOKENS, USAGE_REJECTED_EVENT, Sizing, settle, size_request,
-                                    worst_case_pico)
+from workers.llm.accounting import COMPLETION_SLACK_TOKENS, USAGE_REJECTED_EVENT, Sizing, settle, size_request, worst_case_pico
 from workers.llm.calling import Attempt
 from workers.llm.direct import LiteLLMClient
 from workers.llm.pricing import Price, default_prices, pico_to_usd
 from workers.llm.providers import DeploymentConfig, provider_messages, redact_url, url_secrets
 from workers.llm.tokens import TokenCount
-from schemas.parts import read_table
 
 from .conftest import FAKE_KEY_ENV, make_request
 

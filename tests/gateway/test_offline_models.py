@@ -10,6 +10,7 @@ import pytest
 
 from recap.llm import ChatMessage, LLMError, LLMRequest
 from recap.methods import METHODS
+from schemas.parts import PartWriter, read_table
 from schemas.records import CallRecord, MessageRecord
 from workers.gateway.core import DeploymentGateway
 from workers.llm.offline.expert import chunk_actions, expert_reply, group_plan
@@ -17,7 +18,6 @@ from workers.llm.offline.knobs import INVALID_ACTION, MALFORMED_JSON, Knobs
 from workers.llm.offline.provider import offline_text
 from workers.llm.offline.random_model import random_reply
 from workers.llm.providers import DeploymentConfig
-from schemas.parts import PartWriter, read_table
 
 #: the reply fields each method's agent sends in its hints (the offline models read these, not the name)
 FIELDS = {name: agent_cls.reply_fields for name, (agent_cls, _config_cls) in METHODS.items()}

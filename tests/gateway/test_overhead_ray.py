@@ -7,8 +7,6 @@ in test_journal_group_commit.py. Timings are bench/gateway.py's job, not a test'
 
 from __future__ import annotations
 
-import pytest
-
 import ray  # noqa: E402
 
 from workers.gateway.actors import RunGateways  # noqa: E402
@@ -23,7 +21,7 @@ def _config(server, name: str) -> DeploymentConfig:
                             params={"max_tokens": 20})
 
 
-def test_shared_budget_group_commits_and_deferred_settlements_keep_idempotency(ray_session, fake_server, run_dir):
+def test_shared_budget_group_commits_and_deferred_settlements_keep_idempotency(ray_session, fake_server, run_dir):  # noqa: F811
     server = fake_server(latency_s=0.2)
     gws = RunGateways([_config(server, "one"), _config(server, "two")], run_dir, "ray-run", budget="shared")
     one, two = gws.client("one"), gws.client("two")

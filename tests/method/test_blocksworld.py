@@ -45,7 +45,7 @@ def test_closed_loop_expert_solves_from_random_states(iid):
         if step is not None and step.success:
             assert env.expert_plan() == []
             continue
-        for n in range(60):
+        for _n in range(60):
             plan = env.expert_plan()
             step = env.step(plan[0])
             if step.success:

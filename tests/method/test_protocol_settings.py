@@ -10,7 +10,7 @@ import json
 import pytest
 
 from recap.agent import ElidedObservations
-from recap.baselines import ADaPTConfig, ActAgent, CoTAgent, PlanConfig, ReActAgent, ReActConfig, StandardAgent
+from recap.baselines import ActAgent, ADaPTConfig, CoTAgent, PlanConfig, ReActAgent, ReActConfig, StandardAgent
 from recap.blocksworld import BENCHMARK, DEMONSTRATION, RULES
 from recap.config import OMITTED_OBSERVATION, ConfigError, ReCAPConfig, build_config
 from recap.llm import LLMResponse

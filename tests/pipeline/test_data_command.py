@@ -25,8 +25,8 @@ from pipeline import data as datacmd
 from pipeline.data import data_main
 from recap.env import DataNotFoundError
 from workers.envs import data_paths
-from workers.envs.alfworld import games as alf_games
 from workers.envs.alfworld import data_folders as alf_folders
+from workers.envs.alfworld import games as alf_games
 from workers.envs.robotouille import data as rob_data
 from workers.envs.robotouille.data_folders import COMMIT as ROBOTOUILLE_COMMIT
 from workers.envs.robotouille.data_folders import FOLDER as ROB_FOLDER

@@ -15,8 +15,8 @@ from pipeline.spec import parse_spec
 from pipeline.store import RunStore
 from pipeline.summary import collect
 from pipeline.units import expand
-from schemas.records import EpisodeRecord, EventRecord
 from schemas.parts import PartWriter
+from schemas.records import EpisodeRecord, EventRecord
 
 SPEC = """run: infra
 output: {out}

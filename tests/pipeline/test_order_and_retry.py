@@ -25,8 +25,8 @@ from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
 from pipeline.summary import collect
 from pipeline.units import expand, order_seed, order_units, stratum
-from schemas.records import EpisodeRecord, EventRecord
 from schemas.parts import PartWriter
+from schemas.records import EpisodeRecord, EventRecord
 
 MIXED = """run: mixed
 output: /tmp/never-written
@@ -431,8 +431,8 @@ def test_a_give_up_whose_last_error_names_a_dead_actor_counts_as_infrastructure(
     """The worker lived but its task failed on a dead actor (attempt_failed, no marker): the row
     reads as worker_lost to resume and status, so the session counts it as failed (exit 4)."""
     from pipeline.driver import RunSummary
-    from pipeline.worker_pool import Finished, Slot
     from pipeline.resume import Pending
+    from pipeline.worker_pool import Finished, Slot
 
     out = tmp_path / "one"
     text = f"run: one\noutput: {out}\n" + """models: [{model: offline/tiny}]

@@ -12,12 +12,12 @@ from pipeline.spec import parse_spec
 from pipeline.store import RunStore
 from pipeline.units import expand
 from recap.llm import ChatMessage, LLMRequest, LLMResponse
+from schemas.parts import PartWriter
 from schemas.records import CallRecord, EpisodeRecord, EventRecord, MessageRecord
 from schemas.tables import record_to_row
-from workers.episode_worker import EpisodeClient, RecordForwarder
 from workers.envs.registry import make_env
+from workers.episode_worker import EpisodeClient, RecordForwarder
 from workers.sink import Sink
-from schemas.parts import PartWriter
 
 
 def msg(eid: str, seq: int) -> MessageRecord:

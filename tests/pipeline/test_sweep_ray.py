@@ -88,7 +88,7 @@ def test_sweep_end_to_end_tables_and_queries(ray_address, tmp_path, capsys):
     root_v0 = q(con, f"select versions[1].subtasks from tree_nodes where episode_id = '{recap_ep}' and parent_id is null")[0][0]
     first_action = q(con, f"select action from steps where episode_id = '{recap_ep}' order by index limit 1")[0][0]
     assert recap_ep in shown and "Build one tower" in shown
-    assert f"v0 think: " in shown and f"subtasks: [{root_v0[0]}, {root_v0[1]}" in shown
+    assert "v0 think: " in shown and f"subtasks: [{root_v0[0]}, {root_v0[1]}" in shown
     assert f"action {first_action} ok" in shown
     assert main(["sql", str(out), "select count(*) as n from episodes"]) == 0
     assert "6" in capsys.readouterr().out

@@ -23,13 +23,12 @@ from pathlib import Path
 import pytest
 
 from recap.llm import ChatMessage, LLMError, LLMRequest
+from schemas.parts import read_table
+from tests.gateway.agent_episodes import assert_every_call_recorded, episode_rows, play
 from workers.gateway.blocking import BlockingGateway
 from workers.gateway.core import DeploymentGateway
 from workers.gateway.ledger import JOURNAL_NAME
 from workers.llm.providers import DeploymentConfig
-from schemas.parts import read_table
-
-from tests.gateway.agent_episodes import assert_every_call_recorded, episode_rows, play
 
 pytestmark = pytest.mark.realmodel
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from recap.config import AgentConfig, ReCAPConfig, build_config
+from schemas.parts import PartWriter
 from schemas.records import (
     CallRecord,
     EpisodeRecord,
@@ -24,7 +25,6 @@ from schemas.records import (
     RunRecord,
     StepRecord,
 )
-from schemas.parts import PartWriter
 
 RECAP = ReCAPConfig().to_json()
 RECAP_128 = build_config(ReCAPConfig, window=128).to_json()

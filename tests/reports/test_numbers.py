@@ -336,8 +336,8 @@ def test_permutation_test_exact_and_sampled():
 
 def test_loop_detector_boundaries(tmp_path):
     """Cycles must repeat 3 times back to back (a single action 4 times); progress is no loop."""
-    from schemas.records import StepRecord
     from schemas.parts import PartWriter
+    from schemas.records import StepRecord
 
     obs = {"a": "at a", "b": "at b", "c": "at c", "x": "same", "ok": "o", "bad": "o"}
     episodes = {

@@ -20,9 +20,9 @@ from pipeline.cli import main as recap_main
 from pipeline.spec import parse_spec
 from pipeline.store import RunStore
 from pipeline.units import expand
+from schemas.parts import PartWriter, check_parts, schema_problem
 from schemas.records import CallRecord, EpisodeRecord, MessageRecord, StepRecord
 from schemas.tables import arrow_schema, record_to_row
-from schemas.parts import PartWriter, check_parts, schema_problem
 
 SPEC = """run: typed
 output: {out}

@@ -20,8 +20,8 @@ from reports.views import (
     open_runs_checked,
     run_query,
 )
-from schemas.tables import TABLES
 from schemas.parts import part_files
+from schemas.tables import TABLES
 
 NAMED_VIEWS = ["attempts", "terminal", "outcomes", "calls", "nodes", "tree_stats", "step_patterns", "episode_modes", "failures"]
 

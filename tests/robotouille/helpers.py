@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 from workers.envs.robotouille import catalog
@@ -18,7 +18,7 @@ def require_data() -> Path:
     return DATA
 
 
-@lru_cache(maxsize=None)
+@cache
 def instance_record(split: str, task: str, seed: int) -> dict:
     path = require_data() / "instances" / split / f"{task}_{seed}.json"
     return json.loads(path.read_text())

@@ -8,8 +8,8 @@ import pyarrow as pa
 import pytest
 
 from schemas import SCHEMA_VERSION, TABLES, arrow_schema, record_to_row
-from schemas.records import ALL_RECORD_TYPES, CallRecord, MessageRecord, NodeRecord, NodeVersion, StepRecord
 from schemas.parts import PartWriter, check_parts, read_table
+from schemas.records import ALL_RECORD_TYPES, CallRecord, MessageRecord, NodeRecord, NodeVersion, StepRecord
 
 
 def test_each_table_has_run_id_then_the_record_fields_and_a_version():

@@ -13,8 +13,8 @@ from pipeline.errors import RunFolderError
 from pipeline.store import RunStore
 from pipeline.summary import collect
 from reports.views import open_runs, run_query
-from schemas.tables import arrow_schema
 from schemas.parts import read_table
+from schemas.tables import arrow_schema
 
 ADDED = ("label", "profile", "ablation", "provider_model")
 RECAP_CFG = json.dumps({"window": 64, "think": "none", "max_level": None, "name_only": False, "shortcut": True})

@@ -66,9 +66,9 @@ def _ledger_restored_event(run_dir: str, ledger: BudgetLedger) -> None:
     import time
     import uuid
 
+    from schemas.parts import PartWriter
     from schemas.records import EventRecord
     from workers.gateway.call_log import run_id_of
-    from schemas.parts import PartWriter
 
     try:
         run_id = run_id_of(run_dir)
@@ -96,7 +96,7 @@ class BudgetActor(LocalBudget):
         _ledger_restored_event(run_dir, self.ledger)
 
     @ray.method(concurrency_group=CONTROL)
-    async def stats(self) -> dict[str, Any]:
+    async def stats(self) -> dict[str, Any]:  # type: ignore[override]  # async over Ray: callers await the handle
         return self.ledger.stats()
 
     @ray.method(concurrency_group=CONTROL)
@@ -112,13 +112,14 @@ class RemoteBudget:
         self.handle = handle
         self._unconfirmed: list[Any] = []  # settlements sent without waiting
 
-    async def begin(self, call_key, name, worst_pico, cache_key, owner):  # type: ignore[no-untyped-def]
+    async def begin(self, call_key: str, name: str, worst_pico: int, cache_key: str | None, owner: str) -> Any:
         return await self.handle.begin.remote(call_key, name, worst_pico, cache_key, owner)
 
-    async def reserve(self, call_key, name, worst_pico, owner):  # type: ignore[no-untyped-def]
+    async def reserve(self, call_key: str, name: str, worst_pico: int, owner: str) -> Any:
         return await self.handle.reserve.remote(call_key, name, worst_pico, owner)
 
-    async def settle(self, rid, cost_pico, status, result, cache_key, litellm_cost_usd):  # type: ignore[no-untyped-def]
+    async def settle(self, rid: int, cost_pico: int, status: str, result: Any, cache_key: str | None,
+                     litellm_cost_usd: float | None) -> None:
         # not awaited: the reservation already bounds this call's cost, so the caller need
         # not wait a round trip; if the settlement is lost, a restart charges the worst case
         self._unconfirmed.append(self.handle.settle.remote(rid, cost_pico, status, result, cache_key,
@@ -126,10 +127,10 @@ class RemoteBudget:
         if len(self._unconfirmed) > 256:
             _, self._unconfirmed = ray.wait(self._unconfirmed, num_returns=len(self._unconfirmed), timeout=0)
 
-    async def charge_worst(self, rid):  # type: ignore[no-untyped-def]
+    async def charge_worst(self, rid: int) -> Any:
         return await self.handle.charge_worst.remote(rid)
 
-    async def adopt_orphans(self, deployment, keep_owner):  # type: ignore[no-untyped-def]
+    async def adopt_orphans(self, deployment: str, keep_owner: str) -> Any:
         return await self.handle.adopt_orphans.remote(deployment, keep_owner)
 
     async def stats(self) -> dict[str, Any]:
@@ -154,7 +155,9 @@ class GatewayActor:
                  model_caps_usd: Mapping[str, float] | None = None, secret_env: SecretEnv | None = None,
                  group_commit: bool = True):
         from workers.gateway.core import DeploymentGateway
+        from workers.log_setup import configure_from_env
 
+        configure_from_env()
         if secret_env is not None:  # the API keys, for this actor process only
             secret_env.apply()
         if isinstance(budget, str):  # a named BudgetActor: no handle among the arguments, so Ray
@@ -258,7 +261,7 @@ class RunGateways:
         self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget)
                        for c in self.configs}
 
-    def client(self, name: str) -> "Any":
+    def client(self, name: str) -> Any:
         from workers.gateway.client import GatewayClient
 
         if name in self.actors:

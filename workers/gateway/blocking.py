@@ -59,7 +59,7 @@ class BlockingGateway:
             self._thread.join(10)
             self._loop.close()
 
-    def __enter__(self) -> "BlockingGateway":
+    def __enter__(self) -> BlockingGateway:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -20,9 +20,10 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from schemas.records import CallRecord, EventRecord
-from schemas.tables import record_to_row
+from schemas.kinds import EventKind, Severity
 from schemas.parts import RUN_FILE, PartWriter, read_run_file
+from schemas.records import CallRecord, EventRecord
+from schemas.tables import check_vocabulary, record_to_row
 
 
 class RunIdentityError(RuntimeError):
@@ -61,14 +62,14 @@ class CallLog:
         if len(self._pending) >= self.max_rows:
             self.flush()
 
-    def add_event(self, kind: str, severity: str, detail: dict[str, Any], episode_id: str | None = None) -> None:
+    def add_event(self, kind: EventKind, severity: Severity, detail: dict[str, Any], episode_id: str | None = None) -> None:
         """A gateway ``events`` row (``source="gateway"``), written with the next batch.
 
         ``unit_id`` stays empty: resume reads attempt numbers from events that name a unit,
         and a call attempt is not a unit attempt."""
-        self._events.append(record_to_row(EventRecord(
+        self._events.append(record_to_row(check_vocabulary(EventRecord(
             ts=time.time(), source="gateway", kind=kind, severity=severity, episode_id=episode_id,
-            detail=json.dumps(detail, sort_keys=True, default=str)), self.run_id))
+            detail=json.dumps(detail, sort_keys=True, default=str))), self.run_id))
         if len(self._events) >= self.max_rows:
             self.flush()
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import logging
 import time
 import uuid
 from collections import Counter
@@ -43,17 +44,33 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, stop_after_attempt, stop_after_delay
-from tenacity import wait_exponential_jitter
+from tenacity import (
+    AsyncRetrying,
+    RetryCallState,
+    retry_if_exception_type,
+    stop_after_attempt,
+    stop_after_delay,
+    wait_exponential_jitter,
+)
 
+from recap.llm import LLMError, LLMRequest, LLMResponse
+from schemas.kinds import EventKind, Severity
 from schemas.outcomes import BudgetRefusal
 from schemas.records import CallRecord
-from recap.llm import LLMError, LLMRequest, LLMResponse
 from workers.gateway.call_log import CallLog, run_id_of, writer_name
 from workers.gateway.ledger import BudgetLedger, LocalBudget
 from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
-from workers.llm.accounting import USAGE_REJECTED_EVENT, Settlement, Sizing, error_record, ok_record, served_from
-from workers.llm.accounting import settle, size_request, worst_case_pico
+from workers.llm.accounting import (
+    USAGE_REJECTED_EVENT,
+    Settlement,
+    Sizing,
+    error_record,
+    ok_record,
+    served_from,
+    settle,
+    size_request,
+    worst_case_pico,
+)
 from workers.llm.cache_markers import BreakpointPlanner, mark
 from workers.llm.calling import Attempt, attempt_async, litellm_kwargs
 from workers.llm.errors import Classified, classify, redact_known, scrub
@@ -64,6 +81,8 @@ from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provi
 
 #: extra seconds granted to litellm's own timeout before asyncio cuts the attempt
 _TIMEOUT_BACKSTOP_S = 2.0
+
+log = logging.getLogger(__name__)
 
 
 class _AttemptFailed(Exception):
@@ -241,6 +260,7 @@ class DeploymentGateway:
         text = redact_known(attempt.text, secrets)
         finish = None if attempt.finish_reason is None else redact_known(str(attempt.finish_reason), secrets)[:64]
         result = {"text": text, "finish_reason": finish, **usage.as_dict()}
+        assert call.rid is not None  # admitted: it holds a reservation
         await self.budget.settle(call.rid, cost, "ok", result, call.cache_key, settled.provider_cost_usd)
         total = cost + call.charged
         self.spent_pico += total
@@ -255,7 +275,7 @@ class DeploymentGateway:
         self._record(request, resp, usage.cache_write_tokens)
         return resp
 
-    async def _attempts(self, call: "_Call") -> Attempt:
+    async def _attempts(self, call: _Call) -> Attempt:
         cfg = self.config
         backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
 
@@ -278,7 +298,7 @@ class DeploymentGateway:
                 return await self._one_attempt(call)
         raise AssertionError("unreachable: tenacity reraises the last failure")
 
-    async def _admit_and_reserve(self, call: "_Call") -> Ticket:
+    async def _admit_and_reserve(self, call: _Call) -> Ticket:
         """Wait for admission, then make sure the attempt is covered by a reservation.
 
         The budget is asked only once the attempt may be sent, so calls queued behind the
@@ -292,7 +312,7 @@ class DeploymentGateway:
             ticket = await asyncio.wait_for(self.admission.acquire(call.window_tokens), remaining)
         except AdmissionError as exc:
             raise _Final(Classified("bad_request", str(exc))) from None
-        except asyncio.TimeoutError:
+        except TimeoutError:
             raise _Final(Classified("timeout", f"no capacity within the total timeout {cfg.total_timeout_s}s")) from None
         key = call.request.call_key
         try:
@@ -316,7 +336,7 @@ class DeploymentGateway:
         raise _Final(Classified("budget", answer["message"],
                                 refusal=BudgetRefusal.from_dict(refusal) if refusal is not None else None))
 
-    async def _one_attempt(self, call: "_Call") -> Attempt:
+    async def _one_attempt(self, call: _Call) -> Attempt:
         cfg = self.config
         call.attempts += 1
         if call.attempts > 1:
@@ -383,7 +403,7 @@ class DeploymentGateway:
         self._record(request, resp)
         return resp
 
-    def _attempt_event(self, kind: str, severity: str, call: "_Call", c: Classified, attempt: int) -> None:
+    def _attempt_event(self, kind: EventKind, severity: Severity, call: _Call, c: Classified, attempt: int) -> None:
         """An ``events`` row per failed attempt: ``retry`` when another follows, ``call_failed``
         when the call gives up - so provider trouble that retries absorbed stays visible."""
         detail: dict[str, Any] = {"deployment": self.deployment, "call_key": call.request.call_key,
@@ -391,6 +411,8 @@ class DeploymentGateway:
                                   "message": scrub(c.message)[:300]}
         if c.retry_after_s is not None:
             detail["retry_after_s"] = c.retry_after_s
+        log.info("%s: %s %s of call %s (attempt %d): %s", self.deployment, kind, c.kind, call.request.call_key, attempt,
+                 detail["message"])
         self.call_log.add_event(kind, severity, detail, episode_id=call.request.episode_id)
 
     def _fail(self, request: LLMRequest, c: Classified, t0: float, attempts: int, charged: int,

@@ -74,10 +74,11 @@ class SlidingWindow:
         if self.total + amount <= self.limit:
             return 0.0
         remaining = self.total
-        for e in sorted((e for e in self._entries if e.ends is not None), key=lambda e: e.ends):
-            remaining -= e.amount
+        ending = sorted(((e.ends, e.amount) for e in self._entries if e.ends is not None), key=lambda pair: pair[0])
+        for ends, entry_amount in ending:
+            remaining -= entry_amount
             if remaining + amount <= self.limit:
-                return max(1e-4, e.ends + self.span_s - now)
+                return max(1e-4, ends + self.span_s - now)
         return self.span_s
 
     def add(self, amount: int, now: float) -> _Entry:
@@ -164,7 +165,7 @@ class AdmissionController:
         self._window_changed.clear()
         try:
             await asyncio.wait_for(self._window_changed.wait(), timeout=seconds)
-        except asyncio.TimeoutError:
+        except TimeoutError:
             pass
 
     async def acquire(self, tokens: int) -> Ticket:

@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 from schemas.kinds import LLMErrorKind
 from schemas.records import CallRecord
@@ -54,7 +54,7 @@ COMPLETION_SLACK_TOKENS = 2
 #: reported prompt / completion tokens below our own count divided by this are impossible
 PROMPT_FLOOR_DIVISOR = 4
 #: the event kind of an answer whose usage (or cost figure) was refused
-USAGE_REJECTED_EVENT = "usage_rejected"
+USAGE_REJECTED_EVENT: Final = "usage_rejected"
 
 REPLAY_MODEL = "offline/replay"
 

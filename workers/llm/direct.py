@@ -15,8 +15,14 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from tenacity import Retrying, RetryCallState, retry_if_exception_type, stop_after_attempt, stop_after_delay
-from tenacity import wait_exponential_jitter
+from tenacity import (
+    RetryCallState,
+    Retrying,
+    retry_if_exception_type,
+    stop_after_attempt,
+    stop_after_delay,
+    wait_exponential_jitter,
+)
 
 from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.records import CallRecord

@@ -31,6 +31,7 @@ def import_litellm() -> Any:
     with _lock:
         if _litellm is None:
             import litellm
+
             # importing this module points TIKTOKEN_CACHE_DIR at litellm's bundled encodings
             import litellm.litellm_core_utils.default_encoding  # noqa: F401
 

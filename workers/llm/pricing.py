@@ -102,7 +102,7 @@ class Price:
         return pico_to_usd(self.cost_pico(prompt_tokens, cached_prompt_tokens, completion_tokens, cache_write_tokens))
 
     @classmethod
-    def from_mapping(cls, data: Mapping[str, Any], what: str) -> "Price":
+    def from_mapping(cls, data: Mapping[str, Any], what: str) -> Price:
         unknown = set(data) - {"input", "output", "cached_input", "cache_write", "explicit_cache", "test_double", "note"}
         if unknown:
             raise PriceError(f"{what}: unknown price field(s) {sorted(unknown)}")
@@ -142,7 +142,7 @@ class PriceTable:
         self._prices = dict(prices)
 
     @classmethod
-    def load(cls, path: Path | str = PRICES_FILE) -> "PriceTable":
+    def load(cls, path: Path | str = PRICES_FILE) -> PriceTable:
         path = Path(path)
         try:
             data = yaml.safe_load(path.read_text())
@@ -163,7 +163,7 @@ class PriceTable:
     def models(self) -> list[str]:
         return sorted(self._prices)
 
-    def with_overrides(self, overrides: Mapping[str, Any] | None) -> "PriceTable":
+    def with_overrides(self, overrides: Mapping[str, Any] | None) -> PriceTable:
         """A copy where ``overrides`` (model -> Price or mapping) replace table entries."""
         merged = dict(self._prices)
         for model, price in (overrides or {}).items():

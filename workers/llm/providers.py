@@ -202,7 +202,7 @@ class DeploymentConfig(BaseModel):
         return v
 
     @model_validator(mode="after")
-    def _api_base_scheme(self) -> "DeploymentConfig":
+    def _api_base_scheme(self) -> DeploymentConfig:
         if self.model == "offline/replay" and not self.api_base:
             raise ValueError("offline/replay needs api_base = the run folder to replay")
         return self

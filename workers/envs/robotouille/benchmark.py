@@ -17,8 +17,8 @@ from workers.envs.data_sources import DataFolder
 from workers.envs.registry import Benchmark
 
 from . import catalog
-from .data_folders import FOLDER
 from .data import DataFileError, instance_path, read_json, require, resolve_data_dir, train_instance_path
+from .data_folders import FOLDER
 from .demo import DEMO_SEED, DEMO_SPLIT, DEMO_TASK, make_demonstration
 from .domain import load_domain
 from .env import RobotouilleEnv

@@ -49,7 +49,7 @@ class EffectSpec:
     kind: str
     param: str
     fx: tuple[Literal, ...]
-    nested: tuple["EffectSpec", ...]
+    nested: tuple[EffectSpec, ...]
     conditions: tuple[Literal, ...] = ()
     created: CreatedObject | None = None
 

@@ -133,7 +133,7 @@ class ActiveEffect:
     def __hash__(self) -> int:
         return hash(self.key)
 
-    def copy(self) -> "ActiveEffect":
+    def copy(self) -> ActiveEffect:
         new = object.__new__(ActiveEffect)
         new.spec = self.spec
         new.arg = self.arg

@@ -52,16 +52,16 @@ class Goal:
             total *= math.perm(n, k)
         return total
 
-    def find_assignment(self, state: "State", pinned: dict[int, str] | None = None) -> dict[int, str] | None:
+    def find_assignment(self, state: State, pinned: dict[int, str] | None = None) -> dict[int, str] | None:
         """An assignment making every literal true in ``state`` (None if there is none)."""
         return _search(self, state, dict(pinned or {}))
 
-    def holds(self, state: "State") -> bool:
+    def holds(self, state: State) -> bool:
         """Whether ``state`` satisfies the goal: some injective assignment makes every entry true."""
         return self.find_assignment(state) is not None
 
 
-def parse_goal(raw: Any, state: "State", source: str) -> Goal:
+def parse_goal(raw: Any, state: State, source: str) -> Goal:
     """The goal of a problem JSON against its initial ``state``: each id takes the first name it appears under; a
     name with no object yet ranges over the objects it will create. DataFileError for a malformed goal or
     unknown predicate."""
@@ -93,7 +93,7 @@ def parse_goal(raw: Any, state: "State", source: str) -> Goal:
     return Goal(tuple(literals), var_names, domains)
 
 
-def _search(goal: Goal, state: "State", assignment: dict[int, str]) -> dict[int, str] | None:
+def _search(goal: Goal, state: State, assignment: dict[int, str]) -> dict[int, str] | None:
     facts = state.facts
     # unary literals filter domains up front
     domains: dict[int, list[str]] = {}

@@ -61,7 +61,7 @@ def _build(domain: Domain, raw: dict, source: str) -> Problem:
             raise DataFileError(f"{source}: predicate {pred!r} is not in the domain")
         facts[pred].add(args)
 
-    for obj_type, named in placed.items():
+    for _obj_type, named in placed.items():
         for name, entry in named:
             add("is" + entry["name"], name)
             for pred in entry.get("predicates", ()) or ():

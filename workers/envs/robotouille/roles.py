@@ -178,7 +178,7 @@ class RoleChooser:
         for v in recipe.item_vars:
             if v not in fixed:
                 by_name.setdefault(goal.var_names[v], []).append(v)
-        for name, vars_ in by_name.items():
+        for _name, vars_ in by_name.items():
             objs = [o for o in goal.domains[vars_[0]] if o not in taken]
             options = None
             for combo in itertools.permutations(objs, len(vars_)):

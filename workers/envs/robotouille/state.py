@@ -73,7 +73,7 @@ class State:
         for i, o in enumerate(self.objects[obj_type]):
             self.index[o] = i
         del self.index[name]
-        for pred, rows in self.facts.items():
+        for _pred, rows in self.facts.items():
             dead = {r for r in rows if name in r}
             if dead:
                 rows -= dead
@@ -102,7 +102,7 @@ class State:
             for row in rows:
                 yield pred, row
 
-    def clone(self) -> "State":
+    def clone(self) -> State:
         new = object.__new__(State)
         new.domain = self.domain
         new.config = self.config

@@ -33,7 +33,7 @@ class Knobs:
     chunk_size: int | None = None
 
     @classmethod
-    def from_options(cls, options: Mapping[str, Any] | None) -> "Knobs":
+    def from_options(cls, options: Mapping[str, Any] | None) -> Knobs:
         options = dict(options or {})
         unknown = set(options) - {"seed", "invalid_action_rate", "malformed_json_rate", "chunk_size"}
         if unknown:

@@ -68,18 +68,17 @@ def _make_provider_class() -> type:
             model_response.model = f"{PROVIDER}/{model}"
             prompt = estimate_prompt_tokens(msgs)
             completion = estimate_text_tokens(text)
-            setattr(model_response, "usage",
-                    Usage(prompt_tokens=prompt, completion_tokens=completion, total_tokens=prompt + completion))
+            model_response.usage = Usage(prompt_tokens=prompt, completion_tokens=completion, total_tokens=prompt + completion)
             return model_response
 
         def completion(self, model, messages, api_base, custom_prompt_dict, model_response, print_verbose,
                        encoding, api_key, logging_obj, optional_params, acompletion=None,
-                       litellm_params=None, logger_fn=None, headers={}, timeout=None, client=None):
+                       litellm_params=None, logger_fn=None, headers={}, timeout=None, client=None):  # noqa: B006  (litellm's CustomLLM signature; never mutated)
             return self._fill(model, messages, api_base, model_response, litellm_params)
 
         async def acompletion(self, model, messages, api_base, custom_prompt_dict, model_response,
                               print_verbose, encoding, api_key, logging_obj, optional_params,
-                              acompletion=None, litellm_params=None, logger_fn=None, headers={},
+                              acompletion=None, litellm_params=None, logger_fn=None, headers={},  # noqa: B006  (litellm's signature)
                               timeout=None, client=None):
             return self._fill(model, messages, api_base, model_response, litellm_params)
 

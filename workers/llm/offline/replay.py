@@ -14,8 +14,8 @@ import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from workers.llm.fingerprint import messages_fingerprint
 from schemas.parts import read_table
+from workers.llm.fingerprint import messages_fingerprint
 
 
 class ReplayError(LookupError):
@@ -29,7 +29,7 @@ class ReplayIndex:
     answers: dict[str, list[tuple[str, str]]] = field(default_factory=dict)
 
     @classmethod
-    def load(cls, run_dir: Path | str) -> "ReplayIndex":
+    def load(cls, run_dir: Path | str) -> ReplayIndex:
         run_dir = Path(run_dir)
         if not (run_dir / "llm_calls").is_dir() or not (run_dir / "messages").is_dir():
             raise ReplayError(f"offline/replay: {run_dir} has no llm_calls/ and messages/ tables to replay")
