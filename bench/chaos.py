@@ -121,13 +121,30 @@ def main(argv: list[str] | None = None) -> int:
     from rich.table import Table
 
     t = Table(title=f"recap-eval chaos suite (seed {args.seed}, {time.monotonic() - t_all:.0f}s)")
-    for col, just in (("scenario", "left"), ("runs", "right"), ("passed", "right"), ("lost", "right"),
-                      ("duplicated", "right"), ("overspend", "right"), ("checks", "right"), ("s", "right"),
-                      ("figures", "left")):
+    for col, just in (
+        ("scenario", "left"),
+        ("runs", "right"),
+        ("passed", "right"),
+        ("lost", "right"),
+        ("duplicated", "right"),
+        ("overspend", "right"),
+        ("checks", "right"),
+        ("s", "right"),
+        ("figures", "left"),
+    ):
         t.add_column(col, justify=just)
     for r in results:
-        t.add_row(r.name, str(r.runs), str(r.passed), str(r.lost), str(r.duplicated), _fmt_usd(r.overspend_usd),
-                  f"{len(r.checks) - len(r.failures)}/{len(r.checks)}", f"{r.wall_s:.0f}", "; ".join(r.notes))
+        t.add_row(
+            r.name,
+            str(r.runs),
+            str(r.passed),
+            str(r.lost),
+            str(r.duplicated),
+            _fmt_usd(r.overspend_usd),
+            f"{len(r.checks) - len(r.failures)}/{len(r.checks)}",
+            f"{r.wall_s:.0f}",
+            "; ".join(r.notes),
+        )
     Console(width=None if sys.stdout.isatty() else 240, highlight=False).print(t)
     if args.keep:
         print(f"run folders kept under {root}")

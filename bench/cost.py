@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     groups = instances(args.alfworld_limit)
     if args.robotouille_limit:
-        groups["robotouille task 6"] = groups["robotouille task 6"][:args.robotouille_limit]
+        groups["robotouille task 6"] = groups["robotouille task 6"][: args.robotouille_limit]
     rows = []
     for group, ids in groups.items():
         if not ids:
@@ -161,11 +161,15 @@ def main(argv: list[str] | None = None) -> int:
             continue
         trajs = {arm: [record(i, arm, m, s) for i in ids] for arm, (m, s) in settings.items()}
         steps = {arm: sum(len(t.calls) for t in ts) / len(ts) for arm, ts in trajs.items()}
-        print(f"\n{group}: {len(ids)} episodes; calls/episode "
-              + ", ".join(f"{a} {n:.1f}" for a, n in steps.items())
-              + f"; solved {sum(t.success for t in trajs['recap/pair'])}/{len(ids)} ({time.perf_counter() - t0:.0f}s)")
-        print(f"{'provider':<18} {'arm':<14} {'prompt tok/ep':>13} {'cached':>7} {'written':>7} "
-              f"{'$/ep':>9} {'$/ep no cache':>13} {'vs ReAct':>8} {'no cache':>8}")
+        print(
+            f"\n{group}: {len(ids)} episodes; calls/episode "
+            + ", ".join(f"{a} {n:.1f}" for a, n in steps.items())
+            + f"; solved {sum(t.success for t in trajs['recap/pair'])}/{len(ids)} ({time.perf_counter() - t0:.0f}s)"
+        )
+        print(
+            f"{'provider':<18} {'arm':<14} {'prompt tok/ep':>13} {'cached':>7} {'written':>7} "
+            f"{'$/ep':>9} {'$/ep no cache':>13} {'vs ReAct':>8} {'no cache':>8}"
+        )
         for provider, (model, rule) in PROVIDERS.items():
             price = prices.get(model)
             bills = {}
@@ -178,19 +182,28 @@ def main(argv: list[str] | None = None) -> int:
             for arm, b in bills.items():
                 n = len(ids)
                 row = {
-                    "group": group, "provider": provider, "model": model, "rule": rule, "arm": arm,
-                    "episodes": n, "calls_per_episode": b.calls / n, "prompt_tokens_per_episode": b.prompt / n,
+                    "group": group,
+                    "provider": provider,
+                    "model": model,
+                    "rule": rule,
+                    "arm": arm,
+                    "episodes": n,
+                    "calls_per_episode": b.calls / n,
+                    "prompt_tokens_per_episode": b.prompt / n,
                     "cached_share": b.cached / b.prompt if b.prompt else 0.0,
                     "written_share": b.written / b.prompt if b.prompt else 0.0,
-                    "usd_per_episode": b.pico / n / 1e12, "usd_per_episode_uncached": b.pico_uncached / n / 1e12,
+                    "usd_per_episode": b.pico / n / 1e12,
+                    "usd_per_episode_uncached": b.pico_uncached / n / 1e12,
                     "ratio_vs_react": b.pico / react.pico if react.pico else None,
                     "ratio_vs_react_uncached": b.pico_uncached / react.pico_uncached if react.pico_uncached else None,
                 }
                 rows.append(row)
-                print(f"{provider:<18} {arm:<14} {row['prompt_tokens_per_episode']:>13,.0f} "
-                      f"{row['cached_share']:>7.1%} {row['written_share']:>7.1%} "
-                      f"{row['usd_per_episode']:>9.4f} {row['usd_per_episode_uncached']:>13.4f} "
-                      f"{row['ratio_vs_react']:>7.2f}x {row['ratio_vs_react_uncached']:>7.2f}x")
+                print(
+                    f"{provider:<18} {arm:<14} {row['prompt_tokens_per_episode']:>13,.0f} "
+                    f"{row['cached_share']:>7.1%} {row['written_share']:>7.1%} "
+                    f"{row['usd_per_episode']:>9.4f} {row['usd_per_episode_uncached']:>13.4f} "
+                    f"{row['ratio_vs_react']:>7.2f}x {row['ratio_vs_react_uncached']:>7.2f}x"
+                )
     print(f"\npaper (ALFWorld, GPT-4o, no caching): ReCAP / ReAct = $118.40 / $37.89 = {PAPER_RATIO:.2f}x")
     if args.json:
         with open(args.json, "w") as fh:

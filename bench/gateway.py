@@ -54,9 +54,13 @@ class ServerProcess:
     """The fake server in its own process (so it does not share our GIL)."""
 
     def __init__(self, *args: str):
-        self.proc = subprocess.Popen([sys.executable, "-m", "tests.doubles.fake_server", "--port", "0", *args],
-                                     cwd=REPO, stdout=subprocess.PIPE, text=True,
-                                     env={**os.environ, "PYTHONPATH": str(REPO)})
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "tests.doubles.fake_server", "--port", "0", *args],
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(REPO)},
+        )
         line = self.proc.stdout.readline()  # type: ignore[union-attr]
         if "listening on" not in line:
             raise RuntimeError(f"fake server did not start: {line!r}")
@@ -85,16 +89,34 @@ def utilisation(calls: list[dict], key: str, limit: int, window_s: float, window
     return amount * window_s / (limit * (end - t0))
 
 
-async def quota_run(name: str, server_args: list[str], cfg_kwargs: dict, prompt_chars: int, limit: int,
-                    key: str, window_s: float, windows: int, callers: int) -> None:
+async def quota_run(
+    name: str,
+    server_args: list[str],
+    cfg_kwargs: dict,
+    prompt_chars: int,
+    limit: int,
+    key: str,
+    window_s: float,
+    windows: int,
+    callers: int,
+) -> None:
     server = ServerProcess(*server_args, "--window-s", str(window_s))
     run_dir = Path(tempfile.mkdtemp(prefix="bench-gw-"))
     try:
         # the pad is scaled with the window like the window itself (0.25 s at 60 s)
-        gw = DeploymentGateway(DeploymentConfig(model=MODEL, api_base=server.url, window_s=window_s,
-                                                window_pad_s=0.25 * window_s / 60, max_concurrency=callers,
-                                                params={"max_tokens": 50}, **cfg_kwargs),
-                               run_dir=run_dir, run_id="bench")
+        gw = DeploymentGateway(
+            DeploymentConfig(
+                model=MODEL,
+                api_base=server.url,
+                window_s=window_s,
+                window_pad_s=0.25 * window_s / 60,
+                max_concurrency=callers,
+                params={"max_tokens": 50},
+                **cfg_kwargs,
+            ),
+            run_dir=run_dir,
+            run_id="bench",
+        )
         stop_at = time.monotonic() + (windows + 1.5) * window_s
         failed: dict[str, int] = {}
         counter = iter(range(10**9))
@@ -113,9 +135,11 @@ async def quota_run(name: str, server_args: list[str], cfg_kwargs: dict, prompt_
         calls = server.log()
         n429 = sum(1 for c in calls if c["status"] == 429)
         u = utilisation(calls, key, limit, window_s, windows)
-        print(f"  {name:<14} limit {limit:>6} {key}/{window_s:g}s  utilisation {u * 100:5.1f} %  "
-              f"accepted {sum(1 for c in calls if c['status'] == 200):>5}  429s {n429}  "
-              f"failed calls {sum(failed.values())}  gateway 429s seen {stats['rate_limited']}")
+        print(
+            f"  {name:<14} limit {limit:>6} {key}/{window_s:g}s  utilisation {u * 100:5.1f} %  "
+            f"accepted {sum(1 for c in calls if c['status'] == 200):>5}  429s {n429}  "
+            f"failed calls {sum(failed.values())}  gateway 429s seen {stats['rate_limited']}"
+        )
     finally:
         server.close()
 
@@ -132,9 +156,11 @@ def _line(label: str, xs: list[float], base: float | None, note: str = "") -> No
 def _ratio(label: str, before: list[float], after: list[float], base: float) -> None:
     b, a = pct(before, 0.5) - base, pct(after, 0.5) - base
     ratio = f"{a / b:5.2f}" if a > 0 and b > 0 else "  n/a"  # an overhead at or below 0 is noise
-    print(f"  {label:<34} overhead p50 before {b:+6.2f} ms  after {a:+6.2f} ms  after/before "
-          f"{ratio}   latency p50 after/before {pct(after, 0.5) / pct(before, 0.5):5.2f}"
-          f"   p95 after/before {pct(after, 0.95) / pct(before, 0.95):5.2f}")
+    print(
+        f"  {label:<34} overhead p50 before {b:+6.2f} ms  after {a:+6.2f} ms  after/before "
+        f"{ratio}   latency p50 after/before {pct(after, 0.5) / pct(before, 0.5):5.2f}"
+        f"   p95 after/before {pct(after, 0.95) / pct(before, 0.95):5.2f}"
+    )
 
 
 def _budget(run_dir: Path, group_commit: bool) -> object:
@@ -150,12 +176,11 @@ async def overhead_run(n: int, use_ray: bool, callers: int) -> None:
     lit = get_litellm()
     run_dir = Path(tempfile.mkdtemp(prefix="bench-gw-"))
     cfg = DeploymentConfig(model=MODEL, api_base=server.url, max_concurrency=max(8, callers), params={"max_tokens": 50})
-    cores = {"core before": DeploymentGateway(cfg, run_dir=run_dir / "cb", run_id="bench",
-                                              budget=_budget(run_dir / "cb", False)),
-             "core after": DeploymentGateway(cfg, run_dir=run_dir / "ca", run_id="bench",
-                                             budget=_budget(run_dir / "ca", True)),
-             "core kill-safe": DeploymentGateway(cfg, run_dir=run_dir / "ck", run_id="bench",
-                                                 durable_reservations=False)}
+    cores = {
+        "core before": DeploymentGateway(cfg, run_dir=run_dir / "cb", run_id="bench", budget=_budget(run_dir / "cb", False)),
+        "core after": DeploymentGateway(cfg, run_dir=run_dir / "ca", run_id="bench", budget=_budget(run_dir / "ca", True)),
+        "core kill-safe": DeploymentGateway(cfg, run_dir=run_dir / "ck", run_id="bench", durable_reservations=False),
+    }
     clients: dict[str, object] = {}
     groups: list = []
     noop = None
@@ -166,8 +191,12 @@ async def overhead_run(n: int, use_ray: bool, callers: int) -> None:
 
         os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)
         ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-        for name, budget, gc in (("ray local before", "local", False), ("ray local after", "local", True),
-                                 ("ray shared before", "shared", False), ("ray shared after", "shared", True)):
+        for name, budget, gc in (
+            ("ray local before", "local", False),
+            ("ray local after", "local", True),
+            ("ray shared before", "shared", False),
+            ("ray shared after", "shared", True),
+        ):
             g = RunGateways([cfg], run_dir / name.replace(" ", "-"), "bench", budget=budget, group_commit=gc)
             groups.append(g)
             clients[name] = g.client(MODEL)
@@ -176,9 +205,16 @@ async def overhead_run(n: int, use_ray: bool, callers: int) -> None:
     text = "Where is the onion? " * 10
 
     async def direct(i: int) -> None:
-        await lit.acompletion(model=MODEL, api_base=server.url, api_key="no-key", timeout=120.0,
-                              num_retries=0, max_retries=0, max_tokens=50,
-                              messages=[{"role": "user", "content": f"{i} {text}"}])
+        await lit.acompletion(
+            model=MODEL,
+            api_base=server.url,
+            api_key="no-key",
+            timeout=120.0,
+            num_retries=0,
+            max_retries=0,
+            max_tokens=50,
+            messages=[{"role": "user", "content": f"{i} {text}"}],
+        )
 
     labels = ["direct", *cores, *clients] + (["ray echo", "ray litellm"] if noop is not None else [])
     times: dict[str, list[float]] = {k: [] for k in labels}
@@ -208,8 +244,7 @@ async def overhead_run(n: int, use_ray: bool, callers: int) -> None:
     _line("(b2) core, kill-safe only", times["core kill-safe"], base, "  (reservation written, not fsync'd)")
     if noop is not None:
         _line("(r) Ray echo of the request", times["ray echo"], None, "  (a bare actor round trip)")
-        _line("(r2) litellm in a bare actor", times["ray litellm"], base,
-              "  (the actor hop alone: the floor of (c))")
+        _line("(r2) litellm in a bare actor", times["ray litellm"], base, "  (the actor hop alone: the floor of (c))")
         for name in clients:
             _line(f"(c) {name}", times[name], base)
     print("  -- after/before (overhead = p50 minus (a)'s p50) --")
@@ -219,8 +254,10 @@ async def overhead_run(n: int, use_ray: bool, callers: int) -> None:
         _ratio("(c) Ray, shared BudgetActor", times["ray shared before"], times["ray shared after"], base)
         hop50, hop95 = pct(times["ray litellm"], 0.5), pct(times["ray litellm"], 0.95)
         for name in ("ray local before", "ray local after", "ray shared before", "ray shared after"):
-            print(f"  {name:<20} the gateway's own overhead beyond the actor hop (c) - (r2): p50 "
-                  f"{pct(times[name], 0.5) - hop50:+6.2f} ms  p95 {pct(times[name], 0.95) - hop95:+6.2f} ms")
+            print(
+                f"  {name:<20} the gateway's own overhead beyond the actor hop (c) - (r2): p50 "
+                f"{pct(times[name], 0.5) - hop50:+6.2f} ms  p95 {pct(times[name], 0.95) - hop95:+6.2f} ms"
+            )
 
     if callers > 1:
         await concurrent_run(cfg, run_dir, callers, n, clients)
@@ -240,8 +277,10 @@ async def overhead_run(n: int, use_ray: bool, callers: int) -> None:
 
     real = core.attempt_async
     core.attempt_async = instant
-    stubs = {gc: DeploymentGateway(cfg, run_dir=run_dir / f"stub{gc}", run_id="bench",
-                                   budget=_budget(run_dir / f"stub{gc}", gc)) for gc in (False, True)}
+    stubs = {
+        gc: DeploymentGateway(cfg, run_dir=run_dir / f"stub{gc}", run_id="bench", budget=_budget(run_dir / f"stub{gc}", gc))
+        for gc in (False, True)
+    }
     only: dict[bool, list[float]] = {False: [], True: []}
     for i in range(-20, n):
         for gc, stub in stubs.items():
@@ -270,8 +309,9 @@ async def concurrent_run(cfg: DeploymentConfig, run_dir: Path, callers: int, n: 
     for gc in (False, True):
         led = BudgetLedger(run_dir / f"conc{gc}")
         paths[f"core {'after' if gc else 'before'}"] = (
-            DeploymentGateway(cfg, run_dir=run_dir / f"conc{gc}", run_id="bench",
-                              budget=LocalBudget(led, group_commit=gc)), led)
+            DeploymentGateway(cfg, run_dir=run_dir / f"conc{gc}", run_id="bench", budget=LocalBudget(led, group_commit=gc)),
+            led,
+        )
     for name in ("ray shared before", "ray shared after"):
         if name in clients:
             paths[name] = (clients[name], None)
@@ -282,6 +322,7 @@ async def concurrent_run(cfg: DeploymentConfig, run_dir: Path, callers: int, n: 
     counter = iter(range(10**9))
     for r in range(rounds + 1):  # round 0 warms up
         for name, (gw, _led) in paths.items():
+
             async def caller() -> None:
                 for _ in range(5):
                     req = request(500_000 + next(counter), f"{text} {r}")
@@ -298,14 +339,18 @@ async def concurrent_run(cfg: DeploymentConfig, run_dir: Path, callers: int, n: 
     for name, (_gw, led) in paths.items():
         per = None if led is None else led.stats()["journal_syncs"] / max(1, led.settled)
         syncs = "" if per is None else f"   fdatasyncs per reservation {per:4.2f}"
-        print(f"  {name:<34} p50 {pct(lat[name], 0.5):6.2f} ms  p95 {pct(lat[name], 0.95):6.2f} ms  "
-              f"calls/s median {statistics.median(rate[name]):7.1f}{syncs}")
+        print(
+            f"  {name:<34} p50 {pct(lat[name], 0.5):6.2f} ms  p95 {pct(lat[name], 0.95):6.2f} ms  "
+            f"calls/s median {statistics.median(rate[name]):7.1f}{syncs}"
+        )
     for kind in ("core", "ray shared"):
         if f"{kind} after" in lat:
             b, a = lat[f"{kind} before"], lat[f"{kind} after"]
-            print(f"  {kind}: latency p50 after/before {pct(a, 0.5) / pct(b, 0.5):5.2f}  p95 after/before "
-                  f"{pct(a, 0.95) / pct(b, 0.95):5.2f}  calls/s after/before "
-                  f"{statistics.median(rate[f'{kind} after']) / statistics.median(rate[f'{kind} before']):5.2f}")
+            print(
+                f"  {kind}: latency p50 after/before {pct(a, 0.5) / pct(b, 0.5):5.2f}  p95 after/before "
+                f"{pct(a, 0.95) / pct(b, 0.95):5.2f}  calls/s after/before "
+                f"{statistics.median(rate[f'{kind} after']) / statistics.median(rate[f'{kind} before']):5.2f}"
+            )
     for name, (gw, _led) in paths.items():
         if name.startswith("core"):
             await gw.aclose()
@@ -336,9 +381,16 @@ def _litellm_actor() -> object:
             self.lit = get_litellm()
 
         async def complete(self, req: LLMRequest) -> tuple:
-            await self.lit.acompletion(model=MODEL, api_base=self.url, api_key="no-key", timeout=120.0,
-                                       num_retries=0, max_retries=0, max_tokens=50,
-                                       messages=[{"role": "user", "content": req.messages[0].content}])
+            await self.lit.acompletion(
+                model=MODEL,
+                api_base=self.url,
+                api_key="no-key",
+                timeout=120.0,
+                num_retries=0,
+                max_retries=0,
+                max_tokens=50,
+                messages=[{"role": "user", "content": req.messages[0].content}],
+            )
             return ("ok", None)
 
     return BareLitellm
@@ -370,13 +422,37 @@ def main() -> None:
     p.add_argument("--no-ray", action="store_true")
     p.add_argument("--skip-quota", action="store_true")
     args = p.parse_args()
-    print(f"[1] quota utilisation, {args.callers} concurrent callers, window {args.window_s:g}s "
-          f"(scaled from 60 s), {args.windows} windows measured")
+    print(
+        f"[1] quota utilisation, {args.callers} concurrent callers, window {args.window_s:g}s "
+        f"(scaled from 60 s), {args.windows} windows measured"
+    )
     if not args.skip_quota:
-        asyncio.run(quota_run("RPM-bound", ["--rpm", "60", "--tpm", "10000000"], {"rpm": 60, "tpm": 10_000_000},
-                              40, 60, "requests", args.window_s, args.windows, args.callers))
-        asyncio.run(quota_run("TPM-bound", ["--rpm", "100000", "--tpm", "20000"], {"rpm": 100_000, "tpm": 20_000},
-                              1200, 20_000, "tokens", args.window_s, args.windows, args.callers))
+        asyncio.run(
+            quota_run(
+                "RPM-bound",
+                ["--rpm", "60", "--tpm", "10000000"],
+                {"rpm": 60, "tpm": 10_000_000},
+                40,
+                60,
+                "requests",
+                args.window_s,
+                args.windows,
+                args.callers,
+            )
+        )
+        asyncio.run(
+            quota_run(
+                "TPM-bound",
+                ["--rpm", "100000", "--tpm", "20000"],
+                {"rpm": 100_000, "tpm": 20_000},
+                1200,
+                20_000,
+                "tokens",
+                args.window_s,
+                args.windows,
+                args.callers,
+            )
+        )
     print(f"[2] overhead per call, {args.calls} calls per path, interleaved; zero-latency fake server")
     asyncio.run(overhead_run(args.calls, not args.no_ray, args.concurrent))
 

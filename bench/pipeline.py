@@ -92,10 +92,16 @@ def run_one(url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp:
     lat, _ = RunStore(out).read_table("llm_calls", ["latency_s"])
     gw_latency = statistics.median(lat.column("latency_s").to_pylist()) if lat.num_rows else float("nan")
     return {
-        "workers": workers, "episodes": eps.num_rows, "finished": summary.finished_now, "span_s": span, "wall_s": wall,
-        "eps_per_min": n_measured / span * 60, "calls_per_s": calls / span,
+        "workers": workers,
+        "episodes": eps.num_rows,
+        "finished": summary.finished_now,
+        "span_s": span,
+        "wall_s": wall,
+        "eps_per_min": n_measured / span * 60,
+        "calls_per_s": calls / span,
         "calls_per_episode": calls / max(n_measured, 1),
-        "gw_ms": gw_latency * 1000, "call_ms": span * workers / max(calls, 1) * 1000,
+        "gw_ms": gw_latency * 1000,
+        "call_ms": span * workers / max(calls, 1) * 1000,
         "rss_mb": statistics.median(rss.values()) / 2**20 if rss else float("nan"),
         "reasons": sorted(set(eps.column("end_reason").to_pylist())),
     }
@@ -108,8 +114,10 @@ def sink_rows_per_second(n_rows: int, tmp: Path, via_ray: bool) -> float:
     from workers.sink import Sink, sink_actor
 
     text = "You arrive at the stove. On the stove you see a pot, a pan and a potato. " * 4
-    batch = [record_to_row(MessageRecord(f"ep{i // 50}", i % 50, "user", "observation", text[:300], i % 7), "bench")
-             for i in range(500)]
+    batch = [
+        record_to_row(MessageRecord(f"ep{i // 50}", i % 50, "user", "observation", text[:300], i % 7), "bench")
+        for i in range(500)
+    ]
     folder = tmp / ("sink-ray" if via_ray else "sink")
     if via_ray:
         import ray
@@ -140,8 +148,13 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=4, help="episodes per worker in each measurement (the first is warm-up)")
     ap.add_argument("--rpm", type=int, default=0, help="gateway quota per window for the scaling series (0: none)")
     ap.add_argument("--window-s", type=float, default=10.0, help="quota window in seconds")
-    ap.add_argument("--quota-check", type=int, default=100, metavar="RPM",
-                    help="finally run the largest worker count under this quota per window (0: skip)")
+    ap.add_argument(
+        "--quota-check",
+        type=int,
+        default=100,
+        metavar="RPM",
+        help="finally run the largest worker count under this quota per window (0: skip)",
+    )
     ap.add_argument("--num-cpus", type=int, default=None)
     ap.add_argument("--sink-rows", type=int, default=100_000)
     args = ap.parse_args()
@@ -157,10 +170,14 @@ def main() -> None:
     url = server.start_in_thread()
     init_ray(RaySpec(num_cpus=args.num_cpus))
     cpus = ray.cluster_resources().get("CPU", 0)
-    print(f"host CPUs {os.cpu_count()}, Ray CPUs {cpus:.0f}; fake server latency {LATENCY * 1000:.0f} ms; "
-          f"{CALLS} calls per episode; {args.rounds} episodes per worker (first round = warm-up, not timed)")
-    print(f"{'workers':>7} {'quota/s':>7} {'episodes':>8} {'ep/min':>8} {'ideal':>8} {'vs ideal':>8} {'vs linear':>9} "
-          f"{'calls/s':>8} {'gw ms':>6} {'call ms':>7} {'worker RSS MB':>13}")
+    print(
+        f"host CPUs {os.cpu_count()}, Ray CPUs {cpus:.0f}; fake server latency {LATENCY * 1000:.0f} ms; "
+        f"{CALLS} calls per episode; {args.rounds} episodes per worker (first round = warm-up, not timed)"
+    )
+    print(
+        f"{'workers':>7} {'quota/s':>7} {'episodes':>8} {'ep/min':>8} {'ideal':>8} {'vs ideal':>8} {'vs linear':>9} "
+        f"{'calls/s':>8} {'gw ms':>6} {'call ms':>7} {'worker RSS MB':>13}"
+    )
     base = None
     runs = [(w, args.rpm) for w in args.workers]
     if args.quota_check:
@@ -175,15 +192,22 @@ def main() -> None:
             if base is None and not quota:
                 base = r["eps_per_min"] / w
             linear = f"{r['eps_per_min'] / (base * w):>9.0%}" if base and not quota else f"{'-':>9}"
-            print(f"{w:>7} {(f'{quota:.0f}' if quota else '-'):>7} {r['episodes']:>8} {r['eps_per_min']:>8.1f} {ideal:>8.1f} "
-                  f"{r['eps_per_min'] / ideal:>8.0%} {linear} {r['calls_per_s']:>8.1f} {r['gw_ms']:>6.0f} "
-                  f"{r['call_ms']:>7.0f} {r['rss_mb']:>13.0f}  {','.join(r['reasons'])}", flush=True)
+            print(
+                f"{w:>7} {(f'{quota:.0f}' if quota else '-'):>7} {r['episodes']:>8} {r['eps_per_min']:>8.1f} {ideal:>8.1f} "
+                f"{r['eps_per_min'] / ideal:>8.0%} {linear} {r['calls_per_s']:>8.1f} {r['gw_ms']:>6.0f} "
+                f"{r['call_ms']:>7.0f} {r['rss_mb']:>13.0f}  {','.join(r['reasons'])}",
+                flush=True,
+            )
         local = sink_rows_per_second(args.sink_rows, Path(tmp), via_ray=False)
         remote = sink_rows_per_second(args.sink_rows, Path(tmp), via_ray=True)
-    print(f"sink: {local:,.0f} rows/s in process, {remote:,.0f} rows/s through the Ray actor "
-          f"(message rows of 300 characters, batches of 500)")
-    print("ideal = workers x 60 s / (calls x latency), or the quota's rate when lower; vs linear = ep/min relative to\n"
-          "1 worker x workers; gw ms = median call latency inside the gateway; call ms = wall time per call in a worker")
+    print(
+        f"sink: {local:,.0f} rows/s in process, {remote:,.0f} rows/s through the Ray actor "
+        f"(message rows of 300 characters, batches of 500)"
+    )
+    print(
+        "ideal = workers x 60 s / (calls x latency), or the quota's rate when lower; vs linear = ep/min relative to\n"
+        "1 worker x workers; gw ms = median call latency inside the gateway; call ms = wall time per call in a worker"
+    )
     server.stop_thread()
     ray.shutdown()
 

@@ -118,9 +118,15 @@ def main() -> None:
         reqs = results[label][n]
         stride = max(1, len(reqs) // 8)
         print(f"{label:<22}" + " ".join(f"{prompt_tokens(r):>6}" for r in reqs[::stride]))
-    recap_growth = max(prompt_tokens(r) for r in results[variants[0][0]][lengths[-1]]) / max(prompt_tokens(r) for r in results[variants[0][0]][lengths[-2]])
-    react_growth = max(prompt_tokens(r) for r in results[variants[3][0]][lengths[-1]]) / max(prompt_tokens(r) for r in results[variants[3][0]][lengths[-2]])
-    print(f"\nGrowth of the max prompt from {lengths[-2]} to {lengths[-1]} steps: ReCAP x{recap_growth:.2f}, ReAct full history x{react_growth:.2f}")
+    recap_growth = max(prompt_tokens(r) for r in results[variants[0][0]][lengths[-1]]) / max(
+        prompt_tokens(r) for r in results[variants[0][0]][lengths[-2]]
+    )
+    react_growth = max(prompt_tokens(r) for r in results[variants[3][0]][lengths[-1]]) / max(
+        prompt_tokens(r) for r in results[variants[3][0]][lengths[-2]]
+    )
+    print(
+        f"\nGrowth of the max prompt from {lengths[-2]} to {lengths[-1]} steps: ReCAP x{recap_growth:.2f}, ReAct full history x{react_growth:.2f}"
+    )
     print(f"\nCacheable share (mean fraction of each prompt identical to the previous prompt's prefix), {n}-step episode:")
     for label, *_ in variants:
         print(f"{label:<22}{cacheable_share(results[label][n]):>8.1%}")

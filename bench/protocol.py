@@ -102,8 +102,10 @@ def main() -> None:
         longest_plan = max(plans, key=lambda p: len(json.dumps(p[2])))
         max_steps = max(p[1] for p in plans)
         demo = env.demonstration()
-        print(f"{benchmark}: {len(plans)} instances in {time.perf_counter() - t0:.1f}s; longest expert plan "
-              f"{len(longest_plan[2])} actions ({longest_plan[0]}); largest step cap {max_steps}")
+        print(
+            f"{benchmark}: {len(plans)} instances in {time.perf_counter() - t0:.1f}s; longest expert plan "
+            f"{len(longest_plan[2])} actions ({longest_plan[0]}); largest step cap {max_steps}"
+        )
         for method in METHODS:
             paper = make_agent(method, profile="paper", benchmark=benchmark)
             every = make_agent(method, profile="paper", benchmark=benchmark, demo_observations="all")
@@ -117,27 +119,47 @@ def main() -> None:
             think = longest_think(replies)
             reply_tokens = max(tokens(expert_reply(method, plan, think)) for _, _, plan in plans)
             cap = paper.config.max_tokens
-            rows.append({
-                "benchmark": benchmark, "method": method,
-                "demo_tokens_all_obs": demo_all, "demo_tokens_paper": demo_paper,
-                "longest_expert_reply_tokens": reply_tokens, "max_tokens": cap,
-                "output_headroom": round(cap / reply_tokens, 2) if cap else None,
-                "max_step_cap": max_steps, "call_cap": paper.call_cap(max_steps),
-                "call_cap_per_step": round(paper.call_cap(max_steps) / max_steps, 2),
-            })
+            rows.append(
+                {
+                    "benchmark": benchmark,
+                    "method": method,
+                    "demo_tokens_all_obs": demo_all,
+                    "demo_tokens_paper": demo_paper,
+                    "longest_expert_reply_tokens": reply_tokens,
+                    "max_tokens": cap,
+                    "output_headroom": round(cap / reply_tokens, 2) if cap else None,
+                    "max_step_cap": max_steps,
+                    "call_cap": paper.call_cap(max_steps),
+                    "call_cap_per_step": round(paper.call_cap(max_steps) / max_steps, 2),
+                }
+            )
         env.close()
-    cols = ["benchmark", "method", "demo_tokens_all_obs", "demo_tokens_paper", "longest_expert_reply_tokens",
-            "max_tokens", "output_headroom", "max_step_cap", "call_cap", "call_cap_per_step"]
+    cols = [
+        "benchmark",
+        "method",
+        "demo_tokens_all_obs",
+        "demo_tokens_paper",
+        "longest_expert_reply_tokens",
+        "max_tokens",
+        "output_headroom",
+        "max_step_cap",
+        "call_cap",
+        "call_cap_per_step",
+    ]
     widths = {c: max(len(c), *(len(str(r[c])) for r in rows)) if rows else len(c) for c in cols}
     print("  ".join(c.ljust(widths[c]) for c in cols))
     for r in rows:
         print("  ".join(str(r[c]).ljust(widths[c]) for c in cols))
     short = [r for r in rows if r["max_tokens"] and r["longest_expert_reply_tokens"] > r["max_tokens"]]
-    print(f"output caps below the longest expert reply: {len(short)}"
-          + "".join(f"\n  {r['method']} on {r['benchmark']}" for r in short))
+    print(
+        f"output caps below the longest expert reply: {len(short)}"
+        + "".join(f"\n  {r['method']} on {r['benchmark']}" for r in short)
+    )
     need = {m: max((r["longest_expert_reply_tokens"] for r in rows if r["method"] == m), default=0) for m in METHODS}
-    print("suggested caps (2 x the longest expert reply, rounded up to 256): "
-          + ", ".join(f"{m} {256 * math.ceil(2 * n / 256)}" for m, n in need.items() if n))
+    print(
+        "suggested caps (2 x the longest expert reply, rounded up to 256): "
+        + ", ".join(f"{m} {256 * math.ceil(2 * n / 256)}" for m, n in need.items() if n)
+    )
     if args.json:
         with open(args.json, "w") as f:
             json.dump(rows, f, indent=1)

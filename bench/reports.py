@@ -61,7 +61,10 @@ def main() -> int:
         if not (run_dir / "messages").is_dir():
             t = time.perf_counter()
             counts = write_synthetic_run(run_dir, SyntheticSpec(messages=a.messages))
-            print(f"generated synthetic run in {time.perf_counter() - t:.1f} s: " + ", ".join(f"{k} {v:,}" for k, v in counts.items()))
+            print(
+                f"generated synthetic run in {time.perf_counter() - t:.1f} s: "
+                + ", ".join(f"{k} {v:,}" for k, v in counts.items())
+            )
         size = sum(f.stat().st_size for f in run_dir.rglob("*.parquet"))
         print(f"run folder: {run_dir} ({size / 2**20:.0f} MiB of Parquet)")
         out_dir = Path(tmp) / "report"
@@ -73,9 +76,11 @@ def main() -> int:
             times.append(time.perf_counter() - t)
             print(f"  report run {i + 1}: {times[-1]:.2f} s ({len(written)} files)")
         html = (out_dir / "report.html").stat().st_size
-        print(f"recap report (md, html, tex, csv): best {min(times):.2f} s, median {statistics.median(times):.2f} s "
-              f"over {a.repeat} runs; report.html {html / 2**20:.2f} MiB; load average {os.getloadavg()[0]:.1f} "
-              f"on {os.cpu_count()} CPUs; target <= 5 s")
+        print(
+            f"recap report (md, html, tex, csv): best {min(times):.2f} s, median {statistics.median(times):.2f} s "
+            f"over {a.repeat} runs; report.html {html / 2**20:.2f} MiB; load average {os.getloadavg()[0]:.1f} "
+            f"on {os.cpu_count()} CPUs; target <= 5 s"
+        )
         print("breakdown of one more pass:")
         for name, secs in _breakdown(run_dir):
             print(f"  {name:40s} {secs:6.3f} s")

@@ -105,8 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         f"(target median <= {STEP_TARGET_MS:.0f} ms: {'met' if max(step_meds) * 1000 <= STEP_TARGET_MS else 'MISSED'})"
     )
     print(
-        f"total build: real engine {real_total:.1f} s vs ours {ours_total:.3f} s "
-        f"-> {real_total / ours_total:.0f}x faster overall"
+        f"total build: real engine {real_total:.1f} s vs ours {ours_total:.3f} s -> {real_total / ours_total:.0f}x faster overall"
     )
     print(
         f"expert plan/optimal: mean {statistics.mean(ratios):.3f}, max {max(ratios):.3f}; "

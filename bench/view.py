@@ -80,7 +80,10 @@ def main() -> int:
             mean_calls = max(2, (a.messages // a.episodes - 2) // 2)  # messages per episode = 2 x calls + 2
             counts = write_synthetic_run(run_dir, SyntheticSpec(messages=a.messages, mean_calls=mean_calls))
             _label_episodes(run_dir)
-            print(f"generated synthetic run in {time.perf_counter() - t:.1f} s: " + ", ".join(f"{k} {v:,}" for k, v in counts.items()))
+            print(
+                f"generated synthetic run in {time.perf_counter() - t:.1f} s: "
+                + ", ".join(f"{k} {v:,}" for k, v in counts.items())
+            )
         size = sum(f.stat().st_size for f in run_dir.rglob("*.parquet"))
         print(f"run folder: {run_dir} ({size / 2**20:.0f} MiB of Parquet)")
 
@@ -106,15 +109,32 @@ def main() -> int:
                     requests.append(("filter", f"{param} = {v}", "episodes?" + urlencode({param: v})))
             arms = snap.options.get("arm") or []
             if len(arms) >= 2:
-                requests.append(("filter", "arm + success + sort", "episodes?" + urlencode({"arm": arms[0], "success": "false", "sort": "steps"})))
+                requests.append(
+                    (
+                        "filter",
+                        "arm + success + sort",
+                        "episodes?" + urlencode({"arm": arms[0], "success": "false", "sort": "steps"}),
+                    )
+                )
             for phrase in (words[0], " ".join(words[1:4]), words[2] + " [12345]", "no such text anywhere"):
                 requests.append(("search", f"search {phrase!r}", "episodes?" + urlencode({"q": phrase})))
             for run_id, eid, calls in pick:
                 requests.append(("episode", f"episode {eid} ({calls} calls)", "episode?" + urlencode({"run": run_id, "id": eid})))
-                requests.append(("window", f"window of call {calls - 1} of {eid}",
-                                 "window?" + urlencode({"run": run_id, "id": eid, "call": calls - 1, "fragment": 1})))
+                requests.append(
+                    (
+                        "window",
+                        f"window of call {calls - 1} of {eid}",
+                        "window?" + urlencode({"run": run_id, "id": eid, "call": calls - 1, "fragment": 1}),
+                    )
+                )
             if len(arms) >= 2:
-                requests.append(("compare", f"compare arms {arms[0]} / {arms[1]}", "compare?" + urlencode({"kind": "arm", "a": arms[0], "b": arms[1]})))
+                requests.append(
+                    (
+                        "compare",
+                        f"compare arms {arms[0]} / {arms[1]}",
+                        "compare?" + urlencode({"kind": "arm", "a": arms[0], "b": arms[1]}),
+                    )
+                )
             _get(base + "episodes")  # warm-up
             worst: dict[str, float] = {}
             print(f"{'request':58s} {'median ms':>10s} {'worst ms':>9s} {'KiB':>7s}")

@@ -48,8 +48,7 @@ class CapPolicy:
         if self.run_stopped is None and cap is not None and spend.total_usd >= cap - EPS:
             self.stop_run(f"run cap ${cap:.2f} reached")  # the spend figure is the live one beside it
         for m in self.spec.models:
-            if (m.cap_usd is not None and m.name not in self.stopped_models
-                    and spend.by_model.get(m.name, 0.0) >= m.cap_usd - EPS):
+            if m.cap_usd is not None and m.name not in self.stopped_models and spend.by_model.get(m.name, 0.0) >= m.cap_usd - EPS:
                 self.stop_model(m.name, f"model cap ${m.cap_usd:.2f} of {m.name} reached")
 
     def on_refusal(self, model_label: str, refusal: BudgetRefusal | None, error: str | None, spend: Spend) -> None:
@@ -58,8 +57,11 @@ class CapPolicy:
         m = self.spec.model(model_label)
         run_cap = self.spec.run_cap_usd
         if (refusal is not None and refusal.scope == "run") or m.cap_usd is None:
-            self.stop_run(f"run cap ${run_cap:.2f} reached (spent ${spend.total_usd:.4f})" if run_cap is not None
-                          else f"a model call was refused for lack of budget: {error}")
+            self.stop_run(
+                f"run cap ${run_cap:.2f} reached (spent ${spend.total_usd:.4f})"
+                if run_cap is not None
+                else f"a model call was refused for lack of budget: {error}"
+            )
         else:
             self.stop_model(m.name, f"model cap ${m.cap_usd:.2f} of {m.name} reached")
 

@@ -128,7 +128,8 @@ A torn last line in the ledger journal (a crash mid-write; recap status names it
 recap resume RUN --repair (a backup is kept; a corrupt line in the middle is refused).
 """
 
-_RUN_EPILOG = """\
+_RUN_EPILOG = (
+    """\
 examples:
   recap run examples/demo.yaml --dry-run              check the sweep and show the plan, run nothing
   recap run examples/demo.yaml --workers 8 --run-cap 5
@@ -139,9 +140,12 @@ examples:
 Running a sweep again on its output folder prints what changed and runs only units without a
 result.
 
-""" + _RUN_EXIT
+"""
+    + _RUN_EXIT
+)
 
-_RESUME_EPILOG = """\
+_RESUME_EPILOG = (
+    """\
 examples:
   recap resume runs/demo                     finish the remaining units (spec saved in the folder)
   recap resume runs/demo --run-cap 60        continue with a higher run cap
@@ -149,7 +153,9 @@ examples:
   recap resume runs/demo --retry errors      also re-run units that ended env_error / llm_error
   recap resume s3://bucket/runs/demo --address auto
 
-""" + _RUN_EXIT
+"""
+    + _RUN_EXIT
+)
 
 _STATUS_EPILOG = """\
 examples:
@@ -217,78 +223,155 @@ exit status: 0 every observation identical; 1 a difference (printed); 2 unreadab
 
 def _parser() -> argparse.ArgumentParser:
     p = _OneLineParser(prog="recap", description="Run and inspect ReCAP evaluation sweeps.", epilog=_MAIN_EPILOG)
-    p.add_argument("--log-level", choices=LOG_LEVELS, default=DEFAULT_LOG_LEVEL,
-                   help="diagnostic lines on stderr (and in the Ray workers' logs) from this level up; "
-                        "accepted before or after any command (default: warning, or $RECAP_LOG_LEVEL)")
-    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND", title="commands",
-                           help="one of the commands below; recap COMMAND --help for its options and examples")
+    p.add_argument(
+        "--log-level",
+        choices=LOG_LEVELS,
+        default=DEFAULT_LOG_LEVEL,
+        help="diagnostic lines on stderr (and in the Ray workers' logs) from this level up; "
+        "accepted before or after any command (default: warning, or $RECAP_LOG_LEVEL)",
+    )
+    sub = p.add_subparsers(
+        dest="cmd",
+        required=True,
+        metavar="COMMAND",
+        title="commands",
+        help="one of the commands below; recap COMMAND --help for its options and examples",
+    )
 
     def run_flags(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument("--address", metavar="ADDRESS",
-                        help="join an existing Ray cluster (e.g. 10.0.0.5:6379 or auto) instead of starting a local one")
+        sp.add_argument(
+            "--address",
+            metavar="ADDRESS",
+            help="join an existing Ray cluster (e.g. 10.0.0.5:6379 or auto) instead of starting a local one",
+        )
         sp.add_argument("--workers", type=int, metavar="N", help="number of episode workers (overrides the spec's)")
-        sp.add_argument("--run-cap", type=float, dest="run_cap", metavar="USD", help="run dollar cap in USD (overrides the spec's)")
-        sp.add_argument("--progress", choices=("auto", "live", "lines", "off"), default="auto",
-                        help="progress display: live (a terminal), lines (a line every few seconds), off; "
-                             "auto (default) is live on a terminal, lines otherwise")
-        sp.add_argument("--executor", choices=("ray", "in-process"), default="ray",
-                        help="where episodes run: ray (default) - one Ray actor per worker; in-process - threads of "
-                             "this process (no actor start-up, debugger breakpoints work; the sink and the gateways "
-                             "stay Ray actors)")
+        sp.add_argument(
+            "--run-cap", type=float, dest="run_cap", metavar="USD", help="run dollar cap in USD (overrides the spec's)"
+        )
+        sp.add_argument(
+            "--progress",
+            choices=("auto", "live", "lines", "off"),
+            default="auto",
+            help="progress display: live (a terminal), lines (a line every few seconds), off; "
+            "auto (default) is live on a terminal, lines otherwise",
+        )
+        sp.add_argument(
+            "--executor",
+            choices=("ray", "in-process"),
+            default="ray",
+            help="where episodes run: ray (default) - one Ray actor per worker; in-process - threads of "
+            "this process (no actor start-up, debugger breakpoints work; the sink and the gateways "
+            "stay Ray actors)",
+        )
 
-    r = sub.add_parser("run", help="run a sweep file", epilog=_RUN_EPILOG,
-                       description="Run a sweep file: every (instance, method, model, seed) unit without a result.")
+    r = sub.add_parser(
+        "run",
+        help="run a sweep file",
+        epilog=_RUN_EPILOG,
+        description="Run a sweep file: every (instance, method, model, seed) unit without a result.",
+    )
     r.add_argument("spec", help="the sweep file (YAML)")
     run_flags(r)
     r.add_argument("--output", metavar="DIR", help="output folder or s3:// URI (overrides the spec's)")
     r.add_argument("--dry-run", action="store_true", help="check the spec and show the plan, run nothing")
 
-    rs = sub.add_parser("resume", help="finish a run after a crash or with a higher cap", epilog=_RESUME_EPILOG,
-                        description="Finish a run from the spec saved in its folder; finished units never re-run.")
+    rs = sub.add_parser(
+        "resume",
+        help="finish a run after a crash or with a higher cap",
+        epilog=_RESUME_EPILOG,
+        description="Finish a run from the spec saved in its folder; finished units never re-run.",
+    )
     rs.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
     run_flags(rs)
-    rs.add_argument("--repair", action="store_true",
-                    help="first cut a torn last line off the ledger journal (a backup is kept); refuses a corrupt line in the middle")
-    rs.add_argument("--retry", choices=("infra", "errors"), default="infra",
-                    help="what to run again besides unfinished units: infra (default) - units whose latest attempt failed on "
-                         "infrastructure; errors - also units that ended env_error or llm_error (a data folder or a param "
-                         "fixed since); earlier rows are kept, the new attempt gets the next number")
+    rs.add_argument(
+        "--repair",
+        action="store_true",
+        help="first cut a torn last line off the ledger journal (a backup is kept); refuses a corrupt line in the middle",
+    )
+    rs.add_argument(
+        "--retry",
+        choices=("infra", "errors"),
+        default="infra",
+        help="what to run again besides unfinished units: infra (default) - units whose latest attempt failed on "
+        "infrastructure; errors - also units that ended env_error or llm_error (a data folder or a param "
+        "fixed since); earlier rows are kept, the new attempt gets the next number",
+    )
 
-    st = sub.add_parser("status", help="units done/total, success, spend of a run folder", epilog=_STATUS_EPILOG,
-                        description="Units done/total, success, spend and problems of a run folder.")
+    st = sub.add_parser(
+        "status",
+        help="units done/total, success, spend of a run folder",
+        epilog=_STATUS_EPILOG,
+        description="Units done/total, success, spend and problems of a run folder.",
+    )
     st.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
 
-    es = sub.add_parser("estimate", help="units, calls, tokens and a cost range of a sweep file", epilog=_ESTIMATE_EPILOG,
-                        description="Units, model calls, tokens and a cost range of a sweep file, before anything is spent.")
+    es = sub.add_parser(
+        "estimate",
+        help="units, calls, tokens and a cost range of a sweep file",
+        epilog=_ESTIMATE_EPILOG,
+        description="Units, model calls, tokens and a cost range of a sweep file, before anything is spent.",
+    )
     es.add_argument("spec", help="the sweep file (YAML)")
 
-    sh = sub.add_parser("show", help="one episode's ReCAP context tree", epilog=_SHOW_EPILOG,
-                        description="One episode's ReCAP context tree (or a flat method's actions) in the terminal.")
+    sh = sub.add_parser(
+        "show",
+        help="one episode's ReCAP context tree",
+        epilog=_SHOW_EPILOG,
+        description="One episode's ReCAP context tree (or a flat method's actions) in the terminal.",
+    )
     sh.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
     sh.add_argument("episode", help="an episode id, a unit id (its latest attempt), or an unambiguous prefix")
 
     # sql, report and view are read by the reports package (see main); these entries list them in recap --help
-    sub.add_parser("sql", help="read-only SQL over the tables of one or more run folders (--csv, --json, --file, @NAME)",
-                   add_help=False)
+    sub.add_parser(
+        "sql", help="read-only SQL over the tables of one or more run folders (--csv, --json, --file, @NAME)", add_help=False
+    )
     sub.add_parser("report", help="build the report (Markdown, HTML, LaTeX, CSV) of one or more runs", add_help=False)
     sub.add_parser("view", help="browse every episode of one or more runs in a local web viewer (read-only)", add_help=False)
 
-    env = sub.add_parser("env", help="list, play or replay benchmark instances (no model)", epilog=_ENV_EPILOG,
-                         description="Look at the benchmarks without any model.")
-    esub = env.add_subparsers(dest="env_cmd", required=True, metavar="ACTION", title="actions",
-                              help="one of the actions below; recap env ACTION --help for its options and examples")
-    el = esub.add_parser("list", help="instance ids of a benchmark", epilog=_ENV_LIST_EPILOG,
-                         description="The instance ids of a benchmark that a sweep file can name.")
+    env = sub.add_parser(
+        "env",
+        help="list, play or replay benchmark instances (no model)",
+        epilog=_ENV_EPILOG,
+        description="Look at the benchmarks without any model.",
+    )
+    esub = env.add_subparsers(
+        dest="env_cmd",
+        required=True,
+        metavar="ACTION",
+        title="actions",
+        help="one of the actions below; recap env ACTION --help for its options and examples",
+    )
+    el = esub.add_parser(
+        "list",
+        help="instance ids of a benchmark",
+        epilog=_ENV_LIST_EPILOG,
+        description="The instance ids of a benchmark that a sweep file can name.",
+    )
     el.add_argument("bench", help="blocksworld, robotouille or alfworld")
-    el.add_argument("selector", nargs="?",
-                    help="only the ids it selects: a size (blocksworld), a split or task (robotouille, alfworld)")
-    ep = esub.add_parser("play", help="play an instance by hand", epilog=_ENV_PLAY_EPILOG,
-                         description="Play an instance by hand: see the observation, type actions, watch the step count.")
+    el.add_argument(
+        "selector", nargs="?", help="only the ids it selects: a size (blocksworld), a split or task (robotouille, alfworld)"
+    )
+    ep = esub.add_parser(
+        "play",
+        help="play an instance by hand",
+        epilog=_ENV_PLAY_EPILOG,
+        description="Play an instance by hand: see the observation, type actions, watch the step count.",
+    )
     ep.add_argument("instance_id", help="an instance id as recap env list prints it (e.g. blocksworld/3@1)")
-    ep.add_argument("--step-multiplier", type=_finite_positive, default=4.0, metavar="X",
-                    help="step cap = X times the optimal plan's length (default 4; ALFWorld's cap is fixed)")
-    er = esub.add_parser("replay", help="replay a recorded Robotouille trajectory", epilog=_ENV_REPLAY_EPILOG,
-                         description="Re-run a recorded Robotouille trajectory on our engine and compare every observation.")
+    ep.add_argument(
+        "--step-multiplier",
+        type=_finite_positive,
+        default=4.0,
+        metavar="X",
+        help="step cap = X times the optimal plan's length (default 4; ALFWorld's cap is fixed)",
+    )
+    er = esub.add_parser(
+        "replay",
+        help="replay a recorded Robotouille trajectory",
+        epilog=_ENV_REPLAY_EPILOG,
+        description="Re-run a recorded Robotouille trajectory on our engine and compare every observation.",
+    )
     er.add_argument("trajectory", help="the recorded trajectory (JSON)")
 
     sub.add_parser("data", help="list, check or fetch the benchmark data folders (recap data --help)", add_help=False)
@@ -361,21 +444,42 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
 
     console = _console()
     backend = backend if backend is not None else _backend(prepared.spec)
-    driver = Driver(prepared, backend, command=command, progress=args.progress, address=args.address,
-                    retry=getattr(args, "retry", "infra"), executor=args.executor)
+    driver = Driver(
+        prepared,
+        backend,
+        command=command,
+        progress=args.progress,
+        address=args.address,
+        retry=getattr(args, "retry", "infra"),
+        executor=args.executor,
+    )
     summary = driver.run()
     _render(render, collect(prepared.store))
     if summary.stopped:
-        console.print(_styled(f"stopped: {summary.stopped}; {summary.not_started} units not started, "
-                              f"{summary.budget_stopped} episodes ended budget_exhausted this session", "yellow"))
+        console.print(
+            _styled(
+                f"stopped: {summary.stopped}; {summary.not_started} units not started, "
+                f"{summary.budget_stopped} episodes ended budget_exhausted this session",
+                "yellow",
+            )
+        )
         console.print(_plain(f"continue with a higher cap: recap resume {prepared.store.location} --run-cap <USD>"))
     if summary.interrupted:
         console.print(_styled(f"interrupted; continue with: recap resume {prepared.store.location}", "yellow"))
     if summary.retried_errors:
-        console.print(_plain(f"--retry errors: {summary.retried_errors} units that had ended in env_error or llm_error "
-                             "were queued again (their earlier rows are kept)"))
+        console.print(
+            _plain(
+                f"--retry errors: {summary.retried_errors} units that had ended in env_error or llm_error "
+                "were queued again (their earlier rows are kept)"
+            )
+        )
     if summary.abandoned:
-        console.print(_styled(f"{summary.abandoned} units gave up after {prepared.spec.max_attempts} failed attempts (see the events table)", "red"))
+        console.print(
+            _styled(
+                f"{summary.abandoned} units gave up after {prepared.spec.max_attempts} failed attempts (see the events table)",
+                "red",
+            )
+        )
     console.print(_plain(f"run folder: {prepared.store.location}   report: recap report {prepared.store.location}"))
     return summary.exit_code()
 
@@ -477,7 +581,9 @@ def cmd_status(args: argparse.Namespace) -> int:
     except PipelineError:
         raise
     except Exception as exc:  # status must never die with a traceback on a damaged folder
-        raise PipelineError(f"cannot read {args.run_dir}: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}") from None
+        raise PipelineError(
+            f"cannot read {args.run_dir}: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+        ) from None
     _render(render, report)
     return 0
 
@@ -587,7 +693,7 @@ def _take_log_level(argv: list[str]) -> str | None:
                 raise PipelineError(f"--log-level needs a level: {', '.join(LOG_LEVELS)}")
             if level.lower() not in LOG_LEVELS:
                 raise PipelineError(f"--log-level: unknown level {level!r}; one of {', '.join(LOG_LEVELS)}")
-            del argv[i:i + drop]
+            del argv[i : i + drop]
             break
     return level
 

@@ -397,8 +397,7 @@ def _stage(bench: DataFolder, mirror: str | None, stage: Path, out: TextIO) -> d
     """Fetch every fetchable manifest file of ``bench`` into ``stage/data``; verify each one.
     Returns the files written with their sha256."""
     manifest = read_manifest(manifest_file(bench))
-    wanted = {rel: d for rel, d in manifest.items()
-              if bench.group_of(rel).fetchable and not bench.group_of(rel).generated}
+    wanted = {rel: d for rel, d in manifest.items() if bench.group_of(rel).fetchable and not bench.group_of(rel).generated}
     data, downloads = stage / "data", stage / "downloads"
     data.mkdir()
     downloads.mkdir()
@@ -571,30 +570,52 @@ class _Exit(Exception):
 
 
 def _parser(out: TextIO) -> _Parser:
-    p = _Parser(prog="recap data", description="Find, verify and fetch the benchmark data folders.", out=out,
-                formatter_class=argparse.RawDescriptionHelpFormatter,
-                epilog="examples:\n  recap data list\n  recap data check alfworld\n"
-                       "  recap data fetch robotouille --mirror /mnt/mirror\n\n"
-                       "exit status: 0 all verified; 1 a check or fetch failed; 2 bad usage")
-    sub = p.add_subparsers(dest="action", required=True, metavar="ACTION", help="list, check or fetch",
-                           parser_class=partial(_Parser, out=out))  # type: ignore[call-overload]  # a class with its out bound
+    p = _Parser(
+        prog="recap data",
+        description="Find, verify and fetch the benchmark data folders.",
+        out=out,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  recap data list\n  recap data check alfworld\n"
+        "  recap data fetch robotouille --mirror /mnt/mirror\n\n"
+        "exit status: 0 all verified; 1 a check or fetch failed; 2 bad usage",
+    )
+    sub = p.add_subparsers(
+        dest="action", required=True, metavar="ACTION", help="list, check or fetch", parser_class=partial(_Parser, out=out)
+    )  # type: ignore[call-overload]  # a class with its out bound
     choices = (*folders(), "all")
-    for name, text in (("list", "where each benchmark's folder is looked for, and which one is used"),
-                       ("check", "verify each folder against the sha256 manifest")):
-        sp = sub.add_parser(name, help=text, description=text, formatter_class=argparse.RawDescriptionHelpFormatter,
-                            epilog=f"examples:\n  recap data {name}\n  recap data {name} robotouille --data-dir ~/data/robotouille")
-        sp.add_argument("bench", nargs="?", default="all", choices=choices, metavar="BENCH",
-                        help=f"one of {', '.join(choices)} (default all)")
+    for name, text in (
+        ("list", "where each benchmark's folder is looked for, and which one is used"),
+        ("check", "verify each folder against the sha256 manifest"),
+    ):
+        sp = sub.add_parser(
+            name,
+            help=text,
+            description=text,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+            epilog=f"examples:\n  recap data {name}\n  recap data {name} robotouille --data-dir ~/data/robotouille",
+        )
+        sp.add_argument(
+            "bench", nargs="?", default="all", choices=choices, metavar="BENCH", help=f"one of {', '.join(choices)} (default all)"
+        )
         sp.add_argument("--data-dir", dest="data_dir", metavar="DIR", help="look here first (needs BENCH)")
-    f = sub.add_parser("fetch", help="download, verify and install the data",
-                       description="Download what can be downloaded, verify it, then move it into place.",
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="examples:\n  recap data fetch alfworld\n  recap data fetch all --mirror file:///mnt/mirror --dest ~/data")
-    f.add_argument("bench", nargs="?", default="all", choices=choices, metavar="BENCH",
-                   help=f"one of {', '.join(choices)} (default all)")
-    f.add_argument("--mirror", metavar="DIR_OR_URL", help="folder or URL prefix holding the upstream file names (default: upstream URLs)")
-    f.add_argument("--dest", metavar="DIR", help="the folder (with BENCH) or the parent of the folders (without); "
-                   "default ~/.cache/recap-eval/data/<bench>")
+    f = sub.add_parser(
+        "fetch",
+        help="download, verify and install the data",
+        description="Download what can be downloaded, verify it, then move it into place.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  recap data fetch alfworld\n  recap data fetch all --mirror file:///mnt/mirror --dest ~/data",
+    )
+    f.add_argument(
+        "bench", nargs="?", default="all", choices=choices, metavar="BENCH", help=f"one of {', '.join(choices)} (default all)"
+    )
+    f.add_argument(
+        "--mirror", metavar="DIR_OR_URL", help="folder or URL prefix holding the upstream file names (default: upstream URLs)"
+    )
+    f.add_argument(
+        "--dest",
+        metavar="DIR",
+        help="the folder (with BENCH) or the parent of the folders (without); default ~/.cache/recap-eval/data/<bench>",
+    )
     return p
 
 

@@ -103,6 +103,7 @@ class Prepared:
     """A sweep checked and ready to start: its expanded plan and output store. ``identity`` and ``diff`` are None
     for a fresh folder; for an existing run they are its run.json and how the new plan differs from the stored
     one."""
+
     spec: SweepSpec
     spec_text: str
     plan: Plan
@@ -145,8 +146,9 @@ def _git_revision() -> str | None:
     if r.returncode != 0 or not rev:
         return None
     # tracked changes only: a run folder (or any output) inside the checkout is not a code change
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=PROJECT_ROOT,
-                           capture_output=True, text=True, timeout=10)
+    dirty = subprocess.run(
+        ["git", "status", "--porcelain", "--untracked-files=no"], cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=10
+    )
     return rev + ("+dirty" if dirty.stdout.strip() else "")
 
 
@@ -157,6 +159,7 @@ def _git_revision() -> str | None:
 class RunSummary:
     """What one driver session did (counts are for this session unless named ``*_before``); the CLI prints it and
     turns it into the exit status."""
+
     location: str
     run: str
     run_id: str
@@ -191,8 +194,10 @@ class RunSummary:
         if not self.infra_failed:
             return None
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.infra_kinds.items()))
-        return (f"{self.infra_failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
-                f"then retry them with: recap resume {self.location}")
+        return (
+            f"{self.infra_failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
+            f"then retry them with: recap resume {self.location}"
+        )
 
     def exit_code(self) -> int:
         """The process exit status: interrupted beats an infrastructure failure, which beats work left (a cap
@@ -228,9 +233,18 @@ class Driver:
     lost), :func:`pipeline.episode_rows.episode_record` (the terminal row) and
     :class:`pipeline.events.EventBuffer`."""
 
-    def __init__(self, prepared: Prepared, backend: ModelBackend, *, command: str = "", progress: str = "auto",
-                 hooks: Hooks | None = None, address: str | None = None, retry: Retry = "infra",
-                 executor: Executor = "ray") -> None:
+    def __init__(
+        self,
+        prepared: Prepared,
+        backend: ModelBackend,
+        *,
+        command: str = "",
+        progress: str = "auto",
+        hooks: Hooks | None = None,
+        address: str | None = None,
+        retry: Retry = "infra",
+        executor: Executor = "ray",
+    ) -> None:
         if retry not in RETRY_MODES:
             raise PipelineError(f"--retry must be one of {', '.join(RETRY_MODES)}, got {retry!r}")
         if executor not in EXECUTORS:
@@ -266,10 +280,16 @@ class Driver:
         return self.channel.actor if self.channel is not None else None
 
     # -- helpers --------------------------------------------------------------------------------
-    def _event(self, kind: EventKind, *, severity: Severity = "info", unit: Unit | None = None, episode_id: str | None = None,
-               **detail: Any) -> None:
-        self.events.add(kind, severity=severity, unit_id=unit.unit_id if unit else None, episode_id=episode_id,
-                        **detail)
+    def _event(
+        self,
+        kind: EventKind,
+        *,
+        severity: Severity = "info",
+        unit: Unit | None = None,
+        episode_id: str | None = None,
+        **detail: Any,
+    ) -> None:
+        self.events.add(kind, severity=severity, unit_id=unit.unit_id if unit else None, episode_id=episode_id, **detail)
 
     def _send(self, records: list[Any], *, flush: bool = False) -> None:
         assert self.channel is not None
@@ -294,19 +314,41 @@ class Driver:
         """A unit ended in an infrastructure failure: not done, retried by the next resume."""
         self.summary.infra_failed += 1
         self.summary.infra_kinds[kind] = self.summary.infra_kinds.get(kind, 0) + 1
-        self._event("unit_failed", severity="error", unit=unit, episode_id=f"{unit.unit_id}-{attempt}",
-                    attempt=attempt, failure=kind, retry="recap resume")
+        self._event(
+            "unit_failed",
+            severity="error",
+            unit=unit,
+            episode_id=f"{unit.unit_id}-{attempt}",
+            attempt=attempt,
+            failure=kind,
+            retry="recap resume",
+        )
 
-    def _failed_attempt(self, fin: Finished, kind: Literal["attempt_failed", "worker_lost"], error: str, out: EpisodeOutcome | None = None,
-                        source: str = "worker") -> None:
+    def _failed_attempt(
+        self,
+        fin: Finished,
+        kind: Literal["attempt_failed", "worker_lost"],
+        error: str,
+        out: EpisodeOutcome | None = None,
+        source: str = "worker",
+    ) -> None:
         """An attempt without an ending: retried under the next attempt number, or, its
         attempts used up, given up on with a terminal row saying why."""
         unit, attempt = fin.pending.unit, fin.pending.attempt
         self.failures[unit.unit_id] = self.failures.get(unit.unit_id, 0) + 1
         self.last_failure[unit.unit_id] = "worker_lost" if kind == "worker_lost" else source
         n = self.failures[unit.unit_id]
-        self._event(kind, severity="warning", unit=unit, episode_id=f"{unit.unit_id}-{attempt}", attempt=attempt,
-                    worker_id=fin.slot.worker_id, error=error[:1000], failures=n, max_attempts=self.spec.max_attempts)
+        self._event(
+            kind,
+            severity="warning",
+            unit=unit,
+            episode_id=f"{unit.unit_id}-{attempt}",
+            attempt=attempt,
+            worker_id=fin.slot.worker_id,
+            error=error[:1000],
+            failures=n,
+            max_attempts=self.spec.max_attempts,
+        )
         if n < self.spec.max_attempts:
             self.queue.retry(unit)
             return
@@ -317,8 +359,16 @@ class Driver:
         reason: RowEndReason = INFRA_ERROR if infra else ("llm_error" if source == "client" else "env_error")
         marker = f" (infrastructure: {infra})" if infra else ""
         msg = f"gave up after {n} failed attempts{marker}; last: {error}"[:2000]
-        rec = episode_record(unit, attempt, out, end_reason=reason, error=msg, worker_id=fin.slot.worker_id,
-                             started=fin.started, journal_spend=self._journal_spend)
+        rec = episode_record(
+            unit,
+            attempt,
+            out,
+            end_reason=reason,
+            error=msg,
+            worker_id=fin.slot.worker_id,
+            started=fin.started,
+            journal_spend=self._journal_spend,
+        )
         self.records_out.append(rec)
         self._event("unit_abandoned", severity="error", unit=unit, attempt=attempt, failures=n)
         self.summary.abandoned += 1
@@ -361,8 +411,7 @@ class Driver:
         if self.hooks.on_result:
             self.hooks.on_result(unit, attempt, out)
         if out.crash is not None:
-            self._failed_attempt(fin, "attempt_failed", f"{out.crash.source}: {out.crash.error}", out,
-                                 source=out.crash.source)
+            self._failed_attempt(fin, "attempt_failed", f"{out.crash.source}: {out.crash.error}", out, source=out.crash.source)
             return
         rec = episode_record(unit, attempt, out, journal_spend=self._journal_spend)
         self.records_out.append(rec)
@@ -400,13 +449,24 @@ class Driver:
             remaining = len(self.queue) + running
             eta = remaining / rate if rate > 0 else None
         try:
-            rates = {label + (TEST_DOUBLE_LABEL if self._is_test_double(label) else ""): r
-                     for label, r in self.backend.rate_stats().items()}
+            rates = {
+                label + (TEST_DOUBLE_LABEL if self._is_test_double(label) else ""): r
+                for label, r in self.backend.rate_stats().items()
+            }
         except Exception:
             rates = {}
-        return Snapshot(total=self.summary.total, done=done, success=self.success_before + self.summary.success_now,
-                        running=running, spend_usd=spend.total_usd, run_cap_usd=self.spec.run_cap_usd,
-                        eta_s=eta, rates=rates, restarts=self.summary.worker_restarts, stopped=self.caps.stopped)
+        return Snapshot(
+            total=self.summary.total,
+            done=done,
+            success=self.success_before + self.summary.success_now,
+            running=running,
+            spend_usd=spend.total_usd,
+            run_cap_usd=self.spec.run_cap_usd,
+            eta_s=eta,
+            rates=rates,
+            restarts=self.summary.worker_restarts,
+            stopped=self.caps.stopped,
+        )
 
     # -- the run folder ---------------------------------------------------------------------------
     def _write_identity(self) -> RunIdentity:
@@ -458,8 +518,10 @@ class Driver:
         now = self.p.store.check_can_hold(self.spec.run)
         before = self.p.identity
         if (now is None) != (before is None) or (now is not None and before is not None and now.run_id != before.run_id):
-            raise RunFolderError(f"run folder {self.p.store.location} changed while this driver was starting "
-                                 "(another driver ran there); run the command again")
+            raise RunFolderError(
+                f"run folder {self.p.store.location} changed while this driver was starting "
+                "(another driver ran there); run the command again"
+            )
 
     def _make_pool(self, factory: Any) -> WorkerPool:
         import ray
@@ -470,9 +532,11 @@ class Driver:
 
             sink = self.channel.actor
             return InProcessWorkerPool(
-                lambda wid: EpisodeRunner(wid, self.run_id, factory, send=lambda rows: sink.add.remote(rows),
-                                          wait=lambda ref: ray.get(ref)),
-                session=self.session)
+                lambda wid: EpisodeRunner(
+                    wid, self.run_id, factory, send=lambda rows: sink.add.remote(rows), wait=lambda ref: ray.get(ref)
+                ),
+                session=self.session,
+            )
         from workers.episode_worker import worker_actor
 
         multi_node = len([n for n in ray.nodes() if n.get("Alive")]) > 1
@@ -539,8 +603,13 @@ class Driver:
         spec, plan = self.spec, self.p.plan
         plan_ids = {u.unit_id for u in plan.units}
         completed_before = len(state.completed & plan_ids)
-        self.summary = RunSummary(location=self.p.store.location, run=spec.run, run_id=ident.run_id,
-                                  total=len(plan.units), completed_before=completed_before)
+        self.summary = RunSummary(
+            location=self.p.store.location,
+            run=spec.run,
+            run_id=ident.run_id,
+            total=len(plan.units),
+            completed_before=completed_before,
+        )
         self.success_before = self._success_before(plan_ids)
         # the start order (spec.order): interleaved over arms by default, so a cap that binds
         # early leaves a balanced subsample; the same spec gives the same order on every resume
@@ -550,22 +619,40 @@ class Driver:
         self.done_times: list[float] = []
         self.t0 = time.monotonic()
         resumed = self.p.identity is not None
-        self._send([RunRecord(
-            started_at=time.time(), spec_yaml=self.p.spec_text, spec_hash=text_hash(self.p.spec_text),
-            package_versions=_versions(), git_revision=_git_revision(), host=socket.gethostname(), command=self.command)])
+        self._send(
+            [
+                RunRecord(
+                    started_at=time.time(),
+                    spec_yaml=self.p.spec_text,
+                    spec_hash=text_hash(self.p.spec_text),
+                    package_versions=_versions(),
+                    git_revision=_git_revision(),
+                    host=socket.gethostname(),
+                    command=self.command,
+                )
+            ]
+        )
         retrying = {u: k for u, k in state.infra_failed.items() if u in plan_ids}
         # --retry errors: units whose latest completing row ended env_error / llm_error run again
-        self.retrying_errors = {u: r for u, r in state.errored.items()
-                                if u in plan_ids and u not in state.completed and u not in retrying}
+        self.retrying_errors = {
+            u: r for u, r in state.errored.items() if u in plan_ids and u not in state.completed and u not in retrying
+        }
         self.summary.retried_errors = len(self.retrying_errors)
         extra: dict[str, Any] = {}
         if retrying:
             extra["retrying_failed"] = len(retrying)
         if self.retrying_errors:
             extra["retrying_errors"] = len(self.retrying_errors)
-        self._event("run_resumed" if resumed else "run_started", units=len(plan.units), completed=completed_before,
-                    pending=len(self.queue), run_cap_usd=spec.run_cap_usd, workers=spec.workers, order=spec.order,
-                    **extra)
+        self._event(
+            "run_resumed" if resumed else "run_started",
+            units=len(plan.units),
+            completed=completed_before,
+            pending=len(self.queue),
+            run_cap_usd=spec.run_cap_usd,
+            workers=spec.workers,
+            order=spec.order,
+            **extra,
+        )
         self.caps.check(self.backend.spend())
         self.n_workers = max(1, min(spec.workers, len(self.queue))) if len(self.queue) else 0
         nodes = self.pool.start(self.n_workers)
@@ -634,9 +721,14 @@ class Driver:
         self.summary.spend_usd = spend.total_usd
         self.summary.wall_s = time.monotonic() - t_start
         infra: dict[str, Any] = {"infra_failed": self.summary.infra_failed} if self.summary.infra_failed else {}
-        self._event("run_finished" if not (interrupted or lost) else "run_stopped",
-                    finished=self.summary.finished_now, not_started=self.summary.not_started,
-                    spend_usd=spend.total_usd, stopped=self.summary.stopped or lost, **infra)
+        self._event(
+            "run_finished" if not (interrupted or lost) else "run_stopped",
+            finished=self.summary.finished_now,
+            not_started=self.summary.not_started,
+            spend_usd=spend.total_usd,
+            stopped=self.summary.stopped or lost,
+            **infra,
+        )
         self._ship_events()
         try:
             self.backend.flush()
@@ -648,7 +740,8 @@ class Driver:
             raise PipelineError(
                 f"the sink actor was lost ({self.channel.lost}); the session stopped: "
                 f"{self.summary.finished_now} episodes finished this session are written, "
-                f"{self.summary.not_started} units were not finished; continue with: recap resume {self.p.store.location}")
+                f"{self.summary.not_started} units were not finished; continue with: recap resume {self.p.store.location}"
+            )
         return self.summary
 
     def _finish_ready_before_stop(self) -> None:

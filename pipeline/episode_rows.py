@@ -22,9 +22,18 @@ from schemas.tables import check_vocabulary
 JournalSpend = Callable[[str], AttemptSpend | None]
 
 
-def episode_record(unit: Unit, attempt: int, outcome: EpisodeOutcome | None, *, end_reason: RowEndReason | None = None,
-                   error: str | None = None, worker_id: str | None = None, started: float = 0.0,
-                   journal_spend: JournalSpend | None = None, now: float | None = None) -> EpisodeRecord:
+def episode_record(
+    unit: Unit,
+    attempt: int,
+    outcome: EpisodeOutcome | None,
+    *,
+    end_reason: RowEndReason | None = None,
+    error: str | None = None,
+    worker_id: str | None = None,
+    started: float = 0.0,
+    journal_spend: JournalSpend | None = None,
+    now: float | None = None,
+) -> EpisodeRecord:
     """The terminal row of an attempt (schema version 2).
 
     The arm's method, label, profile and ablation apart; the place from
@@ -49,30 +58,58 @@ def episode_record(unit: Unit, attempt: int, outcome: EpisodeOutcome | None, *, 
     if infra_failure(end_reason, error) is not None:
         end_reason = INFRA_ERROR
     if res is not None:
-        calls, prompt, cached, completion, cost = (res.llm_calls, res.prompt_tokens, res.cached_prompt_tokens,
-                                                   res.completion_tokens, res.cost_usd)
+        calls, prompt, cached, completion, cost = (
+            res.llm_calls,
+            res.prompt_tokens,
+            res.cached_prompt_tokens,
+            res.completion_tokens,
+            res.cost_usd,
+        )
     else:
         s = _safe(journal_spend, f"{unit.unit_id}-{attempt}")
-        calls, prompt, cached, completion, cost = ((s.calls, s.prompt_tokens, s.cached_prompt_tokens,
-                                                    s.completion_tokens, s.cost_usd) if s is not None else (0, 0, 0, 0, 0.0))
+        calls, prompt, cached, completion, cost = (
+            (s.calls, s.prompt_tokens, s.cached_prompt_tokens, s.completion_tokens, s.cost_usd)
+            if s is not None
+            else (0, 0, 0, 0, 0.0)
+        )
     bench, split, task = place_of(unit.instance_id, env.split or None, env.task or None)
-    return check_vocabulary(EpisodeRecord(
-        episode_id=f"{unit.unit_id}-{attempt}", unit_id=unit.unit_id, attempt=attempt,
-        benchmark=env.benchmark or bench, split=split, task=task,
-        instance_id=unit.instance_id, seed=unit.seed, method=unit.method, method_config=unit.method_config,
-        model=unit.model_label, end_reason=end_reason, success=bool(res.success) if res is not None else False,
-        steps=res.steps if res is not None else 0, llm_calls=int(calls),
-        prompt_tokens=int(prompt), cached_prompt_tokens=int(cached),
-        completion_tokens=int(completion), cost_usd=float(cost),
-        wall_s=float(outcome.wall_s if outcome is not None else (now - started if started else 0.0)),
-        step_cap=int(env.max_steps or 0), step_multiplier=unit.step_multiplier,
-        optimal_steps=env.optimal_steps, max_depth=res.max_depth if res is not None else 0,
-        error=error, worker_id=(outcome.worker_id if outcome is not None else None) or worker_id,
-        started_at=float(outcome.started_at if outcome is not None else started),
-        ended_at=float(outcome.ended_at if outcome is not None else now),
-        test_double=outcome.test_double if outcome is not None else unit.model.startswith("offline/"),
-        label=unit.method_label, profile=unit.profile, ablation=unit.ablation_name, provider_model=unit.model,
-    ))
+    return check_vocabulary(
+        EpisodeRecord(
+            episode_id=f"{unit.unit_id}-{attempt}",
+            unit_id=unit.unit_id,
+            attempt=attempt,
+            benchmark=env.benchmark or bench,
+            split=split,
+            task=task,
+            instance_id=unit.instance_id,
+            seed=unit.seed,
+            method=unit.method,
+            method_config=unit.method_config,
+            model=unit.model_label,
+            end_reason=end_reason,
+            success=bool(res.success) if res is not None else False,
+            steps=res.steps if res is not None else 0,
+            llm_calls=int(calls),
+            prompt_tokens=int(prompt),
+            cached_prompt_tokens=int(cached),
+            completion_tokens=int(completion),
+            cost_usd=float(cost),
+            wall_s=float(outcome.wall_s if outcome is not None else (now - started if started else 0.0)),
+            step_cap=int(env.max_steps or 0),
+            step_multiplier=unit.step_multiplier,
+            optimal_steps=env.optimal_steps,
+            max_depth=res.max_depth if res is not None else 0,
+            error=error,
+            worker_id=(outcome.worker_id if outcome is not None else None) or worker_id,
+            started_at=float(outcome.started_at if outcome is not None else started),
+            ended_at=float(outcome.ended_at if outcome is not None else now),
+            test_double=outcome.test_double if outcome is not None else unit.model.startswith("offline/"),
+            label=unit.method_label,
+            profile=unit.profile,
+            ablation=unit.ablation_name,
+            provider_model=unit.model,
+        )
+    )
 
 
 def _safe(journal_spend: JournalSpend | None, episode_id: str) -> AttemptSpend | None:

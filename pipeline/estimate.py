@@ -130,8 +130,9 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
             c_high = min(max_calls, max(c_low, shape.max_steps * hi + 1))
         p_low, p_high = _prompt_total(c_low, shape, window), _prompt_total(c_high, shape, window)
         o_low, o_high = c_low * COMPLETION_TOKENS[0], c_high * COMPLETION_TOKENS[1]
-        g = groups.setdefault((u.method_label, u.model_label),
-                              GroupEstimate(u.method_label, u.model_label, u.model.startswith("offline/")))
+        g = groups.setdefault(
+            (u.method_label, u.model_label), GroupEstimate(u.method_label, u.model_label, u.model.startswith("offline/"))
+        )
         g.units += 1
         g.calls.add(c_low, c_high)
         g.tokens.add(p_low + o_low, p_high + o_high)
@@ -163,11 +164,19 @@ def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
             total_cost.add(g.cost.low, g.cost.high)
         else:
             unknown = True
-        t.add_row(escape(g.method), escape(model_label(g.model, g.test_double)), str(g.units), f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
-                  f"{g.tokens.low:,.0f} - {g.tokens.high:,.0f}", cost)
+        t.add_row(
+            escape(g.method),
+            escape(model_label(g.model, g.test_double)),
+            str(g.units),
+            f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
+            f"{g.tokens.low:,.0f} - {g.tokens.high:,.0f}",
+            cost,
+        )
     console.print(t)
     calls = sum(g.calls.low for g in groups), sum(g.calls.high for g in groups)
-    line = f"total: {len(plan.units)} units, {calls[0]:,.0f} - {calls[1]:,.0f} calls, ${total_cost.low:.2f} - ${total_cost.high:.2f}"
+    line = (
+        f"total: {len(plan.units)} units, {calls[0]:,.0f} - {calls[1]:,.0f} calls, ${total_cost.low:.2f} - ${total_cost.high:.2f}"
+    )
     if unknown:
         line += " (plus models without a price)"
     console.print(line)

@@ -27,15 +27,38 @@ class EventBuffer:
         self.source = source
         self._events: list[EventRecord] = []
 
-    def add(self, kind: EventKind, *, severity: Severity = "info", unit_id: str | None = None, episode_id: str | None = None,
-            **detail: Any) -> None:
+    def add(
+        self,
+        kind: EventKind,
+        *,
+        severity: Severity = "info",
+        unit_id: str | None = None,
+        episode_id: str | None = None,
+        **detail: Any,
+    ) -> None:
         """Record one event now (and log it); ``detail`` keyword arguments become the row's JSON ``detail``. The
         kind and severity are checked against the closed vocabularies."""
-        log.info("event %s (%s)%s%s %s", kind, severity, f" unit {unit_id}" if unit_id else "",
-                 f" episode {episode_id}" if episode_id else "", detail)
-        self._events.append(check_vocabulary(EventRecord(ts=time.time(), source=self.source, kind=kind, severity=severity,
-                                        episode_id=episode_id, unit_id=unit_id,
-                                        detail=json.dumps(detail, sort_keys=True, default=str))))
+        log.info(
+            "event %s (%s)%s%s %s",
+            kind,
+            severity,
+            f" unit {unit_id}" if unit_id else "",
+            f" episode {episode_id}" if episode_id else "",
+            detail,
+        )
+        self._events.append(
+            check_vocabulary(
+                EventRecord(
+                    ts=time.time(),
+                    source=self.source,
+                    kind=kind,
+                    severity=severity,
+                    episode_id=episode_id,
+                    unit_id=unit_id,
+                    detail=json.dumps(detail, sort_keys=True, default=str),
+                )
+            )
+        )
 
     def drain(self) -> list[EventRecord]:
         """Every pending event, oldest first; the buffer is empty afterwards."""

@@ -47,7 +47,9 @@ def deployment_config(m: ModelSpec, where: str) -> Any:
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(x) for x in err.get("loc", ()))
-        raise SpecError(f"{where} ({m.name}): {loc + ': ' if loc else ''}{err.get('msg', 'invalid').removeprefix('Value error, ')}") from None
+        raise SpecError(
+            f"{where} ({m.name}): {loc + ': ' if loc else ''}{err.get('msg', 'invalid').removeprefix('Value error, ')}"
+        ) from None
     except ValueError as exc:
         raise SpecError(f"{where} ({m.name}): {exc}") from None
 
@@ -92,8 +94,7 @@ class GatewayBackend:
         # a killed gateway or budget actor is restarted by Ray (same arguments: the ledger is
         # replayed from the run folder's journal) and the calls it had in flight are sent to
         # the new incarnation, so a crash of either costs a few seconds, not the episodes
-        opts: dict[str, Any] = {"runtime_env": self._runtime_env(), "max_restarts": -1,
-                                "max_task_retries": TASK_RETRIES}
+        opts: dict[str, Any] = {"runtime_env": self._runtime_env(), "max_restarts": -1, "max_task_retries": TASK_RETRIES}
         if node_id is not None:
             from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
@@ -102,7 +103,8 @@ class GatewayBackend:
         # Ray warn at every start that a restart depends on the object store
         budget_name = f"recap-budget-{run_id}-{uuid.uuid4().hex[:8]}"
         self.budget = BudgetActor.options(name=budget_name, **opts).remote(
-            str(run_dir), self.spec.run_cap_usd, self.caps, provider_models=provider_models(self.spec))
+            str(run_dir), self.spec.run_cap_usd, self.caps, provider_models=provider_models(self.spec)
+        )
         keys = self._api_keys()
         for label, cfg in self.configs.items():
             actor = GatewayActor.options(**opts).remote(cfg, str(run_dir), run_id, budget_name, secret_env=keys)
@@ -152,9 +154,13 @@ class GatewayBackend:
         for (label, cfg), s in zip(self.configs.items(), stats):
             per_min = 60.0 / cfg.window_s
             out[label] = RateStats(
-                rpm=s.get("window_requests", 0) * per_min, rpm_limit=(s["rpm"] * per_min) if s.get("rpm") else None,
-                tpm=s.get("window_tokens", 0) * per_min, tpm_limit=(s["tpm"] * per_min) if s.get("tpm") else None,
-                in_flight=s.get("inflight"), paused_until=s.get("paused_until"))
+                rpm=s.get("window_requests", 0) * per_min,
+                rpm_limit=(s["rpm"] * per_min) if s.get("rpm") else None,
+                tpm=s.get("window_tokens", 0) * per_min,
+                tpm_limit=(s["tpm"] * per_min) if s.get("tpm") else None,
+                in_flight=s.get("inflight"),
+                paused_until=s.get("paused_until"),
+            )
         return out
 
     def set_run_cap(self, usd: float | None) -> None:

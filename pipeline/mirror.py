@@ -38,7 +38,7 @@ def _listing(fs: object, root: str) -> dict[str, int]:
     import pyarrow.fs as pafs
 
     infos = fs.get_file_info(pafs.FileSelector(root, recursive=True, allow_not_found=True))  # type: ignore[attr-defined]
-    return {i.path[len(root) + 1:]: i.size for i in infos if i.type == pafs.FileType.File}
+    return {i.path[len(root) + 1 :]: i.size for i in infos if i.type == pafs.FileType.File}
 
 
 def pull(uri: str, local: Path) -> int:

@@ -61,7 +61,9 @@ def check_keys(spec: SweepSpec) -> None:
             continue
         missing = _litellm_missing_keys(m)
         if missing:
-            raise PreflightError(f"models[{i}] ({m.name}): API key missing: set {' or '.join(missing)} (or name another variable with api_key_env)")
+            raise PreflightError(
+                f"models[{i}] ({m.name}): API key missing: set {' or '.join(missing)} (or name another variable with api_key_env)"
+            )
 
 
 def check_prices(spec: SweepSpec) -> None:

@@ -22,6 +22,7 @@ TEST_DOUBLE_MARK = "(test double)"
 class Snapshot:
     """The figures one progress refresh shows; ``eta_s`` and ``run_cap_usd`` are None when unknown or uncapped,
     ``stopped`` names the cap that stopped new work."""
+
     total: int
     done: int
     success: int
@@ -35,7 +36,7 @@ class Snapshot:
 
 
 def paused_text(until: float | None, now: float | None = None) -> str:
-    """"  paused until HH:MM:SS" while a provider's Retry-After holds a model back, else ""."""
+    """ "  paused until HH:MM:SS" while a provider's Retry-After holds a model back, else ""."""
     now = time.time() if now is None else now
     if until is None or until <= now:
         return ""
@@ -74,10 +75,14 @@ def status_line(s: Snapshot) -> str:
     """The one-line form of a snapshot (the ``lines`` mode and logs): units, success, spend vs cap, ETA,
     restarts, per-model rate use."""
     cap = f" / cap ${s.run_cap_usd:.2f}" if s.run_cap_usd is not None else ""
-    rate = "; ".join(f"{m}: rpm {_pct(r.rpm, r.rpm_limit)} tpm {_pct(r.tpm, r.tpm_limit)}{paused_text(r.paused_until)}"
-                     for m, r in s.rates.items())
-    line = (f"units {s.done}/{s.total} | success {s.success}/{s.done} | running {s.running} | "
-            f"spend ${s.spend_usd:.4f}{cap}{nominal(s)} | ETA {eta_text(s)}")
+    rate = "; ".join(
+        f"{m}: rpm {_pct(r.rpm, r.rpm_limit)} tpm {_pct(r.tpm, r.tpm_limit)}{paused_text(r.paused_until)}"
+        for m, r in s.rates.items()
+    )
+    line = (
+        f"units {s.done}/{s.total} | success {s.success}/{s.done} | running {s.running} | "
+        f"spend ${s.spend_usd:.4f}{cap}{nominal(s)} | ETA {eta_text(s)}"
+    )
     if s.restarts:
         line += f" | worker restarts {s.restarts}"
     if rate:
@@ -133,9 +138,12 @@ class ProgressView:
         cap = f" of ${s.run_cap_usd:.2f} cap ({100 * s.spend_usd / s.run_cap_usd:.0f}%)" if s.run_cap_usd else ""
         t.add_row("spend", f"${s.spend_usd:.4f}{cap}{nominal(s)}")
         for m, r in s.rates.items():
-            t.add_row(escape(f"{m}"), f"rpm {_pct(r.rpm, r.rpm_limit)}  tpm {_pct(r.tpm, r.tpm_limit)}"
-                      + (f"  in flight {r.in_flight}" if r.in_flight is not None else "")
-                      + paused_text(r.paused_until))
+            t.add_row(
+                escape(f"{m}"),
+                f"rpm {_pct(r.rpm, r.rpm_limit)}  tpm {_pct(r.tpm, r.tpm_limit)}"
+                + (f"  in flight {r.in_flight}" if r.in_flight is not None else "")
+                + paused_text(r.paused_until),
+            )
         t.add_row("ETA", eta_text(s))
         if s.restarts:
             t.add_row("restarts", str(s.restarts))

@@ -53,8 +53,12 @@ def init_ray(ray_spec: RaySpec, address: str | None = None) -> bool:
     if ray.is_initialized():
         return False
     address = address or ray_spec.address
-    common: dict[str, Any] = {"runtime_env": runtime_env(), "log_to_driver": False,
-                              "configure_logging": True, "logging_level": "error"}
+    common: dict[str, Any] = {
+        "runtime_env": runtime_env(),
+        "log_to_driver": False,
+        "configure_logging": True,
+        "logging_level": "error",
+    }
     if address:
         if _is_loopback(address):  # a local Ray started on the loopback (ours, or ray start --node-ip-address 127.0.0.1)
             with _loopback_node():

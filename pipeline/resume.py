@@ -234,11 +234,15 @@ class JournalIssue:
 
     def describe(self) -> str:
         if self.torn:
-            return (f"ledger journal {self.path}: line {self.line} of {self.lines} is torn (a crash mid-write); "
-                    f"the next resume drops it, keeping a backup (or now: recap resume <run> --repair)")
-        return (f"ledger journal {self.path}: line {self.line} of {self.lines} is corrupt and not the last line; "
-                f"the run's spend cannot be restored from it - restore the file from a backup "
-                f"(recap resume --repair only cuts a torn last line)")
+            return (
+                f"ledger journal {self.path}: line {self.line} of {self.lines} is torn (a crash mid-write); "
+                f"the next resume drops it, keeping a backup (or now: recap resume <run> --repair)"
+            )
+        return (
+            f"ledger journal {self.path}: line {self.line} of {self.lines} is corrupt and not the last line; "
+            f"the run's spend cannot be restored from it - restore the file from a backup "
+            f"(recap resume --repair only cuts a torn last line)"
+        )
 
 
 def scan_journal(data: bytes, path: str = JOURNAL_FILE) -> JournalIssue | None:
@@ -284,14 +288,18 @@ def repair_run(store: RunStore) -> str:
     if issue is None:
         return f"nothing to repair in {store.location}: the ledger journal is intact"
     if not issue.torn:
-        raise RunFolderError(issue.describe().replace("(recap resume --repair only cuts a torn last line)",
-                                                      "- --repair only cuts a torn last line, so it changed nothing"))
+        raise RunFolderError(
+            issue.describe().replace(
+                "(recap resume --repair only cuts a torn last line)",
+                "- --repair only cuts a torn last line, so it changed nothing",
+            )
+        )
     stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime())
     if store.remote:
         data = store.read_bytes(JOURNAL_FILE) or b""
         backup_name = f"{JOURNAL_FILE}.bak-{stamp}"
         store.write_bytes(backup_name, data)
-        store.write_bytes(JOURNAL_FILE, data[:issue.good_end])
+        store.write_bytes(JOURNAL_FILE, data[: issue.good_end])
         backup = f"{store.location.rstrip('/')}/{backup_name}"
     else:
         import fcntl
@@ -301,8 +309,9 @@ def repair_run(store: RunStore) -> str:
             try:  # no live ledger may hold it (the gateway's own lock)
                 fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
-                raise RunFolderError(f"{path} is held by a live ledger (a driver is running on this run); "
-                                     "repair it once that driver has ended") from None
+                raise RunFolderError(
+                    f"{path} is held by a live ledger (a driver is running on this run); repair it once that driver has ended"
+                ) from None
             data = fh.read()
             again = scan_journal(data, str(path))
             if again is None or not again.torn:  # changed under us
@@ -321,5 +330,7 @@ def repair_run(store: RunStore) -> str:
             issue = again
         backup = str(backup_path)
     cut = issue.size - issue.good_end
-    return (f"repaired {issue.path}: cut the torn last line {issue.line} ({cut} bytes); "
-            f"the whole file before the repair is kept as {backup}")
+    return (
+        f"repaired {issue.path}: cut the torn last line {issue.line} ({cut} bytes); "
+        f"the whole file before the repair is kept as {backup}"
+    )

@@ -46,14 +46,18 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
     from rich.tree import Tree
 
     status = "[green]success[/green]" if episode["success"] else f"[red]{episode['end_reason']}[/red]"
-    title = (f"[bold]{escape(episode['episode_id'])}[/bold]  {escape(episode['instance_id'])}  {escape(episode['method'])} / "
-             f"{escape(episode['model'])}  {status}  steps {episode['steps']}  calls {episode['llm_calls']}  ${episode['cost_usd']:.4f}")
+    title = (
+        f"[bold]{escape(episode['episode_id'])}[/bold]  {escape(episode['instance_id'])}  {escape(episode['method'])} / "
+        f"{escape(episode['model'])}  {status}  steps {episode['steps']}  calls {episode['llm_calls']}  ${episode['cost_usd']:.4f}"
+    )
     root_tree = Tree(title)
     ordered = sorted(steps, key=lambda s: s["index"])
     step_at = {s["index"]: s for s in ordered}
     # each step's observation shown as what changed since the step before it
-    change = {s["index"]: observation_change(p["observation"] if p else None, s["observation"])
-              for p, s in zip([None, *ordered], ordered)}
+    change = {
+        s["index"]: observation_change(p["observation"] if p else None, s["observation"])
+        for p, s in zip([None, *ordered], ordered)
+    }
     if not nodes:
         for s in ordered:
             mark = "[green]ok[/green]" if s["valid"] else "[red]invalid[/red]"

@@ -53,8 +53,7 @@ class SinkChannel:
         from workers.sink import sink_actor
 
         here = NodeAffinitySchedulingStrategy(node_id=node_id, soft=False)
-        self.actor = sink_actor().options(scheduling_strategy=here).remote(str(self.run_dir), self.run_id,
-                                                                           writer=self.writer)
+        self.actor = sink_actor().options(scheduling_strategy=here).remote(str(self.run_dir), self.run_id, writer=self.writer)
         return self.actor
 
     def send(self, records: list[Any], *, flush: bool = False) -> None:
@@ -140,8 +139,7 @@ class SinkChannel:
         found = recover_wal(self.run_dir, self.writer)
         pending = [rows for _, h, rows in self._unacked if h not in found.hashes]
         self._unacked = []
-        self.events.add("sink_lost", severity="error", reason=why, recovered_rows=found.rows,
-                        driver_batches=len(pending))
+        self.events.add("sink_lost", severity="error", reason=why, recovered_rows=found.rows, driver_batches=len(pending))
         self.write_direct(pending)
 
     def write_direct(self, batches: list[Rows]) -> None:

@@ -169,8 +169,9 @@ def _label(v: str) -> str:
     if v != v.strip():
         raise ValueError("must not start or end with a space")
     if not _LABEL.match(v):
-        raise ValueError("may hold only letters, digits, spaces and - _ . : @ + / ( ) , = # % "
-                         f"(no brackets or control characters), got {v!r}")
+        raise ValueError(
+            f"may hold only letters, digits, spaces and - _ . : @ + / ( ) , = # % (no brackets or control characters), got {v!r}"
+        )
     return v
 
 
@@ -237,10 +238,19 @@ class PriceSpec(_Strict):
 #: first: ``max_attempts = retries + 1``. Every ModelSpec field is here or in
 #: :data:`SPEC_ONLY_FIELDS` (tests/pipeline/test_model_config.py checks it).
 DEPLOYMENT_FIELDS: dict[str, str] = {
-    "model": "model", "label": "name", "params": "params", "options": "offline_options",
-    "rpm": "rpm", "tpm": "tpm", "concurrency": "max_concurrency", "window_s": "window_s",
-    "retries": "max_attempts", "timeout_s": "attempt_timeout_s", "prices": "price",
-    "api_base": "api_base", "api_key_env": "api_key_env",
+    "model": "model",
+    "label": "name",
+    "params": "params",
+    "options": "offline_options",
+    "rpm": "rpm",
+    "tpm": "tpm",
+    "concurrency": "max_concurrency",
+    "window_s": "window_s",
+    "retries": "max_attempts",
+    "timeout_s": "attempt_timeout_s",
+    "prices": "price",
+    "api_base": "api_base",
+    "api_key_env": "api_key_env",
 }
 #: model entry fields the gateway's deployment does not carry (the ledger takes the caps)
 SPEC_ONLY_FIELDS = frozenset({"cap_usd"})
@@ -329,12 +339,13 @@ class ModelSpec(_Strict):
             except ValueError:
                 raise ValueError(f"port out of range in {v!r}") from None
             secret_query = {"key", "api_key", "apikey", "token", "access_token", "password", "secret"}
-            if url.username or url.password or any(
-                    k.lower() in secret_query for k, _ in parse_qsl(url.query)):
+            if url.username or url.password or any(k.lower() in secret_query for k, _ in parse_qsl(url.query)):
                 # credentials in the URL would be stored with the spec and clash with the key
                 # header at the provider; keys travel in the environment only
-                raise ValueError("must not carry credentials (user:password@ or a key/token query "
-                                 "parameter): put the key in the variable named by api_key_env")
+                raise ValueError(
+                    "must not carry credentials (user:password@ or a key/token query "
+                    "parameter): put the key in the variable named by api_key_env"
+                )
             return v
         return v if _is_uri(v) else _local_path(v)
 
@@ -733,7 +744,9 @@ def read_spec_text(path: str | Path) -> str:
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise SpecError(f"sweep file {name} cannot be read: not UTF-8 text (byte {raw[exc.start]:#04x} at offset {exc.start})") from None
+        raise SpecError(
+            f"sweep file {name} cannot be read: not UTF-8 text (byte {raw[exc.start]:#04x} at offset {exc.start})"
+        ) from None
 
 
 def load_spec(path: str | Path) -> tuple[SweepSpec, str]:
@@ -767,8 +780,14 @@ def text_hash(text: str) -> str:
 #: seconds the reachability check of an object-store output may take (env override)
 STORE_CHECK_TIMEOUT_S = 15.0
 
-_FS_MODULES = {"s3": "pyarrow._s3fs", "gs": "pyarrow._gcsfs", "gcs": "pyarrow._gcsfs", "hdfs": "pyarrow._hdfs",
-               "abfs": "pyarrow._azurefs", "abfss": "pyarrow._azurefs"}
+_FS_MODULES = {
+    "s3": "pyarrow._s3fs",
+    "gs": "pyarrow._gcsfs",
+    "gcs": "pyarrow._gcsfs",
+    "hdfs": "pyarrow._hdfs",
+    "abfs": "pyarrow._azurefs",
+    "abfss": "pyarrow._azurefs",
+}
 
 _PROBE = """
 import sys
@@ -865,8 +884,9 @@ def check_output_location(location: str, *, timeout_s: float | None = None) -> N
         return
     scheme = location.split("://", 1)[0].lower()
     if scheme not in URI_SCHEMES:
-        raise SpecError(f"output {location}: unknown URI scheme {scheme!r}; use a local folder or "
-                        f"{', '.join(s + '://' for s in URI_SCHEMES)}")
+        raise SpecError(
+            f"output {location}: unknown URI scheme {scheme!r}; use a local folder or {', '.join(s + '://' for s in URI_SCHEMES)}"
+        )
     if scheme == "file":
         return
     if timeout_s is None:
@@ -877,18 +897,22 @@ def check_output_location(location: str, *, timeout_s: float | None = None) -> N
     try:
         importlib.import_module(_FS_MODULES[scheme])
     except ImportError:
-        raise SpecError(f"output {location}: this pyarrow cannot write {scheme}:// (no {scheme} support built in); "
-                        "use a local folder") from None
+        raise SpecError(
+            f"output {location}: this pyarrow cannot write {scheme}:// (no {scheme} support built in); use a local folder"
+        ) from None
     host, port = _endpoint(scheme, location)
     why = _reach(host, port, min(timeout_s, 5.0))
     if why is not None:
         raise SpecError(f"output {location} cannot be used: {why}; check the network or use a local folder")
     try:
-        r = subprocess.run([sys.executable, "-c", _PROBE, location], capture_output=True, text=True,
-                           timeout=timeout_s, stdin=subprocess.DEVNULL)
+        r = subprocess.run(
+            [sys.executable, "-c", _PROBE, location], capture_output=True, text=True, timeout=timeout_s, stdin=subprocess.DEVNULL
+        )
     except subprocess.TimeoutExpired:
-        raise SpecError(f"output {location} cannot be used: no answer within {timeout_s:g} s "
-                        "(check credentials and network, or use a local folder)") from None
+        raise SpecError(
+            f"output {location} cannot be used: no answer within {timeout_s:g} s "
+            "(check credentials and network, or use a local folder)"
+        ) from None
     except OSError as exc:
         raise SpecError(f"output {location} cannot be checked: {exc}") from None
     if r.returncode != 0:

@@ -46,6 +46,7 @@ SPEC_FILE = "spec.yaml"
 class RunIdentity:
     """The content of run.json: which run owns the folder (``run`` is the spec's name, ``run_id`` unique per
     folder) and the schema version its rows were written under."""
+
     run_id: str
     run: str
     created_at: float
@@ -187,8 +188,13 @@ class RunStore:
             older = ident.schema_version < SCHEMA_VERSION
             raise RunFolderError(
                 f"output folder {self.location} was written with schema version {ident.schema_version}, this recap writes "
-                f"{SCHEMA_VERSION}: " + ("its rows stay readable (recap status, sql, show, report); continue the sweep in a new "
-                                         "output folder" if older else "use the recap version that wrote it"))
+                f"{SCHEMA_VERSION}: "
+                + (
+                    "its rows stay readable (recap status, sql, show, report); continue the sweep in a new output folder"
+                    if older
+                    else "use the recap version that wrote it"
+                )
+            )
         return ident
 
     def _only_lock(self) -> bool:
@@ -420,8 +426,11 @@ class RunStore:
             import pyarrow.fs as pafs
 
             sel = pafs.FileSelector(f"{self.root}/{table}", allow_not_found=True)
-            return sorted(i.path for i in self.fs.get_file_info(sel)
-                          if i.type == pafs.FileType.File and i.base_name.startswith("part-") and i.base_name.endswith(".parquet"))
+            return sorted(
+                i.path
+                for i in self.fs.get_file_info(sel)
+                if i.type == pafs.FileType.File and i.base_name.startswith("part-") and i.base_name.endswith(".parquet")
+            )
         folder = self.path / table
         if not folder.is_dir():
             return []

@@ -35,6 +35,7 @@ TEST_DOUBLE_LABEL = " (test double)"
 class GroupRow:
     """One line of the status table: an arm (label x model) and where its planned units stand (done, stopped by a
     cap, gave up, not started)."""
+
     #: the arm's label (plan.json's "method")
     method: str
     model: str
@@ -65,6 +66,7 @@ class GroupRow:
 class StatusReport:
     """What ``recap status`` and the end-of-run summary show: totals, the per-arm rows, and every unreadable part
     or journal problem found on the way."""
+
     location: str
     run: str
     run_id: str
@@ -93,16 +95,20 @@ class StatusReport:
         """One line on the units ``--retry errors`` would run again, or None."""
         if not self.errored:
             return None
-        return (f"{self.errored} done units ended in env_error or llm_error; once the cause is fixed, "
-                f"run them again with: recap resume {self.location} --retry errors")
+        return (
+            f"{self.errored} done units ended in env_error or llm_error; once the cause is fixed, "
+            f"run them again with: recap resume {self.location} --retry errors"
+        )
 
     def retry_hint(self) -> str | None:
         """One line on the units that gave up in an infrastructure failure and the command that retries them, or None."""
         if not self.failed:
             return None
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.failed_kinds.items()))
-        return (f"{self.failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
-                f"then retry them with: recap resume {self.location}")
+        return (
+            f"{self.failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
+            f"then retry them with: recap resume {self.location}"
+        )
 
 
 def model_label(name: str, test_double: bool) -> str:
@@ -153,8 +159,11 @@ def collect(store: RunStore) -> StatusReport:
         if issue is not None:
             problems.append(issue.describe().replace("<run>", store.location))
     failed_kinds: dict[str, int] = defaultdict(int)
-    spend = float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist())) if calls.num_rows else \
-        float(sum(r["cost_usd"] for r in rows))
+    spend = (
+        float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist()))
+        if calls.num_rows
+        else float(sum(r["cost_usd"] for r in rows))
+    )
     groups: dict[tuple[str, str], GroupRow] = {}
     for u in units:
         key = (u["method"], u["model"])
@@ -180,11 +189,21 @@ def collect(store: RunStore) -> StatusReport:
         g.calls += r["llm_calls"]
     completed = sum(g.done for g in groups.values())
     return StatusReport(
-        location=store.location, run=ident.run, run_id=ident.run_id, total=len(units), completed=completed,
-        success=sum(g.success for g in groups.values()), budget_stopped=sum(g.budget_stopped for g in groups.values()),
-        spend_usd=spend, terminal_rows=len(rows), duplicate_terminal=duplicates,
-        groups=list(groups.values()), bad_parts=bad, problems=problems,
-        failed=sum(g.failed for g in groups.values()), failed_kinds=dict(failed_kinds),
+        location=store.location,
+        run=ident.run,
+        run_id=ident.run_id,
+        total=len(units),
+        completed=completed,
+        success=sum(g.success for g in groups.values()),
+        budget_stopped=sum(g.budget_stopped for g in groups.values()),
+        spend_usd=spend,
+        terminal_rows=len(rows),
+        duplicate_terminal=duplicates,
+        groups=list(groups.values()),
+        bad_parts=bad,
+        problems=problems,
+        failed=sum(g.failed for g in groups.values()),
+        failed_kinds=dict(failed_kinds),
         errored=sum(g.errored for g in groups.values()),
     )
 
@@ -195,17 +214,36 @@ def render(report: StatusReport, console: Any) -> None:
     from rich.table import Table
 
     t = Table(title=escape(f"run {report.run} ({report.run_id}) - {report.location}"))
-    columns: tuple[tuple[str, Literal["left", "right"]], ...] = (("arm", "left"), ("model", "left"), ("planned", "right"), ("done", "right"),
-                      ("success", "right"), ("capped", "right"), ("gave up", "right"), ("not started", "right"),
-                      ("avg steps", "right"), ("avg calls", "right"), ("cost $", "right"))
+    columns: tuple[tuple[str, Literal["left", "right"]], ...] = (
+        ("arm", "left"),
+        ("model", "left"),
+        ("planned", "right"),
+        ("done", "right"),
+        ("success", "right"),
+        ("capped", "right"),
+        ("gave up", "right"),
+        ("not started", "right"),
+        ("avg steps", "right"),
+        ("avg calls", "right"),
+        ("cost $", "right"),
+    )
     for col, just in columns:
         t.add_column(col, justify=just)
     for g in report.groups:
         rate = f"{g.success}/{g.done} ({100 * g.success / g.done:.0f}%)" if g.done else "-"
-        t.add_row(escape(g.method), escape(model_label(g.model, g.test_double)), str(g.planned), str(g.done), rate,
-                  str(g.budget_stopped), str(g.failed), str(g.not_started),
-                  f"{g.steps / g.done:.1f}" if g.done else "-", f"{g.calls / g.done:.1f}" if g.done else "-",
-                  f"{g.cost_usd:.4f}")
+        t.add_row(
+            escape(g.method),
+            escape(model_label(g.model, g.test_double)),
+            str(g.planned),
+            str(g.done),
+            rate,
+            str(g.budget_stopped),
+            str(g.failed),
+            str(g.not_started),
+            f"{g.steps / g.done:.1f}" if g.done else "-",
+            f"{g.calls / g.done:.1f}" if g.done else "-",
+            f"{g.cost_usd:.4f}",
+        )
     console.print(t)
     failed = f"{report.failed} failed on infrastructure, " if report.failed else ""
     console.print(

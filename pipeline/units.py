@@ -38,6 +38,7 @@ class Unit:
     """One unit of work: one episode to play (instance, method with resolved settings, model with params, seed).
     ``unit_id`` is the content hash of :func:`unit_hash`; ``method_label``/``model_label`` are the spec's
     names for the arm, ``method``/``model`` what actually runs."""
+
     unit_id: str
     instance_id: str
     method_label: str
@@ -71,10 +72,16 @@ class Unit:
     def work(self) -> UnitWork:
         """What a worker needs to play the unit: the resolved settings, not the raw ones."""
         return UnitWork(
-            unit_id=self.unit_id, instance_id=self.instance_id, method=self.method,
-            method_config=self.method_config, model_label=self.model_label, model=self.model,
-            seed=self.seed, step_multiplier=self.step_multiplier,
-            env_options=tuple(sorted(self.env_options.items())))
+            unit_id=self.unit_id,
+            instance_id=self.instance_id,
+            method=self.method,
+            method_config=self.method_config,
+            model_label=self.model_label,
+            model=self.model,
+            seed=self.seed,
+            step_multiplier=self.step_multiplier,
+            env_options=tuple(sorted(self.env_options.items())),
+        )
 
     def summary(self) -> dict[str, Any]:
         """What plan.json keeps per unit (enough for status, the report's coverage table and
@@ -82,10 +89,21 @@ class Unit:
         plan.json so far: status groups by it), ``method_name`` the method itself; the place
         (benchmark, split, task) is the one its episode rows will have."""
         bench, split, task = place_of(self.instance_id)
-        return {"unit_id": self.unit_id, "key": self.key, "instance_id": self.instance_id,
-                "method": self.method_label, "model": self.model_label, "seed": self.seed,
-                "method_name": self.method, "profile": self.profile, "ablation": self.ablation_name,
-                "provider_model": self.model, "benchmark": bench, "split": split, "task": task}
+        return {
+            "unit_id": self.unit_id,
+            "key": self.key,
+            "instance_id": self.instance_id,
+            "method": self.method_label,
+            "model": self.model_label,
+            "seed": self.seed,
+            "method_name": self.method,
+            "profile": self.profile,
+            "ablation": self.ablation_name,
+            "provider_model": self.model,
+            "benchmark": bench,
+            "split": split,
+            "task": task,
+        }
 
 
 def resolve_ablation(ablation: str | None, method_config: str) -> str | None:
@@ -99,13 +117,20 @@ def resolve_ablation(ablation: str | None, method_config: str) -> str | None:
     return ablation_of_config(method_config)
 
 
-def unit_hash(*, instance_id: str, method: str, method_config: str, model: str, params: Mapping[str, Any],
-              seed: int, step_multiplier: float) -> str:
+def unit_hash(
+    *, instance_id: str, method: str, method_config: str, model: str, params: Mapping[str, Any], seed: int, step_multiplier: float
+) -> str:
     """The ``unit_id``: 16 hex digits of a sha256 over what changes what an episode does (see the module
     docstring); ``HASH_VERSION`` is inside, so a new hashing never collides with an old one."""
     content = {
-        "v": HASH_VERSION, "instance": instance_id, "method": method, "config": json.loads(method_config),
-        "model": model, "params": dict(params), "seed": seed, "step_multiplier": float(step_multiplier),
+        "v": HASH_VERSION,
+        "instance": instance_id,
+        "method": method,
+        "config": json.loads(method_config),
+        "model": model,
+        "params": dict(params),
+        "seed": seed,
+        "step_multiplier": float(step_multiplier),
     }
     return hashlib.sha256(_canonical(content).encode()).hexdigest()[:16]
 
@@ -200,6 +225,7 @@ def resolve_methods(spec: SweepSpec, benchmark: str | None = None) -> list[tuple
 @dataclass
 class Plan:
     """A sweep expanded into its units, in the fixed order of :func:`expand`."""
+
     spec: SweepSpec
     units: list[Unit]
 
@@ -217,8 +243,10 @@ def expand(spec: SweepSpec) -> Plan:
     instances = resolve_instances(spec.environments)
     n = len(instances) * len(spec.methods) * len(spec.models) * len(spec.seeds)
     if n > MAX_UNITS:
-        raise SpecError(f"the sweep expands to {n:,} units ({len(instances)} instances x {len(spec.methods)} methods x "
-                        f"{len(spec.models)} models x {len(spec.seeds)} seeds); at most {MAX_UNITS:,} per run: split it")
+        raise SpecError(
+            f"the sweep expands to {n:,} units ({len(instances)} instances x {len(spec.methods)} methods x "
+            f"{len(spec.models)} models x {len(spec.seeds)} seeds); at most {MAX_UNITS:,} per run: split it"
+        )
     methods_by_benchmark: dict[str, list[tuple[Any, dict[str, Any], str]]] = {}
     units: list[Unit] = []
     seen: dict[str, str] = {}
@@ -229,12 +257,35 @@ def expand(spec: SweepSpec) -> Plan:
         for m, settings, cfg in methods_by_benchmark[benchmark]:
             for model in spec.models:
                 for seed in spec.seeds:
-                    uid = unit_hash(instance_id=inst, method=m.method, method_config=cfg, model=model.model,
-                                    params={**model.params, **({"options": model.options} if model.options else {})}, seed=seed, step_multiplier=spec.step_multiplier)
-                    u = Unit(uid, inst, m.name, m.method, m.profile, m.ablation, settings, cfg, model.name,
-                             model.model, dict(model.params), seed, spec.step_multiplier, options)
+                    uid = unit_hash(
+                        instance_id=inst,
+                        method=m.method,
+                        method_config=cfg,
+                        model=model.model,
+                        params={**model.params, **({"options": model.options} if model.options else {})},
+                        seed=seed,
+                        step_multiplier=spec.step_multiplier,
+                    )
+                    u = Unit(
+                        uid,
+                        inst,
+                        m.name,
+                        m.method,
+                        m.profile,
+                        m.ablation,
+                        settings,
+                        cfg,
+                        model.name,
+                        model.model,
+                        dict(model.params),
+                        seed,
+                        spec.step_multiplier,
+                        options,
+                    )
                     if uid in seen:
-                        raise SpecError(f"units {seen[uid]!r} and {u.key!r} are identical (same method settings and model); remove one")
+                        raise SpecError(
+                            f"units {seen[uid]!r} and {u.key!r} are identical (same method settings and model); remove one"
+                        )
                     seen[uid] = u.key
                     units.append(u)
     return Plan(spec, units)
@@ -245,6 +296,7 @@ def expand(spec: SweepSpec) -> Plan:
 class PlanDiff:
     """How a new plan compares with the stored one, as lists of unit keys: ``changed`` keys hash differently now
     (their settings changed), ``removed`` keys are in the old plan only."""
+
     new: list[str]
     unchanged: list[str]
     changed: list[str]
@@ -252,8 +304,9 @@ class PlanDiff:
 
     def describe(self) -> str:
         """The diff in one line for the plan printout, e.g. "3 new, 10 unchanged, 0 changed"."""
-        return (f"{len(self.new)} new, {len(self.unchanged)} unchanged, {len(self.changed)} changed"
-                + (f", {len(self.removed)} no longer in the spec" if self.removed else ""))
+        return f"{len(self.new)} new, {len(self.unchanged)} unchanged, {len(self.changed)} changed" + (
+            f", {len(self.removed)} no longer in the spec" if self.removed else ""
+        )
 
 
 def diff_plans(old: Mapping[str, Any] | None, plan: Plan) -> PlanDiff:
@@ -335,8 +388,10 @@ def order_units(units: Sequence[Unit], spec: SweepSpec) -> list[Unit]:
     arms: dict[tuple[str, str], list[Unit]] = defaultdict(list)
     for u in units:
         arms[(u.method_label, u.model_label)].append(u)
-    queues = [sorted(arms[a], key=lambda u: (seed_rank.get(u.seed, len(seed_rank)), u.seed, inst_rank[u.instance_id]))
-              for a in sorted(arms, key=lambda a: (arm_rank.get(a, len(arm_rank)), a))]
+    queues = [
+        sorted(arms[a], key=lambda u: (seed_rank.get(u.seed, len(seed_rank)), u.seed, inst_rank[u.instance_id]))
+        for a in sorted(arms, key=lambda a: (arm_rank.get(a, len(arm_rank)), a))
+    ]
     out: list[Unit] = []
     n = len(queues)
     for r in range(max((len(q) for q in queues), default=0)):

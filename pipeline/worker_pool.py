@@ -177,8 +177,9 @@ class RayWorkerPool:
                 fin.failure = "elsewhere"
                 return fin
             fin.failure = "worker_lost"
-            log.warning("worker %s died running unit %s attempt %d: %s", slot.worker_id, pending.unit.unit_id,
-                        pending.attempt, fin.error)
+            log.warning(
+                "worker %s died running unit %s attempt %d: %s", slot.worker_id, pending.unit.unit_id, pending.attempt, fin.error
+            )
             try:
                 ray.kill(slot.handle)
             except Exception:
@@ -187,8 +188,9 @@ class RayWorkerPool:
             return fin
         except RayTaskError as exc:
             fin.failure, fin.error = "task_raised", str(exc).splitlines()[-1][:1000]
-            log.warning("unit %s attempt %d raised in worker %s: %s", pending.unit.unit_id, pending.attempt,
-                        slot.worker_id, fin.error)
+            log.warning(
+                "unit %s attempt %d raised in worker %s: %s", pending.unit.unit_id, pending.attempt, slot.worker_id, fin.error
+            )
             self.idle.append(slot)
             return fin
         slot.units += 1

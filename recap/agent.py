@@ -50,8 +50,18 @@ class ElidedObservations(Environment):
     def __init__(self, inner: Environment, *, keep_first: bool) -> None:
         self.inner = inner
         self.keep_first = keep_first
-        for name in ("instance_id", "benchmark", "split", "task", "seed", "invalid_action_mode",
-                     "optimal_steps", "max_steps", "test_double", "partially_observed"):
+        for name in (
+            "instance_id",
+            "benchmark",
+            "split",
+            "task",
+            "seed",
+            "invalid_action_mode",
+            "optimal_steps",
+            "max_steps",
+            "test_double",
+            "partially_observed",
+        ):
             setattr(self, name, getattr(inner, name))
 
     def reset(self) -> Reset:
@@ -193,7 +203,9 @@ class Agent(ABC):
 
     def demo_config(self) -> AgentConfig:
         """Settings for rendering a demonstration: nothing trimmed, no caps that could cut it."""
-        return dataclasses.replace(self.config, window=100_000, max_llm_calls=100_000, max_episode_tokens=None, max_episode_cost_usd=None)
+        return dataclasses.replace(
+            self.config, window=100_000, max_llm_calls=100_000, max_episode_tokens=None, max_episode_cost_usd=None
+        )
 
     def demonstration_text(self, env: Environment) -> str | None:
         demo = env.demonstration()
@@ -219,9 +231,17 @@ class Agent(ABC):
                 messages.append(record)
 
         shaped = [self.shape_demo_reply(r) for r in replies]
-        result = agent.run(self.demo_env(demo), ScriptedClient(shaped, model="demonstration"), episode_id=f"demo:{demo.name}", emit=keep, demonstration=False)
+        result = agent.run(
+            self.demo_env(demo),
+            ScriptedClient(shaped, model="demonstration"),
+            episode_id=f"demo:{demo.name}",
+            emit=keep,
+            demonstration=False,
+        )
         if not result.success:
-            raise DemonstrationError(f"demonstration {demo.name!r} does not reach the goal with {type(self).__name__} ({result.end_reason}: {result.error})")
+            raise DemonstrationError(
+                f"demonstration {demo.name!r} does not reach the goal with {type(self).__name__} ({result.end_reason}: {result.error})"
+            )
         text = format_transcript(messages)
         _DEMO_CACHE[key] = text
         return text

@@ -143,7 +143,16 @@ class BlocksworldEnv(Environment):
     benchmark = "blocksworld"
     invalid_action_mode = "reject"
 
-    def __init__(self, towers: list[list[str]], goal: list[str], *, instance_id: str, seed: int = 0, step_multiplier: float = 4.0, demo: bool = True):
+    def __init__(
+        self,
+        towers: list[list[str]],
+        goal: list[str],
+        *,
+        instance_id: str,
+        seed: int = 0,
+        step_multiplier: float = 4.0,
+        demo: bool = True,
+    ):
         self._start = [list(t) for t in towers]
         self._goal = list(goal)
         self.instance_id = instance_id
@@ -160,9 +169,9 @@ class BlocksworldEnv(Environment):
 
     def goal_text(self) -> str:
         g = self._goal
-        return "Build one tower with " + ", then ".join(
-            [f"{g[0]} on the table"] + [f"{b} on {a}" for a, b in zip(g, g[1:])]
-        ) + "."
+        return (
+            "Build one tower with " + ", then ".join([f"{g[0]} on the table"] + [f"{b} on {a}" for a, b in zip(g, g[1:])]) + "."
+        )
 
     def reset(self) -> Reset:
         self._state = _State([list(t) for t in self._start], None)
@@ -232,12 +241,18 @@ DEMO_SCRIPT = DemoScript(
     ),
     plan_thought="C blocks A, so move C to the table, then stack B on A and C on B.",
     decomposition=(
-        ("A must be the base, but C is sitting on it. First clear A, then build B and C on top.", ("clear block A", "build B on A and C on B")),
+        (
+            "A must be the base, but C is sitting on it. First clear A, then build B and C on top.",
+            ("clear block A", "build B on A and C on B"),
+        ),
         ("Only C is on A, so moving C to the table clears it.", ("unstack C from A", "put down C")),
         ("I hold C; putting it down leaves A clear.", ("put down C",)),
         ("C is on the table and A has nothing on it, so A is clear.", ()),
         ("A is clear on the table; what is left is building the tower.", ("build B on A and C on B",)),
-        ("B and C are both alone on the table: move B onto A, then C onto B.", ("pick up B", "stack B on A", "pick up C", "stack C on B")),
+        (
+            "B and C are both alone on the table: move B onto A, then C onto B.",
+            ("pick up B", "stack B on A", "pick up C", "stack C on B"),
+        ),
         ("I hold B; it goes on A next.", ("stack B on A", "pick up C", "stack C on B")),
         ("B is on A. Now C.", ("pick up C", "stack C on B")),
         ("I hold C; stacking it on B finishes the tower.", ("stack C on B",)),
@@ -259,13 +274,17 @@ class _Benchmark:
         sel = selector.removeprefix("blocksworld/")
         picked = [i for i in ids if i == f"blocksworld/{sel}" or i.split("/")[1].split("@")[0] == sel]
         if not picked:
-            raise UnknownInstanceError(f"no blocksworld instance matches {selector!r}; sizes {list(self.SIZES)}, e.g. blocksworld/3@1")
+            raise UnknownInstanceError(
+                f"no blocksworld instance matches {selector!r}; sizes {list(self.SIZES)}, e.g. blocksworld/3@1"
+            )
         return picked
 
     def make(self, instance_id: str, *, step_multiplier: float = 4.0, **_options: object) -> BlocksworldEnv:
         m = _ID.match(instance_id)
         if not m or not 2 <= int(m.group(1)) <= len(LETTERS):
-            raise UnknownInstanceError(f"unknown blocksworld instance {instance_id!r}; use blocksworld/<n>@<seed> with 2 <= n <= {len(LETTERS)}")
+            raise UnknownInstanceError(
+                f"unknown blocksworld instance {instance_id!r}; use blocksworld/<n>@<seed> with 2 <= n <= {len(LETTERS)}"
+            )
         n, seed = int(m.group(1)), int(m.group(2))
         towers, goal = _random_instance(n, seed)
         return BlocksworldEnv(towers, goal, instance_id=instance_id, seed=seed, step_multiplier=step_multiplier)

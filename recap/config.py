@@ -135,8 +135,10 @@ class AgentConfig:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown, missing = sorted(set(values) - names), sorted(names - set(values))
         if unknown or missing:
-            raise ConfigError(f"{cls.__name__}: resolved settings do not match this version "
-                              f"(unknown: {', '.join(unknown) or '-'}; missing: {', '.join(missing) or '-'})")
+            raise ConfigError(
+                f"{cls.__name__}: resolved settings do not match this version "
+                f"(unknown: {', '.join(unknown) or '-'}; missing: {', '.join(missing) or '-'})"
+            )
         return cls(**values)
 
 
@@ -199,8 +201,13 @@ ABLATIONS: dict[str, dict[str, Any]] = {
 }
 
 
-def build_config(cls: type[AgentConfig], profile: str | None = None, ablation: str | None = None,
-                 benchmark: str | None = None, **overrides: Any) -> AgentConfig:
+def build_config(
+    cls: type[AgentConfig],
+    profile: str | None = None,
+    ablation: str | None = None,
+    benchmark: str | None = None,
+    **overrides: Any,
+) -> AgentConfig:
     """Profile defaults (generic, then the method's own for ``benchmark``), then an ablation,
     then explicit overrides; unknown names are errors."""
     values: dict[str, Any] = {}

@@ -40,7 +40,9 @@ class DemoScript:
 
     def __post_init__(self) -> None:
         if len(self.step_thoughts) != len(self.actions):
-            raise ValueError(f"a demonstration script needs one thought per action ({len(self.step_thoughts)} thoughts, {len(self.actions)} actions)")
+            raise ValueError(
+                f"a demonstration script needs one thought per action ({len(self.step_thoughts)} thoughts, {len(self.actions)} actions)"
+            )
         if not self.actions:
             raise ValueError("a demonstration script needs at least one action")
 

@@ -150,4 +150,6 @@ def plan_reply(obj: Mapping[str, Any], *, with_think: bool) -> dict[str, Any]:
 
 def dump_reply(reply: Mapping[str, Any]) -> str:
     """Serialise a reply the way demonstrations show it (stable key order, no None fields)."""
-    return json.dumps({k: (list(v) if isinstance(v, tuple) else v) for k, v in reply.items() if v is not None}, ensure_ascii=False)
+    return json.dumps(
+        {k: (list(v) if isinstance(v, tuple) else v) for k, v in reply.items() if v is not None}, ensure_ascii=False
+    )

@@ -22,8 +22,15 @@ ERROR_KINDS = LLM_ERROR_KINDS
 class LLMError(RuntimeError):
     """A failed model call, classified. ``kind`` is one of :data:`ERROR_KINDS`."""
 
-    def __init__(self, kind: LLMErrorKind, message: str = "", *, retries: int = 0, cost_usd: float = 0.0,
-                 refusal: BudgetRefusal | None = None):
+    def __init__(
+        self,
+        kind: LLMErrorKind,
+        message: str = "",
+        *,
+        retries: int = 0,
+        cost_usd: float = 0.0,
+        refusal: BudgetRefusal | None = None,
+    ):
         if kind not in ERROR_KINDS:
             raise ValueError(f"unknown LLM error kind {kind!r}")
         super().__init__(f"{kind}: {message}" if message else kind)

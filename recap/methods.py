@@ -85,8 +85,9 @@ def method_classes(method: str) -> tuple[type[Agent], type[AgentConfig]]:
     return METHODS[method]
 
 
-def make_agent(method: str, profile: str | None = None, ablation: str | None = None,
-               benchmark: str | None = None, **settings: Any) -> Agent:
+def make_agent(
+    method: str, profile: str | None = None, ablation: str | None = None, benchmark: str | None = None, **settings: Any
+) -> Agent:
     """Profile defaults (for ``benchmark`` when given), then the ablation, then explicit
     settings (see ``build_config``)."""
     agent_cls, config_cls = method_classes(method)

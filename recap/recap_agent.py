@@ -77,8 +77,7 @@ class ReCAPAgent(Agent):
     def play(self, ep: Episode, reset: Reset) -> None:
         cfg = self.config
         st = self._state(ep)
-        st.update(nodes=[], iterations=0, rules=ep.env.rules(), max_depth=0, remind=False,
-                  next_reminder_call=cfg.reminder_period)
+        st.update(nodes=[], iterations=0, rules=ep.env.rules(), max_depth=0, remind=False, next_reminder_call=cfg.reminder_period)
         with_think = cfg.think != "none"
         root = self._new_node(ep, None, reset.goal)
         root.kind = "root"

@@ -18,11 +18,7 @@ def reply_format(with_think: bool) -> str:
 
 
 def system_text(with_think: bool) -> str:
-    think_line = (
-        '- "think": your reasoning about the current task and the latest observation.\n'
-        if with_think
-        else ""
-    )
+    think_line = '- "think": your reasoning about the current task and the latest observation.\n' if with_think else ""
     return (
         "You are an agent that reaches a goal in an environment by planning recursively. "
         "For the task you are currently working on, you write an ordered list of subtasks; "

@@ -37,8 +37,9 @@ Emit = Callable[[Record], None]
 class EpisodeEnd(Exception):
     """Raised from anywhere inside an episode to end it with a named reason."""
 
-    def __init__(self, reason: EndReason, detail: str = "", *, error_kind: LLMErrorKind | None = None,
-                 refusal: BudgetRefusal | None = None):
+    def __init__(
+        self, reason: EndReason, detail: str = "", *, error_kind: LLMErrorKind | None = None, refusal: BudgetRefusal | None = None
+    ):
         if reason not in END_REASONS:
             raise ValueError(f"unknown end reason {reason!r}")
         super().__init__(f"{reason}: {detail}" if detail else reason)
@@ -90,18 +91,23 @@ class Conversation:
         self.expected_format = expected_format
         #: the reply's fields (``Agent.reply_fields``), told to offline test doubles in the hints
         self.reply_fields = tuple(reply_fields)
-        self.history = history if history is not None else History(
-            episode_id,
-            config.history_window(),
-            mode=config.window_mode,
-            block=config.window_block,
-            emit=emit,
-            counts_pins=config.history_counts_pins(),
+        self.history = (
+            history
+            if history is not None
+            else History(
+                episode_id,
+                config.history_window(),
+                mode=config.window_mode,
+                block=config.window_block,
+                emit=emit,
+                counts_pins=config.history_counts_pins(),
+            )
         )
         self.usage = usage if usage is not None else Usage()
 
-    def fork(self, *, expected_format: str | None = None, style: str | None = None,
-             reply_fields: tuple[str, ...] | None = None) -> Conversation:
+    def fork(
+        self, *, expected_format: str | None = None, style: str | None = None, reply_fields: tuple[str, ...] | None = None
+    ) -> Conversation:
         """A separate, empty context for the same episode (ADaPT's isolated planner/executor
         prompts): usage, caps and message numbering are shared, the history is not."""
         cfg = self.config
@@ -185,7 +191,9 @@ class Conversation:
                 self._record_error(request, exc, time.perf_counter() - started)
                 if exc.kind == "context_length":
                     if self.history.drop_oldest(self.config.context_drop) == 0:
-                        raise EpisodeEnd("llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind) from None
+                        raise EpisodeEnd(
+                            "llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind
+                        ) from None
                     continue
                 if exc.kind == "budget":
                     raise EpisodeEnd("budget_exhausted", exc.message, error_kind=exc.kind, refusal=exc.refusal) from None

@@ -47,7 +47,9 @@ class ScriptedClient:
     def complete(self, request: LLMRequest) -> LLMResponse:
         self.requests.append(request)
         if self._pos >= len(self._replies):
-            raise ScriptExhausted(f"script of {len(self._replies)} replies exhausted at call {request.call_index} ({request.purpose})")
+            raise ScriptExhausted(
+                f"script of {len(self._replies)} replies exhausted at call {request.call_index} ({request.purpose})"
+            )
         item: Any = self._replies[self._pos]
         self._pos += 1
         if callable(item) and not isinstance(item, LLMError):

@@ -29,6 +29,7 @@ FORMATS = ("md", "html", "tex", "csv")
 class ReportOptions:
     """What ``recap report`` asks for: output formats, the viewer's episodes, the title, and whether only the
     paper section is built."""
+
     formats: tuple[str, ...] = FORMATS
     #: episodes to show in the viewer; None = a sample of ``viewer_max``
     episodes: tuple[str, ...] | None = None
@@ -56,10 +57,25 @@ def build_report(run_dirs: Sequence[str | Path], options: ReportOptions = Report
         materialize(con, ("attempts", "episode_modes"))
         results: dict[str, Result] = {}
         q = sections.make_query(con, results)
-        ids = select_episodes(con, list(options.episodes) if options.episodes else None, options.viewer_max) if "html" in options.formats else []
+        ids = (
+            select_episodes(con, list(options.episodes) if options.episodes else None, options.viewer_max)
+            if "html" in options.formats
+            else []
+        )
         paper = paper_section(q, results)
-        secs = [paper] if options.paper_only else [
-            sections.overview(q), sections.success(q), sections.costs(q), sections.context(q), sections.trees(q), sections.failures(q), paper]
+        secs = (
+            [paper]
+            if options.paper_only
+            else [
+                sections.overview(q),
+                sections.success(q),
+                sections.costs(q),
+                sections.context(q),
+                sections.trees(q),
+                sections.failures(q),
+                paper,
+            ]
+        )
         viewer_html = build_viewer(con, ids, results) if ids else ""
         dirs = [str(r[0]) for r in con.execute("SELECT run_dir FROM run_dirs").fetchall()]
     finally:

@@ -94,13 +94,28 @@ exit status: 0 written; 1 a problem with the run folders or the option values; 2
 
 
 def _report_parser(out: TextIO | None = None) -> _Parser:
-    p = _Parser(prog="recap report", out=out, epilog=_REPORT_EPILOG,
-                description="Write a report (Markdown, HTML, LaTeX, CSV) over one or more run folders.")
+    p = _Parser(
+        prog="recap report",
+        out=out,
+        epilog=_REPORT_EPILOG,
+        description="Write a report (Markdown, HTML, LaTeX, CSV) over one or more run folders.",
+    )
     p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run folder(s); several are reported together")
     p.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/report for one run; required for several)")
-    p.add_argument("--format", default=",".join(FORMATS), metavar="LIST", help=f"comma-separated formats among {','.join(FORMATS)} (default: all)")
+    p.add_argument(
+        "--format",
+        default=",".join(FORMATS),
+        metavar="LIST",
+        help=f"comma-separated formats among {','.join(FORMATS)} (default: all)",
+    )
     p.add_argument("--episodes", metavar="IDS", help="comma-separated episode ids to show in the HTML viewer (default: a sample)")
-    p.add_argument("--viewer-max", type=int, default=DEFAULT_EPISODES, metavar="N", help=f"episodes in the viewer sample (default {DEFAULT_EPISODES}; 0 = none)")
+    p.add_argument(
+        "--viewer-max",
+        type=int,
+        default=DEFAULT_EPISODES,
+        metavar="N",
+        help=f"episodes in the viewer sample (default {DEFAULT_EPISODES}; 0 = none)",
+    )
     p.add_argument("--title", default="recap-eval report", metavar="TEXT", help="report title (default: recap-eval report)")
     p.add_argument("--paper", action="store_true", help="only the paper section: the ReCAP paper's tables beside ours")
     return p
@@ -118,8 +133,9 @@ def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: Te
         if args.out is None and len(args.run_dirs) > 1:
             raise ReportError("--out is required when reporting several run folders")
         episodes = tuple(e.strip() for e in args.episodes.split(",") if e.strip()) if args.episodes else None
-        options = ReportOptions(formats=formats, episodes=episodes, viewer_max=args.viewer_max, title=args.title,
-                                paper_only=args.paper)
+        options = ReportOptions(
+            formats=formats, episodes=episodes, viewer_max=args.viewer_max, title=args.title, paper_only=args.paper
+        )
         report = build_report(args.run_dirs, options)
         out_dir = Path(args.out) if args.out else Path(args.run_dirs[0]) / "report"
         written = write_report(report, out_dir, formats)
@@ -175,8 +191,12 @@ exit status: 0 ok; 2 any error (bad usage, a missing run folder, SQL that fails 
 
 def _sql_parser(out: TextIO | None = None) -> _Parser:
     p = _Parser(prog="recap sql", out=out, usage=_SQL_USAGE, description=_SQL_DESCRIPTION, epilog=_sql_epilog())
-    p.add_argument("args", nargs="+", metavar="RUN_DIR ... QUERY",
-                   help="run folder(s), then the query: SQL text or @NAME (reports/sql/NAME.sql)")
+    p.add_argument(
+        "args",
+        nargs="+",
+        metavar="RUN_DIR ... QUERY",
+        help="run folder(s), then the query: SQL text or @NAME (reports/sql/NAME.sql)",
+    )
     p.add_argument("--file", metavar="QUERY.sql", help="read the query from this file (then every positional is a run folder)")
     fmt = p.add_mutually_exclusive_group()
     fmt.add_argument("--csv", action="store_true", help="print CSV (every row)")
@@ -221,7 +241,10 @@ def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextI
     if args.csv:
         out.write(result_csv(result))
     elif args.json:
-        out.write(json.dumps([{k: _json_value(v) for k, v in zip(result.columns, r)} for r in result.rows], indent=1, default=str) + "\n")
+        out.write(
+            json.dumps([{k: _json_value(v) for k, v in zip(result.columns, r)} for r in result.rows], indent=1, default=str)
+            + "\n"
+        )
     else:
         out.write(format_table(result, max_rows=args.max_rows))
     return 0
@@ -296,6 +319,7 @@ def format_table(result: Result, *, max_rows: int = 100, width: int = 60) -> str
     """An aligned text table, numbers right-aligned, at most ``max_rows`` rows."""
     shown = result.rows[: max(max_rows, 0)]
     cells = [[_text(v, width) for v in row] for row in shown]
+
     def is_number(v: Any) -> bool:
         return isinstance(v, (int, float)) and not isinstance(v, bool)
 
@@ -312,7 +336,9 @@ def format_table(result: Result, *, max_rows: int = 100, width: int = 60) -> str
     lines += [line(row) for row in cells]
     n = len(result.rows)
     more = n - len(shown)
-    lines.append(f"({n} row{'s' if n != 1 else ''}" + (f"; {more} not shown, use --max-rows, --csv or --json)" if more > 0 else ")"))
+    lines.append(
+        f"({n} row{'s' if n != 1 else ''}" + (f"; {more} not shown, use --max-rows, --csv or --json)" if more > 0 else ")")
+    )
     return "\n".join(lines) + "\n"
 
 

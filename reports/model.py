@@ -20,6 +20,7 @@ KINDS = ("text", "int", "float", "ref", "pct", "usd", "tokens", "p", "list", "ra
 class Column:
     """One column of a displayed table: the row key it shows, its header, and its value ``kind`` (one of KINDS),
     which decides how every renderer formats it."""
+
     key: str
     header: str
     kind: str = "text"
@@ -44,6 +45,7 @@ class Table:
 @dataclass
 class Plot:
     """One figure of a section, as finished SVG text; ``source`` names the SQL file its numbers come from."""
+
     name: str
     title: str
     svg: str
@@ -54,6 +56,7 @@ class Plot:
 @dataclass
 class Section:
     """One part of the report (overview, success, costs, ...): an introduction, then its tables and plots."""
+
     key: str
     title: str
     intro: str = ""
@@ -65,6 +68,7 @@ class Section:
 class Report:
     """A built report: every section with its numbers already computed, ready for any renderer; ``skipped`` lists
     part files that could not be read."""
+
     title: str
     run_dirs: list[str]
     skipped: list[SkippedPart]

@@ -17,7 +17,8 @@ def observation_change(prev: str | None, cur: str | None, width: int = 120) -> s
     An unchanged observation reads "(no change)"; the first step is compared with nothing (all of
     its lines but the object headers)."""
     seen = set((prev or "").splitlines())
-    new = [line.strip() for line in (cur or "").splitlines()
-           if line.strip() and line not in seen and not line.rstrip().endswith(":")]
+    new = [
+        line.strip() for line in (cur or "").splitlines() if line.strip() and line not in seen and not line.rstrip().endswith(":")
+    ]
     text = " | ".join(new) if new else ("(no change)" if prev is not None else first_line(cur, width))
     return text if len(text) <= width else text[: width - 3] + "..."

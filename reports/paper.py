@@ -37,12 +37,30 @@ FOREIGN: dict[tuple[str, str], str] = {
 
 #: per-task pass@1 (%), GPT-4o (appendix tables): split -> task index -> method -> %
 _TASK_COLUMNS = ("recap", "react", "adapt", "act", "cot", "standard")
-_SYNC_ROWS = ((100, 60, 70, 90, 40, 50), (80, 30, 70, 30, 30, 20), (80, 40, 50, 10, 10, 10), (80, 60, 50, 30, 10, 0),
-              (90, 80, 80, 70, 10, 10), (70, 60, 60, 30, 30, 30), (70, 50, 20, 20, 0, 0), (60, 0, 0, 0, 0, 0),
-              (50, 0, 0, 10, 10, 0), (20, 0, 0, 20, 0, 0))
-_ASYNC_ROWS = ((50, 20, 20, 20, 10, 10), (80, 40, 40, 20, 10, 10), (90, 10, 10, 0, 20, 0), (40, 40, 20, 20, 0, 0),
-               (50, 10, 0, 0, 10, 0), (80, 60, 50, 10, 0, 0), (70, 30, 0, 0, 0, 0), (40, 30, 0, 10, 0, 0),
-               (20, 0, 0, 0, 0, 0), (10, 0, 0, 0, 0, 0))
+_SYNC_ROWS = (
+    (100, 60, 70, 90, 40, 50),
+    (80, 30, 70, 30, 30, 20),
+    (80, 40, 50, 10, 10, 10),
+    (80, 60, 50, 30, 10, 0),
+    (90, 80, 80, 70, 10, 10),
+    (70, 60, 60, 30, 30, 30),
+    (70, 50, 20, 20, 0, 0),
+    (60, 0, 0, 0, 0, 0),
+    (50, 0, 0, 10, 10, 0),
+    (20, 0, 0, 20, 0, 0),
+)
+_ASYNC_ROWS = (
+    (50, 20, 20, 20, 10, 10),
+    (80, 40, 40, 20, 10, 10),
+    (90, 10, 10, 0, 20, 0),
+    (40, 40, 20, 20, 0, 0),
+    (50, 10, 0, 0, 10, 0),
+    (80, 60, 50, 10, 0, 0),
+    (70, 30, 0, 0, 0, 0),
+    (40, 30, 0, 10, 0, 0),
+    (20, 0, 0, 0, 0, 0),
+    (10, 0, 0, 0, 0, 0),
+)
 PER_TASK: dict[str, dict[int, dict[str, float]]] = {
     split: {i: {m: float(v) for m, v in zip(_TASK_COLUMNS, row)} for i, row in enumerate(rows)}
     for split, rows in (("synchronous", _SYNC_ROWS), ("asynchronous", _ASYNC_ROWS))
@@ -61,13 +79,24 @@ CROSS_MODEL: dict[str, dict[str, float]] = {
     "llama-4": {"react": 37.0, "recap": 60.0},
     "deepseek-v3": {"react": 57.0, "recap": 87.0},
 }
-CROSS_MODEL_NAMES = {"gpt-4o": "GPT-4o", "qwen2.5-32b": "Qwen2.5-32B", "qwen2.5-72b": "Qwen2.5-72B",
-                     "llama-4": "LLaMA-4 (400B)", "deepseek-v3": "DeepSeek-V3 (671B)"}
+CROSS_MODEL_NAMES = {
+    "gpt-4o": "GPT-4o",
+    "qwen2.5-32b": "Qwen2.5-32B",
+    "qwen2.5-72b": "Qwen2.5-72B",
+    "llama-4": "LLaMA-4 (400B)",
+    "deepseek-v3": "DeepSeek-V3 (671B)",
+}
 
 #: Robotouille sync task 6, 128-message context, in the paper's column order
 ABLATIONS: dict[str, float] = {
-    "original": 80.0, "think_many": 70.0, "no_think": 60.0, "name_only": 55.0,
-    "level_5": 70.0, "level_4": 60.0, "level_3": 10.0, "level_2": 0.0,
+    "original": 80.0,
+    "think_many": 70.0,
+    "no_think": 60.0,
+    "name_only": 55.0,
+    "level_5": 70.0,
+    "level_4": 60.0,
+    "level_3": 10.0,
+    "level_2": 0.0,
 }
 
 TREE = {"task": "robotouille synchronous task 6", "depth": 3.4, "branching_factor": 12.5, "episodes": 20}
@@ -184,7 +213,8 @@ def mismatch(protocol: Protocol, arm: ArmProtocol, expected_tasks: Iterable[str]
         missing = sorted(want - got, key=_natural)
         extra = sorted(got - want, key=_natural)
         parts = ([f"{len(got & want)} of the paper's {len(want)} tasks (missing {', '.join(missing)})"] if missing else []) + (
-            [f"tasks the paper's number leaves out ({', '.join(extra)})"] if extra else [])
+            [f"tasks the paper's number leaves out ({', '.join(extra)})"] if extra else []
+        )
         return "ran " + "; ".join(parts)
     if arm.benchmark == "robotouille":
         for task, mults in arm.tasks:

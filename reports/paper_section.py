@@ -29,8 +29,11 @@ from reports.views import Result
 
 Query = Callable[[str], Result]
 
-BENCH_ROWS = (("alfworld", None, "ALFWorld"), ("robotouille", "synchronous", "Robotouille (Sync)"),
-              ("robotouille", "asynchronous", "Robotouille (Async)"))
+BENCH_ROWS = (
+    ("alfworld", None, "ALFWorld"),
+    ("robotouille", "synchronous", "Robotouille (Sync)"),
+    ("robotouille", "asynchronous", "Robotouille (Async)"),
+)
 
 INTRO = (
     "The ReCAP paper's tables, filled from this run. A success cell is: ours as success % [95% interval] "
@@ -88,12 +91,18 @@ def rate_ci(cell: dict[str, Any]) -> tuple[int, int, float, float]:
 
 
 def _rate_columns(key: str, header: str) -> list[Column]:
-    return [Column(key, header, "rate_ci"), Column(f"{key}:paper", "paper", "text"), Column(f"{key}:diff", "diff", "ref"),
-            Column(f"{key}:p", "p", "p"), Column(f"{key}:holm", "p Holm", "p")]
+    return [
+        Column(key, header, "rate_ci"),
+        Column(f"{key}:paper", "paper", "text"),
+        Column(f"{key}:diff", "diff", "ref"),
+        Column(f"{key}:p", "p", "p"),
+        Column(f"{key}:holm", "p Holm", "p"),
+    ]
 
 
-def _fill_rate(row: dict[str, Any], key: str, cell: dict[str, Any], ref: float | None, why: str | None,
-               notes: Footnotes, p: float | None) -> None:
+def _fill_rate(
+    row: dict[str, Any], key: str, cell: dict[str, Any], ref: float | None, why: str | None, notes: Footnotes, p: float | None
+) -> None:
     """One success cell: ours, the paper's value (or a footnote mark), the difference, p."""
     row[key] = rate_ci(cell)
     if ref is not None and why is None:
@@ -131,8 +140,10 @@ class _Cells:
     def __init__(self, q: Query) -> None:
         self.cells = q("paper_cells").dicts()
         self.pairs = q("paper_pairs").dicts()
-        self._pairs = {(r["scope"], r["model_label"], r["arm_label"], r["ref_label"], r["benchmark"], r["split"], r["level"], r["task"]): r
-                       for r in self.pairs}
+        self._pairs = {
+            (r["scope"], r["model_label"], r["arm_label"], r["ref_label"], r["benchmark"], r["split"], r["level"], r["task"]): r
+            for r in self.pairs
+        }
 
     def select(self, *, scope: str = "all", level: str, **where: Any) -> list[dict[str, Any]]:
         out = []
@@ -146,17 +157,33 @@ class _Cells:
     def reference(self, cell: dict[str, Any], pool: list[dict[str, Any]]) -> dict[str, Any] | None:
         """The ReCAP (original) cell ``cell`` is compared with: same model, benchmark, split,
         task, profile and window; the first by arm label."""
-        refs = [r for r in pool
-                if r["method"] == "recap" and r["ablation"] == "original" and r["arm_label"] != cell["arm_label"]
-                and r["model_label"] == cell["model_label"] and (r["benchmark"], r["split"], r["task"]) == (cell["benchmark"], cell["split"], cell["task"])
-                and _same_protocol(r, cell)]
+        refs = [
+            r
+            for r in pool
+            if r["method"] == "recap"
+            and r["ablation"] == "original"
+            and r["arm_label"] != cell["arm_label"]
+            and r["model_label"] == cell["model_label"]
+            and (r["benchmark"], r["split"], r["task"]) == (cell["benchmark"], cell["split"], cell["task"])
+            and _same_protocol(r, cell)
+        ]
         return min(refs, key=lambda r: r["arm_label"]) if refs else None
 
     def pair(self, cell: dict[str, Any], ref: dict[str, Any] | None) -> dict[str, Any] | None:
         if ref is None:
             return None
-        return self._pairs.get((cell["scope"], cell["model_label"], cell["arm_label"], ref["arm_label"], cell["benchmark"],
-                                cell["split"], cell["level"], cell["task"]))
+        return self._pairs.get(
+            (
+                cell["scope"],
+                cell["model_label"],
+                cell["arm_label"],
+                ref["arm_label"],
+                cell["benchmark"],
+                cell["split"],
+                cell["level"],
+                cell["task"],
+            )
+        )
 
 
 def _p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]]) -> float | None:
@@ -172,8 +199,15 @@ def _p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]]) -> float
 def main_table(cells: _Cells) -> Table | str:
     """Paper Table 1 (pass@1 per benchmark and method) from the arms without an ablation; or, when no arm fits,
     the one line that says why it is left out."""
-    pool = [c for c in cells.select(level="split") if c["ablation"] == "original" and (
-        c["benchmark"] == "alfworld" or (c["benchmark"], c["split"]) in (("robotouille", "synchronous"), ("robotouille", "asynchronous")))]
+    pool = [
+        c
+        for c in cells.select(level="split")
+        if c["ablation"] == "original"
+        and (
+            c["benchmark"] == "alfworld"
+            or (c["benchmark"], c["split"]) in (("robotouille", "synchronous"), ("robotouille", "asynchronous"))
+        )
+    ]
     if not pool:
         return "Main results: no arm without an ablation ran Robotouille (synchronous or asynchronous) or ALFWorld."
     arms = sorted({(c["method"], c["arm_label"]) for c in pool}, key=lambda a: (_method_rank(paper.MAIN_ORDER, a[0]), a[1]))
@@ -182,11 +216,20 @@ def main_table(cells: _Cells) -> Table | str:
         cols += _rate_columns(label, label)
     notes = Footnotes()
     rows: list[dict[str, Any]] = []
-    row_keys = sorted({(c["benchmark"], c["split"], c["model_label"]) for c in pool},
-                      key=lambda k: (next(i for i, b in enumerate(BENCH_ROWS) if b[0] == k[0] and b[1] in (None, k[1])), k[1], _test_double_last(k[2])))
+    row_keys = sorted(
+        {(c["benchmark"], c["split"], c["model_label"]) for c in pool},
+        key=lambda k: (
+            next(i for i, b in enumerate(BENCH_ROWS) if b[0] == k[0] and b[1] in (None, k[1])),
+            k[1],
+            _test_double_last(k[2]),
+        ),
+    )
     for bench, split, model in row_keys:
         title = next(t for b, s, t in BENCH_ROWS if b == bench and s in (None, split))
-        row: dict[str, Any] = {"benchmark": title if bench != "alfworld" or split == "valid_unseen" else f"{title} ({split})", "model": model}
+        row: dict[str, Any] = {
+            "benchmark": title if bench != "alfworld" or split == "valid_unseen" else f"{title} ({split})",
+            "model": model,
+        }
         for c in pool:
             if (c["benchmark"], c["split"], c["model_label"]) != (bench, split, model):
                 continue
@@ -195,10 +238,14 @@ def main_table(cells: _Cells) -> Table | str:
             _fill_rate(row, c["arm_label"], c, ref, why, notes, _p(cells, c, pool))
         rows.append(row)
     m = _add_holm(rows, [a[1] for a in arms])
-    note = _join(f"Columns: method arms in the paper's order (ReCAP, ADaPT, ReAct, CoT, Act, Standard). p: exact McNemar "
-                 f"against the ReCAP arm of the same model, profile and window; {m} comparisons (Holm over the table).",
-                 notes.text())
-    return Table("paper_main", "Main results: pass@1 (%) by benchmark and method (paper Table 1)", cols, rows, "paper_cells", note)
+    note = _join(
+        f"Columns: method arms in the paper's order (ReCAP, ADaPT, ReAct, CoT, Act, Standard). p: exact McNemar "
+        f"against the ReCAP arm of the same model, profile and window; {m} comparisons (Holm over the table).",
+        notes.text(),
+    )
+    return Table(
+        "paper_main", "Main results: pass@1 (%) by benchmark and method (paper Table 1)", cols, rows, "paper_cells", note
+    )
 
 
 def per_task_tables(cells: _Cells, split: str) -> list[Table] | str:
@@ -238,24 +285,40 @@ def per_task_tables(cells: _Cells, split: str) -> list[Table] | str:
             _fill_rate(avg, c["arm_label"], c, ref, why, notes, _p(cells, c, ms))
         rows.append(avg)
         m = _add_holm(rows, [a[1] for a in arms])
-        note = _join(f"model: {model}. Rows: the benchmark's tasks in order (the paper shows each recipe as a picture); "
-                     "Average: all episodes of the split pooled (the paper's average of ten equal tasks). Columns: the "
-                     f"paper's order (ReCAP, ReAct, ADaPT, Act, CoT, Std). p: exact McNemar against ReCAP; {m} comparisons "
-                     "(Holm over the table).", notes.text())
+        note = _join(
+            f"model: {model}. Rows: the benchmark's tasks in order (the paper shows each recipe as a picture); "
+            "Average: all episodes of the split pooled (the paper's average of ten equal tasks). Columns: the "
+            f"paper's order (ReCAP, ReAct, ADaPT, Act, CoT, Std). p: exact McNemar against ReCAP; {m} comparisons "
+            "(Holm over the table).",
+            notes.text(),
+        )
         slug = re.sub(r"[^0-9A-Za-z]+", "_", model).strip("_")
-        tables.append(Table(f"paper_tasks_{split}_{slug}", f"Robotouille {split}: pass@1 (%) per task (paper Table {number})",
-                            cols, rows, "paper_cells", note))
+        tables.append(
+            Table(
+                f"paper_tasks_{split}_{slug}",
+                f"Robotouille {split}: pass@1 (%) per task (paper Table {number})",
+                cols,
+                rows,
+                "paper_cells",
+                note,
+            )
+        )
     return tables
 
 
 def cross_model_table(cells: _Cells) -> Table | str:
     """Paper Table 2 (ReAct and ReCAP across models on synchronous tasks 2, 4, 6, 64-message window); or the one
     line that says why it is left out."""
-    pool = [c for c in cells.select(scope="sync_2_4_6", level="split") if c["method"] in ("react", "recap")
-            and c["ablation"] == "original" and list(c["windows"]) == [64]]
+    pool = [
+        c
+        for c in cells.select(scope="sync_2_4_6", level="split")
+        if c["method"] in ("react", "recap") and c["ablation"] == "original" and list(c["windows"]) == [64]
+    ]
     if not pool:
-        return ("Cross-model table: no ReAct or ReCAP arm without an ablation ran Robotouille synchronous tasks 2, 4, 6 "
-                "with a 64-message window.")
+        return (
+            "Cross-model table: no ReAct or ReCAP arm without an ablation ran Robotouille synchronous tasks 2, 4, 6 "
+            "with a 64-message window."
+        )
     order = list(paper.CROSS_MODEL)
 
     def model_rank(model: str) -> tuple[int, bool, str]:
@@ -285,21 +348,39 @@ def cross_model_table(cells: _Cells) -> Table | str:
             _fill_rate(row, c["model_label"], c, ref, why, notes, _p(cells, c, pool))
         rows.append(row)
     m = _add_holm(rows, models)
-    note = _join("Robotouille synchronous tasks 2, 4 and 6, 64-message window. p (on the ReAct rows): exact McNemar "
-                 f"against ReCAP of the same model on the same units; {m} comparisons (Holm over the table).", notes.text())
-    return Table("paper_cross_model", "Success rates (%) of ReAct and ReCAP across models, Robotouille tasks 2, 4, 6 (paper Table 2)",
-                 cols, rows, "paper_cells", note)
+    note = _join(
+        "Robotouille synchronous tasks 2, 4 and 6, 64-message window. p (on the ReAct rows): exact McNemar "
+        f"against ReCAP of the same model on the same units; {m} comparisons (Holm over the table).",
+        notes.text(),
+    )
+    return Table(
+        "paper_cross_model",
+        "Success rates (%) of ReAct and ReCAP across models, Robotouille tasks 2, 4, 6 (paper Table 2)",
+        cols,
+        rows,
+        "paper_cells",
+        note,
+    )
 
 
 def ablation_table(cells: _Cells) -> Table | str:
     """Paper Table 3 (ReCAP ablations on synchronous task 6, 128-message window), each variant against the
     original; or the one line that says why it is left out."""
-    pool = [c for c in cells.select(level="task", benchmark="robotouille", split="synchronous")
-            if c["method"] == "recap" and paper.task_index(c["task"]) == 6 and list(c["windows"]) == [128]]
+    pool = [
+        c
+        for c in cells.select(level="task", benchmark="robotouille", split="synchronous")
+        if c["method"] == "recap" and paper.task_index(c["task"]) == 6 and list(c["windows"]) == [128]
+    ]
     if not any(c["ablation"] != "original" for c in pool):
         return "Ablation table: no ReCAP ablation ran Robotouille synchronous task 6 with a 128-message window."
-    variants = sorted({c["ablation"] for c in pool}, key=lambda v: (list(paper.ABLATIONS).index(v) if v in paper.ABLATIONS else len(paper.ABLATIONS), v))
-    row_keys = sorted({(c["model_label"], ",".join(p or "none" for p in c["profiles"])) for c in pool}, key=lambda k: (*_test_double_last(k[0]), k[1]))
+    variants = sorted(
+        {c["ablation"] for c in pool},
+        key=lambda v: (list(paper.ABLATIONS).index(v) if v in paper.ABLATIONS else len(paper.ABLATIONS), v),
+    )
+    row_keys = sorted(
+        {(c["model_label"], ",".join(p or "none" for p in c["profiles"])) for c in pool},
+        key=lambda k: (*_test_double_last(k[0]), k[1]),
+    )
     cols = [Column("model", "model"), Column("profile", "profile")]
     for v in variants:
         cols += _rate_columns(v, v)
@@ -307,8 +388,10 @@ def ablation_table(cells: _Cells) -> Table | str:
     rows = []
     for model, profile in row_keys:
         row: dict[str, Any] = {"model": model, "profile": profile}
-        mine = sorted((c for c in pool if c["model_label"] == model and ",".join(p or "none" for p in c["profiles"]) == profile),
-                      key=lambda c: c["arm_label"])
+        mine = sorted(
+            (c for c in pool if c["model_label"] == model and ",".join(p or "none" for p in c["profiles"]) == profile),
+            key=lambda c: c["arm_label"],
+        )
         for v in variants:
             c = next((c for c in mine if c["ablation"] == v), None)
             if c is None:
@@ -322,11 +405,20 @@ def ablation_table(cells: _Cells) -> Table | str:
             _fill_rate(row, v, c, paper.ABLATIONS.get(v), why, notes, p)
         rows.append(row)
     m = _add_holm(rows, variants)
-    note = _join("Robotouille synchronous task 6, 128-message window; columns in the paper's order. p: exact McNemar of "
-                 f"each variant against the original (same model and profile) on the units both ran; {m} comparisons "
-                 "(Holm over the table).", notes.text())
-    return Table("paper_ablations", "ReCAP variants: success rate (%) on Robotouille synchronous task 6 (paper Table 3)",
-                 cols, rows, "paper_cells", note)
+    note = _join(
+        "Robotouille synchronous task 6, 128-message window; columns in the paper's order. p: exact McNemar of "
+        f"each variant against the original (same model and profile) on the units both ran; {m} comparisons "
+        "(Holm over the table).",
+        notes.text(),
+    )
+    return Table(
+        "paper_ablations",
+        "ReCAP variants: success rate (%) on Robotouille synchronous task 6 (paper Table 3)",
+        cols,
+        rows,
+        "paper_cells",
+        note,
+    )
 
 
 def _cost_p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]]) -> float | None:
@@ -351,22 +443,44 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
         why = paper.mismatch(paper.PROTOCOLS["costs_alfworld"], arm_protocol(c))
         if why is None and c["episodes"] != paper.ALFWORLD_GAMES:
             why = f"ran {c['episodes']} of the paper's {paper.ALFWORLD_GAMES} games: totals differ in size"
-        row = {"model": c["model_label"], "method": c["arm_label"], "games": c["episodes"], "calls": c["calls"],
-               "tokens": c["tokens"], "cost": c["cost_usd"], "per_game": c["cost_per_episode"],
-               "p": _cost_p(cells, c, pool)}
+        row = {
+            "model": c["model_label"],
+            "method": c["arm_label"],
+            "games": c["episodes"],
+            "calls": c["calls"],
+            "tokens": c["tokens"],
+            "cost": c["cost_usd"],
+            "per_game": c["cost_per_episode"],
+            "p": _cost_p(cells, c, pool),
+        }
         if ref is not None and why is None:
             row["paper"], row["diff"] = f"${ref:,.2f}", c["cost_usd"] - ref
         elif ref is not None and why is not None:
             row["paper"] = notes.mark(why)
         rows.append(row)
     totals_t = Table(
-        "paper_costs_alfworld", "ALFWorld: total cost per method over the games run (paper: 134 games)",
-        [Column("model", "model"), Column("method", "method"), Column("games", "games", "int"), Column("calls", "LLM calls", "int"),
-         Column("tokens", "tokens", "int"), Column("cost", "total $", "usd"), Column("per_game", "$/game", "usd"),
-         Column("paper", "paper total", "text"), Column("diff", "diff $", "usd"), Column("p", "p ($ vs ReCAP)", "p")],
-        rows, "paper_cells",
-        _join("p: paired permutation test of the per-game cost difference against ReCAP of the same model, profile and window, "
-              "on the games both ran.", notes.text()))
+        "paper_costs_alfworld",
+        "ALFWorld: total cost per method over the games run (paper: 134 games)",
+        [
+            Column("model", "model"),
+            Column("method", "method"),
+            Column("games", "games", "int"),
+            Column("calls", "LLM calls", "int"),
+            Column("tokens", "tokens", "int"),
+            Column("cost", "total $", "usd"),
+            Column("per_game", "$/game", "usd"),
+            Column("paper", "paper total", "text"),
+            Column("diff", "diff $", "usd"),
+            Column("p", "p ($ vs ReCAP)", "p"),
+        ],
+        rows,
+        "paper_cells",
+        _join(
+            "p: paired permutation test of the per-game cost difference against ReCAP of the same model, profile and window, "
+            "on the games both ran.",
+            notes.text(),
+        ),
+    )
     ratio_notes = Footnotes()
     ratio_rows = []
     paper_ratio = totals["recap"] / totals["react"]
@@ -377,10 +491,19 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
         pr = cells.pair(c, ref_cell)
         if ref_cell is None or pr is None or not pr["arm_cost"]:
             continue
-        why = paper.mismatch(paper.PROTOCOLS["costs_alfworld"], arm_protocol(c)) or paper.mismatch(paper.PROTOCOLS["costs_alfworld"], arm_protocol(ref_cell))
-        row = {"model": c["model_label"], "recap": ref_cell["arm_label"], "react": c["arm_label"], "games": pr["pairs"],
-               "recap_cost": pr["ref_cost"], "react_cost": pr["arm_cost"], "ratio": pr["ref_cost"] / pr["arm_cost"],
-               "p": paired_permutation_p(pr["cost_diffs"])}
+        why = paper.mismatch(paper.PROTOCOLS["costs_alfworld"], arm_protocol(c)) or paper.mismatch(
+            paper.PROTOCOLS["costs_alfworld"], arm_protocol(ref_cell)
+        )
+        row = {
+            "model": c["model_label"],
+            "recap": ref_cell["arm_label"],
+            "react": c["arm_label"],
+            "games": pr["pairs"],
+            "recap_cost": pr["ref_cost"],
+            "react_cost": pr["arm_cost"],
+            "ratio": pr["ref_cost"] / pr["arm_cost"],
+            "p": paired_permutation_p(pr["cost_diffs"]),
+        }
         if why is None:
             row["paper"], row["diff"] = f"{paper_ratio:.2f}", row["ratio"] - paper_ratio
         else:
@@ -388,22 +511,42 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
         ratio_rows.append(row)
     out = [totals_t]
     if ratio_rows:
-        out.append(Table(
-            "paper_cost_ratio", "ALFWorld: ReCAP/ReAct cost ratio on the games both ran (paper: $118.40 / $37.89)",
-            [Column("model", "model"), Column("recap", "ReCAP arm"), Column("react", "ReAct arm"), Column("games", "games", "int"),
-             Column("recap_cost", "ReCAP $", "usd"), Column("react_cost", "ReAct $", "usd"), Column("ratio", "ratio", "float"),
-             Column("paper", "paper", "text"), Column("diff", "diff", "float"), Column("p", "p", "p")],
-            ratio_rows, "paper_pairs",
-            _join("ratio = ReCAP's total / ReAct's total over the paired games; p: paired permutation test of the per-game "
-                  "cost difference.", ratio_notes.text())))
+        out.append(
+            Table(
+                "paper_cost_ratio",
+                "ALFWorld: ReCAP/ReAct cost ratio on the games both ran (paper: $118.40 / $37.89)",
+                [
+                    Column("model", "model"),
+                    Column("recap", "ReCAP arm"),
+                    Column("react", "ReAct arm"),
+                    Column("games", "games", "int"),
+                    Column("recap_cost", "ReCAP $", "usd"),
+                    Column("react_cost", "ReAct $", "usd"),
+                    Column("ratio", "ratio", "float"),
+                    Column("paper", "paper", "text"),
+                    Column("diff", "diff", "float"),
+                    Column("p", "p", "p"),
+                ],
+                ratio_rows,
+                "paper_pairs",
+                _join(
+                    "ratio = ReCAP's total / ReAct's total over the paired games; p: paired permutation test of the per-game "
+                    "cost difference.",
+                    ratio_notes.text(),
+                ),
+            )
+        )
     return out
 
 
 def task6_cost_table(cells: _Cells) -> Table | str:
     """The task-6 cost table (calls, tokens and dollars per episode on synchronous task 6); or the one line that
     says why it is left out."""
-    pool = [c for c in cells.select(level="task", benchmark="robotouille", split="synchronous")
-            if paper.task_index(c["task"]) == 6 and c["ablation"] == "original"]
+    pool = [
+        c
+        for c in cells.select(level="task", benchmark="robotouille", split="synchronous")
+        if paper.task_index(c["task"]) == 6 and c["ablation"] == "original"
+    ]
     if not pool:
         return "Task-6 costs: no arm without an ablation ran Robotouille synchronous task 6."
     pool.sort(key=lambda c: (*_test_double_last(c["model_label"]), _method_rank(paper.MAIN_ORDER, c["method"]), c["arm_label"]))
@@ -411,10 +554,18 @@ def task6_cost_table(cells: _Cells) -> Table | str:
     notes = Footnotes()
     rows = []
     for c in pool:
-        row = {"model": c["model_label"], "method": c["arm_label"], "window": ", ".join(str(w) for w in c["windows"]),
-               "episodes": c["episodes"], "calls": c["calls_per_episode"], "calls_sd": c["calls_sd"],
-               "tokens": c["tokens_per_episode"], "cost": c["cost_per_episode"], "cost_sd": c["cost_sd"],
-               "p": _cost_p(cells, c, pool)}
+        row = {
+            "model": c["model_label"],
+            "method": c["arm_label"],
+            "window": ", ".join(str(w) for w in c["windows"]),
+            "episodes": c["episodes"],
+            "calls": c["calls_per_episode"],
+            "calls_sd": c["calls_sd"],
+            "tokens": c["tokens_per_episode"],
+            "cost": c["cost_per_episode"],
+            "cost_sd": c["cost_sd"],
+            "p": _cost_p(cells, c, pool),
+        }
         if c["method"] == "recap":
             why = paper.mismatch(paper.PROTOCOLS["costs_task6"], arm_protocol(c))
             if why is None:
@@ -426,16 +577,33 @@ def task6_cost_table(cells: _Cells) -> Table | str:
                 row["paper_calls"] = row["paper_cost"] = notes.mark(why)
         rows.append(row)
     return Table(
-        "paper_costs_task6", "Robotouille synchronous task 6: LLM calls, tokens and dollars per episode (paper: ReCAP, GPT-4o)",
-        [Column("model", "model"), Column("method", "method"), Column("window", "window"), Column("episodes", "episodes", "int"),
-         Column("calls", "calls/episode", "float"), Column("calls_sd", "sd", "float"), Column("tokens", "tokens/episode", "tokens"),
-         Column("cost", "$/episode", "usd"), Column("cost_sd", "sd", "usd"), Column("paper_calls", "paper calls", "text"),
-         Column("diff_calls", "diff calls", "float"), Column("paper_cost", "paper $", "text"), Column("diff_cost", "diff $", "usd"),
-         Column("p", "p ($ vs ReCAP)", "p")],
-        rows, "paper_cells",
-        _join("The paper's task-6 cost is taken to come from its 20 task-6 runs (128-message window, as its tree analysis). "
-              "p: paired permutation test of the per-episode cost difference against ReCAP of the same model, profile "
-              "and window.", notes.text()))
+        "paper_costs_task6",
+        "Robotouille synchronous task 6: LLM calls, tokens and dollars per episode (paper: ReCAP, GPT-4o)",
+        [
+            Column("model", "model"),
+            Column("method", "method"),
+            Column("window", "window"),
+            Column("episodes", "episodes", "int"),
+            Column("calls", "calls/episode", "float"),
+            Column("calls_sd", "sd", "float"),
+            Column("tokens", "tokens/episode", "tokens"),
+            Column("cost", "$/episode", "usd"),
+            Column("cost_sd", "sd", "usd"),
+            Column("paper_calls", "paper calls", "text"),
+            Column("diff_calls", "diff calls", "float"),
+            Column("paper_cost", "paper $", "text"),
+            Column("diff_cost", "diff $", "usd"),
+            Column("p", "p ($ vs ReCAP)", "p"),
+        ],
+        rows,
+        "paper_cells",
+        _join(
+            "The paper's task-6 cost is taken to come from its 20 task-6 runs (128-message window, as its tree analysis). "
+            "p: paired permutation test of the per-episode cost difference against ReCAP of the same model, profile "
+            "and window.",
+            notes.text(),
+        ),
+    )
 
 
 def tree_table(q: Query) -> Table | str:
@@ -448,9 +616,16 @@ def tree_table(q: Query) -> Table | str:
     notes = Footnotes()
     rows = []
     for t in trees:
-        row = {"model": t["model_label"], "method": t["arm_label"], "window": ", ".join(str(w) for w in t["windows"]),
-               "episodes": t["episodes"], "levels": t["mean_levels"], "levels_sd": t["levels_sd"],
-               "branching": t["mean_branching"], "branching_sd": t["branching_sd"]}
+        row = {
+            "model": t["model_label"],
+            "method": t["arm_label"],
+            "window": ", ".join(str(w) for w in t["windows"]),
+            "episodes": t["episodes"],
+            "levels": t["mean_levels"],
+            "levels_sd": t["levels_sd"],
+            "branching": t["mean_branching"],
+            "branching_sd": t["branching_sd"],
+        }
         why = paper.mismatch(paper.PROTOCOLS["trees"], arm_protocol(t))
         if why is None:
             row["paper_depth"], row["diff_depth"] = f"{paper.TREE['depth']:.1f}", t["mean_levels"] - paper.TREE["depth"]
@@ -460,15 +635,31 @@ def tree_table(q: Query) -> Table | str:
             row["paper_depth"] = row["paper_branching"] = notes.mark(why)
         rows.append(row)
     return Table(
-        "paper_trees", "Task trees on Robotouille synchronous task 6: depth and branching factor (paper §Task Tree Analysis)",
-        [Column("model", "model"), Column("method", "method"), Column("window", "window"), Column("episodes", "episodes", "int"),
-         Column("levels", "depth (levels)", "float"), Column("levels_sd", "sd", "float"), Column("branching", "branching", "float"),
-         Column("branching_sd", "sd", "float"), Column("paper_depth", "paper depth", "text"), Column("diff_depth", "diff depth", "float"),
-         Column("paper_branching", "paper branching", "text"), Column("diff_branching", "diff branching", "float")],
-        rows, "paper_trees",
-        _join("depth = levels of the tree, the root being level 1 (the level_N ablations' convention); branching = mean "
-              "children per node that has children; both per episode, then averaged. The paper defines neither and "
-              "reports no test here.", notes.text()))
+        "paper_trees",
+        "Task trees on Robotouille synchronous task 6: depth and branching factor (paper §Task Tree Analysis)",
+        [
+            Column("model", "model"),
+            Column("method", "method"),
+            Column("window", "window"),
+            Column("episodes", "episodes", "int"),
+            Column("levels", "depth (levels)", "float"),
+            Column("levels_sd", "sd", "float"),
+            Column("branching", "branching", "float"),
+            Column("branching_sd", "sd", "float"),
+            Column("paper_depth", "paper depth", "text"),
+            Column("diff_depth", "diff depth", "float"),
+            Column("paper_branching", "paper branching", "text"),
+            Column("diff_branching", "diff branching", "float"),
+        ],
+        rows,
+        "paper_trees",
+        _join(
+            "depth = levels of the tree, the root being level 1 (the level_N ablations' convention); branching = mean "
+            "children per node that has children; both per episode, then averaged. The paper defines neither and "
+            "reports no test here.",
+            notes.text(),
+        ),
+    )
 
 
 def paper_section(q: Query, results: dict[str, Result] | None = None) -> Section:
@@ -477,8 +668,14 @@ def paper_section(q: Query, results: dict[str, Result] | None = None) -> Section
     sec = Section("paper", "The paper's tables", INTRO)
     omitted: list[dict[str, str]] = []
     built: list[Table | list[Table] | str] = [
-        main_table(cells), per_task_tables(cells, "synchronous"), per_task_tables(cells, "asynchronous"),
-        cross_model_table(cells), ablation_table(cells), alfworld_cost_tables(cells), task6_cost_table(cells), tree_table(q),
+        main_table(cells),
+        per_task_tables(cells, "synchronous"),
+        per_task_tables(cells, "asynchronous"),
+        cross_model_table(cells),
+        ablation_table(cells),
+        alfworld_cost_tables(cells),
+        task6_cost_table(cells),
+        tree_table(q),
     ]
     for item in built:
         if isinstance(item, str):
@@ -489,10 +686,18 @@ def paper_section(q: Query, results: dict[str, Result] | None = None) -> Section
         else:
             sec.tables.append(item)
     if omitted:
-        sec.tables.append(Table("paper_omitted", "Paper tables left out: what the run did not run",
-                                [Column("table", "table"), Column("missing", "what is missing")], omitted, "paper_cells"))
+        sec.tables.append(
+            Table(
+                "paper_omitted",
+                "Paper tables left out: what the run did not run",
+                [Column("table", "table"), Column("missing", "what is missing")],
+                omitted,
+                "paper_cells",
+            )
+        )
     if results is not None:
         for t in sec.tables:
             results[f"paper_table_{t.name.removeprefix('paper_')}"] = Result(
-                [c.key for c in t.columns], [tuple(format_value(c.kind, r.get(c.key)) for c in t.columns) for r in t.rows])
+                [c.key for c in t.columns], [tuple(format_value(c.kind, r.get(c.key)) for c in t.columns) for r in t.rows]
+            )
     return sec

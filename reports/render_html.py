@@ -203,17 +203,21 @@ def render_html(report: Report) -> str:
         '<p class="intro">Run folders: ' + ", ".join(f"<code>{escape(d)}</code>" for d in report.run_dirs) + "</p>",
     ]
     if report.skipped:
-        parts.append('<div class="warn"><strong>Unreadable part files were skipped:</strong><ul>'
-                     + "".join(f"<li><code>{escape(s.path)}</code>: {escape(s.error)}</li>" for s in report.skipped)
-                     + "</ul></div>")
+        parts.append(
+            '<div class="warn"><strong>Unreadable part files were skipped:</strong><ul>'
+            + "".join(f"<li><code>{escape(s.path)}</code>: {escape(s.error)}</li>" for s in report.skipped)
+            + "</ul></div>"
+        )
     parts.append(f"<nav><ul>{nav}</ul></nav>")
     for s in report.sections:
         parts.append(f'<section id="s-{s.key}"><h2>{escape(s.title)}</h2>')
         if s.intro:
             parts.append(f'<p class="intro">{escape(s.intro)}</p>')
         for p in s.plots:
-            parts.append(f'<figure id="p-{escape(p.name)}" data-source="{escape(p.source)}.sql">{p.svg}<figcaption>{escape(p.title)}'
-                         f'{(" — " + escape(p.note)) if p.note else ""}</figcaption></figure>')
+            parts.append(
+                f'<figure id="p-{escape(p.name)}" data-source="{escape(p.source)}.sql">{p.svg}<figcaption>{escape(p.title)}'
+                f"{(' — ' + escape(p.note)) if p.note else ''}</figcaption></figure>"
+            )
         for t in s.tables:
             parts.append(table_html(t, viewer))
         parts.append("</section>")

@@ -67,16 +67,26 @@ def load_plans(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
 
     if (con.execute("SELECT count(*) FROM planned_units").fetchone() or (0,))[0]:
         return {}
-    cols: dict[str, list[Any]] = {k: [] for k in ("run_dir", "run_id", "unit_id", "label", "method", "model", "instance_id", "seed",
-                                                  "test_double")}
+    cols: dict[str, list[Any]] = {
+        k: [] for k in ("run_dir", "run_id", "unit_id", "label", "method", "model", "instance_id", "seed", "test_double")
+    }
     how: dict[str, str] = {}
     for run_dir, run_id in con.execute("SELECT run_dir, run_json_id FROM run_dirs ORDER BY run_dir").fetchall():
         path = Path(run_dir) / PLAN_FILE
         try:
             units = json.loads(path.read_text(encoding="utf-8"))["units"]
             # plan.json's "method" is the arm's label; "method_name" the method (schema version 2)
-            rows = [(str(u["unit_id"]), str(u["method"]), u.get("method_name"), str(u["model"]), str(u.get("instance_id") or ""),
-                     u.get("seed")) for u in units]
+            rows = [
+                (
+                    str(u["unit_id"]),
+                    str(u["method"]),
+                    u.get("method_name"),
+                    str(u["model"]),
+                    str(u.get("instance_id") or ""),
+                    u.get("seed"),
+                )
+                for u in units
+            ]
         except FileNotFoundError:
             how[run_dir] = f"no {PLAN_FILE}"
             continue
@@ -86,8 +96,20 @@ def load_plans(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
         doubles = _test_double_models(Path(run_dir))
         how[run_dir] = PLAN_FILE
         for uid, label, method, model, inst, seed in rows:
-            for k, v in zip(cols, (run_dir, run_id, uid, label, method if isinstance(method, str) else None, model, inst,
-                                   seed if isinstance(seed, int) and not isinstance(seed, bool) else None, doubles.get(model))):
+            for k, v in zip(
+                cols,
+                (
+                    run_dir,
+                    run_id,
+                    uid,
+                    label,
+                    method if isinstance(method, str) else None,
+                    model,
+                    inst,
+                    seed if isinstance(seed, int) and not isinstance(seed, bool) else None,
+                    doubles.get(model),
+                ),
+            ):
                 cols[k].append(v)
     if cols["unit_id"]:
         types = {"seed": pa.int64(), "test_double": pa.bool_()}
@@ -146,15 +168,22 @@ def overview(q: Query) -> Section:
         "skipped_part_files": "unreadable part files skipped",
     }
     rows = [{"metric": labels[k], "value": f"${v:,.4f}" if k == "spend_usd" else f"{v:,}"} for k, v in ov.items()]
-    sec.tables.append(Table("overview", "What this report covers", [Column("metric", "metric"), Column("value", "value")], rows, "overview"))
+    sec.tables.append(
+        Table("overview", "What this report covers", [Column("metric", "metric"), Column("value", "value")], rows, "overview")
+    )
     sec.tables.append(
         Table(
             "runs",
             "Runs",
             [
-                Column("run_id", "run"), Column("starts", "starts", "int"), Column("first_started", "first started"),
-                Column("host", "host"), Column("git_revision", "git revision"), Column("spec_hash", "spec hash"),
-                Column("units", "units", "int"), Column("successes", "successes", "int"),
+                Column("run_id", "run"),
+                Column("starts", "starts", "int"),
+                Column("first_started", "first started"),
+                Column("host", "host"),
+                Column("git_revision", "git revision"),
+                Column("spec_hash", "spec hash"),
+                Column("units", "units", "int"),
+                Column("successes", "successes", "int"),
             ],
             q("runs").dicts(),
             "runs",
@@ -163,22 +192,31 @@ def overview(q: Query) -> Section:
     coverage = q("coverage").dicts()
     if coverage:
         derived = sorted({r["run_id"] or "?" for r in coverage if r["planned_from"] != "plan.json"})
-        note = ("finished: the units every success rate counts (they finished on their own merits; env_error and "
-                "llm_error outcomes count). capped: the latest attempt ended budget_exhausted (a cap stopped it); "
-                "gave up: the latest attempt ended in an infrastructure failure (infra_error: the model service failed or "
-                "the workers died; recap resume retries it); not started: no episode row. The same counts as recap status.")
+        note = (
+            "finished: the units every success rate counts (they finished on their own merits; env_error and "
+            "llm_error outcomes count). capped: the latest attempt ended budget_exhausted (a cap stopped it); "
+            "gave up: the latest attempt ended in an infrastructure failure (infra_error: the model service failed or "
+            "the workers died; recap resume retries it); not started: no episode row. The same counts as recap status."
+        )
         if derived:
-            note += (f" No readable plan.json for run {', '.join(derived)}: planned is derived from the episode rows "
-                     "(units never started are not counted).")
+            note += (
+                f" No readable plan.json for run {', '.join(derived)}: planned is derived from the episode rows "
+                "(units never started are not counted)."
+            )
         sec.tables.append(
             Table(
                 "coverage",
                 "Coverage: planned and finished units per arm",
                 [
-                    Column("run_id", "run"), Column("model_label", "model"), Column("arm", "arm"),
-                    Column("planned", "planned", "int"), Column("finished", "finished", "int"),
-                    Column("successes", "successes", "int"), Column("capped", "capped", "int"),
-                    Column("gave_up", "gave up", "int"), Column("not_started", "not started", "int"),
+                    Column("run_id", "run"),
+                    Column("model_label", "model"),
+                    Column("arm", "arm"),
+                    Column("planned", "planned", "int"),
+                    Column("finished", "finished", "int"),
+                    Column("successes", "successes", "int"),
+                    Column("capped", "capped", "int"),
+                    Column("gave_up", "gave up", "int"),
+                    Column("not_started", "not started", "int"),
                     Column("planned_from", "planned from"),
                 ],
                 coverage,
@@ -203,7 +241,13 @@ def overview(q: Query) -> Section:
             Table(
                 "events",
                 "Pipeline events",
-                [Column("source", "source"), Column("kind", "kind"), Column("severity", "severity"), Column("events", "events", "int"), Column("episodes", "episodes", "int")],
+                [
+                    Column("source", "source"),
+                    Column("kind", "kind"),
+                    Column("severity", "severity"),
+                    Column("events", "events", "int"),
+                    Column("episodes", "episodes", "int"),
+                ],
                 events,
                 "events_summary",
             )
@@ -239,16 +283,32 @@ def success(q: Query) -> Section:
             if (r["model_label"], r["arm"]) == (m, a):
                 row[r["env_split"]] = _rate_ci(r)
         rows.append(row)
-    sec.tables.append(Table("main", "Success rate by method and environment split", cols, rows, "success_by_split", PAPER_POINTER))
+    sec.tables.append(
+        Table("main", "Success rate by method and environment split", cols, rows, "success_by_split", PAPER_POINTER)
+    )
 
     models = _unique(r["model_label"] for r in main)
     arms = _unique(_series_label(r["model_label"], r["arm"], models) for r in main)
     values = {(r["env_split"], _series_label(r["model_label"], r["arm"], models)): 100 * r["success_rate"] for r in main}
-    errors = {(r["env_split"], _series_label(r["model_label"], r["arm"], models)): (100 * r["ci_low"], 100 * r["ci_high"]) for r in main}
+    errors = {
+        (r["env_split"], _series_label(r["model_label"], r["arm"], models)): (100 * r["ci_low"], 100 * r["ci_high"]) for r in main
+    }
     sec.plots.append(
-        Plot("success_by_split", "Success rate by environment split (95% Wilson intervals)",
-             svg.grouped_bars("Success rate by environment split (95% Wilson intervals)", splits, arms, values, errors=errors, y_label="success (%)", y_max=100, value_fmt=lambda v: f"{v:.1f}"),
-             "success_by_split")
+        Plot(
+            "success_by_split",
+            "Success rate by environment split (95% Wilson intervals)",
+            svg.grouped_bars(
+                "Success rate by environment split (95% Wilson intervals)",
+                splits,
+                arms,
+                values,
+                errors=errors,
+                y_label="success (%)",
+                y_max=100,
+                value_fmt=lambda v: f"{v:.1f}",
+            ),
+            "success_by_split",
+        )
     )
 
     per_task = q("success_by_task").dicts()
@@ -264,7 +324,16 @@ def success(q: Query) -> Section:
                     row[_series_label(r["model_label"], r["arm"], split_models)] = _rate_ci(r)
             rows.append(row)
         note = "model: " + ", ".join(split_models) if len(split_models) == 1 else ""
-        sec.tables.append(Table(f"tasks_{_slug(s)}", f"Success rate per task: {s}", [Column("task", "task")] + [Column(x, x, "rate_ci") for x in series], rows, "success_by_task", note))
+        sec.tables.append(
+            Table(
+                f"tasks_{_slug(s)}",
+                f"Success rate per task: {s}",
+                [Column("task", "task")] + [Column(x, x, "rate_ci") for x in series],
+                rows,
+                "success_by_task",
+                note,
+            )
+        )
 
     by_model = q("success_by_model").dicts()
     arms_m = _unique(r["arm"] for r in by_model)
@@ -276,7 +345,16 @@ def success(q: Query) -> Section:
             if r["model_label"] == m:
                 row[r["arm"]] = _rate_ci(r)
         rows.append(row)
-    sec.tables.append(Table("models", "Success rate by model (cross-model table, all tasks of the run)", cols, rows, "success_by_model", PAPER_POINTER))
+    sec.tables.append(
+        Table(
+            "models",
+            "Success rate by model (cross-model table, all tasks of the run)",
+            cols,
+            rows,
+            "success_by_model",
+            PAPER_POINTER,
+        )
+    )
 
     abl = q("success_by_ablation").dicts()
     if any(r["ablation"] != "original" for r in abl):
@@ -288,14 +366,23 @@ def success(q: Query) -> Section:
                 "ablations",
                 "Success rate by ablation, with an exact McNemar test against the original settings",
                 [
-                    Column("model_label", "model"), Column("method", "method"), Column("env_split", "split"),
-                    Column("window_size", "window", "int"), Column("ablation", "ablation"), Column("rate_ci", "success", "rate_ci"),
-                    Column("pairs", "pairs", "int"), Column("original_only", "orig. only", "int"),
-                    Column("variant_only", "variant only", "int"), Column("p_value", "p", "p"), Column("p_holm", "Holm p", "p"),
+                    Column("model_label", "model"),
+                    Column("method", "method"),
+                    Column("env_split", "split"),
+                    Column("window_size", "window", "int"),
+                    Column("ablation", "ablation"),
+                    Column("rate_ci", "success", "rate_ci"),
+                    Column("pairs", "pairs", "int"),
+                    Column("original_only", "orig. only", "int"),
+                    Column("variant_only", "variant only", "int"),
+                    Column("p_value", "p", "p"),
+                    Column("p_holm", "Holm p", "p"),
                 ],
                 abl,
                 "success_by_ablation",
-                "orig. only / variant only: paired units only one of the two solved. " + PAPER_POINTER + " "
+                "orig. only / variant only: paired units only one of the two solved. "
+                + PAPER_POINTER
+                + " "
                 + _comparisons_note(comparisons([r["p_value"] for r in abl]), "McNemar test"),
             )
         )
@@ -313,11 +400,20 @@ def success(q: Query) -> Section:
             "paired",
             "Paired comparisons between methods (same units)",
             [
-                Column("model_label", "model"), Column("env_split", "split"), Column("arm_a", "A"), Column("arm_b", "B"),
-                Column("pairs", "pairs", "int"), Column("a_rate", "A %", "pct"), Column("b_rate", "B %", "pct"),
-                Column("a_only", "A only", "int"), Column("b_only", "B only", "int"), Column("p_value", "McNemar p", "p"),
-                Column("p_value_holm", "Holm p", "p"), Column("mean_cost_diff", "mean $ A−B", "usd"),
-                Column("cost_p", "cost p (perm.)", "p"), Column("cost_p_holm", "Holm cost p", "p"),
+                Column("model_label", "model"),
+                Column("env_split", "split"),
+                Column("arm_a", "A"),
+                Column("arm_b", "B"),
+                Column("pairs", "pairs", "int"),
+                Column("a_rate", "A %", "pct"),
+                Column("b_rate", "B %", "pct"),
+                Column("a_only", "A only", "int"),
+                Column("b_only", "B only", "int"),
+                Column("p_value", "McNemar p", "p"),
+                Column("p_value_holm", "Holm p", "p"),
+                Column("mean_cost_diff", "mean $ A−B", "usd"),
+                Column("cost_p", "cost p (perm.)", "p"),
+                Column("cost_p_holm", "Holm cost p", "p"),
             ],
             paired,
             "paired_methods",
@@ -325,7 +421,8 @@ def success(q: Query) -> Section:
             "permutation (sign-flip) test of the mean cost difference, exact up to 16 non-zero "
             "differences, else 20,000 random sign patterns. "
             + _comparisons_note(comparisons([r["p_value"] for r in paired]), "McNemar test")
-            + " " + _comparisons_note(comparisons([r["cost_p"] for r in paired]), "cost test", "Holm cost p"),
+            + " "
+            + _comparisons_note(comparisons([r["cost_p"] for r in paired]), "cost test", "Holm cost p"),
         )
     )
     return sec
@@ -362,13 +459,21 @@ def costs(q: Query) -> Section:
             "costs",
             "Dollars, tokens and calls per episode and per success",
             [
-                Column("model_label", "model"), Column("arm", "method"), Column("env_split", "split"),
-                Column("episodes", "episodes", "int"), Column("successes", "successes", "int"),
-                Column("cost_per_episode", "$/episode", "usd"), Column("cost_sd", "sd", "usd"),
-                Column("cost_per_success", "$/success", "usd"), Column("tokens_per_episode", "tokens/episode", "tokens"),
-                Column("tokens_per_success", "tokens/success", "tokens"), Column("calls_per_episode", "calls/episode", "float"),
-                Column("calls_sd", "sd", "float"), Column("cached_share", "cached %", "pct"),
-                Column("steps_per_episode", "steps/episode", "float"), Column("cost_usd", "total $", "usd"),
+                Column("model_label", "model"),
+                Column("arm", "method"),
+                Column("env_split", "split"),
+                Column("episodes", "episodes", "int"),
+                Column("successes", "successes", "int"),
+                Column("cost_per_episode", "$/episode", "usd"),
+                Column("cost_sd", "sd", "usd"),
+                Column("cost_per_success", "$/success", "usd"),
+                Column("tokens_per_episode", "tokens/episode", "tokens"),
+                Column("tokens_per_success", "tokens/success", "tokens"),
+                Column("calls_per_episode", "calls/episode", "float"),
+                Column("calls_sd", "sd", "float"),
+                Column("cached_share", "cached %", "pct"),
+                Column("steps_per_episode", "steps/episode", "float"),
+                Column("cost_usd", "total $", "usd"),
             ],
             rows,
             "costs",
@@ -378,16 +483,30 @@ def costs(q: Query) -> Section:
     models = _unique(r["model_label"] for r in rows)
     series = _unique(_series_label(r["model_label"], r["arm"], models) for r in rows)
     values = {(r["env_split"], _series_label(r["model_label"], r["arm"], models)): r["cost_per_episode"] for r in rows}
-    sec.plots.append(Plot("cost_per_episode", "Dollars per episode", svg.grouped_bars("Dollars per episode", splits, series, values, y_label="USD per episode", value_fmt=lambda v: f"${v:,.4f}"), "costs"))
+    sec.plots.append(
+        Plot(
+            "cost_per_episode",
+            "Dollars per episode",
+            svg.grouped_bars(
+                "Dollars per episode", splits, series, values, y_label="USD per episode", value_fmt=lambda v: f"${v:,.4f}"
+            ),
+            "costs",
+        )
+    )
     sec.tables.append(
         Table(
             "spend_by_model",
             "Spend by model (every call of every attempt)",
             [
-                Column("model_label", "model"), Column("calls", "calls", "int"), Column("failed_calls", "failed", "int"),
-                Column("retries", "retries", "int"), Column("prompt_tokens", "prompt tokens", "int"),
-                Column("cached_share", "cached %", "pct"), Column("completion_tokens", "completion tokens", "int"),
-                Column("cost_usd", "spend", "usd"), Column("spend_share", "share %", "pct"),
+                Column("model_label", "model"),
+                Column("calls", "calls", "int"),
+                Column("failed_calls", "failed", "int"),
+                Column("retries", "retries", "int"),
+                Column("prompt_tokens", "prompt tokens", "int"),
+                Column("cached_share", "cached %", "pct"),
+                Column("completion_tokens", "completion tokens", "int"),
+                Column("cost_usd", "spend", "usd"),
+                Column("spend_share", "share %", "pct"),
             ],
             q("spend_by_model").dicts(),
             "spend_by_model",
@@ -398,12 +517,19 @@ def costs(q: Query) -> Section:
             "wasted_spend",
             "Spend that bought no success",
             [
-                Column("model_label", "model"), Column("arm", "method"), Column("cost_usd", "spend", "usd"),
-                Column("failed_calls", "failed calls", "int"), Column("retries", "retries", "int"),
-                Column("failed_call_cost", "failed-call $", "usd"), Column("repair_calls", "JSON repairs", "int"),
-                Column("repair_cost", "repair $", "usd"), Column("superseded_cost", "re-run attempts $", "usd"),
-                Column("orphan_cost", "lost attempts $", "usd"), Column("failed_episode_cost", "failed episodes $", "usd"),
-                Column("wasted_cost", "wasted $", "usd"), Column("wasted_share", "wasted %", "pct"),
+                Column("model_label", "model"),
+                Column("arm", "method"),
+                Column("cost_usd", "spend", "usd"),
+                Column("failed_calls", "failed calls", "int"),
+                Column("retries", "retries", "int"),
+                Column("failed_call_cost", "failed-call $", "usd"),
+                Column("repair_calls", "JSON repairs", "int"),
+                Column("repair_cost", "repair $", "usd"),
+                Column("superseded_cost", "re-run attempts $", "usd"),
+                Column("orphan_cost", "lost attempts $", "usd"),
+                Column("failed_episode_cost", "failed episodes $", "usd"),
+                Column("wasted_cost", "wasted $", "usd"),
+                Column("wasted_share", "wasted %", "pct"),
             ],
             q("wasted_spend").dicts(),
             "wasted_spend",
@@ -433,20 +559,35 @@ def context(q: Query) -> Section:
     models = _unique(r["model_label"] for r in per_call)
     series: dict[str, list[tuple[float, float]]] = {}
     for r in per_call:
-        series.setdefault(_series_label(r["model_label"], r["arm"], models), []).append((float(r["call_index"]), float(r["mean_prompt_tokens"])))
-    sec.plots.append(Plot("context_by_call", "Mean prompt tokens by call index", svg.lines("Mean prompt tokens by call index", series, x_label="call index in the episode", y_label="prompt tokens"), "context_by_call"))
+        series.setdefault(_series_label(r["model_label"], r["arm"], models), []).append(
+            (float(r["call_index"]), float(r["mean_prompt_tokens"]))
+        )
+    sec.plots.append(
+        Plot(
+            "context_by_call",
+            "Mean prompt tokens by call index",
+            svg.lines("Mean prompt tokens by call index", series, x_label="call index in the episode", y_label="prompt tokens"),
+            "context_by_call",
+        )
+    )
     sec.tables.append(
         Table(
             "context",
             "Prompt tokens per call",
             [
-                Column("model_label", "model"), Column("arm", "method"), Column("calls", "calls", "int"),
-                Column("mean_prompt_tokens", "mean", "tokens"), Column("median_prompt_tokens", "median", "tokens"),
-                Column("p95_prompt_tokens", "p95", "tokens"), Column("max_prompt_tokens", "max", "int"),
+                Column("model_label", "model"),
+                Column("arm", "method"),
+                Column("calls", "calls", "int"),
+                Column("mean_prompt_tokens", "mean", "tokens"),
+                Column("median_prompt_tokens", "median", "tokens"),
+                Column("p95_prompt_tokens", "p95", "tokens"),
+                Column("max_prompt_tokens", "max", "int"),
                 Column("max_window_messages", "max window (messages)", "int"),
-                Column("episodes", "episodes", "int"), Column("filled_episodes", "window filled", "int"),
+                Column("episodes", "episodes", "int"),
+                Column("filled_episodes", "window filled", "int"),
                 Column("slope_median", "growth after fill: median (tokens/call)", "float"),
-                Column("slope_q25", "25th pct.", "float"), Column("slope_q75", "75th pct.", "float"),
+                Column("slope_q25", "25th pct.", "float"),
+                Column("slope_q75", "75th pct.", "float"),
             ],
             q("context_summary").dicts(),
             "context_summary",
@@ -478,12 +619,19 @@ def trees(q: Query) -> Section:
             "trees",
             "Tree depth, branching factor and leaf failures",
             [
-                Column("model_label", "model"), Column("arm", "method"), Column("env_split", "split"),
-                Column("episodes", "episodes", "int"), Column("mean_levels", "levels", "float"),
-                Column("mean_max_depth", "depth", "float"), Column("max_depth_sd", "sd", "float"),
-                Column("mean_branching_factor", "branching", "float"), Column("branching_factor_sd", "sd", "float"),
-                Column("max_children", "max children", "int"), Column("nodes_per_episode", "nodes/episode", "float"),
-                Column("leaf_failures_per_episode", "leaf failures/episode", "float"), Column("leaf_failures", "leaf failures", "int"),
+                Column("model_label", "model"),
+                Column("arm", "method"),
+                Column("env_split", "split"),
+                Column("episodes", "episodes", "int"),
+                Column("mean_levels", "levels", "float"),
+                Column("mean_max_depth", "depth", "float"),
+                Column("max_depth_sd", "sd", "float"),
+                Column("mean_branching_factor", "branching", "float"),
+                Column("branching_factor_sd", "sd", "float"),
+                Column("max_children", "max children", "int"),
+                Column("nodes_per_episode", "nodes/episode", "float"),
+                Column("leaf_failures_per_episode", "leaf failures/episode", "float"),
+                Column("leaf_failures", "leaf failures", "int"),
                 Column("refinements_per_episode", "refinements/episode", "float"),
             ],
             rows,
@@ -492,7 +640,11 @@ def trees(q: Query) -> Section:
     )
     dist = q("tree_distribution").dicts()
     models = _unique(r["model_label"] for r in dist)
-    titles = {"levels": "Tree levels per episode", "branching_factor": "Branching factor per episode (bin [k, k+1))", "leaf_failures": "Leaf failures per episode"}
+    titles = {
+        "levels": "Tree levels per episode",
+        "branching_factor": "Branching factor per episode (bin [k, k+1))",
+        "leaf_failures": "Leaf failures per episode",
+    }
     for metric, title in titles.items():
         rs = [r for r in dist if r["metric"] == metric]
         if not rs:
@@ -500,7 +652,9 @@ def trees(q: Query) -> Section:
         cats = [str(v) for v in sorted(_unique(r["value"] for r in rs))]
         series = _unique(_series_label(r["model_label"], r["arm"], models) for r in rs)
         values = {(str(r["value"]), _series_label(r["model_label"], r["arm"], models)): float(r["episodes"]) for r in rs}
-        sec.plots.append(Plot(f"tree_{metric}", title, svg.grouped_bars(title, cats, series, values, y_label="episodes"), "tree_distribution"))
+        sec.plots.append(
+            Plot(f"tree_{metric}", title, svg.grouped_bars(title, cats, series, values, y_label="episodes"), "tree_distribution")
+        )
     return sec
 
 
@@ -528,9 +682,14 @@ def failures(q: Query) -> Section:
         "failure_modes",
         "Failure modes: episodes, cost and examples",
         [
-            Column("model_label", "model"), Column("mode", "mode"), Column("episodes", "episodes", "int"),
-            Column("share", "share %", "pct"), Column("cost_usd", "cost", "usd"), Column("mean_steps", "steps/episode", "float"),
-            Column("mean_calls", "calls/episode", "float"), Column("examples", "example episodes", "list"),
+            Column("model_label", "model"),
+            Column("mode", "mode"),
+            Column("episodes", "episodes", "int"),
+            Column("share", "share %", "pct"),
+            Column("cost_usd", "cost", "usd"),
+            Column("mean_steps", "steps/episode", "float"),
+            Column("mean_calls", "calls/episode", "float"),
+            Column("examples", "example episodes", "list"),
         ],
         rows,
         "failure_modes",
@@ -547,10 +706,23 @@ def failures(q: Query) -> Section:
                 row[r["mode"]] = r["episodes"]
         rows2.append(row)
     sec.tables.append(
-        Table("failure_modes_by_arm", "Failure modes by method (episodes)", [Column("model", "model"), Column("arm", "method")] + [Column(mo, mo, "int") for mo in modes], rows2, "failure_modes_by_arm")
+        Table(
+            "failure_modes_by_arm",
+            "Failure modes by method (episodes)",
+            [Column("model", "model"), Column("arm", "method")] + [Column(mo, mo, "int") for mo in modes],
+            rows2,
+            "failure_modes_by_arm",
+        )
     )
     models = _unique(m for m, _ in keys)
     cats = [_series_label(m, a, models) for m, a in keys]
     counts = {(_series_label(r["model_label"], r["arm"], models), r["mode"]): float(r["episodes"]) for r in by_arm}
-    sec.plots.append(Plot("failure_modes", "Failure modes by method", svg.stacked_shares("Failure modes by method", cats, modes, counts), "failure_modes_by_arm"))
+    sec.plots.append(
+        Plot(
+            "failure_modes",
+            "Failure modes by method",
+            svg.stacked_shares("Failure modes by method", cats, modes, counts),
+            "failure_modes_by_arm",
+        )
+    )
     return sec

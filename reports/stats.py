@@ -23,7 +23,9 @@ SAMPLES = 20_000
 SEED = 20251
 
 
-def paired_permutation_p(diffs: Sequence[float], *, exact_max: int = EXACT_MAX, samples: int = SAMPLES, seed: int = SEED) -> float:
+def paired_permutation_p(
+    diffs: Sequence[float], *, exact_max: int = EXACT_MAX, samples: int = SAMPLES, seed: int = SEED
+) -> float:
     """Two-sided p-value of H0 "mean paired difference is 0" by random sign flips.
 
     Under H0 each pair's difference is as likely to be +d as -d. The p-value is the share of

@@ -16,10 +16,26 @@ from html import escape
 #: Tableau 10 (distinguishable, colour-blind friendly enough for a handful of series), then the
 #: other colours of Tableau 20, so that up to 20 arms get a colour each
 PALETTE = (
-    "#4e79a7", "#f28e2b", "#e15759", "#76b7b2", "#59a14f",
-    "#edc948", "#b07aa1", "#ff9da7", "#9c755f", "#bab0ac",
-    "#a0cbe8", "#ffbe7d", "#8cd17d", "#b6992d", "#499894",
-    "#86bcb6", "#ff9d9a", "#79706e", "#d37295", "#d4a6c8",
+    "#4e79a7",
+    "#f28e2b",
+    "#e15759",
+    "#76b7b2",
+    "#59a14f",
+    "#edc948",
+    "#b07aa1",
+    "#ff9da7",
+    "#9c755f",
+    "#bab0ac",
+    "#a0cbe8",
+    "#ffbe7d",
+    "#8cd17d",
+    "#b6992d",
+    "#499894",
+    "#86bcb6",
+    "#ff9d9a",
+    "#79706e",
+    "#d37295",
+    "#d4a6c8",
 )
 
 WIDTH = 760
@@ -117,7 +133,9 @@ def _frame(title: str, body: list[str], legend: Sequence[str], height: int = HEI
     return "\n".join(parts)
 
 
-def _y_axis(ticks: list[float], y_of: Callable[[float], float], left: float, right: float, label: str, fmt: Callable[[float], str]) -> list[str]:
+def _y_axis(
+    ticks: list[float], y_of: Callable[[float], float], left: float, right: float, label: str, fmt: Callable[[float], str]
+) -> list[str]:
     out = []
     for t in ticks:
         y = y_of(t)
@@ -271,7 +289,9 @@ def lines(
         if not pts:
             continue
         path = " ".join(f"{x_of(x):.1f},{y_of(y):.1f}" for x, y in pts)
-        body.append(f'<polyline class="line" fill="none" stroke="{color(si)}" stroke-width="2" points="{path}"><title>{escape(name)}</title></polyline>')
+        body.append(
+            f'<polyline class="line" fill="none" stroke="{color(si)}" stroke-width="2" points="{path}"><title>{escape(name)}</title></polyline>'
+        )
         if len(pts) <= 60:
             for x, y in pts:
                 body.append(

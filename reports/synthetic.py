@@ -44,6 +44,7 @@ WORDS = np.array(
 class SyntheticSpec:
     """The shape of a synthetic run: about ``messages`` message rows, ``mean_calls`` LLM calls per episode, a
     sliding window of ``window`` messages, and the random ``seed``."""
+
     messages: int = 1_000_000
     mean_calls: int = 120
     window: int = 64
@@ -120,54 +121,65 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     mask = rel >= 2
     values[mask] = (np.repeat(before - tail, win_len) + rel - 2)[mask]
     window = pa.ListArray.from_arrays(pa.array(offsets), pa.array(values))
-    prompt = (300 + 55 * (win_len - 2) + rng.integers(0, 200, n_calls) + np.where(np.repeat(method, calls_per) == "recap", 0, 20 * np.minimum(call_idx, 40))).astype(np.int64)
+    prompt = (
+        300
+        + 55 * (win_len - 2)
+        + rng.integers(0, 200, n_calls)
+        + np.where(np.repeat(method, calls_per) == "recap", 0, 20 * np.minimum(call_idx, 40))
+    ).astype(np.int64)
     cached = (prompt * rng.uniform(0, 0.6, n_calls)).astype(np.int64)
     completion = rng.integers(20, 200, n_calls).astype(np.int64)
     status = np.where(rng.uniform(size=n_calls) < 0.01, "error", "ok")
     cost = np.where(status == "ok", (prompt - cached) * 2.5e-6 + cached * 1.25e-6 + completion * 1e-5, 0.0)
     retries = np.where(status == "error", rng.integers(1, 4, n_calls), (rng.uniform(size=n_calls) < 0.02).astype(np.int64))
     purpose = np.where(call_idx == 0, "task", np.array(PURPOSES)[rng.integers(0, len(PURPOSES), n_calls)])
-    calls = pa.table({
-        "run_id": pa.array([run_id] * n_calls),
-        "episode_id": ep_ids[call_ep],
-        "call_index": call_idx,
-        "call_key": np.char.add(np.char.add(ep_ids[call_ep], "#"), call_idx.astype(str)),
-        "purpose": purpose,
-        "window_seqs": window,
-        "model": np.where(status == "ok", "gpt-4o", ""),
-        "status": status,
-        "node_id": pa.nulls(n_calls, pa.int64()),
-        "response_seq": before,
-        "error_kind": pa.array(["rate_limit" if s == "error" else None for s in status.tolist()], pa.string()),
-        "error_message": pa.nulls(n_calls, pa.string()),
-        "prompt_tokens": np.where(status == "ok", prompt, 0),
-        "cached_prompt_tokens": np.where(status == "ok", cached, 0),
-        "completion_tokens": np.where(status == "ok", completion, 0),
-        "cost_usd": cost,
-        "latency_s": rng.uniform(0.3, 3.0, n_calls),
-        "retries": retries,
-        "token_count_source": ["provider"] * n_calls,
-        "served_from": ["provider"] * n_calls,
-        "deployment": pa.nulls(n_calls, pa.string()),
-        "test_double": np.zeros(n_calls, dtype=bool),
-    })
+    calls = pa.table(
+        {
+            "run_id": pa.array([run_id] * n_calls),
+            "episode_id": ep_ids[call_ep],
+            "call_index": call_idx,
+            "call_key": np.char.add(np.char.add(ep_ids[call_ep], "#"), call_idx.astype(str)),
+            "purpose": purpose,
+            "window_seqs": window,
+            "model": np.where(status == "ok", "gpt-4o", ""),
+            "status": status,
+            "node_id": pa.nulls(n_calls, pa.int64()),
+            "response_seq": before,
+            "error_kind": pa.array(["rate_limit" if s == "error" else None for s in status.tolist()], pa.string()),
+            "error_message": pa.nulls(n_calls, pa.string()),
+            "prompt_tokens": np.where(status == "ok", prompt, 0),
+            "cached_prompt_tokens": np.where(status == "ok", cached, 0),
+            "completion_tokens": np.where(status == "ok", completion, 0),
+            "cost_usd": cost,
+            "latency_s": rng.uniform(0.3, 3.0, n_calls),
+            "retries": retries,
+            "token_count_source": ["provider"] * n_calls,
+            "served_from": ["provider"] * n_calls,
+            "deployment": pa.nulls(n_calls, pa.string()),
+            "test_double": np.zeros(n_calls, dtype=bool),
+        }
+    )
 
     # -- messages ------------------------------------------------------------------------------
     n_msg = int(msgs_per.sum())
     msg_ep = np.repeat(np.arange(n_ep), msgs_per)
     msg_seq = np.arange(n_msg) - np.repeat(np.concatenate([[0], np.cumsum(msgs_per)[:-1]]), msgs_per)
     role = np.where((msg_seq >= 2) & (msg_seq % 2 == 1), "assistant", "user")
-    kind = np.where(msg_seq == 0, "demonstration", np.where(msg_seq == 1, "task", np.where(role == "assistant", "reply", "observation")))
-    messages = pa.table({
-        "run_id": pa.array([run_id] * n_msg),
-        "episode_id": ep_ids[msg_ep],
-        "seq": msg_seq,
-        "role": role,
-        "kind": kind,
-        "content": _texts(rng, n_msg, 20, 90),
-        "node_id": pa.nulls(n_msg, pa.int64()),
-        "pinned": msg_seq < 2,
-    })
+    kind = np.where(
+        msg_seq == 0, "demonstration", np.where(msg_seq == 1, "task", np.where(role == "assistant", "reply", "observation"))
+    )
+    messages = pa.table(
+        {
+            "run_id": pa.array([run_id] * n_msg),
+            "episode_id": ep_ids[msg_ep],
+            "seq": msg_seq,
+            "role": role,
+            "kind": kind,
+            "content": _texts(rng, n_msg, 20, 90),
+            "node_id": pa.nulls(n_msg, pa.int64()),
+            "pinned": msg_seq < 2,
+        }
+    )
 
     # -- steps: a few invalid attempts, some episodes end in an a-b loop ----------------------------
     n_steps = int(steps_per.sum())
@@ -181,18 +193,20 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     act = np.where(looping, np.where(st_idx % 2 == 0, "go to table1", "go to table2"), act)
     obs = np.where(looping, np.where(st_idx % 2 == 0, "at table1", "at table2"), obs)
     valid = valid | looping
-    steps = pa.table({
-        "run_id": pa.array([run_id] * n_steps),
-        "episode_id": ep_ids[st_ep],
-        "index": st_idx,
-        "env_step": st_idx + 1,
-        "action": act,
-        "valid": valid,
-        "observation": obs,
-        "done": st_idx == np.repeat(steps_per, steps_per) - 1,
-        "success": (st_idx == np.repeat(steps_per, steps_per) - 1) & np.repeat(success, steps_per),
-        "node_id": pa.nulls(n_steps, pa.int64()),
-    })
+    steps = pa.table(
+        {
+            "run_id": pa.array([run_id] * n_steps),
+            "episode_id": ep_ids[st_ep],
+            "index": st_idx,
+            "env_step": st_idx + 1,
+            "action": act,
+            "valid": valid,
+            "observation": obs,
+            "done": st_idx == np.repeat(steps_per, steps_per) - 1,
+            "success": (st_idx == np.repeat(steps_per, steps_per) - 1) & np.repeat(success, steps_per),
+            "node_id": pa.nulls(n_steps, pa.int64()),
+        }
+    )
 
     # -- task trees for recap episodes: root, ~8 composites, leaves under them -------------------
     rec = np.flatnonzero(method == "recap")
@@ -204,7 +218,9 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     is_comp = (nd_id >= 1) & (nd_id < n_comp)
     leaf_slot = nd_id - n_comp
     parent = np.where(nd_id == 0, -1, np.where(is_comp, 0, np.where(n_comp > 1, leaf_slot % np.maximum(n_comp - 1, 1) + 1, 0)))
-    child_index = np.where(nd_id == 0, 0, np.where(is_comp, nd_id - 1, np.where(n_comp > 1, leaf_slot // np.maximum(n_comp - 1, 1), leaf_slot)))
+    child_index = np.where(
+        nd_id == 0, 0, np.where(is_comp, nd_id - 1, np.where(n_comp > 1, leaf_slot // np.maximum(n_comp - 1, 1), leaf_slot))
+    )
     depth = np.where(nd_id == 0, 0, np.where(is_comp | (parent == 0), 1, 2))
     kind_n = np.where(nd_id == 0, "root", np.where(is_comp, "composite", "primitive"))
     status_n = np.where(rng.uniform(size=n_nodes) < 0.05, "failed", "done")
@@ -218,25 +234,32 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     versions = pa.ListArray.from_arrays(
         pa.array(v_off),
         pa.StructArray.from_arrays(
-            [pa.array(v_num), pa.array(_texts(rng, v_total, 5, 25), pa.string()), subtasks,
-             pa.array(rng.integers(0, 100, v_total).astype(np.int32)), pa.array(rng.integers(2, 200, v_total))],
+            [
+                pa.array(v_num),
+                pa.array(_texts(rng, v_total, 5, 25), pa.string()),
+                subtasks,
+                pa.array(rng.integers(0, 100, v_total).astype(np.int32)),
+                pa.array(rng.integers(2, 200, v_total)),
+            ],
             names=["version", "think", "subtasks", "call_index", "message_seq"],
         ),
     )
     tasks = np.array(["make a burger", "cut lettuce", "cook patty", "assemble", "serve the dish"])
-    nodes = pa.table({
-        "run_id": pa.array([run_id] * n_nodes),
-        "episode_id": ep_ids[nd_ep],
-        "node_id": nd_id,
-        "parent_id": pa.array(parent, mask=parent < 0),
-        "depth": depth,
-        "child_index": child_index,
-        "task": tasks[nd_id % len(tasks)],
-        "kind": kind_n,
-        "status": status_n,
-        "versions": versions,
-        "step_index": pa.nulls(n_nodes, pa.int64()),
-    })
+    nodes = pa.table(
+        {
+            "run_id": pa.array([run_id] * n_nodes),
+            "episode_id": ep_ids[nd_ep],
+            "node_id": nd_id,
+            "parent_id": pa.array(parent, mask=parent < 0),
+            "depth": depth,
+            "child_index": child_index,
+            "task": tasks[nd_id % len(tasks)],
+            "kind": kind_n,
+            "status": status_n,
+            "versions": versions,
+            "step_index": pa.nulls(n_nodes, pa.int64()),
+        }
+    )
     max_depth = np.zeros(n_ep, dtype=np.int64)
     max_depth[rec] = 2
 
@@ -252,9 +275,12 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     alf = bench == "alfworld"
     task = np.where(alf, np.array(ALFWORLD_TYPES)[task_i % len(ALFWORLD_TYPES)], robot_task)
     instance = np.where(
-        alf, np.char.add(np.char.add(np.char.add("alfworld/", task), "/game-"), task_i.astype(str)),
-        np.char.add(np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"),
-                    seed.astype(str)))
+        alf,
+        np.char.add(np.char.add(np.char.add("alfworld/", task), "/game-"), task_i.astype(str)),
+        np.char.add(
+            np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"), seed.astype(str)
+        ),
+    )
     # canonical configs, as the driver stores them (recap.config / recap.baselines to_json)
     from recap.baselines.react import ReActConfig
     from recap.config import ReCAPConfig
@@ -262,49 +288,66 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     cfg = np.where(method == "recap", ReCAPConfig(window=spec.window).to_json(), ReActConfig(window=spec.window).to_json())
     unit = np.char.add(np.char.add(np.char.add(method, "|"), instance), np.char.add("|", seed.astype(str)))
     ended = 1.7e9 + np.arange(n_ep, dtype=np.float64)
-    episodes = pa.table({
-        "run_id": pa.array([run_id] * n_ep),
-        "episode_id": ep_ids,
-        "unit_id": unit,
-        "attempt": np.ones(n_ep, dtype=np.int64),
-        "benchmark": bench,
-        "split": split,
-        "task": task,
-        "instance_id": instance,
-        "seed": seed,
-        "method": method,
-        "method_config": cfg,
-        "model": ["gpt-4o"] * n_ep,
-        "end_reason": end,
-        "success": success,
-        "steps": steps_per,
-        "llm_calls": calls_per,
-        "prompt_tokens": np.bincount(call_ep, weights=np.where(ok, prompt, 0), minlength=n_ep).astype(np.int64),
-        "cached_prompt_tokens": np.bincount(call_ep, weights=np.where(ok, cached, 0), minlength=n_ep).astype(np.int64),
-        "completion_tokens": np.bincount(call_ep, weights=np.where(ok, completion, 0), minlength=n_ep).astype(np.int64),
-        "cost_usd": per_ep_cost,
-        "wall_s": rng.uniform(30, 600, n_ep),
-        "step_cap": np.full(n_ep, 120, dtype=np.int64),
-        "step_multiplier": np.full(n_ep, 4.0),
-        "optimal_steps": np.full(n_ep, 30, dtype=np.int64),
-        "max_depth": max_depth,
-        "error": pa.nulls(n_ep, pa.string()),
-        "worker_id": ["w0"] * n_ep,
-        "started_at": ended - 100.0,
-        "ended_at": ended,
-        "test_double": np.zeros(n_ep, dtype=bool),
-        "label": method,
-        "profile": pa.nulls(n_ep, pa.string()),
-        "ablation": pa.nulls(n_ep, pa.string()),
-        "provider_model": ["openai/gpt-4o-2024-08-06"] * n_ep,
-    })
-    run = pa.table({
-        "run_id": [run_id], "started_at": [1.7e9], "spec_yaml": ["synthetic: true\n"], "spec_hash": ["synthetic"],
-        "package_versions": ["{}"], "git_revision": [None], "host": ["bench"], "command": ["python -m reports.synthetic"],
-        "schema_version": [SCHEMA_VERSION],
-    })
+    episodes = pa.table(
+        {
+            "run_id": pa.array([run_id] * n_ep),
+            "episode_id": ep_ids,
+            "unit_id": unit,
+            "attempt": np.ones(n_ep, dtype=np.int64),
+            "benchmark": bench,
+            "split": split,
+            "task": task,
+            "instance_id": instance,
+            "seed": seed,
+            "method": method,
+            "method_config": cfg,
+            "model": ["gpt-4o"] * n_ep,
+            "end_reason": end,
+            "success": success,
+            "steps": steps_per,
+            "llm_calls": calls_per,
+            "prompt_tokens": np.bincount(call_ep, weights=np.where(ok, prompt, 0), minlength=n_ep).astype(np.int64),
+            "cached_prompt_tokens": np.bincount(call_ep, weights=np.where(ok, cached, 0), minlength=n_ep).astype(np.int64),
+            "completion_tokens": np.bincount(call_ep, weights=np.where(ok, completion, 0), minlength=n_ep).astype(np.int64),
+            "cost_usd": per_ep_cost,
+            "wall_s": rng.uniform(30, 600, n_ep),
+            "step_cap": np.full(n_ep, 120, dtype=np.int64),
+            "step_multiplier": np.full(n_ep, 4.0),
+            "optimal_steps": np.full(n_ep, 30, dtype=np.int64),
+            "max_depth": max_depth,
+            "error": pa.nulls(n_ep, pa.string()),
+            "worker_id": ["w0"] * n_ep,
+            "started_at": ended - 100.0,
+            "ended_at": ended,
+            "test_double": np.zeros(n_ep, dtype=bool),
+            "label": method,
+            "profile": pa.nulls(n_ep, pa.string()),
+            "ablation": pa.nulls(n_ep, pa.string()),
+            "provider_model": ["openai/gpt-4o-2024-08-06"] * n_ep,
+        }
+    )
+    run = pa.table(
+        {
+            "run_id": [run_id],
+            "started_at": [1.7e9],
+            "spec_yaml": ["synthetic: true\n"],
+            "spec_hash": ["synthetic"],
+            "package_versions": ["{}"],
+            "git_revision": [None],
+            "host": ["bench"],
+            "command": ["python -m reports.synthetic"],
+            "schema_version": [SCHEMA_VERSION],
+        }
+    )
     counts = {}
-    for table, data in (("episodes", episodes), ("llm_calls", calls), ("messages", messages), ("steps", steps), ("tree_nodes", nodes), ("run", run)):
+    for table, data in (
+        ("episodes", episodes),
+        ("llm_calls", calls),
+        ("messages", messages),
+        ("steps", steps),
+        ("tree_nodes", nodes),
+        ("run", run),
+    ):
         _write(run_dir, table, data, "synth001", spec.part_rows, spec.row_group_rows)
         counts[table] = data.num_rows
     return counts

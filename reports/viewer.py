@@ -28,7 +28,11 @@ MAX_OBSERVATION_CHARS = 2000
 def select_episodes(con: duckdb.DuckDBPyConnection, wanted: list[str] | None, limit: int) -> list[str]:
     """The episode ids to show: ``wanted`` (all must exist) or a sample of ``limit`` covering modes."""
     if wanted:
-        found = set(run_query(con, "SELECT DISTINCT episode_id FROM attempts WHERE list_contains($ids, episode_id)", {"ids": wanted}).column("episode_id"))
+        found = set(
+            run_query(
+                con, "SELECT DISTINCT episode_id FROM attempts WHERE list_contains($ids, episode_id)", {"ids": wanted}
+            ).column("episode_id")
+        )
         missing = [w for w in wanted if w not in found]
         if missing:
             raise ReportError(f"unknown episode id(s) for the viewer: {', '.join(missing)}")
@@ -73,7 +77,10 @@ def build_viewer(con: duckdb.DuckDBPyConnection, ids: list[str], results: dict[s
     if not ids:
         return ""
     params = {"ids": ids}
-    data = {name: named_query(con, name, params) for name in ("viewer_episodes", "viewer_nodes", "viewer_steps", "viewer_calls", "viewer_messages")}
+    data = {
+        name: named_query(con, name, params)
+        for name in ("viewer_episodes", "viewer_nodes", "viewer_steps", "viewer_calls", "viewer_messages")
+    }
     results.update({f"{k}": v for k, v in data.items()})
     group: dict[str, dict[tuple[str, str], list[dict[str, Any]]]] = {}
     for name in ("viewer_nodes", "viewer_steps", "viewer_calls", "viewer_messages"):
@@ -81,13 +88,23 @@ def build_viewer(con: duckdb.DuckDBPyConnection, ids: list[str], results: dict[s
         for row in data[name].dicts():
             g[(row["run_id"], row["episode_id"])].append(row)
         group[name] = g
-    parts = ['<section id="viewer" class="viewer"><h2>Episode viewer</h2>',
-             f"<p>{len(data['viewer_episodes'].rows)} episode(s). Click a call's window to see the exact "
-             "messages it was sent. Long texts are cut.</p>"]
+    parts = [
+        '<section id="viewer" class="viewer"><h2>Episode viewer</h2>',
+        f"<p>{len(data['viewer_episodes'].rows)} episode(s). Click a call's window to see the exact "
+        "messages it was sent. Long texts are cut.</p>",
+    ]
     order = {e: i for i, e in enumerate(ids)}
     for ep in sorted(data["viewer_episodes"].dicts(), key=lambda e: (order.get(e["episode_id"], len(order)), e["run_id"])):
         key = (ep["run_id"], ep["episode_id"])
-        parts.append(_episode_html(ep, group["viewer_nodes"][key], group["viewer_steps"][key], group["viewer_calls"][key], group["viewer_messages"][key]))
+        parts.append(
+            _episode_html(
+                ep,
+                group["viewer_nodes"][key],
+                group["viewer_steps"][key],
+                group["viewer_calls"][key],
+                group["viewer_messages"][key],
+            )
+        )
     parts.append("</section>")
     return "\n".join(parts)
 
@@ -96,20 +113,30 @@ def _episode_html(ep: dict[str, Any], nodes: list[dict], steps: list[dict], call
     eid = ep["episode_id"]
     aid = anchor(eid)
     meta = [
-        ("model", ep["model_label"]), ("method", ep["arm"]), ("split", ep["env_split"]), ("task", ep["task"]),
-        ("instance", ep["instance_id"]), ("seed", ep["seed"]), ("run", ep["run_id"]),
+        ("model", ep["model_label"]),
+        ("method", ep["arm"]),
+        ("split", ep["env_split"]),
+        ("task", ep["task"]),
+        ("instance", ep["instance_id"]),
+        ("seed", ep["seed"]),
+        ("run", ep["run_id"]),
         ("attempt", f"{ep['attempt']}{'' if ep['is_latest'] else ' (superseded)'}"),
-        ("end", ep["end_reason"]), ("mode", ep["mode"] or "–"), ("steps", ep["steps"]), ("calls", ep["llm_calls"]),
+        ("end", ep["end_reason"]),
+        ("mode", ep["mode"] or "–"),
+        ("steps", ep["steps"]),
+        ("calls", ep["llm_calls"]),
         ("cost", format_value("usd", ep["cost_usd"])),
     ]
     out = [
         f'<article class="episode" id="{aid}" data-episode="{escape(eid)}">',
-        f"<h3><span class=\"ep-link\" data-episode=\"{escape(eid)}\" data-run=\"{escape(ep['run_id'])}\">{escape(eid)}</span> <span class=\"badge {'ok' if ep['success'] else 'fail'}\">{'success' if ep['success'] else escape(ep['mode'] or ep['end_reason'])}</span></h3>",
+        f'<h3><span class="ep-link" data-episode="{escape(eid)}" data-run="{escape(ep["run_id"])}">{escape(eid)}</span> <span class="badge {"ok" if ep["success"] else "fail"}">{"success" if ep["success"] else escape(ep["mode"] or ep["end_reason"])}</span></h3>',
         '<dl class="meta">' + "".join(f"<dt>{k}</dt><dd>{escape(str(v))}</dd>" for k, v in meta) + "</dl>",
     ]
     if ep["error"]:
         out.append(f'<p class="error">{escape(_cut(ep["error"], 500))}</p>')
-    out.append(f'<details open><summary>Context tree ({len(nodes)} nodes)</summary>{_tree_html(nodes) if nodes else "<p>No task tree (this method keeps none).</p>"}</details>')
+    out.append(
+        f"<details open><summary>Context tree ({len(nodes)} nodes)</summary>{_tree_html(nodes) if nodes else '<p>No task tree (this method keeps none).</p>'}</details>"
+    )
     out.append(f"<details><summary>Actions and observations ({len(steps)})</summary>{_steps_html(steps)}</details>")
     out.append(f"<details><summary>LLM calls ({len(calls)})</summary>{_calls_html(aid, calls)}</details>")
     out.append(f"<details><summary>Messages ({len(messages)})</summary>{_messages_html(aid, messages)}</details>")
@@ -133,15 +160,15 @@ def _tree_html(nodes: list[dict]) -> str:
             src = f"call {v['call_index']}" if v["call_index"] is not None else "shortcut"
             think = f'<div class="think">{escape(_cut(v["think"], MAX_MESSAGE_CHARS))}</div>' if v["think"] else ""
             subs = "".join(f"<li>{escape(s)}</li>" for s in v["subtasks"])
-            vs.append(f'<li class="version"><span class="vtag">v{v["version"]} · {src}</span>{think}<ol class="subtasks">{subs}</ol></li>')
+            vs.append(
+                f'<li class="version"><span class="vtag">v{v["version"]} · {src}</span>{think}<ol class="subtasks">{subs}</ol></li>'
+            )
         step = f" · step {n['step_index']}" if n["step_index"] is not None else ""
         kids = "".join(render(c) for c in children.get(n["node_id"], []))
         return (
             f'<li class="node {escape(n["status"])}"><span class="ntitle">#{n["node_id"]} {escape(n["task"])}</span> '
             f'<span class="ntag">{escape(n["kind"])} · {escape(n["status"])} · depth {n["depth"]}{step}</span>'
-            f'<ol class="versions">{"".join(vs)}</ol>'
-            + (f'<ul class="tree">{kids}</ul>' if kids else "")
-            + "</li>"
+            f'<ol class="versions">{"".join(vs)}</ol>' + (f'<ul class="tree">{kids}</ul>' if kids else "") + "</li>"
         )
 
     return '<ul class="tree root">' + "".join(render(r) for r in children.get(None, [])) + "</ul>"
@@ -152,7 +179,7 @@ def _steps_html(steps: list[dict]) -> str:
         return "<p>No steps.</p>"
     rows = "".join(
         f'<tr class="{"" if s["valid"] else "invalid"}"><td>{s["index"]}</td><td>{s["env_step"]}</td><td>{"" if s["node_id"] is None else s["node_id"]}</td>'
-        f'<td>{escape(s["action"])}</td><td>{"yes" if s["valid"] else "no"}</td><td><pre>{escape(_cut(s["observation"], MAX_OBSERVATION_CHARS))}</pre></td></tr>'
+        f"<td>{escape(s['action'])}</td><td>{'yes' if s['valid'] else 'no'}</td><td><pre>{escape(_cut(s['observation'], MAX_OBSERVATION_CHARS))}</pre></td></tr>"
         for s in steps
     )
     return f'<table class="data"><thead><tr><th>#</th><th>env step</th><th>node</th><th>action</th><th>valid</th><th>observation</th></tr></thead><tbody>{rows}</tbody></table>'
@@ -167,9 +194,9 @@ def _calls_html(aid: str, calls: list[dict]) -> str:
         status = c["status"] if c["status"] == "ok" else f"{c['status']}: {c['error_kind']}"
         rows.append(
             f'<tr class="{"" if c["status"] == "ok" else "invalid"}"><td>{c["call_index"]}</td><td>{escape(c["purpose"])}</td>'
-            f'<td>{"" if c["node_id"] is None else c["node_id"]}</td><td>{escape(status)}</td><td>{escape(c["model_label"])}</td>'
-            f'<td>{c["prompt_tokens"]:,}</td><td>{c["cached_prompt_tokens"]:,}</td><td>{c["completion_tokens"]:,}</td>'
-            f'<td>{format_value("usd", c["cost_usd"])}</td><td>{c["retries"]}</td>'
+            f"<td>{'' if c['node_id'] is None else c['node_id']}</td><td>{escape(status)}</td><td>{escape(c['model_label'])}</td>"
+            f"<td>{c['prompt_tokens']:,}</td><td>{c['cached_prompt_tokens']:,}</td><td>{c['completion_tokens']:,}</td>"
+            f"<td>{format_value('usd', c['cost_usd'])}</td><td>{c['retries']}</td>"
             f'<td><button type="button" class="show-window" id="call-{aid}-{c["call_index"]}" data-target="{aid}" data-seqs="{win}" '
             f'data-response="{"" if c["response_seq"] is None else c["response_seq"]}">{len(c["window_seqs"])} msgs: {win}</button></td></tr>'
         )
@@ -185,8 +212,8 @@ def _messages_html(aid: str, messages: list[dict]) -> str:
         return "<p>No messages.</p>"
     items = "".join(
         f'<li class="msg {escape(m["role"])}" data-seq="{m["seq"]}"><span class="mtag">#{m["seq"]} {escape(m["role"])} · {escape(m["kind"])}'
-        f'{" · pinned" if m["pinned"] else ""}{"" if m["node_id"] is None else " · node " + str(m["node_id"])}</span>'
-        f'<pre>{escape(_cut(m["content"], MAX_MESSAGE_CHARS))}</pre></li>'
+        f"{' · pinned' if m['pinned'] else ''}{'' if m['node_id'] is None else ' · node ' + str(m['node_id'])}</span>"
+        f"<pre>{escape(_cut(m['content'], MAX_MESSAGE_CHARS))}</pre></li>"
         for m in messages
     )
     return f'<ol class="messages" id="{aid}-messages">{items}</ol>'

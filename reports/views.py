@@ -150,7 +150,10 @@ def duckdb_types() -> dict[str, dict[str, str]]:
     out: dict[str, dict[str, str]] = {}
     for table, schema in TABLES.items():
         empty = schema.empty_table()  # noqa: F841 - read by DuckDB's replacement scan below
-        out[table] = {name: typ for name, typ in con.execute("SELECT column_name, column_type FROM (DESCRIBE SELECT * FROM empty)").fetchall()}
+        out[table] = {
+            name: typ
+            for name, typ in con.execute("SELECT column_name, column_type FROM (DESCRIBE SELECT * FROM empty)").fetchall()
+        }
     con.close()
     return out
 
@@ -202,7 +205,7 @@ def open_runs_checked(
     con = duckdb.connect(":memory:")
     for table, parts in files.items():
         _create_table_view(con, table, parts)
-    con.execute("CREATE TABLE bad_parts (run_dir VARCHAR, \"table\" VARCHAR, path VARCHAR, error VARCHAR)")
+    con.execute('CREATE TABLE bad_parts (run_dir VARCHAR, "table" VARCHAR, path VARCHAR, error VARCHAR)')
     if skipped:
         con.executemany("INSERT INTO bad_parts VALUES (?, ?, ?, ?)", [(s.run_dir, s.table, s.path, s.error) for s in skipped])
     con.execute("CREATE TABLE run_dirs (run_dir VARCHAR, run_json_id VARCHAR, part_files BIGINT)")
@@ -365,8 +368,11 @@ def check_read_only(con: duckdb.DuckDBPyConnection, sql: str) -> int:
             except Exception:  # noqa: BLE001
                 toks = []
             # PRAGMA name [(args)] only: 'PRAGMA name = value' is a SET
-            if (_words(toks, 0) == "pragma" and _words(toks, 1) in _READ_PRAGMAS
-                    and not any(t[2] == duckdb.token_type.operator and "=" in t[1] for t in toks)):
+            if (
+                _words(toks, 0) == "pragma"
+                and _words(toks, 1) in _READ_PRAGMAS
+                and not any(t[2] == duckdb.token_type.operator and "=" in t[1] for t in toks)
+            ):
                 continue
         kind = st.type.name.replace("_", " ")
         if st.type == duckdb.StatementType.LOAD:  # INSTALL and LOAD parse as LOAD
@@ -405,9 +411,7 @@ class Result:
         return [r[i] for r in self.rows]
 
 
-def run_query(
-    con: duckdb.DuckDBPyConnection, sql: str, params: Mapping[str, Any] | Sequence[Any] | None = None
-) -> Result:
+def run_query(con: duckdb.DuckDBPyConnection, sql: str, params: Mapping[str, Any] | Sequence[Any] | None = None) -> Result:
     """Check that ``sql`` only reads, run it and return the last statement's result."""
     n = check_read_only(con, sql)
     try:

@@ -54,22 +54,36 @@ class BudgetRefusal:
     def message(self) -> str:
         """The one line an episode row's ``error`` carries."""
         if self.scope == "unpriced":
-            return (f"no price for model {self.model}: a capped run cannot price its calls "
-                    "(add it to workers/pricing/prices.yaml or pass a price override)")
+            return (
+                f"no price for model {self.model}: a capped run cannot price its calls "
+                "(add it to workers/pricing/prices.yaml or pass a price override)"
+            )
         who = "run" if self.scope == "run" else self.model
-        return (f"{who} budget: committed {_usd(self.committed_pico)} + this call's worst case "
-                f"{_usd(self.worst_pico or 0)} > cap {_usd(self.cap_pico or 0)}")
+        return (
+            f"{who} budget: committed {_usd(self.committed_pico)} + this call's worst case "
+            f"{_usd(self.worst_pico or 0)} > cap {_usd(self.cap_pico or 0)}"
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """The refusal as plain JSON types, as the ledger answers a gateway's reservation (:meth:`from_dict` reads it back)."""
-        return {"scope": self.scope, "model": self.model, "cap_pico": self.cap_pico,
-                "committed_pico": self.committed_pico, "worst_pico": self.worst_pico}
+        return {
+            "scope": self.scope,
+            "model": self.model,
+            "cap_pico": self.cap_pico,
+            "committed_pico": self.committed_pico,
+            "worst_pico": self.worst_pico,
+        }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> BudgetRefusal:
         """The refusal from :meth:`to_dict`'s form; a missing committed amount reads as 0, an unknown scope raises ValueError."""
-        return cls(scope=d["scope"], model=d["model"], cap_pico=d.get("cap_pico"),
-                   committed_pico=int(d.get("committed_pico") or 0), worst_pico=d.get("worst_pico"))
+        return cls(
+            scope=d["scope"],
+            model=d["model"],
+            cap_pico=d.get("cap_pico"),
+            committed_pico=int(d.get("committed_pico") or 0),
+            worst_pico=d.get("worst_pico"),
+        )
 
 
 @dataclass

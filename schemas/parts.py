@@ -82,6 +82,7 @@ class PartWriter:
 @dataclass(frozen=True)
 class BadPart:
     """A part file a reader skipped, and why (one line)."""
+
     path: Path
     error: str
 
@@ -164,7 +165,9 @@ def inspect_parts(
 
 
 def read_parts(
-    paths: Iterable[Any], table: str, columns: Sequence[str] | None = None,
+    paths: Iterable[Any],
+    table: str,
+    columns: Sequence[str] | None = None,
     open_file: Callable[[str], Any] | None = None,
 ) -> tuple[pa.Table, list[BadPart]]:
     """The rows of the good part files among ``paths`` (optionally a few columns) and the bad

@@ -96,7 +96,9 @@ def vocabularies(record_type: Any) -> dict[str, frozenset[str]]:
     and the values each admits."""
     out: dict[str, frozenset[str]] = {}
     for name, hint in typing.get_type_hints(record_type).items():
-        args = [a for a in typing.get_args(hint) if a is not type(None)] if typing.get_origin(hint) is not typing.Literal else [hint]
+        args = (
+            [a for a in typing.get_args(hint) if a is not type(None)] if typing.get_origin(hint) is not typing.Literal else [hint]
+        )
         for a in args:
             if typing.get_origin(a) is typing.Literal:
                 out[name] = frozenset(typing.get_args(a))

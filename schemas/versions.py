@@ -148,8 +148,7 @@ def _episode_v1(row: dict[str, Any]) -> dict[str, Any]:
         out["ablation"] = ablation_of_config(row.get("method_config"))
     out["provider_model"] = None
     if row.get("benchmark") == "alfworld" or not row.get("split"):
-        _, out["split"], out["task"] = place_of(row.get("instance_id") or "", row.get("split") or None,
-                                                row.get("task") or None)
+        _, out["split"], out["task"] = place_of(row.get("instance_id") or "", row.get("split") or None, row.get("task") or None)
     if infra_failure(row.get("end_reason"), row.get("error")) is not None:
         out["end_reason"] = INFRA_ERROR
     return out

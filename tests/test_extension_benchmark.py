@@ -120,8 +120,9 @@ def corridor():
 
 def _git_status() -> str | None:
     try:
-        done = subprocess.run(["git", "status", "--porcelain", "--untracked-files=all"], cwd=REPO,
-                              capture_output=True, text=True, timeout=60)
+        done = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=all"], cwd=REPO, capture_output=True, text=True, timeout=60
+        )
     except (OSError, subprocess.TimeoutExpired):
         return None
     return done.stdout if done.returncode == 0 else None
@@ -162,8 +163,15 @@ def test_a_benchmark_defined_in_a_test_plays_an_episode_through_the_worker(corri
     assert (out.episode_id, out.model, out.test_double) == ("u1-1", "offline/expert", True)
     result = out.result
     assert isinstance(result, EpisodeResult)
-    assert (result.end_reason, result.success, result.steps, result.llm_calls, result.invalid_actions,
-            result.json_repairs, result.error) == ("success", True, 3, 3, 0, 0, None)
+    assert (
+        result.end_reason,
+        result.success,
+        result.steps,
+        result.llm_calls,
+        result.invalid_actions,
+        result.json_repairs,
+        result.error,
+    ) == ("success", True, 3, 3, 0, 0, None)
 
     rows: dict[str, list[dict]] = {}
     for batch in batches:
@@ -179,15 +187,17 @@ def test_a_benchmark_defined_in_a_test_plays_an_episode_through_the_worker(corri
         (4, "user", "observation", "Observation:\nYou are in room 2 of rooms 0 to 3.", False),
         (5, "assistant", "reply", '{"think": "Expert plan: 1 action(s) left.", "action": "walk forward"}', False),
     ]
-    steps = [(s["index"], s["env_step"], s["action"], s["valid"], s["observation"], s["done"], s["success"])
-             for s in rows["steps"]]
+    steps = [
+        (s["index"], s["env_step"], s["action"], s["valid"], s["observation"], s["done"], s["success"]) for s in rows["steps"]
+    ]
     assert steps == [
         (0, 1, "walk forward", True, "You are in room 1 of rooms 0 to 3.", False, False),
         (1, 2, "walk forward", True, "You are in room 2 of rooms 0 to 3.", False, False),
         (2, 3, "walk forward", True, "You are in room 3 of rooms 0 to 3.", True, True),
     ]
-    calls = [(c["call_index"], c["purpose"], c["window_seqs"], c["response_seq"], c["status"], c["model"])
-             for c in rows["llm_calls"]]
+    calls = [
+        (c["call_index"], c["purpose"], c["window_seqs"], c["response_seq"], c["status"], c["model"]) for c in rows["llm_calls"]
+    ]
     assert calls == [
         (0, "task", [0], 1, "ok", "offline/expert"),
         (1, "observation", [0, 1, 2], 3, "ok", "offline/expert"),
@@ -218,7 +228,9 @@ def test_registration_is_lazy_named_once_and_undone(corridor):
             register_benchmark("tunnel", CorridorBenchmark)
     finally:
         unregister_benchmark("tunnel")
-    with pytest.raises(UnknownInstanceError, match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, corridor$"):
+    with pytest.raises(
+        UnknownInstanceError, match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, corridor$"
+    ):
         registry.get_benchmark("tunnel")
     # the declared hooks' defaults: no per-method options, no data folder, nothing to forward
     bench = registry.get_benchmark(NAME)
@@ -239,8 +251,11 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
         unregister_benchmark("ghost")
     register_benchmark("plain", lambda: object())  # type: ignore[arg-type,return-value]
     try:
-        with pytest.raises(TypeError, match=r"^benchmark 'plain' resolved to <object object at .*>, which is not a "
-                                            r"workers.envs.registry.Benchmark$"):
+        with pytest.raises(
+            TypeError,
+            match=r"^benchmark 'plain' resolved to <object object at .*>, which is not a "
+            r"workers.envs.registry.Benchmark$",
+        ):
             registry.get_benchmark("plain")
     finally:
         unregister_benchmark("plain")

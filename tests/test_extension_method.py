@@ -75,12 +75,20 @@ class ReplanAgent(Agent):
 
     def play(self, ep: Episode, reset: Reset) -> None:
         head = [] if self.demo_mode else [f"Rules:\n{ep.env.rules()}"]
-        ep.conv.pin("task", "\n\n".join([*head, f"Goal: {reset.goal}", f"State:\n{reset.observation}",
-                                         f"Reply with a plan: {self.expected_format}"]))
+        ep.conv.pin(
+            "task",
+            "\n\n".join(
+                [*head, f"Goal: {reset.goal}", f"State:\n{reset.observation}", f"Reply with a plan: {self.expected_format}"]
+            ),
+        )
         prompt: str | None = None
         for _ in range(self.config.max_plans):
-            reply, _seq = ep.conv.ask(prompt, "plan" if prompt is None else "replan", lambda o: plan_reply(o, with_think=True),
-                                      context={"task": reset.goal, "depth": 0, "valid_actions": list(ep.driver.valid_actions or [])})
+            reply, _seq = ep.conv.ask(
+                prompt,
+                "plan" if prompt is None else "replan",
+                lambda o: plan_reply(o, with_think=True),
+                context={"task": reset.goal, "depth": 0, "valid_actions": list(ep.driver.valid_actions or [])},
+            )
             stopped = "the plan ran out"
             for action in reply["actions"]:
                 try:
@@ -118,8 +126,16 @@ def _run(config: ReplanConfig) -> tuple[Any, dict[str, list[dict]]]:
             rows.setdefault(table, []).extend(items)
 
     runner = EpisodeRunner("w1", "run-x", _Factory(), send=send, wait=lambda _ref: None)
-    work = UnitWork(unit_id="u1", instance_id="blocksworld/3@1", method=NAME, method_config=config.to_json(),
-                    model_label="expert", model="offline/expert", seed=1, step_multiplier=4.0)
+    work = UnitWork(
+        unit_id="u1",
+        instance_id="blocksworld/3@1",
+        method=NAME,
+        method_config=config.to_json(),
+        model_label="expert",
+        model="offline/expert",
+        seed=1,
+        step_multiplier=4.0,
+    )
     return runner.run_unit(work, 1), rows
 
 
@@ -158,9 +174,22 @@ def test_a_method_defined_outside_the_repository_runs_a_unit():
 
     assert outcome.crash is None
     r = outcome.result
-    assert (r.end_reason, r.success, r.steps, r.llm_calls, r.invalid_actions, r.json_repairs, r.error) == ("success", True, 10, 1, 0, 0, None)
+    assert (r.end_reason, r.success, r.steps, r.llm_calls, r.invalid_actions, r.json_repairs, r.error) == (
+        "success",
+        True,
+        10,
+        1,
+        0,
+        0,
+        None,
+    )
     assert (outcome.model, outcome.test_double) == ("offline/expert", True)
-    assert (outcome.env.benchmark, outcome.env.split, outcome.env.task, outcome.env.max_steps) == ("blocksworld", "3_blocks", "tower_CAB", 40)
+    assert (outcome.env.benchmark, outcome.env.split, outcome.env.task, outcome.env.max_steps) == (
+        "blocksworld",
+        "3_blocks",
+        "tower_CAB",
+        40,
+    )
 
     messages = [(m["seq"], m["role"], m["kind"], m["pinned"]) for m in rows["messages"]]
     assert messages == [(0, "user", "demonstration", True), (1, "user", "task", True), (2, "assistant", "reply", False)]
@@ -168,14 +197,26 @@ def test_a_method_defined_outside_the_repository_runs_a_unit():
     # the demonstration: the toy's own prompt and the reply it derived from blocksworld's script
     assert text[0] == DEMO
     assert text[1] == TASK
-    plan = ["unstack B from C", "put down B", "unstack C from A", "put down C", "pick up C", "put down C",
-            "pick up A", "stack A on C", "pick up B", "stack B on A"]
+    plan = [
+        "unstack B from C",
+        "put down B",
+        "unstack C from A",
+        "put down C",
+        "pick up C",
+        "put down C",
+        "pick up A",
+        "stack A on C",
+        "pick up B",
+        "stack B on A",
+    ]
     # the offline expert answered the fields the toy declared, knowing nothing else about it
     assert json.loads(text[2]) == {"think": "Expert plan: 10 action(s) left.", "actions": plan}
     assert [(s["index"], s["env_step"], s["action"], s["valid"], s["success"]) for s in rows["steps"]] == [
         (i, i + 1, a, True, i == len(plan) - 1) for i, a in enumerate(plan)
     ]
-    assert [(c["call_index"], c["purpose"], c["status"], c["model"]) for c in rows["llm_calls"]] == [(0, "plan", "ok", "offline/expert")]
+    assert [(c["call_index"], c["purpose"], c["status"], c["model"]) for c in rows["llm_calls"]] == [
+        (0, "plan", "ok", "offline/expert")
+    ]
     assert sorted(rows) == ["llm_calls", "messages", "steps"]
 
 
@@ -196,10 +237,17 @@ def test_the_toy_replans_after_an_invalid_action():
 
 def test_nothing_in_the_repository_names_the_toy_method():
     """The toy needed no edit anywhere: no source file outside this test mentions it."""
-    tracked = subprocess.run(["git", "ls-files", "*.py", "*.yaml", "*.md"], cwd=REPO, capture_output=True, text=True, check=True).stdout.split()
+    tracked = subprocess.run(
+        ["git", "ls-files", "*.py", "*.yaml", "*.md"], cwd=REPO, capture_output=True, text=True, check=True
+    ).stdout.split()
     here = Path(__file__).resolve()
-    named = [p for p in tracked if (REPO / p).resolve() != here and (REPO / p).is_file()
-             and ("ReplanAgent" in (REPO / p).read_text(errors="replace") or f'"{NAME}"' in (REPO / p).read_text(errors="replace"))]
+    named = [
+        p
+        for p in tracked
+        if (REPO / p).resolve() != here
+        and (REPO / p).is_file()
+        and ("ReplanAgent" in (REPO / p).read_text(errors="replace") or f'"{NAME}"' in (REPO / p).read_text(errors="replace"))
+    ]
     assert named == []
 
 

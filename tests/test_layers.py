@@ -40,10 +40,7 @@ def imported_modules(path: Path) -> set[str]:
 
 
 def package_imports(package: str) -> dict[str, set[str]]:
-    return {
-        str(p.relative_to(REPO)): imported_modules(p)
-        for p in sorted((REPO / package).rglob("*.py"))
-    }
+    return {str(p.relative_to(REPO)): imported_modules(p) for p in sorted((REPO / package).rglob("*.py"))}
 
 
 @pytest.mark.parametrize("package", OURS)

@@ -41,8 +41,14 @@ OFFLINE_PREFIX = "offline/"
 # --------------------------------------------------------------------------------------------
 # agents
 # --------------------------------------------------------------------------------------------
-def build_agent(method: str, *, profile: str | None = None, ablation: str | None = None,
-                settings: Mapping[str, Any] | None = None, benchmark: str | None = None) -> Agent:
+def build_agent(
+    method: str,
+    *,
+    profile: str | None = None,
+    ablation: str | None = None,
+    settings: Mapping[str, Any] | None = None,
+    benchmark: str | None = None,
+) -> Agent:
     """The agent for a method name + profile + ablation + settings (``recap.methods.make_agent``).
 
     Unknown methods or settings raise :class:`recap.config.ConfigError` (a bad setting's
@@ -130,8 +136,15 @@ class RecordForwarder:
     batch is in flight, which bounds the worker's memory when the sink is slow.
     """
 
-    def __init__(self, run_id: str, send: Callable[[dict[str, list[dict]]], Any], wait: Callable[[Any], Any],
-                 *, skip_calls: bool, batch_rows: int = 500) -> None:
+    def __init__(
+        self,
+        run_id: str,
+        send: Callable[[dict[str, list[dict]]], Any],
+        wait: Callable[[Any], Any],
+        *,
+        skip_calls: bool,
+        batch_rows: int = 500,
+    ) -> None:
         self.run_id = run_id
         self.send = send
         self.wait = wait
@@ -196,8 +209,16 @@ def agent_from_config(method: str, method_config: str) -> Agent:
 class EpisodeRunner:
     """Plays units; the Ray actor is a thin shell around this (so it can be tested directly)."""
 
-    def __init__(self, worker_id: str, run_id: str, factory: ClientFactory,
-                 send: Callable[[dict[str, list[dict]]], Any], wait: Callable[[Any], Any], *, batch_rows: int = 500) -> None:
+    def __init__(
+        self,
+        worker_id: str,
+        run_id: str,
+        factory: ClientFactory,
+        send: Callable[[dict[str, list[dict]]], Any],
+        wait: Callable[[Any], Any],
+        *,
+        batch_rows: int = 500,
+    ) -> None:
         self.worker_id = worker_id
         self.run_id = run_id
         self.factory = factory
@@ -229,11 +250,20 @@ class EpisodeRunner:
         episode_id = f"{unit.unit_id}-{attempt}"
         t0 = time.perf_counter()
         offline = unit.model.startswith(OFFLINE_PREFIX)
-        out = EpisodeOutcome(unit_id=unit.unit_id, attempt=attempt, episode_id=episode_id, worker_id=self.worker_id,
-                             pid=os.getpid(), started_at=time.time(), env=EnvFacts(unit.benchmark), model=unit.model,
-                             test_double=offline)
-        forward = RecordForwarder(self.run_id, self.send, self.wait, skip_calls=bool(self.factory.writes_llm_calls),
-                                  batch_rows=self.batch_rows)
+        out = EpisodeOutcome(
+            unit_id=unit.unit_id,
+            attempt=attempt,
+            episode_id=episode_id,
+            worker_id=self.worker_id,
+            pid=os.getpid(),
+            started_at=time.time(),
+            env=EnvFacts(unit.benchmark),
+            model=unit.model,
+            test_double=offline,
+        )
+        forward = RecordForwarder(
+            self.run_id, self.send, self.wait, skip_calls=bool(self.factory.writes_llm_calls), batch_rows=self.batch_rows
+        )
         env: Environment | None = None
         try:
             agent = self._agent(unit)
@@ -243,8 +273,9 @@ class EpisodeRunner:
                 log.warning("%s: no environment for %s: %s: %s", episode_id, unit.instance_id, type(exc).__name__, exc)
                 out.result = EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000])
                 return out
-            out.env = EnvFacts(benchmark=env.benchmark, split=env.split, task=env.task,
-                               optimal_steps=env.optimal_steps, max_steps=env.max_steps)
+            out.env = EnvFacts(
+                benchmark=env.benchmark, split=env.split, task=env.task, optimal_steps=env.optimal_steps, max_steps=env.max_steps
+            )
             client = EpisodeClient(self._client(unit.model_label), env, seed=int(unit.seed), offline=offline)
             try:
                 result = agent.run(env, client, episode_id=episode_id, emit=forward)
@@ -271,8 +302,9 @@ class EpisodeRunner:
             out.ended_at = time.time()
             out.wall_s = time.perf_counter() - t0
             self.units_done += 1
-            log.debug("%s done in %.2fs: %s", episode_id, out.wall_s,
-                      out.result.end_reason if out.result is not None else "no result")
+            log.debug(
+                "%s done in %.2fs: %s", episode_id, out.wall_s, out.result.end_reason if out.result is not None else "no result"
+            )
 
 
 # --------------------------------------------------------------------------------------------
@@ -285,8 +317,14 @@ class _EpisodeWorker:
         configure_from_env()
 
         self._sink = sink
-        self.runner = EpisodeRunner(worker_id, run_id, factory, send=lambda rows: sink.add.remote(rows),
-                                    wait=lambda ref: ray.get(ref), batch_rows=batch_rows)
+        self.runner = EpisodeRunner(
+            worker_id,
+            run_id,
+            factory,
+            send=lambda rows: sink.add.remote(rows),
+            wait=lambda ref: ray.get(ref),
+            batch_rows=batch_rows,
+        )
 
     def pid(self) -> int:
         return os.getpid()

@@ -70,8 +70,7 @@ def is_uri(location: str) -> bool:
 def batch_hash(rows_by_table: Mapping[str, Sequence[dict[str, Any]]]) -> str:
     """A content hash of a batch (rows carry episode ids, sequence numbers and timestamps, so
     two different batches never share one)."""
-    canon = json.dumps({t: list(r) for t, r in rows_by_table.items() if r}, sort_keys=True, default=str,
-                       separators=(",", ":"))
+    canon = json.dumps({t: list(r) for t, r in rows_by_table.items() if r}, sort_keys=True, default=str, separators=(",", ":"))
     return hashlib.blake2b(canon.encode(), digest_size=16).hexdigest()
 
 
@@ -102,7 +101,7 @@ def read_segment(path: Path) -> Iterator[tuple[str, dict[str, list[dict[str, Any
     pos = 0
     while pos + _HEADER.size <= len(data):
         size, crc = _HEADER.unpack_from(data, pos)
-        payload = data[pos + _HEADER.size: pos + _HEADER.size + size]
+        payload = data[pos + _HEADER.size : pos + _HEADER.size + size]
         if len(payload) < size or zlib.crc32(payload) != crc:
             return
         try:
@@ -124,7 +123,9 @@ def _write_segment_parts(writer: PartWriter | Any, seg: int, buffer: Mapping[str
         writer._n = seg - 1
         path = writer.write_rows(table, rows)
         if path is not None:
-            if isinstance(path, Path) and path.name != f"part-{getattr(writer, 'writer', '')}-{seg:06d}.parquet":  # the naming the log relies on changed
+            if (
+                isinstance(path, Path) and path.name != f"part-{getattr(writer, 'writer', '')}-{seg:06d}.parquet"
+            ):  # the naming the log relies on changed
                 raise RuntimeError(f"sink part {path.name} is not named after its log segment {seg}")
             written[table] = len(rows)
     return written
@@ -177,8 +178,16 @@ def records_by_table(records: Iterable[Any], run_id: str) -> dict[str, list[dict
 class Sink:
     """Buffers rows by table and writes them as part files (see the module docstring)."""
 
-    def __init__(self, location: str, run_id: str, *, writer: str | None = None,
-                 flush_rows: int = 5000, flush_s: float = 2.0, wal: bool = True) -> None:
+    def __init__(
+        self,
+        location: str,
+        run_id: str,
+        *,
+        writer: str | None = None,
+        flush_rows: int = 5000,
+        flush_s: float = 2.0,
+        wal: bool = True,
+    ) -> None:
         self.run_id = run_id
         self.run_dir = Path(location)
         self.writer = PartWriter(self.run_dir, writer or f"sink{uuid.uuid4().hex[:8]}")
@@ -241,8 +250,9 @@ class Sink:
             path = _segment_path(self.run_dir, self.name, self.seg)
             path.parent.mkdir(parents=True, exist_ok=True)
             self._wal_fh = open(path, "ab")
-        payload = pickle.dumps({"h": h, "rows": {t: list(r) for t, r in rows_by_table.items() if r}},
-                               protocol=pickle.HIGHEST_PROTOCOL)
+        payload = pickle.dumps(
+            {"h": h, "rows": {t: list(r) for t, r in rows_by_table.items() if r}}, protocol=pickle.HIGHEST_PROTOCOL
+        )
         self._wal_fh.write(_HEADER.pack(len(payload), zlib.crc32(payload)) + payload)
         self._wal_fh.flush()  # in the kernel: survives a kill of this process
 

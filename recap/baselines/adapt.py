@@ -127,8 +127,9 @@ def fork(conv: Conversation, expected_format: str, reply_fields: tuple[str, ...]
     forked = conv.fork(expected_format=expected_format, reply_fields=reply_fields)
     if forked.history.counter is not conv.history.counter:
         h = conv.history
-        forked.history = History(conv.episode_id, h.window, mode=h.mode, block=h.block, emit=conv.emit, counter=h.counter,
-                                 counts_pins=h.counts_pins)
+        forked.history = History(
+            conv.episode_id, h.window, mode=h.mode, block=h.block, emit=conv.emit, counter=h.counter, counts_pins=h.counts_pins
+        )
     return forked
 
 
@@ -259,8 +260,9 @@ class ADaPTAgent(Agent):
         valid = ep.driver.valid_actions
         return {"role": role, "task": node.task, "depth": node.depth, "valid_actions": list(valid) if valid is not None else None}
 
-    def _open(self, ep: Episode, node: TaskNode | None, demo: str | None, expected_format: str,
-              reply_fields: tuple[str, ...]) -> Conversation:
+    def _open(
+        self, ep: Episode, node: TaskNode | None, demo: str | None, expected_format: str, reply_fields: tuple[str, ...]
+    ) -> Conversation:
         """The root executor works in the episode's main context (its demonstration is already
         pinned there); every other executor run and every planner call gets a fresh one."""
         if node is not None and node.parent is None:
@@ -278,7 +280,9 @@ class ADaPTAgent(Agent):
         kind = "executor_task"
         streak = 0
         for _ in range(cfg.executor_steps):
-            reply, _seq = conv.ask(prompt, kind, executor_reply, node_id=node.node_id, context=self._context(ep, node, "executor"))
+            reply, _seq = conv.ask(
+                prompt, kind, executor_reply, node_id=node.node_id, context=self._context(ep, node, "executor")
+            )
             if reply["status"] is not None:
                 return reply["status"] == "done"
             action = reply["action"]
@@ -300,7 +304,9 @@ class ADaPTAgent(Agent):
     def _plan(self, ep: Episode, node: TaskNode) -> tuple[tuple[str, ...], str]:
         conv = self._open(ep, None, ep.extra["planner_demo"], P.PLANNER_FORMAT, PLANNER_REPLY_FIELDS)
         conv.pin("planner_task", P.planner_task_prompt(task=node.task, **self._situation(ep, "planner")))
-        reply, seq = conv.ask(None, "planner_task", planner_reply, node_id=node.node_id, context=self._context(ep, node, "planner"))
+        reply, seq = conv.ask(
+            None, "planner_task", planner_reply, node_id=node.node_id, context=self._context(ep, node, "planner")
+        )
         node.versions.append(NodeVersion(len(node.versions), reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq))
         return reply["subtasks"], reply["logic"]
 
@@ -336,10 +342,14 @@ class ADaPTAgent(Agent):
         if key not in _DEMOS:
             replies = demo.replies.get(EXECUTOR_DEMO_KEY) or demo.replies.get(ReActAgent.style)
             if replies is None:
-                raise DemonstrationError(f"demonstration {demo.name!r} has no 'adapt_executor' or 'react' replies for the ADaPT executor")
+                raise DemonstrationError(
+                    f"demonstration {demo.name!r} has no 'adapt_executor' or 'react' replies for the ADaPT executor"
+                )
             messages, result = self._render_run(demo, list(replies), "executor")
             if not result.success:
-                raise DemonstrationError(f"demonstration {demo.name!r} does not reach the goal with the ADaPT executor ({result.end_reason}: {result.error})")
+                raise DemonstrationError(
+                    f"demonstration {demo.name!r} does not reach the goal with the ADaPT executor ({result.end_reason}: {result.error})"
+                )
             _DEMOS[key] = format_transcript(messages)
         return _DEMOS[key]
 
@@ -348,7 +358,9 @@ class ADaPTAgent(Agent):
         if key not in _DEMOS:
             messages, result = self._render_run(demo, [planner_demo_reply(demo)], "planner")
             if result.end_reason != "agent_done" or result.llm_calls != 1:
-                raise DemonstrationError(f"the ADaPT planner reply of demonstration {demo.name!r} is not usable ({result.end_reason}: {result.error})")
+                raise DemonstrationError(
+                    f"the ADaPT planner reply of demonstration {demo.name!r} is not usable ({result.end_reason}: {result.error})"
+                )
             prompt, reply = (m.content for m in messages)
             _DEMOS[key] = P.planner_transcript(prompt, reply)
         return _DEMOS[key]
@@ -363,7 +375,13 @@ class ADaPTAgent(Agent):
             if isinstance(record, MessageRecord):
                 messages.append(record)
 
-        result = agent.run(self.demo_env(demo), ScriptedClient(replies, model="demonstration"), episode_id=f"demo:{demo.name}:{part}", emit=keep, demonstration=False)
+        result = agent.run(
+            self.demo_env(demo),
+            ScriptedClient(replies, model="demonstration"),
+            episode_id=f"demo:{demo.name}:{part}",
+            emit=keep,
+            demonstration=False,
+        )
         return messages, result
 
     def _demo_texts(self, ep: Episode) -> tuple[str | None, str | None]:
@@ -385,6 +403,8 @@ def planner_demo_reply(demo: Demonstration) -> dict[str, Any]:
         return dict(demo.replies[PLANNER_DEMO_KEY][0])
     recap = demo.replies.get(ReCAPAgent.style)
     if not recap:
-        raise DemonstrationError(f"demonstration {demo.name!r} has no 'adapt_planner' or 'recap' replies to derive the ADaPT planner's example")
+        raise DemonstrationError(
+            f"demonstration {demo.name!r} has no 'adapt_planner' or 'recap' replies to derive the ADaPT planner's example"
+        )
     first = recap[0]
     return {"think": first.get("think") or "", "subtasks": list(first["subtasks"]), "logic": "and"}

@@ -45,13 +45,41 @@ log = logging.getLogger(__name__)
 
 #: filters of the episode list: (parameter, column of _episode_list); optional ones only when present
 FILTERS: tuple[tuple[str, str], ...] = (
-    ("run", "run_id"), ("model", "model_label"), ("label", "label"), ("arm", "arm"), ("method", "method"),
-    ("profile", "profile"), ("ablation", "ablation"), ("benchmark", "benchmark"), ("split", "split"),
-    ("task", "task"), ("end_reason", "end_reason"), ("mode", "mode"), ("success", "success"),
+    ("run", "run_id"),
+    ("model", "model_label"),
+    ("label", "label"),
+    ("arm", "arm"),
+    ("method", "method"),
+    ("profile", "profile"),
+    ("ablation", "ablation"),
+    ("benchmark", "benchmark"),
+    ("split", "split"),
+    ("task", "task"),
+    ("end_reason", "end_reason"),
+    ("mode", "mode"),
+    ("success", "success"),
 )
 #: columns the list may be sorted by (the URL names them; nothing else reaches the SQL)
-SORTABLE = ("episode_id", "run_id", "model_label", "arm", "label", "env_split", "task", "instance_id", "seed",
-            "attempt", "end_reason", "mode", "success", "steps", "llm_calls", "cost_usd", "wall_s", "ended_at")
+SORTABLE = (
+    "episode_id",
+    "run_id",
+    "model_label",
+    "arm",
+    "label",
+    "env_split",
+    "task",
+    "instance_id",
+    "seed",
+    "attempt",
+    "end_reason",
+    "mode",
+    "success",
+    "steps",
+    "llm_calls",
+    "cost_usd",
+    "wall_s",
+    "ended_at",
+)
 PAGE_SIZES = (25, 50, 100, 200)
 #: the longest search text accepted (a phrase, not a document)
 MAX_QUERY_CHARS = 200
@@ -90,13 +118,25 @@ class SearchIndex:
             part = self._parts.get(key)
             if part is None:
                 raw = pq.read_table(f, columns=["run_id", "episode_id", "seq", "content"])
-                part = pa.table({"run_id": raw["run_id"], "episode_id": raw["episode_id"], "seq": raw["seq"],
-                                 "text": pc.utf8_lower(raw["content"])})
+                part = pa.table(
+                    {
+                        "run_id": raw["run_id"],
+                        "episode_id": raw["episode_id"],
+                        "seq": raw["seq"],
+                        "text": pc.utf8_lower(raw["content"]),
+                    }
+                )
             keep[key] = part
         self._parts = keep
         if not keep:
-            return pa.table({"run_id": pa.array([], pa.string()), "episode_id": pa.array([], pa.string()),
-                             "seq": pa.array([], pa.int64()), "text": pa.array([], pa.string())})
+            return pa.table(
+                {
+                    "run_id": pa.array([], pa.string()),
+                    "episode_id": pa.array([], pa.string()),
+                    "seq": pa.array([], pa.int64()),
+                    "text": pa.array([], pa.string()),
+                }
+            )
         return pa.concat_tables(list(keep.values()))
 
 
@@ -132,8 +172,11 @@ class Snapshot:
             name = self.hits.pop(text, None)
             if name is None:
                 name = f"_hits_{len(self.hits)}_{int(time.time() * 1e6)}"
-                self.con.execute(f"CREATE TEMP TABLE {name} AS SELECT run_id, episode_id, count(*) AS hits, min(seq) AS first_hit "
-                                 "FROM _search WHERE contains(text, $q) GROUP BY ALL", {"q": text})
+                self.con.execute(
+                    f"CREATE TEMP TABLE {name} AS SELECT run_id, episode_id, count(*) AS hits, min(seq) AS first_hit "
+                    "FROM _search WHERE contains(text, $q) GROUP BY ALL",
+                    {"q": text},
+                )
                 while len(self.hits) >= SEARCH_CACHE:
                     old = self.hits.pop(next(iter(self.hits)))
                     self.con.execute(f"DROP TABLE IF EXISTS {old}")
@@ -171,8 +214,12 @@ def build_snapshot(run_dirs: Sequence[Path], index: SearchIndex) -> Snapshot:
         options: dict[str, list[Any]] = {}
         for param, col in FILTERS:
             if col in columns:
-                options[param] = [r[0] for r in con.execute(
-                    f'SELECT DISTINCT "{col}" FROM _episode_list WHERE "{col}" IS NOT NULL ORDER BY 1').fetchall()]
+                options[param] = [
+                    r[0]
+                    for r in con.execute(
+                        f'SELECT DISTINCT "{col}" FROM _episode_list WHERE "{col}" IS NOT NULL ORDER BY 1'
+                    ).fetchall()
+                ]
     except BaseException:
         con.close()
         raise
@@ -187,8 +234,11 @@ def _fingerprint(run_dirs: Sequence[Path]) -> tuple:
             folder = d / table
             try:
                 with os.scandir(folder) as it:
-                    out.extend((e.path, e.stat().st_size, e.stat().st_mtime_ns) for e in it
-                               if e.name.endswith(".parquet") and not e.name.startswith("."))
+                    out.extend(
+                        (e.path, e.stat().st_size, e.stat().st_mtime_ns)
+                        for e in it
+                        if e.name.endswith(".parquet") and not e.name.startswith(".")
+                    )
             except OSError:
                 continue
         for name in (RUN_FILE, PLAN_FILE):
@@ -249,7 +299,9 @@ class Catalog:
 # -- runs -----------------------------------------------------------------------------------------
 
 _SECRET_KEY = re.compile(r"(key|token|secret|password|passwd|authorization|credential)", re.I)
-_SECRET_VALUE = re.compile(r"\b(sk-[A-Za-z0-9_\-]{8,}|(?:AKIA|ASIA)[A-Z0-9]{12,}|[A-Za-z0-9_\-]{20,}\.[A-Za-z0-9_\-]{20,}\.[A-Za-z0-9_\-]{10,})\b")
+_SECRET_VALUE = re.compile(
+    r"\b(sk-[A-Za-z0-9_\-]{8,}|(?:AKIA|ASIA)[A-Z0-9]{12,}|[A-Za-z0-9_\-]{20,}\.[A-Za-z0-9_\-]{20,}\.[A-Za-z0-9_\-]{10,})\b"
+)
 
 
 def redact_spec(text: str) -> str:
@@ -294,10 +346,14 @@ def runs(snap: Snapshot) -> list[dict[str, Any]]:
         for k in _COVERAGE_COUNTS:
             if k in r:
                 c[k] = c.get(k, 0) + int(r[k] or 0)
-    spend = {r["run_id"]: r for r in snap.query(
-        "SELECT run_id, sum(cost_usd) AS spend_usd, count(*) AS calls FROM llm_calls GROUP BY run_id").dicts()}
-    specs = {r["run_id"]: r["spec_yaml"] for r in snap.query(
-        "SELECT run_id, arg_max(spec_yaml, started_at) AS spec_yaml FROM run GROUP BY run_id").dicts()}
+    spend = {
+        r["run_id"]: r
+        for r in snap.query("SELECT run_id, sum(cost_usd) AS spend_usd, count(*) AS calls FROM llm_calls GROUP BY run_id").dicts()
+    }
+    specs = {
+        r["run_id"]: r["spec_yaml"]
+        for r in snap.query("SELECT run_id, arg_max(spec_yaml, started_at) AS spec_yaml FROM run GROUP BY run_id").dicts()
+    }
     folders = snap.query("SELECT run_dir, run_json_id FROM run_dirs ORDER BY run_dir").dicts()
     out = []
     seen = set()
@@ -308,15 +364,28 @@ def runs(snap: Snapshot) -> list[dict[str, Any]]:
         for run_id in ids:
             seen.add(run_id)
             b, c, s = base.get(run_id, {}), cover_by.get(run_id, {}), spend.get(run_id, {})
-            out.append({
-                "run_id": run_id, "name": name, "run_dir": f["run_dir"], "started": b.get("first_started"),
-                "starts": b.get("starts", 0), "host": b.get("host"), "git_revision": b.get("git_revision"),
-                "planned": c.get("planned"), "finished": c.get("finished"), "successes": c.get("successes"),
-                "capped": c.get("capped"), "not_started": c.get("not_started"),
-                "gave_up": c.get("gave_up", c.get("infra_failed")),
-                "units": b.get("units", 0), "spend_usd": s.get("spend_usd") or 0.0, "calls": s.get("calls", 0),
-                "caps": _spec_caps(specs.get(run_id)), "has_spec": specs.get(run_id) is not None,
-            })
+            out.append(
+                {
+                    "run_id": run_id,
+                    "name": name,
+                    "run_dir": f["run_dir"],
+                    "started": b.get("first_started"),
+                    "starts": b.get("starts", 0),
+                    "host": b.get("host"),
+                    "git_revision": b.get("git_revision"),
+                    "planned": c.get("planned"),
+                    "finished": c.get("finished"),
+                    "successes": c.get("successes"),
+                    "capped": c.get("capped"),
+                    "not_started": c.get("not_started"),
+                    "gave_up": c.get("gave_up", c.get("infra_failed")),
+                    "units": b.get("units", 0),
+                    "spend_usd": s.get("spend_usd") or 0.0,
+                    "calls": s.get("calls", 0),
+                    "caps": _spec_caps(specs.get(run_id)),
+                    "has_spec": specs.get(run_id) is not None,
+                }
+            )
     return out
 
 
@@ -344,6 +413,7 @@ def _run_name(run_dir: Path) -> str:
 class ListQuery:
     """The episode list's checked URL parameters: column filters, a message search ``q``, sort column and
     direction, page (1-based) and page size, and whether only the counted (latest) row of each unit is shown."""
+
     filters: dict[str, str]
     q: str = ""
     sort: str = "episode_id"
@@ -398,15 +468,37 @@ def parse_list_query(params: dict[str, list[str]], snap: Snapshot) -> ListQuery:
 @dataclass
 class EpisodePage:
     """One page of the episode list, the total matching rows across pages, and how long the query took (ms)."""
+
     rows: list[dict[str, Any]]
     total: int
     query: ListQuery
     elapsed_ms: float
 
 
-_LIST_COLUMNS = ("run_id", "episode_id", "unit_id", "attempt", "is_latest", "model_label", "arm", "method", "ablation",
-                 "benchmark", "split", "env_split", "task", "instance_id", "seed", "end_reason", "success", "mode",
-                 "steps", "llm_calls", "cost_usd", "wall_s")
+_LIST_COLUMNS = (
+    "run_id",
+    "episode_id",
+    "unit_id",
+    "attempt",
+    "is_latest",
+    "model_label",
+    "arm",
+    "method",
+    "ablation",
+    "benchmark",
+    "split",
+    "env_split",
+    "task",
+    "instance_id",
+    "seed",
+    "end_reason",
+    "success",
+    "mode",
+    "steps",
+    "llm_calls",
+    "cost_usd",
+    "wall_s",
+)
 
 
 def episode_list(snap: Snapshot, lq: ListQuery) -> EpisodePage:
@@ -429,9 +521,11 @@ def episode_list(snap: Snapshot, lq: ListQuery) -> EpisodePage:
     cols = [c for c in _LIST_COLUMNS if c in snap.columns] + [c for c in ("label", "profile") if c in snap.columns]
     select = ", ".join(f'e."{c}"' for c in cols) + (", h.hits, h.first_hit" if lq.q else ", NULL AS hits, NULL AS first_hit")
     order = f'e."{lq.sort}" {"DESC" if lq.desc else "ASC"} NULLS LAST, e.episode_id, e.run_id'
-    sql = (f"SELECT {select}, count(*) OVER () AS total FROM _episode_list e {hits} "
-           f"{'WHERE ' + ' AND '.join(where) if where else ''} ORDER BY {order} "
-           f"LIMIT {lq.per} OFFSET {(lq.page - 1) * lq.per}")
+    sql = (
+        f"SELECT {select}, count(*) OVER () AS total FROM _episode_list e {hits} "
+        f"{'WHERE ' + ' AND '.join(where) if where else ''} ORDER BY {order} "
+        f"LIMIT {lq.per} OFFSET {(lq.page - 1) * lq.per}"
+    )
     res = snap.query(sql, params)
     rows = res.dicts()
     total = rows[0]["total"] if rows else (0 if lq.page == 1 else _count(snap, where, hits, params))
@@ -450,6 +544,7 @@ def _count(snap: Snapshot, where: list[str], hits: str, params: dict[str, Any]) 
 class Episode:
     """One episode as the viewer shows it: its row and the rows of its tree nodes, steps, calls and messages, and
     the query time (ms)."""
+
     meta: dict[str, Any]
     nodes: list[dict[str, Any]]
     steps: list[dict[str, Any]]
@@ -486,7 +581,9 @@ def episode(snap: Snapshot, run_id: str, episode_id: str) -> Episode:
     meta = mine("viewer_episodes")
     if not meta:
         raise BadRequest(f"no episode {episode_id!r} in run {run_id!r}", 404)
-    extra = snap.query("SELECT * FROM _episode_list WHERE run_id = $r AND episode_id = $e", {"r": run_id, "e": episode_id}).dicts()
+    extra = snap.query(
+        "SELECT * FROM _episode_list WHERE run_id = $r AND episode_id = $e", {"r": run_id, "e": episode_id}
+    ).dicts()
     m = {**(extra[0] if extra else {}), **meta[0]}
     out = Episode(m, mine("viewer_nodes"), mine("viewer_steps"), mine("viewer_calls"), mine("viewer_messages"), 0.0)
     out.elapsed_ms = (time.perf_counter() - t0) * 1000
@@ -498,7 +595,9 @@ def call_window(snap: Snapshot, run_id: str, episode_id: str, call_index: int) -
     call = snap.query(
         "SELECT call_index, purpose, status, window_seqs, response_seq, model_label, prompt_tokens, completion_tokens, "
         "cost_usd, latency_s, retries, error_kind, error_message FROM calls "
-        "WHERE run_id = $r AND episode_id = $e AND call_index = $c", {"r": run_id, "e": episode_id, "c": call_index}).dicts()
+        "WHERE run_id = $r AND episode_id = $e AND call_index = $c",
+        {"r": run_id, "e": episode_id, "c": call_index},
+    ).dicts()
     if not call:
         raise BadRequest(f"episode {episode_id!r} has no call {call_index}", 404)
     msgs = snap.query(
@@ -506,7 +605,8 @@ def call_window(snap: Snapshot, run_id: str, episode_id: str, call_index: int) -
         "WHERE run_id = $r AND episode_id = $e AND call_index = $c) "
         "SELECT w.pos, w.seq, m.role, m.kind, m.pinned, m.node_id, m.content FROM w "
         "LEFT JOIN messages m ON m.run_id = $r AND m.episode_id = $e AND m.seq = w.seq ORDER BY w.pos",
-        {"r": run_id, "e": episode_id, "c": call_index}).dicts()
+        {"r": run_id, "e": episode_id, "c": call_index},
+    ).dicts()
     return call[0], msgs
 
 
@@ -517,6 +617,7 @@ def call_window(snap: Snapshot, run_id: str, episode_id: str, call_index: int) -
 class Comparison:
     """Two runs or two arms (``kind``) compared on the units both ran: successes, discordant pairs with the exact
     McNemar p, cost difference (a minus b) with a permutation p, overall and per task."""
+
     kind: str  # "run" or "arm"
     a: str
     b: str
@@ -542,18 +643,26 @@ def _side_sql(kind: str, columns: set[str]) -> str:
     terminal view keeps one run per unit, so it cannot pair two runs). Two arms: the rows the
     report's paired table counts (terminal, finished), paired like reports/sql/paired_methods.sql
     on model, split, task, instance and seed."""
-    cols = ("SELECT {side} AS side, {grp} AS grp, env_split, task, instance_id, seed, run_id, episode_id, success, "
-            "cost_usd, end_reason, mode FROM _episode_list ")
+    cols = (
+        "SELECT {side} AS side, {grp} AS grp, env_split, task, instance_id, seed, run_id, episode_id, success, "
+        "cost_usd, end_reason, mode FROM _episode_list "
+    )
     finished_first = "finished DESC, " if "finished" in columns else ""
     if kind == "run":
-        return (cols.format(side="run_id", grp="arm || ' · ' || model_label")
-                + f"QUALIFY row_number() OVER (PARTITION BY run_id, unit_id ORDER BY {finished_first}attempt DESC, "
-                "ended_at DESC, episode_id DESC) = 1")
+        return (
+            cols.format(side="run_id", grp="arm || ' · ' || model_label")
+            + f"QUALIFY row_number() OVER (PARTITION BY run_id, unit_id ORDER BY {finished_first}attempt DESC, "
+            "ended_at DESC, episode_id DESC) = 1"
+        )
     counted = "is_unit_row" if "is_unit_row" in columns else "is_latest"
     # several runs may hold the same (arm, model, instance, seed): the latest row counts, as in paired_methods.sql
-    return (cols.format(side="arm", grp="model_label") + f"WHERE {counted}" + (" AND finished" if "finished" in columns else "")
-            + " QUALIFY row_number() OVER (PARTITION BY arm, model_label, env_split, task, instance_id, seed "
-            "ORDER BY ended_at DESC, run_id DESC, episode_id DESC) = 1")
+    return (
+        cols.format(side="arm", grp="model_label")
+        + f"WHERE {counted}"
+        + (" AND finished" if "finished" in columns else "")
+        + " QUALIFY row_number() OVER (PARTITION BY arm, model_label, env_split, task, instance_id, seed "
+        "ORDER BY ended_at DESC, run_id DESC, episode_id DESC) = 1"
+    )
 
 
 def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
@@ -579,9 +688,20 @@ def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
     pairs = snap.query(sql, {"a": a, "b": b}).dicts()
     per: dict[tuple[str, str, str], dict[str, Any]] = {}
     for p in pairs:
-        t = per.setdefault((p["grp"], p["env_split"], p["task"]), {"group": p["grp"], "env_split": p["env_split"], "task": p["task"],
-                                                                     "pairs": 0, "a_successes": 0, "b_successes": 0, "a_only": 0,
-                                                                     "b_only": 0, "cost_diffs": []})
+        t = per.setdefault(
+            (p["grp"], p["env_split"], p["task"]),
+            {
+                "group": p["grp"],
+                "env_split": p["env_split"],
+                "task": p["task"],
+                "pairs": 0,
+                "a_successes": 0,
+                "b_successes": 0,
+                "a_only": 0,
+                "b_only": 0,
+                "cost_diffs": [],
+            },
+        )
         t["pairs"] += 1
         t["a_successes"] += bool(p["a_success"])
         t["b_successes"] += bool(p["b_success"])
@@ -598,13 +718,26 @@ def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
     a_only = sum(1 for p in pairs if p["a_success"] and not p["b_success"])
     b_only = sum(1 for p in pairs if p["b_success"] and not p["a_success"])
     return Comparison(
-        kind, a, b, per_task, len(pairs), sum(bool(p["a_success"]) for p in pairs), sum(bool(p["b_success"]) for p in pairs),
-        a_only, b_only, float(mcnemar_exact(a_only, b_only)),
-        sum(diffs) / len(diffs) if diffs else None, paired_permutation_p(diffs) if diffs else None,
-        [p for p in pairs if bool(p["a_success"]) != bool(p["b_success"])], (time.perf_counter() - t0) * 1000)
+        kind,
+        a,
+        b,
+        per_task,
+        len(pairs),
+        sum(bool(p["a_success"]) for p in pairs),
+        sum(bool(p["b_success"]) for p in pairs),
+        a_only,
+        b_only,
+        float(mcnemar_exact(a_only, b_only)),
+        sum(diffs) / len(diffs) if diffs else None,
+        paired_permutation_p(diffs) if diffs else None,
+        [p for p in pairs if bool(p["a_success"]) != bool(p["b_success"])],
+        (time.perf_counter() - t0) * 1000,
+    )
 
 
 def compare_choices(snap: Snapshot) -> dict[str, list[str]]:
     """The run ids and arm labels a comparison can choose from, sorted."""
-    return {"run": [str(v) for v in snap.query("SELECT DISTINCT run_id FROM _episode_list ORDER BY 1").column("run_id")],
-            "arm": [str(v) for v in snap.query("SELECT DISTINCT arm FROM _episode_list ORDER BY 1").column("arm")]}
+    return {
+        "run": [str(v) for v in snap.query("SELECT DISTINCT run_id FROM _episode_list ORDER BY 1").column("run_id")],
+        "arm": [str(v) for v in snap.query("SELECT DISTINCT arm FROM _episode_list ORDER BY 1").column("arm")],
+    }

@@ -41,6 +41,7 @@ CSP = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; 
 class ViewServer(ThreadingHTTPServer):
     """The viewer's HTTP server: bound to 127.0.0.1 (``port`` 0 = any free port), one thread per request, all
     serving one :class:`reports.webview.data.Catalog`."""
+
     daemon_threads = True
 
     def __init__(self, catalog: D.Catalog, port: int = 0) -> None:
@@ -55,6 +56,7 @@ class ViewServer(ThreadingHTTPServer):
 
 class Handler(BaseHTTPRequestHandler):
     """One request: the host check, routing to a fixed route, and one-line errors (see the module docstring's safety rules)."""
+
     server: ViewServer
     server_version = "recap-view"
     sys_version = ""
@@ -109,8 +111,10 @@ class Handler(BaseHTTPRequestHandler):
         except (BrokenPipeError, ConnectionResetError):
             pass
         except Exception as exc:  # noqa: BLE001 - one line to the log and to the client, no traceback
-            print(f"recap view: error on {self.path[:200]}: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}",
-                  file=sys.stderr)
+            print(
+                f"recap view: error on {self.path[:200]}: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}",
+                file=sys.stderr,
+            )
             try:
                 self._error(500, "internal error (see the terminal running recap view)")
             except OSError:
@@ -161,8 +165,11 @@ class Handler(BaseHTTPRequestHandler):
         self.send_header("Content-Length", str(len(body)))
         self.send_header("Cache-Control", "no-store")
         self.send_header("X-Content-Type-Options", "nosniff")
-        self.send_header("Content-Security-Policy", "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; "
-                                                    "img-src 'self' data:; frame-ancestors 'none'")
+        self.send_header(
+            "Content-Security-Policy",
+            "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; "
+            "img-src 'self' data:; frame-ancestors 'none'",
+        )
         self.end_headers()
         if self.command != "HEAD":
             self.wfile.write(body)
@@ -243,8 +250,14 @@ def _int(params: dict[str, list[str]], name: str) -> int:
 
 
 ROUTES: dict[str, Any] = {
-    "/": Handler.runs, "/runs": Handler.runs, "/spec": Handler.spec, "/report": Handler.report,
-    "/episodes": Handler.episodes, "/episode": Handler.episode, "/window": Handler.window, "/compare": Handler.compare,
+    "/": Handler.runs,
+    "/runs": Handler.runs,
+    "/spec": Handler.spec,
+    "/report": Handler.report,
+    "/episodes": Handler.episodes,
+    "/episode": Handler.episode,
+    "/window": Handler.window,
+    "/compare": Handler.compare,
     "/ping.gif": Handler.ping,
     **{f"/static/{n}": _static_route(n) for n in STATIC},
 }
@@ -253,7 +266,9 @@ ROUTES: dict[str, Any] = {
 # -- running it ---------------------------------------------------------------------------------------
 
 
-def serve(run_dirs: Sequence[str | Path], port: int = DEFAULT_PORT, *, poll_s: float = 2.0) -> tuple[ViewServer, threading.Thread]:
+def serve(
+    run_dirs: Sequence[str | Path], port: int = DEFAULT_PORT, *, poll_s: float = 2.0
+) -> tuple[ViewServer, threading.Thread]:
     """Start a viewer in a background thread (tests, the bench); ``server.shutdown()`` ends it."""
     catalog = D.Catalog(run_dirs, poll_s=poll_s)
     try:
@@ -292,13 +307,27 @@ def view_parser(out: TextIO | None = None) -> Any:
     """The ``recap view`` argument parser (``out``: where ``--help`` goes)."""
     from reports.commands import _Parser
 
-    p = _Parser(prog="recap view", out=out, epilog=_EPILOG,
-                description="Browse every episode of one or more run folders in a local web viewer (read-only).")
+    p = _Parser(
+        prog="recap view",
+        out=out,
+        epilog=_EPILOG,
+        description="Browse every episode of one or more run folders in a local web viewer (read-only).",
+    )
     p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run folder(s); several are browsed together")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT, metavar="N",
-                   help=f"port on 127.0.0.1 (default {DEFAULT_PORT}; 0 = any free port)")
-    p.add_argument("--poll", type=float, default=2.0, metavar="SECONDS",
-                   help="how often to look for new part files (default 2; 0 = never, a fixed snapshot)")
+    p.add_argument(
+        "--port",
+        type=int,
+        default=DEFAULT_PORT,
+        metavar="N",
+        help=f"port on 127.0.0.1 (default {DEFAULT_PORT}; 0 = any free port)",
+    )
+    p.add_argument(
+        "--poll",
+        type=float,
+        default=2.0,
+        metavar="SECONDS",
+        help="how often to look for new part files (default 2; 0 = never, a fixed snapshot)",
+    )
     return p
 
 

@@ -26,8 +26,7 @@ def win_by_expert(env: Environment) -> list[str]:
         assert env.expert_plan() == plan[i:]
         step = env.step(action)
         valid = step.valid_actions
-        assert step.info == {"steps": i + 1, "max_steps": 50, "won": step.success,
-                             "admissible_commands": valid}
+        assert step.info == {"steps": i + 1, "max_steps": 50, "won": step.success, "admissible_commands": valid}
         assert step.done == (i == len(plan) - 1)
     assert step.success and step.done
     assert env.expert_plan() == []
@@ -83,6 +82,7 @@ def walk_recap(env: Environment, replies: Sequence[Mapping[str, Any]]) -> dict[s
 
     run_node(reply(), 0)
     return state
+
 
 #: the heat game used by the environment tests, and its first observation (2.1.1 wording)
 HEAT_ID = "alfworld/heat/pick_heat_then_place_in_recep-Apple-None-Fridge-10/trial_T20190906_182259_116320"

@@ -23,7 +23,9 @@ def test_one_demonstration_per_task_type():
         demo = demonstration_for(short)
         assert demo.name == f"alfworld-{short}"
         assert set(demo.replies) == set(STYLES) == {"recap", "react", "act", "cot", "standard"}
-    with pytest.raises(ValueError, match="^no ALFWorld demonstration for 'boil'; task types: put, clean, heat, cool, examine, puttwo$"):
+    with pytest.raises(
+        ValueError, match="^no ALFWorld demonstration for 'boil'; task types: put, clean, heat, cool, examine, puttwo$"
+    ):
         demonstration_for("boil")
 
 
@@ -90,9 +92,20 @@ def test_recorded_text_matches_alfworld_wording():
         "You put the cellphone 2 in/on the bed 1.",
     ]
     assert rec.steps[1].valid_actions == (
-        "examine dresser 1", "go to bed 1", "go to desk 1", "go to drawer 1", "go to drawer 2",
-        "go to garbagecan 1", "go to shelf 1", "go to shelf 2", "go to sidetable 1", "inventory",
-        "look", "take cd 2 from dresser 1", "take cellphone 2 from dresser 1", "take mug 1 from dresser 1",
+        "examine dresser 1",
+        "go to bed 1",
+        "go to desk 1",
+        "go to drawer 1",
+        "go to drawer 2",
+        "go to garbagecan 1",
+        "go to shelf 1",
+        "go to shelf 2",
+        "go to sidetable 1",
+        "inventory",
+        "look",
+        "take cd 2 from dresser 1",
+        "take cellphone 2 from dresser 1",
+        "take mug 1 from dresser 1",
     )
     assert rec.steps[2].valid_actions[:2] == ("examine cellphone 2", "examine dresser 1")
     assert "put cellphone 2 in/on dresser 1" in rec.steps[2].valid_actions
@@ -127,12 +140,15 @@ def test_replay_answers_like_the_game_and_refuses_to_leave_its_script():
     start = env.reset()
     step = env.step("take tomato 1 from diningtable 1")  # not valid yet
     assert (step.observation, step.valid_actions, step.done, step.info["steps"]) == (
-        "Nothing happens.", start.valid_actions, False, 1)
+        "Nothing happens.",
+        start.valid_actions,
+        False,
+        1,
+    )
     with pytest.raises(EnvError) as err:
         env.step("go to fridge 1")
     assert str(err.value) == (
-        "alfworld-demo/cool/demo-cool: replay cannot follow 'go to fridge 1'; "
-        "the recording continues with 'go to diningtable 1'"
+        "alfworld-demo/cool/demo-cool: replay cannot follow 'go to fridge 1'; the recording continues with 'go to diningtable 1'"
     )
     assert env.expert_plan()[0] == "go to diningtable 1"
     assert env.rules() == demonstration_for("cool").make_env().rules() and "in/on" in env.rules()
@@ -153,15 +169,25 @@ def test_replay_step_cap():
 def test_recorder_rejects_a_step_that_is_not_admissible():
     scene = Scene((Place("drawer 1", 3, ("pen 1",), openable=True), Place("desk 1", 5)), goal="put a pen in desk")
     with pytest.raises(ValueError) as err:
-        record(scene, ["go to drawer 1", "take pen 1 from drawer 1"], name="x", split="put",
-               task="pick_and_place_simple", version="2.1.1")
+        record(
+            scene,
+            ["go to drawer 1", "take pen 1 from drawer 1"],
+            name="x",
+            split="put",
+            task="pick_and_place_simple",
+            version="2.1.1",
+        )
     assert str(err.value) == "demonstration 'x' step 1: 'take pen 1 from drawer 1' is not admissible there"
-    ok = record(scene, ["go to drawer 1", "open drawer 1", "take pen 1 from drawer 1", "go to desk 1",
-                        "put pen 1 in/on desk 1"], name="x", split="put", task="pick_and_place_simple",
-                version="2.1.1")
+    ok = record(
+        scene,
+        ["go to drawer 1", "open drawer 1", "take pen 1 from drawer 1", "go to desk 1", "put pen 1 in/on desk 1"],
+        name="x",
+        split="put",
+        task="pick_and_place_simple",
+        version="2.1.1",
+    )
     assert ok.steps[-1].won and not any(s.won for s in ok.steps[:-1])
-    assert ok.steps[-1].valid_actions == (
-        "examine desk 1", "go to drawer 1", "inventory", "look", "take pen 1 from desk 1")
+    assert ok.steps[-1].valid_actions == ("examine desk 1", "go to drawer 1", "inventory", "look", "take pen 1 from desk 1")
 
 
 @pytest.mark.parametrize(("short", "version"), CASES)

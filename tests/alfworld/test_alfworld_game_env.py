@@ -13,8 +13,13 @@ from workers.envs.alfworld import AlfworldBenchmark
 from workers.envs.alfworld.task_types import TASK_TYPES
 
 HEAT_PLAN_2_1_1 = [
-    "go to garbagecan 1", "take apple 2 from garbagecan 1", "go to microwave 1",
-    "heat apple 2 with microwave 1", "go to fridge 1", "open fridge 1", "put apple 2 in/on fridge 1",
+    "go to garbagecan 1",
+    "take apple 2 from garbagecan 1",
+    "go to microwave 1",
+    "heat apple 2 with microwave 1",
+    "go to fridge 1",
+    "open fridge 1",
+    "put apple 2 in/on fridge 1",
 ]
 
 
@@ -66,8 +71,7 @@ def test_invalid_command_is_sent_answers_nothing_happens_and_changes_nothing(hea
     assert heat_env.expert_plan() == HEAT_PLAN_2_1_1  # the expert did not advance
     arrive = heat_env.step("go to garbagecan 1")
     assert arrive.observation == (
-        "You arrive at loc 31. On the garbagecan 1, you see a apple 2, a apple 1, a egg 2, a egg 1, "
-        "a potato 2, and a potato 1."
+        "You arrive at loc 31. On the garbagecan 1, you see a apple 2, a apple 1, a egg 2, a egg 1, a potato 2, and a potato 1."
     )
     assert "take apple 2 from garbagecan 1" in arrive.valid_actions
     assert heat_env.expert_plan() == HEAT_PLAN_2_1_1[1:]
@@ -145,11 +149,11 @@ def test_home_folder_is_not_written(tmp_path):
         "import os\n"
         "from workers.envs.alfworld import AlfworldBenchmark\n"
         f"env = AlfworldBenchmark({str(DATA)!r}).make({HEAT_ID!r})\n"
-        "print(env.reset().goal, os.environ['ALFWORLD_DATA'] == " f"{str(DATA)!r})"
+        "print(env.reset().goal, os.environ['ALFWORLD_DATA'] == "
+        f"{str(DATA)!r})"
     )
     env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
-    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "heat some apple and put it in fridge True"
     assert list(tmp_path.iterdir()) == []
@@ -157,8 +161,13 @@ def test_home_folder_is_not_written(tmp_path):
 
 def _planner_copies_mapped() -> int:
     with open("/proc/self/maps") as maps:
-        return len({line.split()[-2] if line.rstrip().endswith("(deleted)") else line.split()[-1]
-                    for line in maps if "libdownward" in line})
+        return len(
+            {
+                line.split()[-2] if line.rstrip().endswith("(deleted)") else line.split()[-1]
+                for line in maps
+                if "libdownward" in line
+            }
+        )
 
 
 def test_a_closed_game_hands_its_planner_library_to_the_next(bench):

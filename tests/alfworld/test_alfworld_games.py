@@ -45,9 +45,14 @@ def test_ids_are_short_type_game_folder_trial(bench):
         bench_name, short, game_dir, trial = instance_id.split("/")
         assert bench_name == "alfworld" and trial.startswith("trial_T")
         assert game_dir.startswith(
-            {"put": "pick_and_place_simple-", "clean": "pick_clean_then_place_in_recep-",
-             "heat": "pick_heat_then_place_in_recep-", "cool": "pick_cool_then_place_in_recep-",
-             "examine": "look_at_obj_in_light-", "puttwo": "pick_two_obj_and_place-"}[short]
+            {
+                "put": "pick_and_place_simple-",
+                "clean": "pick_clean_then_place_in_recep-",
+                "heat": "pick_heat_then_place_in_recep-",
+                "cool": "pick_cool_then_place_in_recep-",
+                "examine": "look_at_obj_in_light-",
+                "puttwo": "pick_two_obj_and_place-",
+            }[short]
         )
 
 
@@ -80,9 +85,7 @@ def test_unknown_selector_lists_what_exists(bench):
 def test_make_needs_one_full_id(bench):
     with pytest.raises(UnknownInstanceError) as err:
         bench.make("alfworld/heat")
-    assert str(err.value) == (
-        f"'alfworld/heat' names 23 ALFWorld games; make() needs one full id such as {HEAT_ID}"
-    )
+    assert str(err.value) == (f"'alfworld/heat' names 23 ALFWorld games; make() needs one full id such as {HEAT_ID}")
     with pytest.raises(UnknownInstanceError, match="unknown ALFWorld game or selector 'alfworld/heat/nope'"):
         make_env("alfworld/heat/nope")
 
@@ -132,8 +135,7 @@ def test_env_var_is_the_default_data_folder(monkeypatch):
     assert AlfworldBenchmark().list_instances("cool") == AlfworldBenchmark(DATA).list_instances("cool")
 
 
-def _fake_trial(root: Path, game_dir: str, trial: str, *, task_type: str, solvable: bool = True,
-                traj: bool = True) -> None:
+def _fake_trial(root: Path, game_dir: str, trial: str, *, task_type: str, solvable: bool = True, traj: bool = True) -> None:
     folder = root / "json_2.1.1" / "valid_unseen" / game_dir / trial
     folder.mkdir(parents=True)
     if traj:
@@ -148,10 +150,10 @@ def test_selection_rule(tmp_path):
     _fake_trial(tmp_path, f"{heat}-Egg-None-Fridge-1", "trial_T3", task_type=heat, traj=False)
     _fake_trial(tmp_path, f"{heat}-EggSliced-None-Fridge-1", "trial_T4", task_type=heat)
     _fake_trial(tmp_path, f"{heat}-Egg-movable-Fridge-1", "trial_T5", task_type=heat)
-    _fake_trial(tmp_path, "pick_and_place_with_movable_recep-Egg-Pan-Fridge-1", "trial_T6",
-                task_type="pick_and_place_with_movable_recep")
-    _fake_trial(tmp_path, "pick_and_place_simple-Egg-None-Fridge-1", "trial_T7",
-                task_type="pick_and_place_simple")
+    _fake_trial(
+        tmp_path, "pick_and_place_with_movable_recep-Egg-Pan-Fridge-1", "trial_T6", task_type="pick_and_place_with_movable_recep"
+    )
+    _fake_trial(tmp_path, "pick_and_place_simple-Egg-None-Fridge-1", "trial_T7", task_type="pick_and_place_simple")
     games = discover_games(tmp_path.resolve())
     assert [g.instance_id for g in games] == [
         "alfworld/put/pick_and_place_simple-Egg-None-Fridge-1/trial_T7",
@@ -200,14 +202,25 @@ def test_version_2_1_2_without_its_data(monkeypatch, tmp_path):
 def test_walkthrough_from_the_2_1_2_file(bench):
     game = bench.games(HEAT_ID)[0]
     assert load_walkthrough(DATA_2_1_2, game) == (
-        "go to garbagecan 1", "take apple 2 from garbagecan 1", "go to microwave 1",
-        "heat apple 2 with microwave 1", "go to fridge 1", "open fridge 1", "move apple 2 to fridge 1",
+        "go to garbagecan 1",
+        "take apple 2 from garbagecan 1",
+        "go to microwave 1",
+        "heat apple 2 with microwave 1",
+        "go to fridge 1",
+        "open fridge 1",
+        "move apple 2 to fridge 1",
     )
 
 
 def _run_isolated(code: str) -> str:
-    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
-                          env={"PATH": "/usr/bin:/bin", "ALFWORLD_DATA": str(DATA)}, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env={"PATH": "/usr/bin:/bin", "ALFWORLD_DATA": str(DATA)},
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr
     return proc.stdout.strip()
 

@@ -25,8 +25,7 @@ from workers.llm.offline.expert import expert_reply
 from workers.llm.offline.knobs import Knobs
 
 HEAT_ARRIVE = (
-    "You arrive at loc 31. On the garbagecan 1, you see a apple 2, a apple 1, a egg 2, a egg 1, "
-    "a potato 2, and a potato 1."
+    "You arrive at loc 31. On the garbagecan 1, you see a apple 2, a apple 1, a egg 2, a egg 1, a potato 2, and a potato 1."
 )
 _GO_TO = (
     "go to cabinet 1\ngo to cabinet 2\ngo to cabinet 3\ngo to cabinet 4\ngo to cabinet 5\n"
@@ -110,7 +109,12 @@ def test_the_setting_values_and_the_per_style_choice():
             check_show_valid_actions(bad)
     assert SHOW_VALID_ACTIONS == "show_valid_actions"
     assert {s: show_valid_actions_for(s) for s in ("recap", "react", "act", "cot", "standard", "adapt")} == {
-        "recap": True, "react": False, "act": False, "cot": False, "standard": False, "adapt": False,
+        "recap": True,
+        "react": False,
+        "act": False,
+        "cot": False,
+        "standard": False,
+        "adapt": False,
     }
     assert with_valid_actions("Nothing happens.", ("look", "inventory")) == "Nothing happens.\n\nValid actions:\nlook\ninventory"
     assert with_valid_actions("x", ()) == "x\n\nValid actions:\n(none)"
@@ -134,7 +138,7 @@ def test_replay_observations_follow_the_setting():
         "go to diningtable 1\ngo to drawer 1\ngo to fridge 1\ngo to garbagecan 1\ngo to microwave 1\n"
         "go to sinkbasin 1\ngo to stoveburner 1\ngo to toaster 1\ninventory\nlook"
     )
-    start_list = reset.observation[reset.observation.index("\n\nValid actions:\n"):]
+    start_list = reset.observation[reset.observation.index("\n\nValid actions:\n") :]
     assert env.step("take tomato 1 from diningtable 1").observation == "Nothing happens." + start_list
     assert env.step("go to diningtable 1").observation == (
         "You arrive at loc 13. On the diningtable 1, you see a bread 1, a tomato 1, and a winebottle 1.\n\n"
@@ -212,8 +216,17 @@ def test_offline_expert_wins_with_the_lists_shown(bench, style):
 def _work(instance_id, **env_options):
     from schemas.outcomes import UnitWork
 
-    return UnitWork(unit_id="u", instance_id=instance_id, method="react", method_config="{}", model_label="m",
-                    model="offline/expert", seed=1, step_multiplier=1.0, env_options=tuple(sorted(env_options.items())))
+    return UnitWork(
+        unit_id="u",
+        instance_id=instance_id,
+        method="react",
+        method_config="{}",
+        model_label="m",
+        model="offline/expert",
+        seed=1,
+        step_multiplier=1.0,
+        env_options=tuple(sorted(env_options.items())),
+    )
 
 
 def test_the_worker_fills_the_setting_per_method_and_a_sweep_option_wins():

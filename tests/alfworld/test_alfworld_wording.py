@@ -14,8 +14,14 @@ def test_put_and_move_convert_both_ways():
     assert to_version("put tomato 1 in/on toaster 1", "2.1.2") == "move tomato 1 to toaster 1"
     assert to_version("move tomato 1 to toaster 1", "2.1.2") == "move tomato 1 to toaster 1"
     assert to_version("put tomato 1 in/on toaster 1", "2.1.1") == "put tomato 1 in/on toaster 1"
-    for same in ("go to toaster 1", "take potato 1 from countertop 2", "heat mug 3 with microwave 1",
-                 "look", "move", "put it down"):
+    for same in (
+        "go to toaster 1",
+        "take potato 1 from countertop 2",
+        "heat mug 3 with microwave 1",
+        "look",
+        "move",
+        "put it down",
+    ):
         assert to_version(same, "2.1.1") == same
         assert to_version(same, "2.1.2") == same
     with pytest.raises(ValueError, match="^unknown ALFWorld game-file version '3'; use one of: 2.1.1, 2.1.2$"):
@@ -23,11 +29,15 @@ def test_put_and_move_convert_both_ways():
 
 
 def test_banner_and_goal():
-    text = ("-= Welcome to TextWorld, ALFRED! =-\n\nYou are in the middle of a room. Looking quickly "
-            "around you, you see a desk 1.\n\nYour task is to: put a hot mug in cabinet.")
+    text = (
+        "-= Welcome to TextWorld, ALFRED! =-\n\nYou are in the middle of a room. Looking quickly "
+        "around you, you see a desk 1.\n\nYour task is to: put a hot mug in cabinet."
+    )
     body = strip_banner(text)
-    assert body == ("You are in the middle of a room. Looking quickly around you, you see a desk 1."
-                    "\n\nYour task is to: put a hot mug in cabinet.")
+    assert body == (
+        "You are in the middle of a room. Looking quickly around you, you see a desk 1."
+        "\n\nYour task is to: put a hot mug in cabinet."
+    )
     assert extract_goal(body) == "put a hot mug in cabinet"
     assert extract_goal("no task here") is None
     assert strip_banner("You arrive at loc 3.") == "You arrive at loc 3."

@@ -83,21 +83,33 @@ def secrets_and_sockets(lab: Lab) -> ScenarioResult:
         proc.kill()
         stdout, stderr = proc.communicate()
     mine = listeners(process_tree(os.getpid()))
-    res.check("the run ends (exit 4: the wrong-key units failed on auth, retryable)", proc.returncode == 4,
-              f"exit {proc.returncode}: {stderr.strip()[-300:]}")
-    res.check("no Ray error about restart arguments in the object store",
-              "constructor arguments in the object store" not in stderr, stderr.strip()[:200])
+    res.check(
+        "the run ends (exit 4: the wrong-key units failed on auth, retryable)",
+        proc.returncode == 4,
+        f"exit {proc.returncode}: {stderr.strip()[-300:]}",
+    )
+    res.check(
+        "no Ray error about restart arguments in the object store",
+        "constructor arguments in the object store" not in stderr,
+        stderr.strip()[:200],
+    )
     res.check("sockets were sampled while the sweep ran", len(seen) >= 3, len(seen))
     public = sorted(str(x) for x in seen | set(mine) if not x.loopback)
     res.check("every listening socket is on the loopback", not public, public[:5])
     dashboard = [x for x in seen if "dashboard" in x.process.lower()]
-    res.check("the dashboard (on in this sweep) listens, on the loopback", dashboard and all(x.loopback for x in dashboard),
-              [str(x) for x in dashboard][:3])
+    res.check(
+        "the dashboard (on in this sweep) listens, on the loopback",
+        dashboard and all(x.loopback for x in dashboard),
+        [str(x) for x in dashboard][:3],
+    )
     res.check("the wrong key reached the server (its echo was exercised)", any(c.status == 401 for c in server.log))
     res.check("the right key worked", any(c.status == 200 for c in server.log))
     errors = [r for r in rows(out, "llm_calls") if r["error_kind"] == "auth"]
-    res.check("the echoed key is scrubbed in the llm_calls rows",
-              errors and all("[REDACTED]" in (r["error_message"] or "") for r in errors), len(errors))
+    res.check(
+        "the echoed key is scrubbed in the llm_calls rows",
+        errors and all("[REDACTED]" in (r["error_message"] or "") for r in errors),
+        len(errors),
+    )
     keys = [FAKE_KEY, WRONG_KEY]
     in_run = files_containing(out, keys)
     in_ray = files_containing(ray_tmp, keys)
@@ -106,8 +118,10 @@ def secrets_and_sockets(lab: Lab) -> ScenarioResult:
     res.check("no Ray session file or log holds a key", not in_ray, in_ray[:3])
     res.check("stdout/stderr hold no key", not in_output, in_output)
     n_files = sum(len(names) for _, _, names in os.walk(ray_tmp)) + sum(len(names) for _, _, names in os.walk(out))
-    res.notes.append(f"{n_files} files scanned, {len(in_run) + len(in_ray) + len(in_output)} with a key; "
-                     f"{len(seen | set(mine))} listening sockets, {len(public)} off the loopback")
+    res.notes.append(
+        f"{n_files} files scanned, {len(in_run) + len(in_ray) + len(in_output)} with a key; "
+        f"{len(seen | set(mine))} listening sockets, {len(public)} off the loopback"
+    )
     shutil.rmtree(ray_tmp, ignore_errors=True)
     res.end_run()
     return res

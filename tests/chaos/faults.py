@@ -39,8 +39,16 @@ from tests.chaos.harness import (
 )
 
 #: the error class each fault mode of the fake server must be handled as
-CLASS_OF_MODE = {"500": "server_error", "502": "server_error", "503": "server_error", "empty": "server_error",
-                 "malformed": "server_error", "hang": "timeout", "429": "rate_limit", "ctx": "context_length"}
+CLASS_OF_MODE = {
+    "500": "server_error",
+    "502": "server_error",
+    "503": "server_error",
+    "empty": "server_error",
+    "malformed": "server_error",
+    "hang": "timeout",
+    "429": "rate_limit",
+    "ctx": "context_length",
+}
 
 
 def _fault_accounting(res: ScenarioResult, out: Path, server: Any, max_attempts: int) -> Counter:
@@ -48,14 +56,18 @@ def _fault_accounting(res: ScenarioResult, out: Path, server: Any, max_attempts:
     arrivals = Counter(CLASS_OF_MODE[c.mode] for c in server.log if c.mode in CLASS_OF_MODE)
     gw = [e for e in events(out) if e["source"] == "gateway" and e["kind"] in ("retry", "call_failed")]
     seen = Counter(e["detail"]["kind"] for e in gw)
-    res.check("every failed attempt is one gateway event of its class", arrivals == seen,
-              f"server {dict(arrivals)} vs events {dict(seen)}")
+    res.check(
+        "every failed attempt is one gateway event of its class",
+        arrivals == seen,
+        f"server {dict(arrivals)} vs events {dict(seen)}",
+    )
     calls = [r for r in rows(out, "llm_calls") if r["error_kind"] != "budget"]
     over = [r["call_key"] for r in calls if r["retries"] > max_attempts - 1]
     res.check(f"no call made more than {max_attempts} attempts", not over, over[:3])
     sent = sum(r["retries"] + 1 for r in calls if r["served_from"] == "provider")
-    res.check("server arrivals == attempts the llm_calls rows account for", sent == len(server.log),
-              f"{sent} vs {len(server.log)}")
+    res.check(
+        "server arrivals == attempts the llm_calls rows account for", sent == len(server.log), f"{sent} vs {len(server.log)}"
+    )
     gave_up = [r for r in calls if r["status"] == "error" and r["error_kind"] in ("server_error", "timeout", "rate_limit")]
     early = [r["call_key"] for r in gave_up if r["retries"] != max_attempts - 1]
     res.check("a transient failure gives up only after every attempt", not early, early[:3])
@@ -97,14 +109,19 @@ def _transient(lab: Lab, res: ScenarioResult) -> None:
     arrivals = _fault_accounting(res, out, server, retries + 1)
     res.check("every fault class occurred", {"server_error", "timeout"} <= set(arrivals), dict(arrivals))
     charged = [e for e in journal(out) if e.get("status") == "charged"]
-    res.check("each timed-out attempt charged at worst case", len(charged) == arrivals["timeout"],
-              f"{len(charged)} charged vs {arrivals['timeout']} hangs")
+    res.check(
+        "each timed-out attempt charged at worst case",
+        len(charged) == arrivals["timeout"],
+        f"{len(charged)} charged vs {arrivals['timeout']} hangs",
+    )
     _units_done(res, out)
     eps = rows(out, "episodes")
     failed = sum(1 for r in eps if r["end_reason"] == "llm_error")
-    res.notes.append(f"transient: {sum(arrivals.values())} faults in {len(server.log)} requests "
-                     f"({', '.join(f'{k} {v}' for k, v in sorted(arrivals.items()))}), {failed}/{len(eps)} episodes "
-                     f"ended llm_error, {wall:.0f}s")
+    res.notes.append(
+        f"transient: {sum(arrivals.values())} faults in {len(server.log)} requests "
+        f"({', '.join(f'{k} {v}' for k, v in sorted(arrivals.items()))}), {failed}/{len(eps)} episodes "
+        f"ended llm_error, {wall:.0f}s"
+    )
     res.end_run()
 
 
@@ -122,8 +139,9 @@ def _context_length(lab: Lab, res: ScenarioResult) -> None:
     res.check("the run ends (exit 0)", summary.exit_code() == 0, summary.exit_code())
     arrivals = _fault_accounting(res, out, server, 6)
     ctx = [r for r in rows(out, "llm_calls") if r["error_kind"] == "context_length"]
-    res.check("context-length errors occurred, never retried by the gateway",
-              ctx and all(r["retries"] == 0 for r in ctx), len(ctx))
+    res.check(
+        "context-length errors occurred, never retried by the gateway", ctx and all(r["retries"] == 0 for r in ctx), len(ctx)
+    )
     by_episode: dict[str, list[dict[str, Any]]] = {}
     for r in rows(out, "llm_calls"):
         by_episode.setdefault(r["episode_id"], []).append(r)
@@ -135,7 +153,9 @@ def _context_length(lab: Lab, res: ScenarioResult) -> None:
                 recovered += 1
     res.check("the agent recovered: the next call after the error succeeded", recovered >= 1, recovered)
     _units_done(res, out)
-    res.notes.append(f"context length: {arrivals['context_length']} refusals at {window} tokens, {recovered} recovered by dropping messages")
+    res.notes.append(
+        f"context length: {arrivals['context_length']} refusals at {window} tokens, {recovered} recovered by dropping messages"
+    )
     res.end_run()
 
 
@@ -193,18 +213,30 @@ def _storm_run(lab: Lab, res: ScenarioResult, name: str, storm_s: float, retries
     # pauses for Retry-After (1 s) after a 429 and halves its concurrency to 1
     bound = 3 + 2 * storm_s
     res.check("429s bounded by the pause (<= 3 + 2/s)", len(refused) <= bound, f"{len(refused)} in {storm_s:.0f}s")
-    res.check("concurrency shrank to 1 and the deployment paused for Retry-After", low["limit"] == 1 and low["shrinks"] >= 1 and low["paused"] >= 1, low)
+    res.check(
+        "concurrency shrank to 1 and the deployment paused for Retry-After",
+        low["limit"] == 1 and low["shrinks"] >= 1 and low["paused"] >= 1,
+        low,
+    )
     eps = rows(out, "episodes")
     errors = [r for r in eps if r["end_reason"] == "llm_error"]
     if retries is not None:
-        res.check("with enough retries every call outlived the storm", not errors and summary.exit_code() == 0,
-                  f"{len(errors)} llm_error")
+        res.check(
+            "with enough retries every call outlived the storm",
+            not errors and summary.exit_code() == 0,
+            f"{len(errors)} llm_error",
+        )
     else:
-        res.check("with the default retries calls gave up as rate_limit",
-                  errors and all("rate_limit" in (r["error"] or "") for r in errors), [r["error"] for r in errors][:2])
+        res.check(
+            "with the default retries calls gave up as rate_limit",
+            errors and all("rate_limit" in (r["error"] or "") for r in errors),
+            [r["error"] for r in errors][:2],
+        )
     _units_done(res, out)
-    res.notes.append(f"{name}: {len(refused)} x 429 in {storm_s:.0f}s, retries {retries if retries is not None else 'default 5'}: "
-                     f"{len(errors)}/{len(eps)} episodes ended llm_error")
+    res.notes.append(
+        f"{name}: {len(refused)} x 429 in {storm_s:.0f}s, retries {retries if retries is not None else 'default 5'}: "
+        f"{len(errors)}/{len(eps)} episodes ended llm_error"
+    )
     res.end_run()
 
 

@@ -96,40 +96,55 @@ def corrupt_parts(lab: Lab) -> ScenarioResult:
     named = [p for p in broken if str(p) not in stdout]
     res.check("recap status names every unreadable part", not named, named)
     n_left = len(before.plan) - len(hit["lost_units"])
-    res.check("recap status counts the units still done", f"units {n_left}/{len(before.plan)} done" in stdout,
-              [line for line in stdout.splitlines() if line.startswith("units ")])
+    res.check(
+        "recap status counts the units still done",
+        f"units {n_left}/{len(before.plan)} done" in stdout,
+        [line for line in stdout.splitlines() if line.startswith("units ")],
+    )
     res.check("a writer's leftover temp file is ignored", str(hit["temp"]) not in stdout)
 
     code, stdout, stderr = cli("sql", str(out), "select count(*) as n from episodes", "--csv")
-    res.check("recap sql reads what is readable", code == 0 and stdout.splitlines() == ["n", str(n_left)],
-              (code, stdout.strip(), stderr.strip()[-200:]))
+    res.check(
+        "recap sql reads what is readable",
+        code == 0 and stdout.splitlines() == ["n", str(n_left)],
+        (code, stdout.strip(), stderr.strip()[-200:]),
+    )
     report_dir = out.parent / "report"
     code, stdout, stderr = cli("report", str(out), "--out", str(report_dir), "--format", "md")
     md = (report_dir / "report.md").read_text() if (report_dir / "report.md").exists() else ""
     # (the reports read parts by column name, for older schema versions: a foreign-schema part
     # is merged with empty columns there, not skipped; truncated and corrupt ones are skipped)
     corrupt = [hit[k] for k in ("episodes", "messages", "steps")]
-    res.check("recap report exits 0 and lists the truncated / corrupt parts",
-              code == 0 and "Unreadable part files were skipped" in md and all(str(p) in md for p in corrupt),
-              (code, [str(p) for p in corrupt if str(p) not in md]))
+    res.check(
+        "recap report exits 0 and lists the truncated / corrupt parts",
+        code == 0 and "Unreadable part files were skipped" in md and all(str(p) in md for p in corrupt),
+        (code, [str(p) for p in corrupt if str(p) not in md]),
+    )
     victim_episode = sorted(hit["message_episodes"])[0]
     code, stdout, stderr = cli("show", str(out), victim_episode)
-    res.check("recap show on an episode whose messages were lost: no traceback",
-              code in (0, 2) and len(stderr.strip().splitlines()) <= 1 + len(broken), (code, stderr.strip()[-300:]))
+    res.check(
+        "recap show on an episode whose messages were lost: no traceback",
+        code in (0, 2) and len(stderr.strip().splitlines()) <= 1 + len(broken),
+        (code, stderr.strip()[-300:]),
+    )
 
     code, stdout, stderr = cli("resume", str(out), "--progress", "off")
     res.check("recap resume exits 0", code == 0, stderr.strip()[-300:])
     after = terminal(out)
     rerun = {r["unit_id"] for r in after.rows if r["attempt"] > 1}
-    res.check("resume re-ran exactly the units whose terminal rows were lost", rerun == hit["lost_units"],
-              f"re-ran {len(rerun)}, lost {len(hit['lost_units'])}")
+    res.check(
+        "resume re-ran exactly the units whose terminal rows were lost",
+        rerun == hit["lost_units"],
+        f"re-ran {len(rerun)}, lost {len(hit['lost_units'])}",
+    )
     new_calls = {e for e, c in calls_by_episode(out).items() if e not in calls_before}
     others = {e for e in new_calls if e.rsplit("-", 1)[0] not in hit["lost_units"]}
     res.check("no other unit made a model call", not others, sorted(others)[:3])
     res.lost += len(after.lost)
     res.duplicated += after.duplicated
     res.check("lost 0, duplicated 0", not after.lost and after.duplicated == 0, (len(after.lost), after.duplicated))
-    res.notes.append(f"{len(broken)} broken parts + 1 temp file; {len(hit['lost_units'])} terminal rows lost, "
-                     f"{len(rerun)} units re-run")
+    res.notes.append(
+        f"{len(broken)} broken parts + 1 temp file; {len(hit['lost_units'])} terminal rows lost, {len(rerun)} units re-run"
+    )
     res.end_run()
     return res

@@ -82,12 +82,14 @@ def sql_attacks(lab: Lab, units: int = 4) -> ScenarioResult:
     out = lab.folder("sql-guard") / "run"
     summary, _ = run_driver(sweep(out, "  - model: offline/expert\n", blocks(units), run="sql-guard", workers=2))
     # setup checks (not runs): without a finished, readable run there is nothing to attack
-    if not res.check("the run folder was built by a finished run (exit 0)", summary.exit_code() == 0,
-                     summary.exit_code()):
+    if not res.check("the run folder was built by a finished run (exit 0)", summary.exit_code() == 0, summary.exit_code()):
         return res
     rc, stdout, stderr = _recap(["sql", str(out), "SELECT count(*) AS n FROM episodes", "--json"])
-    if not res.check("a query still reads the run (exit 0)", rc == 0 and str(units) in stdout,
-                     f"exit {rc}: {stdout.strip()[:80]} {stderr.strip()[:200]}"):
+    if not res.check(
+        "a query still reads the run (exit 0)",
+        rc == 0 and str(units) in stdout,
+        f"exit {rc}: {stdout.strip()[:80]} {stderr.strip()[:200]}",
+    ):
         return res
     first = _hashes(out)
     refused, total_bytes = 0, 0
@@ -104,9 +106,11 @@ def sql_attacks(lab: Lab, units: int = 4) -> ScenarioResult:
             n, changed = _bytes_changed(before, _hashes(out))
             total_bytes += n
             res.check(f"{name}: exit 2", rc == 2, f"exit {rc}: {stderr.strip()[:200]}")
-            res.check(f"{name}: one error line on stderr, nothing on stdout",
-                      stdout == "" and len(stderr.splitlines()) == 1 and stderr.startswith("error: "),
-                      f"stdout {stdout[:80]!r}, stderr {stderr[:200]!r}")
+            res.check(
+                f"{name}: one error line on stderr, nothing on stdout",
+                stdout == "" and len(stderr.splitlines()) == 1 and stderr.startswith("error: "),
+                f"stdout {stdout[:80]!r}, stderr {stderr[:200]!r}",
+            )
             res.check(f"{name}: 0 bytes changed", not changed, f"{n} bytes in {changed[:3]}")
             refused += int(rc == 2)
             res.end_run()
@@ -116,8 +120,9 @@ def sql_attacks(lab: Lab, units: int = 4) -> ScenarioResult:
     res.check("the run folder is byte-identical after every attack", not changed_all, changed_all[:5])
     total_bytes = max(total_bytes, n_all)
     res.name = f"SQL write attempts ({len(ATTACKS)} tried, {total_bytes} bytes changed)"
-    res.notes.append(f"{len(ATTACKS)} attacks, {refused} refused, {total_bytes} bytes changed "
-                     f"({len(first)} files and folders hashed)")
+    res.notes.append(
+        f"{len(ATTACKS)} attacks, {refused} refused, {total_bytes} bytes changed ({len(first)} files and folders hashed)"
+    )
     return res
 
 
@@ -188,43 +193,67 @@ def cap_attacks(lab: Lab, cap_usd: float = 0.001) -> ScenarioResult:
         unreadable = attack.get("mode") == "fracusage"
         expected_errors = {"budget", "server_error"} if unreadable else {"budget"}
         if unreadable:
-            res.check(f"{name}: every unreadable reply charged a positive amount",
-                      all(e.cost_usd > 0 for e in errors if e.kind == "server_error"),
-                      sorted({e.cost_usd for e in errors})[:3])
+            res.check(
+                f"{name}: every unreadable reply charged a positive amount",
+                all(e.cost_usd > 0 for e in errors if e.kind == "server_error"),
+                sorted({e.cost_usd for e in errors})[:3],
+            )
         else:
             res.check(f"{name}: the provider answered", len(ok) >= (1 if "n" in attack else 2), f"{len(ok)} answers")
-        res.check(f"{name}: the budget refused in the end, no other error",
-                  bool(out) and isinstance(out[-1], LLMError) and out[-1].kind == "budget"
-                  and {e.kind for e in errors} <= expected_errors, sorted({e.kind for e in errors}))
-        res.check(f"{name}: ledger spend within the cap, nothing reserved, no overrun",
-                  spent <= cap_pico and stats["reserved_usd"] == 0 and stats["overruns"] == 0,
-                  f"spent ${pico_to_usd(spent):.6f} of ${cap_usd}, reserved {stats['reserved_usd']}, "
-                  f"overruns {stats['overruns']}")
-        res.check(f"{name}: never billed below what the provider generated", spent >= bill,
-                  f"ledger ${pico_to_usd(spent):.6f}, provider ${pico_to_usd(bill):.6f}")
-        res.check(f"{name}: every answer charged a positive amount", all(r.cost_usd > 0 for r in ok),
-                  sorted({r.cost_usd for r in ok})[:3])
+        res.check(
+            f"{name}: the budget refused in the end, no other error",
+            bool(out)
+            and isinstance(out[-1], LLMError)
+            and out[-1].kind == "budget"
+            and {e.kind for e in errors} <= expected_errors,
+            sorted({e.kind for e in errors}),
+        )
+        res.check(
+            f"{name}: ledger spend within the cap, nothing reserved, no overrun",
+            spent <= cap_pico and stats["reserved_usd"] == 0 and stats["overruns"] == 0,
+            f"spent ${pico_to_usd(spent):.6f} of ${cap_usd}, reserved {stats['reserved_usd']}, overruns {stats['overruns']}",
+        )
+        res.check(
+            f"{name}: never billed below what the provider generated",
+            spent >= bill,
+            f"ledger ${pico_to_usd(spent):.6f}, provider ${pico_to_usd(bill):.6f}",
+        )
+        res.check(
+            f"{name}: every answer charged a positive amount",
+            all(r.cost_usd > 0 for r in ok),
+            sorted({r.cost_usd for r in ok})[:3],
+        )
         if "mode" in attack:
             lied = sum(1 for c in server.log if c.status == 200 and c.mode == attack["mode"])
             answered = len(server.log) if unreadable else len(ok)
             res.check(f"{name}: the provider lied on every answer", lied == answered == len(server.log), (lied, answered))
         elif "n" in attack:
-            res.check(f"{name}: n choices reached the provider", {b.get("n") for b in server.bodies} == {attack["n"]},
-                      sorted({str(b.get("n")) for b in server.bodies}))
+            res.check(
+                f"{name}: n choices reached the provider",
+                {b.get("n") for b in server.bodies} == {attack["n"]},
+                sorted({str(b.get("n")) for b in server.bodies}),
+            )
         if "mode" in attack or attack.get("cost"):
             rejected = events(run_dir, USAGE_REJECTED_EVENT)
             # fractional usage is rejected as malformed; every lie is an error event
-            res.check(f"{name}: each lie recorded as a usage_rejected event", len(rejected) == len(ok),
-                      f"{len(rejected)} events, {len(ok)} answers")
+            res.check(
+                f"{name}: each lie recorded as a usage_rejected event",
+                len(rejected) == len(ok),
+                f"{len(rejected)} events, {len(ok)} answers",
+            )
         kinds = ", ".join(f"{k} x{n}" for k, n in sorted(Counter(e.kind for e in errors if e.kind != "budget").items()))
         answered = sum(1 for c in server.log if c.status == 200)
-        per_attack.append(f"{name} {len(ok)} ok{', ' + kinds if kinds else ''}: ledger ${pico_to_usd(spent):.6f}, "
-                          f"provider ${pico_to_usd(bill):.6f} for {answered} answers")
+        per_attack.append(
+            f"{name} {len(ok)} ok{', ' + kinds if kinds else ''}: ledger ${pico_to_usd(spent):.6f}, "
+            f"provider ${pico_to_usd(bill):.6f} for {answered} answers"
+        )
         res.end_run()
     res.overspend_usd = pico_to_usd(worst_over)
     res.name = f"cap attacks ({len(attacks)} tried, max overspend ${pico_to_usd(worst_over):.6f})"
-    res.notes.append(f"{len(attacks)} attacks on a ${cap_usd} cap, max overspend ${pico_to_usd(worst_over):.6f}, "
-                     f"max under-billed ${pico_to_usd(worst_under):.6f}")
+    res.notes.append(
+        f"{len(attacks)} attacks on a ${cap_usd} cap, max overspend ${pico_to_usd(worst_over):.6f}, "
+        f"max under-billed ${pico_to_usd(worst_under):.6f}"
+    )
     res.notes += per_attack
     return res
 
@@ -232,8 +261,9 @@ def cap_attacks(lab: Lab, cap_usd: float = 0.001) -> ScenarioResult:
 # --------------------------------------------------------------------------------------------
 # lock
 # --------------------------------------------------------------------------------------------
-def lock_race(lab: Lab, thread_trials: int = 50, process_trials: int = 10, contenders: int = 8,
-              processes: int = 4) -> ScenarioResult:
+def lock_race(
+    lab: Lab, thread_trials: int = 50, process_trials: int = 10, contenders: int = 8, processes: int = 4
+) -> ScenarioResult:
     """Synchronised contenders for one driver lock: exactly one winner per trial."""
     from pipeline.store import LOCK_FILE, RunStore
     from tests.pipeline.test_driver_lock import _contender, _race_threads
@@ -255,8 +285,9 @@ def lock_race(lab: Lab, thread_trials: int = 50, process_trials: int = 10, conte
             continue
         good = res.check(f"thread trial {trial}: exactly 1 winner of {contenders}", len(winners) == 1, len(winners))
         holder = RunStore(folder).lock_holder()
-        res.check(f"thread trial {trial}: the lock names the winner",
-                  holder is not None and holder.get("pid") == os.getpid(), holder)
+        res.check(
+            f"thread trial {trial}: the lock names the winner", holder is not None and holder.get("pid") == os.getpid(), holder
+        )
         for w in winners:
             w.release_lock()
         res.check(f"thread trial {trial}: free after release", RunStore(folder).lock_holder() is None)
@@ -282,13 +313,18 @@ def lock_race(lab: Lab, thread_trials: int = 50, process_trials: int = 10, conte
             if p.is_alive():
                 p.kill()
                 p.join(5)
-        good = res.check(f"process trial {trial}: exactly 1 winner of {processes}",
-                         sorted(got) == ["refused"] * (processes - 1) + ["won"], sorted(got))
+        good = res.check(
+            f"process trial {trial}: exactly 1 winner of {processes}",
+            sorted(got) == ["refused"] * (processes - 1) + ["won"],
+            sorted(got),
+        )
         res.check(f"process trial {trial}: free once the processes ended", RunStore(folder).lock_holder() is None)
         exact += int(good)
         res.end_run()
     n = thread_trials + process_trials
     res.name = f"lock race ({n} trials, {'1 winner each' if exact == n else f'{exact} with 1 winner'})"
-    res.notes.append(f"{n} trials, {exact} with exactly 1 winner ({thread_trials} x {contenders} threads, "
-                     f"{process_trials} x {processes} processes)")
+    res.notes.append(
+        f"{n} trials, {exact} with exactly 1 winner ({thread_trials} x {contenders} threads, "
+        f"{process_trials} x {processes} processes)"
+    )
     return res

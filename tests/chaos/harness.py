@@ -175,23 +175,40 @@ def blocks(n: int) -> list[str]:
     return [f"blocksworld/{3 + i % 2}@{1 + i // 2}" for i in range(n)]
 
 
-def fake_model(url: str, *, label: str | None = None, key_env: str = KEY_ENV, max_tokens: int = MAX_TOKENS,
-               **transport: Any) -> str:
+def fake_model(
+    url: str, *, label: str | None = None, key_env: str = KEY_ENV, max_tokens: int = MAX_TOKENS, **transport: Any
+) -> str:
     """A sweep's model entry for the fake server (``transport``: rpm, retries, timeout_s ...)."""
-    lines = [f"  - model: {FAKE_MODEL}", f"    api_base: {url}", f"    api_key_env: {key_env}",
-             f"    params: {{max_tokens: {max_tokens}}}"]
+    lines = [
+        f"  - model: {FAKE_MODEL}",
+        f"    api_base: {url}",
+        f"    api_key_env: {key_env}",
+        f"    params: {{max_tokens: {max_tokens}}}",
+    ]
     if label:
         lines.append(f"    label: {label}")
     lines += [f"    {k}: {json.dumps(v)}" for k, v in transport.items()]
     return "\n".join(lines) + "\n"
 
 
-def sweep(out: Path, models: str, instances: Sequence[str], *, run: str | None = None, seeds: Sequence[int] = (0,),
-          method: str = "react", llm_calls: int = 6, workers: int = 3, extra: str = "") -> str:
-    return (f"run: {run or out.name}\noutput: {out}\nmodels:\n{models}"
-            f"methods: [{{method: {method}}}]\n"
-            f"environments: [{{benchmark: blocksworld, instances: [{', '.join(instances)}]}}]\n"
-            f"seeds: {list(seeds)}\nlimits: {{llm_calls: {llm_calls}}}\nworkers: {workers}\n{extra}")
+def sweep(
+    out: Path,
+    models: str,
+    instances: Sequence[str],
+    *,
+    run: str | None = None,
+    seeds: Sequence[int] = (0,),
+    method: str = "react",
+    llm_calls: int = 6,
+    workers: int = 3,
+    extra: str = "",
+) -> str:
+    return (
+        f"run: {run or out.name}\noutput: {out}\nmodels:\n{models}"
+        f"methods: [{{method: {method}}}]\n"
+        f"environments: [{{benchmark: blocksworld, instances: [{', '.join(instances)}]}}]\n"
+        f"seeds: {list(seeds)}\nlimits: {{llm_calls: {llm_calls}}}\nworkers: {workers}\n{extra}"
+    )
 
 
 def run_driver(text: str, *, hooks: Any = None, backend: Any = None, overrides: dict[str, Any] | None = None) -> tuple[Any, Any]:
@@ -327,8 +344,11 @@ def provider_bill_usd(server: Any, statuses: Iterable[int] = (200,)) -> float:
 
     price = fake_price()
     keep = set(statuses)
-    pico = sum(price.cost_pico(c.prompt_tokens, c.cached_tokens, c.completion_tokens)
-               for c in server.log if c.status in keep and c.mode == "ok")
+    pico = sum(
+        price.cost_pico(c.prompt_tokens, c.cached_tokens, c.completion_tokens)
+        for c in server.log
+        if c.status in keep and c.mode == "ok"
+    )
     return pico_to_usd(pico)
 
 

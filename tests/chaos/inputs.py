@@ -49,8 +49,12 @@ def good(d: Path, url: str, out: str | None = None) -> str:
     return GOOD.format(out=out.format(d=d) if out else d / "out", url=url)
 
 
-def _spec(change: tuple[str, str] | None = None, text: str | bytes | None = None, out: str | None = None,
-          edit: Callable[[str], str] | None = None) -> Callable[[Path, str], list[str]]:
+def _spec(
+    change: tuple[str, str] | None = None,
+    text: str | bytes | None = None,
+    out: str | None = None,
+    edit: Callable[[str], str] | None = None,
+) -> Callable[[Path, str], list[str]]:
     """``recap run SPEC`` on GOOD with one replacement or edit (or on a given text)."""
 
     def make(d: Path, url: str) -> list[str]:
@@ -126,26 +130,50 @@ CASES = [
     Case("zero workers", _spec(("workers: 2", "workers: 0")), "workers: Input should be greater than 0"),
     Case("repeated seed", _spec(("seeds: [0]", "seeds: [0, 0]")), "seeds: repeated seed"),
     Case("run name with a slash", _spec(("run: bad-input", "run: bad input/1")), "run: must be letters, digits"),
-    Case("negative step multiplier", _spec(("seeds: [0]", "seeds: [0]\nstep_multiplier: -1")), "step_multiplier: Input should be greater than 0"),
-    Case("two models with one name", _spec(("models:\n", "models:\n  - model: offline/expert\n  - model: offline/expert\n")),
-         "models: two entries are both named 'offline/expert'"),
+    Case(
+        "negative step multiplier",
+        _spec(("seeds: [0]", "seeds: [0]\nstep_multiplier: -1")),
+        "step_multiplier: Input should be greater than 0",
+    ),
+    Case(
+        "two models with one name",
+        _spec(("models:\n", "models:\n  - model: offline/expert\n  - model: offline/expert\n")),
+        "models: two entries are both named 'offline/expert'",
+    ),
     Case("environment without tasks", _spec(('    tasks: ["3"]', "    limit: 2")), "environments[0]: give 'tasks'"),
     Case("sweep file is a list", _spec(text="- run: x\n"), "the sweep file must be a YAML mapping"),
     Case("empty sweep file", _spec(text=""), "the sweep file must be a YAML mapping"),
     Case("binary sweep file", _spec(text=b"\x89PNG\r\n\x1a\n\xff\xfe\x00"), "cannot be read"),
     Case("unknown profile", _spec(("  - method: react", "  - method: recap\n    profile: papr")), "methods[0]"),
     Case("unknown ablation", _spec(("  - method: react", "  - method: recap\n    ablation: no_thinking")), "no_thinking"),
-    Case("test-double options on a real model", _spec((MODEL_LINE, MODEL_LINE + "\n    options: {seed: 1}")),
-         "'options' are for offline/ test doubles only"),
+    Case(
+        "test-double options on a real model",
+        _spec((MODEL_LINE, MODEL_LINE + "\n    options: {seed: 1}")),
+        "'options' are for offline/ test doubles only",
+    ),
     Case("negative dollar cap", _spec((MODEL_LINE, MODEL_LINE + "\n    cap_usd: -1")), "models[0].cap_usd"),
     Case("zero rpm", _spec((MODEL_LINE, MODEL_LINE + "\n    rpm: 0")), "models[0].rpm: Input should be greater than 0"),
     Case("zero call limit", _spec(("seeds: [0]", "seeds: [0]\nlimits: {llm_calls: 0}")), "limits.llm_calls"),
-    Case("api_base that is not a URL", _spec(("api_base: http://", "api_base: localhost:8000 #")), "api_base: must be an http(s) URL"),
-    Case("temperature that is not a number", _spec((MODEL_LINE, MODEL_LINE + "\n    params: {temperature: hot}")),
-         "params: temperature must be a number"),
-    Case("negative max_tokens", _spec((MODEL_LINE, MODEL_LINE + "\n    params: {max_tokens: -5}")), "max_tokens must be an integer >= 1"),
-    Case("API key variable not set", _spec(("api_key_env: RECAP_CHAOS_KEY", "api_key_env: RECAP_CHAOS_UNSET_KEY")),
-         "API key variable RECAP_CHAOS_UNSET_KEY is not set"),
+    Case(
+        "api_base that is not a URL",
+        _spec(("api_base: http://", "api_base: localhost:8000 #")),
+        "api_base: must be an http(s) URL",
+    ),
+    Case(
+        "temperature that is not a number",
+        _spec((MODEL_LINE, MODEL_LINE + "\n    params: {temperature: hot}")),
+        "params: temperature must be a number",
+    ),
+    Case(
+        "negative max_tokens",
+        _spec((MODEL_LINE, MODEL_LINE + "\n    params: {max_tokens: -5}")),
+        "max_tokens must be an integer >= 1",
+    ),
+    Case(
+        "API key variable not set",
+        _spec(("api_key_env: RECAP_CHAOS_KEY", "api_key_env: RECAP_CHAOS_UNSET_KEY")),
+        "API key variable RECAP_CHAOS_UNSET_KEY is not set",
+    ),
     Case("unknown task", _spec(('tasks: ["3"]', 'tasks: ["99"]')), "no blocksworld instance matches '99'"),
     Case("output under a file", _file_as_parent, "cannot be created"),
     Case("output folder of another run", _other_run, "holds run 'someone-else'"),
@@ -155,28 +183,57 @@ CASES = [
     Case("unknown flag", _flags("--fast"), "unrecognized arguments: --fast"),
     Case("sweep file does not exist", lambda d, url: ["run", str(d / "nope.yaml")], "does not exist"),
     Case("resume: corrupt run.json", _on_folder("resume", "RUN", run_json="{not json"), "is not a valid run file"),
-    Case("resume: spec.yaml edited into nonsense", _on_folder("resume", "RUN", spec_text=("workers: 2", "workers: -3")),
-         "workers: Input should be greater than 0"),
-    Case("status of a file", lambda d, url: (d / "f.txt").write_text("x") and ["status", str(d / "f.txt")], "is not a run folder"),
+    Case(
+        "resume: spec.yaml edited into nonsense",
+        _on_folder("resume", "RUN", spec_text=("workers: 2", "workers: -3")),
+        "workers: Input should be greater than 0",
+    ),
+    Case(
+        "status of a file", lambda d, url: (d / "f.txt").write_text("x") and ["status", str(d / "f.txt")], "is not a run folder"
+    ),
     Case("show an unknown episode", _on_folder("show", "RUN", "no-such-episode"), "no episode 'no-such-episode'"),
     Case("sql that would write a file", _on_folder("sql", "RUN", "COPY (SELECT 1) TO 'DIR/leak.csv'"), "rror"),
     Case("report in an unknown format", _on_folder("report", "RUN", "--format", "pdf"), "unknown report format(s) pdf"),
     # spec hardening: bounded values, YAML bombs, duplicate keys, labels, addresses, stores
     Case("seed beyond int64", _spec(("seeds: [0]", "seeds: [9223372036854775808]")), "seeds[0]: integer out of range"),
     Case("boolean worker count", _spec(("workers: 2", "workers: true")), "workers: must be a number, not true/false"),
-    Case("nan temperature", _spec((MODEL_LINE, MODEL_LINE + "\n    params: {temperature: .nan}")),
-         "models[0].params.temperature: must be a finite number"),
-    Case("infinite model cap", _spec((MODEL_LINE, MODEL_LINE + "\n    cap_usd: .inf")), "models[0].cap_usd: must be a finite number"),
-    Case("overflowing price", _spec((MODEL_LINE, MODEL_LINE + "\n    prices: {input: 1, output: 1e999}")), "models[0].prices.output"),
-    Case("duplicate cap_usd", _spec((MODEL_LINE, MODEL_LINE + "\n    cap_usd: 1\n    cap_usd: 500")), "duplicate key 'cap_usd' at line 8"),
-    Case("alias bomb", _spec(("seeds: [0]", "seeds: [0]\nx0: &a [1, 1, 1, 1, 1, 1, 1, 1, 1]\nx1: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]")),
-         "YAML anchors are not allowed"),
+    Case(
+        "nan temperature",
+        _spec((MODEL_LINE, MODEL_LINE + "\n    params: {temperature: .nan}")),
+        "models[0].params.temperature: must be a finite number",
+    ),
+    Case(
+        "infinite model cap",
+        _spec((MODEL_LINE, MODEL_LINE + "\n    cap_usd: .inf")),
+        "models[0].cap_usd: must be a finite number",
+    ),
+    Case(
+        "overflowing price",
+        _spec((MODEL_LINE, MODEL_LINE + "\n    prices: {input: 1, output: 1e999}")),
+        "models[0].prices.output",
+    ),
+    Case(
+        "duplicate cap_usd",
+        _spec((MODEL_LINE, MODEL_LINE + "\n    cap_usd: 1\n    cap_usd: 500")),
+        "duplicate key 'cap_usd' at line 8",
+    ),
+    Case(
+        "alias bomb",
+        _spec(("seeds: [0]", "seeds: [0]\nx0: &a [1, 1, 1, 1, 1, 1, 1, 1, 1]\nx1: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]")),
+        "YAML anchors are not allowed",
+    ),
     Case("markup in a label", _spec((MODEL_LINE, MODEL_LINE + "\n    label: '[bold]x[/]'")), "models[0].label: may hold only"),
-    Case("escape code in a label", _spec((MODEL_LINE, MODEL_LINE + '\n    label: "a\\e[31mb"')), "models[0].label: may hold only"),
+    Case(
+        "escape code in a label", _spec((MODEL_LINE, MODEL_LINE + '\n    label: "a\\e[31mb"')), "models[0].label: may hold only"
+    ),
     Case("50 kB label", _spec((MODEL_LINE, MODEL_LINE + "\n    label: " + "x" * 50_000)), "at most 4096"),
     Case("sweep file is /dev/zero", lambda d, url: ["run", "/dev/zero"], "not a regular file"),
     Case("2 MB sweep file", _spec(text="# " + "x" * 2_000_000 + "\n"), "at most 1 MiB"),
-    Case("unreachable object store", _spec(out="s3://bucket/runs/x?endpoint_override=127.0.0.1:1&scheme=http"), "cannot connect to 127.0.0.1:1"),
+    Case(
+        "unreachable object store",
+        _spec(out="s3://bucket/runs/x?endpoint_override=127.0.0.1:1&scheme=http"),
+        "cannot connect to 127.0.0.1:1",
+    ),
     Case("unknown output scheme", _spec(out="ftp://host/runs/x"), "unknown URI scheme 'ftp'"),
     Case("ray address without a port", _spec(("workers: 2", "workers: 2\nray: {address: head-node}")), "ray.address: must be"),
     Case("--address out of range", _flags("--address", "10.0.0.5:99999"), "ray.address: must be"),
@@ -233,7 +290,11 @@ def bad_inputs(lab: Lab, cases: list[Case] | None = None) -> ScenarioResult:
     for i, case in enumerate(cases):
         code, lines, problems = run_case(case, root / f"case-{i:02d}", server)
         failed += bool(problems)
-        res.check(case.name, not problems, f"exit {code}: {lines[0] if lines else ''}" + (f" ({'; '.join(problems)})" if problems else ""))
+        res.check(
+            case.name,
+            not problems,
+            f"exit {code}: {lines[0] if lines else ''}" + (f" ({'; '.join(problems)})" if problems else ""),
+        )
     res.notes.append(f"{len(cases) - failed}/{len(cases)} rejected in one line with no write and no model call")
     res.end_run()
     return res

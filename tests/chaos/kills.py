@@ -117,23 +117,33 @@ def worker_kill(lab: Lab, runs: int = 1, units: int = 20) -> ScenarioResult:
         landed = [k for k in kills if "pid" in k]
         lost_events = events(out, "worker_lost")
         finished_ids = {r["episode_id"] for r in term.rows}
-        res.check("run exits 0 with every unit done", summary.exit_code() == 0 and not term.lost,
-                  f"exit {summary.exit_code()}, not done {len(term.lost)}")
-        res.check("every returned episode has its terminal row", set(returned) <= finished_ids,
-                  sorted(set(returned) - finished_ids)[:3])
-        res.check("no terminal row for an attempt that never returned", finished_ids <= set(returned),
-                  sorted(finished_ids - set(returned))[:3])
-        res.check("one worker_lost event per worker replaced",
-                  len(lost_events) == summary.worker_restarts and summary.worker_restarts <= len(landed),
-                  f"{len(lost_events)} events, {summary.worker_restarts} restarts, {len(landed)} kills")
+        res.check(
+            "run exits 0 with every unit done",
+            summary.exit_code() == 0 and not term.lost,
+            f"exit {summary.exit_code()}, not done {len(term.lost)}",
+        )
+        res.check(
+            "every returned episode has its terminal row", set(returned) <= finished_ids, sorted(set(returned) - finished_ids)[:3]
+        )
+        res.check(
+            "no terminal row for an attempt that never returned",
+            finished_ids <= set(returned),
+            sorted(finished_ids - set(returned))[:3],
+        )
+        res.check(
+            "one worker_lost event per worker replaced",
+            len(lost_events) == summary.worker_restarts and summary.worker_restarts <= len(landed),
+            f"{len(lost_events)} events, {summary.worker_restarts} restarts, {len(landed)} kills",
+        )
         res.check("kills landed", len(landed) >= 1 and summary.worker_restarts >= 1, f"{len(landed)} kills")
         _records_complete(res, out, finished_ids)
         orphans = {r["episode_id"] for r in rows(out, "messages", ["episode_id"])} - finished_ids
         res.lost += len(term.lost) + len(set(returned) - finished_ids)
         res.duplicated += term.duplicated
         res.check("lost 0, duplicated 0", not term.lost and term.duplicated == 0, (len(term.lost), term.duplicated))
-        res.notes.append(f"{len(landed)} kills, {summary.worker_restarts} workers replaced, "
-                         f"{len(orphans)} killed attempts left orphan rows")
+        res.notes.append(
+            f"{len(landed)} kills, {summary.worker_restarts} workers replaced, {len(orphans)} killed attempts left orphan rows"
+        )
         res.end_run()
     return res
 
@@ -162,8 +172,7 @@ def gateway_kill(lab: Lab, runs: int = 1, units: int = 12) -> ScenarioResult:
         per_episode = _calibrate(lab, server, f"gateway-kill-{r}")
         cap = round(per_episode * units * 0.6, 6)
         out = lab.folder(f"gateway-kill-{r}") / "run"
-        text = sweep(out, fake_model(server.base_url), blocks(units), llm_calls=6, workers=3,
-                     extra=f"run_cap_usd: {cap}\n")
+        text = sweep(out, fake_model(server.base_url), blocks(units), llm_calls=6, workers=3, extra=f"run_cap_usd: {cap}\n")
         server.reset()
         backend = GatewayBackend(parse_spec(text))
         plan = {"gateway": rng.uniform(0.15, 0.35), "budget": rng.uniform(0.45, 0.65)}
@@ -176,13 +185,20 @@ def gateway_kill(lab: Lab, runs: int = 1, units: int = 12) -> ScenarioResult:
                 actor = backend.budget if target == "budget" else next(iter(backend.actors.values()))
                 try:
                     pid = _actor_pid(actor)
-                    if not wait_until(lambda: ray.get(backend.budget.stats.remote())["spent_usd"] >= plan[target] * cap, 120, 0.05):
+                    if not wait_until(
+                        lambda: ray.get(backend.budget.stats.remote())["spent_usd"] >= plan[target] * cap, 120, 0.05
+                    ):
                         return
                     before = ray.get(backend.budget.stats.remote())
                     inflight = ray.get(next(iter(backend.actors.values())).stats.remote())["inflight"]
                     os.kill(pid, signal.SIGKILL)
-                    seen[target] = {"pid": pid, "t": time.monotonic(), "arrivals": len(server.log),
-                                    "spent_pico": before["spent_pico"], "inflight": inflight}
+                    seen[target] = {
+                        "pid": pid,
+                        "t": time.monotonic(),
+                        "arrivals": len(server.log),
+                        "spent_pico": before["spent_pico"],
+                        "inflight": inflight,
+                    }
                     after = ray.get(backend.budget.stats.remote(), timeout=120)  # waits for the restart
                     seen[target]["after_pico"] = after["spent_pico"]
                     seen[target]["new_pid"] = _actor_pid(actor)
@@ -202,32 +218,46 @@ def gateway_kill(lab: Lab, runs: int = 1, units: int = 12) -> ScenarioResult:
             s = seen.get(target, {})
             res.check(f"{target} actor killed and restarted", "new_pid" in s and s["new_pid"] != s["pid"], s)
             res.check(f"{target} kill: spend restored, never lower", s.get("after_pico", -1) >= s.get("spent_pico", 0), s)
-        res.check("calls went on after the kills",
-                  "budget" in seen and len(server.log) > seen["budget"].get("arrivals", 10**9), len(server.log))
+        res.check(
+            "calls went on after the kills",
+            "budget" in seen and len(server.log) > seen["budget"].get("arrivals", 10**9),
+            len(server.log),
+        )
         errors = [r["episode_id"] for r in term.rows if r["end_reason"] == "llm_error"]
         res.check("no episode ended llm_error because of the kills", not errors, errors[:3])
         restored = [e for e in journal(out) if e.get("status") == "orphaned"]
         res.check("open reservations of the dead actors charged from the journal", len(restored) >= 1, len(restored))
         res.check("the cap bound (run stopped, exit 3)", summary.exit_code() == 3 and summary.stopped, summary.stopped)
         over = max(bill, ledger_usd, table_usd) - cap
-        res.check("provider bill, ledger and llm_calls within the cap", over <= 1e-12,
-                  f"bill ${bill:.6f}, ledger ${ledger_usd:.6f}, table ${table_usd:.6f}, cap ${cap:.6f}")
+        res.check(
+            "provider bill, ledger and llm_calls within the cap",
+            over <= 1e-12,
+            f"bill ${bill:.6f}, ledger ${ledger_usd:.6f}, table ${table_usd:.6f}, cap ${cap:.6f}",
+        )
         res.add_overspend(over)
         # a restart that found reservations of its dead predecessor says so in the events table
         kinds = {e["kind"] for e in events(out) if e["kind"] in ("orphans_charged", "ledger_restored")}
-        expected = {k for k, target in (("orphans_charged", "gateway"), ("ledger_restored", "budget"))
-                    if seen.get(target, {}).get("inflight", 0) > 0}
+        expected = {
+            k
+            for k, target in (("orphans_charged", "gateway"), ("ledger_restored", "budget"))
+            if seen.get(target, {}).get("inflight", 0) > 0
+        }
         res.check("restarts visible in events", expected and expected <= kinds, f"{sorted(kinds)} (expected {sorted(expected)})")
         # finish with a higher cap: every unit done exactly once
         summary2, _ = run_driver(text, overrides={"run_cap_usd": cap * 10})
         term = terminal(out)
-        res.check("resume with a higher cap finishes every unit", summary2.exit_code() == 0 and not term.lost,
-                  f"exit {summary2.exit_code()}, not done {len(term.lost)}")
+        res.check(
+            "resume with a higher cap finishes every unit",
+            summary2.exit_code() == 0 and not term.lost,
+            f"exit {summary2.exit_code()}, not done {len(term.lost)}",
+        )
         res.lost += len(term.lost) + len(errors)
         res.duplicated += term.duplicated
         res.check("lost 0, duplicated 0", not term.lost and term.duplicated == 0, (len(term.lost), term.duplicated))
-        res.notes.append(f"cap ${cap:.4f}: provider billed ${bill:.4f}, ledger ${ledger_usd:.4f}; "
-                         f"{len(restored)} in-flight reservations charged at worst case")
+        res.notes.append(
+            f"cap ${cap:.4f}: provider billed ${bill:.4f}, ledger ${ledger_usd:.4f}; "
+            f"{len(restored)} in-flight reservations charged at worst case"
+        )
         res.end_run()
     return res
 
@@ -286,9 +316,13 @@ def driver_kill(lab: Lab, runs: int = 2, units: int = 12) -> ScenarioResult:
             if (out / "plan.json").exists():
                 snapshots.append({u: row["attempt"] for u, row in terminal(out).completed.items()})
                 kill_points.append(f"{delay:.1f}s of ~{active_s:.0f}s ({len(snapshots[-1])}/{units} done)")
-        final = lab.cli(["resume", str(out)] + common, env=lab.env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                        text=True) if (out / "run.json").exists() else \
-            lab.cli(["run", str(spec_file)] + common, env=lab.env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        final = (
+            lab.cli(["resume", str(out)] + common, env=lab.env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            if (out / "run.json").exists()
+            else lab.cli(
+                ["run", str(spec_file)] + common, env=lab.env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+            )
+        )
         try:
             output, _ = final.communicate(timeout=300)
         except subprocess.TimeoutExpired:
@@ -297,8 +331,7 @@ def driver_kill(lab: Lab, runs: int = 2, units: int = 12) -> ScenarioResult:
         res.check("final resume exits 0", final.returncode == 0, f"exit {final.returncode}: {output.strip().splitlines()[-1:]}")
         term = terminal(out)
         done = term.completed
-        res.check("same unit set as an uninterrupted run", set(done) == set(reference),
-                  f"{len(done)} vs {len(reference)}")
+        res.check("same unit set as an uninterrupted run", set(done) == set(reference), f"{len(done)} vs {len(reference)}")
         diff = [u for u in reference if u in done and any(done[u][c] != reference[u][c] for c in _COMPARED)]
         res.check("each unit's terminal row equals the uninterrupted run's", not diff, diff[:3])
         entries = journal(out)
@@ -326,8 +359,13 @@ def driver_kill(lab: Lab, runs: int = 2, units: int = 12) -> ScenarioResult:
         full = {u: 0 for u in reference}
         for e in reserved:
             u = unit_of(e)
-            n_ok = len({x["key"] for x in entries if x.get("op") == "settle" and x.get("status") == "ok"
-                        and x["key"].rsplit("#", 1)[0] == e})
+            n_ok = len(
+                {
+                    x["key"]
+                    for x in entries
+                    if x.get("op") == "settle" and x.get("status") == "ok" and x["key"].rsplit("#", 1)[0] == e
+                }
+            )
             if u in reference and n_ok >= reference[u]["llm_calls"]:
                 full[u] += 1
         redone = sum(1 for n in full.values() if n > 1)
@@ -335,9 +373,11 @@ def driver_kill(lab: Lab, runs: int = 2, units: int = 12) -> ScenarioResult:
         res.duplicated += term.duplicated
         res.check("lost 0, duplicated 0", not term.lost and term.duplicated == 0, (len(term.lost), term.duplicated))
         res.check("the driver was killed mid-run", bool(kill_points), kill_points)
-        res.notes.append(f"run {r}: killed at {', '.join(kill_points) or '-'}; ${wasted:.4f} paid for "
-                         f"killed attempts; {redone} finished episodes re-run (terminal row not yet on disk); "
-                         f"{missing_rows} llm_calls rows lost with the gateway buffer")
+        res.notes.append(
+            f"run {r}: killed at {', '.join(kill_points) or '-'}; ${wasted:.4f} paid for "
+            f"killed attempts; {redone} finished episodes re-run (terminal row not yet on disk); "
+            f"{missing_rows} llm_calls rows lost with the gateway buffer"
+        )
         res.end_run()
     return res
 
@@ -423,23 +463,36 @@ def sink_kill(lab: Lab, runs: int = 1, units: int = 12, restarts: bool = True) -
         res.check("the sink was killed mid-run", landed and all(len(k["done"]) < units for k in landed), seen)
         if restarts:
             res.check("the sink came back after each kill", all(k.get("new_pid") not in (None, k["pid"]) for k in landed), seen)
-            res.check("the run went on to the end (exit 0)", error is None and summary.exit_code() == 0,
-                      error or summary.exit_code())
+            res.check(
+                "the run went on to the end (exit 0)", error is None and summary.exit_code() == 0, error or summary.exit_code()
+            )
         else:
-            res.check("the driver stopped at once with one line naming recap resume",
-                      error is not None and "recap resume" in error and "\n" not in error, error)
-        res.check("the sink's death was not read as worker deaths",
-                  summary.worker_restarts == 0 and not events(out, "worker_lost"), summary.worker_restarts)
+            res.check(
+                "the driver stopped at once with one line naming recap resume",
+                error is not None and "recap resume" in error and "\n" not in error,
+                error,
+            )
+        res.check(
+            "the sink's death was not read as worker deaths",
+            summary.worker_restarts == 0 and not events(out, "worker_lost"),
+            summary.worker_restarts,
+        )
         on_disk = {row["unit_id"] for row in terminal_rows(out)}
         before = set(on_disk)
         again: list[str] = []
         summary2, _ = run_driver(text, hooks=Hooks(on_dispatch=lambda u, a, actor: again.append(u.unit_id)))
         term = terminal(out)
         done = term.completed
-        res.check("resume exits 0 with every unit done", summary2.exit_code() == 0 and not term.lost,
-                  f"exit {summary2.exit_code()}, not done {len(term.lost)}")
-        res.check("resume ran exactly the units without a terminal row", set(again) == set(reference) - before,
-                  f"ran {len(set(again))}, missing {len(set(reference) - before)}")
+        res.check(
+            "resume exits 0 with every unit done",
+            summary2.exit_code() == 0 and not term.lost,
+            f"exit {summary2.exit_code()}, not done {len(term.lost)}",
+        )
+        res.check(
+            "resume ran exactly the units without a terminal row",
+            set(again) == set(reference) - before,
+            f"ran {len(set(again))}, missing {len(set(reference) - before)}",
+        )
         res.check("same unit set as an uninterrupted run", set(done) == set(reference), f"{len(done)} vs {len(reference)}")
         diff = [u for u in reference if u in done and any(done[u][c] != reference[u][c] for c in _COMPARED)]
         res.check("each unit's terminal row equals the uninterrupted run's", not diff, diff[:3])
@@ -458,13 +511,18 @@ def sink_kill(lab: Lab, runs: int = 1, units: int = 12, restarts: bool = True) -
         off = [u for u, row in done.items() if paid.get(row["episode_id"], 0) != ref_spend.get(u, -1)]
         res.check("each completed attempt paid once, at the uninterrupted run's cost (ledger)", not off, off[:3])
         if restarts:
-            res.check("one attempt per unit: nothing re-run at all", all(attempt_of(e) == 1 for e in reserved),
-                      sorted(e for e in reserved if attempt_of(e) != 1)[:3])
+            res.check(
+                "one attempt per unit: nothing re-run at all",
+                all(attempt_of(e) == 1 for e in reserved),
+                sorted(e for e in reserved if attempt_of(e) != 1)[:3],
+            )
         _records_complete(res, out, {row["episode_id"] for row in done.values()})
         res.lost += len(term.lost)
         res.duplicated += term.duplicated
         res.check("lost 0, duplicated 0", not term.lost and term.duplicated == 0, (len(term.lost), term.duplicated))
-        res.notes.append(f"run {r}: sink killed at {[k['at_rows'] for k in landed]} terminal rows; "
-                         f"{len(before)}/{units} units on disk after the first session")
+        res.notes.append(
+            f"run {r}: sink killed at {[k['at_rows'] for k in landed]} terminal rows; "
+            f"{len(before)}/{units} units on disk after the first session"
+        )
         res.end_run()
     return res

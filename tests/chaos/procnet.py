@@ -43,7 +43,7 @@ def parse_address(hex_addr: str) -> tuple[str, int]:
     if len(raw) == 4:
         host = socket.inet_ntop(socket.AF_INET, struct.pack("<I", int(ip_hex, 16)))
     else:
-        host = socket.inet_ntop(socket.AF_INET6, b"".join(raw[i:i + 4][::-1] for i in range(0, 16, 4)))
+        host = socket.inet_ntop(socket.AF_INET6, b"".join(raw[i : i + 4][::-1] for i in range(0, 16, 4)))
     return host, int(port_hex, 16)
 
 

@@ -60,8 +60,9 @@ def test_argparse_errors_are_one_line(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["status"])
     assert exc.value.code == 2
-    assert capsys.readouterr().err == ("recap: error: status: the following arguments are required: run_dir "
-                                       "(see recap status --help)\n")
+    assert capsys.readouterr().err == (
+        "recap: error: status: the following arguments are required: run_dir (see recap status --help)\n"
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -90,8 +91,32 @@ def _finished_folder(out: Path) -> list[str]:
         for uid in half:
             eid = f"{uid}-1"
             recs += [MessageRecord(eid, 0, "user", "task", "go"), StepRecord(eid, 0, 1, "a", True, "ok", True, True)]
-            recs.append(EpisodeRecord(eid, uid, 1, "blocksworld", "3", "t", "blocksworld/3@1", 0, "react", "{}",
-                                      "offline/expert", "success", True, 1, 1, 10, 0, 2, 0.0, 1.0, 12, 4.0))
+            recs.append(
+                EpisodeRecord(
+                    eid,
+                    uid,
+                    1,
+                    "blocksworld",
+                    "3",
+                    "t",
+                    "blocksworld/3@1",
+                    0,
+                    "react",
+                    "{}",
+                    "offline/expert",
+                    "success",
+                    True,
+                    1,
+                    1,
+                    10,
+                    0,
+                    2,
+                    0.0,
+                    1.0,
+                    12,
+                    4.0,
+                )
+            )
         w.write_records("r1", recs)
     (out / "tree_nodes").mkdir()
     return ids
@@ -112,7 +137,9 @@ def test_damaged_parts_are_named_by_status_and_resume_queues_only_units_whose_ro
 
     state = load_state(RunStore(out))
     assert state.completed == set(ids[:2])
-    assert sorted(str(b.path) for b in state.bad_parts) == sorted(str(hit[t]) for t in ("episodes", "messages", "steps", "events"))
+    assert sorted(str(b.path) for b in state.bad_parts) == sorted(
+        str(hit[t]) for t in ("episodes", "messages", "steps", "events")
+    )
     queue = UnitQueue(expand(parse_spec(SPEC.format(out=out))).units, state)
     pending = [queue.take() for _ in range(len(queue))]
     assert sorted((p.unit.unit_id, p.attempt) for p in pending) == sorted((u, 2) for u in ids[2:])
@@ -124,7 +151,8 @@ def test_check_parts_names_truncated_empty_and_foreign_parts(tmp_path):
     hit = damage(out)
     store = RunStore(out)
     assert [(b.path, b.error) for b in store.check_parts("events")] == [
-        (hit["events"], "ValueError: not a events part: missing column(s) detail, episode_id, kind, run_id, severity (+3 more)")]
+        (hit["events"], "ValueError: not a events part: missing column(s) detail, episode_id, kind, run_id, severity (+3 more)")
+    ]
     assert [b.error for b in store.check_parts("steps")] == ["ArrowInvalid: Parquet file size is 0 bytes"]
     assert [b.path for b in store.check_parts("messages")] == [hit["messages"]]
     assert store.check_parts("tree_nodes") == []  # the leftover temp file is not a part
@@ -140,9 +168,11 @@ def test_an_attempt_seen_only_in_the_ledger_journal_is_not_reused(tmp_path):
     RunStore(out).create_identity("damaged")
     a, b = plan.units[0].unit_id, plan.units[1].unit_id
     (out / "gateway").mkdir(parents=True)
-    lines = [{"op": "reserve", "rid": 1, "key": f"{a}-1#0", "model": "m", "pico": 5, "owner": "x", "t": 0},
-             {"op": "settle", "rid": 1, "key": f"{a}-1#0", "model": "m", "pico": 3, "status": "ok", "t": 0},
-             {"op": "reserve", "rid": 2, "key": f"{b}-3#4", "model": "m", "pico": 5, "owner": "x", "t": 0}]
+    lines = [
+        {"op": "reserve", "rid": 1, "key": f"{a}-1#0", "model": "m", "pico": 5, "owner": "x", "t": 0},
+        {"op": "settle", "rid": 1, "key": f"{a}-1#0", "model": "m", "pico": 3, "status": "ok", "t": 0},
+        {"op": "reserve", "rid": 2, "key": f"{b}-3#4", "model": "m", "pico": 5, "owner": "x", "t": 0},
+    ]
     (out / "gateway" / "ledger.jsonl").write_text("".join(json.dumps(e) + "\n" for e in lines) + '{"op": "res')
     state = load_state(RunStore(out))
     assert state.last_attempt == {a: 1, b: 3}
@@ -167,8 +197,14 @@ def test_gateway_events_for_retried_and_failed_calls(tmp_path, server):
     run_dir = tmp_path / "run"
     run_dir.mkdir()
     (run_dir / "run.json").write_text(json.dumps({"run_id": "r1"}))
-    cfg = DeploymentConfig(model="openai/fake-gpt", api_base=server.base_url, max_attempts=3, backoff_initial_s=0.01,
-                           backoff_max_s=0.02, params={"max_tokens": 16})
+    cfg = DeploymentConfig(
+        model="openai/fake-gpt",
+        api_base=server.base_url,
+        max_attempts=3,
+        backoff_initial_s=0.01,
+        backoff_max_s=0.02,
+        params={"max_tokens": 16},
+    )
     gw = DeploymentGateway(cfg, run_dir=run_dir, run_cap_usd=1.0)
 
     async def go() -> list:
@@ -184,9 +220,20 @@ def test_gateway_events_for_retried_and_failed_calls(tmp_path, server):
     ok, ctx, gave_up = asyncio.run(go())
     assert (ok.retries, ctx, gave_up) == (2, "context_length", "server_error")
     evs = pq.read_table(run_dir / "events").to_pylist()
-    got = [(e["source"], e["kind"], e["severity"], e["episode_id"], e["unit_id"],
-            json.loads(e["detail"])["call_key"], json.loads(e["detail"])["call_attempt"], json.loads(e["detail"])["kind"],
-            json.loads(e["detail"])["status"]) for e in sorted(evs, key=lambda e: e["ts"])]
+    got = [
+        (
+            e["source"],
+            e["kind"],
+            e["severity"],
+            e["episode_id"],
+            e["unit_id"],
+            json.loads(e["detail"])["call_key"],
+            json.loads(e["detail"])["call_attempt"],
+            json.loads(e["detail"])["kind"],
+            json.loads(e["detail"])["status"],
+        )
+        for e in sorted(evs, key=lambda e: e["ts"])
+    ]
     assert got == [
         ("gateway", "retry", "warning", "u1-1", None, "u1-1#0", 1, "server_error", 500),
         ("gateway", "retry", "warning", "u1-1", None, "u1-1#0", 2, "server_error", 500),
@@ -249,17 +296,23 @@ def test_api_keys_are_not_in_the_runtime_env_and_their_holder_does_not_print_the
 
     key = "sk-chaos-FASTTEST-0123456789"
     monkeypatch.setenv("RECAP_CHAOS_KEY", key)
-    backend = GatewayBackend(parse_spec("""run: s
+    backend = GatewayBackend(
+        parse_spec("""run: s
 output: /nonexistent/never-written
 models:
   - {model: openai/fake-gpt, api_base: "http://127.0.0.1:9/v1", api_key_env: RECAP_CHAOS_KEY}
   - {model: offline/expert}
 methods: [{method: react}]
 environments: [{benchmark: blocksworld, tasks: ["3"]}]
-"""))
+""")
+    )
     assert key not in json.dumps(backend._runtime_env())
     secrets = backend._api_keys()
-    assert (secrets.names(), repr(secrets), str(secrets)) == (["RECAP_CHAOS_KEY"], "SecretEnv(RECAP_CHAOS_KEY)", "SecretEnv(RECAP_CHAOS_KEY)")
+    assert (secrets.names(), repr(secrets), str(secrets)) == (
+        ["RECAP_CHAOS_KEY"],
+        "SecretEnv(RECAP_CHAOS_KEY)",
+        "SecretEnv(RECAP_CHAOS_KEY)",
+    )
     monkeypatch.delenv("RECAP_CHAOS_KEY")
     SecretEnv({"RECAP_CHAOS_KEY": key}).apply()
     assert os.environ["RECAP_CHAOS_KEY"] == key
@@ -293,9 +346,17 @@ def test_listeners_of_this_process_are_found_with_their_address():
     assert found[("0.0.0.0", ports["0.0.0.0"])] is False
 
 
-@pytest.mark.parametrize("address, loopback", [("127.0.0.1:6379", True), ("localhost:6379", True), ("[::1]:6379", True),
-                                               ("10.0.0.5:6379", False), ("ray://10.0.0.5:10001", False),
-                                               ("head.example.org:6379", False)])
+@pytest.mark.parametrize(
+    "address, loopback",
+    [
+        ("127.0.0.1:6379", True),
+        ("localhost:6379", True),
+        ("[::1]:6379", True),
+        ("10.0.0.5:6379", False),
+        ("ray://10.0.0.5:10001", False),
+        ("head.example.org:6379", False),
+    ],
+)
 def test_which_cluster_addresses_are_joined_on_the_loopback(address, loopback):
     from pipeline.raysetup import _is_loopback
 

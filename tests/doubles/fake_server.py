@@ -59,16 +59,33 @@ from workers.llm.tokens import estimate_prompt_tokens, estimate_text_tokens
 
 HOST = "127.0.0.1"
 DEFAULT_REPLY = '{"think": "fake server reply", "action": "wait"}'
-FAULT_MODES = ("429", "500", "502", "503", "hang", "empty", "malformed", "ctx", "400", "401",
-               "retrylong", "echokey", "negusage", "zerousage", "hugeusage", "fracusage", "nousage", "negcached")
+FAULT_MODES = (
+    "429",
+    "500",
+    "502",
+    "503",
+    "hang",
+    "empty",
+    "malformed",
+    "ctx",
+    "400",
+    "401",
+    "retrylong",
+    "echokey",
+    "negusage",
+    "zerousage",
+    "hugeusage",
+    "fracusage",
+    "nousage",
+    "negcached",
+)
 #: usage blocks of the lying-provider modes (None: the field is left out)
 _USAGE_FAULTS: dict[str, dict[str, Any]] = {
     "negusage": {"prompt_tokens": -1_000_000, "completion_tokens": -1_000_000},
     "zerousage": {"prompt_tokens": 0, "completion_tokens": 0},
     "hugeusage": {"prompt_tokens": 50_000_000, "completion_tokens": 50_000_000},
     "fracusage": {"prompt_tokens": 10.5, "completion_tokens": 2.25},
-    "nousage": {"prompt_tokens": None, "completion_tokens": None, "cached_tokens": None,
-                "cache_write_tokens": None},
+    "nousage": {"prompt_tokens": None, "completion_tokens": None, "cached_tokens": None, "cache_write_tokens": None},
     "negcached": {"cached_tokens": -1_000_000},
 }
 _DIRECTIVE = re.compile(r"FAKE:([a-z0-9]+)(?:\*(\d+))?")
@@ -260,8 +277,9 @@ class FakeServer:
         cfg = self.config
         rule = cfg.rule_for(model)
         if rule not in self._caches:
-            self._caches[rule] = PromptCache(rule, ttl_s=cfg.cache_ttl_s, min_tokens=cfg.cache_min_tokens,
-                                             recent_prompts=cfg.prefix_memory)
+            self._caches[rule] = PromptCache(
+                rule, ttl_s=cfg.cache_ttl_s, min_tokens=cfg.cache_min_tokens, recent_prompts=cfg.prefix_memory
+            )
         return self._caches[rule]
 
     # ---- handlers ----
@@ -309,8 +327,19 @@ class FakeServer:
         self._window_tokens += tokens
         return None
 
-    def _record(self, now: float, status: int, mode: str, model: str, prompt: int, completion: int,
-                cached: int, max_tokens: int | None, counted: int, written: int = 0) -> None:
+    def _record(
+        self,
+        now: float,
+        status: int,
+        mode: str,
+        model: str,
+        prompt: int,
+        completion: int,
+        cached: int,
+        max_tokens: int | None,
+        counted: int,
+        written: int = 0,
+    ) -> None:
         self.log.append(FakeCall(now, status, mode, model, prompt, completion, cached, max_tokens, counted, written))
 
     async def _chat(self, request: web.Request) -> web.StreamResponse:
@@ -321,16 +350,18 @@ class FakeServer:
             messages = list(body["messages"])
             model = str(body.get("model", ""))
         except Exception:
-            return web.json_response(_error_body("request body is not a chat completion request",
-                                                 "invalid_request_error", None), status=400)
+            return web.json_response(
+                _error_body("request body is not a chat completion request", "invalid_request_error", None), status=400
+            )
         if cfg.keep_bodies:
             self.bodies.append(body)
         max_tokens = body.get("max_tokens") or body.get("max_completion_tokens")
         try:
             seen = normalize(messages)
         except Exception:
-            return web.json_response(_error_body("request body is not a chat completion request",
-                                                 "invalid_request_error", None), status=400)
+            return web.json_response(
+                _error_body("request body is not a chat completion request", "invalid_request_error", None), status=400
+            )
         prompt_tokens = estimate_prompt_tokens([{"role": m.role, "content": m.text} for m in seen])
         mode = self._mode_of(messages)
 
@@ -341,8 +372,9 @@ class FakeServer:
         if mode == "401":
             got = request.headers.get("Authorization", "").removeprefix("Bearer ").strip()
             self._record(now, 401, mode, model, prompt_tokens, 0, 0, max_tokens, 0)
-            return web.json_response(_error_body(f"Incorrect API key provided: {got}.",
-                                                 "invalid_request_error", "invalid_api_key"), status=401)
+            return web.json_response(
+                _error_body(f"Incorrect API key provided: {got}.", "invalid_request_error", "invalid_api_key"), status=401
+            )
 
         reply = cfg.reply
         finish = "stop"
@@ -364,8 +396,7 @@ class FakeServer:
         forced = {"429": 1.0, "retrylong": cfg.long_retry_after_s}.get(mode)
         wait = self._admit(now, admitted) if forced is None else forced
         if wait is not None:
-            self._record(now, 429, mode if forced is not None else "rate_limited", model,
-                         prompt_tokens, 0, 0, max_tokens, 0)
+            self._record(now, 429, mode if forced is not None else "rate_limited", model, prompt_tokens, 0, 0, max_tokens, 0)
             wait = max(wait, 0.001)
             if cfg.retry_after_s is not None and mode != "retrylong":
                 wait = cfg.retry_after_s
@@ -375,18 +406,26 @@ class FakeServer:
                 headers={"Retry-After": str(max(1, math.ceil(wait))), "retry-after-ms": str(int(wait * 1000))},
             )
 
-        if mode == "ctx" or (cfg.max_context_tokens is not None
-                             and prompt_tokens + int(max_tokens or 0) > cfg.max_context_tokens):
+        if mode == "ctx" or (
+            cfg.max_context_tokens is not None and prompt_tokens + int(max_tokens or 0) > cfg.max_context_tokens
+        ):
             self._record(now, 400, "ctx", model, prompt_tokens, 0, 0, max_tokens, admitted)
             limit = cfg.max_context_tokens or 0
-            return web.json_response(_error_body(
-                f"This model's maximum context length is {limit} tokens. However, you requested "
-                f"{prompt_tokens + int(max_tokens or 0)} tokens. Please reduce the length of the messages.",
-                "invalid_request_error", "context_length_exceeded", "messages"), status=400)
+            return web.json_response(
+                _error_body(
+                    f"This model's maximum context length is {limit} tokens. However, you requested "
+                    f"{prompt_tokens + int(max_tokens or 0)} tokens. Please reduce the length of the messages.",
+                    "invalid_request_error",
+                    "context_length_exceeded",
+                    "messages",
+                ),
+                status=400,
+            )
         if mode == "400":
             self._record(now, 400, mode, model, prompt_tokens, 0, 0, max_tokens, admitted)
-            return web.json_response(_error_body("Invalid value for 'temperature'.",
-                                                 "invalid_request_error", None, "temperature"), status=400)
+            return web.json_response(
+                _error_body("Invalid value for 'temperature'.", "invalid_request_error", None, "temperature"), status=400
+            )
 
         delay = cfg.latency_s + (self._rng.uniform(0, cfg.latency_jitter_s) if cfg.latency_jitter_s else 0.0)
         if mode == "hang":
@@ -397,30 +436,47 @@ class FakeServer:
             await asyncio.sleep(delay)
         if mode in ("500", "502", "503"):
             self._record(now, int(mode), mode, model, prompt_tokens, 0, 0, max_tokens, admitted)
-            return web.json_response(_error_body("The server had an error while processing your request.",
-                                                 "server_error", None), status=int(mode))
+            return web.json_response(
+                _error_body("The server had an error while processing your request.", "server_error", None), status=int(mode)
+            )
         if mode == "empty":
             self._record(now, 200, mode, model, prompt_tokens, 0, 0, max_tokens, admitted)
             return web.Response(body=b"", status=200, content_type="application/json")
         if mode == "malformed":
             self._record(now, 200, mode, model, prompt_tokens, 0, 0, max_tokens, admitted)
-            return web.Response(body=b'{"id": "chatcmpl-fake", "choices": [{"mess', status=200,
-                                content_type="application/json")
+            return web.Response(body=b'{"id": "chatcmpl-fake", "choices": [{"mess', status=200, content_type="application/json")
 
         rule = cfg.rule_for(model)
         outcome = self.cache_for(model).serve(model, seen, now + self._clock_offset, reply=reply)
         cached, written = outcome.cached_tokens, outcome.cache_write_tokens
-        self._record(now, 200, mode if mode in _USAGE_FAULTS or mode == "echokey" else "ok", model,
-                     prompt_tokens, completion_tokens, cached, max_tokens, admitted, written)
-        usage: dict[str, Any] = {"prompt_tokens": prompt_tokens, "completion_tokens": completion_tokens,
-                                 "total_tokens": prompt_tokens + completion_tokens, "cached_tokens": cached,
-                                 "cache_write_tokens": written if rule == "anthropic" else None}
+        self._record(
+            now,
+            200,
+            mode if mode in _USAGE_FAULTS or mode == "echokey" else "ok",
+            model,
+            prompt_tokens,
+            completion_tokens,
+            cached,
+            max_tokens,
+            admitted,
+            written,
+        )
+        usage: dict[str, Any] = {
+            "prompt_tokens": prompt_tokens,
+            "completion_tokens": completion_tokens,
+            "total_tokens": prompt_tokens + completion_tokens,
+            "cached_tokens": cached,
+            "cache_write_tokens": written if rule == "anthropic" else None,
+        }
         for source in (_USAGE_FAULTS.get(mode), cfg.usage_override):
             for name, value in (source or {}).items():
                 usage[name] = value
                 if name in ("prompt_tokens", "completion_tokens") and "total_tokens" not in source:
-                    usage["total_tokens"] = None if None in (usage["prompt_tokens"], usage["completion_tokens"]) \
+                    usage["total_tokens"] = (
+                        None
+                        if None in (usage["prompt_tokens"], usage["completion_tokens"])
                         else usage["prompt_tokens"] + usage["completion_tokens"]
+                    )
         cached_reported = usage.pop("cached_tokens")
         written_reported = usage.pop("cache_write_tokens")
         usage = {k: v for k, v in usage.items() if v is not None}
@@ -431,8 +487,10 @@ class FakeServer:
             "object": "chat.completion",
             "created": int(time.time()),
             "model": model,
-            "choices": [{"index": i, "message": {"role": "assistant", "content": reply},
-                         "finish_reason": finish} for i in range(n_choices)],
+            "choices": [
+                {"index": i, "message": {"role": "assistant", "content": reply}, "finish_reason": finish}
+                for i in range(n_choices)
+            ],
         }
         if usage:
             payload["usage"] = usage
@@ -449,14 +507,25 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--latency-jitter-s", type=float, default=0.0)
     p.add_argument("--reply", default=DEFAULT_REPLY)
     p.add_argument("--max-context-tokens", type=int)
-    p.add_argument("--fault", action="append", default=[], metavar="MODE=RATE",
-                   help=f"inject a fault at random; modes: {', '.join(FAULT_MODES)}")
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="MODE=RATE",
+        help=f"inject a fault at random; modes: {', '.join(FAULT_MODES)}",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--require-api-key")
-    p.add_argument("--cache-rule", default="lcp", choices=RULES,
-                   help="prompt-cache rule of models without --model-cache-rule (default lcp)")
-    p.add_argument("--model-cache-rule", action="append", default=[], metavar="MODEL=RULE",
-                   help="the prompt-cache rule of one model name (repeatable)")
+    p.add_argument(
+        "--cache-rule", default="lcp", choices=RULES, help="prompt-cache rule of models without --model-cache-rule (default lcp)"
+    )
+    p.add_argument(
+        "--model-cache-rule",
+        action="append",
+        default=[],
+        metavar="MODEL=RULE",
+        help="the prompt-cache rule of one model name (repeatable)",
+    )
     p.add_argument("--cache-ttl-s", type=float, help="seconds an unused cache entry lives (default: the rule's)")
     args = p.parse_args(argv)
     rules = {}
@@ -467,13 +536,23 @@ def main(argv: list[str] | None = None) -> None:
     for item in args.fault:
         mode, _, rate = item.partition("=")
         faults[mode] = float(rate)
-    server = FakeServer(FakeServerConfig(
-        rpm=args.rpm, tpm=args.tpm, window_s=args.window_s, latency_s=args.latency_s,
-        latency_jitter_s=args.latency_jitter_s, reply=args.reply,
-        max_context_tokens=args.max_context_tokens, fault_rates=faults, seed=args.seed,
-        require_api_key=args.require_api_key, cache_rule=args.cache_rule, cache_rules=rules,
-        cache_ttl_s=args.cache_ttl_s,
-    ))
+    server = FakeServer(
+        FakeServerConfig(
+            rpm=args.rpm,
+            tpm=args.tpm,
+            window_s=args.window_s,
+            latency_s=args.latency_s,
+            latency_jitter_s=args.latency_jitter_s,
+            reply=args.reply,
+            max_context_tokens=args.max_context_tokens,
+            fault_rates=faults,
+            seed=args.seed,
+            require_api_key=args.require_api_key,
+            cache_rule=args.cache_rule,
+            cache_rules=rules,
+            cache_ttl_s=args.cache_ttl_s,
+        )
+    )
 
     async def serve() -> None:
         url = await server.start(args.port)

@@ -11,8 +11,9 @@ from typing import Any
 from schemas.parts import read_table
 
 
-def play(method: str, instance_id: str, inner: Any, episode_id: str, *, offline: bool,
-         settings: dict[str, Any] | None = None) -> Any:
+def play(
+    method: str, instance_id: str, inner: Any, episode_id: str, *, offline: bool, settings: dict[str, Any] | None = None
+) -> Any:
     """One episode of ``method`` on ``instance_id``; the gateway behind ``inner`` records the calls."""
     from workers.envs.registry import make_env
     from workers.episode_worker import EpisodeClient, build_agent

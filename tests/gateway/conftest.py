@@ -52,10 +52,17 @@ def fake_key(monkeypatch: pytest.MonkeyPatch) -> str:
     return FAKE_KEY
 
 
-def make_request(i: int, content: str | None = None, *, episode: str = "ep", hints=None,
-                 max_tokens: int | None = None, window=None) -> LLMRequest:
+def make_request(
+    i: int, content: str | None = None, *, episode: str = "ep", hints=None, max_tokens: int | None = None, window=None
+) -> LLMRequest:
     return LLMRequest(
         messages=(ChatMessage("user", content if content is not None else f"request number {i}"),),
-        episode_id=episode, call_index=i, purpose="task",
-        window_seqs=tuple(window) if window is not None else (i,), node_id=0, response_seq=i + 1,
-        max_tokens=max_tokens, hints=hints or {})
+        episode_id=episode,
+        call_index=i,
+        purpose="task",
+        window_seqs=tuple(window) if window is not None else (i,),
+        node_id=0,
+        response_seq=i + 1,
+        max_tokens=max_tokens,
+        hints=hints or {},
+    )

@@ -16,14 +16,15 @@ from workers.llm.providers import DeploymentConfig
 
 async def main(run_dir: str, base_url: str, cap_usd: float) -> None:
     gw = DeploymentGateway(
-        DeploymentConfig(model="openai/fake-gpt", api_base=base_url, max_concurrency=4,
-                         params={"max_tokens": 20}),
-        run_dir=run_dir, run_id="kill-test", run_cap_usd=cap_usd)
+        DeploymentConfig(model="openai/fake-gpt", api_base=base_url, max_concurrency=4, params={"max_tokens": 20}),
+        run_dir=run_dir,
+        run_id="kill-test",
+        run_cap_usd=cap_usd,
+    )
     print("READY", flush=True)
 
     async def one(i: int) -> None:
-        req = LLMRequest(messages=(ChatMessage("user", f"request number {i}"),), episode_id="ep",
-                         call_index=i, purpose="task")
+        req = LLMRequest(messages=(ChatMessage("user", f"request number {i}"),), episode_id="ep", call_index=i, purpose="task")
         resp = await gw.complete(req)
         print(f"OK {req.call_key} {round(resp.cost_usd * 10**12)} {resp.text}", flush=True)
 

@@ -21,8 +21,9 @@ def test_expert_drives_each_agent_to_success_and_every_call_is_recorded(run_dir,
 
 
 def test_injected_faults_reach_the_agent_and_are_recorded(run_dir):
-    cfg = DeploymentConfig(model="offline/expert",
-                           offline_options={"seed": 5, "malformed_json_rate": 0.25, "invalid_action_rate": 0.25})
+    cfg = DeploymentConfig(
+        model="offline/expert", offline_options={"seed": 5, "malformed_json_rate": 0.25, "invalid_action_rate": 0.25}
+    )
     with BlockingGateway(cfg, run_dir=run_dir) as gw:
         result = play("recap", "blocksworld/3@2", gw, "faulty", offline=True)
     assert result.json_repairs >= 1

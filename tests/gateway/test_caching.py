@@ -62,6 +62,7 @@ def caching_server(fake_server):
 
 # ---- each provider's rule through litellm's HTTP client ----------------------------------
 
+
 def test_openai_rule_reports_1024_plus_128_increments_as_cached_tokens(caching_server):
     rows: list = []
     c = client(caching_server, "openai/fake-gpt", rows)
@@ -83,7 +84,10 @@ def test_anthropic_rule_writes_at_marked_breakpoints_and_reads_them_back(caching
     # call 0: nothing seen before, no marker; call 1 marks the end of what it shares with call 0
     # (pin + task, 1306 tokens) and writes it; call 2 reads it and writes the next turn (26)
     assert [(r.prompt_tokens, r.cached_prompt_tokens, w.cache_write_tokens) for r, w in zip(got, rows)] == [
-        (1309, 0, 0), (1335, 0, 1306), (1361, 1306, 26)]
+        (1309, 0, 0),
+        (1335, 0, 1306),
+        (1361, 1306, 26),
+    ]
     sent = [[isinstance(m["content"], list) for m in b["messages"]] for b in caching_server.bodies]
     assert sent == [[False, False], [False, True, False, False], [False, True, False, True, False, False]]
     block = caching_server.bodies[1]["messages"][1]["content"]
@@ -102,12 +106,15 @@ def test_deepseek_rule_hits_the_unit_ending_after_the_previous_reply(caching_ser
     assert [r.cost_usd for r in got] == [usd(1309), usd(16, 1319), usd(16, 1345)]
 
 
-@pytest.mark.parametrize("rule, fields", [
-    ("openai", {"prompt_tokens_details": {"cached_tokens": 1280}}),
-    ("anthropic", {"cache_read_input_tokens": 1306, "cache_creation_input_tokens": 26}),
-    # the first answer's unit (its prompt + its reply, 1319 tokens) matches completely
-    ("deepseek", {"prompt_cache_hit_tokens": 1319, "prompt_cache_miss_tokens": 29}),
-])
+@pytest.mark.parametrize(
+    "rule, fields",
+    [
+        ("openai", {"prompt_tokens_details": {"cached_tokens": 1280}}),
+        ("anthropic", {"cache_read_input_tokens": 1306, "cache_creation_input_tokens": 26}),
+        # the first answer's unit (its prompt + its reply, 1319 tokens) matches completely
+        ("deepseek", {"prompt_cache_hit_tokens": 1319, "prompt_cache_miss_tokens": 29}),
+    ],
+)
 def test_each_rule_answers_in_its_providers_own_usage_fields(fake_server, rule, fields):
     import httpx
 
@@ -122,8 +129,13 @@ def test_each_rule_answers_in_its_providers_own_usage_fields(fake_server, rule, 
     usage = post(with_markers([*plain, {"role": "user", "content": "x" * 40}], [1, 3]))
     assert {k: usage[k] for k in fields} == fields
     assert usage["prompt_tokens"] == 1348
-    others = {"prompt_tokens_details", "cache_read_input_tokens", "cache_creation_input_tokens",
-              "prompt_cache_hit_tokens", "prompt_cache_miss_tokens"} - set(fields)
+    others = {
+        "prompt_tokens_details",
+        "cache_read_input_tokens",
+        "cache_creation_input_tokens",
+        "prompt_cache_hit_tokens",
+        "prompt_cache_miss_tokens",
+    } - set(fields)
     assert not others & set(usage)
 
 
@@ -149,8 +161,9 @@ def test_cache_markers_can_be_turned_off(caching_server):
 
 
 def test_gateway_marks_breakpoints_and_records_cache_writes(caching_server, run_dir):
-    cfg = DeploymentConfig(model="openai/fake-claude", api_base=caching_server.base_url, max_attempts=1,
-                           params={"max_tokens": 20})
+    cfg = DeploymentConfig(
+        model="openai/fake-claude", api_base=caching_server.base_url, max_attempts=1, params={"max_tokens": 20}
+    )
     gw = DeploymentGateway(cfg, run_dir=run_dir)
 
     async def go():
@@ -161,12 +174,16 @@ def test_gateway_marks_breakpoints_and_records_cache_writes(caching_server, run_
     got = asyncio.run(go())
     rows = sorted(read_table(run_dir, "llm_calls")[0].to_pylist(), key=lambda r: r["call_index"])
     assert [(r["prompt_tokens"], r["cached_prompt_tokens"], r["cache_write_tokens"]) for r in rows] == [
-        (1309, 0, 0), (1335, 0, 1306), (1361, 1306, 26)]
+        (1309, 0, 0),
+        (1335, 0, 1306),
+        (1361, 1306, 26),
+    ]
     assert [r["cost_usd"] for r in rows] == [g.cost_usd for g in got]
     assert rows[2]["cost_usd"] == usd(29, 1306, 26)
 
 
 # ---- breakpoints under pair and block windowing -------------------------------------------
+
 
 def _window(pins: list[str], live: list[str]) -> list[dict]:
     return [{"role": "user", "content": c} for c in pins + live]
@@ -180,8 +197,13 @@ def test_breakpoints_end_the_pins_under_pair_trimming_and_the_stable_block_under
     assert [pair.plan("ep", _window(pins, live)) for live in calls] == [(), (3,), (1,), (1,)]
     block = BreakpointPlanner()
     # block trimming: the window grows until a block of 4 is dropped, then grows again
-    calls = [["a", "b"], ["a", "b", "c", "d"], ["a", "b", "c", "d", "e", "f"], ["e", "f", "g", "h"],
-             ["e", "f", "g", "h", "i", "j"]]
+    calls = [
+        ["a", "b"],
+        ["a", "b", "c", "d"],
+        ["a", "b", "c", "d", "e", "f"],
+        ["e", "f", "g", "h"],
+        ["e", "f", "g", "h", "i", "j"],
+    ]
     # the longest shared prefix and the shortest one (kept across the next trim)
     assert [block.plan("ep", _window(pins, live)) for live in calls] == [(), (3,), (3, 5), (1,), (1, 5)]
     # another episode's history does not count
@@ -196,6 +218,7 @@ def test_two_breakpoints_when_the_last_requests_share_different_prefixes():
 
 
 # ---- the rules without HTTP ----------------------------------------------------------------
+
 
 def test_openai_increments_and_minimum():
     assert [openai_cached(n) for n in (0, 1023, 1024, 1151, 1152, 5000)] == [0, 0, 1024, 1024, 1152, 4992]
@@ -223,6 +246,7 @@ def test_anthropic_prefix_below_the_minimum_is_not_cached():
 
 # ---- accounting ----------------------------------------------------------------------------
 
+
 def _sizing(prompt: int, max_tokens: int = 20) -> Sizing:
     messages = [{"role": "user", "content": "x" * (4 * (prompt - 6))}]
     return size_request("openai/fake-claude", messages, {"max_tokens": max_tokens})
@@ -234,15 +258,23 @@ def test_cache_writes_are_checked_and_priced_at_the_write_price():
     assert sizing.counted.tokens == 1000
 
     def attempt(cached, written):
-        return Attempt(text=REPLY, finish_reason="stop", prompt_tokens=1000, cached_prompt_tokens=cached,
-                       completion_tokens=10, litellm_cost_usd=None, cache_write_tokens=written)
+        return Attempt(
+            text=REPLY,
+            finish_reason="stop",
+            prompt_tokens=1000,
+            cached_prompt_tokens=cached,
+            completion_tokens=10,
+            litellm_cost_usd=None,
+            cache_write_tokens=written,
+        )
 
     ok = settle("openai/fake-claude", price, attempt(600, 300), sizing)
     assert not ok.rejected and ok.usage.cache_write_tokens == 300
     assert ok.cost_pico == 100 * 1_000_000 + 600 * 100_000 + 300 * 1_250_000 + 10 * 2_000_000
     assert usage_problems(attempt(600, -1), sizing, 10) == ["cache-write prompt tokens -1 is negative"]
     assert usage_problems(attempt(600, 401), sizing, 10) == [
-        "cached 600 + cache-write 401 prompt tokens above prompt_tokens 1000"]
+        "cached 600 + cache-write 401 prompt tokens above prompt_tokens 1000"
+    ]
 
 
 def test_worst_case_reserves_every_prompt_token_at_the_write_price():

@@ -31,8 +31,6 @@ workers: 2
 """
 
 
-
-
 def test_sweep_records_cached_tokens_and_bills_them_at_the_cached_prices(ray_address, tmp_path: Path, monkeypatch):
     from pipeline.cli import main
     from pipeline.sqlview import open_tables
@@ -41,8 +39,9 @@ def test_sweep_records_cached_tokens_and_bills_them_at_the_cached_prices(ray_add
 
     monkeypatch.setenv("RECAP_FAKE_KEY", "not-a-secret")
     # blocksworld prompts are short: the minimum cacheable prefix is lowered for the test
-    server = FakeServer(FakeServerConfig(cache_rules={"fake-claude": "anthropic", "fake-deepseek": "deepseek"},
-                                         cache_min_tokens=0))
+    server = FakeServer(
+        FakeServerConfig(cache_rules={"fake-claude": "anthropic", "fake-deepseek": "deepseek"}, cache_min_tokens=0)
+    )
     url = server.start_in_thread()
     out = tmp_path / "caching"
     spec = tmp_path / "sweep.yaml"
@@ -54,7 +53,8 @@ def test_sweep_records_cached_tokens_and_bills_them_at_the_cached_prices(ray_add
     con, _ = open_tables(RunStore(out))
     calls = con.execute(
         "select episode_id, model, call_index, prompt_tokens, cached_prompt_tokens, cache_write_tokens, "
-        "completion_tokens, cost_usd from llm_calls where status = 'ok' order by model, call_index").fetchall()
+        "completion_tokens, cost_usd from llm_calls where status = 'ok' order by model, call_index"
+    ).fetchall()
     episodes = dict(con.execute("select model, cost_usd from episodes").fetchall())
     ep_of = dict(con.execute("select episode_id, model from episodes").fetchall())
     assert len(calls) == 10 and set(ep_of.values()) == {"openai/fake-claude", "openai/fake-deepseek"}

@@ -22,9 +22,18 @@ MODEL = "openai/fake-gpt"  # TEST DOUBLE price: $1/M input, $0.5/M cached, $2/M 
 
 
 def config(server, **kw) -> DeploymentConfig:
-    args = dict(model=MODEL, api_base=server.base_url, window_s=2.0, window_pad_s=0.1, max_concurrency=16,
-                max_attempts=3, backoff_initial_s=0.01, backoff_max_s=0.05, attempt_timeout_s=5.0,
-                params={"max_tokens": 20})
+    args = dict(
+        model=MODEL,
+        api_base=server.base_url,
+        window_s=2.0,
+        window_pad_s=0.1,
+        max_concurrency=16,
+        max_attempts=3,
+        backoff_initial_s=0.01,
+        backoff_max_s=0.05,
+        attempt_timeout_s=5.0,
+        params={"max_tokens": 20},
+    )
     args.update(kw)
     return DeploymentConfig(**args)
 
@@ -176,8 +185,7 @@ def test_repeated_call_key_and_identical_requests_are_not_paid_twice(fake_server
     gw = DeploymentGateway(config(server, cache=True), run_dir=run_dir)
 
     async def go():
-        first, in_flight_twin = await asyncio.gather(gw.complete(make_request(0, "same")),
-                                                     gw.complete(make_request(0, "same")))
+        first, in_flight_twin = await asyncio.gather(gw.complete(make_request(0, "same")), gw.complete(make_request(0, "same")))
         again = await gw.complete(make_request(0, "same"))
         cached = await gw.complete(make_request(1, "same"))  # another call, identical request
         await gw.aclose()
@@ -187,7 +195,10 @@ def test_repeated_call_key_and_identical_requests_are_not_paid_twice(fake_server
     assert len(server.log) == 1
     assert first.served_from == "provider" and first.cost_usd > 0
     assert [(r.served_from, r.cost_usd, r.text) for r in (twin, again, cached)] == [
-        ("ledger", 0.0, first.text), ("ledger", 0.0, first.text), ("cache", 0.0, first.text)]
+        ("ledger", 0.0, first.text),
+        ("ledger", 0.0, first.text),
+        ("cache", 0.0, first.text),
+    ]
     assert sorted(r["served_from"] for r in rows(run_dir)) == ["cache", "ledger", "ledger", "provider"]
 
 

@@ -36,8 +36,14 @@ def ray_session():
 
 
 def _config(server, **kw) -> DeploymentConfig:
-    args = dict(model="openai/fake-gpt", api_base=server.base_url, max_concurrency=16, max_attempts=2,
-                backoff_initial_s=0.01, params={"max_tokens": 20})
+    args = dict(
+        model="openai/fake-gpt",
+        api_base=server.base_url,
+        max_concurrency=16,
+        max_attempts=2,
+        backoff_initial_s=0.01,
+        params={"max_tokens": 20},
+    )
     args.update(kw)
     return DeploymentConfig(**args)
 

@@ -35,8 +35,16 @@ PRICE = default_prices().get(MODEL)
 
 
 def config(server, **kw) -> DeploymentConfig:
-    args = dict(model=MODEL, api_base=server.base_url, max_concurrency=4, max_attempts=2,
-                backoff_initial_s=0.01, backoff_max_s=0.05, attempt_timeout_s=5.0, params={"max_tokens": 20})
+    args = dict(
+        model=MODEL,
+        api_base=server.base_url,
+        max_concurrency=4,
+        max_attempts=2,
+        backoff_initial_s=0.01,
+        backoff_max_s=0.05,
+        attempt_timeout_s=5.0,
+        params={"max_tokens": 20},
+    )
     args.update(kw)
     return DeploymentConfig(**args)
 
@@ -68,8 +76,7 @@ def test_a_reply_the_client_cannot_read_is_charged_its_reservation_and_the_cap_h
 
 def true_bill_pico(server) -> int:
     """What the fake provider really generated (its own counts, not the usage it reported)."""
-    return sum(PRICE.cost_pico(c.prompt_tokens, c.cached_tokens, c.completion_tokens)
-               for c in server.log if c.status == 200)
+    return sum(PRICE.cost_pico(c.prompt_tokens, c.cached_tokens, c.completion_tokens) for c in server.log if c.status == 200)
 
 
 def spend_until_refused(gw: DeploymentGateway, content, limit: int = 200) -> tuple[list, dict]:
@@ -92,6 +99,7 @@ def spend_until_refused(gw: DeploymentGateway, content, limit: int = 200) -> tup
 
 
 # ---- 1a. parameters that multiply the output ----
+
 
 @pytest.mark.parametrize("name", ["n", "best_of"])
 def test_choice_multipliers_other_than_one_are_refused_at_config_time(name):
@@ -139,8 +147,14 @@ def test_impossible_usage_is_charged_at_worst_case_and_the_cap_holds(fake_server
     assert len(ok) >= 2 and out[-1].kind == "budget"
     assert stats["spent_usd"] <= cap and stats["reserved_usd"] == 0 and stats["overruns"] == 0
     assert stats["spent_pico"] >= true_bill_pico(server)
-    worst = worst_case_pico(PRICE, size_request(MODEL, provider_messages(make_request(0, f"question 000 FAKE:{mode}").messages),
-                                                cfg.generation_params(None, None, False)))
+    worst = worst_case_pico(
+        PRICE,
+        size_request(
+            MODEL,
+            provider_messages(make_request(0, f"question 000 FAKE:{mode}").messages),
+            cfg.generation_params(None, None, False),
+        ),
+    )
     for r in ok:  # each answer: charged at its reservation, recorded with our own counts
         assert r.cost_usd == pico_to_usd(worst)
         assert r.token_count_source == "estimate" and r.prompt_tokens > 0 and r.completion_tokens > 0
@@ -243,11 +257,16 @@ def test_settlement_rules_without_a_server():
     assert not honest.rejected and honest.cost_pico == price.cost_pico(100, 60, 10) == honest.floor_pico
     assert settle(MODEL, price, attempt(120, 12), sizing).cost_pico == price.cost_pico(120, 0, 12)
     impossible = {
-        "negative prompt": attempt(-5, 10), "zero prompt": attempt(0, 10), "zero completion": attempt(100, 0),
-        "prompt far below our count": attempt(24, 10), "prompt above the bound": attempt(301, 10),
+        "negative prompt": attempt(-5, 10),
+        "zero prompt": attempt(0, 10),
+        "zero completion": attempt(100, 0),
+        "prompt far below our count": attempt(24, 10),
+        "prompt above the bound": attempt(301, 10),
         "completion above max_tokens": attempt(100, 20 + COMPLETION_SLACK_TOKENS + 1),
-        "missing": attempt(None, None), "cached above prompt": attempt(100, 10, cached=101),
-        "negative cached": attempt(100, 10, cached=-1), "negative cost": attempt(100, 10, cost=-0.1),
+        "missing": attempt(None, None),
+        "cached above prompt": attempt(100, 10, cached=101),
+        "negative cached": attempt(100, 10, cached=-1),
+        "negative cost": attempt(100, 10, cost=-0.1),
         "NaN cost": attempt(100, 10, cost=math.nan),
         "malformed": dataclasses.replace(attempt(None, 10), malformed=("prompt_tokens 10.5 is not a whole number",)),
     }
@@ -261,6 +280,7 @@ def test_settlement_rules_without_a_server():
 
 
 # ---- 2. Retry-After ----
+
 
 def test_a_retry_after_beyond_the_cap_fails_fast_as_rate_limit(fake_server, run_dir):
     server = fake_server()  # FAKE:retrylong answers 429 with Retry-After: 3600
@@ -343,8 +363,7 @@ def test_progress_figures_read_the_request_and_the_token_windows():
     now = [100.0]
 
     async def run():
-        ac = AdmissionController(rpm=100, tpm=10_000, window_s=60.0, pad_s=0.0, max_concurrency=8,
-                                 clock=lambda: now[0])
+        ac = AdmissionController(rpm=100, tpm=10_000, window_s=60.0, pad_s=0.0, max_concurrency=8, clock=lambda: now[0])
         a, b, c = await ac.acquire(100), await ac.acquire(200), await ac.acquire(300)
         s = ac.stats()
         assert (s["window_requests"], s["window_tokens"]) == (3, 600)
@@ -370,6 +389,7 @@ def test_progress_figures_read_the_request_and_the_token_windows():
 
 # ---- 3. credentials ----
 
+
 def test_base_url_credentials_are_stripped_from_every_name():
     url = "https://alice:pa%24ss-w0rd@api.example.com:8443/v1?api_key=QK-123456&region=eu&token=T0KEN-xyz"
     assert redact_url(url) == "https://api.example.com:8443/v1?region=eu"
@@ -379,8 +399,14 @@ def test_base_url_credentials_are_stripped_from_every_name():
     assert cfg.deployment_name == "openai/x@https://api.example.com:8443/v1?region=eu#SOME_KEY"
     assert cfg.api_base == url  # the provider still gets the real URL
     secrets = url_secrets(url)
-    for s in ("pa%24ss-w0rd", "pa$ss-w0rd", "alice:pa%24ss-w0rd", "QK-123456", "T0KEN-xyz",
-              base64.b64encode(b"alice:pa$ss-w0rd").decode()):
+    for s in (
+        "pa%24ss-w0rd",
+        "pa$ss-w0rd",
+        "alice:pa%24ss-w0rd",
+        "QK-123456",
+        "T0KEN-xyz",
+        base64.b64encode(b"alice:pa$ss-w0rd").decode(),
+    ):
         assert s in secrets
     for text in (repr(cfg), str(cfg)):
         assert "pa%24ss" not in text and "QK-123456" not in text and "T0KEN" not in text
@@ -408,8 +434,9 @@ def test_base_url_credentials_never_reach_a_file_a_row_or_a_log(fake_server, run
     via_gateway = asyncio.run(go())
     # the sync path (httpx) sends the URL's userinfo as HTTP Basic auth; the reply echoes it
     log = CallLog(run_dir, "test-run", "direct-writer")
-    direct = LiteLLMClient(config(server, api_base=server.base_url.replace("http://", f"http://alice:{password}@")),
-                           record_sink=log.add)
+    direct = LiteLLMClient(
+        config(server, api_base=server.base_url.replace("http://", f"http://alice:{password}@")), record_sink=log.add
+    )
     echoed = direct.complete(make_request(9, "FAKE:echokey"))
     log.flush()
     assert echoed.text == "your key is Basic [REDACTED] and Basic [REDACTED]"

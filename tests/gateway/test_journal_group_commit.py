@@ -91,8 +91,7 @@ def test_refusals_and_recorded_results_wait_for_no_fdatasync(tmp_path, synced_si
     async def go() -> list[dict]:
         first = await budget.begin("ep#0", "m", 600, None, "g:1")
         await budget.settle(first["rid"], 500, "ok", {"text": "hi"}, None, None)
-        return [first, await budget.begin("ep#0", "m", 600, None, "g:1"),
-                await budget.begin("ep#1", "m", 600, None, "g:1")]
+        return [first, await budget.begin("ep#0", "m", 600, None, "g:1"), await budget.begin("ep#1", "m", 600, None, "g:1")]
 
     first, recorded, refused = asyncio.run(go())
     assert first == {"status": "reserved", "rid": 1} and len(synced_sizes) == 1
@@ -111,8 +110,7 @@ def test_a_failed_fdatasync_answers_no_reservation_and_frees_the_cap(tmp_path, m
     monkeypatch.setattr(journal_mod.os, "fdatasync", broken)
 
     async def go() -> list:
-        return await asyncio.gather(*[budget.begin(f"ep#{i}", "m", 400, None, "g:1") for i in range(2)],
-                                    return_exceptions=True)
+        return await asyncio.gather(*[budget.begin(f"ep#{i}", "m", 400, None, "g:1") for i in range(2)], return_exceptions=True)
 
     results = asyncio.run(go())
     assert [type(r) for r in results] == [OSError, OSError]
@@ -122,7 +120,11 @@ def test_a_failed_fdatasync_answers_no_reservation_and_frees_the_cap(tmp_path, m
     led.close()
     entries = [json.loads(x) for x in (tmp_path / JOURNAL_NAME).read_text().splitlines()]
     assert [(e["op"], e["rid"], e["pico"]) for e in entries] == [
-        ("reserve", 1, 400), ("reserve", 2, 400), ("settle", 1, 0), ("settle", 2, 0)]
+        ("reserve", 1, 400),
+        ("reserve", 2, 400),
+        ("settle", 1, 0),
+        ("settle", 2, 0),
+    ]
 
 
 def test_a_cancelled_waiter_releases_its_reservation_and_others_still_commit(tmp_path, synced_sizes):

@@ -59,8 +59,7 @@ def test_restart_restores_spend_results_and_charges_open_reservations(tmp_path):
     again = BudgetLedger(tmp_path, run_cap_usd=1.0)
     assert again.spent == 123 + 500 + 77 + 999  # the open reservation is charged at worst case
     assert again.reserved == 0 and again.restored_orphans == 1
-    assert again.begin("ep#0", "m", 300) == {"status": "recorded", "served_from": "ledger",
-                                             "result": {"text": "first"}}
+    assert again.begin("ep#0", "m", 300) == {"status": "recorded", "served_from": "ledger", "result": {"text": "first"}}
     assert again.begin("ep#9", "m", 300, cache_key="c0")["served_from"] == "cache"
     again.close()
     third = BudgetLedger(tmp_path)  # the orphan settlement itself was journaled

@@ -57,9 +57,21 @@ def test_no_call_is_sent_before_its_reservation_is_durable_and_a_crash_keeps_the
     image = run_dir.parent / "disk-image.jsonl"
     hold = 6
     child = subprocess.Popen(
-        [sys.executable, "-m", "tests.gateway.test_ledger_group_commit_crash", str(run_dir), server.base_url,
-         str(cap), str(image), str(hold)],
-        cwd=REPO, stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+        [
+            sys.executable,
+            "-m",
+            "tests.gateway.test_ledger_group_commit_crash",
+            str(run_dir),
+            server.base_url,
+            str(cap),
+            str(image),
+            str(hold),
+        ],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
     ok = 0
     try:
         for line in child.stdout:  # type: ignore[union-attr]
@@ -90,8 +102,7 @@ def test_no_call_is_sent_before_its_reservation_is_durable_and_a_crash_keeps_the
 
     async def go():
         restored = await gw.budget.stats()
-        results = await asyncio.gather(*[gw.complete(_request(1000 + i)) for i in range(150)],
-                                       return_exceptions=True)
+        results = await asyncio.gather(*[gw.complete(_request(1000 + i)) for i in range(150)], return_exceptions=True)
         final = await gw.budget.stats()
         await gw.aclose()
         return restored, results, final

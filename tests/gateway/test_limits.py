@@ -34,8 +34,7 @@ def test_admission_anchor_counts_from_admission():
 
 
 def _controller(**kw) -> AdmissionController:
-    args = dict(rpm=None, tpm=None, window_s=60.0, pad_s=0.0, max_concurrency=8,
-                rate_limit_default_wait_s=0.3)
+    args = dict(rpm=None, tpm=None, window_s=60.0, pad_s=0.0, max_concurrency=8, rate_limit_default_wait_s=0.3)
     args.update(kw)
     return AdmissionController(**args)
 

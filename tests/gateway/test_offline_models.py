@@ -36,7 +36,7 @@ class ToyEnv:
         return self.plan_all + ["wait"]
 
     def plan(self) -> list[str]:
-        return self.plan_all[self.pos:]
+        return self.plan_all[self.pos :]
 
     @property
     def done(self) -> bool:
@@ -54,8 +54,15 @@ def drive_recap(env: ToyEnv, knobs: Knobs, max_calls: int = 200) -> list[tuple[s
 
     def ask(purpose: str, task: str, depth: int, remaining: list[str]) -> list[str]:
         assert len(calls) < max_calls, "the expert did not finish"
-        hints = {"style": "recap", "purpose": purpose, "task": task, "depth": depth,
-                 "remaining": list(remaining), "valid_actions": env.valid(), "expert_plan": env.plan()}
+        hints = {
+            "style": "recap",
+            "purpose": purpose,
+            "task": task,
+            "depth": depth,
+            "remaining": list(remaining),
+            "valid_actions": env.valid(),
+            "expert_plan": env.plan(),
+        }
         reply = expert_reply(hints, knobs, call_key=f"ep#{len(calls)}")
         calls.append((purpose, task, reply["subtasks"]))
         return list(reply["subtasks"])
@@ -132,8 +139,17 @@ def test_expert_drives_flat_styles_one_action_per_call(style):
     for i in range(20):
         if env.done:
             break
-        reply = expert_reply({"style": style, "reply_fields": FIELDS[style], "purpose": "act", "expert_plan": env.plan(),
-                              "valid_actions": env.valid()}, Knobs(), f"ep#{i}")
+        reply = expert_reply(
+            {
+                "style": style,
+                "reply_fields": FIELDS[style],
+                "purpose": "act",
+                "expert_plan": env.plan(),
+                "valid_actions": env.valid(),
+            },
+            Knobs(),
+            f"ep#{i}",
+        )
         assert set(reply) == ({"action"} if style == "act" else {"think", "action"})
         env.step(reply["action"])
     assert env.executed == PLAN
@@ -149,8 +165,13 @@ def test_injection_is_deterministic_per_call_key_and_seed():
     def malformed(seed: int, rate: float) -> set[str]:
         out = set()
         for i in range(200):
-            meta = {"recap_offline": {"call_key": f"ep#{i}", "options": {"seed": seed, "malformed_json_rate": rate},
-                                      "hints": {"style": "act", "reply_fields": FIELDS["act"], "expert_plan": PLAN}}}
+            meta = {
+                "recap_offline": {
+                    "call_key": f"ep#{i}",
+                    "options": {"seed": seed, "malformed_json_rate": rate},
+                    "hints": {"style": "act", "reply_fields": FIELDS["act"], "expert_plan": PLAN},
+                }
+            }
             text = offline_text("expert", [{"role": "user", "content": "x"}], meta, None)
             if text == MALFORMED_JSON:
                 out.add(f"ep#{i}")
@@ -167,8 +188,12 @@ def test_injection_is_deterministic_per_call_key_and_seed():
 
 def test_random_model_picks_a_valid_action_deterministically():
     valid = ["north", "south", "east", "west"]
-    picks = {random_reply({"style": "react", "reply_fields": FIELDS["react"], "valid_actions": valid}, Knobs(seed=1), f"k{i}")["action"]
-             for i in range(40)}
+    picks = {
+        random_reply({"style": "react", "reply_fields": FIELDS["react"], "valid_actions": valid}, Knobs(seed=1), f"k{i}")[
+            "action"
+        ]
+        for i in range(40)
+    }
     assert picks == set(valid)
     one = random_reply({"style": "recap", "valid_actions": valid}, Knobs(seed=1), "k0")
     assert one == random_reply({"style": "recap", "valid_actions": valid}, Knobs(seed=1), "k0")
@@ -176,8 +201,15 @@ def test_random_model_picks_a_valid_action_deterministically():
 
 
 def _request(i: int, text: str, hints=None, episode: str = "ep") -> LLMRequest:
-    return LLMRequest(messages=(ChatMessage("user", text),), episode_id=episode, call_index=i, purpose="task",
-                      window_seqs=(0,), response_seq=1, hints=hints or {})
+    return LLMRequest(
+        messages=(ChatMessage("user", text),),
+        episode_id=episode,
+        call_index=i,
+        purpose="task",
+        window_seqs=(0,),
+        response_seq=1,
+        hints=hints or {},
+    )
 
 
 def test_offline_expert_takes_the_provider_path_and_is_labelled_a_test_double(run_dir):
@@ -201,11 +233,14 @@ def test_offline_expert_takes_the_provider_path_and_is_labelled_a_test_double(ru
 
 def test_replay_serves_recorded_responses_by_message_hash(tmp_path, run_dir):
     old = tmp_path / "old-run"
-    PartWriter(old).write_records("old", [
-        MessageRecord("e1", 0, "user", "task", "make tea"),
-        MessageRecord("e1", 1, "assistant", "reply", '{"think": "t", "subtasks": ["boil water"]}'),
-        CallRecord("e1", 0, "e1#0", "task", (0,), "openai/gpt-4o", "ok", response_seq=1),
-    ])
+    PartWriter(old).write_records(
+        "old",
+        [
+            MessageRecord("e1", 0, "user", "task", "make tea"),
+            MessageRecord("e1", 1, "assistant", "reply", '{"think": "t", "subtasks": ["boil water"]}'),
+            CallRecord("e1", 0, "e1#0", "task", (0,), "openai/gpt-4o", "ok", response_seq=1),
+        ],
+    )
     cfg = DeploymentConfig(model="offline/replay", api_base=str(old))
 
     async def go():

@@ -17,16 +17,20 @@ from .test_gateway_ray import ray_session  # noqa: E402,F401
 
 
 def _config(server, name: str) -> DeploymentConfig:
-    return DeploymentConfig(model="openai/fake-gpt", api_base=server.base_url, name=name, max_concurrency=16,
-                            params={"max_tokens": 20})
+    return DeploymentConfig(
+        model="openai/fake-gpt", api_base=server.base_url, name=name, max_concurrency=16, params={"max_tokens": 20}
+    )
 
 
 def test_shared_budget_group_commits_and_deferred_settlements_keep_idempotency(ray_session, fake_server, run_dir):  # noqa: F811
     server = fake_server(latency_s=0.2)
     gws = RunGateways([_config(server, "one"), _config(server, "two")], run_dir, "ray-run", budget="shared")
     one, two = gws.client("one"), gws.client("two")
-    refs = [c.actor.complete.remote(make_request(i, episode=f"ep-{name}"))
-            for name, c in (("one", one), ("two", two)) for i in range(12)]
+    refs = [
+        c.actor.complete.remote(make_request(i, episode=f"ep-{name}"))
+        for name, c in (("one", one), ("two", two))
+        for i in range(12)
+    ]
     envelopes = ray.get(refs)
     assert [e[0] for e in envelopes] == ["ok"] * 24
     arrivals = len(server.log)

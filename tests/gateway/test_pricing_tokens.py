@@ -79,9 +79,14 @@ def test_list_price_bills_with_cache_reads_and_writes_equal_hand_computed_totals
     # DeepSeek-chat: 2M prompt, 1.5M cache hits, 100k out: 0.5 x $0.28 + 1.5 x $0.028 + 0.1 x $0.42 = $0.224
     assert table.get("deepseek/deepseek-chat").cost_usd(2_000_000, 1_500_000, 100_000) == 0.224
     # one call to the cent: 23,456 prompt tokens (20,000 read, 3,000 written), 512 out on Claude
-    assert round(claude.cost_usd(23_456, 20_000, 512, 3_000), 2) == round(
-        (456 * 3 + 20_000 * 0.3 + 3_000 * 3.75 + 512 * 15) / 1e6, 2) == 0.03
-    assert claude.cost_pico(23_456, 20_000, 512, 3_000) == 456 * 3_000_000 + 20_000 * 300_000 + 3_000 * 3_750_000 + 512 * 15_000_000
+    assert (
+        round(claude.cost_usd(23_456, 20_000, 512, 3_000), 2)
+        == round((456 * 3 + 20_000 * 0.3 + 3_000 * 3.75 + 512 * 15) / 1e6, 2)
+        == 0.03
+    )
+    assert (
+        claude.cost_pico(23_456, 20_000, 512, 3_000) == 456 * 3_000_000 + 20_000 * 300_000 + 3_000 * 3_750_000 + 512 * 15_000_000
+    )
 
 
 def test_cache_counts_beyond_the_prompt_are_clamped_in_the_price():

@@ -42,7 +42,11 @@ def test_sigkilled_gateway_continues_from_recorded_spend(fake_server, run_dir):
     cap = 0.003
     child = subprocess.Popen(
         [sys.executable, "-m", "tests.gateway.crash_child", str(run_dir), server.base_url, str(cap)],
-        cwd=REPO, stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
     paid: dict[str, tuple[int, str]] = {}
     try:
         for line in child.stdout:  # type: ignore[union-attr]
@@ -60,9 +64,12 @@ def test_sigkilled_gateway_continues_from_recorded_spend(fake_server, run_dir):
     assert open_before > 0  # calls were in flight when the process died
 
     server.config.latency_s = 0.0
-    gw = DeploymentGateway(DeploymentConfig(model="openai/fake-gpt", api_base=server.base_url, max_concurrency=20,
-                                            params={"max_tokens": 20}),
-                           run_dir=run_dir, run_id="kill-test", run_cap_usd=cap)
+    gw = DeploymentGateway(
+        DeploymentConfig(model="openai/fake-gpt", api_base=server.base_url, max_concurrency=20, params={"max_tokens": 20}),
+        run_dir=run_dir,
+        run_id="kill-test",
+        run_cap_usd=cap,
+    )
 
     async def go():
         restored = await gw.budget.stats()
@@ -70,8 +77,7 @@ def test_sigkilled_gateway_continues_from_recorded_spend(fake_server, run_dir):
         key, (_pico, text) = next(iter(paid.items()))
         again = await gw.complete(make_request(int(key.split("#")[1]), "ignored: answered from the ledger"))
         assert len(server.log) == arrivals and (again.served_from, again.text, again.cost_usd) == ("ledger", text, 0.0)
-        results = await asyncio.gather(*[gw.complete(make_request(100 + i)) for i in range(120)],
-                                       return_exceptions=True)
+        results = await asyncio.gather(*[gw.complete(make_request(100 + i)) for i in range(120)], return_exceptions=True)
         final = await gw.budget.stats()
         await gw.aclose()
         return restored, results, final

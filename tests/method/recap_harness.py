@@ -34,7 +34,9 @@ def demo_env() -> BlocksworldEnv:
     return BlocksworldEnv([["A", "C"], ["B"]], ["A", "B", "C"], instance_id="blocksworld/test", demo=False)
 
 
-def run_recap(replies: list[Any], config: ReCAPConfig | None = None, env: BlocksworldEnv | None = None, demonstration: Any = False) -> Run:
+def run_recap(
+    replies: list[Any], config: ReCAPConfig | None = None, env: BlocksworldEnv | None = None, demonstration: Any = False
+) -> Run:
     client = ScriptedClient(replies)
     records: list[Any] = []
     agent = ReCAPAgent(config or ReCAPConfig())

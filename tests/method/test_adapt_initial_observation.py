@@ -39,10 +39,17 @@ def partial_env() -> PartialBlocksworld:
 
 
 def executor_prompt_with_start(task: str, obs: str, last: str) -> str:
-    return "\n\n".join([
-        EXECUTOR_SYSTEM, RULES_PART, f"Observation at the start of the episode:\n{OBS[0]}",
-        f"Last action taken in the environment: {last}", f"Current observation:\n{obs}", f"Your task: {task}", EXEC_CLOSING,
-    ])
+    return "\n\n".join(
+        [
+            EXECUTOR_SYSTEM,
+            RULES_PART,
+            f"Observation at the start of the episode:\n{OBS[0]}",
+            f"Last action taken in the environment: {last}",
+            f"Current observation:\n{obs}",
+            f"Your task: {task}",
+            EXEC_CLOSING,
+        ]
+    )
 
 
 def test_the_interface_default_and_the_benchmarks():

@@ -54,7 +54,9 @@ def executor_prompt(task: str, obs: str, last: str | None = None) -> str:
 
 def planner_prompt(task: str, obs: str, last: str | None = None) -> str:
     situation = ([f"Last action taken in the environment: {last}"] if last else []) + [f"Current observation:\n{obs}"]
-    return "\n\n".join([PLANNER_SYSTEM, RULES_PART, *situation, f"Task to break down: {task}", "Write the subtasks and how they combine."])
+    return "\n\n".join(
+        [PLANNER_SYSTEM, RULES_PART, *situation, f"Task to break down: {task}", "Write the subtasks and how they combine."]
+    )
 
 
 FAILED = {"think": "this is more than I can do in one go", "status": "failed"}
@@ -83,7 +85,12 @@ def test_executor_alone_solves_the_task_without_planning():
     assert run.nodes == [node(0, None, 0, 0, GOAL, "root", "open")]
     assert [s.node_id for s in run.steps] == [0] * 6
     assert run.client.requests[0].hints == {
-        "style": "adapt", "purpose": "executor_task", "reply_fields": ("think", "action"), "role": "executor", "task": GOAL, "depth": 0,
+        "style": "adapt",
+        "purpose": "executor_task",
+        "reply_fields": ("think", "action"),
+        "role": "executor",
+        "task": GOAL,
+        "depth": 0,
         "valid_actions": ["pick up B", "unstack C from A"],
     }
 
@@ -94,20 +101,52 @@ def test_executor_failure_then_and_decomposition_runs_subtasks_in_isolated_conte
     assert run.result.end_reason == "success"
     assert (run.result.steps, run.result.llm_calls, run.result.max_depth) == (6, 9, 1)
     assert [(m.seq, m.kind, m.pinned) for m in run.messages] == [
-        (0, "executor_task", True), (1, "reply", False),  # root executor (main context)
-        (2, "planner_task", True), (3, "reply", False),  # planner (own context)
-        (4, "executor_task", True), (5, "reply", False), (6, "observation", False), (7, "reply", False),
-        (8, "observation", False), (9, "reply", False),  # executor for "clear block A"
-        (10, "executor_task", True), (11, "reply", False), (12, "observation", False), (13, "reply", False),
-        (14, "observation", False), (15, "reply", False), (16, "observation", False), (17, "reply", False),
+        (0, "executor_task", True),
+        (1, "reply", False),  # root executor (main context)
+        (2, "planner_task", True),
+        (3, "reply", False),  # planner (own context)
+        (4, "executor_task", True),
+        (5, "reply", False),
+        (6, "observation", False),
+        (7, "reply", False),
+        (8, "observation", False),
+        (9, "reply", False),  # executor for "clear block A"
+        (10, "executor_task", True),
+        (11, "reply", False),
+        (12, "observation", False),
+        (13, "reply", False),
+        (14, "observation", False),
+        (15, "reply", False),
+        (16, "observation", False),
+        (17, "reply", False),
     ]
     assert run.content(2) == planner_prompt(GOAL, OBS[0])
     assert run.content(4) == executor_prompt("clear block A", OBS[0])
     # the next executor sees only its own task, the last action and the current observation
     assert run.content(10) == executor_prompt("build the tower", OBS[2], last="put down C")
     # each context sees only its own messages
-    assert run.windows() == [(0,), (2,), (4,), (4, 5, 6), (4, 5, 6, 7, 8), (10,), (10, 11, 12), (10, 11, 12, 13, 14), tuple(range(10, 17))]
-    assert [c.purpose for c in run.calls] == ["executor_task", "planner_task", "executor_task", "observation", "observation", "executor_task", "observation", "observation", "observation"]
+    assert run.windows() == [
+        (0,),
+        (2,),
+        (4,),
+        (4, 5, 6),
+        (4, 5, 6, 7, 8),
+        (10,),
+        (10, 11, 12),
+        (10, 11, 12, 13, 14),
+        tuple(range(10, 17)),
+    ]
+    assert [c.purpose for c in run.calls] == [
+        "executor_task",
+        "planner_task",
+        "executor_task",
+        "observation",
+        "observation",
+        "executor_task",
+        "observation",
+        "observation",
+        "observation",
+    ]
     assert [c.node_id for c in run.calls] == [0, 0, 1, 1, 1, 2, 2, 2, 2]
     assert run.client.requests[1].hints["role"] == "planner"
     assert run.nodes == [
@@ -132,10 +171,17 @@ def test_or_tries_alternatives_until_one_succeeds():
     options = {"think": "two ways", "subtasks": ["build it straight away", "build it step by step"], "logic": "or"}
     run = run_agent(ADaPTAgent(ADaPTConfig(max_depth=2)), [FAILED, options, FAILED, *REACT])
     assert run.result.end_reason == "success" and run.result.llm_calls == 9
-    assert [(n.task, n.status) for n in run.nodes] == [(GOAL, "open"), ("build it straight away", "failed"), ("build it step by step", "open")]
+    assert [(n.task, n.status) for n in run.nodes] == [
+        (GOAL, "open"),
+        ("build it straight away", "failed"),
+        ("build it step by step", "open"),
+    ]
     # the first success ends an OR: the second alternative is never tried
     run = run_agent(ADaPTAgent(ADaPTConfig(max_depth=2)), [FAILED, options, DONE])
-    assert (run.result.end_reason, run.result.error) == ("agent_done", "the goal was reported done but the environment does not confirm it")
+    assert (run.result.end_reason, run.result.error) == (
+        "agent_done",
+        "the goal was reported done but the environment does not confirm it",
+    )
     assert [(n.task, n.status) for n in run.nodes] == [(GOAL, "done"), ("build it straight away", "done")]
 
 
@@ -183,12 +229,26 @@ def test_invalid_action_feedback_and_patience_in_reject_mode():
     bad = {"think": "try", "action": "put down"}
     run = run_agent(ADaPTAgent(ADaPTConfig(executor_patience=2, max_depth=1)), [bad, REACT[0], bad, bad])
     assert run.result.end_reason == "agent_done" and run.result.llm_calls == 4
-    assert [m.kind for m in run.messages] == ["executor_task", "reply", "feedback", "reply", "observation", "reply", "feedback", "reply"]
+    assert [m.kind for m in run.messages] == [
+        "executor_task",
+        "reply",
+        "feedback",
+        "reply",
+        "observation",
+        "reply",
+        "feedback",
+        "reply",
+    ]
     assert run.content(2) == (
         "Error feedback: 'put down' is not one of the valid actions, so it was not carried out and nothing "
         f"changed. Choose an action exactly as it is written among the valid actions.\n\nObservation:\n{OBS[0]}"
     )
-    assert [(s.action, s.valid, s.env_step) for s in run.steps] == [("put down", False, 0), ("unstack C from A", True, 1), ("put down", False, 1), ("put down", False, 1)]
+    assert [(s.action, s.valid, s.env_step) for s in run.steps] == [
+        ("put down", False, 0),
+        ("unstack C from A", True, 1),
+        ("put down", False, 1),
+        ("put down", False, 1),
+    ]
 
 
 def test_invalid_action_reaches_the_environment_in_step_mode():
@@ -196,7 +256,10 @@ def test_invalid_action_reaches_the_environment_in_step_mode():
     run = run_agent(ADaPTAgent(ADaPTConfig(executor_patience=2, max_depth=1)), [bad, bad], env=stepping_env())
     assert run.result.end_reason == "agent_done" and run.result.steps == 2
     assert run.content(2) == "Observation:\nNothing happens."
-    assert run.steps == [StepRecord("ep", 0, 1, "put down", False, "Nothing happens.", False, False, 0), StepRecord("ep", 1, 2, "put down", False, "Nothing happens.", False, False, 0)]
+    assert run.steps == [
+        StepRecord("ep", 0, 1, "put down", False, "Nothing happens.", False, False, 0),
+        StepRecord("ep", 1, 2, "put down", False, "Nothing happens.", False, False, 0),
+    ]
 
 
 def test_executor_and_planner_reply_shapes_are_repaired():
@@ -215,7 +278,9 @@ def test_executor_and_planner_reply_shapes_are_repaired():
         'of the form {"think": "<your reasoning>", "action": "<one valid action>"} to act, or '
         '{"think": "<your reasoning>", "status": "done" or "failed"} to finish the task and nothing else.'
     )
-    assert run.messages[8].content.endswith('of the form {"think": "<your reasoning>", "subtasks": ["<subtask>", ...], "logic": "and" or "or"} and nothing else.')
+    assert run.messages[8].content.endswith(
+        'of the form {"think": "<your reasoning>", "subtasks": ["<subtask>", ...], "logic": "and" or "or"} and nothing else.'
+    )
     # logic left out means "and"; the only subtask then fails at depth 2
     assert run.result.end_reason == "agent_done" and run.nodes[0].versions[0].subtasks == ("clear block A",)
     assert run.result.json_repairs == 3
@@ -227,7 +292,9 @@ def test_caps_and_errors_span_every_context():
     run = run_agent(ADaPTAgent(), [FAILED, LLMError("budget", "spent")])
     assert run.result.end_reason == "budget_exhausted"
     # context-length recovery inside a sub-executor drops only that context's oldest messages
-    run = run_agent(ADaPTAgent(ADaPTConfig(max_depth=2)), [FAILED, SPLIT, REACT[0], LLMError("context_length", "long"), REACT[1], FAILED])
+    run = run_agent(
+        ADaPTAgent(ADaPTConfig(max_depth=2)), [FAILED, SPLIT, REACT[0], LLMError("context_length", "long"), REACT[1], FAILED]
+    )
     assert run.windows() == [(0,), (2,), (4,), (4, 5, 6), (4, 6), (4, 6, 7, 8)]
     assert [(c.call_index, c.status) for c in run.calls] == [(0, "ok"), (1, "ok"), (2, "ok"), (3, "error"), (4, "ok"), (5, "ok")]
     assert (run.result.end_reason, run.result.steps) == ("agent_done", 2)
@@ -238,8 +305,15 @@ def test_initial_observation_option_shows_the_first_observation_once_the_state_m
     run = run_agent(ADaPTAgent(cfg), [REACT[0], SPLIT, LLMError("auth", "stop")])
     assert run.content(0) == executor_prompt(GOAL, OBS[0])
     assert run.content(2) == "\n\n".join(
-        [PLANNER_SYSTEM, RULES_PART, f"Observation at the start of the episode:\n{OBS[0]}", "Last action taken in the environment: unstack C from A",
-         f"Current observation:\n{OBS[1]}", f"Task to break down: {GOAL}", "Write the subtasks and how they combine."]
+        [
+            PLANNER_SYSTEM,
+            RULES_PART,
+            f"Observation at the start of the episode:\n{OBS[0]}",
+            "Last action taken in the environment: unstack C from A",
+            f"Current observation:\n{OBS[1]}",
+            f"Task to break down: {GOAL}",
+            "Write the subtasks and how they combine.",
+        ]
     )
 
 
@@ -254,7 +328,16 @@ def test_demonstrations_are_pinned_in_every_context():
     executor_demo = agent.render_demonstration(DEMONSTRATION)
     planner_demo = agent.render_planner_demonstration(DEMONSTRATION)
     pins = [(m.seq, m.kind) for m in run.messages if m.pinned]
-    assert pins == [(0, "demonstration"), (1, "executor_task"), (3, "demonstration"), (4, "planner_task"), (6, "demonstration"), (7, "executor_task"), (13, "demonstration"), (14, "executor_task")]
+    assert pins == [
+        (0, "demonstration"),
+        (1, "executor_task"),
+        (3, "demonstration"),
+        (4, "planner_task"),
+        (6, "demonstration"),
+        (7, "executor_task"),
+        (13, "demonstration"),
+        (14, "executor_task"),
+    ]
     assert [run.content(s) for s in (0, 3, 6, 13)] == [executor_demo, planner_demo, executor_demo, executor_demo]
     assert run.windows()[:3] == [(0, 1), (3, 4), (6, 7)]
     # a demonstration given as text goes to every context as is
@@ -265,7 +348,10 @@ def test_demonstrations_are_pinned_in_every_context():
 def test_executor_demonstration_is_the_react_demo_in_executor_format():
     text = ADaPTAgent().render_demonstration(DEMONSTRATION)
     first_prompt = f"[Example prompt]\nCurrent observation:\n{OBS[0]}\n\nYour task: {GOAL}\n\n{EXEC_CLOSING}"
-    assert text.split("\n\n[Example reply]")[0] == "Here is a complete example of the interaction, from the first prompt to the goal being reached.\n\n" + first_prompt
+    assert (
+        text.split("\n\n[Example reply]")[0]
+        == "Here is a complete example of the interaction, from the first prompt to the goal being reached.\n\n" + first_prompt
+    )
     assert [json.loads(block.split("\n", 1)[1]) for block in text.split("\n\n") if block.startswith("[Example reply]")] == REACT
 
 
@@ -279,7 +365,9 @@ def test_adapt_planner_entry_overrides_the_derived_planner_example():
     )
     text = ADaPTAgent().render_planner_demonstration(custom)
     assert '[Example reply]\n{"think": "options", "subtasks": ["a", "b"], "logic": "or"}' in text
-    broken = Demonstration(name="blocksworld/demo-none", make_env=DEMONSTRATION.make_env, replies={"react": DEMONSTRATION.replies["react"]})
+    broken = Demonstration(
+        name="blocksworld/demo-none", make_env=DEMONSTRATION.make_env, replies={"react": DEMONSTRATION.replies["react"]}
+    )
     from recap.agent import DemonstrationError
 
     with pytest.raises(DemonstrationError, match="has no 'adapt_planner' or 'recap' replies"):
@@ -290,8 +378,20 @@ def test_window_trims_each_context_and_keeps_its_two_pins():
     run = run_agent(ADaPTAgent(ADaPTConfig(window=4)), [FAILED, SPLIT, *REACT], demonstration="DEMO")
     assert run.result.end_reason == "success" and run.result.llm_calls == 8
     assert [(m.seq, m.kind) for m in run.messages if m.pinned] == [
-        (0, "demonstration"), (1, "executor_task"), (3, "demonstration"), (4, "planner_task"), (6, "demonstration"), (7, "executor_task"),
+        (0, "demonstration"),
+        (1, "executor_task"),
+        (3, "demonstration"),
+        (4, "planner_task"),
+        (6, "demonstration"),
+        (7, "executor_task"),
     ]
     assert run.windows() == [
-        (0, 1), (3, 4), (6, 7), (6, 7, 8, 9), (6, 7, 8, 9, 10, 11), (6, 7, 10, 11, 12, 13), (6, 7, 12, 13, 14, 15), (6, 7, 14, 15, 16, 17),
+        (0, 1),
+        (3, 4),
+        (6, 7),
+        (6, 7, 8, 9),
+        (6, 7, 8, 9, 10, 11),
+        (6, 7, 10, 11, 12, 13),
+        (6, 7, 12, 13, 14, 15),
+        (6, 7, 14, 15, 16, 17),
     ]

@@ -39,7 +39,14 @@ def test_invalid_action_in_reject_mode_gets_error_feedback_and_takes_no_step():
     assert run.result.end_reason == "success"
     assert (run.result.steps, run.result.invalid_actions, run.result.llm_calls) == (6, 2, 8)
     assert [(m.seq, m.kind) for m in run.messages[:8]] == [
-        (0, "task"), (1, "reply"), (2, "observation"), (3, "reply"), (4, "feedback"), (5, "reply"), (6, "feedback"), (7, "reply"),
+        (0, "task"),
+        (1, "reply"),
+        (2, "observation"),
+        (3, "reply"),
+        (4, "feedback"),
+        (5, "reply"),
+        (6, "feedback"),
+        (7, "reply"),
     ]
     assert run.content(4) == feedback("put down", OBS[1])
     assert run.content(6) == feedback("stack C on C", OBS[1])
@@ -81,8 +88,19 @@ def test_robotouille_give_up_rule_ends_after_rounds_of_invalid_streaks():
 def test_window_trims_oldest_pairs_and_keeps_both_pins():
     run = run_agent(ReActAgent(ReActConfig(window=4)), list(REACT), demonstration="DEMO TEXT")
     assert run.result.end_reason == "success"
-    assert [(m.seq, m.kind, m.pinned) for m in run.messages[:3]] == [(0, "demonstration", True), (1, "task", True), (2, "reply", False)]
-    assert run.windows() == [(0, 1), (0, 1, 2, 3), (0, 1, 2, 3, 4, 5), (0, 1, 4, 5, 6, 7), (0, 1, 6, 7, 8, 9), (0, 1, 8, 9, 10, 11)]
+    assert [(m.seq, m.kind, m.pinned) for m in run.messages[:3]] == [
+        (0, "demonstration", True),
+        (1, "task", True),
+        (2, "reply", False),
+    ]
+    assert run.windows() == [
+        (0, 1),
+        (0, 1, 2, 3),
+        (0, 1, 2, 3, 4, 5),
+        (0, 1, 4, 5, 6, 7),
+        (0, 1, 6, 7, 8, 9),
+        (0, 1, 8, 9, 10, 11),
+    ]
     assert run.client.requests[3].messages[0].content == "DEMO TEXT"
     assert all(len(r.messages) <= 6 for r in run.client.requests)
 
@@ -126,7 +144,9 @@ def test_call_cap_ends_the_episode():
 
 def test_step_cap_ends_the_episode():
     env = demo_env(step_multiplier=0.5)  # 6 optimal steps -> cap 3
-    run = run_agent(ActAgent(), [{"action": "unstack C from A"}, {"action": "stack C on A"}, {"action": "unstack C from A"}], env=env)
+    run = run_agent(
+        ActAgent(), [{"action": "unstack C from A"}, {"action": "stack C on A"}, {"action": "unstack C from A"}], env=env
+    )
     assert (run.result.end_reason, run.result.error) == ("step_cap", "3 steps (cap 3)")
     assert (run.steps[-1].done, run.steps[-1].success, run.result.steps) == (True, False, 3)
 
@@ -172,7 +192,10 @@ def test_standard_in_step_mode_sends_invalid_actions_to_the_environment():
 
 def test_plan_running_out_before_the_goal_ends_with_agent_done():
     run = run_agent(StandardAgent(), [{"actions": DEMO_ACTIONS[:4]}])
-    assert (run.result.end_reason, run.result.error) == ("agent_done", "the plan's 4 action(s) ran out before the goal was reached")
+    assert (run.result.end_reason, run.result.error) == (
+        "agent_done",
+        "the plan's 4 action(s) ran out before the goal was reached",
+    )
     assert run.result.steps == 4
     run = run_agent(CoTAgent(), [plan()])
     assert (run.result.end_reason, run.result.steps) == ("agent_done", 0)

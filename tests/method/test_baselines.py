@@ -94,8 +94,14 @@ def test_react_and_act_full_episode(agent, script, system):
     assert [c.purpose for c in run.calls] == ["task"] + ["observation"] * 5
     assert [c.response_seq for c in run.calls] == [1, 3, 5, 7, 9, 11]
     hints = run.client.requests[1].hints
-    assert hints == {"style": agent.style, "purpose": "observation", "reply_fields": agent.reply_fields, "task": GOAL, "depth": 0,
-                     "valid_actions": ["put down C", "stack C on A", "stack C on B"]}
+    assert hints == {
+        "style": agent.style,
+        "purpose": "observation",
+        "reply_fields": agent.reply_fields,
+        "task": GOAL,
+        "depth": 0,
+        "valid_actions": ["put down C", "stack C on A", "stack C on B"],
+    }
     assert agent.reply_fields == (("think", "action") if agent.with_think else ("action",))
 
 
@@ -207,7 +213,9 @@ def test_registry_maps_every_method_to_its_agent_and_config():
 
 def test_make_agent_applies_profile_ablation_and_settings():
     a = make_agent("react", profile="released", invalid_streak=5)
-    assert isinstance(a, ReActAgent) and a.config == ReActConfig(window=128, temperature=None, window_counts_pins=True, invalid_streak=5)
+    assert isinstance(a, ReActAgent) and a.config == ReActConfig(
+        window=128, temperature=None, window_counts_pins=True, invalid_streak=5
+    )
     a = make_agent("adapt", profile="paper", max_depth=4)
     assert isinstance(a, ADaPTAgent) and a.config == ADaPTConfig(window=64, temperature=0.5, max_depth=4)
     assert make_agent("standard", on_invalid="skip").config == PlanConfig(on_invalid="skip")

@@ -27,7 +27,10 @@ def test_invalid_action_changes_nothing():
         env.step("pick up")  # a prefix of a valid action is not a match
     assert env.expert_plan()[0] == "unstack C from A" and env.steps_taken == 0
     s = env.step("unstack C from A")
-    assert s.valid_actions == ("put down C", "stack C on A", "stack C on B") and r.valid_actions == ("pick up B", "unstack C from A")
+    assert s.valid_actions == ("put down C", "stack C on A", "stack C on B") and r.valid_actions == (
+        "pick up B",
+        "unstack C from A",
+    )
 
 
 @pytest.mark.parametrize("iid", BENCHMARK.list_instances())

@@ -86,12 +86,15 @@ def test_register_and_unregister_a_method():
     assert "probe" not in METHODS
 
 
-@pytest.mark.parametrize("name,agent_cls,config_cls,message", [
-    ("other", _Probe, ReActConfig, r"_Probe.style must be 'other'"),
-    ("probe", dict, ReActConfig, "is not an Agent subclass"),
-    ("probe", _Probe, ReCAPConfig, "is not a ReActConfig"),
-    ("probe", _Probe, AgentConfig, "is not a ReActConfig"),
-])
+@pytest.mark.parametrize(
+    "name,agent_cls,config_cls,message",
+    [
+        ("other", _Probe, ReActConfig, r"_Probe.style must be 'other'"),
+        ("probe", dict, ReActConfig, "is not an Agent subclass"),
+        ("probe", _Probe, ReCAPConfig, "is not a ReActConfig"),
+        ("probe", _Probe, AgentConfig, "is not a ReActConfig"),
+    ],
+)
 def test_registration_checks_the_classes(name, agent_cls, config_cls, message):
     with pytest.raises(ConfigError, match=message):
         register_method(name, agent_cls, config_cls)
@@ -100,14 +103,18 @@ def test_registration_checks_the_classes(name, agent_cls, config_cls, message):
 
 # -- the offline test doubles fill whatever fields the agent declares ------------------------------
 
-@pytest.mark.parametrize("fields,reply", [
-    (("think", "subtasks"), {"think": "Expert plan: 2 action(s) left.", "subtasks": PLAN}),
-    (("think", "action"), {"think": "Expert plan: 2 action(s) left.", "action": "pick up B"}),
-    (("action",), {"action": "pick up B"}),
-    (("think", "actions"), {"think": "Expert plan: 2 action(s) left.", "actions": PLAN}),
-    (("actions",), {"actions": PLAN}),
-    (("actions", "think"), {"actions": PLAN, "think": "Expert plan: 2 action(s) left."}),
-])
+
+@pytest.mark.parametrize(
+    "fields,reply",
+    [
+        (("think", "subtasks"), {"think": "Expert plan: 2 action(s) left.", "subtasks": PLAN}),
+        (("think", "action"), {"think": "Expert plan: 2 action(s) left.", "action": "pick up B"}),
+        (("action",), {"action": "pick up B"}),
+        (("think", "actions"), {"think": "Expert plan: 2 action(s) left.", "actions": PLAN}),
+        (("actions",), {"actions": PLAN}),
+        (("actions", "think"), {"actions": PLAN, "think": "Expert plan: 2 action(s) left."}),
+    ],
+)
 def test_the_expert_fills_the_declared_fields_in_order(fields, reply):
     got = expert_reply({"purpose": "task", "reply_fields": fields, "expert_plan": PLAN}, Knobs(), "ep#0")
     assert got == reply and list(got) == list(reply)
@@ -117,10 +124,11 @@ def test_the_method_name_does_not_change_the_reply():
     hints = {"purpose": "task", "expert_plan": PLAN, "valid_actions": PLAN}
     for style in (*METHODS, "anything"):
         assert expert_reply({**hints, "style": style, "reply_fields": ["action"]}, Knobs(), "k") == {"action": "pick up B"}
-        assert random_reply({**hints, "style": style, "reply_fields": ["actions"]}, Knobs(seed=2), "k") == {"actions": ["stack B on A"]}
+        assert random_reply({**hints, "style": style, "reply_fields": ["actions"]}, Knobs(seed=2), "k") == {
+            "actions": ["stack B on A"]
+        }
     # no fields named: a decomposition, as a request without hints always got
-    assert expert_reply({**hints, "style": "act"}, Knobs(), "k") == {"think": "Expert plan: 2 action(s) left.",
-                                                                     "subtasks": PLAN}
+    assert expert_reply({**hints, "style": "act"}, Knobs(), "k") == {"think": "Expert plan: 2 action(s) left.", "subtasks": PLAN}
 
 
 def test_injection_and_unknown_fields():

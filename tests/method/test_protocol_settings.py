@@ -51,7 +51,13 @@ def test_paper_profile_per_method_and_benchmark():
 def test_released_profile_per_benchmark_and_ablation():
     r = build_config(ReCAPConfig, "released", None, "robotouille")
     assert (r.window, r.temperature, r.window_counts_pins) == (128, None, True)
-    assert (r.reminder_on, r.reminder_period, r.shortcut, r.shortcut_trace, r.demo_observations) == ("iterations", 10, True, True, "all")
+    assert (r.reminder_on, r.reminder_period, r.shortcut, r.shortcut_trace, r.demo_observations) == (
+        "iterations",
+        10,
+        True,
+        True,
+        "all",
+    )
     assert build_config(ReCAPConfig, "released", None, "alfworld").reminder_period is None
     for ablation in ("no_think", "name_only", "think_many", "level_3"):
         assert build_config(ReCAPConfig, "released", ablation, "robotouille").shortcut is False
@@ -61,7 +67,9 @@ def test_released_profile_per_benchmark_and_ablation():
     assert build_config(ReCAPConfig, "released", "no_think", "robotouille", shortcut=True).shortcut is True
 
 
-@pytest.mark.parametrize("bad", [{"reminder_on": "returns"}, {"demo_observations": "some"}, {"max_tokens": 0}, {"max_llm_calls": 0}])
+@pytest.mark.parametrize(
+    "bad", [{"reminder_on": "returns"}, {"demo_observations": "some"}, {"max_tokens": 0}, {"max_llm_calls": 0}]
+)
 def test_protocol_settings_are_validated(bad):
     with pytest.raises(ConfigError):
         build_config(ReCAPConfig, **bad)
@@ -75,7 +83,16 @@ def test_reminder_every_n_calls_goes_on_the_next_prompt():
     assert run.result.end_reason == "success" and run.result.llm_calls == 9
     # calls 0..8: task, descend, leaf_done, leaf_judge, nonleaf_done, descend, leaf_done x3
     assert [r.purpose for r in run.client.requests] == [
-        "task", "descend", "leaf_done", "leaf_judge", "nonleaf_done", "descend", "leaf_done", "leaf_done", "leaf_done"]
+        "task",
+        "descend",
+        "leaf_done",
+        "leaf_judge",
+        "nonleaf_done",
+        "descend",
+        "leaf_done",
+        "leaf_done",
+        "leaf_done",
+    ]
     assert reminded_calls(run) == [2, 4, 6, 8]
 
 
@@ -93,18 +110,32 @@ def test_reminder_also_reaches_descend_prompts():
     assert reminded_calls(run) == [5]
     assert run.client.requests[5].purpose == "descend"
     assert run.client.requests[5].messages[-1].content == REMINDER + (
-        "OK.\n\nYour current task: build B on A and C on B\n\nWrite the list of subtasks for this task.")
+        "OK.\n\nYour current task: build B on A and C on B\n\nWrite the list of subtasks for this task."
+    )
 
 
 # -- released shortcut trace -----------------------------------------------------------------
 def test_shortcut_trace_records_prompt_and_synthetic_reply_without_a_call():
     run = run_recap(list(SCRIPT), ReCAPConfig(shortcut_trace=True, reminder_period=None))
     assert run.result.end_reason == "success" and run.result.llm_calls == 9
-    assert run.kinds()[:10] == ["task", "reply", "descend", "reply", "descend", "shortcut", "leaf_done", "reply", "descend", "shortcut"]
+    assert run.kinds()[:10] == [
+        "task",
+        "reply",
+        "descend",
+        "reply",
+        "descend",
+        "shortcut",
+        "leaf_done",
+        "reply",
+        "descend",
+        "shortcut",
+    ]
     shortcut = [m for m in run.messages if m.kind == "shortcut"]
     assert len(shortcut) == 6 and all(m.role == "assistant" for m in shortcut)
     assert json.loads(shortcut[0].content) == {
-        "think": "This task is itself one of the valid actions, so I carry it out directly.", "subtasks": ["unstack C from A"]}
+        "think": "This task is itself one of the valid actions, so I carry it out directly.",
+        "subtasks": ["unstack C from A"],
+    }
     assert run.messages[4].content == "OK.\n\nYour current task: unstack C from A\n\nWrite the list of subtasks for this task."
     # the trace is in the window of the next call
     seqs = {m.seq for m in shortcut}
@@ -112,8 +143,10 @@ def test_shortcut_trace_records_prompt_and_synthetic_reply_without_a_call():
     # the tree's shortcut node points at its synthetic reply
     node = next(n for n in run.nodes if n.task == "unstack C from A")
     assert (node.versions[0].call_index, node.versions[0].message_seq) == (None, shortcut[0].seq)
-    no_think = run_recap([{k: v for k, v in r.items() if k != "think"} for r in SCRIPT],
-                         ReCAPConfig(shortcut_trace=True, think="none", reminder_period=None))
+    no_think = run_recap(
+        [{k: v for k, v in r.items() if k != "think"} for r in SCRIPT],
+        ReCAPConfig(shortcut_trace=True, think="none", reminder_period=None),
+    )
     assert json.loads([m for m in no_think.messages if m.kind == "shortcut"][0].content) == {"subtasks": ["unstack C from A"]}
 
 
@@ -152,7 +185,14 @@ def run_flat(agent, replies, env=None, demonstration="DEMO"):
 def test_react_history_last_sees_only_the_last_reply_and_the_new_observation():
     result, client, msgs = run_flat(ReActAgent(ReActConfig(history="last")), list(REACT))
     assert result.end_reason == "success"
-    assert [r.window_seqs for r in client.requests] == [(0, 1), (0, 1, 2, 3), (0, 1, 4, 5), (0, 1, 6, 7), (0, 1, 8, 9), (0, 1, 10, 11)]
+    assert [r.window_seqs for r in client.requests] == [
+        (0, 1),
+        (0, 1, 2, 3),
+        (0, 1, 4, 5),
+        (0, 1, 6, 7),
+        (0, 1, 8, 9),
+        (0, 1, 10, 11),
+    ]
     last = client.requests[-1].messages
     assert last[2].role == "assistant" and json.loads(last[2].content)["action"] == "pick up C"
     assert last[3].content.startswith("Observation:\n")
@@ -178,6 +218,7 @@ def test_call_cap_formula_per_method():
     assert ReActAgent().call_cap(144) == 2 * 144 + 10 + 3
     assert CoTAgent().call_cap(144) == StandardAgent().call_cap(144) == 1 + 3
     from recap.baselines import ADaPTAgent
+
     assert ADaPTAgent(ADaPTConfig()).call_cap(144) == 3 * 144 + 10 + 3
     # no method is cut by calls before steps: ReCAP's cap allows >= 2 calls per step
     for steps in (10, 36 * 4, 82 * 4):
@@ -199,8 +240,13 @@ def test_derived_call_cap_comes_from_the_episode_step_cap():
 
 # -- output cap: a cut reply ends as truncated -----------------------------------------------
 def test_reply_cut_at_the_output_cap_ends_as_truncated_not_json_failure():
-    cut = LLMResponse(text='{"think": "long plan", "actions": ["unstack C from A", "put d', model="m",
-                      prompt_tokens=10, completion_tokens=3072, finish_reason="length")
+    cut = LLMResponse(
+        text='{"think": "long plan", "actions": ["unstack C from A", "put d',
+        model="m",
+        prompt_tokens=10,
+        completion_tokens=3072,
+        finish_reason="length",
+    )
     result, client, msgs = run_flat(CoTAgent(PlanConfig()), [cut])
     assert result.end_reason == "truncated" and result.llm_calls == 1 and result.json_repairs == 0
     assert result.error == "reply cut at the output cap (3072 tokens, max_tokens 3072)"

@@ -32,7 +32,7 @@ def test_rule_reminder_on_every_tenth_iteration():
     assert len(refines) == 15
     reminder = f"Reminder of the environment rules:\n{RULES}\n\n"
     assert [r.content.startswith(reminder) for r in refines] == [i == 9 for i in range(15)]
-    assert refines[9].content[len(reminder):].startswith("You have completed the task: ")
+    assert refines[9].content[len(reminder) :].startswith("You have completed the task: ")
 
 
 def test_reminder_period_is_configurable_and_can_be_off():
@@ -71,7 +71,12 @@ def test_block_window_mode_keeps_a_shared_prefix():
     for prev, cur in zip(windows, windows[1:]):
         assert cur[: len(prev)] == prev or cur[2] - prev[2] == 4
     assert windows[:6] == [
-        (0, 1), (0, 1, 2, 3), (0, 1, 2, 3, 4, 5), (0, 1, 2, 3, 4, 5, 6, 7), (0, 1, 2, 3, 4, 5, 6, 7, 8, 9), (0, 1, 6, 7, 8, 9, 10, 11),
+        (0, 1),
+        (0, 1, 2, 3),
+        (0, 1, 2, 3, 4, 5),
+        (0, 1, 2, 3, 4, 5, 6, 7),
+        (0, 1, 2, 3, 4, 5, 6, 7, 8, 9),
+        (0, 1, 6, 7, 8, 9, 10, 11),
     ]
 
 
@@ -87,7 +92,11 @@ def test_context_length_error_drops_oldest_and_retries_keeping_pins():
 
 
 def test_malformed_json_is_repaired_with_a_reask():
-    script = ["```json\n{'think': 'fenced, single quotes', 'subtasks': ['clear block A', 'build B on A and C on B',],}\n```", "I think we should", *SCRIPT[1:]]
+    script = [
+        "```json\n{'think': 'fenced, single quotes', 'subtasks': ['clear block A', 'build B on A and C on B',],}\n```",
+        "I think we should",
+        *SCRIPT[1:],
+    ]
     run = run_recap(script)
     assert run.result.end_reason == "success"
     assert run.kinds()[:6] == ["task", "reply", "descend", "reply", "repair", "reply"]

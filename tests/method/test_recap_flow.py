@@ -110,7 +110,12 @@ def test_full_episode_message_sequence():
     # assistant messages are the model's replies verbatim
     assert json.loads(run.messages[1].content) == dict(SCRIPT[0])
     assert [s.action for s in run.steps] == [
-        "unstack C from A", "put down C", "pick up B", "stack B on A", "pick up C", "stack C on B",
+        "unstack C from A",
+        "put down C",
+        "pick up B",
+        "stack B on A",
+        "pick up C",
+        "stack C on B",
     ]
     assert all(s.valid for s in run.steps) and run.steps[-1].success and run.steps[-1].done
 
@@ -119,7 +124,15 @@ def test_calls_reference_their_window_and_reply():
     run = run_recap(list(SCRIPT))
     assert [c.call_index for c in run.calls] == list(range(9))
     assert [c.purpose for c in run.calls] == [
-        "task", "descend", "leaf_done", "leaf_judge", "nonleaf_done", "descend", "leaf_done", "leaf_done", "leaf_done",
+        "task",
+        "descend",
+        "leaf_done",
+        "leaf_judge",
+        "nonleaf_done",
+        "descend",
+        "leaf_done",
+        "leaf_done",
+        "leaf_done",
     ]
     assert run.calls[0].window_seqs == (0,)
     assert run.calls[3].window_seqs == (0, 1, 2, 3, 4, 5, 6)
@@ -250,6 +263,8 @@ def test_one_valid_action_reply_executes_as_leaf():
 
 def test_env_is_unchanged_after_leaf_failure():
     env = demo_env()
-    run = run_recap([{"think": "a", "subtasks": ["fly"]}, {"think": "b", "subtasks": ["fly"]}, {"think": "c", "subtasks": []}], env=env)
+    run = run_recap(
+        [{"think": "a", "subtasks": ["fly"]}, {"think": "b", "subtasks": ["fly"]}, {"think": "c", "subtasks": []}], env=env
+    )
     assert run.result.steps == 0
     assert env.expert_plan() == ["unstack C from A", "put down C", "pick up B", "stack B on A", "pick up C", "stack C on B"]

@@ -40,7 +40,12 @@ class RandomModel:
 
 
 @settings(max_examples=60, deadline=None)
-@given(seed=st.integers(0, 10_000), window=st.sampled_from([2, 4, 6, 10]), mode=st.sampled_from(["pair", "block"]), level=st.sampled_from([None, 2, 3, 4]))
+@given(
+    seed=st.integers(0, 10_000),
+    window=st.sampled_from([2, 4, 6, 10]),
+    mode=st.sampled_from(["pair", "block"]),
+    level=st.sampled_from([None, 2, 3, 4]),
+)
 def test_window_bound_and_active_path(seed, window, mode, level):
     env = BENCHMARK.make(f"blocksworld/{3 + seed % 3}@{1 + seed % 3}")
     model = RandomModel(seed)

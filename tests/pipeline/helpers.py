@@ -43,8 +43,15 @@ class TinyExpert:
             reply = {"think": "plan", "actions": plan}
         else:
             reply = {"think": "next", "action": plan[0] if plan else "nothing"}
-        return LLMResponse(text=json.dumps(reply), model=self.model, prompt_tokens=100, completion_tokens=10,
-                           cost_usd=PRICE_PER_CALL, test_double=True, token_count_source="estimate")
+        return LLMResponse(
+            text=json.dumps(reply),
+            model=self.model,
+            prompt_tokens=100,
+            completion_tokens=10,
+            cost_usd=PRICE_PER_CALL,
+            test_double=True,
+            token_count_source="estimate",
+        )
 
 
 class _Budget:

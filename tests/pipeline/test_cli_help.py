@@ -12,8 +12,21 @@ from pipeline.cli import COMMANDS, command_parsers, main
 from tests.reports.known_run import write_run_a, write_run_b
 
 #: every command path whose --help this file checks (data is pipeline.data's own parser)
-PATHS = [(), ("run",), ("resume",), ("status",), ("estimate",), ("show",), ("sql",), ("report",), ("view",),
-         ("env",), ("env", "list"), ("env", "play"), ("env", "replay")]
+PATHS = [
+    (),
+    ("run",),
+    ("resume",),
+    ("status",),
+    ("estimate",),
+    ("show",),
+    ("sql",),
+    ("report",),
+    ("view",),
+    ("env",),
+    ("env", "list"),
+    ("env", "play"),
+    ("env", "replay"),
+]
 
 
 def _call(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -63,18 +76,27 @@ def test_top_level_help_lists_every_command(capsys):
 
 def test_help_anywhere_after_the_command(capsys):
     """``--help`` after positionals prints the same help (sql and report included)."""
-    for argv, first in ((["sql", "runs/x", "--help"], ["sql", "--help"]),
-                        (["report", "runs/x", "--format", "md", "--help"], ["report", "--help"]),
-                        (["run", "sweep.yaml", "--help"], ["run", "--help"])):
+    for argv, first in (
+        (["sql", "runs/x", "--help"], ["sql", "--help"]),
+        (["report", "runs/x", "--format", "md", "--help"], ["report", "--help"]),
+        (["run", "sweep.yaml", "--help"], ["run", "--help"]),
+    ):
         assert _call(argv, capsys)[:2] == _call(first, capsys)[:2]
 
 
 def test_run_and_resume_help_give_the_exit_statuses(capsys):
     for cmd in ("run", "resume"):
         out = " ".join(_call([cmd, "--help"], capsys)[1].split())  # words, whatever the wrapping
-        for line in ("0    all units done", "2    bad input", "folder in use", "sink lost", "3    a cap stopped it",
-                     "4    a unit ended in an infrastructure failure", "130  interrupted",
-                     "recap resume RUN --repair"):
+        for line in (
+            "0    all units done",
+            "2    bad input",
+            "folder in use",
+            "sink lost",
+            "3    a cap stopped it",
+            "4    a unit ended in an infrastructure failure",
+            "130  interrupted",
+            "recap resume RUN --repair",
+        ):
             assert " ".join(line.split()) in out, (cmd, line)
         assert "recap resume RUN" in out
 
@@ -96,19 +118,22 @@ def test_no_arguments_is_one_usage_line_and_a_hint(capsys):
         assert name in err
 
 
-@pytest.mark.parametrize("argv, start", [
-    (["nosuch"], "recap: error: argument COMMAND: invalid choice: 'nosuch'"),
-    (["run"], "recap: error: run: the following arguments are required: spec"),
-    (["run", "x.yaml", "--progress", "loud"], "recap: error: run: argument --progress: invalid choice"),
-    (["resume", "runs/x", "--workers", "many"], "recap: error: resume: argument --workers: invalid int value"),
-    (["env"], "recap: error: env: the following arguments are required: ACTION"),
-    (["env", "play", "blocksworld/3@1", "--step-multiplier", "nan"], "recap: error: env play: argument --step-multiplier"),
-    (["show", "runs/x"], "recap: error: show: the following arguments are required: episode"),
-    (["sql", "--max-rows"], "recap sql: argument --max-rows: expected one argument"),
-    (["sql", "--csv", "--json", "runs/x", "SELECT 1"], "recap sql: argument --json: not allowed with argument --csv"),
-    (["report", "--format"], "recap report: argument --format: expected one argument"),
-    (["report"], "recap report: the following arguments are required: RUN_DIR"),
-])
+@pytest.mark.parametrize(
+    "argv, start",
+    [
+        (["nosuch"], "recap: error: argument COMMAND: invalid choice: 'nosuch'"),
+        (["run"], "recap: error: run: the following arguments are required: spec"),
+        (["run", "x.yaml", "--progress", "loud"], "recap: error: run: argument --progress: invalid choice"),
+        (["resume", "runs/x", "--workers", "many"], "recap: error: resume: argument --workers: invalid int value"),
+        (["env"], "recap: error: env: the following arguments are required: ACTION"),
+        (["env", "play", "blocksworld/3@1", "--step-multiplier", "nan"], "recap: error: env play: argument --step-multiplier"),
+        (["show", "runs/x"], "recap: error: show: the following arguments are required: episode"),
+        (["sql", "--max-rows"], "recap sql: argument --max-rows: expected one argument"),
+        (["sql", "--csv", "--json", "runs/x", "SELECT 1"], "recap sql: argument --json: not allowed with argument --csv"),
+        (["report", "--format"], "recap report: argument --format: expected one argument"),
+        (["report"], "recap report: the following arguments are required: RUN_DIR"),
+    ],
+)
 def test_usage_errors_stay_one_line_exit_2(argv, start, capsys):
     code, out, err = _call(argv, capsys)
     assert (code, out) == (2, "")
@@ -149,13 +174,20 @@ def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys):
     a = str(runs[0])
     q = tmp_path / "q.sql"
     q.write_text(QUERY + "\n")
-    by_file = [_call(argv, capsys) for argv in (["sql", "--file", str(q), a, "--csv"],
-                                                ["sql", a, "--file", str(q), "--csv"],
-                                                ["sql", "--csv", a, "--file", str(q)])]
+    by_file = [
+        _call(argv, capsys)
+        for argv in (
+            ["sql", "--file", str(q), a, "--csv"],
+            ["sql", a, "--file", str(q), "--csv"],
+            ["sql", "--csv", a, "--file", str(q)],
+        )
+    ]
     assert by_file[0][0] == 0 and by_file == [by_file[0]] * 3
     assert by_file[0] == _call(["sql", a, QUERY, "--csv"], capsys)
-    named = [_call(argv, capsys) for argv in (["sql", a, "@overview", "--json"], ["sql", "--json", a, "@overview"],
-                                              ["sql", a, "--json", "@overview"])]
+    named = [
+        _call(argv, capsys)
+        for argv in (["sql", a, "@overview", "--json"], ["sql", "--json", a, "@overview"], ["sql", a, "--json", "@overview"])
+    ]
     assert named[0][0] == 0 and '"units"' in named[0][1] and named == [named[0]] * 3
 
 
@@ -176,8 +208,11 @@ def test_report_options_in_any_position(runs, tmp_path, capsys):
     assert texts == [texts[0]] * 3
     assert texts[0][0].startswith("wrote ") and texts[0][0].splitlines()[0].endswith(f" files to {out} (md)")
     # several run folders with options between them
-    both = [["report", a, "--out", out, b, "--format", "md"], ["report", "--format", "md", a, b, "--out", out],
-            ["report", a, b, "--format", "md", "--out", out]]
+    both = [
+        ["report", a, "--out", out, b, "--format", "md"],
+        ["report", "--format", "md", a, b, "--out", out],
+        ["report", a, b, "--format", "md", "--out", out],
+    ]
     md = []
     for argv in both:
         code, _, err = _call(argv, capsys)

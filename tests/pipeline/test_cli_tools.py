@@ -21,7 +21,8 @@ def test_env_list(capsys):
 def test_env_list_unknown_selector(capsys):
     assert main(["env", "list", "blocksworld", "11"]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        "recap: error: no blocksworld instance matches '11'; sizes [3, 4, 5], e.g. blocksworld/3@1"]
+        "recap: error: no blocksworld instance matches '11'; sizes [3, 4, 5], e.g. blocksworld/3@1"
+    ]
 
 
 def test_env_play_by_number_and_by_text(capsys, monkeypatch):
@@ -57,7 +58,7 @@ def test_env_replay_delegates_and_sets_the_exit_status(tmp_path, capsys, monkeyp
 def test_estimate_ranges(tmp_path, capsys):
     spec = tmp_path / "sweep.yaml"
     spec.write_text(f"""run: est
-output: {tmp_path / 'never'}
+output: {tmp_path / "never"}
 models:
   - model: gpt-4o
   - model: offline/expert

@@ -31,7 +31,9 @@ def test_example_sweeps_parse():
     assert [m.model for m in demo.models] == ["offline/expert"]
     assert [m.name for m in demo.methods] == ["recap", "react"]
     assert [(e.benchmark, e.tasks) for e in demo.environments] == [
-        ("robotouille", ["synchronous/2", "synchronous/6", "asynchronous/1", "asynchronous/5"]), ("alfworld", ["heat", "clean"])]
+        ("robotouille", ["synchronous/2", "synchronous/6", "asynchronous/1", "asynchronous/5"]),
+        ("alfworld", ["heat", "clean"]),
+    ]
     real, _ = load_spec(REPO / "examples" / "real-model.yaml")
     assert real.run_cap_usd == 40.0 and real.models[0].cap_usd == 20.0
     assert [m.name for m in real.methods] == ["recap", "recap-no-think", "react"]

@@ -27,4 +27,7 @@ def test_the_demo_keeps_what_it_can_run(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("ROBOTOUILLE_DATA", str(tmp_path / "none"))
     assert demo_spec.main(str(REPO / "examples" / "demo.yaml"), str(out)) == 0
     assert yaml.safe_load(out.read_text())["environments"] == [{"benchmark": "blocksworld", "tasks": ["3"], "limit": 2}]
-    assert capsys.readouterr().out.strip().splitlines()[-1] == "demo: no benchmark data found; running the built-in blocksworld instead"
+    assert (
+        capsys.readouterr().out.strip().splitlines()[-1]
+        == "demo: no benchmark data found; running the built-in blocksworld instead"
+    )

@@ -115,8 +115,10 @@ def test_a_killed_driver_releases_the_lock_and_a_live_one_is_named(tmp_path):
     assert holder is not None and holder["pid"] == p.pid
     with pytest.raises(RunFolderError) as err:
         RunStore(tmp_path).acquire_lock(wait_s=0.2)
-    assert str(err.value) == (f"run folder {tmp_path} is in use by another driver (pid {p.pid} on {socket.gethostname()}); "
-                              "wait for it to finish (a driver that dies releases the lock by itself)")
+    assert str(err.value) == (
+        f"run folder {tmp_path} is in use by another driver (pid {p.pid} on {socket.gethostname()}); "
+        "wait for it to finish (a driver that dies releases the lock by itself)"
+    )
     with pytest.raises(RunFolderError, match="in use by another driver"):
         RunStore(tmp_path).check_unlocked()
     os.kill(p.pid, signal.SIGKILL)

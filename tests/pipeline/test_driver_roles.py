@@ -73,7 +73,9 @@ def test_a_typed_refusal_stops_the_run_or_only_the_model_it_names(spec):
     caps2 = CapPolicy(spec, EventBuffer().add)
     caps2.on_refusal("big", BudgetRefusal("unpriced", "offline/random"), "no price", Spend())
     assert caps2.run_stopped == "run cap $5.00 reached (spent $0.0000)"
-    assert model_refusal.message == "offline/expert budget: committed $0.900000 + this call's worst case $0.125000 > cap $1.000000"
+    assert (
+        model_refusal.message == "offline/expert budget: committed $0.900000 + this call's worst case $0.125000 > cap $1.000000"
+    )
     assert BudgetRefusal.from_dict(model_refusal.to_dict()) == model_refusal
     with pytest.raises(ValueError, match="unknown refusal scope 'team'"):
         BudgetRefusal("team", "m")  # type: ignore[arg-type]
@@ -86,14 +88,29 @@ def test_the_ledger_answers_with_the_cap_that_refused(tmp_path):
     ledger = BudgetLedger(tmp_path, run_cap_usd=1.0, model_caps_usd={"m": 0.5}, fsync=False)
     assert ledger.reserve("k1", "m", 4 * pico // 10)["status"] == "reserved"
     ans = ledger.reserve("k2", "m", 2 * pico // 10)
-    assert ans == {"status": "refused", "refusal": {"scope": "model", "model": "m", "cap_pico": pico // 2,
-                                                    "committed_pico": 4 * pico // 10, "worst_pico": 2 * pico // 10},
-                   "message": "m budget: committed $0.400000 + this call's worst case $0.200000 > cap $0.500000"}
+    assert ans == {
+        "status": "refused",
+        "refusal": {
+            "scope": "model",
+            "model": "m",
+            "cap_pico": pico // 2,
+            "committed_pico": 4 * pico // 10,
+            "worst_pico": 2 * pico // 10,
+        },
+        "message": "m budget: committed $0.400000 + this call's worst case $0.200000 > cap $0.500000",
+    }
     ans = ledger.reserve("k3", "n", 7 * pico // 10)
     assert (ans["refusal"]["scope"], ans["message"]) == (
-        "run", "run budget: committed $0.400000 + this call's worst case $0.700000 > cap $1.000000")
-    assert ledger.reserve("k4", "m", None)["refusal"] == {"scope": "unpriced", "model": "m", "cap_pico": None,
-                                                          "committed_pico": 0, "worst_pico": None}
+        "run",
+        "run budget: committed $0.400000 + this call's worst case $0.700000 > cap $1.000000",
+    )
+    assert ledger.reserve("k4", "m", None)["refusal"] == {
+        "scope": "unpriced",
+        "model": "m",
+        "cap_pico": None,
+        "committed_pico": 0,
+        "worst_pico": None,
+    }
     ledger.close()
 
 
@@ -104,21 +121,53 @@ def unit(spec):
 
 
 def _outcome(unit, result=None, crash=None, env=None):
-    return EpisodeOutcome(unit_id=unit.unit_id, attempt=1, episode_id=f"{unit.unit_id}-1", worker_id="w7", pid=1,
-                          started_at=100.0, env=env or EnvFacts("blocksworld", "3", "3@1", 6, 12), model=unit.model,
-                          test_double=True, result=result, crash=crash, ended_at=103.5, wall_s=3.5)
+    return EpisodeOutcome(
+        unit_id=unit.unit_id,
+        attempt=1,
+        episode_id=f"{unit.unit_id}-1",
+        worker_id="w7",
+        pid=1,
+        started_at=100.0,
+        env=env or EnvFacts("blocksworld", "3", "3@1", 6, 12),
+        model=unit.model,
+        test_double=True,
+        result=result,
+        crash=crash,
+        ended_at=103.5,
+        wall_s=3.5,
+    )
 
 
 def test_the_row_of_an_episode_that_ended(unit):
-    res = EpisodeResult("success", True, 6, 7, prompt_tokens=700, cached_prompt_tokens=128, completion_tokens=70,
-                        cost_usd=0.25, max_depth=2)
+    res = EpisodeResult(
+        "success", True, 6, 7, prompt_tokens=700, cached_prompt_tokens=128, completion_tokens=70, cost_usd=0.25, max_depth=2
+    )
     rec = episode_record(unit, 1, _outcome(unit, res))
     assert isinstance(rec, EpisodeRecord)
-    assert (rec.episode_id, rec.end_reason, rec.success, rec.steps, rec.llm_calls, rec.prompt_tokens,
-            rec.cached_prompt_tokens, rec.completion_tokens, rec.cost_usd, rec.max_depth) == (
-        f"{unit.unit_id}-1", "success", True, 6, 7, 700, 128, 70, 0.25, 2)
-    assert (rec.benchmark, rec.split, rec.task, rec.step_cap, rec.optimal_steps, rec.worker_id, rec.wall_s,
-            rec.started_at, rec.ended_at, rec.test_double) == ("blocksworld", "3", "3@1", 12, 6, "w7", 3.5, 100.0, 103.5, True)
+    assert (
+        rec.episode_id,
+        rec.end_reason,
+        rec.success,
+        rec.steps,
+        rec.llm_calls,
+        rec.prompt_tokens,
+        rec.cached_prompt_tokens,
+        rec.completion_tokens,
+        rec.cost_usd,
+        rec.max_depth,
+    ) == (f"{unit.unit_id}-1", "success", True, 6, 7, 700, 128, 70, 0.25, 2)
+    assert (
+        rec.benchmark,
+        rec.split,
+        rec.task,
+        rec.step_cap,
+        rec.optimal_steps,
+        rec.worker_id,
+        rec.wall_s,
+        rec.started_at,
+        rec.ended_at,
+        rec.test_double,
+    ) == ("blocksworld", "3", "3@1", 12, 6, "w7", 3.5, 100.0, 103.5, True)
     assert (rec.model, rec.provider_model, rec.method, rec.label) == (unit.model_label, unit.model, "react", unit.method_label)
 
 
@@ -133,19 +182,34 @@ def test_an_infrastructure_failure_is_named_by_its_kind_first(unit):
 def test_a_given_up_attempt_gets_the_journal_spend_and_its_place(unit):
     spent = AttemptSpend(calls=4, prompt_tokens=400, cached_prompt_tokens=0, completion_tokens=40, cost_usd=0.125)
     asked = []
-    rec = episode_record(unit, 2, None, end_reason="env_error", error="gave up after 2 failed attempts; last: x",
-                         worker_id="w1", started=50.0, now=60.0,
-                         journal_spend=lambda eid: asked.append(eid) or spent)
+    rec = episode_record(
+        unit,
+        2,
+        None,
+        end_reason="env_error",
+        error="gave up after 2 failed attempts; last: x",
+        worker_id="w1",
+        started=50.0,
+        now=60.0,
+        journal_spend=lambda eid: asked.append(eid) or spent,
+    )
     assert asked == [f"{unit.unit_id}-2"]
     assert (rec.end_reason, rec.llm_calls, rec.prompt_tokens, rec.cost_usd, rec.wall_s, rec.worker_id) == (
-        "env_error", 4, 400, 0.125, 10.0, "w1")
+        "env_error",
+        4,
+        400,
+        0.125,
+        10.0,
+        "w1",
+    )
     assert (rec.benchmark, rec.success, rec.steps) == ("blocksworld", False, 0)
 
     def broken(eid):
         raise OSError("journal unreadable")
 
-    rec = episode_record(unit, 2, _outcome(unit, crash=Crash("agent", "boom")), end_reason="env_error", error="e",
-                         journal_spend=broken)
+    rec = episode_record(
+        unit, 2, _outcome(unit, crash=Crash("agent", "boom")), end_reason="env_error", error="e", journal_spend=broken
+    )
     assert (rec.llm_calls, rec.cost_usd, rec.split) == (0, 0.0, "3")  # the row matters more than its spend
     with pytest.raises(ValueError, match="no result and no end reason"):
         episode_record(unit, 1, None)
@@ -160,10 +224,18 @@ class _Runner:
         self.gate.wait(10)
         if work.seed < 0:
             raise RuntimeError("runner broke")
-        return EpisodeOutcome(unit_id=work.unit_id, attempt=attempt, episode_id=f"{work.unit_id}-{attempt}",
-                              worker_id=self.wid, pid=0, started_at=0.0, env=EnvFacts(work.benchmark),
-                              model=work.model, test_double=True,
-                              result=EpisodeResult("success", True, 1, 1))
+        return EpisodeOutcome(
+            unit_id=work.unit_id,
+            attempt=attempt,
+            episode_id=f"{work.unit_id}-{attempt}",
+            worker_id=self.wid,
+            pid=0,
+            started_at=0.0,
+            env=EnvFacts(work.benchmark),
+            model=work.model,
+            test_double=True,
+            result=EpisodeResult("success", True, 1, 1),
+        )
 
 
 def test_the_in_process_pool_runs_attempts_on_its_own_workers(unit):
@@ -234,7 +306,9 @@ def test_every_resolved_config_round_trips_and_the_worker_builds_it_exactly():
 
 
 def test_a_unit_hands_its_worker_the_resolved_settings_not_the_raw_ones(tmp_path):
-    text = SPEC.format(out=tmp_path / "r2").replace("[{method: react}]", "[{method: recap, profile: paper, ablation: no_think, settings: {window: 32}}]")
+    text = SPEC.format(out=tmp_path / "r2").replace(
+        "[{method: react}]", "[{method: recap, profile: paper, ablation: no_think, settings: {window: 32}}]"
+    )
     u = expand(parse_spec(text, "sweep.yaml")).units[0]
     work = u.work()
     assert work.method_config == u.method_config and json.loads(work.method_config)["window"] == 32
@@ -268,10 +342,14 @@ workers: 2
         con, bad = open_tables(RunStore(out))
         assert bad == []
         rows[executor] = (
-            con.execute("select unit_id, attempt, end_reason, success, steps, llm_calls, prompt_tokens, "
-                        "completion_tokens, cost_usd, max_depth from episodes order by unit_id").fetchall(),
+            con.execute(
+                "select unit_id, attempt, end_reason, success, steps, llm_calls, prompt_tokens, "
+                "completion_tokens, cost_usd, max_depth from episodes order by unit_id"
+            ).fetchall(),
             con.execute("select episode_id, seq, role, content from messages order by episode_id, seq").fetchall(),
-            con.execute("select episode_id, index, env_step, action, valid, observation from steps order by episode_id, index").fetchall(),
+            con.execute(
+                "select episode_id, index, env_step, action, valid, observation from steps order by episode_id, index"
+            ).fetchall(),
             sorted({w[:4] + w[5] for (w,) in con.execute("select distinct worker_id from episodes").fetchall()}),
         )
     ray_rows, local_rows = rows["ray"], rows["in-process"]

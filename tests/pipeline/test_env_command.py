@@ -69,7 +69,10 @@ def test_show_prints_what_each_observation_changed():
     after = "Station table1:\ntable1 has bread1\n\nPlayer robot1:\nrobot1 is at table1\nrobot1 is holding nothing"
     assert observation_change(before, after) == "robot1 is at table1"
     assert observation_change(after, after) == "(no change)"
-    assert observation_change(None, "You arrive at loc 5.\nOn the desk 1, you see a pen 2.") == "You arrive at loc 5. | On the desk 1, you see a pen 2."
+    assert (
+        observation_change(None, "You arrive at loc 5.\nOn the desk 1, you see a pen 2.")
+        == "You arrive at loc 5. | On the desk 1, you see a pen 2."
+    )
     assert observation_change("You arrive at loc 5.", "Nothing happens.") == "Nothing happens."
     assert observation_change("", "x" * 200).endswith("...") and len(observation_change("", "x" * 200)) == 120
 
@@ -78,15 +81,34 @@ def test_progress_after_a_stop_shows_no_eta_and_marks_nominal_spend():
     from pipeline.backend import RateStats
     from pipeline.progress import Snapshot, status_line
 
-    running = Snapshot(total=10, done=4, success=2, running=2, spend_usd=1.25, run_cap_usd=2.0, eta_s=90.0,
-                       rates={"offline/expert (test double)": RateStats()})
+    running = Snapshot(
+        total=10,
+        done=4,
+        success=2,
+        running=2,
+        spend_usd=1.25,
+        run_cap_usd=2.0,
+        eta_s=90.0,
+        rates={"offline/expert (test double)": RateStats()},
+    )
     line = status_line(running)
     assert "| ETA " in line and "stopped" not in line
     assert "spend $1.2500 / cap $2.00 (nominal: test doubles)" in line
-    stopped = Snapshot(total=10, done=4, success=2, running=0, spend_usd=2.0, run_cap_usd=2.0, eta_s=90.0,
-                       rates={"gpt-4o": RateStats()}, stopped="run cap $2.00 reached")
+    stopped = Snapshot(
+        total=10,
+        done=4,
+        success=2,
+        running=0,
+        spend_usd=2.0,
+        run_cap_usd=2.0,
+        eta_s=90.0,
+        rates={"gpt-4o": RateStats()},
+        stopped="run cap $2.00 reached",
+    )
     line = status_line(stopped)
     assert "ETA -- (stopped)" in line and "nominal" not in line
     # one spend figure (the live one); the stop reason names the cap, not a second, stale spend
-    assert line == ("units 4/10 | success 2/4 | running 0 | spend $2.0000 / cap $2.00 | ETA -- (stopped) | "
-                    "gpt-4o: rpm -- tpm -- | run cap $2.00 reached")
+    assert line == (
+        "units 4/10 | success 2/4 | running 0 | spend $2.0000 / cap $2.00 | ETA -- (stopped) | "
+        "gpt-4o: rpm -- tpm -- | run cap $2.00 reached"
+    )

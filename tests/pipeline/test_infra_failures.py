@@ -26,30 +26,56 @@ environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
 """
 
 
-@pytest.mark.parametrize("reason, error, kind", [
-    ("llm_error", "server_error: APIConnectionError: Connection refused (http://127.0.0.1:9/v1)", "server_error"),
-    ("llm_error", "auth: AuthenticationError: invalid api key", "auth"),
-    ("llm_error", "rate_limit: Retry-After 3600s is longer than the deployment waits", "rate_limit"),
-    ("llm_error", "timeout: gateway gpt gave no answer within 120s", "timeout"),
-    ("llm_error", "bad_request: NotFoundError: litellm.NotFoundError: 404 page not found", "not_found"),
-    ("llm_error", "context length exceeded with nothing left to drop", None),
-    ("llm_error", "bad_request: BadRequestError: temperature must be <= 2", None),
-    ("env_error", "gave up after 3 failed attempts (infrastructure: worker_lost); last: ActorDiedError: x", "worker_lost"),
-    ("llm_error", "gave up after 3 failed attempts (infrastructure: client); last: client: ClientError: x", "client"),
-    ("env_error", "gave up after 3 failed attempts; last: ActorDiedError: The actor died", "worker_lost"),  # older rows
-    ("env_error", "gave up after 3 failed attempts; last: agent: KeyError: 'x'", None),
-    ("env_error", "FileNotFoundError: no such game", None),
-    ("success", None, None),
-    ("budget_exhausted", "run budget spent", None),
-])
+@pytest.mark.parametrize(
+    "reason, error, kind",
+    [
+        ("llm_error", "server_error: APIConnectionError: Connection refused (http://127.0.0.1:9/v1)", "server_error"),
+        ("llm_error", "auth: AuthenticationError: invalid api key", "auth"),
+        ("llm_error", "rate_limit: Retry-After 3600s is longer than the deployment waits", "rate_limit"),
+        ("llm_error", "timeout: gateway gpt gave no answer within 120s", "timeout"),
+        ("llm_error", "bad_request: NotFoundError: litellm.NotFoundError: 404 page not found", "not_found"),
+        ("llm_error", "context length exceeded with nothing left to drop", None),
+        ("llm_error", "bad_request: BadRequestError: temperature must be <= 2", None),
+        ("env_error", "gave up after 3 failed attempts (infrastructure: worker_lost); last: ActorDiedError: x", "worker_lost"),
+        ("llm_error", "gave up after 3 failed attempts (infrastructure: client); last: client: ClientError: x", "client"),
+        ("env_error", "gave up after 3 failed attempts; last: ActorDiedError: The actor died", "worker_lost"),  # older rows
+        ("env_error", "gave up after 3 failed attempts; last: agent: KeyError: 'x'", None),
+        ("env_error", "FileNotFoundError: no such game", None),
+        ("success", None, None),
+        ("budget_exhausted", "run budget spent", None),
+    ],
+)
 def test_which_rows_are_infrastructure_failures(reason, error, kind):
     assert infra_failure(reason, error) == kind
     assert is_final(reason, error) == (kind is None and reason != "budget_exhausted")
 
 
 def _ep(uid: str, attempt: int, reason: str, error: str | None = None) -> EpisodeRecord:
-    return EpisodeRecord(f"{uid}-{attempt}", uid, attempt, "blocksworld", "", "", "x", 0, "react", "{}", "offline/expert",
-                         reason, reason == "success", 0, 0, 0, 0, 0, 0.0, 0.0, 0, 4.0, error=error)
+    return EpisodeRecord(
+        f"{uid}-{attempt}",
+        uid,
+        attempt,
+        "blocksworld",
+        "",
+        "",
+        "x",
+        0,
+        "react",
+        "{}",
+        "offline/expert",
+        reason,
+        reason == "success",
+        0,
+        0,
+        0,
+        0,
+        0,
+        0.0,
+        0.0,
+        0,
+        4.0,
+        error=error,
+    )
 
 
 def _folder(tmp_path):
@@ -67,12 +93,15 @@ def test_resume_queues_failed_units_under_the_next_attempt_with_a_fresh_failure_
     out, plan, store = _folder(tmp_path)
     a, b, c = (u.unit_id for u in plan.units)
     w = PartWriter(out, "t")
-    w.write_records("r", [
-        _ep(a, 1, "success"),
-        _ep(b, 1, "llm_error", "server_error: APIConnectionError: Connection refused"),
-        _ep(c, 3, "env_error", "gave up after 3 failed attempts (infrastructure: worker_lost); last: ActorDiedError"),
-        *[EventRecord(1.0, "driver", "worker_lost", unit_id=c, detail=json.dumps({"attempt": n})) for n in (1, 2, 3)],
-    ])
+    w.write_records(
+        "r",
+        [
+            _ep(a, 1, "success"),
+            _ep(b, 1, "llm_error", "server_error: APIConnectionError: Connection refused"),
+            _ep(c, 3, "env_error", "gave up after 3 failed attempts (infrastructure: worker_lost); last: ActorDiedError"),
+            *[EventRecord(1.0, "driver", "worker_lost", unit_id=c, detail=json.dumps({"attempt": n})) for n in (1, 2, 3)],
+        ],
+    )
     state = load_state(store)
     assert state.completed == {a}
     assert state.infra_failed == {b: "server_error", c: "worker_lost"}
@@ -95,8 +124,14 @@ def test_resume_queues_failed_units_under_the_next_attempt_with_a_fresh_failure_
 def test_status_says_how_many_failed_and_how_to_retry(tmp_path, capsys):
     out, plan, _ = _folder(tmp_path)
     a, b, c = (u.unit_id for u in plan.units)
-    PartWriter(out, "t").write_records("r", [_ep(a, 1, "success"), _ep(b, 1, "llm_error", "auth: AuthenticationError: bad key"),
-                                             _ep(c, 1, "llm_error", "auth: AuthenticationError: bad key")])
+    PartWriter(out, "t").write_records(
+        "r",
+        [
+            _ep(a, 1, "success"),
+            _ep(b, 1, "llm_error", "auth: AuthenticationError: bad key"),
+            _ep(c, 1, "llm_error", "auth: AuthenticationError: bad key"),
+        ],
+    )
     assert main(["status", str(out)]) == 0
     text = capsys.readouterr().out
     assert "units 1/3 done, 1 succeeded, 0 stopped by a budget cap, 2 failed on infrastructure, 0 not finished" in text
@@ -104,11 +139,20 @@ def test_status_says_how_many_failed_and_how_to_retry(tmp_path, capsys):
 
 
 def test_exit_status_of_a_session_with_infrastructure_failures():
-    s = RunSummary(location="/r", run="r", run_id="x", total=3, completed_before=1, finished_now=1,
-                   infra_failed=1, infra_kinds={"server_error": 1})
+    s = RunSummary(
+        location="/r",
+        run="r",
+        run_id="x",
+        total=3,
+        completed_before=1,
+        finished_now=1,
+        infra_failed=1,
+        infra_kinds={"server_error": 1},
+    )
     assert s.exit_code() == EXIT_INFRA == 4
-    assert s.retry_hint() == ("1 units ended in an infrastructure failure (server_error 1); fix the cause, "
-                              "then retry them with: recap resume /r")
+    assert s.retry_hint() == (
+        "1 units ended in an infrastructure failure (server_error 1); fix the cause, then retry them with: recap resume /r"
+    )
     s.interrupted = True
     assert s.exit_code() == 130
     done = RunSummary(location="/r", run="r", run_id="x", total=2, completed_before=1, finished_now=1)

@@ -27,10 +27,12 @@ methods: [{{method: react}}]
 environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
 """
 
-ENTRIES = [{"op": "reserve", "rid": 1, "key": "u-1#0", "model": "m", "pico": 50, "owner": "g", "t": 0},
-           {"op": "settle", "rid": 1, "key": "u-1#0", "model": "m", "pico": 30, "status": "ok", "t": 0},
-           {"op": "reserve", "rid": 2, "key": "u-1#1", "model": "m", "pico": 50, "owner": "g", "t": 0},
-           {"op": "settle", "rid": 2, "key": "u-1#1", "model": "m", "pico": 20, "status": "ok", "t": 0}]
+ENTRIES = [
+    {"op": "reserve", "rid": 1, "key": "u-1#0", "model": "m", "pico": 50, "owner": "g", "t": 0},
+    {"op": "settle", "rid": 1, "key": "u-1#0", "model": "m", "pico": 30, "status": "ok", "t": 0},
+    {"op": "reserve", "rid": 2, "key": "u-1#1", "model": "m", "pico": 50, "owner": "g", "t": 0},
+    {"op": "settle", "rid": 2, "key": "u-1#1", "model": "m", "pico": 20, "status": "ok", "t": 0},
+]
 GOOD = b"".join(json.dumps(e).encode() + b"\n" for e in ENTRIES)
 
 TORN_TAILS = {
@@ -61,8 +63,10 @@ def test_a_torn_last_line_is_named_by_status_and_cut_by_repair_with_a_backup(tmp
     assert load_state(RunStore(out)).last_attempt == {"u": 1}  # resume's own read copes too
     assert main(["status", str(out)]) == 0
     lines = [ln for ln in capsys.readouterr().out.splitlines() if "ledger journal" in ln]
-    assert lines == [f"ledger journal {journal}: line 5 of 5 is torn (a crash mid-write); the next resume drops it, "
-                     f"keeping a backup (or now: recap resume {out} --repair)"]
+    assert lines == [
+        f"ledger journal {journal}: line 5 of 5 is torn (a crash mid-write); the next resume drops it, "
+        f"keeping a backup (or now: recap resume {out} --repair)"
+    ]
 
     said = repair_run(RunStore(out))
     assert said.startswith(f"repaired {journal}: cut the torn last line 5 (")
@@ -79,11 +83,14 @@ def test_a_corrupt_line_in_the_middle_is_refused_by_repair_status_and_resume(tmp
     damaged = b"".join(lines[:2]) + b'{"op": "reserve", "rid": 2, "key": "u-1#1", "mo\n' + lines[3]
     out = _run_folder(tmp_path, damaged)
     journal = out / JOURNAL_NAME
-    expected = (f"ledger journal {journal}: line 3 of 4 is corrupt and not the last line; the run's spend cannot be "
-                f"restored from it - restore the file from a backup")
+    expected = (
+        f"ledger journal {journal}: line 3 of 4 is corrupt and not the last line; the run's spend cannot be "
+        f"restored from it - restore the file from a backup"
+    )
     assert main(["status", str(out)]) == 0
-    assert [ln for ln in capsys.readouterr().out.splitlines() if "ledger journal" in ln] == \
-        [expected + " (recap resume --repair only cuts a torn last line)"]
+    assert [ln for ln in capsys.readouterr().out.splitlines() if "ledger journal" in ln] == [
+        expected + " (recap resume --repair only cuts a torn last line)"
+    ]
 
     with pytest.raises(RunFolderError) as err:
         repair_run(RunStore(out))

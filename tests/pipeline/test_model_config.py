@@ -49,41 +49,90 @@ def test_every_model_entry_field_maps_to_the_deployment_or_is_the_spec_own():
 
 
 def test_a_model_entry_becomes_its_deployment_field_by_field():
-    m = ModelSpec(model="openai/gpt-4o", label="fast", params={"temperature": 0.2}, rpm=10, tpm=1000,
-                  concurrency=3, window_s=30, retries=4, timeout_s=50, api_base="http://127.0.0.1:9/v1",
-                  api_key_env="MY_KEY", prices={"input": 1, "output": 2}, cap_usd=5)
+    m = ModelSpec(
+        model="openai/gpt-4o",
+        label="fast",
+        params={"temperature": 0.2},
+        rpm=10,
+        tpm=1000,
+        concurrency=3,
+        window_s=30,
+        retries=4,
+        timeout_s=50,
+        api_base="http://127.0.0.1:9/v1",
+        api_key_env="MY_KEY",
+        prices={"input": 1, "output": 2},
+        cap_usd=5,
+    )
     cfg = deployment_config(m, "models[0]")
     got = {f: getattr(cfg, f) for f in DEPLOYMENT_FIELDS.values() if f != "price"}
-    assert got == {"model": "openai/gpt-4o", "name": "fast", "params": {"temperature": 0.2}, "offline_options": {},
-                   "rpm": 10, "tpm": 1000, "max_concurrency": 3, "window_s": 30.0, "max_attempts": 5,
-                   "attempt_timeout_s": 50.0, "api_base": "http://127.0.0.1:9/v1", "api_key_env": "MY_KEY"}
+    assert got == {
+        "model": "openai/gpt-4o",
+        "name": "fast",
+        "params": {"temperature": 0.2},
+        "offline_options": {},
+        "rpm": 10,
+        "tpm": 1000,
+        "max_concurrency": 3,
+        "window_s": 30.0,
+        "max_attempts": 5,
+        "attempt_timeout_s": 50.0,
+        "api_base": "http://127.0.0.1:9/v1",
+        "api_key_env": "MY_KEY",
+    }
     assert (cfg.price.input, cfg.price.output, cfg.price.cached_input) == (1.0, 2.0, None)
     assert cfg.deployment_name == m.name == "fast"
     # left out: the gateway's defaults; unlabelled: the deployment is named after the model string
     bare = deployment_config(ModelSpec(model="openai/gpt-4o", api_base="http://127.0.0.1:9/v1"), "models[1]")
     defaults = DeploymentConfig(model="x")
-    assert (bare.name, bare.deployment_name, bare.max_attempts, bare.max_concurrency, bare.attempt_timeout_s,
-            bare.window_s, bare.price) == ("openai/gpt-4o", "openai/gpt-4o", defaults.max_attempts,
-                                           defaults.max_concurrency, defaults.attempt_timeout_s, defaults.window_s, None)
+    assert (
+        bare.name,
+        bare.deployment_name,
+        bare.max_attempts,
+        bare.max_concurrency,
+        bare.attempt_timeout_s,
+        bare.window_s,
+        bare.price,
+    ) == (
+        "openai/gpt-4o",
+        "openai/gpt-4o",
+        defaults.max_attempts,
+        defaults.max_concurrency,
+        defaults.attempt_timeout_s,
+        defaults.window_s,
+        None,
+    )
 
 
 def test_caps_and_the_ledger_names_are_the_sweep_names(tmp_path):
     spec = two_on_one(tmp_path)
     assert model_caps(spec) == {"expert-a": 0.5, "expert-b": 2.0}  # two caps on one model string
-    assert provider_models(spec) == {"expert-a": "offline/expert", "expert-b": "offline/expert",
-                                     "offline/random": "offline/random"}
+    assert provider_models(spec) == {
+        "expert-a": "offline/expert",
+        "expert-b": "offline/expert",
+        "offline/random": "offline/random",
+    }
     assert [deployment_config(m, "m").deployment_name for m in spec.models] == ["expert-a", "expert-b", "offline/random"]
 
 
 # -- one key: the ledger ----------------------------------------------------------------------------
 def test_two_names_on_one_model_string_have_their_own_caps_and_spend(tmp_path):
-    led = BudgetLedger(tmp_path, model_caps_usd={"expert-a": 0.5, "expert-b": 2.0}, fsync=False,
-                       provider_models={"expert-a": "offline/expert", "expert-b": "offline/expert"})
+    led = BudgetLedger(
+        tmp_path,
+        model_caps_usd={"expert-a": 0.5, "expert-b": 2.0},
+        fsync=False,
+        provider_models={"expert-a": "offline/expert", "expert-b": "offline/expert"},
+    )
     a = led.reserve("ea-1#0", "expert-a", 4 * PICO // 10)
     led.settle(a["rid"], 3 * PICO // 10, "ok")
     refused = led.reserve("ea-1#1", "expert-a", 3 * PICO // 10)
-    assert refused["refusal"] == {"scope": "model", "model": "expert-a", "cap_pico": PICO // 2,
-                                  "committed_pico": 3 * PICO // 10, "worst_pico": 3 * PICO // 10}
+    assert refused["refusal"] == {
+        "scope": "model",
+        "model": "expert-a",
+        "cap_pico": PICO // 2,
+        "committed_pico": 3 * PICO // 10,
+        "worst_pico": 3 * PICO // 10,
+    }
     b = led.reserve("eb-1#0", "expert-b", 15 * PICO // 10)  # expert-a's cap does not stop expert-b
     assert b["status"] == "reserved"
     led.settle(b["rid"], PICO, "ok")
@@ -91,26 +140,43 @@ def test_two_names_on_one_model_string_have_their_own_caps_and_spend(tmp_path):
     led.close()
     lines = [json.loads(x) for x in (tmp_path / JOURNAL_NAME).read_text().splitlines()]
     assert [(e["op"], e["name"], "model" in e) for e in lines] == [
-        ("reserve", "expert-a", False), ("settle", "expert-a", False),
-        ("reserve", "expert-b", False), ("settle", "expert-b", False)]
+        ("reserve", "expert-a", False),
+        ("settle", "expert-a", False),
+        ("reserve", "expert-b", False),
+        ("settle", "expert-b", False),
+    ]
 
 
 def _legacy_journal(path, model="offline/expert"):
     """A journal as the ledger wrote it before spend was kept by name (entries keyed by model)."""
-    lines = [{"op": "reserve", "rid": 1, "key": "u1-1#0", "model": model, "pico": 500, "owner": "g:1", "t": 0},
-             {"op": "settle", "rid": 1, "key": "u1-1#0", "model": model, "pico": 300, "status": "ok",
-              "result": {"text": "x", "prompt_tokens": 20, "cached_prompt_tokens": 4, "completion_tokens": 5}, "t": 0},
-             {"op": "reserve", "rid": 2, "key": "u2-1#0", "model": model, "pico": 700, "owner": "g:1", "t": 0},
-             {"op": "reserve", "rid": 3, "key": "u3-1#0", "model": "openai/gone", "pico": 50, "owner": "h:1", "t": 0},
-             {"op": "settle", "rid": 3, "key": "u3-1#0", "model": "openai/gone", "pico": 40, "status": "ok", "t": 0}]
+    lines = [
+        {"op": "reserve", "rid": 1, "key": "u1-1#0", "model": model, "pico": 500, "owner": "g:1", "t": 0},
+        {
+            "op": "settle",
+            "rid": 1,
+            "key": "u1-1#0",
+            "model": model,
+            "pico": 300,
+            "status": "ok",
+            "result": {"text": "x", "prompt_tokens": 20, "cached_prompt_tokens": 4, "completion_tokens": 5},
+            "t": 0,
+        },
+        {"op": "reserve", "rid": 2, "key": "u2-1#0", "model": model, "pico": 700, "owner": "g:1", "t": 0},
+        {"op": "reserve", "rid": 3, "key": "u3-1#0", "model": "openai/gone", "pico": 50, "owner": "h:1", "t": 0},
+        {"op": "settle", "rid": 3, "key": "u3-1#0", "model": "openai/gone", "pico": 40, "status": "ok", "t": 0},
+    ]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("".join(json.dumps(e) + "\n" for e in lines))
 
 
 def test_an_old_journal_keyed_by_model_string_resumes_under_the_one_name_serving_it(tmp_path):
     _legacy_journal(tmp_path / JOURNAL_NAME)
-    led = BudgetLedger(tmp_path, model_caps_usd={"expert-a": 1.2 * 10**-9}, fsync=False,
-                       provider_models={"expert-a": "offline/expert", "gpt": "openai/gpt-4o"})
+    led = BudgetLedger(
+        tmp_path,
+        model_caps_usd={"expert-a": 1.2 * 10**-9},
+        fsync=False,
+        provider_models={"expert-a": "offline/expert", "gpt": "openai/gpt-4o"},
+    )
     # the open reservation (rid 2) is charged at its worst case, under expert-a
     assert (led.spent, dict(led.spent_by_model)) == (300 + 700 + 40, {"expert-a": 1000, "openai/gone": 40})
     assert led.reserve("u4-1#0", "expert-a", 300)["refusal"]["scope"] == "model"  # 1000 + 300 > 1200
@@ -124,9 +190,11 @@ def test_an_old_journal_keyed_by_model_string_resumes_under_the_one_name_serving
     assert (last["op"], last["name"], last["status"], last["pico"]) == ("settle", "gpt", "orphaned", 300)
 
 
-AMBIGUOUS = ("{where} was written before spend was kept per model name: its entries name model 'offline/expert', "
-             "which 'expert-a', 'expert-b' of this sweep share, so their spend cannot be split between them; "
-             "resume with one sweep entry on that model, or use a new output folder")
+AMBIGUOUS = (
+    "{where} was written before spend was kept per model name: its entries name model 'offline/expert', "
+    "which 'expert-a', 'expert-b' of this sweep share, so their spend cannot be split between them; "
+    "resume with one sweep entry on that model, or use a new output folder"
+)
 
 
 def test_an_old_journal_whose_model_string_two_names_share_is_refused(tmp_path):
@@ -191,7 +259,9 @@ def test_a_sweep_keeps_spend_and_caps_apart_for_two_names_on_one_model_string(ra
     assert a_rows.count(("success",)) < 3 and not summary.all_done
     # every call carries both names; each name's spend is its own
     assert q("select distinct model, model_name, deployment from llm_calls order by 2") == [
-        ("offline/expert", "expert-a", "expert-a"), ("offline/expert", "expert-b", "expert-b")]
+        ("offline/expert", "expert-a", "expert-a"),
+        ("offline/expert", "expert-b", "expert-b"),
+    ]
     spent = dict(q("select model_name, sum(cost_usd) from llm_calls group by 1"))
     assert 0 < spent["expert-a"] <= cap and spent["expert-b"] > cap
     # episodes and their calls agree on the model's name and on what each attempt paid
@@ -208,8 +278,7 @@ def test_a_sweep_keeps_spend_and_caps_apart_for_two_names_on_one_model_string(ra
 
     # the same journal as recap wrote it before (keyed by model string): the two labels' spend
     # cannot be told apart any more, so a resume is refused, in one line, before anything starts
-    legacy = [{("model" if k == "name" else k): ("offline/expert" if k == "name" else v) for k, v in e.items()}
-              for e in journal]
+    legacy = [{("model" if k == "name" else k): ("offline/expert" if k == "name" else v) for k, v in e.items()} for e in journal]
     (out / JOURNAL_NAME).write_text("".join(json.dumps(e) + "\n" for e in legacy))
     with pytest.raises(RunFolderError) as err:
         prepare(spec, text)

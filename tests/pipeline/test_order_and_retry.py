@@ -121,7 +121,11 @@ def test_plan_order_keeps_the_old_order_and_unit_ids_do_not_depend_on_the_order(
     first = pplan.units[:12]
     assert len({u.instance_id for u in first}) == 1
     assert [(u.method_label, u.model_label, u.seed) for u in first[:4]] == [
-        ("recap", "offline/expert", 0), ("recap", "offline/expert", 1), ("recap", "offline/random", 0), ("recap", "offline/random", 1)]
+        ("recap", "offline/expert", 0),
+        ("recap", "offline/expert", 1),
+        ("recap", "offline/random", 0),
+        ("recap", "offline/random", 1),
+    ]
     # the order is not part of any hash: the same ids and keys, and plan.json lists the plan order either way
     assert [(u.key, u.unit_id) for u in pplan.units] == [(u.key, u.unit_id) for u in plan.units]
     assert pplan.to_json() == plan.to_json()
@@ -153,8 +157,33 @@ environments: [{{benchmark: blocksworld, tasks: ["3", "4", "5"]}}]
 
 
 def _ep(uid: str, attempt: int, reason: str, error: str | None = None, method: str = "react") -> EpisodeRecord:
-    return EpisodeRecord(f"{uid}-{attempt}", uid, attempt, "blocksworld", "", "", "x", 0, method, "{}", "offline/expert",
-                         reason, reason == "success", 0, 0, 0, 0, 0, 0.0, 0.0, 0, 4.0, error=error, test_double=True, label=method)
+    return EpisodeRecord(
+        f"{uid}-{attempt}",
+        uid,
+        attempt,
+        "blocksworld",
+        "",
+        "",
+        "x",
+        0,
+        method,
+        "{}",
+        "offline/expert",
+        reason,
+        reason == "success",
+        0,
+        0,
+        0,
+        0,
+        0,
+        0.0,
+        0.0,
+        0,
+        4.0,
+        error=error,
+        test_double=True,
+        label=method,
+    )
 
 
 def _folder(tmp_path: Path, text: str = SMALL):
@@ -173,18 +202,22 @@ def test_retry_errors_selects_env_and_llm_errors_under_the_next_attempt(tmp_path
     out, plan, store = _folder(tmp_path)
     a, b, c, d, e, f, g, h, i = (u.unit_id for u in plan.units[:9])
     gave_up = "gave up after 3 failed attempts; last: agent: KeyError: 'x'"
-    PartWriter(out, "t").write_records("r", [
-        _ep(a, 1, "success"),
-        _ep(b, 1, "env_error", "ExplicitDataDirError: data folder '/nope' does not exist"),
-        _ep(c, 1, "llm_error", "bad_request: BadRequestError: temperature must be <= 2"),
-        _ep(d, 1, "llm_error", "server_error: APIConnectionError: Connection refused"),   # infrastructure
-        _ep(e, 1, "env_error", "FileNotFoundError: x"), _ep(e, 2, "success"),              # fixed already
-        _ep(f, 3, "env_error", gave_up),                                                   # an agent crash given up on
-        *[EventRecord(1.0, "driver", "attempt_failed", unit_id=f, detail=json.dumps({"attempt": n})) for n in (1, 2, 3)],
-        _ep(g, 1, "budget_exhausted", "run budget spent"),
-        _ep(h, 1, "step_cap"),                                                             # a real outcome
-        # i: never started
-    ])
+    PartWriter(out, "t").write_records(
+        "r",
+        [
+            _ep(a, 1, "success"),
+            _ep(b, 1, "env_error", "ExplicitDataDirError: data folder '/nope' does not exist"),
+            _ep(c, 1, "llm_error", "bad_request: BadRequestError: temperature must be <= 2"),
+            _ep(d, 1, "llm_error", "server_error: APIConnectionError: Connection refused"),  # infrastructure
+            _ep(e, 1, "env_error", "FileNotFoundError: x"),
+            _ep(e, 2, "success"),  # fixed already
+            _ep(f, 3, "env_error", gave_up),  # an agent crash given up on
+            *[EventRecord(1.0, "driver", "attempt_failed", unit_id=f, detail=json.dumps({"attempt": n})) for n in (1, 2, 3)],
+            _ep(g, 1, "budget_exhausted", "run budget spent"),
+            _ep(h, 1, "step_cap"),  # a real outcome
+            # i: never started
+        ],
+    )
     assert infra_failure("env_error", gave_up) is None
 
     plain = load_state(store)
@@ -200,7 +233,8 @@ def test_retry_errors_selects_env_and_llm_errors_under_the_next_attempt(tmp_path
     assert errors.failures == {}  # the give-up row spent f's failed attempts: a fresh count
     q = UnitQueue(plan.units, errors)
     assert sorted((p.unit.unit_id, p.attempt) for p in iter(q.take, None)) == sorted(
-        [(b, 2), (c, 2), (d, 2), (f, 4), (g, 2), (i, 1)])
+        [(b, 2), (c, 2), (d, 2), (f, 4), (g, 2), (i, 1)]
+    )
 
     with pytest.raises(ValueError):
         load_state(store, retry="everything")  # type: ignore[arg-type]
@@ -212,11 +246,20 @@ def test_retry_errors_selects_env_and_llm_errors_under_the_next_attempt(tmp_path
     assert (report.completed, report.errored, report.failed, report.budget_stopped) == (6, 3, 1, 1)
     assert main(["status", str(out)]) == 0
     text = capsys.readouterr().out
-    assert f"3 done units ended in env_error or llm_error; once the cause is fixed, run them again with: recap resume {out} --retry errors" in text
+    assert (
+        f"3 done units ended in env_error or llm_error; once the cause is fixed, run them again with: recap resume {out} --retry errors"
+        in text
+    )
 
     # the retry ran: b fixed, c failed again (done again, retried again on request), an infra failure after an error
-    PartWriter(out, "t2").write_records("r2", [_ep(b, 2, "success"), _ep(c, 2, "llm_error", "bad_request: still bad"),
-                                              _ep(f, 4, "llm_error", "timeout: no answer within 120s")])
+    PartWriter(out, "t2").write_records(
+        "r2",
+        [
+            _ep(b, 2, "success"),
+            _ep(c, 2, "llm_error", "bad_request: still bad"),
+            _ep(f, 4, "llm_error", "timeout: no answer within 120s"),
+        ],
+    )
     again = load_state(store, retry="errors")
     assert b in again.completed and c not in again.completed and f not in again.completed
     assert again.infra_failed == {d: "server_error", f: "timeout"}
@@ -225,72 +268,157 @@ def test_retry_errors_selects_env_and_llm_errors_under_the_next_attempt(tmp_path
 
 
 def test_status_shows_planned_and_done_per_arm(tmp_path, capsys):
-    out, plan, store = _folder(tmp_path, SMALL.replace("methods: [{{method: react}}]", "methods: [{{method: react}}, {{method: cot}}]"))
+    out, plan, store = _folder(
+        tmp_path, SMALL.replace("methods: [{{method: react}}]", "methods: [{{method: react}}, {{method: cot}}]")
+    )
     react = [u.unit_id for u in plan.units if u.method_label == "react"]
     cot = [u.unit_id for u in plan.units if u.method_label == "cot"]
     assert len(react) == len(cot) == 9
-    PartWriter(out, "t").write_records("r", [
-        _ep(react[0], 1, "success"), _ep(react[1], 1, "step_cap"), _ep(react[2], 1, "budget_exhausted", "run budget spent"),
-        _ep(cot[0], 1, "success", method="cot"), _ep(cot[1], 1, "llm_error", "auth: AuthenticationError: bad key", method="cot"),
-    ])
+    PartWriter(out, "t").write_records(
+        "r",
+        [
+            _ep(react[0], 1, "success"),
+            _ep(react[1], 1, "step_cap"),
+            _ep(react[2], 1, "budget_exhausted", "run budget spent"),
+            _ep(cot[0], 1, "success", method="cot"),
+            _ep(cot[1], 1, "llm_error", "auth: AuthenticationError: bad key", method="cot"),
+        ],
+    )
     groups = {g.method: g for g in collect(store).groups}
-    assert [(g.planned, g.done, g.success, g.budget_stopped, g.failed, g.not_started) for g in (groups["react"], groups["cot"])] == [
-        (9, 2, 1, 1, 0, 6), (9, 1, 1, 0, 1, 7)]
+    assert [
+        (g.planned, g.done, g.success, g.budget_stopped, g.failed, g.not_started) for g in (groups["react"], groups["cot"])
+    ] == [(9, 2, 1, 1, 0, 6), (9, 1, 1, 0, 1, 7)]
     assert main(["status", str(out)]) == 0
     lines = capsys.readouterr().out.splitlines()
     header = next(line for line in lines if "┃" in line and "planned" in line)
-    assert [w for w in ("arm", "model", "planned", "done", "success", "capped", "gave up", "not started") if w not in header] == []
+    assert [
+        w for w in ("arm", "model", "planned", "done", "success", "capped", "gave up", "not started") if w not in header
+    ] == []
     row = next(line for line in lines if line.strip("│ ").startswith("react"))
     cells = [c.strip() for c in row.strip().strip("│").split("│")]
     assert cells[:8] == ["react", "offline/expert (test double)", "9", "2", "1/2 (50%)", "1", "0", "6"]
     row = next(line for line in lines if line.strip("│ ").startswith("cot"))
-    assert [c.strip() for c in row.strip().strip("│").split("│")][:8] == ["cot", "offline/expert (test double)", "9", "1", "1/1 (100%)", "0", "1", "7"]
+    assert [c.strip() for c in row.strip().strip("│").split("│")][:8] == [
+        "cot",
+        "offline/expert (test double)",
+        "9",
+        "1",
+        "1/1 (100%)",
+        "0",
+        "1",
+        "7",
+    ]
 
 
 def test_report_coverage_table_reads_the_plan(tmp_path):
     from reports.build import build_report
     from reports.views import named_query, open_runs
 
-    out, plan, store = _folder(tmp_path, SMALL.replace("methods: [{{method: react}}]", "methods: [{{method: react}}, {{method: cot}}]"))
+    out, plan, store = _folder(
+        tmp_path, SMALL.replace("methods: [{{method: react}}]", "methods: [{{method: react}}, {{method: cot}}]")
+    )
     react = [u.unit_id for u in plan.units if u.method_label == "react"]
     cot = [u.unit_id for u in plan.units if u.method_label == "cot"]
     run_id = store.require_identity().run_id
-    PartWriter(out, "t").write_records(run_id, [
-        _ep(react[0], 1, "success"), _ep(react[1], 1, "env_error", "x"), _ep(react[2], 1, "budget_exhausted", "run budget spent"),
-        _ep(cot[0], 1, "llm_error", "auth: AuthenticationError: bad key", method="cot"),
-        _ep(cot[1], 1, "env_error", "gave up after 3 failed attempts (infrastructure: worker_lost); last: ActorDiedError: x", method="cot"),
-        _ep(cot[2], 1, "budget_exhausted", "run budget spent", method="cot"), _ep(cot[2], 2, "success", method="cot"),
-    ])
+    PartWriter(out, "t").write_records(
+        run_id,
+        [
+            _ep(react[0], 1, "success"),
+            _ep(react[1], 1, "env_error", "x"),
+            _ep(react[2], 1, "budget_exhausted", "run budget spent"),
+            _ep(cot[0], 1, "llm_error", "auth: AuthenticationError: bad key", method="cot"),
+            _ep(
+                cot[1],
+                1,
+                "env_error",
+                "gave up after 3 failed attempts (infrastructure: worker_lost); last: ActorDiedError: x",
+                method="cot",
+            ),
+            _ep(cot[2], 1, "budget_exhausted", "run budget spent", method="cot"),
+            _ep(cot[2], 2, "success", method="cot"),
+        ],
+    )
     report = build_report([out])
     table = next(t for s in report.sections for t in s.tables if t.name == "coverage")
-    got = [{k: r[k] for k in ("run_id", "model_label", "arm", "planned", "finished", "successes", "capped", "gave_up",
-                              "not_started", "planned_from")} for r in table.rows]
+    got = [
+        {
+            k: r[k]
+            for k in (
+                "run_id",
+                "model_label",
+                "arm",
+                "planned",
+                "finished",
+                "successes",
+                "capped",
+                "gave_up",
+                "not_started",
+                "planned_from",
+            )
+        }
+        for r in table.rows
+    ]
     assert got == [
-        {"run_id": run_id, "model_label": "offline/expert (test double)", "arm": "cot", "planned": 9, "finished": 1,
-         "successes": 1, "capped": 0, "gave_up": 2, "not_started": 6, "planned_from": "plan.json"},
-        {"run_id": run_id, "model_label": "offline/expert (test double)", "arm": "react", "planned": 9, "finished": 2,
-         "successes": 1, "capped": 1, "gave_up": 0, "not_started": 6, "planned_from": "plan.json"},
+        {
+            "run_id": run_id,
+            "model_label": "offline/expert (test double)",
+            "arm": "cot",
+            "planned": 9,
+            "finished": 1,
+            "successes": 1,
+            "capped": 0,
+            "gave_up": 2,
+            "not_started": 6,
+            "planned_from": "plan.json",
+        },
+        {
+            "run_id": run_id,
+            "model_label": "offline/expert (test double)",
+            "arm": "react",
+            "planned": 9,
+            "finished": 2,
+            "successes": 1,
+            "capped": 1,
+            "gave_up": 0,
+            "not_started": 6,
+            "planned_from": "plan.json",
+        },
     ]
     assert "No readable plan.json" not in table.note
     # without a plan (a plain `recap sql` session): planned falls back to the units with rows, and says so
     con = open_runs([out])
     rows = named_query(con, "coverage").dicts()
     assert [(r["arm"], r["planned"], r["not_started"], r["planned_from"]) for r in rows] == [
-        ("cot", 3, 0, "episode rows"), ("react", 3, 0, "episode rows")]
+        ("cot", 3, 0, "episode rows"),
+        ("react", 3, 0, "episode rows"),
+    ]
     # the SQL rule for infrastructure failures is the pipeline's
-    samples = [("llm_error", "server_error: x"), ("llm_error", "auth: y"), ("llm_error", "bad_request: NotFoundError: 404"),
-               ("llm_error", "bad_request: temperature"), ("llm_error", "context length exceeded"), ("llm_error", None),
-               ("env_error", "gave up after 3 failed attempts (infrastructure: client); last: client: boom"),
-               ("env_error", "gave up after 3 failed attempts; last: ActorDiedError: gone"),
-               ("env_error", "gave up after 3 failed attempts; last: client: ClientError"),
-               ("env_error", "gave up after 3 failed attempts; last: agent: KeyError"), ("env_error", "FileNotFoundError"),
-               ("success", None), ("budget_exhausted", "run budget spent"), ("llm_error", "rate_limit: slow down"),
-               # schema version 2 writes infrastructure failures as infra_error
-               ("infra_error", "auth: y"), ("infra_error", "bad_request: NotFoundError: 404"), ("infra_error", "odd"),
-               ("infra_error", "gave up after 1 failed attempts (infrastructure: worker_lost); last: ActorDiedError: x"),
-               ("infra_error", None)]
-    got = con.execute("SELECT infra_failure_kind(r, e) FROM (SELECT unnest($1) AS r, unnest($2) AS e)",
-                      [[s[0] for s in samples], [s[1] for s in samples]]).fetchall()
+    samples = [
+        ("llm_error", "server_error: x"),
+        ("llm_error", "auth: y"),
+        ("llm_error", "bad_request: NotFoundError: 404"),
+        ("llm_error", "bad_request: temperature"),
+        ("llm_error", "context length exceeded"),
+        ("llm_error", None),
+        ("env_error", "gave up after 3 failed attempts (infrastructure: client); last: client: boom"),
+        ("env_error", "gave up after 3 failed attempts; last: ActorDiedError: gone"),
+        ("env_error", "gave up after 3 failed attempts; last: client: ClientError"),
+        ("env_error", "gave up after 3 failed attempts; last: agent: KeyError"),
+        ("env_error", "FileNotFoundError"),
+        ("success", None),
+        ("budget_exhausted", "run budget spent"),
+        ("llm_error", "rate_limit: slow down"),
+        # schema version 2 writes infrastructure failures as infra_error
+        ("infra_error", "auth: y"),
+        ("infra_error", "bad_request: NotFoundError: 404"),
+        ("infra_error", "odd"),
+        ("infra_error", "gave up after 1 failed attempts (infrastructure: worker_lost); last: ActorDiedError: x"),
+        ("infra_error", None),
+    ]
+    got = con.execute(
+        "SELECT infra_failure_kind(r, e) FROM (SELECT unnest($1) AS r, unnest($2) AS e)",
+        [[s[0] for s in samples], [s[1] for s in samples]],
+    ).fetchall()
     assert [g[0] for g in got] == [infra_failure(r, e) for r, e in samples]
     con.close()
 
@@ -329,7 +457,7 @@ def test_a_capped_run_samples_every_arm(ray_address, tmp_path, capsys):
     started = {r[0] for r in rows}
     # what started is a prefix of the interleaved order: balanced over the 4 arms, spread over both sizes
     order = [u.unit_id for u in order_units(prepared.plan.units, spec)]
-    assert started == set(order[:len(started)])
+    assert started == set(order[: len(started)])
     per_arm = Counter((r[1], r[2]) for r in rows)
     assert len(per_arm) == 4 and max(per_arm.values()) - min(per_arm.values()) <= 1, per_arm
     # round 0 gives each arm the same first instance, round 1 one of the other size
@@ -356,13 +484,16 @@ environments:
 workers: 2
 """
     broken = f"run: {out.name}\noutput: {out}\n" + body.replace(
-        "    limit: 1\n", "    limit: 1\n    options: {data_dir: " + str(tmp_path / "no-such-data") + "}\n")
+        "    limit: 1\n", "    limit: 1\n    options: {data_dir: " + str(tmp_path / "no-such-data") + "}\n"
+    )
     spec = parse_spec(broken, "sweep.yaml")
     first = Driver(prepare(spec, broken, check_keys=False), make_backend(spec), progress="off").run()
     assert (first.finished_now, first.infra_failed, first.exit_code()) == (2, 0, 0)
     con, _ = open_tables(RunStore(out))
     assert sorted(con.execute("select instance_id, attempt, end_reason from episodes").fetchall()) == [
-        ("blocksworld/3@1", 1, "success"), ("robotouille/synchronous/0_cheese_sandwich@42", 1, "env_error")]
+        ("blocksworld/3@1", 1, "success"),
+        ("robotouille/synchronous/0_cheese_sandwich@42", 1, "env_error"),
+    ]
 
     # the data folder fixed (env options are not part of the unit hash); a plain resume re-runs nothing
     fixed = f"run: {out.name}\noutput: {out}\n" + body
@@ -374,9 +505,13 @@ workers: 2
     assert (retried.completed_before, retried.finished_now, retried.retried_errors, retried.exit_code()) == (1, 1, 1, 0)
     con, _ = open_tables(RunStore(out))
     assert sorted(con.execute("select instance_id, attempt, end_reason from episodes").fetchall()) == [
-        ("blocksworld/3@1", 1, "success"), ("robotouille/synchronous/0_cheese_sandwich@42", 1, "env_error"),
-        ("robotouille/synchronous/0_cheese_sandwich@42", 2, "success")]  # the earlier row kept for the record
-    detail = json.loads(con.execute("select detail from events where kind = 'run_resumed' order by ts desc limit 1").fetchone()[0])
+        ("blocksworld/3@1", 1, "success"),
+        ("robotouille/synchronous/0_cheese_sandwich@42", 1, "env_error"),
+        ("robotouille/synchronous/0_cheese_sandwich@42", 2, "success"),
+    ]  # the earlier row kept for the record
+    detail = json.loads(
+        con.execute("select detail from events where kind = 'run_resumed' order by ts desc limit 1").fetchone()[0]
+    )
     assert detail["retrying_errors"] == 1 and detail["order"] == "interleaved"
     assert load_state(RunStore(out), retry="errors").errored == {}
 
@@ -393,12 +528,15 @@ def test_a_unit_given_up_after_worker_deaths_exits_4_and_the_summary_says_so(ray
     from tests.pipeline.helpers import TinyBackend
 
     out = tmp_path / "deaths"
-    text = f"run: {out.name}\noutput: {out}\n" + """models: [{model: offline/tiny}]
+    text = (
+        f"run: {out.name}\noutput: {out}\n"
+        + """models: [{model: offline/tiny}]
 methods: [{method: react}]
 environments: [{benchmark: blocksworld, instances: [blocksworld/3@1, blocksworld/3@2]}]
 workers: 2
 max_attempts: 2
 """
+    )
     spec = parse_spec(text, "sweep.yaml")
     prepared = prepare(spec, text, check_keys=False)
     target = next(u.unit_id for u in prepared.plan.units if u.instance_id == "blocksworld/3@1")
@@ -424,7 +562,10 @@ max_attempts: 2
     assert main(["status", str(out)]) == 0
     status = capsys.readouterr().out
     assert "1 failed on infrastructure" in status
-    assert f"1 units ended in an infrastructure failure (worker_lost 1); fix the cause, then retry them with: recap resume {out}" in status
+    assert (
+        f"1 units ended in an infrastructure failure (worker_lost 1); fix the cause, then retry them with: recap resume {out}"
+        in status
+    )
 
 
 def test_a_give_up_whose_last_error_names_a_dead_actor_counts_as_infrastructure(tmp_path):
@@ -435,18 +576,24 @@ def test_a_give_up_whose_last_error_names_a_dead_actor_counts_as_infrastructure(
     from pipeline.worker_pool import Finished, Slot
 
     out = tmp_path / "one"
-    text = f"run: one\noutput: {out}\n" + """models: [{model: offline/tiny}]
+    text = (
+        f"run: one\noutput: {out}\n"
+        + """models: [{model: offline/tiny}]
 methods: [{method: react}]
 environments: [{benchmark: blocksworld, instances: [blocksworld/3@1]}]
 max_attempts: 1
 """
+    )
     spec = parse_spec(text, "sweep.yaml")
     d = Driver(prepare(spec, text, check_keys=False), None, progress="off")
     unit = d.p.plan.units[0]
     d.summary = RunSummary(location=str(out), run="one", run_id="x", total=1, completed_before=0)
     d.failures, d.queue = {}, UnitQueue([], RunState())
-    d._failed_attempt(Finished(Slot("w1", None), Pending(unit, 1), 0.0), "attempt_failed",
-                      "ActorDiedError: The actor died unexpectedly before finishing this task.")
+    d._failed_attempt(
+        Finished(Slot("w1", None), Pending(unit, 1), 0.0),
+        "attempt_failed",
+        "ActorDiedError: The actor died unexpectedly before finishing this task.",
+    )
     (rec,) = d.records_out
     assert rec.error.startswith("gave up after 1 failed attempts; last: ActorDiedError")
     assert infra_failure(rec.end_reason, rec.error) == "worker_lost"

@@ -93,8 +93,9 @@ def test_a_good_plan_passes_silently(count_opens, capsys):
 def test_a_demonstration_without_replies_for_the_style(monkeypatch):
     monkeypatch.setattr(blocksworld, "DEMONSTRATION", demo_without("cot", "blocksworld/demo-no-cot"))
     message = refusal(plan_of(methods("recap", "cot"), BLOCKS))
-    assert message == ("methods[1] (cot) cannot run on blocksworld/3: demonstration 'blocksworld/demo-no-cot' "
-                       "has no replies for style 'cot'")
+    assert message == (
+        "methods[1] (cot) cannot run on blocksworld/3: demonstration 'blocksworld/demo-no-cot' has no replies for style 'cot'"
+    )
 
 
 def test_a_demonstration_that_does_not_reach_its_goal(monkeypatch):
@@ -102,8 +103,10 @@ def test_a_demonstration_that_does_not_reach_its_goal(monkeypatch):
     replies = dict(d.replies, standard=[{"actions": ["pick up B"]}])  # stops far from the goal
     monkeypatch.setattr(blocksworld, "DEMONSTRATION", Demonstration("blocksworld/demo-short", d.make_env, replies))
     message = refusal(plan_of(methods("recap", "react", "standard"), BLOCKS))
-    assert message.startswith("methods[2] (standard) cannot run on blocksworld/3: demonstration 'blocksworld/demo-short' "
-                              "does not reach the goal with StandardAgent")
+    assert message.startswith(
+        "methods[2] (standard) cannot run on blocksworld/3: demonstration 'blocksworld/demo-short' "
+        "does not reach the goal with StandardAgent"
+    )
 
 
 def test_a_label_names_the_method(monkeypatch):
@@ -124,8 +127,9 @@ def test_a_data_variable_naming_an_empty_folder(no_data, monkeypatch):
     empty.mkdir()
     monkeypatch.setenv("ROBOTOUILLE_DATA", str(empty))
     message = refusal(plan_of(methods("recap", "react"), BLOCKS + "\n" + ROBOTOUILLE))
-    assert message.startswith(f"environments[1] (robotouille): cannot find its data: '{empty}' (from ROBOTOUILLE_DATA) "
-                              "is not a Robotouille data folder")
+    assert message.startswith(
+        f"environments[1] (robotouille): cannot find its data: '{empty}' (from ROBOTOUILLE_DATA) is not a Robotouille data folder"
+    )
     assert message.endswith("`recap data list` shows where it looks, `recap data fetch robotouille` gets it")
 
 
@@ -162,8 +166,11 @@ def test_all_alfworld_games_open_a_handful(count_opens, monkeypatch):
 # --------------------------------------------------------------------------------------------
 # through the CLI (pipeline.cli wires check_plan into run, resume and estimate)
 # --------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("argv", [["run", "{spec}", "--progress", "off"], ["run", "{spec}", "--dry-run"], ["estimate", "{spec}"]],
-                         ids=["run", "dry-run", "estimate"])
+@pytest.mark.parametrize(
+    "argv",
+    [["run", "{spec}", "--progress", "off"], ["run", "{spec}", "--dry-run"], ["estimate", "{spec}"]],
+    ids=["run", "dry-run", "estimate"],
+)
 def test_cli_refuses_a_unit_that_cannot_start(no_data, monkeypatch, capsys, argv):
     import pipeline.cli as cli
 

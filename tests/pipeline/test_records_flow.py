@@ -31,15 +31,24 @@ def call(eid: str, i: int) -> CallRecord:
 def test_forwarder_batches_and_skips_calls_when_the_gateway_writes_them():
     sent: list[dict] = []
     waited: list[int] = []
-    fwd = RecordForwarder("run1", send=lambda rows: sent.append(rows) or len(sent), wait=waited.append,
-                          skip_calls=True, batch_rows=3)
+    fwd = RecordForwarder(
+        "run1", send=lambda rows: sent.append(rows) or len(sent), wait=waited.append, skip_calls=True, batch_rows=3
+    )
     for i in range(4):
         fwd(msg("e-1", i))
         fwd(call("e-1", i))
     assert fwd.close() == 4
     assert [{t: len(r) for t, r in b.items()} for b in sent] == [{"messages": 3}, {"messages": 1}]
-    assert sent[0]["messages"][0] == {"run_id": "run1", "episode_id": "e-1", "seq": 0, "role": "user",
-                                      "kind": "observation", "content": "m0", "node_id": None, "pinned": False}
+    assert sent[0]["messages"][0] == {
+        "run_id": "run1",
+        "episode_id": "e-1",
+        "seq": 0,
+        "role": "user",
+        "kind": "observation",
+        "content": "m0",
+        "node_id": None,
+        "pinned": False,
+    }
     assert waited == [1, 2]  # the first batch was awaited before the second went out; close waits for the last
     keep = RecordForwarder("run1", send=lambda rows: sent.append(rows), wait=lambda r: None, skip_calls=False)
     keep(call("e-1", 0))
@@ -59,8 +68,30 @@ class _OrderWriter:
 def test_sink_flushes_by_size_and_writes_episode_rows_last(tmp_path):
     sink = Sink(str(tmp_path), "run1", flush_rows=5, flush_s=3600)
     sink.writer = _OrderWriter()
-    ep = EpisodeRecord("e-1", "e", 1, "blocksworld", "3_blocks", "t", "blocksworld/3@1", 0, "recap", "{}", "m",
-                       "success", True, 3, 3, 10, 0, 5, 0.0, 1.0, 12, 4.0)
+    ep = EpisodeRecord(
+        "e-1",
+        "e",
+        1,
+        "blocksworld",
+        "3_blocks",
+        "t",
+        "blocksworld/3@1",
+        0,
+        "recap",
+        "{}",
+        "m",
+        "success",
+        True,
+        3,
+        3,
+        10,
+        0,
+        5,
+        0.0,
+        1.0,
+        12,
+        4.0,
+    )
     sink.add_records([ep])
     sink.add({"messages": [record_to_row(msg("e-1", i), "run1") for i in range(2)]})
     assert sink.writer.tables == []  # 3 rows buffered, below the size threshold
@@ -87,8 +118,9 @@ def test_episode_client_adds_seed_and_expert_plan_for_offline_models():
             seen.append(request)
             return LLMResponse(text="{}", model="offline/expert", test_double=True)
 
-    req = LLMRequest(messages=(ChatMessage("user", "hi"),), episode_id="e-1", call_index=0, purpose="task",
-                     hints={"style": "recap"})
+    req = LLMRequest(
+        messages=(ChatMessage("user", "hi"),), episode_id="e-1", call_index=0, purpose="task", hints={"style": "recap"}
+    )
     client = EpisodeClient(Inner(), env, seed=5, offline=True)
     client.complete(req)
     assert seen[0].hints == {"style": "recap", "seed": 5, "expert_plan": env.expert_plan()}
@@ -110,12 +142,36 @@ environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
     w = PartWriter(tmp_path, "t")
 
     def ep(uid: str, attempt: int, reason: str) -> EpisodeRecord:
-        return EpisodeRecord(f"{uid}-{attempt}", uid, attempt, "blocksworld", "", "", "x", 0, "recap", "{}", "m",
-                             reason, reason == "success", 0, 0, 0, 0, 0, 0.0, 0.0, 0, 4.0)
+        return EpisodeRecord(
+            f"{uid}-{attempt}",
+            uid,
+            attempt,
+            "blocksworld",
+            "",
+            "",
+            "x",
+            0,
+            "recap",
+            "{}",
+            "m",
+            reason,
+            reason == "success",
+            0,
+            0,
+            0,
+            0,
+            0,
+            0.0,
+            0.0,
+            0,
+            4.0,
+        )
 
     w.write_records("r", [ep(a, 1, "success"), ep(b, 1, "budget_exhausted")])
     # unit c: a killed attempt 1 (messages only) and a lost worker on attempt 2
-    w.write_records("r", [msg(f"{c}-1", 0), EventRecord(1.0, "driver", "worker_lost", unit_id=c, detail=json.dumps({"attempt": 2}))])
+    w.write_records(
+        "r", [msg(f"{c}-1", 0), EventRecord(1.0, "driver", "worker_lost", unit_id=c, detail=json.dumps({"attempt": 2}))]
+    )
     state = load_state(RunStore(tmp_path))
     assert state.completed == {a}
     assert state.budget_stopped == {b}

@@ -37,8 +37,6 @@ max_attempts: 3
 INSTANCES = [f"blocksworld/{3 + i % 2}@{1 + i // 2}" for i in range(8)]
 
 
-
-
 def q(out: Path, sql: str):
     con, _ = open_tables(RunStore(out))
     return con.execute(sql).fetchall()
@@ -60,8 +58,10 @@ class _Recorder:
     def __init__(self) -> None:
         self.dispatched: list[tuple[str, int]] = []
         self.returned: list[tuple[str, int]] = []
-        self.hooks = Hooks(on_dispatch=lambda u, a, actor: self.dispatched.append((u.unit_id, a)),
-                           on_result=lambda u, a, o: None if o.crash is not None else self.returned.append((u.unit_id, a)))
+        self.hooks = Hooks(
+            on_dispatch=lambda u, a, actor: self.dispatched.append((u.unit_id, a)),
+            on_result=lambda u, a, o: None if o.crash is not None else self.returned.append((u.unit_id, a)),
+        )
 
 
 def _kill_sink_when(driver: Driver, out: Path, after_rows: int, seen: dict) -> threading.Thread:
@@ -102,8 +102,11 @@ def test_sink_killed_mid_run_comes_back_and_loses_or_repays_nothing(ray_address,
     assert sorted(rec.dispatched) == sorted(rec.returned) and all(a == 1 for _, a in rec.dispatched)
     assert q(out, "select count(*), count(distinct unit_id), max(attempt) from episodes") == [(8, 8, 1)]
     assert q(out, "select count(*) from events where kind in ('worker_lost', 'attempt_failed', 'sink_lost')") == [(0,)]
-    assert q(out, """select count(*) from episodes e where e.steps <> (select count(*) from steps s where s.episode_id = e.episode_id)
-                     or not exists (select 1 from messages m where m.episode_id = e.episode_id)""") == [(0,)]
+    assert q(
+        out,
+        """select count(*) from episodes e where e.steps <> (select count(*) from steps s where s.episode_id = e.episode_id)
+                     or not exists (select 1 from messages m where m.episode_id = e.episode_id)""",
+    ) == [(0,)]
     assert q(out, "select count(*) from (select episode_id, seq from messages group by 1, 2 having count(*) > 1)") == [(0,)]
     assert not (out / ".sink-wal").exists()
 
@@ -120,8 +123,9 @@ def test_sink_gone_for_good_stops_the_run_and_resume_reruns_only_what_was_never_
     monkeypatch.setattr(workers.sink, "SINK_MAX_RESTARTS", 0)  # no restart: the driver's own path
     out, text = _sweep(tmp_path, "sinkgone")
     rec = _Recorder()
-    driver = Driver(prepare(parse_spec(text), text, check_keys=False), TinyBackend(latency_s=0.1), progress="off",
-                    hooks=rec.hooks)
+    driver = Driver(
+        prepare(parse_spec(text), text, check_keys=False), TinyBackend(latency_s=0.1), progress="off", hooks=rec.hooks
+    )
     seen: dict = {}
     killer = _kill_sink_when(driver, out, 2, seen)
     with pytest.raises(PipelineError) as err:
@@ -136,8 +140,11 @@ def test_sink_gone_for_good_stops_the_run_and_resume_reruns_only_what_was_never_
     assert {u for u, _ in rec.returned} <= written
     assert q(out, "select count(*), count(distinct episode_id) from episodes")[0][0] == len(written)
     assert q(out, "select count(*) from events where kind = 'sink_lost'") == [(1,)]
-    assert q(out, """select count(*) from episodes e where not exists
-                     (select 1 from messages m where m.episode_id = e.episode_id)""") == [(0,)]
+    assert q(
+        out,
+        """select count(*) from episodes e where not exists
+                     (select 1 from messages m where m.episode_id = e.episode_id)""",
+    ) == [(0,)]
 
     monkeypatch.setattr(workers.sink, "SINK_MAX_RESTARTS", 20)
     rec2 = _Recorder()
@@ -190,7 +197,10 @@ def test_infrastructure_failures_exit_4_and_a_corrected_rerun_retries_them(ray_a
     spec_file.write_text(INFRA.format(out=out, url="http://127.0.0.1:9/v1"))  # a typo: nothing listens there
     assert main(["run", str(spec_file), "--progress", "off"]) == EXIT_INFRA
     said = capsys.readouterr().out
-    assert f"3 units ended in an infrastructure failure (server_error 3); fix the cause, then retry them with: recap resume {out}" in said
+    assert (
+        f"3 units ended in an infrastructure failure (server_error 3); fix the cause, then retry them with: recap resume {out}"
+        in said
+    )
     assert q(out, "select count(*), min(end_reason), max(attempt) from episodes") == [(3, "infra_error", 1)]
     assert main(["status", str(out)]) == 0
     assert "units 0/3 done" in capsys.readouterr().out

@@ -17,8 +17,30 @@ def msg(eid: str, seq: int) -> MessageRecord:
 
 
 def ep(eid: str) -> EpisodeRecord:
-    return EpisodeRecord(eid, eid.rsplit("-", 1)[0], 1, "blocksworld", "3", "t", "blocksworld/3@1", 0, "react", "{}",
-                         "m", "success", True, 1, 1, 10, 0, 2, 0.0, 1.0, 12, 4.0)
+    return EpisodeRecord(
+        eid,
+        eid.rsplit("-", 1)[0],
+        1,
+        "blocksworld",
+        "3",
+        "t",
+        "blocksworld/3@1",
+        0,
+        "react",
+        "{}",
+        "m",
+        "success",
+        True,
+        1,
+        1,
+        10,
+        0,
+        2,
+        0.0,
+        1.0,
+        12,
+        4.0,
+    )
 
 
 def rows_of(out, table: str, column: str) -> list:

@@ -42,7 +42,9 @@ def _snapshot(d: Path) -> dict[str, tuple[int, int]]:
     return {str(p.relative_to(d)): (p.stat().st_size, p.stat().st_mtime_ns) for p in d.rglob("*")}
 
 
-def run_cli(tmp_path: Path, capsys, spec_text: str | bytes | None, *extra: str, spec_path: str | None = None) -> tuple[int, list[str], Path]:
+def run_cli(
+    tmp_path: Path, capsys, spec_text: str | bytes | None, *extra: str, spec_path: str | None = None
+) -> tuple[int, list[str], Path]:
     out = tmp_path / "out"
     spec = tmp_path / "sweep.yaml"
     if spec_text is not None:
@@ -56,8 +58,9 @@ def run_cli(tmp_path: Path, capsys, spec_text: str | bytes | None, *extra: str, 
     return code, captured.err.strip().splitlines(), out
 
 
-def assert_refused(tmp_path: Path, capsys, spec_text: str | bytes | None, expect: str, *extra: str,
-                   spec_path: str | None = None) -> str:
+def assert_refused(
+    tmp_path: Path, capsys, spec_text: str | bytes | None, expect: str, *extra: str, spec_path: str | None = None
+) -> str:
     before = _snapshot(tmp_path)
     before.pop("sweep.yaml", None)
     code, err, out = run_cli(tmp_path, capsys, spec_text, *extra, spec_path=spec_path)
@@ -91,7 +94,11 @@ def top(extra: str) -> str:
 # --------------------------------------------------------------------------------------------
 BOUNDED = [
     ("seed beyond int64", edit("seeds: [0]", "seeds: [0, 9223372036854775808]"), "seeds[1]: integer out of range"),
-    ("seed beyond the documented range", edit("seeds: [0]", "seeds: [2147483648]"), "seeds[0]: Input should be less than or equal to 2147483647"),
+    (
+        "seed beyond the documented range",
+        edit("seeds: [0]", "seeds: [2147483648]"),
+        "seeds[0]: Input should be less than or equal to 2147483647",
+    ),
     ("negative seed", edit("seeds: [0]", "seeds: [-1]"), "seeds[0]: Input should be greater than or equal to 0"),
     ("boolean seed", edit("seeds: [0]", "seeds: [true]"), "seeds[0]: must be a number, not true/false"),
     ("boolean workers", top("workers: true"), "workers: must be a number, not true/false"),
@@ -106,29 +113,67 @@ BOUNDED = [
     ("infinite window", model_with("window_s: .inf"), "models[0].window_s: must be a finite number"),
     ("nan temperature", model_with("params: {temperature: .nan}"), "models[0].params.temperature: must be a finite number"),
     ("infinite temperature", model_with("params: {temperature: -.inf}"), "models[0].params.temperature: must be a finite number"),
-    ("params seed beyond int64", model_with("params: {seed: 18446744073709551616}"), "models[0].params.seed: integer out of range"),
-    ("nan test-double option", model_with("options: {invalid_action_rate: .nan}"), "models[0].options.invalid_action_rate: must be a finite number"),
-    ("nan method setting", edit("  - method: recap\n", "  - method: recap\n    settings: {window: .nan}\n"),
-     "methods[0].settings.window: must be a finite number"),
+    (
+        "params seed beyond int64",
+        model_with("params: {seed: 18446744073709551616}"),
+        "models[0].params.seed: integer out of range",
+    ),
+    (
+        "nan test-double option",
+        model_with("options: {invalid_action_rate: .nan}"),
+        "models[0].options.invalid_action_rate: must be a finite number",
+    ),
+    (
+        "nan method setting",
+        edit("  - method: recap\n", "  - method: recap\n    settings: {window: .nan}\n"),
+        "methods[0].settings.window: must be a finite number",
+    ),
     ("infinite cap", model_with("cap_usd: .inf"), "models[0].cap_usd: must be a finite number"),
     ("absurd cap", model_with("cap_usd: 1.0e12"), "models[0].cap_usd: Input should be less than or equal to 1000000"),
     ("boolean cap", model_with("cap_usd: true"), "models[0].cap_usd: must be a number"),
     ("nan price", model_with("prices: {input: .nan, output: 1}"), "models[0].prices.input: must be a finite number"),
-    ("overflowing price", model_with("prices: {input: 1, output: 1e400}"), "models[0].prices.output: Input should be a finite number"),
-    ("absurd price", model_with("prices: {input: 1, output: 1000000}"), "models[0].prices.output: Input should be less than or equal to 10000"),
+    (
+        "overflowing price",
+        model_with("prices: {input: 1, output: 1e400}"),
+        "models[0].prices.output: Input should be a finite number",
+    ),
+    (
+        "absurd price",
+        model_with("prices: {input: 1, output: 1000000}"),
+        "models[0].prices.output: Input should be less than or equal to 10000",
+    ),
     ("infinite run cap", top("run_cap_usd: .inf"), "run_cap_usd: must be a finite number"),
     ("nan step multiplier", top("step_multiplier: .nan"), "step_multiplier: must be a finite number"),
     ("absurd step multiplier", top("step_multiplier: 1.0e9"), "step_multiplier: Input should be less than or equal to 1000"),
-    ("per-episode token limit beyond int64", top("limits: {tokens: 100000000000000000000}"), "limits.tokens: integer out of range"),
-    ("absurd per-episode call limit", top("limits: {llm_calls: 10000000000}"), "limits.llm_calls: Input should be less than or equal to"),
+    (
+        "per-episode token limit beyond int64",
+        top("limits: {tokens: 100000000000000000000}"),
+        "limits.tokens: integer out of range",
+    ),
+    (
+        "absurd per-episode call limit",
+        top("limits: {llm_calls: 10000000000}"),
+        "limits.llm_calls: Input should be less than or equal to",
+    ),
     ("boolean call limit", top("limits: {llm_calls: true}"), "limits.llm_calls: must be a number"),
     ("nan per-episode dollar limit", top("limits: {usd: .nan}"), "limits.usd: must be a finite number"),
-    ("absurd environment limit", edit(ENV, ENV + "    limit: 10000000000\n"), "environments[0].limit: Input should be less than or equal to 100000"),
+    (
+        "absurd environment limit",
+        edit(ENV, ENV + "    limit: 10000000000\n"),
+        "environments[0].limit: Input should be less than or equal to 100000",
+    ),
     ("nan worker cpus", top("ray: {worker_cpus: .nan}"), "ray.worker_cpus: must be a finite number"),
-    ("absurd object store", top("ray: {object_store_mb: 100000000000}"), "ray.object_store_mb: Input should be less than or equal to"),
+    (
+        "absurd object store",
+        top("ray: {object_store_mb: 100000000000}"),
+        "ray.object_store_mb: Input should be less than or equal to",
+    ),
     ("boolean num_cpus", top("ray: {num_cpus: true}"), "ray.num_cpus: must be a number"),
-    ("nan inside an environment option", edit(ENV, ENV + "    options: {step_multiplier: .nan}\n"),
-     "environments[0].options.step_multiplier: must be a finite number"),
+    (
+        "nan inside an environment option",
+        edit(ENV, ENV + "    options: {step_multiplier: .nan}\n"),
+        "environments[0].options.step_multiplier: must be a finite number",
+    ),
 ]
 
 
@@ -138,21 +183,29 @@ def test_unbounded_values_are_refused(tmp_path, capsys, text, expect):
 
 
 def test_the_documented_upper_bounds_are_accepted(tmp_path):
-    text = (model_with("rpm: 10000000\ntpm: 100000000000\nconcurrency: 10000\nretries: 100\ntimeout_s: 86400\n"
-                       "cap_usd: 1000000\nprices: {input: 10000, output: 10000}")
-            + "workers: 1024\nmax_attempts: 100\nstep_multiplier: 1000\nrun_cap_usd: 1000000\n"
-            + "limits: {llm_calls: 1000000, tokens: 10000000000, usd: 1000000}\n")
+    text = (
+        model_with(
+            "rpm: 10000000\ntpm: 100000000000\nconcurrency: 10000\nretries: 100\ntimeout_s: 86400\n"
+            "cap_usd: 1000000\nprices: {input: 10000, output: 10000}"
+        )
+        + "workers: 1024\nmax_attempts: 100\nstep_multiplier: 1000\nrun_cap_usd: 1000000\n"
+        + "limits: {llm_calls: 1000000, tokens: 10000000000, usd: 1000000}\n"
+    )
     spec = parse_spec(edit("seeds: [0]", "seeds: [0, 2147483647]", text).replace("{out}", str(tmp_path / "o")), "sweep.yaml")
     assert spec.seeds == [0, 2147483647] and spec.models[0].tpm == 10**11
 
 
-@pytest.mark.parametrize("flags, expect", [
-    (("--run-cap", "nan"), "command line: run_cap_usd: Input should be a finite number"),
-    (("--run-cap", "inf"), "command line: run_cap_usd: Input should be a finite number"),
-    (("--run-cap", "1e300"), "command line: run_cap_usd: Input should be less than or equal to 1000000"),
-    (("--workers", "99999999999999999999"), "command line: workers: Input should be less than or equal to 1024"),
-    (("--address", "not-an-address"), "command line: ray.address: must be auto, host:port or ray://host:port"),
-], ids=["run-cap nan", "run-cap inf", "run-cap huge", "workers huge", "address"])
+@pytest.mark.parametrize(
+    "flags, expect",
+    [
+        (("--run-cap", "nan"), "command line: run_cap_usd: Input should be a finite number"),
+        (("--run-cap", "inf"), "command line: run_cap_usd: Input should be a finite number"),
+        (("--run-cap", "1e300"), "command line: run_cap_usd: Input should be less than or equal to 1000000"),
+        (("--workers", "99999999999999999999"), "command line: workers: Input should be less than or equal to 1024"),
+        (("--address", "not-an-address"), "command line: ray.address: must be auto, host:port or ray://host:port"),
+    ],
+    ids=["run-cap nan", "run-cap inf", "run-cap huge", "workers huge", "address"],
+)
 def test_flags_are_bounded_like_the_file(tmp_path, capsys, flags, expect):
     assert_refused(tmp_path, capsys, GOOD, expect, *flags)
 
@@ -165,7 +218,10 @@ def test_a_run_folder_is_not_changed_by_a_refused_resume(tmp_path, capsys):
     store = RunStore(out)
     store.create_identity("hardening")
     store.write_text(PLAN_FILE, expand(parse_spec(text)).to_json() + "\n")
-    for bad in (model_with("cap_usd: 1\ncap_usd: 9").replace("{out}", str(out)), top("step_multiplier: .nan").replace("{out}", str(out))):
+    for bad in (
+        model_with("cap_usd: 1\ncap_usd: 9").replace("{out}", str(out)),
+        top("step_multiplier: .nan").replace("{out}", str(out)),
+    ):
         store.write_text(SPEC_FILE, bad)
         before = _snapshot(out)
         capsys.readouterr()
@@ -195,11 +251,18 @@ def test_output_is_expanded_and_made_absolute_once(tmp_path, monkeypatch):
 def test_data_dir_options_and_a_replay_folder_are_resolved(tmp_path, monkeypatch):
     monkeypatch.setenv("HOME", str(tmp_path))
     monkeypatch.chdir(tmp_path)
-    text = edit(ENV, ENV + "    options: {data_dir: ~/data, data_dir_2_1_2: rel/212, cache_dir: ./c, engine: ours, version: 2.1.1}\n")
+    text = edit(
+        ENV, ENV + "    options: {data_dir: ~/data, data_dir_2_1_2: rel/212, cache_dir: ./c, engine: ours, version: 2.1.1}\n"
+    )
     text = edit(MODEL, "  - model: offline/replay\n    api_base: ~/runs/old\n" + MODEL, text)
     spec = parse_spec(text.replace("{out}", "o"))
-    assert spec.environments[0].options == {"data_dir": str(tmp_path / "data"), "data_dir_2_1_2": str(tmp_path / "rel" / "212"),
-                                            "cache_dir": str(tmp_path / "c"), "engine": "ours", "version": "2.1.1"}
+    assert spec.environments[0].options == {
+        "data_dir": str(tmp_path / "data"),
+        "data_dir_2_1_2": str(tmp_path / "rel" / "212"),
+        "cache_dir": str(tmp_path / "c"),
+        "engine": "ours",
+        "version": "2.1.1",
+    }
     assert spec.models[0].api_base == str(tmp_path / "runs" / "old")
 
 
@@ -212,11 +275,14 @@ def test_a_tilde_output_is_one_folder_for_the_whole_run(tmp_path, capsys, monkey
     assert not Path("~").exists()
 
 
-@pytest.mark.parametrize("output, expect", [
-    ("ftp://host/runs/x", "output: unknown URI scheme 'ftp'"),
-    ("s3://", "output: 's3://' names no bucket or container"),
-    ("file://relative/path", "output: a file:// URI needs an absolute path"),
-])
+@pytest.mark.parametrize(
+    "output, expect",
+    [
+        ("ftp://host/runs/x", "output: unknown URI scheme 'ftp'"),
+        ("s3://", "output: 's3://' names no bucket or container"),
+        ("file://relative/path", "output: a file:// URI needs an absolute path"),
+    ],
+)
 def test_malformed_output_uris_are_refused(tmp_path, capsys, output, expect):
     assert_refused(tmp_path, capsys, GOOD.replace("{out}", output), expect)
 
@@ -224,8 +290,12 @@ def test_malformed_output_uris_are_refused(tmp_path, capsys, output, expect):
 def test_an_unreachable_object_store_endpoint_fails_fast(tmp_path, capsys):
     """A closed port stands for 'no network': refused in one line, in well under a second."""
     t0 = time.monotonic()
-    line = assert_refused(tmp_path, capsys, GOOD.replace("{out}", "s3://bucket/runs/x?endpoint_override=127.0.0.1:1&scheme=http"),
-                          "sweep.yaml: output s3://bucket/runs/x?endpoint_override=127.0.0.1:1&scheme=http cannot be used: cannot connect to 127.0.0.1:1")
+    line = assert_refused(
+        tmp_path,
+        capsys,
+        GOOD.replace("{out}", "s3://bucket/runs/x?endpoint_override=127.0.0.1:1&scheme=http"),
+        "sweep.yaml: output s3://bucket/runs/x?endpoint_override=127.0.0.1:1&scheme=http cannot be used: cannot connect to 127.0.0.1:1",
+    )
     assert time.monotonic() - t0 < 10, line
 
 
@@ -267,22 +337,45 @@ models:
     options: &a0 {seed: 1}
 methods: [{method: recap}]
 environments: [{benchmark: blocksworld, tasks: ["3"]}]
-""" + "".join(f"x{i}: &a{i} [*a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}]\n" for i in range(1, 12))
+""" + "".join(
+    f"x{i}: &a{i} [*a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}, *a{i - 1}]\n"
+    for i in range(1, 12)
+)
 
 
-@pytest.mark.parametrize("text, expect", [
-    (BOMB, "sweep.yaml: YAML anchors are not allowed (&a0 at line 5)"),
-    (edit(ENV, ENV + "    options: {data_dir: *nowhere}\n"), "sweep.yaml: YAML aliases are not allowed (*nowhere at line 10)"),
-    (model_with("options: {seed: 1}") + "other: {<<: {seed: 2}}\n", "YAML merge keys (<<) are not allowed (line 12)"),
-    (model_with("label: " + "L" * 50_000), "sweep.yaml: a value of 50000 characters at line 5; at most 4096"),
-    (model_with("label: " + "L" * 300), "sweep.yaml: models[0].label: String should have at most 200 characters"),
-    (edit("run: hardening", "run: " + "r" * 201), "sweep.yaml: run: String should have at most 200 characters"),
-    (edit("- model: offline/expert", "- model: offline/" + "m" * 2100), "sweep.yaml: models[0].model: String should have at most 2000 characters"),
-    (model_with("api_key_env: " + "K" * 300), "sweep.yaml: models[0].api_key_env: String should have at most 200 characters"),
-    (top("deep: " + "[" * 40 + "]" * 40), "sweep.yaml: nested deeper than 16 levels at line 11"),
-    (top("big: " + "9" * 4000), "sweep.yaml: big: integer out of range"),
-], ids=["alias bomb", "alias", "merge key", "huge scalar", "long label", "long run name", "long model", "long key variable",
-        "deep nesting", "huge integer"])
+@pytest.mark.parametrize(
+    "text, expect",
+    [
+        (BOMB, "sweep.yaml: YAML anchors are not allowed (&a0 at line 5)"),
+        (
+            edit(ENV, ENV + "    options: {data_dir: *nowhere}\n"),
+            "sweep.yaml: YAML aliases are not allowed (*nowhere at line 10)",
+        ),
+        (model_with("options: {seed: 1}") + "other: {<<: {seed: 2}}\n", "YAML merge keys (<<) are not allowed (line 12)"),
+        (model_with("label: " + "L" * 50_000), "sweep.yaml: a value of 50000 characters at line 5; at most 4096"),
+        (model_with("label: " + "L" * 300), "sweep.yaml: models[0].label: String should have at most 200 characters"),
+        (edit("run: hardening", "run: " + "r" * 201), "sweep.yaml: run: String should have at most 200 characters"),
+        (
+            edit("- model: offline/expert", "- model: offline/" + "m" * 2100),
+            "sweep.yaml: models[0].model: String should have at most 2000 characters",
+        ),
+        (model_with("api_key_env: " + "K" * 300), "sweep.yaml: models[0].api_key_env: String should have at most 200 characters"),
+        (top("deep: " + "[" * 40 + "]" * 40), "sweep.yaml: nested deeper than 16 levels at line 11"),
+        (top("big: " + "9" * 4000), "sweep.yaml: big: integer out of range"),
+    ],
+    ids=[
+        "alias bomb",
+        "alias",
+        "merge key",
+        "huge scalar",
+        "long label",
+        "long run name",
+        "long model",
+        "long key variable",
+        "deep nesting",
+        "huge integer",
+    ],
+)
 def test_yaml_bombs_and_huge_values_are_refused(tmp_path, capsys, text, expect):
     assert_refused(tmp_path, capsys, text, expect)
 
@@ -303,10 +396,18 @@ def test_a_fifo_as_the_sweep_file_is_refused_without_blocking(tmp_path):
     fifo = tmp_path / "sweep.yaml"
     os.mkfifo(fifo)
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    r = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(fifo)], capture_output=True, text=True,
-                       env=env, timeout=60, stdin=subprocess.DEVNULL)
+    r = subprocess.run(
+        [sys.executable, "-m", "pipeline.cli", "run", str(fifo)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
     assert r.returncode == 2
-    assert r.stderr.strip().splitlines() == [f"recap: error: sweep file '{fifo}' cannot be read: not a regular file (a device, FIFO or socket)"]
+    assert r.stderr.strip().splitlines() == [
+        f"recap: error: sweep file '{fifo}' cannot be read: not a regular file (a device, FIFO or socket)"
+    ]
 
 
 def test_a_folder_and_a_binary_file_as_the_sweep_file(tmp_path, capsys):
@@ -325,14 +426,27 @@ def test_a_sweep_that_expands_to_too_many_units_is_refused(tmp_path, capsys):
 # --------------------------------------------------------------------------------------------
 # 4. duplicate keys at any depth
 # --------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("text, expect", [
-    (model_with("cap_usd: 1\ncap_usd: 100"), "recap: error: sweep.yaml: duplicate key 'cap_usd' at line 6 (first at line 5)"),
-    (top("workers: 2\nworkers: 8"), "recap: error: sweep.yaml: duplicate key 'workers' at line 12 (first at line 11)"),
-    (model_with("params: {temperature: 0.1, temperature: 1.5}"), "recap: error: sweep.yaml: duplicate key 'temperature' at line 5"),
-    (model_with("prices:\n  input: 1\n  output: 2\n  input: 0.01"), "recap: error: sweep.yaml: duplicate key 'input' at line 8 (first at line 6)"),
-    (top("methods:\n  - method: react"), "recap: error: sweep.yaml: duplicate key 'methods' at line 11 (first at line 5)"),
-    (edit(ENV, ENV + "    options: {data_dir: /a}\n    options: {data_dir: /b}\n"), "duplicate key 'options' at line 11 (first at line 10)"),
-], ids=["model cap", "top level", "flow mapping", "nested price", "a whole list", "env options"])
+@pytest.mark.parametrize(
+    "text, expect",
+    [
+        (model_with("cap_usd: 1\ncap_usd: 100"), "recap: error: sweep.yaml: duplicate key 'cap_usd' at line 6 (first at line 5)"),
+        (top("workers: 2\nworkers: 8"), "recap: error: sweep.yaml: duplicate key 'workers' at line 12 (first at line 11)"),
+        (
+            model_with("params: {temperature: 0.1, temperature: 1.5}"),
+            "recap: error: sweep.yaml: duplicate key 'temperature' at line 5",
+        ),
+        (
+            model_with("prices:\n  input: 1\n  output: 2\n  input: 0.01"),
+            "recap: error: sweep.yaml: duplicate key 'input' at line 8 (first at line 6)",
+        ),
+        (top("methods:\n  - method: react"), "recap: error: sweep.yaml: duplicate key 'methods' at line 11 (first at line 5)"),
+        (
+            edit(ENV, ENV + "    options: {data_dir: /a}\n    options: {data_dir: /b}\n"),
+            "duplicate key 'options' at line 11 (first at line 10)",
+        ),
+    ],
+    ids=["model cap", "top level", "flow mapping", "nested price", "a whole list", "env options"],
+)
 def test_duplicate_keys_are_refused(tmp_path, capsys, text, expect):
     line = assert_refused(tmp_path, capsys, text, expect)
     assert line.startswith(expect) or expect in line
@@ -341,8 +455,18 @@ def test_duplicate_keys_are_refused(tmp_path, capsys, text, expect):
 # --------------------------------------------------------------------------------------------
 # 5. labels and names: a safe character set; user strings printed without markup
 # --------------------------------------------------------------------------------------------
-LABELS = ["[bold]x[/]", "[link=https://example.com]click[/link]", "model [/]", "two\nlines", "esc\x1b[31mred",
-          "bell\x07", "rtl\u202eoverride", "tab\there", " padded", "back\\slash"]
+LABELS = [
+    "[bold]x[/]",
+    "[link=https://example.com]click[/link]",
+    "model [/]",
+    "two\nlines",
+    "esc\x1b[31mred",
+    "bell\x07",
+    "rtl\u202eoverride",
+    "tab\there",
+    " padded",
+    "back\\slash",
+]
 
 
 @pytest.mark.parametrize("label", LABELS, ids=[repr(x) for x in LABELS])
@@ -352,14 +476,21 @@ def test_unsafe_labels_are_refused(tmp_path, capsys, label):
     quoted = json.dumps(label)  # a YAML double-quoted scalar
     line = assert_refused(tmp_path, capsys, model_with(f"label: {quoted}"), "sweep.yaml: models[0].label: ")
     assert "\x1b" not in line and "\u202e" not in line
-    line = assert_refused(tmp_path, capsys, edit("  - method: recap\n", f"  - method: recap\n    label: {quoted}\n"), "sweep.yaml: methods[0].label: ")
+    line = assert_refused(
+        tmp_path,
+        capsys,
+        edit("  - method: recap\n", f"  - method: recap\n    label: {quoted}\n"),
+        "sweep.yaml: methods[0].label: ",
+    )
 
 
 @pytest.mark.parametrize("run", ["[bold]r", "r\x1b", "r n", "r/../x"])
 def test_unsafe_run_names_are_refused(tmp_path, capsys, run):
     import json
 
-    assert_refused(tmp_path, capsys, edit("run: hardening", f"run: {json.dumps(run)}"), "sweep.yaml: run: must be letters, digits")
+    assert_refused(
+        tmp_path, capsys, edit("run: hardening", f"run: {json.dumps(run)}"), "sweep.yaml: run: must be letters, digits"
+    )
 
 
 def test_ordinary_labels_are_accepted(tmp_path):
@@ -371,11 +502,18 @@ def test_ordinary_labels_are_accepted(tmp_path):
 def test_unsafe_model_strings_are_refused(tmp_path, capsys, model):
     import json
 
-    assert_refused(tmp_path, capsys, edit("- model: offline/expert", f"- model: {json.dumps(model)}"), "sweep.yaml: models[0].model: must be a litellm model string")
+    assert_refused(
+        tmp_path,
+        capsys,
+        edit("- model: offline/expert", f"- model: {json.dumps(model)}"),
+        "sweep.yaml: models[0].model: must be a litellm model string",
+    )
 
 
 def test_control_characters_in_other_strings_are_refused_and_escaped(tmp_path, capsys):
-    line = assert_refused(tmp_path, capsys, edit(ENV, '    tasks: ["3\\e[2J"]\n'), "environments[0].tasks[0]: must not contain control characters")
+    line = assert_refused(
+        tmp_path, capsys, edit(ENV, '    tasks: ["3\\e[2J"]\n'), "environments[0].tasks[0]: must not contain control characters"
+    )
     assert "\x1b" not in line and "\\x1b" in line
 
 
@@ -395,8 +533,11 @@ def test_markup_in_user_strings_is_printed_as_is(tmp_path, capsys):
 # 6. one instance, one spelling
 # --------------------------------------------------------------------------------------------
 def test_two_spellings_of_a_blocksworld_instance_are_one_unit(tmp_path):
-    text = edit(ENV, '    tasks: ["3"]\n    instances: [blocksworld/3@01, blocksworld/03@1, blocksworld/3@0002]\n'
-                + "  - benchmark: blocksworld\n    instances: [blocksworld/4@7, blocksworld/004@007]\n")
+    text = edit(
+        ENV,
+        '    tasks: ["3"]\n    instances: [blocksworld/3@01, blocksworld/03@1, blocksworld/3@0002]\n'
+        + "  - benchmark: blocksworld\n    instances: [blocksworld/4@7, blocksworld/004@007]\n",
+    )
     plan = expand(parse_spec(text.replace("{out}", str(tmp_path))))
     assert [u.instance_id for u in plan.units] == ["blocksworld/3@1", "blocksworld/3@2", "blocksworld/3@3", "blocksworld/4@7"]
 
@@ -418,8 +559,11 @@ def test_two_spellings_of_a_robotouille_instance_are_one_unit(tmp_path):
     from workers.envs.robotouille.data import resolve_data_dir
 
     resolve_data_dir(None)  # the test environment has the data (../shared/data or ROBOTOUILLE_DATA)
-    text = edit("  - benchmark: blocksworld\n" + ENV, "  - benchmark: robotouille\n    instances: [robotouille/asynchronous/5_potato_soup@42, "
-                "robotouille/asynchronous/5_potato_soup@042]\n  - benchmark: robotouille\n    tasks: [asynchronous/5_potato_soup@0042]\n")
+    text = edit(
+        "  - benchmark: blocksworld\n" + ENV,
+        "  - benchmark: robotouille\n    instances: [robotouille/asynchronous/5_potato_soup@42, "
+        "robotouille/asynchronous/5_potato_soup@042]\n  - benchmark: robotouille\n    tasks: [asynchronous/5_potato_soup@0042]\n",
+    )
     plan = expand(parse_spec(text.replace("{out}", str(tmp_path))))
     assert [u.instance_id for u in plan.units] == ["robotouille/asynchronous/5_potato_soup@42"]
 
@@ -427,16 +571,36 @@ def test_two_spellings_of_a_robotouille_instance_are_one_unit(tmp_path):
 # --------------------------------------------------------------------------------------------
 # 7. ray.address
 # --------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("address", ["nohost", "host:0", "host:65536", "ray://", "http://10.0.0.5:6379", "10.0.0.5:port",
-                                     "[zz::1]:6379", "host name:6379", "10.0.0.5:6379/x", "-bad-:1"])
+@pytest.mark.parametrize(
+    "address",
+    [
+        "nohost",
+        "host:0",
+        "host:65536",
+        "ray://",
+        "http://10.0.0.5:6379",
+        "10.0.0.5:port",
+        "[zz::1]:6379",
+        "host name:6379",
+        "10.0.0.5:6379/x",
+        "-bad-:1",
+    ],
+)
 def test_malformed_ray_addresses_are_refused(tmp_path, capsys, address):
     import json
 
-    assert_refused(tmp_path, capsys, top(f"ray: {{address: {json.dumps(address)}}}"), "sweep.yaml: ray.address: must be auto, host:port or ray://host:port")
+    assert_refused(
+        tmp_path,
+        capsys,
+        top(f"ray: {{address: {json.dumps(address)}}}"),
+        "sweep.yaml: ray.address: must be auto, host:port or ray://host:port",
+    )
 
 
-@pytest.mark.parametrize("address", ["auto", "local", "127.0.0.1:6379", "ray://10.0.0.5:10001", "[::1]:6379", "head-node.internal:6379",
-                                     "ray://[fe80::1]:10001"])
+@pytest.mark.parametrize(
+    "address",
+    ["auto", "local", "127.0.0.1:6379", "ray://10.0.0.5:10001", "[::1]:6379", "head-node.internal:6379", "ray://[fe80::1]:10001"],
+)
 def test_well_formed_ray_addresses_are_accepted(tmp_path, address):
     import json
 
@@ -461,8 +625,16 @@ def test_status_of_an_old_run_whose_labels_hold_markup_does_not_crash(tmp_path, 
     out = tmp_path / "old"
     store = RunStore(out)
     store.create_identity("old")
-    units = [{"unit_id": "u1", "key": "blocksworld/3@1 | [/]old | [bold]m | seed 0", "instance_id": "blocksworld/3@1",
-              "method": "[/]old", "model": "[bold]m", "seed": 0}]
+    units = [
+        {
+            "unit_id": "u1",
+            "key": "blocksworld/3@1 | [/]old | [bold]m | seed 0",
+            "instance_id": "blocksworld/3@1",
+            "method": "[/]old",
+            "model": "[bold]m",
+            "seed": 0,
+        }
+    ]
     store.write_text(PLAN_FILE, json.dumps({"hash_version": 1, "units": units}))
     capsys.readouterr()
     assert main(["status", str(out)]) == 0
@@ -473,17 +645,24 @@ def test_status_of_an_old_run_whose_labels_hold_markup_does_not_crash(tmp_path, 
 
 @pytest.mark.parametrize("value, kind", [("2024-01-01", "date"), ("!!binary aGVsbG8=", "bytes"), ("!!set {x, y}", "set")])
 def test_only_plain_yaml_values_reach_free_form_mappings(tmp_path, capsys, value, kind):
-    assert_refused(tmp_path, capsys, model_with(f"params: {{stop: {value}}}"),
-                   f"sweep.yaml: models[0].params.stop: a YAML {kind} is not allowed here; quote it to make it a string")
+    assert_refused(
+        tmp_path,
+        capsys,
+        model_with(f"params: {{stop: {value}}}"),
+        f"sweep.yaml: models[0].params.stop: a YAML {kind} is not allowed here; quote it to make it a string",
+    )
 
 
 # --------------------------------------------------------------------------------------------
 # credentials never travel in an api_base (they would be stored with the spec)
-@pytest.mark.parametrize("url", [
-    "https://user:s3cret@api.example.com/v1",
-    "https://api.example.com/v1?api_key=s3cret",
-    "http://127.0.0.1:8000/v1?token=s3cret&x=1",
-])
+@pytest.mark.parametrize(
+    "url",
+    [
+        "https://user:s3cret@api.example.com/v1",
+        "https://api.example.com/v1?api_key=s3cret",
+        "http://127.0.0.1:8000/v1?token=s3cret&x=1",
+    ],
+)
 def test_api_base_with_credentials_is_refused(tmp_path, capsys, url):
     text = GOOD.replace("- model: offline/expert", f"- model: openai/gpt-4o-mini\n    api_base: {url}\n    api_key_env: HOME", 1)
     line = assert_refused(tmp_path, capsys, text, "must not carry credentials")
@@ -497,8 +676,16 @@ def test_progress_shows_a_provider_pause_and_escapes_markup():
     now = 1_000_000.0
     assert paused_text(None, now) == "" and paused_text(now - 1, now) == ""
     assert paused_text(now + 90, now).startswith("  paused until ")
-    snap = Snapshot(total=2, done=1, success=1, running=1, spend_usd=0.5, run_cap_usd=None, eta_s=None,
-                    rates={"[bold]m[/]": RateStats(rpm=1, rpm_limit=10, paused_until=__import__("time").time() + 600)})
+    snap = Snapshot(
+        total=2,
+        done=1,
+        success=1,
+        running=1,
+        spend_usd=0.5,
+        run_cap_usd=None,
+        eta_s=None,
+        rates={"[bold]m[/]": RateStats(rpm=1, rpm_limit=10, paused_until=__import__("time").time() + 600)},
+    )
     assert "[bold]m[/]: rpm" in status_line(snap) and "paused until" in status_line(snap)
     from rich.console import Console
 

@@ -44,17 +44,29 @@ def test_defaults_and_unit_count():
 @pytest.mark.parametrize(
     "text, message",
     [
-        ("run: x\noutput: o\nmodels:\n  - model: a\n   bad", "sweep.yaml: malformed YAML at line 5, column 4: expected <block end>, but found '<scalar>'"),
+        (
+            "run: x\noutput: o\nmodels:\n  - model: a\n   bad",
+            "sweep.yaml: malformed YAML at line 5, column 4: expected <block end>, but found '<scalar>'",
+        ),
         ("- a", "sweep.yaml: the sweep file must be a YAML mapping (run:, output:, models:, ...)"),
-        (BASE.replace("- model: offline/expert", "- model: offline/expert\n    rmp: 3"), "sweep.yaml: models[0].rmp: unknown field"),
-        (BASE.replace("- model: offline/expert", "- model: offline/expert\n    prices: {input: -1, output: 2}"),
-         "sweep.yaml: models[0].prices.input: Input should be greater than or equal to 0"),
-        (BASE.replace("run: unit-test", "run: 'bad name'"),
-         "sweep.yaml: run: must be letters, digits, '.', '_' or '-' (starting with a letter or digit)"),
+        (
+            BASE.replace("- model: offline/expert", "- model: offline/expert\n    rmp: 3"),
+            "sweep.yaml: models[0].rmp: unknown field",
+        ),
+        (
+            BASE.replace("- model: offline/expert", "- model: offline/expert\n    prices: {input: -1, output: 2}"),
+            "sweep.yaml: models[0].prices.input: Input should be greater than or equal to 0",
+        ),
+        (
+            BASE.replace("run: unit-test", "run: 'bad name'"),
+            "sweep.yaml: run: must be letters, digits, '.', '_' or '-' (starting with a letter or digit)",
+        ),
         (BASE.replace("seeds: [0, 1]", "seeds: [0, 0]"), "sweep.yaml: seeds: repeated seed"),
         (BASE.replace("run: unit-test\n", ""), "sweep.yaml: run: required field is missing"),
-        (BASE.replace("  - method: recap\n", "  - method: recap\n  - method: recap\n"),
-         "sweep.yaml: methods: two entries are both named 'recap'; give them distinct 'label's"),
+        (
+            BASE.replace("  - method: recap\n", "  - method: recap\n  - method: recap\n"),
+            "sweep.yaml: methods: two entries are both named 'recap'; give them distinct 'label's",
+        ),
     ],
 )
 def test_spec_errors_are_one_line(text, message):
@@ -66,16 +78,25 @@ def test_spec_errors_are_one_line(text, message):
 @pytest.mark.parametrize(
     "change, message",
     [
-        (("benchmark: blocksworld", "benchmark: nowhere"), "environments[0]: unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld"),
-        (('tasks: ["3"]', 'tasks: ["9"]'),
-         "environments[0]: blocksworld task '9': no blocksworld instance matches '9'; sizes [3, 4, 5], e.g. blocksworld/3@1"),
-        (("- method: recap", "- method: recap\n    settings: {windw: 3}"),
-         "methods[0] (recap): unknown setting(s) windw for ReCAPConfig; known: context_drop, demo_observations, json_mode, "
-         "max_episode_cost_usd, max_episode_tokens, max_json_repairs, max_level, max_llm_calls, max_tokens, name_only, "
-         "reminder_on, reminder_period, shortcut, shortcut_trace, temperature, think, window, window_block, "
-         "window_counts_pins, window_mode"),
-        (("- method: recap", "- method: recap\n    ablation: level_9"),
-         "methods[0] (recap[level_9]): unknown ablation 'level_9'; known: original, no_think, think_many, name_only, level_2, level_3, level_4, level_5, no_shortcut"),
+        (
+            ("benchmark: blocksworld", "benchmark: nowhere"),
+            "environments[0]: unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld",
+        ),
+        (
+            ('tasks: ["3"]', 'tasks: ["9"]'),
+            "environments[0]: blocksworld task '9': no blocksworld instance matches '9'; sizes [3, 4, 5], e.g. blocksworld/3@1",
+        ),
+        (
+            ("- method: recap", "- method: recap\n    settings: {windw: 3}"),
+            "methods[0] (recap): unknown setting(s) windw for ReCAPConfig; known: context_drop, demo_observations, json_mode, "
+            "max_episode_cost_usd, max_episode_tokens, max_json_repairs, max_level, max_llm_calls, max_tokens, name_only, "
+            "reminder_on, reminder_period, shortcut, shortcut_trace, temperature, think, window, window_block, "
+            "window_counts_pins, window_mode",
+        ),
+        (
+            ("- method: recap", "- method: recap\n    ablation: level_9"),
+            "methods[0] (recap[level_9]): unknown ablation 'level_9'; known: original, no_think, think_many, name_only, level_2, level_3, level_4, level_5, no_shortcut",
+        ),
     ],
 )
 def test_expansion_errors_name_the_entry(change, message):
@@ -86,16 +107,29 @@ def test_expansion_errors_name_the_entry(change, message):
 
 def test_unit_hash_is_pinned():
     """The hash of a fixed unit must never change silently (finished work would re-run)."""
-    uid = unit_hash(instance_id="blocksworld/3@1", method="recap", method_config='{"window": 64}', model="offline/expert",
-                    params={}, seed=0, step_multiplier=4.0)
+    uid = unit_hash(
+        instance_id="blocksworld/3@1",
+        method="recap",
+        method_config='{"window": 64}',
+        model="offline/expert",
+        params={},
+        seed=0,
+        step_multiplier=4.0,
+    )
     assert uid == "58de48ed5ccdeed2"
 
 
 def test_transport_settings_do_not_change_unit_ids():
     ids = [u.unit_id for u in expand(spec_of(BASE)).units]
-    transport = BASE.replace("- model: offline/expert", "- model: offline/expert\n    rpm: 10\n    tpm: 1000\n    concurrency: 2\n"
-                             "    retries: 9\n    timeout_s: 5\n    api_base: http://127.0.0.1:1\n    cap_usd: 3\n"
-                             "    prices: {input: 1, output: 1, cached_input: 0.1, cache_write: 1.25}") + "workers: 16\nmax_attempts: 5\nrun_cap_usd: 2\n"
+    transport = (
+        BASE.replace(
+            "- model: offline/expert",
+            "- model: offline/expert\n    rpm: 10\n    tpm: 1000\n    concurrency: 2\n"
+            "    retries: 9\n    timeout_s: 5\n    api_base: http://127.0.0.1:1\n    cap_usd: 3\n"
+            "    prices: {input: 1, output: 1, cached_input: 0.1, cache_write: 1.25}",
+        )
+        + "workers: 16\nmax_attempts: 5\nrun_cap_usd: 2\n"
+    )
     assert [u.unit_id for u in expand(spec_of(transport)).units] == ids
     assert [u.unit_id for u in expand(with_overrides(spec_of(BASE), workers=9, run_cap_usd=1.5)).units] == ids
 
@@ -103,7 +137,12 @@ def test_transport_settings_do_not_change_unit_ids():
 def test_a_price_override_carries_the_cache_write_price():
     from workers.llm.pricing import resolve_price
 
-    spec = spec_of(BASE.replace("- model: offline/expert", "- model: offline/expert\n    prices: {input: 3, output: 15, cached_input: 0.3, cache_write: 3.75}"))
+    spec = spec_of(
+        BASE.replace(
+            "- model: offline/expert",
+            "- model: offline/expert\n    prices: {input: 3, output: 15, cached_input: 0.3, cache_write: 3.75}",
+        )
+    )
     price = resolve_price("offline/expert", spec.models[0].prices.model_dump())
     # 1,000 prompt tokens: 200 read from the cache, 300 written to it, 500 plain; 100 output tokens
     assert price.cost_usd(1000, 200, 100, 300) == pytest.approx((500 * 3 + 200 * 0.3 + 300 * 3.75 + 100 * 15) / 1e6, abs=1e-12)
@@ -131,13 +170,17 @@ def test_limits_map_to_agent_config():
     spec = spec_of(BASE + "limits: {llm_calls: 50, tokens: 90000, usd: 0.5}\n")
     cfg = json.loads(expand(spec).units[0].method_config)
     assert (cfg["max_llm_calls"], cfg["max_episode_tokens"], cfg["max_episode_cost_usd"]) == (50, 90000, 0.5)
-    own = spec_of(BASE.replace("- method: recap", "- method: recap\n    settings: {max_llm_calls: 7}") + "limits: {llm_calls: 50}\n")
+    own = spec_of(
+        BASE.replace("- method: recap", "- method: recap\n    settings: {max_llm_calls: 7}") + "limits: {llm_calls: 50}\n"
+    )
     assert json.loads(expand(own).units[0].method_config)["max_llm_calls"] == 7
 
 
 def test_plan_diff_new_unchanged_changed():
     old = json.loads(expand(spec_of(BASE)).to_json())
-    changed = BASE.replace("- method: recap", "- method: recap\n  - method: react").replace('tasks: ["3"]', 'tasks: ["3"]\n    instances: [blocksworld/4@1]')
+    changed = BASE.replace("- method: recap", "- method: recap\n  - method: react").replace(
+        'tasks: ["3"]', 'tasks: ["3"]\n    instances: [blocksworld/4@1]'
+    )
     plan = expand(spec_of(changed))
     d = diff_plans(old, plan)
     assert (len(d.new), len(d.unchanged), len(d.changed), len(d.removed)) == (10, 6, 0, 0)
@@ -155,8 +198,10 @@ def test_run_folder_identity(tmp_path):
     assert store.check_can_hold("a") == ident
     with pytest.raises(RunFolderError) as err:
         store.check_can_hold("b")
-    assert str(err.value) == (f"output folder {tmp_path / 'run'} holds run 'a' (run_id {ident.run_id}), not 'b'; "
-                              "choose another output folder or use the same run name")
+    assert str(err.value) == (
+        f"output folder {tmp_path / 'run'} holds run 'a' (run_id {ident.run_id}), not 'b'; "
+        "choose another output folder or use the same run name"
+    )
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "notes.txt").write_text("mine")
     with pytest.raises(RunFolderError) as err:
@@ -169,11 +214,22 @@ def test_profiles_resolve_per_benchmark_in_the_unit_config(monkeypatch):
     unit's resolved config (part of its hash) says which."""
     import os
 
-    monkeypatch.setenv("ROBOTOUILLE_DATA", os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "robotouille"))
+    monkeypatch.setenv(
+        "ROBOTOUILLE_DATA", os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "robotouille")
+    )
     text = BASE.replace("- method: recap", "- method: react\n    profile: paper").replace(
-        '    tasks: ["3"]', '    tasks: ["3"]\n    limit: 1\n  - benchmark: robotouille\n    tasks: [synchronous/0]\n    limit: 1')
+        '    tasks: ["3"]', '    tasks: ["3"]\n    limit: 1\n  - benchmark: robotouille\n    tasks: [synchronous/0]\n    limit: 1'
+    )
     plan = expand(spec_of(text))
     cfg = {u.instance_id.split("/")[0]: json.loads(u.method_config) for u in plan.units}
-    assert (cfg["robotouille"]["history"], cfg["robotouille"]["invalid_streak"], cfg["robotouille"]["demo_observations"]) == ("last", 5, "first")
-    assert (cfg["blocksworld"]["history"], cfg["blocksworld"]["invalid_streak"], cfg["blocksworld"]["demo_observations"]) == ("window", None, "all")
+    assert (cfg["robotouille"]["history"], cfg["robotouille"]["invalid_streak"], cfg["robotouille"]["demo_observations"]) == (
+        "last",
+        5,
+        "first",
+    )
+    assert (cfg["blocksworld"]["history"], cfg["blocksworld"]["invalid_streak"], cfg["blocksworld"]["demo_observations"]) == (
+        "window",
+        None,
+        "all",
+    )
     assert cfg["robotouille"]["max_llm_calls"] is None and cfg["robotouille"]["max_tokens"] == 1024

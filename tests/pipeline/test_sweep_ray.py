@@ -25,8 +25,6 @@ from tests.pipeline.helpers import TinyBackend
 REPO = Path(__file__).resolve().parents[2]
 
 
-
-
 def make_spec(out: Path, body: str) -> tuple[str, object]:
     text = f"run: {out.name}\noutput: {out}\n" + body
     return text, parse_spec(text, "sweep.yaml")
@@ -65,15 +63,27 @@ def test_sweep_end_to_end_tables_and_queries(ray_address, tmp_path, capsys):
     assert q(con, "select end_reason, count(*) from episodes group by 1") == [("success", 6)]
     # every message, step, call and tree node belongs to a terminal episode row
     for table in ("messages", "steps", "llm_calls", "tree_nodes"):
-        assert q(con, f"select count(*) from {table} t left join episodes e using (episode_id) where e.episode_id is null") == [(0,)], table
+        assert q(con, f"select count(*) from {table} t left join episodes e using (episode_id) where e.episode_id is null") == [
+            (0,)
+        ], table
     assert q(con, "select count(distinct episode_id) from messages") == [(6,)]
-    assert q(con, "select count(distinct t.episode_id) from tree_nodes t join episodes e using (episode_id) where e.method = 'recap'") == [(3,)]
+    assert q(
+        con, "select count(distinct t.episode_id) from tree_nodes t join episodes e using (episode_id) where e.method = 'recap'"
+    ) == [(3,)]
     assert q(con, "select count(*) from tree_nodes t join episodes e using (episode_id) where e.method = 'react'") == [(0,)]
     # the gateway's llm_calls rows match each episode's call count; steps match its step count
-    assert q(con, """select count(*) from episodes e
+    assert q(
+        con,
+        """select count(*) from episodes e
                      where e.llm_calls <> (select count(*) from llm_calls c where c.episode_id = e.episode_id)
-                        or e.steps <> (select coalesce(max(s.env_step), 0) from steps s where s.episode_id = e.episode_id)""") == [(0,)]
-    assert q(con, "select count(*), min(git_revision is not null or true), min(spec_yaml = ?) from run".replace("?", "'" + text.replace("'", "''") + "'")) == [(1, True, True)]
+                        or e.steps <> (select coalesce(max(s.env_step), 0) from steps s where s.episode_id = e.episode_id)""",
+    ) == [(0,)]
+    assert q(
+        con,
+        "select count(*), min(git_revision is not null or true), min(spec_yaml = ?) from run".replace(
+            "?", "'" + text.replace("'", "''") + "'"
+        ),
+    ) == [(1, True, True)]
     kinds = [r[0] for r in q(con, "select kind from events order by ts")]
     assert kinds[0] == "run_started" and kinds[-1] == "run_finished" and "workers_started" in kinds
 
@@ -110,11 +120,14 @@ def test_worker_killed_mid_episode_is_replaced_and_unit_completes(ray_address, t
     import ray
 
     out = tmp_path / "kill"
-    text, spec = make_spec(out, """models: [{model: offline/tiny}]
+    text, spec = make_spec(
+        out,
+        """models: [{model: offline/tiny}]
 methods: [{method: recap}]
 environments: [{benchmark: blocksworld, instances: [blocksworld/3@1, blocksworld/3@2, blocksworld/3@3, blocksworld/4@1]}]
 workers: 2
-""")
+""",
+    )
     killed: dict[str, object] = {}
 
     def kill_later(unit, attempt, actor):
@@ -176,11 +189,17 @@ def test_run_cap_stops_new_work_and_resume_with_higher_cap_continues(ray_address
     assert resumed.exit_code() == 0
     con, _ = open_tables(RunStore(out))
     assert q(con, "select count(distinct unit_id) from episodes where end_reason <> 'budget_exhausted'") == [(6,)]
-    assert q(con, "select count(*) from (select unit_id from episodes where end_reason <> 'budget_exhausted' group by unit_id having count(*) > 1)") == [(0,)]
+    assert q(
+        con,
+        "select count(*) from (select unit_id from episodes where end_reason <> 'budget_exhausted' group by unit_id having count(*) > 1)",
+    ) == [(0,)]
     assert q(con, "select count(*) from (select episode_id from episodes group by episode_id having count(*) > 1)") == [(0,)]
     # every unit cut by the cap ran again under a later attempt
-    assert q(con, """select count(*) from episodes b where b.end_reason = 'budget_exhausted' and not exists
-                     (select 1 from episodes d where d.unit_id = b.unit_id and d.attempt > b.attempt and d.end_reason <> 'budget_exhausted')""") == [(0,)]
+    assert q(
+        con,
+        """select count(*) from episodes b where b.end_reason = 'budget_exhausted' and not exists
+                     (select 1 from episodes d where d.unit_id = b.unit_id and d.attempt > b.attempt and d.end_reason <> 'budget_exhausted')""",
+    ) == [(0,)]
 
 
 SLOW = """models:
@@ -220,8 +239,12 @@ def test_driver_killed_mid_run_then_resume_finishes_without_duplicates(ray_addre
     spec_file.write_text(text)
     monkeypatch.setenv("RECAP_FAKE_KEY", "not-a-secret")
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(spec_file), "--address", ray_address,
-                             "--progress", "off"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pipeline.cli", "run", str(spec_file), "--address", ray_address, "--progress", "off"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 150
         while _terminal_rows(out) < 1:
@@ -241,9 +264,14 @@ def test_driver_killed_mid_run_then_resume_finishes_without_duplicates(ray_addre
     assert q(con, "select count(*), count(distinct unit_id), count(distinct episode_id) from episodes") == [(9, 9, 9)]
     assert q(con, "select count(*) from episodes where end_reason = 'budget_exhausted'") == [(0,)]
     assert q(con, "select count(*) from run") == [(2,)]
-    assert q(con, "select kind from events where kind in ('run_started', 'run_resumed') order by ts") == [("run_started",), ("run_resumed",)]
+    assert q(con, "select kind from events where kind in ('run_started', 'run_resumed') order by ts") == [
+        ("run_started",),
+        ("run_resumed",),
+    ]
     # every terminal row's messages exist; rows of the killed attempts are orphans, never duplicates
-    assert q(con, """select count(*) from episodes e where not exists (select 1 from messages m where m.episode_id = e.episode_id)""") == [(0,)]
+    assert q(
+        con, """select count(*) from episodes e where not exists (select 1 from messages m where m.episode_id = e.episode_id)"""
+    ) == [(0,)]
     assert q(con, "select count(*) from (select episode_id, seq from messages group by 1, 2 having count(*) > 1)") == [(0,)]
 
 
@@ -263,8 +291,18 @@ workers: 2
     summary = Driver(prepare(spec, text, check_keys=False), TinyBackend(), progress="off").run()
     assert (summary.finished_now, summary.exit_code()) == (2, 0)
     remote = tmp_path / "bucket" / "runs" / "remote"
-    assert {p.name for p in remote.iterdir()} >= {"run.json", "plan.json", "spec.yaml", "episodes", "messages", "steps",
-                                                  "tree_nodes", "llm_calls", "events", "run"}
+    assert {p.name for p in remote.iterdir()} >= {
+        "run.json",
+        "plan.json",
+        "spec.yaml",
+        "episodes",
+        "messages",
+        "steps",
+        "tree_nodes",
+        "llm_calls",
+        "events",
+        "run",
+    }
     assert not any(p.name.startswith(".tmp-") for p in remote.rglob("*"))
     capsys.readouterr()
     assert main(["status", uri]) == 0

@@ -47,14 +47,41 @@ def test_sweep_on_two_loopback_nodes(tmp_path):
     temp = f"/tmp/rt-{uuid.uuid4().hex[:8]}"
     port = _free_port()
     # token auth off: a loopback test cluster, and the worker node must not need the head's token
-    env = dict(os.environ, PYTHONPATH=str(REPO), RAY_USAGE_STATS_ENABLED="0", LITELLM_LOCAL_MODEL_COST_MAP="True",
-               RAY_AUTH_MODE="disabled")
+    env = dict(
+        os.environ,
+        PYTHONPATH=str(REPO),
+        RAY_USAGE_STATS_ENABLED="0",
+        LITELLM_LOCAL_MODEL_COST_MAP="True",
+        RAY_AUTH_MODE="disabled",
+    )
     common = ["--num-cpus", "1", "--disable-usage-stats"]
     try:
-        subprocess.run([ray_bin, "start", "--head", "--port", str(port), "--node-ip-address", "127.0.0.1",
-                        "--include-dashboard=false", "--temp-dir", temp, *common], env=env, check=True, capture_output=True, timeout=180)
-        subprocess.run([ray_bin, "start", "--address", f"127.0.0.1:{port}", "--node-ip-address", "127.0.0.1", *common],
-                       env=env, check=True, capture_output=True, timeout=180)
+        subprocess.run(
+            [
+                ray_bin,
+                "start",
+                "--head",
+                "--port",
+                str(port),
+                "--node-ip-address",
+                "127.0.0.1",
+                "--include-dashboard=false",
+                "--temp-dir",
+                temp,
+                *common,
+            ],
+            env=env,
+            check=True,
+            capture_output=True,
+            timeout=180,
+        )
+        subprocess.run(
+            [ray_bin, "start", "--address", f"127.0.0.1:{port}", "--node-ip-address", "127.0.0.1", *common],
+            env=env,
+            check=True,
+            capture_output=True,
+            timeout=180,
+        )
         out = tmp_path / "two"
         spec = tmp_path / "sweep.yaml"
         spec.write_text(f"""run: two-nodes
@@ -64,8 +91,13 @@ methods: [{{method: recap}}, {{method: react}}]
 environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
 workers: 4
 """)
-        r = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(spec), "--address", f"127.0.0.1:{port}",
-                            "--progress", "off"], env=env, capture_output=True, text=True, timeout=400)
+        r = subprocess.run(
+            [sys.executable, "-m", "pipeline.cli", "run", str(spec), "--address", f"127.0.0.1:{port}", "--progress", "off"],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=400,
+        )
         assert r.returncode == 0, r.stderr[-2000:]
         con, _ = open_tables(RunStore(out))
         assert con.execute("select count(*), count(distinct unit_id) from episodes").fetchall() == [(6, 6)]

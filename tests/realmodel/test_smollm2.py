@@ -56,9 +56,25 @@ def server_url(tmp_path_factory):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     log = open(tmp_path_factory.mktemp("llama") / "server.log", "w")
-    proc = subprocess.Popen([sys.executable, "-m", "llama_cpp.server", "--model", _gguf(), "--host", "127.0.0.1",
-                             "--port", str(port), "--model_alias", ALIAS, "--n_ctx", str(N_CTX)],
-                            stdout=log, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "llama_cpp.server",
+            "--model",
+            _gguf(),
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--model_alias",
+            ALIAS,
+            "--n_ctx",
+            str(N_CTX),
+        ],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
     url = f"http://127.0.0.1:{port}/v1"
     deadline = time.monotonic() + 180
     while True:
@@ -77,21 +93,38 @@ def server_url(tmp_path_factory):
 
 
 def _config(url: str, **kw) -> DeploymentConfig:
-    args = dict(model=MODEL, api_base=url, max_concurrency=2, attempt_timeout_s=300, max_attempts=2,
-                params={"temperature": 0.0, "max_tokens": 24})
+    args = dict(
+        model=MODEL,
+        api_base=url,
+        max_concurrency=2,
+        attempt_timeout_s=300,
+        max_attempts=2,
+        params={"temperature": 0.0, "max_tokens": 24},
+    )
     return DeploymentConfig(**(args | kw))
 
 
 def _request(i: int, text: str, max_tokens: int | None = None) -> LLMRequest:
-    return LLMRequest(messages=(ChatMessage("user", text),), episode_id="real", call_index=i, purpose="check",
-                      window_seqs=(2 * i,), response_seq=2 * i + 1, max_tokens=max_tokens)
+    return LLMRequest(
+        messages=(ChatMessage("user", text),),
+        episode_id="real",
+        call_index=i,
+        purpose="check",
+        window_seqs=(2 * i,),
+        response_seq=2 * i + 1,
+        max_tokens=max_tokens,
+    )
 
 
 def test_calls_tokens_and_end_reasons_are_recorded(server_url, tmp_path):
     run_dir = tmp_path / "run"
     gw = DeploymentGateway(_config(server_url), run_dir=run_dir, run_id="realmodel")
-    questions = ["What is the capital of France?", "Name a fruit that is yellow.",
-                 'Reply with a JSON object {"answer": <a colour>}.', "Count from one to five."]
+    questions = [
+        "What is the capital of France?",
+        "Name a fruit that is yellow.",
+        'Reply with a JSON object {"answer": <a colour>}.',
+        "Count from one to five.",
+    ]
 
     async def go():
         answers = await asyncio.gather(*[gw.complete(_request(i, q)) for i, q in enumerate(questions)])
@@ -108,15 +141,18 @@ def test_calls_tokens_and_end_reasons_are_recorded(server_url, tmp_path):
     assert too_long.kind == "context_length"
 
     rows = sorted(read_table(run_dir, "llm_calls")[0].to_pylist(), key=lambda r: r["call_index"])
-    assert [(r["call_index"], r["status"], r["error_kind"]) for r in rows] == \
-        [(i, "ok", None) for i in range(5)] + [(5, "error", "context_length")]
+    assert [(r["call_index"], r["status"], r["error_kind"]) for r in rows] == [(i, "ok", None) for i in range(5)] + [
+        (5, "error", "context_length")
+    ]
     for row, resp in zip(rows, answers + [cut]):
         assert (row["prompt_tokens"], row["completion_tokens"]) == (resp.prompt_tokens, resp.completion_tokens)
         assert row["test_double"] is False and row["deployment"] == resp.deployment
     # end reasons (finish_reason) are kept with each result in the ledger journal
-    finish = {e["key"]: e["result"]["finish_reason"]
-              for e in map(json.loads, (run_dir / JOURNAL_NAME).read_text().splitlines())
-              if e["op"] == "settle" and e["status"] == "ok"}
+    finish = {
+        e["key"]: e["result"]["finish_reason"]
+        for e in map(json.loads, (run_dir / JOURNAL_NAME).read_text().splitlines())
+        if e["op"] == "settle" and e["status"] == "ok"
+    }
     assert finish["real#4"] == "length"
     assert set(finish) == {f"real#{i}" for i in range(5)} and set(finish.values()) <= {"stop", "length"}
 
@@ -124,10 +160,10 @@ def test_calls_tokens_and_end_reasons_are_recorded(server_url, tmp_path):
 @pytest.mark.parametrize("method", ["recap", "react"])
 def test_agent_episode_through_the_gateway_records_every_call(server_url, tmp_path, method):
     run_dir = tmp_path / "run"
-    with BlockingGateway(_config(server_url, params={"temperature": 0.5, "max_tokens": 96}),
-                         run_dir=run_dir, run_id="realmodel") as gw:
-        result = play(method, "blocksworld/3@1", gw, f"{method}-real", offline=False,
-                      settings={"max_llm_calls": 6})
+    with BlockingGateway(
+        _config(server_url, params={"temperature": 0.5, "max_tokens": 96}), run_dir=run_dir, run_id="realmodel"
+    ) as gw:
+        result = play(method, "blocksworld/3@1", gw, f"{method}-real", offline=False, settings={"max_llm_calls": 6})
     rows = episode_rows(run_dir, f"{method}-real")
     assert 1 <= len(rows) <= 6
     assert_every_call_recorded(result, rows)

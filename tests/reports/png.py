@@ -41,7 +41,7 @@ def read_png(path: Path) -> tuple[int, int, int, bytes]:
         elif f == 1:  # Sub: running sum per channel, mod 256
             cur = (np.cumsum(line.reshape(width, channels).astype(np.int64), axis=0) % 256).astype(np.uint8).reshape(-1)
         elif f == 2:  # Up
-            cur = (line.astype(np.int64) + prev) .astype(np.uint8)
+            cur = (line.astype(np.int64) + prev).astype(np.uint8)
         else:  # Average and Paeth depend on the reconstructed left pixel: one pixel at a time
             cur = _unfilter_slow(int(f), bytearray(line.tobytes()), prev.tobytes(), channels)
         out[y] = cur

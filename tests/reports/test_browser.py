@@ -58,9 +58,18 @@ def chromium() -> str:
 def _run(chromium: str, tmp: Path, *args: str) -> subprocess.CompletedProcess:
     """One headless Chromium run with a fresh profile; fails with its stderr on error or timeout."""
     profile = tempfile.mkdtemp(prefix="profile-", dir=tmp)
-    cmd = [chromium, "--headless", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
-           "--no-default-browser-check", "--disable-extensions", "--mute-audio", f"--user-data-dir={profile}",
-           "--virtual-time-budget=5000"]
+    cmd = [
+        chromium,
+        "--headless",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--no-first-run",
+        "--no-default-browser-check",
+        "--disable-extensions",
+        "--mute-audio",
+        f"--user-data-dir={profile}",
+        "--virtual-time-budget=5000",
+    ]
     if os.geteuid() == 0:
         cmd.append("--no-sandbox")  # Chromium refuses to run as root inside its sandbox
     try:
@@ -81,7 +90,11 @@ def _body(dom: str) -> str:
 @pytest.fixture(scope="module")
 def page(run_a, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("html")
-    rc = report_main([str(run_a), "--out", str(out), "--format", "html", "--episodes", "A-recap-t2-42,A-react-t6-42"], stdout=io.StringIO(), stderr=io.StringIO())
+    rc = report_main(
+        [str(run_a), "--out", str(out), "--format", "html", "--episodes", "A-recap-t2-42,A-react-t6-42"],
+        stdout=io.StringIO(),
+        stderr=io.StringIO(),
+    )
     assert rc == 0
     return out / "report.html"
 
@@ -113,7 +126,9 @@ def test_legend_of_twelve_arms_covers_no_bar_in_the_browser(chromium, tmp_path):
     values = {(s, a): (0.0 if i % 4 == 0 else 7.5 * i) for s in splits for i, a in enumerate(arms)}
     chart = svg.grouped_bars("Success", splits, arms, values, y_max=100, value_fmt=lambda v: f"{v:.1f}")
     html = tmp_path / "twelve.html"
-    html.write_text(render_html(Report("twelve arms", [], [], [Section("s", "S", plots=[Plot("p", "P", chart, "success_by_split")])], {})))
+    html.write_text(
+        render_html(Report("twelve arms", [], [], [Section("s", "S", plots=[Plot("p", "P", chart, "success_by_split")])], {}))
+    )
     body = _body(_run(chromium, tmp_path, "--dump-dom", html.as_uri()).stdout)
     assert 'data-plots-rendered="1"' in body
     assert 'data-legend-overlaps="0"' in body
@@ -122,7 +137,15 @@ def test_legend_of_twelve_arms_covers_no_bar_in_the_browser(chromium, tmp_path):
 
 def test_screenshot_shows_the_plots(chromium, page, tmp_path):
     shot = tmp_path / "shot.png"
-    _run(chromium, tmp_path, "--hide-scrollbars", "--window-size=1280,2400", "--force-device-scale-factor=0.5", f"--screenshot={shot}", page.as_uri())
+    _run(
+        chromium,
+        tmp_path,
+        "--hide-scrollbars",
+        "--window-size=1280,2400",
+        "--force-device-scale-factor=0.5",
+        f"--screenshot={shot}",
+        page.as_uri(),
+    )
     image = read_png(shot)
     assert image[:2] == (640, 1200)
     with_plots = count_color(image, ORANGE)
@@ -130,7 +153,15 @@ def test_screenshot_shows_the_plots(chromium, page, tmp_path):
     bare = tmp_path / "bare.html"
     bare.write_text(re.sub(r"<svg .*?</svg>", "", page.read_text(), flags=re.S))
     shot2 = tmp_path / "bare.png"
-    _run(chromium, tmp_path, "--hide-scrollbars", "--window-size=1280,2400", "--force-device-scale-factor=0.5", f"--screenshot={shot2}", bare.as_uri())
+    _run(
+        chromium,
+        tmp_path,
+        "--hide-scrollbars",
+        "--window-size=1280,2400",
+        "--force-device-scale-factor=0.5",
+        f"--screenshot={shot2}",
+        bare.as_uri(),
+    )
     without = count_color(read_png(shot2), ORANGE)
     assert with_plots >= 1500, with_plots
     assert without == 0
@@ -148,7 +179,10 @@ def test_missing_browser_fails_unless_opted_out(monkeypatch):
     opt-out variable, a skip naming the variable."""
     monkeypatch.setattr(shutil, "which", lambda name: None)
     monkeypatch.delenv(OPT_OUT, raising=False)
-    with pytest.raises(pytest.fail.Exception, match=r"^no Chromium found \(looked for chromium, chromium-browser, google-chrome on PATH\).*RECAP_SKIP_BROWSER=1"):
+    with pytest.raises(
+        pytest.fail.Exception,
+        match=r"^no Chromium found \(looked for chromium, chromium-browser, google-chrome on PATH\).*RECAP_SKIP_BROWSER=1",
+    ):
         browser_or_fail()
     monkeypatch.setenv(OPT_OUT, "1")
     with pytest.raises(pytest.skip.Exception, match=r"^RECAP_SKIP_BROWSER=1: "):

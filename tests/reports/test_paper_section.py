@@ -33,14 +33,34 @@ def test_per_task_tables_average_to_their_average_rows_and_the_main_table():
         for method in paper.TASK_ORDER:
             mean = sum(paper.PER_TASK[split][i][method] for i in range(10)) / 10
             assert mean == paper.PER_TASK_AVERAGE[split][method] == paper.MAIN[("robotouille", split)][method]
-    assert paper.PER_TASK["synchronous"][6] == {"recap": 70.0, "react": 50.0, "adapt": 20.0, "act": 20.0, "cot": 0.0, "standard": 0.0}
-    assert paper.PER_TASK["asynchronous"][9] == {"recap": 10.0, "react": 0.0, "adapt": 0.0, "act": 0.0, "cot": 0.0, "standard": 0.0}
+    assert paper.PER_TASK["synchronous"][6] == {
+        "recap": 70.0,
+        "react": 50.0,
+        "adapt": 20.0,
+        "act": 20.0,
+        "cot": 0.0,
+        "standard": 0.0,
+    }
+    assert paper.PER_TASK["asynchronous"][9] == {
+        "recap": 10.0,
+        "react": 0.0,
+        "adapt": 0.0,
+        "act": 0.0,
+        "cot": 0.0,
+        "standard": 0.0,
+    }
 
 
 def _arm(**kw: Any) -> paper.ArmProtocol:
-    base = dict(provider_model="openai/gpt-4o-2024-08-06", test_double=False, profile="paper", windows=(64,),
-                benchmark="robotouille", split="synchronous",
-                tasks=tuple((f"{i}_t", (paper.step_multiplier("synchronous", i),)) for i in range(10)))
+    base = dict(
+        provider_model="openai/gpt-4o-2024-08-06",
+        test_double=False,
+        profile="paper",
+        windows=(64,),
+        benchmark="robotouille",
+        split="synchronous",
+        tasks=tuple((f"{i}_t", (paper.step_multiplier("synchronous", i),)) for i in range(10)),
+    )
     return paper.ArmProtocol(**{**base, **kw})
 
 
@@ -54,14 +74,20 @@ def test_mismatch_names_the_first_protocol_difference():
     assert paper.mismatch(main, _arm(windows=(128,))) == "window 128 messages, the paper used 64"
     assert paper.mismatch(main, _arm(tasks=(("2_t", (3.0,)), ("6_t", (3.0,))))) == (
         "ran 2 of the paper's 10 tasks (missing synchronous:0, synchronous:1, synchronous:3, synchronous:4, "
-        "synchronous:5, synchronous:7, synchronous:8, synchronous:9)")
+        "synchronous:5, synchronous:7, synchronous:8, synchronous:9)"
+    )
     all_x4 = tuple((f"{i}_t", (4.0,)) for i in range(10))
     assert paper.mismatch(main, _arm(tasks=all_x4)) == "step cap x4 on synchronous:2, the released configs use x3"
     cross = paper.PROTOCOLS["cross_model"]
     t246 = tuple((f"{i}_t", (3.0,)) for i in (2, 4, 6))
     assert paper.mismatch(cross, _arm(tasks=t246, provider_model="together_ai/Qwen/Qwen2.5-72B-Instruct-Turbo")) is None
-    assert paper.mismatch(cross, _arm(tasks=t246, provider_model="deepinfra/meta-llama/Llama-4-Maverick-17B-128E-Instruct-FP8")) is None
-    assert paper.mismatch(cross, _arm(tasks=t246 + (("7_t", (4.0,)),))) == "ran tasks the paper's number leaves out (synchronous:7)"
+    assert (
+        paper.mismatch(cross, _arm(tasks=t246, provider_model="deepinfra/meta-llama/Llama-4-Maverick-17B-128E-Instruct-FP8"))
+        is None
+    )
+    assert (
+        paper.mismatch(cross, _arm(tasks=t246 + (("7_t", (4.0,)),))) == "ran tasks the paper's number leaves out (synchronous:7)"
+    )
     alf = _arm(benchmark="alfworld", split="valid_unseen", tasks=tuple((t, (4.0,)) for t in paper.ALFWORLD_TYPES))
     assert paper.mismatch(main, alf) is None
     assert paper.mismatch(main, alf, ["heat"]) == "ran tasks the paper's number leaves out (clean, cool, examine, put, puttwo)"
@@ -177,7 +203,9 @@ def paper_runs(ray_local, tmp_path_factory) -> dict[str, Path]:
 
 
 def _cells(row: dict[str, Any], key: str) -> dict[str, Any]:
-    return {k: row.get(f"{key}{s}") for k, s in (("ours", ""), ("paper", ":paper"), ("diff", ":diff"), ("p", ":p"), ("holm", ":holm"))}
+    return {
+        k: row.get(f"{key}{s}") for k, s in (("ours", ""), ("paper", ":paper"), ("diff", ":diff"), ("p", ":p"), ("holm", ":holm"))
+    }
 
 
 def _rate_keys(keys: list[str]) -> list[str]:
@@ -204,16 +232,30 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
     model = "gpt-4o (test double)"
     # the main runs hold ReAct and ReCAP on synchronous 2, 4, 6 with a 64-message window: the
     # cross-model table's protocol too
-    assert list(tables) == ["paper_main", "paper_tasks_synchronous_gpt_4o_test_double", "paper_tasks_asynchronous_gpt_4o_test_double",
-                            "paper_cross_model", "paper_costs_alfworld", "paper_cost_ratio", "paper_costs_task6", "paper_trees",
-                            "paper_omitted"]
+    assert list(tables) == [
+        "paper_main",
+        "paper_tasks_synchronous_gpt_4o_test_double",
+        "paper_tasks_asynchronous_gpt_4o_test_double",
+        "paper_cross_model",
+        "paper_costs_alfworld",
+        "paper_cost_ratio",
+        "paper_costs_task6",
+        "paper_trees",
+        "paper_omitted",
+    ]
 
     # main table: rows ALFWorld, Sync, Async; columns in the paper's method order
     t = tables["paper_main"]
     order = ["recap", "adapt", "react", "cot", "act", "standard"]
     assert [c.key for c in t.columns] == ["benchmark", "model"] + _rate_keys(order)
-    assert [(r["benchmark"], r["model"]) for r in t.rows] == [("ALFWorld", model), ("Robotouille (Sync)", model), ("Robotouille (Async)", model)]
-    for row, (bench, split) in zip(t.rows, (("alfworld", "valid_unseen"), ("robotouille", "synchronous"), ("robotouille", "asynchronous"))):
+    assert [(r["benchmark"], r["model"]) for r in t.rows] == [
+        ("ALFWorld", model),
+        ("Robotouille (Sync)", model),
+        ("Robotouille (Async)", model),
+    ]
+    for row, (bench, split) in zip(
+        t.rows, (("alfworld", "valid_unseen"), ("robotouille", "synchronous"), ("robotouille", "asynchronous"))
+    ):
         here = [r for r in units if (r["benchmark"], r["split"]) == (bench, split)]
         ref = [r for r in here if r["label"] == "recap"]
         for label in order:
@@ -247,7 +289,9 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
                 assert_p(cell["p"], None if label == "recap" else mcnemar(mine, [r for r in scope if r["label"] == "recap"]))
         _check_holm(t, task_order)
         # step caps: x3 on synchronous 2, 4, 6, x4 elsewhere (the released configs)
-        assert {(r["task"], r["step_multiplier"]) for r in here} == {(task, paper.step_multiplier(split, paper.task_index(task))) for task in tasks}
+        assert {(r["task"], r["step_multiplier"]) for r in here} == {
+            (task, paper.step_multiplier(split, paper.task_index(task))) for task in tasks
+        }
 
     # ALFWorld costs: totals per method, paired permutation p against ReCAP; the ReCAP/ReAct ratio
     alf = [r for r in units if r["benchmark"] == "alfworld"]
@@ -259,8 +303,14 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
     for row in t.rows:
         mine = [r for r in alf if r["label"] == row["method"]]
         assert (row["model"], row["games"], row["calls"], row["tokens"]) == (
-            model, len(mine), sum(r["llm_calls"] for r in mine), sum(r["prompt_tokens"] + r["completion_tokens"] for r in mine))
-        assert row["cost"] == pytest.approx(sum(r["cost_usd"] for r in mine)) and row["per_game"] == pytest.approx(row["cost"] / len(mine))
+            model,
+            len(mine),
+            sum(r["llm_calls"] for r in mine),
+            sum(r["prompt_tokens"] + r["completion_tokens"] for r in mine),
+        )
+        assert row["cost"] == pytest.approx(sum(r["cost_usd"] for r in mine)) and row["per_game"] == pytest.approx(
+            row["cost"] / len(mine)
+        )
         assert row.get("paper") == ("[1]" if row["method"] in paper.COSTS["alfworld_134_games_usd"] else None)
         assert row.get("diff") is None
         diffs = [r["cost_usd"] - recap_cost[key(r)] for r in sorted(mine, key=key) if key(r) in recap_cost]
@@ -277,7 +327,12 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
     assert [r["method"] for r in t.rows] == ["recap", "adapt", "react", "cot", "act", "standard"]
     for row in t.rows:
         (mine,) = [r for r in t6 if r["label"] == row["method"]]
-        assert (row["episodes"], row["calls"], row["cost"], row["window"]) == (1, mine["llm_calls"], pytest.approx(mine["cost_usd"]), "64")
+        assert (row["episodes"], row["calls"], row["cost"], row["window"]) == (
+            1,
+            mine["llm_calls"],
+            pytest.approx(mine["cost_usd"]),
+            "64",
+        )
         assert row.get("paper_calls") == ("[1]" if row["method"] == "recap" else None)
     (tree_row,) = tables["paper_trees"].rows
     (recap6,) = [r for r in t6 if r["label"] == "recap"]
@@ -285,16 +340,26 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
 
     # what these three runs do not hold: one line each
     assert tables["paper_omitted"].rows == [
-        {"table": "Ablation table", "missing": "no ReCAP ablation ran Robotouille synchronous task 6 with a 128-message window."}]
+        {"table": "Ablation table", "missing": "no ReCAP ablation ran Robotouille synchronous task 6 with a 128-message window."}
+    ]
 
     # the cross-model example
     report = build_report([paper_runs["cross-model"]], ReportOptions(formats=("md",), paper_only=True))
     tables = {t.name: t for t in report.sections[0].tables}
-    assert [r["table"] for r in tables["paper_omitted"].rows] == ["Per-task table (asynchronous)", "Ablation table", "ALFWorld costs"]
+    assert [r["table"] for r in tables["paper_omitted"].rows] == [
+        "Per-task table (asynchronous)",
+        "Ablation table",
+        "ALFWorld costs",
+    ]
     cross = unit_rows(paper_runs["cross-model"])
     t = tables["paper_cross_model"]
-    models = ["gpt-4o (test double)", "qwen2.5-32b (test double)", "qwen2.5-72b (test double)",
-              "llama-4-maverick (test double)", "deepseek-v3 (test double)"]
+    models = [
+        "gpt-4o (test double)",
+        "qwen2.5-32b (test double)",
+        "qwen2.5-72b (test double)",
+        "llama-4-maverick (test double)",
+        "deepseek-v3 (test double)",
+    ]
     assert [c.key for c in t.columns] == ["method"] + _rate_keys(models)  # the paper's model order
     assert [r["method"] for r in t.rows] == ["react", "recap"]
     for row in t.rows:
@@ -311,7 +376,11 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
     # the ablation example
     report = build_report([paper_runs["ablations"]], ReportOptions(formats=("md",), paper_only=True))
     tables = {t.name: t for t in report.sections[0].tables}
-    assert [r["table"] for r in tables["paper_omitted"].rows] == ["Per-task table (asynchronous)", "Cross-model table", "ALFWorld costs"]
+    assert [r["table"] for r in tables["paper_omitted"].rows] == [
+        "Per-task table (asynchronous)",
+        "Cross-model table",
+        "ALFWorld costs",
+    ]
     abl = unit_rows(paper_runs["ablations"])
     t = tables["paper_ablations"]
     variants = list(paper.ABLATIONS)

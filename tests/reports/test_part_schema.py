@@ -33,8 +33,30 @@ environments: [{{benchmark: blocksworld, tasks: ["3", "4"]}}]
 
 
 def _episode(uid: str, steps: int = 1) -> EpisodeRecord:
-    return EpisodeRecord(f"{uid}-1", uid, 1, "blocksworld", "3", "t", "blocksworld/3@1", 0, "react", "{}",
-                         "offline/expert", "success", True, steps, 1, 10, 0, 2, 0.25, 1.0, 12, 4.0)
+    return EpisodeRecord(
+        f"{uid}-1",
+        uid,
+        1,
+        "blocksworld",
+        "3",
+        "t",
+        "blocksworld/3@1",
+        0,
+        "react",
+        "{}",
+        "offline/expert",
+        "success",
+        True,
+        steps,
+        1,
+        10,
+        0,
+        2,
+        0.25,
+        1.0,
+        12,
+        4.0,
+    )
 
 
 def _finished(out: Path) -> list[str]:
@@ -48,12 +70,17 @@ def _finished(out: Path) -> list[str]:
     w = PartWriter(out, "sinkA")
     for uid in ids[:2]:
         eid = f"{uid}-1"
-        w.write_records("r1", [
-            MessageRecord(eid, 0, "user", "task", "go"), StepRecord(eid, 0, 1, "a", True, "ok", True, True),
-            CallRecord(eid, 0, f"{eid}-c0", "act", (0,), "offline/expert", "ok", prompt_tokens=10, completion_tokens=2,
-                       cost_usd=0.25),
-            _episode(uid),
-        ])
+        w.write_records(
+            "r1",
+            [
+                MessageRecord(eid, 0, "user", "task", "go"),
+                StepRecord(eid, 0, 1, "a", True, "ok", True, True),
+                CallRecord(
+                    eid, 0, f"{eid}-c0", "act", (0,), "offline/expert", "ok", prompt_tokens=10, completion_tokens=2, cost_usd=0.25
+                ),
+                _episode(uid),
+            ],
+        )
     return ids
 
 
@@ -80,8 +107,9 @@ def damaged(tmp_path: Path) -> tuple[Path, dict[str, Path], list[str]]:
     bad["episodes"] = out / "episodes" / "part-zztext-000001.parquet"
     pq.write_table(_retyped("episodes", rows, {"steps": pa.string(), "seed": pa.string()}), bad["episodes"])
     # llm_calls: prompt_tokens as int32 (castable without loss) and cost as text
-    row = record_to_row(CallRecord(f"{ids[2]}-1", 0, "k", "act", (0,), "offline/expert", "ok", prompt_tokens=5,
-                                   cost_usd=9.0), "r1")
+    row = record_to_row(
+        CallRecord(f"{ids[2]}-1", 0, "k", "act", (0,), "offline/expert", "ok", prompt_tokens=5, cost_usd=9.0), "r1"
+    )
     bad["llm_calls"] = out / "llm_calls" / "part-zzint32-000001.parquet"
     pq.write_table(_retyped("llm_calls", [row], {"prompt_tokens": pa.int32(), "cost_usd": pa.string()}), bad["llm_calls"])
     # messages: seq as double
@@ -100,15 +128,19 @@ def test_schema_problem_rule():
     assert schema_problem("episodes", schema) is None
     extra = schema.append(pa.field("later_column", pa.string()))
     assert schema_problem("episodes", extra) is None  # extra columns are ignored
-    assert schema_problem("episodes", pa.schema([f for f in schema if f.name != "seed"])) == \
-        "not a episodes part: missing column(s) seed"
+    assert (
+        schema_problem("episodes", pa.schema([f for f in schema if f.name != "seed"]))
+        == "not a episodes part: missing column(s) seed"
+    )
     retyped = pa.schema([pa.field(f.name, pa.string() if f.name == "steps" else f.type) for f in schema])
     assert schema_problem("episodes", retyped) == "not a episodes part: wrong column type(s): steps is string, expected int64"
-    nested = pa.schema([pa.field(f.name, pa.list_(pa.int64()) if f.name == "window_seqs" else f.type)
-                        for f in arrow_schema("llm_calls")])
+    nested = pa.schema(
+        [pa.field(f.name, pa.list_(pa.int64()) if f.name == "window_seqs" else f.type) for f in arrow_schema("llm_calls")]
+    )
     assert schema_problem("llm_calls", nested) is None
-    nested = pa.schema([pa.field(f.name, pa.list_(pa.int32()) if f.name == "window_seqs" else f.type)
-                        for f in arrow_schema("llm_calls")])
+    nested = pa.schema(
+        [pa.field(f.name, pa.list_(pa.int32()) if f.name == "window_seqs" else f.type) for f in arrow_schema("llm_calls")]
+    )
     assert "window_seqs is list<item: int32>, expected list<item: int64>" in schema_problem("llm_calls", nested)
 
 
@@ -128,17 +160,25 @@ def test_status_sql_and_report_agree_on_parts_of_the_wrong_types(damaged, tmp_pa
         assert f"unreadable part file {path}: ValueError: not a " in " ".join(status.split())
 
     # recap sql: the same rows, one warning line per skipped part, exit 0
-    rc = recap_main(["sql", str(out), "SELECT (SELECT count(*) FROM episodes) AS e, (SELECT count(*) FROM llm_calls) AS c, "
-                                      "(SELECT count(*) FROM messages) AS m, (SELECT count(*) FROM steps) AS s, "
-                                      "(SELECT sum(cost_usd) FROM llm_calls) AS usd", "--json"])
+    rc = recap_main(
+        [
+            "sql",
+            str(out),
+            "SELECT (SELECT count(*) FROM episodes) AS e, (SELECT count(*) FROM llm_calls) AS c, "
+            "(SELECT count(*) FROM messages) AS m, (SELECT count(*) FROM steps) AS s, "
+            "(SELECT sum(cost_usd) FROM llm_calls) AS usd",
+            "--json",
+        ]
+    )
     got = capsys.readouterr()
     assert rc == 0
     assert json.loads(got.out) == [{"e": 2, "c": 2, "m": 2, "s": 2, "usd": 0.5}]
     warnings = got.err.splitlines()
     assert len(warnings) == len(bad)
     for path in bad.values():
-        assert any(w.startswith(f"warning: skipped unreadable part file {path} (") and "wrong column type(s)" in w
-                   for w in warnings), path
+        assert any(
+            w.startswith(f"warning: skipped unreadable part file {path} (") and "wrong column type(s)" in w for w in warnings
+        ), path
     rc = recap_main(["sql", str(out), "SELECT path FROM bad_parts ORDER BY path", "--csv"])
     assert rc == 0 and capsys.readouterr().out.splitlines()[1:] == sorted(str(p) for p in bad.values())
 

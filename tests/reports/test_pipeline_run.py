@@ -63,7 +63,10 @@ def test_rows_have_the_version_2_shape(run):
         assert r["method"] in METHODS and r["method"] == u["method_name"]
         assert r["label"] == u["method"]
         assert (r["label"], r["method"], r["ablation"], r["profile"]) in {
-            ("recap", "recap", None, None), ("react", "react", None, None), ("recap-no-think", "recap", "no_think", None)}
+            ("recap", "recap", None, None),
+            ("react", "react", None, None),
+            ("recap-no-think", "recap", "no_think", None),
+        }
         assert (r["model"], r["provider_model"], r["test_double"]) == ("expert", "offline/expert", True)
         parts = r["instance_id"].split("/")
         if r["benchmark"] == "alfworld":
@@ -95,14 +98,22 @@ def test_status_and_the_coverage_table_agree_with_the_rows(run):
         e = expected[u["method"]]
         e["planned"] += 1
         r = counted.get(u["unit_id"])
-        state = ("not_started" if r is None else "capped" if r["end_reason"] == "budget_exhausted"
-                 else "gave_up" if r["end_reason"] == "infra_error" else "finished")
+        state = (
+            "not_started"
+            if r is None
+            else "capped"
+            if r["end_reason"] == "budget_exhausted"
+            else "gave_up"
+            if r["end_reason"] == "infra_error"
+            else "finished"
+        )
         e[state] += 1
         e["successes"] += int(state == "finished" and r["success"])
     keys = ("planned", "finished", "successes", "capped", "gave_up", "not_started")
     want = {arm: tuple(e[k] for k in keys) for arm, e in expected.items()}
-    status = {g.method: (g.planned, g.done, g.success, g.budget_stopped, g.failed, g.not_started)
-              for g in collect(RunStore(out)).groups}
+    status = {
+        g.method: (g.planned, g.done, g.success, g.budget_stopped, g.failed, g.not_started) for g in collect(RunStore(out)).groups
+    }
     con = open_runs([out])
     report = build_report([out])
     con.close()
@@ -131,7 +142,10 @@ def test_success_tables_count_finished_units_only(run):
     assert got == dict(by_split)
     assert {k[1] for k in got} <= {"robotouille/synchronous", "robotouille/asynchronous", "alfworld/valid_unseen"}
     assert {r["model_label"] for r in named_query(con, "success_by_split").dicts()} == {TD}
-    got = {(r["env_split"], r["task"], r["arm"]): [r["episodes"], r["successes"]] for r in named_query(con, "success_by_task").dicts()}
+    got = {
+        (r["env_split"], r["task"], r["arm"]): [r["episodes"], r["successes"]]
+        for r in named_query(con, "success_by_task").dicts()
+    }
     assert got == dict(by_task)
     got = {(r["arm"], r["env_split"]): r["cost_usd"] for r in named_query(con, "costs").dicts()}
     assert got == pytest.approx(dict(cost), rel=1e-12)

@@ -35,8 +35,13 @@ def test_report_files(report_dir):
     names = sorted(str(p.relative_to(report_dir)) for p in report_dir.rglob("*") if p.is_file())
     assert "report.md" in names and "report.html" in names and "tex/report.tex" in names
     assert sorted(n for n in names if n.startswith("plots/")) == [
-        "plots/context_by_call.svg", "plots/cost_per_episode.svg", "plots/failure_modes.svg", "plots/success_by_split.svg",
-        "plots/tree_branching_factor.svg", "plots/tree_leaf_failures.svg", "plots/tree_levels.svg",
+        "plots/context_by_call.svg",
+        "plots/cost_per_episode.svg",
+        "plots/failure_modes.svg",
+        "plots/success_by_split.svg",
+        "plots/tree_branching_factor.svg",
+        "plots/tree_leaf_failures.svg",
+        "plots/tree_levels.svg",
     ]
     assert len([n for n in names if n.startswith("csv/")]) == 32  # + paper_cells/pairs/trees, 5 paper_table_*
     assert len([n for n in names if n.startswith("tex/")]) == 23  # 17 tables + 5 paper tables + report.tex
@@ -45,7 +50,7 @@ def test_report_files(report_dir):
 
 def test_markdown_main_table(report_dir):
     md = (report_dir / "report.md").read_text()
-    table = md[md.index("### Success rate by method and environment split"):].split("\n\n")[2]
+    table = md[md.index("### Success rate by method and environment split") :].split("\n\n")[2]
     assert table.splitlines() == [
         "| model | method | alfworld/valid_unseen | robotouille/synchronous |",
         "|---|---|---:|---:|",
@@ -57,12 +62,19 @@ def test_markdown_main_table(report_dir):
     ]
     # paper numbers appear only in the paper section, behind the protocol check (the fixture's arms
     # ran no profile, so every paper cell there is a footnote mark)
-    success = md[md.index("## Success rates"):md.index("## Costs")]
+    success = md[md.index("## Success rates") : md.index("## Costs")]
     assert "paper |" not in success and "84.0" not in success and "91.0" not in success
-    assert "[1] profile none, the paper's runs are profile paper." in md[md.index("## The paper's tables"):]
-    assert "| gpt-4o | robotouille/synchronous | react | recap | 5 | 20.0 | 80.0 | 0 | 3 | 0.2500 | 1.0000 | -$1.6500 | 0.0625 | 0.3125 |" in md
-    assert "| gpt-4o | recap | robotouille/synchronous | 64 | level_3 | 50.0 [9.5, 90.5] 1/2 | 2 | 1 | 0 | 1.0000 | 1.0000 |" in md
-    assert "| gpt-4o | recap | robotouille/synchronous | 2 | 3.50 | 2.50 | 0.71 | 1.75 | 0.35 | 3 | 5.50 | 0.50 | 1 | 1.00 |" in md
+    assert "[1] profile none, the paper's runs are profile paper." in md[md.index("## The paper's tables") :]
+    assert (
+        "| gpt-4o | robotouille/synchronous | react | recap | 5 | 20.0 | 80.0 | 0 | 3 | 0.2500 | 1.0000 | -$1.6500 | 0.0625 | 0.3125 |"
+        in md
+    )
+    assert (
+        "| gpt-4o | recap | robotouille/synchronous | 64 | level_3 | 50.0 [9.5, 90.5] 1/2 | 2 | 1 | 0 | 1.0000 | 1.0000 |" in md
+    )
+    assert (
+        "| gpt-4o | recap | robotouille/synchronous | 2 | 3.50 | 2.50 | 0.71 | 1.75 | 0.35 | 3 | 5.50 | 0.50 | 1 | 1.00 |" in md
+    )
     assert "| gpt-4o | invalid_action_loop | 1 | 7.1 | $1.0000 | 1.00 | 4.00 | A-react-t6-42 |" in md
     assert "![Success rate by environment split (95% Wilson intervals)](plots/success_by_split.svg)" in md
 
@@ -70,7 +82,12 @@ def test_markdown_main_table(report_dir):
 def test_test_doubles_are_labelled_everywhere(report_dir):
     """The test-double model 'scripted' never appears without its label, in any format."""
     unlabelled = re.compile(r"scripted(?! \(test double\))")
-    for path in [report_dir / "report.md", report_dir / "report.html", *sorted((report_dir / "tex").glob("*.tex")), *sorted((report_dir / "csv").glob("*.csv"))]:
+    for path in [
+        report_dir / "report.md",
+        report_dir / "report.html",
+        *sorted((report_dir / "tex").glob("*.tex")),
+        *sorted((report_dir / "csv").glob("*.csv")),
+    ]:
         text = re.sub(r"</tspan><tspan[^>]*>", " ", path.read_text())  # SVG labels broken over lines
         if path.parent.name == "csv" and path.stem.startswith("viewer_"):
             continue  # raw rows of the viewer's episodes (model column is the model as called)
@@ -78,14 +95,27 @@ def test_test_doubles_are_labelled_everywhere(report_dir):
     md = (report_dir / "report.md").read_text()
     tables_with_models = [t for t in md.split("### ")[1:] if "| model |" in t]
     assert len(tables_with_models) == 15  # 12 + the paper section's main, ALFWorld cost and cost-ratio tables
-    assert sum("scripted (test double)" in t for t in tables_with_models) == 13  # all but the tree table (no tree) and the cost ratio (gpt-4o only)
+    assert (
+        sum("scripted (test double)" in t for t in tables_with_models) == 13
+    )  # all but the tree table (no tree) and the cost ratio (gpt-4o only)
     # the per-task table of ALFWorld names models in its column headers
     assert "| task | react · gpt-4o | recap · gpt-4o | react · scripted (test double) | recap · scripted (test double) |" in md
 
 
 def test_csv_is_the_long_sql_result(report_dir):
     rows = list(csv.reader((report_dir / "csv" / "success_by_split.csv").open()))
-    assert rows[0] == ["model_label", "arm", "env_split", "method", "ablation", "episodes", "successes", "success_rate", "ci_low", "ci_high"]
+    assert rows[0] == [
+        "model_label",
+        "arm",
+        "env_split",
+        "method",
+        "ablation",
+        "episodes",
+        "successes",
+        "success_rate",
+        "ci_low",
+        "ci_high",
+    ]
     assert rows[6][:8] == ["gpt-4o", "recap", "robotouille/synchronous", "recap", "original", "5", "4", "0.8"]
     modes = list(csv.DictReader((report_dir / "csv" / "failure_modes.csv").open()))
     assert json.loads(modes[0]["examples"]) == ["A-lvl3-t6-126", "A-react-t2-42", "A-recap-alf-p1"]
@@ -112,9 +142,21 @@ def test_html_is_self_contained(report_dir):
     # failure-mode examples link to their episode when (and only when) the viewer shows it
     shown = set(re.findall(r'<article class="episode" id="[^"]+" data-episode="([^"]+)"', html))
     linked = set(re.findall(r'<a href="#ep-([^"]+)">', html))
-    assert linked == shown & {"A-lvl3-t6-126", "A-react-t2-42", "A-recap-alf-p1", "A-recap-t6-84", "A-react-t6-126",
-                              "A-react-t6-42", "A-react-alf-p1", "A-react-t6-84", "A-react-t2-84-a2", "A-lvl3-t6-42",
-                              "A-recap-alf-p2-td", "A-react-alf-p1-td", "A-recap-alf-p1-td"}
+    assert linked == shown & {
+        "A-lvl3-t6-126",
+        "A-react-t2-42",
+        "A-recap-alf-p1",
+        "A-recap-t6-84",
+        "A-react-t6-126",
+        "A-react-t6-42",
+        "A-react-alf-p1",
+        "A-react-t6-84",
+        "A-react-t2-84-a2",
+        "A-lvl3-t6-42",
+        "A-recap-alf-p2-td",
+        "A-react-alf-p1-td",
+        "A-recap-alf-p1-td",
+    }
     assert len(linked) >= 6
 
 
@@ -123,13 +165,19 @@ def test_viewer_shows_tree_steps_calls_and_windows(run_a, tmp_path):
     assert (rc, err) == (0, "")
     html = (tmp_path / "report.html").read_text()
     assert html.count('<article class="episode"') == 1
-    viewer = html[html.index('<section id="viewer"'):]
+    viewer = html[html.index('<section id="viewer"') :]
     # every version of the root, with its think and subtasks
-    assert '<span class="vtag">v0 · call 0</span><div class="think">plan it</div><ol class="subtasks"><li>prepare onion</li><li>serve</li><li>clean</li></ol>' in viewer
+    assert (
+        '<span class="vtag">v0 · call 0</span><div class="think">plan it</div><ol class="subtasks"><li>prepare onion</li><li>serve</li><li>clean</li></ol>'
+        in viewer
+    )
     assert '<span class="vtag">v1 · call 3</span><div class="think">onion done</div>' in viewer
     assert '<li class="node failed"><span class="ntitle">#6 place onion on table9</span>' in viewer
     assert "<td>place onion on table9</td><td>no</td>" in viewer  # the rejected step
-    assert 'id="call-ep-A-recap-t2-42-2" data-target="ep-A-recap-t2-42" data-seqs="0-5" data-response="6">6 msgs: 0-5</button>' in viewer
+    assert (
+        'id="call-ep-A-recap-t2-42-2" data-target="ep-A-recap-t2-42" data-seqs="0-5" data-response="6">6 msgs: 0-5</button>'
+        in viewer
+    )
     assert 'data-seqs="0-1,6-7" data-response="8">4 msgs: 0-1,6-7</button>' in viewer
     assert viewer.count('<li class="msg ') == 9
     assert not (tmp_path / "report.md").exists()
@@ -152,10 +200,22 @@ def test_viewer_cuts_long_texts():
 
 
 def test_report_errors(run_a, run_b, tmp_path):
-    assert _run(report_main, [str(run_a), "--out", str(tmp_path), "--episodes", "nope,A-recap-t2-42"])[::2] == (1, "error: unknown episode id(s) for the viewer: nope\n")
-    assert _run(report_main, [str(run_a), "--out", str(tmp_path), "--format", "md,pdf"])[::2] == (1, "error: unknown report format(s) pdf; choose from md, html, tex, csv\n")
-    assert _run(report_main, [str(run_a), str(run_b)])[::2] == (1, "error: --out is required when reporting several run folders\n")
-    assert _run(report_main, [str(tmp_path / "missing")])[::2] == (1, f"error: run folder {tmp_path / 'missing'} does not exist or is not a folder\n")
+    assert _run(report_main, [str(run_a), "--out", str(tmp_path), "--episodes", "nope,A-recap-t2-42"])[::2] == (
+        1,
+        "error: unknown episode id(s) for the viewer: nope\n",
+    )
+    assert _run(report_main, [str(run_a), "--out", str(tmp_path), "--format", "md,pdf"])[::2] == (
+        1,
+        "error: unknown report format(s) pdf; choose from md, html, tex, csv\n",
+    )
+    assert _run(report_main, [str(run_a), str(run_b)])[::2] == (
+        1,
+        "error: --out is required when reporting several run folders\n",
+    )
+    assert _run(report_main, [str(tmp_path / "missing")])[::2] == (
+        1,
+        f"error: run folder {tmp_path / 'missing'} does not exist or is not a folder\n",
+    )
     rc, _, err = _run(report_main, ["--format"])
     assert rc == 2 and err.startswith("recap report: ")
 
@@ -180,7 +240,13 @@ def test_report_over_a_run_with_a_corrupt_part(run_a, tmp_path):
 
 
 def test_sql_prints_a_table(run_a):
-    rc, out, err = _run(sql_main, [str(run_a), "SELECT mode, count(*) AS n, sum(cost_usd) AS usd FROM failures WHERE mode LIKE '%loop%' GROUP BY mode ORDER BY mode"])
+    rc, out, err = _run(
+        sql_main,
+        [
+            str(run_a),
+            "SELECT mode, count(*) AS n, sum(cost_usd) AS usd FROM failures WHERE mode LIKE '%loop%' GROUP BY mode ORDER BY mode",
+        ],
+    )
     assert (rc, err) == (0, "")
     assert out == (
         "mode                 | n | usd\n"
@@ -192,9 +258,18 @@ def test_sql_prints_a_table(run_a):
 
 
 def test_sql_csv_json_and_named_queries(run_a, run_b):
-    rc, out, _ = _run(sql_main, [str(run_a), "SELECT episode_id, cost_usd, examples FROM (SELECT 'e' AS episode_id, 0.5 AS cost_usd, ['a', 'b'] AS examples)", "--csv"])
+    rc, out, _ = _run(
+        sql_main,
+        [
+            str(run_a),
+            "SELECT episode_id, cost_usd, examples FROM (SELECT 'e' AS episode_id, 0.5 AS cost_usd, ['a', 'b'] AS examples)",
+            "--csv",
+        ],
+    )
     assert (rc, out) == (0, 'episode_id,cost_usd,examples\ne,0.5,"[""a"", ""b""]"\n')
-    rc, out, _ = _run(sql_main, [str(run_a), str(run_b), "SELECT run_id, count(*) AS n FROM terminal GROUP BY run_id ORDER BY run_id", "--json"])
+    rc, out, _ = _run(
+        sql_main, [str(run_a), str(run_b), "SELECT run_id, count(*) AS n FROM terminal GROUP BY run_id ORDER BY run_id", "--json"]
+    )
     assert (rc, json.loads(out)) == (0, [{"run_id": "runA", "n": 17}, {"run_id": "runB", "n": 2}])
     rc, out, _ = _run(sql_main, [str(run_a), "@overview", "--json"])
     assert json.loads(out)[0]["units"] == 18
@@ -210,7 +285,11 @@ def test_sql_file_and_row_limit(run_a, tmp_path):
 def test_sql_refuses_writes_and_bad_input(run_a, tmp_path):
     # every recap sql error: one line on stderr, exit status 2 (as every other recap command)
     rc, out, err = _run(sql_main, [str(run_a), "DROP VIEW episodes"])
-    assert (rc, out, err) == (2, "", "error: refused DROP statement: reports are read-only (allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)\n")
+    assert (rc, out, err) == (
+        2,
+        "",
+        "error: refused DROP statement: reports are read-only (allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)\n",
+    )
     rc, _, err = _run(sql_main, [str(run_a), "SELECT * FROM nosuchtable"])
     assert rc == 2 and err.startswith("error: query failed: Catalog Error: Table with name nosuchtable does not exist!")
     assert len(err.splitlines()) == 1

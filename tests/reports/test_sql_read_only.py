@@ -53,7 +53,9 @@ def run(run_a: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 
 def _fill(sql: str, run: Path) -> str:
     return sql.format(
-        part=part_files(run, "episodes")[0], part2=part_files(run, "episodes")[1], calls=part_files(run, "llm_calls")[0],
+        part=part_files(run, "episodes")[0],
+        part2=part_files(run, "episodes")[1],
+        calls=part_files(run, "llm_calls")[0],
         run=run,
     )
 
@@ -174,14 +176,24 @@ def test_raw_connection_cannot_reach_any_file(name, run):
 
 def test_raw_connection_file_access_is_off_and_locked(run):
     con = open_runs([run])
-    settings = dict(con.execute(
-        "SELECT name, value FROM duckdb_settings() WHERE name IN ('enable_external_access', 'lock_configuration', "
-        "'allowed_paths', 'allowed_directories', 'temp_directory')").fetchall())
-    assert settings == {"enable_external_access": "false", "lock_configuration": "true", "allowed_paths": "[]",
-                        "allowed_directories": "[]", "temp_directory": ""}
+    settings = dict(
+        con.execute(
+            "SELECT name, value FROM duckdb_settings() WHERE name IN ('enable_external_access', 'lock_configuration', "
+            "'allowed_paths', 'allowed_directories', 'temp_directory')"
+        ).fetchall()
+    )
+    assert settings == {
+        "enable_external_access": "false",
+        "lock_configuration": "true",
+        "allowed_paths": "[]",
+        "allowed_directories": "[]",
+        "temp_directory": "",
+    }
     part = part_files(run, "episodes")[0]
-    for sql in (f"COPY (SELECT 1 AS a) TO '{part}' (FORMAT parquet, USE_TMP_FILE false)",
-                f"SELECT count(*) FROM read_parquet('{part}')"):
+    for sql in (
+        f"COPY (SELECT 1 AS a) TO '{part}' (FORMAT parquet, USE_TMP_FILE false)",
+        f"SELECT count(*) FROM read_parquet('{part}')",
+    ):
         with pytest.raises(duckdb.PermissionException):
             con.execute(sql)
     with pytest.raises(duckdb.InvalidInputException, match="configuration has been locked"):
@@ -211,14 +223,17 @@ def test_queries_and_explain_of_queries_still_run(sql, run, capsys):
     assert _snapshot(run) == before
 
 
-@pytest.mark.parametrize("sql,refused", [
-    ("EXPLAIN ANALYZE COPY (SELECT 1) TO 'x.csv'", "refused EXPLAIN of a COPY statement"),
-    ("EXPLAIN INSERT INTO bad_parts VALUES ('a', 'b', 'c', 'd')", "refused EXPLAIN of a INSERT statement"),
-    ("EXPLAIN ANALYZE (FORMAT json) CREATE TABLE t AS SELECT 1", "refused EXPLAIN of a CREATE statement"),
-    ("PRAGMA version = 1", "refused SET statement"),  # PRAGMA x = y is a SET
-    ("PRAGMA enable_profiling", "refused PRAGMA statement"),
-    ("FORCE INSTALL httpfs", "refused INSTALL statement"),
-])
+@pytest.mark.parametrize(
+    "sql,refused",
+    [
+        ("EXPLAIN ANALYZE COPY (SELECT 1) TO 'x.csv'", "refused EXPLAIN of a COPY statement"),
+        ("EXPLAIN INSERT INTO bad_parts VALUES ('a', 'b', 'c', 'd')", "refused EXPLAIN of a INSERT statement"),
+        ("EXPLAIN ANALYZE (FORMAT json) CREATE TABLE t AS SELECT 1", "refused EXPLAIN of a CREATE statement"),
+        ("PRAGMA version = 1", "refused SET statement"),  # PRAGMA x = y is a SET
+        ("PRAGMA enable_profiling", "refused PRAGMA statement"),
+        ("FORCE INSTALL httpfs", "refused INSTALL statement"),
+    ],
+)
 def test_refusal_messages(run, sql, refused):
     con = open_runs([run])
     with pytest.raises(ReadOnlyError) as err:
@@ -232,15 +247,25 @@ def test_attack_in_a_real_process(run):
     part = part_files(run, "episodes")[0]
     before = _snapshot(run)
     proc = subprocess.run(
-        [sys.executable, "-m", "reports.commands", "sql", str(run),
-         f"EXPLAIN ANALYZE COPY (SELECT 'x' AS a) TO '{part}' (FORMAT parquet, USE_TMP_FILE false)"],
-        cwd=REPO, capture_output=True, text=True, timeout=120,
+        [
+            sys.executable,
+            "-m",
+            "reports.commands",
+            "sql",
+            str(run),
+            f"EXPLAIN ANALYZE COPY (SELECT 'x' AS a) TO '{part}' (FORMAT parquet, USE_TMP_FILE false)",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert _snapshot(run) == before
     assert (proc.returncode, proc.stdout) == (2, "")
     assert proc.stderr.splitlines() == [
         "error: refused EXPLAIN of a COPY statement: reports are read-only "
-        "(allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)"]
+        "(allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)"
+    ]
 
 
 # -- every recap sql error: one line, exit 2, a --file never echoed ---------------------------
@@ -248,17 +273,20 @@ def test_attack_in_a_real_process(run):
 SECRET = "sk-live-DO-NOT-ECHO-4242"
 
 
-@pytest.mark.parametrize("content", [
-    f"api_key = {SECRET}\nsecond line\n".encode(),
-    f"{SECRET}\n".encode(),
-    f"SELECT '{SECRET}' FROM\n".encode(),
-    f"# config\n[default]\naws_secret_access_key={SECRET}\n".encode(),
-    b"\x89PNG\r\n\x1a\n\x00\x00" + SECRET.encode(),
-    b"\xff\xfe" + SECRET.encode("utf-16-le"),
-    SECRET.encode() + b"\xff\xff",
-    b"",
-    b"-- only a comment " + SECRET.encode() + b"\n",
-])
+@pytest.mark.parametrize(
+    "content",
+    [
+        f"api_key = {SECRET}\nsecond line\n".encode(),
+        f"{SECRET}\n".encode(),
+        f"SELECT '{SECRET}' FROM\n".encode(),
+        f"# config\n[default]\naws_secret_access_key={SECRET}\n".encode(),
+        b"\x89PNG\r\n\x1a\n\x00\x00" + SECRET.encode(),
+        b"\xff\xfe" + SECRET.encode("utf-16-le"),
+        SECRET.encode() + b"\xff\xff",
+        b"",
+        b"-- only a comment " + SECRET.encode() + b"\n",
+    ],
+)
 def test_a_query_file_that_is_not_sql_is_one_line_exit_2_never_echoed(content, run, tmp_path, capsys):
     q = tmp_path / "not.sql"
     q.write_bytes(content)
@@ -283,17 +311,20 @@ def test_query_file_errors(run, tmp_path, capsys):
     assert (rc, out, err) == (2, "", f"error: query file {bad} is not valid SQL (syntax error on line 3)\n")
 
 
-@pytest.mark.parametrize("argv,start", [
-    (["SELEC 1"], "error: cannot parse query: Parser Error: syntax error"),
-    (["SELECT *\nFROM nosuch\nWHERE 1"], "error: query failed: Catalog Error: Table with name nosuch does not exist!"),
-    (["SELECT 1 +"], "error: cannot parse query: "),
-    ([""], "error: empty query"),
-    (["-- nothing"], "error: empty query"),
-    (["@nosuch"], "error: no report query named 'nosuch'"),
-    (["DROP VIEW episodes"], "error: refused DROP statement"),
-    (["SELECT 1", "--max-rows", "x"], "recap sql: argument --max-rows: invalid int value"),
-    (["SELECT 1/0::int, 'a'::int"], "error: query failed: Conversion Error"),
-])
+@pytest.mark.parametrize(
+    "argv,start",
+    [
+        (["SELEC 1"], "error: cannot parse query: Parser Error: syntax error"),
+        (["SELECT *\nFROM nosuch\nWHERE 1"], "error: query failed: Catalog Error: Table with name nosuch does not exist!"),
+        (["SELECT 1 +"], "error: cannot parse query: "),
+        ([""], "error: empty query"),
+        (["-- nothing"], "error: empty query"),
+        (["@nosuch"], "error: no report query named 'nosuch'"),
+        (["DROP VIEW episodes"], "error: refused DROP statement"),
+        (["SELECT 1", "--max-rows", "x"], "recap sql: argument --max-rows: invalid int value"),
+        (["SELECT 1/0::int, 'a'::int"], "error: query failed: Conversion Error"),
+    ],
+)
 def test_sql_errors_are_one_line_exit_2(argv, start, run, capsys):
     rc, out, err = _cli(["sql", str(run), *argv], capsys)
     assert (rc, out) == (2, "")
@@ -303,7 +334,10 @@ def test_sql_errors_are_one_line_exit_2(argv, start, run, capsys):
 
 def test_missing_or_invalid_run_folder_is_exit_2(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
-    for folder, line in ((tmp_path / "missing", "does not exist or is not a folder"), (tmp_path / "empty", "is not a run folder")):
+    for folder, line in (
+        (tmp_path / "missing", "does not exist or is not a folder"),
+        (tmp_path / "empty", "is not a run folder"),
+    ):
         rc = reports_main(["sql", str(folder), "SELECT 1"])
         out, err = capsys.readouterr()
         assert (rc, out) == (2, "") and len(err.splitlines()) == 1 and line in err, err

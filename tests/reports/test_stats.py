@@ -109,6 +109,7 @@ def _anova_deff(clusters: list[tuple[int, int]]) -> float:
 def _score_interval(p: float, n: float, z: float = Z95) -> tuple[float, float]:
     """Wilson's interval as its definition: the pi with |p - pi| <= z sqrt(pi (1 - pi) / n),
     found by bisection on each side of p."""
+
     def inside(pi: float) -> bool:
         return (p - pi) ** 2 <= z * z * pi * (1 - pi) / n
 

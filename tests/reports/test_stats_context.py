@@ -31,8 +31,10 @@ EPISODES = [
 def con():
     c = duckdb.connect(":memory:")
     c.execute("CREATE TABLE attempts (run_id VARCHAR, episode_id VARCHAR, window_size BIGINT)")
-    c.execute("CREATE TABLE calls (run_id VARCHAR, episode_id VARCHAR, model_label VARCHAR, arm VARCHAR, call_index BIGINT, "
-              "status VARCHAR, latest_attempt BOOLEAN, prompt_tokens BIGINT, window_len BIGINT)")
+    c.execute(
+        "CREATE TABLE calls (run_id VARCHAR, episode_id VARCHAR, model_label VARCHAR, arm VARCHAR, call_index BIGINT, "
+        "status VARCHAR, latest_attempt BOOLEAN, prompt_tokens BIGINT, window_len BIGINT)"
+    )
     for eid, k, calls, latest in EPISODES:
         c.execute("INSERT INTO attempts VALUES ('r', ?, ?)", [eid, k])
         for ci, wl, tokens in calls:
@@ -47,14 +49,40 @@ def con():
 
 
 def test_growth_is_a_per_episode_slope_after_the_window_fills(con):
-    rows = [dict(zip([d[0] for d in cur.description], r)) for cur in [con.execute(load_sql("context_summary"))] for r in cur.fetchall()]
+    rows = [
+        dict(zip([d[0] for d in cur.description], r))
+        for cur in [con.execute(load_sql("context_summary"))]
+        for r in cur.fetchall()
+    ]
     # recap slopes 14 (e1), 0 (e2), 25 (e3): median 14, quartiles 0 + 0.5 * 14 and 14 + 0.5 * 11
-    assert_rows(rows, [
-        {"model_label": "gpt-4o", "arm": "react", "episodes": 1, "calls": 3, "max_window_messages": 6,
-         "filled_episodes": 0, "slope_median": None, "slope_q25": None, "slope_q75": None},
-        {"model_label": "gpt-4o", "arm": "recap", "episodes": 5, "calls": 20, "max_prompt_tokens": 900, "max_window_messages": 6,
-         "filled_episodes": 3, "slope_median": 14.0, "slope_q25": 7.0, "slope_q75": 19.5},
-    ])
+    assert_rows(
+        rows,
+        [
+            {
+                "model_label": "gpt-4o",
+                "arm": "react",
+                "episodes": 1,
+                "calls": 3,
+                "max_window_messages": 6,
+                "filled_episodes": 0,
+                "slope_median": None,
+                "slope_q25": None,
+                "slope_q75": None,
+            },
+            {
+                "model_label": "gpt-4o",
+                "arm": "recap",
+                "episodes": 5,
+                "calls": 20,
+                "max_prompt_tokens": 900,
+                "max_window_messages": 6,
+                "filled_episodes": 3,
+                "slope_median": 14.0,
+                "slope_q25": 7.0,
+                "slope_q75": 19.5,
+            },
+        ],
+    )
 
 
 def test_one_pooled_slope_would_have_said_otherwise(con):

@@ -29,7 +29,9 @@ def _overlap(a, b) -> bool:
 def _many_arms_chart() -> ET.Element:
     values = {(s, a): (0.0 if i % 4 == 0 else 7.5 * i) for s in SPLITS for i, a in enumerate(ARMS)}
     errors = {k: (max(0.0, v - 10), min(100.0, v + 12)) for k, v in values.items()}
-    text = svg.grouped_bars("Success", SPLITS, ARMS, values, errors=errors, y_label="success (%)", y_max=100, value_fmt=lambda v: f"{v:.1f}")
+    text = svg.grouped_bars(
+        "Success", SPLITS, ARMS, values, errors=errors, y_label="success (%)", y_max=100, value_fmt=lambda v: f"{v:.1f}"
+    )
     return ET.fromstring(text)
 
 
@@ -43,13 +45,15 @@ def test_legend_of_twelve_arms_covers_no_bar():
     # every key and every label (at the layout's width per character) lies inside the legend box,
     # and no two entries overlap (the browser test measures the real text)
     keys = [_box(k) for k in legend.iterfind("s:rect[@class='legend-key']", NS)]
-    labels = [(float(t.get("x")), float(t.get("y")) - 11, float(t.get("x")) + svg.LEGEND_CHAR * len(t.text), float(t.get("y")) + 3)
-              for t in legend.iterfind("s:text", NS)]
+    labels = [
+        (float(t.get("x")), float(t.get("y")) - 11, float(t.get("x")) + svg.LEGEND_CHAR * len(t.text), float(t.get("y")) + 3)
+        for t in legend.iterfind("s:text", NS)
+    ]
     assert [t.text for t in legend.iterfind("s:text", NS)] == ARMS
     for item in keys + labels:
         assert box[0] <= item[0] and item[2] <= box[2] and box[1] <= item[1] and item[3] <= box[3], item
     entries = [(k[0], k[1], t[2], t[3]) for k, t in zip(keys, labels)]
-    assert not [(a, b) for i, a in enumerate(entries) for b in entries[i + 1:] if _overlap(a, b)]
+    assert not [(a, b) for i, a in enumerate(entries) for b in entries[i + 1 :] if _overlap(a, b)]
     # the legend sits below the plot: below every bar and every category label, inside the chart
     assert box[1] > max(b[3] for b in bars)
     height = float(root.get("height"))
@@ -63,8 +67,15 @@ def test_legend_of_twelve_arms_covers_no_bar():
 
 
 def test_a_zero_bar_is_a_visible_mark_with_its_label():
-    text = svg.grouped_bars("Success", ["t2"], ["react", "recap"], {("t2", "react"): 0.0, ("t2", "recap"): 50.0},
-                            errors={("t2", "react"): (0.0, 79.3), ("t2", "recap"): (9.5, 90.5)}, y_max=100, value_fmt=lambda v: f"{v:.1f}")
+    text = svg.grouped_bars(
+        "Success",
+        ["t2"],
+        ["react", "recap"],
+        {("t2", "react"): 0.0, ("t2", "recap"): 50.0},
+        errors={("t2", "react"): (0.0, 79.3), ("t2", "recap"): (9.5, 90.5)},
+        y_max=100,
+        value_fmt=lambda v: f"{v:.1f}",
+    )
     root = ET.fromstring(text)
     zero = root.find(".//s:rect[@class='bar zero']", NS)
     assert zero is not None and zero.get("fill") == svg.color(0)
@@ -76,7 +87,11 @@ def test_a_zero_bar_is_a_visible_mark_with_its_label():
     # the 0 label stands above its whisker (79.3 %), over the bar's centre
     tx, ty = (float(v) for v in re.match(r"translate\(([\d.]+),([\d.]+)\)", labels["0.0"]).groups())
     assert x0 <= tx - 3 <= x1
-    whisker_top = min(float(ln.get("y2")) for ln in root.iterfind(".//s:line", NS) if ln.get("x1") == ln.get("x2") and abs(float(ln.get("x1")) - (tx - 3)) < 0.11)
+    whisker_top = min(
+        float(ln.get("y2"))
+        for ln in root.iterfind(".//s:line", NS)
+        if ln.get("x1") == ln.get("x2") and abs(float(ln.get("x1")) - (tx - 3)) < 0.11
+    )
     assert ty == pytest.approx(whisker_top - 3, abs=0.11)
     # a missing value (arm not run) draws nothing: no bar, no label
     root2 = ET.fromstring(svg.grouped_bars("S", ["t2"], ["react", "recap"], {("t2", "recap"): 50.0}))
@@ -97,6 +112,9 @@ def test_other_charts_put_their_legend_below_too():
         root = ET.fromstring(text)
         box = _box(root.find(".//s:rect[@class='legend-box']", NS))
         marks = [_box(r) for r in root.iterfind(".//s:rect[@class='bar']", NS)]
-        marks += [(float(c.get("cx")), float(c.get("cy")), float(c.get("cx")), float(c.get("cy"))) for c in root.iterfind(".//s:circle", NS)]
+        marks += [
+            (float(c.get("cx")), float(c.get("cy")), float(c.get("cx")), float(c.get("cy")))
+            for c in root.iterfind(".//s:circle", NS)
+        ]
         assert marks and box[1] > max(m[3] for m in marks)
         assert box[3] <= float(root.get("height"))

@@ -65,10 +65,14 @@ def test_corrupt_part_file_is_skipped_and_reported(run_a, tmp_path):
     parts[1].write_bytes(data[: len(data) // 2])
     (run / "messages" / "part-zzzz-000001.parquet").write_bytes(b"not parquet at all")
     con, skipped = open_runs_checked([run])
-    assert sorted((s.table, Path(s.path).name) for s in skipped) == [("episodes", parts[1].name), ("messages", "part-zzzz-000001.parquet")]
+    assert sorted((s.table, Path(s.path).name) for s in skipped) == [
+        ("episodes", parts[1].name),
+        ("messages", "part-zzzz-000001.parquet"),
+    ]
     assert all(s.error for s in skipped)
     assert run_query(con, 'SELECT "table", path FROM bad_parts ORDER BY path').rows == [
-        ("episodes", str(parts[1])), ("messages", str(run / "messages" / "part-zzzz-000001.parquet"))
+        ("episodes", str(parts[1])),
+        ("messages", str(run / "messages" / "part-zzzz-000001.parquet")),
     ]
     # the first 8 episode rows remain (the first 8 of RUN_A_EPISODES), all messages remain
     assert run_query(con, "SELECT count(*) FROM episodes").rows == [(8,)]
@@ -95,17 +99,42 @@ def test_part_missing_a_column_is_skipped_and_named(tmp_path):
     schema = TABLES["episodes"]
     old = pa.schema([f for f in schema if f.name not in ("test_double", "worker_id")])
     row = {f.name: None for f in old}
-    row.update(run_id="old", episode_id="e1", unit_id="u1", attempt=1, benchmark="robotouille", split="synchronous",
-               task="t1", instance_id="i1", seed=42, method="react", method_config="{}", model="gpt-4o",
-               end_reason="success", success=True, steps=3, llm_calls=2, prompt_tokens=10, cached_prompt_tokens=0,
-               completion_tokens=5, cost_usd=0.5, wall_s=1.0, step_cap=40, step_multiplier=4.0, max_depth=0,
-               started_at=1.0, ended_at=2.0, label="react")
+    row.update(
+        run_id="old",
+        episode_id="e1",
+        unit_id="u1",
+        attempt=1,
+        benchmark="robotouille",
+        split="synchronous",
+        task="t1",
+        instance_id="i1",
+        seed=42,
+        method="react",
+        method_config="{}",
+        model="gpt-4o",
+        end_reason="success",
+        success=True,
+        steps=3,
+        llm_calls=2,
+        prompt_tokens=10,
+        cached_prompt_tokens=0,
+        completion_tokens=5,
+        cost_usd=0.5,
+        wall_s=1.0,
+        step_cap=40,
+        step_multiplier=4.0,
+        max_depth=0,
+        started_at=1.0,
+        ended_at=2.0,
+        label="react",
+    )
     (tmp_path / "episodes").mkdir()
     part = tmp_path / "episodes" / "part-old-000001.parquet"
     pq.write_table(pa.Table.from_pylist([row], schema=old), part)
     con, skipped = open_runs_checked([tmp_path])
     assert [(s.table, s.path, s.error) for s in skipped] == [
-        ("episodes", str(part), "ValueError: not a episodes part: missing column(s) test_double, worker_id")]
+        ("episodes", str(part), "ValueError: not a episodes part: missing column(s) test_double, worker_id")
+    ]
     assert [c for c, _ in _columns(con, "episodes")] == schema.names
     assert run_query(con, "SELECT count(*) FROM terminal").rows == [(0,)]
     assert run_query(con, "SELECT path FROM bad_parts").rows == [(str(part),)]
@@ -137,16 +166,25 @@ def test_statements_that_write_are_refused(run_a, sql):
     with pytest.raises(ReadOnlyError) as err:
         run_query(con, sql)
     assert str(err.value) == (
-        f"{REFUSED[sql]}: reports are read-only "
-        "(allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)"
+        f"{REFUSED[sql]}: reports are read-only (allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)"
     )
     assert run_query(con, "SELECT count(*) FROM episodes").rows == [(19,)]
 
 
-@pytest.mark.parametrize("sql", [
-    "SELECT 1", "WITH a AS (SELECT 2) SELECT * FROM a", "FROM episodes LIMIT 1", "DESCRIBE episodes", "SHOW TABLES",
-    "SUMMARIZE steps", "EXPLAIN SELECT * FROM terminal", "PRAGMA table_info('episodes')", "VALUES (1), (2)",
-])
+@pytest.mark.parametrize(
+    "sql",
+    [
+        "SELECT 1",
+        "WITH a AS (SELECT 2) SELECT * FROM a",
+        "FROM episodes LIMIT 1",
+        "DESCRIBE episodes",
+        "SHOW TABLES",
+        "SUMMARIZE steps",
+        "EXPLAIN SELECT * FROM terminal",
+        "PRAGMA table_info('episodes')",
+        "VALUES (1), (2)",
+    ],
+)
 def test_queries_are_allowed(run_a, sql):
     con = open_runs([run_a])
     assert check_read_only(con, sql) == 1
@@ -179,7 +217,10 @@ def test_bad_run_folders(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(RunDirError) as err:
         open_runs([tmp_path / "empty"])
-    assert str(err.value) == f"{tmp_path / 'empty'} is not a run folder (no run.json and no table folder such as {tmp_path / 'empty' / 'episodes'})"
+    assert (
+        str(err.value)
+        == f"{tmp_path / 'empty'} is not a run folder (no run.json and no table folder such as {tmp_path / 'empty' / 'episodes'})"
+    )
     with pytest.raises(RunDirError, match="no run folder given"):
         open_runs([])
 
@@ -188,5 +229,5 @@ def test_syntax_error_is_one_line(run_a):
     con = open_runs([run_a])
     with pytest.raises(Exception) as err:
         run_query(con, "SELEC 1")
-    assert str(err.value).startswith("cannot parse query: Parser Error: syntax error at or near \"SELEC\"")
+    assert str(err.value).startswith('cannot parse query: Parser Error: syntax error at or near "SELEC"')
     assert "\n" not in str(err.value)

@@ -38,19 +38,25 @@ def test_every_recorded_instance_is_reproduced_with_its_seed_and_key_order():
     assert retried == 38  # recorded: 38 of the 200 benchmark instances needed another seed
 
 
-@pytest.mark.parametrize(("environment_name", "seed", "reason"), [
-    ("synchronous/0_cheese_sandwich", 420, "no extra station left to make room for a required one"),
-    ("synchronous/5_double_cheeseburger", 378, "a required item has nowhere to go"),
-    ("synchronous/5_double_cheeseburger", 379, "a required item has nowhere to go"),
-    ("asynchronous/8_onion_tomato_soup_and_two_chicken_sandwich", 253, "a required container landed on an extra item"),
-])
+@pytest.mark.parametrize(
+    ("environment_name", "seed", "reason"),
+    [
+        ("synchronous/0_cheese_sandwich", 420, "no extra station left to make room for a required one"),
+        ("synchronous/5_double_cheeseburger", 378, "a required item has nowhere to go"),
+        ("synchronous/5_double_cheeseburger", 379, "a required item has nowhere to go"),
+        ("asynchronous/8_onion_tomato_soup_and_two_chicken_sandwich", 253, "a required container landed on an extra item"),
+    ],
+)
 def test_each_kind_of_failed_attempt_moves_on_to_the_next_seed(environment_name, seed, reason):
     problem = as_loaded(_problem(environment_name))
     with pytest.raises(GenerationFailed) as failed:
         randomize(problem, seed)
     assert str(failed.value) == reason
-    recorded = {"synchronous/0_cheese_sandwich": 421, "synchronous/5_double_cheeseburger": 380,
-                "asynchronous/8_onion_tomato_soup_and_two_chicken_sandwich": 254}[environment_name]
+    recorded = {
+        "synchronous/0_cheese_sandwich": 421,
+        "synchronous/5_double_cheeseburger": 380,
+        "asynchronous/8_onion_tomato_soup_and_two_chicken_sandwich": 254,
+    }[environment_name]
     assert generate(_problem(environment_name), seed).used_seed == recorded
 
 
@@ -84,16 +90,19 @@ def test_the_caller_problem_is_not_modified():
     assert json.dumps(problem) == before
 
 
-@pytest.mark.parametrize(("width", "height", "stations", "player", "expected"), [
-    (3, 1, [(0, 0), (2, 0)], None, True),  # the open middle cell borders both
-    (3, 1, [(0, 0), (1, 0), (2, 0)], None, False),  # no open cell at all
-    (3, 3, [(1, 0), (1, 1), (1, 2)], None, True),  # a wall: each side borders all three
-    (3, 3, [(1, 0), (1, 1), (1, 2), (0, 0)], None, False),  # each side now misses one station
-    (3, 3, [(1, 0), (1, 1), (1, 2)], (0, 0), True),
-    (3, 3, [(1, 0), (1, 1), (1, 2), (0, 0)], (2, 1), False),
-    (3, 3, [(1, 0)], (1, 0), True),  # a player drawn onto the only station reaches it...
-    (3, 3, [(1, 0), (2, 2)], (1, 0), False),  # ...and nothing else
-])
+@pytest.mark.parametrize(
+    ("width", "height", "stations", "player", "expected"),
+    [
+        (3, 1, [(0, 0), (2, 0)], None, True),  # the open middle cell borders both
+        (3, 1, [(0, 0), (1, 0), (2, 0)], None, False),  # no open cell at all
+        (3, 3, [(1, 0), (1, 1), (1, 2)], None, True),  # a wall: each side borders all three
+        (3, 3, [(1, 0), (1, 1), (1, 2), (0, 0)], None, False),  # each side now misses one station
+        (3, 3, [(1, 0), (1, 1), (1, 2)], (0, 0), True),
+        (3, 3, [(1, 0), (1, 1), (1, 2), (0, 0)], (2, 1), False),
+        (3, 3, [(1, 0)], (1, 0), True),  # a player drawn onto the only station reaches it...
+        (3, 3, [(1, 0), (2, 2)], (1, 0), False),  # ...and nothing else
+    ],
+)
 def test_reachability(width, height, stations, player, expected):
     grid = generator._Grid(width, height)
     objs = [{"x": x, "y": y} for x, y in stations]
@@ -103,7 +112,9 @@ def test_reachability(width, height, stations, player, expected):
 
 def test_instance_record_has_the_recorded_fields_but_the_real_engine_measurements():
     root = require_data()
-    recorded = json.loads((root / "instances/synchronous/9_onion_cheese_burger_and_lettuce_tomato_chicken_sandwich_336.json").read_text())
+    recorded = json.loads(
+        (root / "instances/synchronous/9_onion_cheese_burger_and_lettuce_tomato_chicken_sandwich_336.json").read_text()
+    )
     made = instance_record(root, recorded["environment_name"], 336, 57)
     assert list(made) == [k for k in recorded if k not in ("num_predicates", "gen_time_s", "create_time_s")] + ["generated_by"]
     assert {k: v for k, v in made.items() if k != "generated_by"} == {k: recorded[k] for k in made if k != "generated_by"}

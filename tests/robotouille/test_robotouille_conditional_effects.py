@@ -50,11 +50,11 @@ def test_t7_pickup_while_cooking_undoes_cooking_and_pauses_the_timer():
             )
     assert seen == {
         24: (True, False, False, [1]),
-        25: (False, False, True, [1]),   # picked up: undone, no tick
-        26: (False, False, True, [1]),   # still off the stove: paused
-        27: (True, False, False, [2]),   # put back: cooking again, the timer goes on from 1
+        25: (False, False, True, [1]),  # picked up: undone, no tick
+        26: (False, False, True, [1]),  # still off the stove: paused
+        27: (True, False, False, [2]),  # put back: cooking again, the timer goes on from 1
         28: (True, False, False, [3]),
-        29: (False, True, False, []),    # cooked two steps late; the effect is dropped
+        29: (False, True, False, []),  # cooked two steps late; the effect is dropped
     }
     step25 = record["steps"][24]["observation"]
     assert "patty1 is held by robot1" in step25 and "patty1 is cooking" not in step25
@@ -70,8 +70,7 @@ def _delayed(param, fx, sfx=()):
 
 
 def _conditional(param, conditions, fx, sfx):
-    return {"type": "conditional", "param": param, "conditions": list(conditions), "fx": list(fx),
-            "sfx": list(sfx)}
+    return {"type": "conditional", "param": param, "conditions": list(conditions), "fx": list(fx), "sfx": list(sfx)}
 
 
 _PREDICATES = [
@@ -113,8 +112,13 @@ _PREDICATES = [
 
 
 def _action(name, description, precons, fx=(), sfx=()):
-    return {"name": name, "precons": list(precons), "immediate_fx": list(fx), "sfx": list(sfx),
-            "language_description": description}
+    return {
+        "name": name,
+        "precons": list(precons),
+        "immediate_fx": list(fx),
+        "sfx": list(sfx),
+        "language_description": description,
+    }
 
 
 def mini_domain():
@@ -123,70 +127,167 @@ def mini_domain():
     for name, types, sentences in _PREDICATES:
         if isinstance(sentences, str):
             sentences = (sentences,)
-        preds.append({"name": name, "param_types": types,
-                      "language_descriptors": {str(k): s for k, s in enumerate(sentences)}})
+        preds.append({"name": name, "param_types": types, "language_descriptors": {str(k): s for k, s in enumerate(sentences)}})
     at = [_lit("loc", "p1", "s1")]
     hands_free = [_lit("nothing", "p1")]
     actions = [
-        _action("move", "Move {p1} from {s1} to {s2}", at + [_lit("vacant", "s2")],
-                [_lit("loc", "p1", "s2"), _lit("loc", "p1", "s1", is_true=False),
-                 _lit("vacant", "s1"), _lit("vacant", "s2", is_true=False)]),
-        _action("pick-up-item", "Pick up {i1} from {s1} using {p1}",
-                hands_free + [_lit("item_on", "i1", "s1")] + at + [_lit("clear", "i1")],
-                [_lit("has_item", "p1", "i1"), _lit("station_empty", "s1"), _lit("nothing", "p1", is_true=False),
-                 _lit("item_at", "i1", "s1", is_true=False), _lit("clear", "i1", is_true=False),
-                 _lit("item_on", "i1", "s1", is_true=False)]),
-        _action("place-item", "Place {i1} on {s1} using {p1}",
-                [_lit("has_item", "p1", "i1")] + at + [_lit("station_empty", "s1")],
-                [_lit("nothing", "p1"), _lit("item_at", "i1", "s1"), _lit("clear", "i1"), _lit("item_on", "i1", "s1"),
-                 _lit("has_item", "p1", "i1", is_true=False), _lit("station_empty", "s1", is_true=False)]),
-        _action("pick-up-container", "Pick up {c1} from {s1} using {p1}",
-                hands_free + [_lit("container_at", "c1", "s1")] + at,
-                [_lit("has_container", "p1", "c1"), _lit("container_at", "c1", "s1", is_true=False),
-                 _lit("nothing", "p1", is_true=False), _lit("station_empty", "s1")]),
-        _action("place-container", "Place {c1} on {s1} using {p1}",
-                [_lit("has_container", "p1", "c1")] + at + [_lit("station_empty", "s1")],
-                [_lit("nothing", "p1"), _lit("container_at", "c1", "s1"),
-                 _lit("has_container", "p1", "c1", is_true=False), _lit("station_empty", "s1", is_true=False)]),
-        _action("cook", "Cook {i1} on {s1} using {p1}",
-                [_lit("isstove", "s1"), _lit("iscookable", "i1"), _lit("iscooking", "i1", is_true=False),
-                 _lit("item_on", "i1", "s1")] + at + hands_free,
-                sfx=[_conditional("i1", [_lit("item_on", "i1", "s1")], [_lit("iscooking", "i1")],
-                                  [_delayed("i1", [_lit("iscooked", "i1"), _lit("iscooking", "i1", is_true=False)])])]),
-        _action("fry", "Fry {i1} on {s1} using {p1}",
-                [_lit("isfryer", "s1"), _lit("isfryable", "i1"), _lit("item_on", "i1", "s1")] + at + hands_free,
-                sfx=[_conditional("i1", [_lit("item_on", "i1", "s1")], [],
-                                  [_delayed("i1", [_lit("isfried", "i1")])])]),
-        _action("thaw", "Thaw {i1} in {s1} using {p1}",
-                [_lit("issink", "s1"), _lit("isfrozen", "i1"), _lit("item_on", "i1", "s1")] + at + hands_free,
-                sfx=[_conditional("i1", [_lit("item_on", "i1", "s1")], [_lit("isfrozen", "i1", is_true=False)],
-                                  [_delayed("i1", [_lit("isthawed", "i1")])])]),
-        _action("cut", "Cut {i1} on {s1} using {p1}",
-                [_lit("isboard", "s1"), _lit("iscuttable", "i1"), _lit("item_on", "i1", "s1")] + at + hands_free,
-                sfx=[{"type": "repetitive", "param": "i1", "fx": [_lit("iscut", "i1")], "sfx": []}]),
-        _action("fill-pot", "Fill {c1} with water from {s1} using {p1}",
-                [_lit("ispot", "c1"), _lit("issink", "s1")] + at + [_lit("container_at", "c1", "s1"),
-                                                                     _lit("container_empty", "c1")] + hands_free,
-                sfx=[_conditional("c1", [_lit("container_at", "c1", "s1")], [], [
-                    _delayed("c1", [], [{
-                        "type": "creation", "param": "c1",
-                        "created_obj": {"name": "water", "type": "meal", "param": "m1"},
-                        "fx": [_lit("iswater", "m1"), _lit("in", "m1", "c1"),
-                               _lit("container_empty", "c1", is_true=False)],
-                        "sfx": []}])])]),
-        _action("boil-water", "Boil {c1}'s contents on {s1} using {p1}",
-                [_lit("ispot", "c1"), _lit("iswater", "m1"), _lit("in", "m1", "c1"), _lit("isstove", "s1"),
-                 _lit("container_at", "c1", "s1")] + at + hands_free,
-                sfx=[_conditional("m1", [_lit("container_at", "c1", "s1")], [],
-                                  [_delayed("m1", [_lit("isboiling", "m1")])])]),
+        _action(
+            "move",
+            "Move {p1} from {s1} to {s2}",
+            at + [_lit("vacant", "s2")],
+            [
+                _lit("loc", "p1", "s2"),
+                _lit("loc", "p1", "s1", is_true=False),
+                _lit("vacant", "s1"),
+                _lit("vacant", "s2", is_true=False),
+            ],
+        ),
+        _action(
+            "pick-up-item",
+            "Pick up {i1} from {s1} using {p1}",
+            hands_free + [_lit("item_on", "i1", "s1")] + at + [_lit("clear", "i1")],
+            [
+                _lit("has_item", "p1", "i1"),
+                _lit("station_empty", "s1"),
+                _lit("nothing", "p1", is_true=False),
+                _lit("item_at", "i1", "s1", is_true=False),
+                _lit("clear", "i1", is_true=False),
+                _lit("item_on", "i1", "s1", is_true=False),
+            ],
+        ),
+        _action(
+            "place-item",
+            "Place {i1} on {s1} using {p1}",
+            [_lit("has_item", "p1", "i1")] + at + [_lit("station_empty", "s1")],
+            [
+                _lit("nothing", "p1"),
+                _lit("item_at", "i1", "s1"),
+                _lit("clear", "i1"),
+                _lit("item_on", "i1", "s1"),
+                _lit("has_item", "p1", "i1", is_true=False),
+                _lit("station_empty", "s1", is_true=False),
+            ],
+        ),
+        _action(
+            "pick-up-container",
+            "Pick up {c1} from {s1} using {p1}",
+            hands_free + [_lit("container_at", "c1", "s1")] + at,
+            [
+                _lit("has_container", "p1", "c1"),
+                _lit("container_at", "c1", "s1", is_true=False),
+                _lit("nothing", "p1", is_true=False),
+                _lit("station_empty", "s1"),
+            ],
+        ),
+        _action(
+            "place-container",
+            "Place {c1} on {s1} using {p1}",
+            [_lit("has_container", "p1", "c1")] + at + [_lit("station_empty", "s1")],
+            [
+                _lit("nothing", "p1"),
+                _lit("container_at", "c1", "s1"),
+                _lit("has_container", "p1", "c1", is_true=False),
+                _lit("station_empty", "s1", is_true=False),
+            ],
+        ),
+        _action(
+            "cook",
+            "Cook {i1} on {s1} using {p1}",
+            [_lit("isstove", "s1"), _lit("iscookable", "i1"), _lit("iscooking", "i1", is_true=False), _lit("item_on", "i1", "s1")]
+            + at
+            + hands_free,
+            sfx=[
+                _conditional(
+                    "i1",
+                    [_lit("item_on", "i1", "s1")],
+                    [_lit("iscooking", "i1")],
+                    [_delayed("i1", [_lit("iscooked", "i1"), _lit("iscooking", "i1", is_true=False)])],
+                )
+            ],
+        ),
+        _action(
+            "fry",
+            "Fry {i1} on {s1} using {p1}",
+            [_lit("isfryer", "s1"), _lit("isfryable", "i1"), _lit("item_on", "i1", "s1")] + at + hands_free,
+            sfx=[_conditional("i1", [_lit("item_on", "i1", "s1")], [], [_delayed("i1", [_lit("isfried", "i1")])])],
+        ),
+        _action(
+            "thaw",
+            "Thaw {i1} in {s1} using {p1}",
+            [_lit("issink", "s1"), _lit("isfrozen", "i1"), _lit("item_on", "i1", "s1")] + at + hands_free,
+            sfx=[
+                _conditional(
+                    "i1",
+                    [_lit("item_on", "i1", "s1")],
+                    [_lit("isfrozen", "i1", is_true=False)],
+                    [_delayed("i1", [_lit("isthawed", "i1")])],
+                )
+            ],
+        ),
+        _action(
+            "cut",
+            "Cut {i1} on {s1} using {p1}",
+            [_lit("isboard", "s1"), _lit("iscuttable", "i1"), _lit("item_on", "i1", "s1")] + at + hands_free,
+            sfx=[{"type": "repetitive", "param": "i1", "fx": [_lit("iscut", "i1")], "sfx": []}],
+        ),
+        _action(
+            "fill-pot",
+            "Fill {c1} with water from {s1} using {p1}",
+            [_lit("ispot", "c1"), _lit("issink", "s1")]
+            + at
+            + [_lit("container_at", "c1", "s1"), _lit("container_empty", "c1")]
+            + hands_free,
+            sfx=[
+                _conditional(
+                    "c1",
+                    [_lit("container_at", "c1", "s1")],
+                    [],
+                    [
+                        _delayed(
+                            "c1",
+                            [],
+                            [
+                                {
+                                    "type": "creation",
+                                    "param": "c1",
+                                    "created_obj": {"name": "water", "type": "meal", "param": "m1"},
+                                    "fx": [
+                                        _lit("iswater", "m1"),
+                                        _lit("in", "m1", "c1"),
+                                        _lit("container_empty", "c1", is_true=False),
+                                    ],
+                                    "sfx": [],
+                                }
+                            ],
+                        )
+                    ],
+                )
+            ],
+        ),
+        _action(
+            "boil-water",
+            "Boil {c1}'s contents on {s1} using {p1}",
+            [
+                _lit("ispot", "c1"),
+                _lit("iswater", "m1"),
+                _lit("in", "m1", "c1"),
+                _lit("isstove", "s1"),
+                _lit("container_at", "c1", "s1"),
+            ]
+            + at
+            + hands_free,
+            sfx=[_conditional("m1", [_lit("container_at", "c1", "s1")], [], [_delayed("m1", [_lit("isboiling", "m1")])])],
+        ),
         _action("wait", "Do nothing", []),
     ]
-    return parse_domain({
-        "name": "mini",
-        "object_types": ["station", "item", "player", "container", "meal"],
-        "predicate_defs": preds,
-        "action_defs": actions,
-    })
+    return parse_domain(
+        {
+            "name": "mini",
+            "object_types": ["station", "item", "player", "container", "meal"],
+            "predicate_defs": preds,
+            "action_defs": actions,
+        }
+    )
 
 
 def kitchen(stations, items=(), containers=(), meals=(), time=3):
@@ -194,8 +295,7 @@ def kitchen(stations, items=(), containers=(), meals=(), time=3):
     return {
         "config": {"cook_time": {"default": time}, "num_cuts": {"default": 3}},
         "stations": [{"name": name, "x": x, "y": 1} for x, name in enumerate(stations)],
-        "items": [{"name": name, "x": x, "y": 1, "stack-level": 0, "predicates": list(preds)}
-                  for name, x, preds in items],
+        "items": [{"name": name, "x": x, "y": 1, "stack-level": 0, "predicates": list(preds)} for name, x, preds in items],
         "containers": [{"name": name, "x": x, "y": 1} for name, x in containers],
         "meals": [{"name": name, "x": x, "y": 1} for name, x in meals],
         "players": [{"name": "robot", "x": 0, "y": 0, "direction": [0, 1]}],
@@ -224,24 +324,47 @@ def timers(state):
 # kitchen, start action, take-away action, put-back action, the fact its timer sets, and the
 # conditional's own effect with its truth after each step of SCRIPT (None: it has no own effect)
 CASES = {
-    "cook": (kitchen(["stove"], items=[("patty", 0, ["iscookable"])]),
-             "Cook patty1 on stove1 using robot1", "Pick up patty1 from stove1 using robot1",
-             "Place patty1 on stove1 using robot1", ("iscooked", "patty1"),
-             (("iscooking", "patty1"), [True, True, False, False, True, False])),
-    "fry": (kitchen(["fryer"], items=[("chicken", 0, ["isfryable"])]),
-            "Fry chicken1 on fryer1 using robot1", "Pick up chicken1 from fryer1 using robot1",
-            "Place chicken1 on fryer1 using robot1", ("isfried", "chicken1"), None),
-    "fill": (kitchen(["sink"], containers=[("pot", 0)]),
-             "Fill pot1 with water from sink1 using robot1", "Pick up pot1 from sink1 using robot1",
-             "Place pot1 on sink1 using robot1", ("iswater", "water1"), None),
-    "boil": (kitchen(["stove"], containers=[("pot", 0)], meals=[("water", 0)]),
-             "Boil pot1's contents on stove1 using robot1", "Pick up pot1 from stove1 using robot1",
-             "Place pot1 on stove1 using robot1", ("isboiling", "water1"), None),
+    "cook": (
+        kitchen(["stove"], items=[("patty", 0, ["iscookable"])]),
+        "Cook patty1 on stove1 using robot1",
+        "Pick up patty1 from stove1 using robot1",
+        "Place patty1 on stove1 using robot1",
+        ("iscooked", "patty1"),
+        (("iscooking", "patty1"), [True, True, False, False, True, False]),
+    ),
+    "fry": (
+        kitchen(["fryer"], items=[("chicken", 0, ["isfryable"])]),
+        "Fry chicken1 on fryer1 using robot1",
+        "Pick up chicken1 from fryer1 using robot1",
+        "Place chicken1 on fryer1 using robot1",
+        ("isfried", "chicken1"),
+        None,
+    ),
+    "fill": (
+        kitchen(["sink"], containers=[("pot", 0)]),
+        "Fill pot1 with water from sink1 using robot1",
+        "Pick up pot1 from sink1 using robot1",
+        "Place pot1 on sink1 using robot1",
+        ("iswater", "water1"),
+        None,
+    ),
+    "boil": (
+        kitchen(["stove"], containers=[("pot", 0)], meals=[("water", 0)]),
+        "Boil pot1's contents on stove1 using robot1",
+        "Pick up pot1 from stove1 using robot1",
+        "Place pot1 on stove1 using robot1",
+        ("isboiling", "water1"),
+        None,
+    ),
     # fx "not isfrozen": taking the fish out of the sink makes it frozen again until it is put back
-    "thaw": (kitchen(["sink"], items=[("fish", 0, ["isfrozen"])]),
-             "Thaw fish1 in sink1 using robot1", "Pick up fish1 from sink1 using robot1",
-             "Place fish1 on sink1 using robot1", ("isthawed", "fish1"),
-             (("isfrozen", "fish1"), [False, False, True, True, False, False])),
+    "thaw": (
+        kitchen(["sink"], items=[("fish", 0, ["isfrozen"])]),
+        "Thaw fish1 in sink1 using robot1",
+        "Pick up fish1 from sink1 using robot1",
+        "Place fish1 on sink1 using robot1",
+        ("isthawed", "fish1"),
+        (("isfrozen", "fish1"), [False, False, True, True, False, False]),
+    ),
 }
 
 
@@ -279,7 +402,7 @@ def test_take_away_undoes_and_pauses_put_back_resumes_where_it_stopped(kind):
         ([("conditional", 2)], False, own_trace[2]),  # taken away: own effect negated, no tick
         ([("conditional", 2)], False, own_trace[3]),  # still away: paused, negated again
         ([("conditional", 3)], False, own_trace[4]),  # put back: own effect again, timer goes on
-        ([], True, own_trace[5]),                     # fires two steps late; nothing restarted
+        ([], True, own_trace[5]),  # fires two steps late; nothing restarted
     ]
 
 
@@ -287,55 +410,59 @@ def test_cook_take_away_and_put_back_exact_observations():
     state = start(CASES["cook"][0])
     goal = "Test goal"
     act(state, "Cook patty1 on stove1 using robot1")
-    assert state.observation(goal) == "\n".join([
-        "Station stove1:",
-        "stove1 is a stove",
-        "stove1 has robot1 at it",
-        "stove1 holds patty1",
-        "stove1 has patty1",
-        "",
-        "Item patty1:",
-        "patty1 is a patty",
-        "patty1 is cookable",
-        "patty1 is cooking",
-        "patty1 is on stove1",
-        "patty1 is at stove1",
-        "patty1 is clear",
-        "",
-        "Player robot1:",
-        "robot1 is a robot",
-        "robot1 is at stove1",
-        "robot1 holds nothing",
-        "",
-        "Valid Actions:",
-        "Pick up patty1 from stove1 using robot1",
-        "Do nothing",
-        "",
-        "Goal: Test goal",
-    ])
+    assert state.observation(goal) == "\n".join(
+        [
+            "Station stove1:",
+            "stove1 is a stove",
+            "stove1 has robot1 at it",
+            "stove1 holds patty1",
+            "stove1 has patty1",
+            "",
+            "Item patty1:",
+            "patty1 is a patty",
+            "patty1 is cookable",
+            "patty1 is cooking",
+            "patty1 is on stove1",
+            "patty1 is at stove1",
+            "patty1 is clear",
+            "",
+            "Player robot1:",
+            "robot1 is a robot",
+            "robot1 is at stove1",
+            "robot1 holds nothing",
+            "",
+            "Valid Actions:",
+            "Pick up patty1 from stove1 using robot1",
+            "Do nothing",
+            "",
+            "Goal: Test goal",
+        ]
+    )
     act(state, "Pick up patty1 from stove1 using robot1")
-    held = "\n".join([
-        "Station stove1:",
-        "stove1 is a stove",
-        "stove1 has robot1 at it",
-        "stove1 is empty",
-        "",
-        "Item patty1:",
-        "patty1 is a patty",
-        "patty1 is cookable",
-        "patty1 is held by robot1",
-        "",
-        "Player robot1:",
-        "robot1 is a robot",
-        "robot1 is at stove1",
-        "robot1 holds patty1",
-        "",
-        "Valid Actions:",
-        "Place patty1 on stove1 using robot1",
-        "Do nothing",
-        "",
-        "Goal: Test goal",
-    ])
+    held = "\n".join(
+        [
+            "Station stove1:",
+            "stove1 is a stove",
+            "stove1 has robot1 at it",
+            "stove1 is empty",
+            "",
+            "Item patty1:",
+            "patty1 is a patty",
+            "patty1 is cookable",
+            "patty1 is held by robot1",
+            "",
+            "Player robot1:",
+            "robot1 is a robot",
+            "robot1 is at stove1",
+            "robot1 holds patty1",
+            "",
+            "Valid Actions:",
+            "Place patty1 on stove1 using robot1",
+            "Do nothing",
+            "",
+            "Goal: Test goal",
+        ]
+    )
     assert state.observation(goal) == held
     act(state, "Do nothing")
     assert state.observation(goal) == held
@@ -350,7 +477,10 @@ def test_cook_take_away_and_put_back_exact_observations():
     assert "patty1 is cooked" in obs and "patty1 is cooking" not in obs
     # not cooking any more: Cook is offered again (the domain has no "not cooked" precondition)
     assert state.valid_actions() == (
-        "Pick up patty1 from stove1 using robot1", "Cook patty1 on stove1 using robot1", "Do nothing")
+        "Pick up patty1 from stove1 using robot1",
+        "Cook patty1 on stove1 using robot1",
+        "Do nothing",
+    )
 
 
 def test_fill_pot_taken_off_the_sink_creates_its_water_two_steps_late():
@@ -375,10 +505,10 @@ def test_fill_pot_taken_off_the_sink_creates_its_water_two_steps_late():
 def test_reissuing_the_action_after_put_back_reuses_the_paused_effect():
     """Fry has no "not frying" precondition: frying again continues the registered timer."""
     state = start(CASES["fry"][0])
-    act(state, "Fry chicken1 on fryer1 using robot1")              # 1
-    act(state, "Pick up chicken1 from fryer1 using robot1")        # paused at 1
-    act(state, "Place chicken1 on fryer1 using robot1")            # 2
-    act(state, "Fry chicken1 on fryer1 using robot1")              # same effect: 3, not a new one at 1
+    act(state, "Fry chicken1 on fryer1 using robot1")  # 1
+    act(state, "Pick up chicken1 from fryer1 using robot1")  # paused at 1
+    act(state, "Place chicken1 on fryer1 using robot1")  # 2
+    act(state, "Fry chicken1 on fryer1 using robot1")  # same effect: 3, not a new one at 1
     assert timers(state) == [("conditional", 3)]
     act(state, "Do nothing")
     assert state.is_true("isfried", "chicken1") and state.effects == []
@@ -386,17 +516,17 @@ def test_reissuing_the_action_after_put_back_reuses_the_paused_effect():
 
 def test_cooking_on_another_stove_starts_a_new_timer_and_leaves_the_first_paused():
     state = start(kitchen(["stove", "stove"], items=[("patty", 0, ["iscookable"])]))
-    act(state, "Cook patty1 on stove1 using robot1")               # first timer 1
-    act(state, "Do nothing")                                       # 2
+    act(state, "Cook patty1 on stove1 using robot1")  # first timer 1
+    act(state, "Do nothing")  # 2
     act(state, "Pick up patty1 from stove1 using robot1")
     act(state, "Move robot1 from stove1 to stove2")
     act(state, "Place patty1 on stove2 using robot1")
-    assert not state.is_true("iscooking", "patty1")                # the first effect is not met there
+    assert not state.is_true("iscooking", "patty1")  # the first effect is not met there
     assert "Cook patty1 on stove2 using robot1" in state.valid_actions()
     act(state, "Cook patty1 on stove2 using robot1")
     # a second effect (its conditions name stove2) from zero; the first stays registered, paused at 2
     assert timers(state) == [("conditional", 2), ("conditional", 1)]
-    assert state.is_true("iscooking", "patty1")                    # the newer effect updates last
+    assert state.is_true("iscooking", "patty1")  # the newer effect updates last
     for _ in range(2):
         act(state, "Do nothing")
     assert not state.is_true("iscooked", "patty1")

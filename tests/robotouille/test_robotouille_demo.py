@@ -42,8 +42,7 @@ def _flat_actions(style: str, replies) -> list[str]:
 def test_flat_styles_solve_the_demo(demo, style):
     replies = demo.replies[style]
     for reply in replies:
-        expected = {"react": {"think", "action"}, "act": {"action"},
-                    "cot": {"think", "actions"}, "standard": {"actions"}}[style]
+        expected = {"react": {"think", "action"}, "act": {"action"}, "cot": {"think", "actions"}, "standard": {"actions"}}[style]
         assert set(reply) == expected
     actions = _flat_actions(style, replies)
     assert actions == ACTIONS and len(actions) == 22
@@ -127,7 +126,11 @@ def test_recap_replies_follow_the_call_order_and_solve_the_demo(demo):
     ]
     # three levels: root -> dish step -> board/onion subtask -> primitive actions
     refined = {task for purpose, task in sim.calls if purpose == "refine"}
-    assert {"Prepare a onion cheese sandwich on a table", "Prepare a cut onion on board1",
-            "Clear lettuce1 off board1", "Cut onion1 three times"} <= refined
+    assert {
+        "Prepare a onion cheese sandwich on a table",
+        "Prepare a cut onion on board1",
+        "Clear lettuce1 off board1",
+        "Cut onion1 three times",
+    } <= refined
     assert sim.calls[0] == ("task", "Prepare a onion cheese sandwich on a table")
     assert len(sim.calls) == len(demo.replies["recap"])

@@ -17,32 +17,39 @@ from .helpers import DATA, instance_record, require_data
 
 def _domain_with_extras():
     raw = copy.deepcopy(json.loads((require_data() / "domain" / "robotouille.json").read_text()))
-    raw["action_defs"].insert(0, {
-        "name": "discard",
-        "precons": [
-            {"predicate": "has_item", "params": ["p1", "i1"], "is_true": True},
-            {"predicate": "loc", "params": ["p1", "s1"], "is_true": True},
-            {"predicate": "issink", "params": ["s1"], "is_true": True},
-        ],
-        "immediate_fx": [
-            {"predicate": "has_item", "params": ["p1", "i1"], "is_true": False},
-            {"predicate": "nothing", "params": ["p1"], "is_true": True},
-        ],
-        "sfx": [{"type": "deletion", "param": "i1", "fx": [], "sfx": []}],
-        "language_description": "Throw {i1} away at {s1} using {p1}",
-    })
-    raw["action_defs"].insert(0, {
-        "name": "chop",
-        "precons": [
-            {"predicate": "item_on", "params": ["i1", "s1"], "is_true": True},
-            {"predicate": "loc", "params": ["p1", "s1"], "is_true": True},
-            {"predicate": "iscut", "params": ["i1"], "is_true": False},
-        ],
-        "immediate_fx": [],
-        "sfx": [{"type": "immediate", "param": "i1",
-                 "fx": [{"predicate": "iscut", "params": ["i1"], "is_true": True}], "sfx": []}],
-        "language_description": "Chop {i1} at once on {s1} using {p1}",
-    })
+    raw["action_defs"].insert(
+        0,
+        {
+            "name": "discard",
+            "precons": [
+                {"predicate": "has_item", "params": ["p1", "i1"], "is_true": True},
+                {"predicate": "loc", "params": ["p1", "s1"], "is_true": True},
+                {"predicate": "issink", "params": ["s1"], "is_true": True},
+            ],
+            "immediate_fx": [
+                {"predicate": "has_item", "params": ["p1", "i1"], "is_true": False},
+                {"predicate": "nothing", "params": ["p1"], "is_true": True},
+            ],
+            "sfx": [{"type": "deletion", "param": "i1", "fx": [], "sfx": []}],
+            "language_description": "Throw {i1} away at {s1} using {p1}",
+        },
+    )
+    raw["action_defs"].insert(
+        0,
+        {
+            "name": "chop",
+            "precons": [
+                {"predicate": "item_on", "params": ["i1", "s1"], "is_true": True},
+                {"predicate": "loc", "params": ["p1", "s1"], "is_true": True},
+                {"predicate": "iscut", "params": ["i1"], "is_true": False},
+            ],
+            "immediate_fx": [],
+            "sfx": [
+                {"type": "immediate", "param": "i1", "fx": [{"predicate": "iscut", "params": ["i1"], "is_true": True}], "sfx": []}
+            ],
+            "language_description": "Chop {i1} at once on {s1} using {p1}",
+        },
+    )
     return parse_domain(raw)
 
 
@@ -66,8 +73,11 @@ def test_deletion_removes_the_object_everywhere():
     domain = _domain_with_extras()
     record = instance_record("synchronous", "0_cheese_sandwich", 42)
     state = build_problem(domain, record["generated_environment_json"]).state
-    for action in ["Pick up cheese1 from table1 using robot1", "Move robot1 from table1 to sink1",
-                   "Throw cheese1 away at sink1 using robot1"]:
+    for action in [
+        "Pick up cheese1 from table1 using robot1",
+        "Move robot1 from table1 to sink1",
+        "Throw cheese1 away at sink1 using robot1",
+    ]:
         _apply(state, action)
     assert "cheese1" not in state.types and "cheese1" not in state.objects["item"]
     assert not any("cheese1" in row for _, row in state.true_facts())

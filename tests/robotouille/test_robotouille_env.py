@@ -21,7 +21,11 @@ def test_registry_finds_the_benchmark():
     assert get_benchmark("robotouille") is BENCHMARK
     env = make_env(POTATO, data_dir=str(require_data()))
     assert (env.instance_id, env.benchmark, env.split, env.task, env.seed) == (
-        POTATO, "robotouille", "asynchronous", "5_potato_soup", 42
+        POTATO,
+        "robotouille",
+        "asynchronous",
+        "5_potato_soup",
+        42,
     )
 
 
@@ -106,8 +110,12 @@ def test_episode_ends_unsuccessfully_at_max_steps():
 def test_invalid_action_is_rejected_and_changes_nothing():
     env = BENCHMARK.make("robotouille/synchronous/0_cheese_sandwich@42", data_dir=str(DATA))
     reset = env.reset()
-    for bad in ["Pick up cheese1 from table1", "pick up cheese1 from table1 using robot1",
-                "Move robot1 from table1 to table1", ""]:
+    for bad in [
+        "Pick up cheese1 from table1",
+        "pick up cheese1 from table1 using robot1",
+        "Move robot1 from table1 to table1",
+        "",
+    ]:
         with pytest.raises(InvalidActionError) as info:
             env.step(bad)
         assert repr(bad) in str(info.value)
@@ -133,8 +141,19 @@ def test_failure_hints_name_the_usual_causes_and_the_closest_action():
 def test_rules_differ_for_sync_and_async():
     sync, async_ = rules_text("synchronous"), rules_text("asynchronous")
     for text in (sync, async_):
-        for topic in ("Station", "Item", "Player", "Container", "Meal", "at most one item",
-                      "three times", "stacks it on top", "Sandwich", "Hamburger", "Soup"):
+        for topic in (
+            "Station",
+            "Item",
+            "Player",
+            "Container",
+            "Meal",
+            "at most one item",
+            "three times",
+            "stacks it on top",
+            "Sandwich",
+            "Hamburger",
+            "Soup",
+        ):
             assert topic in text
     assert "Do nothing action once for each" in async_ and "Do nothing" not in sync
     env = BENCHMARK.make(POTATO, data_dir=str(DATA))

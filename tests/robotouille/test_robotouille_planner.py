@@ -79,11 +79,14 @@ def test_expert_plan_is_empty_once_solved_and_none_when_unreachable():
     _run(env, prefix)
     for _ in range(3):
         env.step("Do nothing")
-    _run(env, [
-        "Pick up pot1 from sink2 using robot1",
-        "Move robot1 from sink2 to board2",
-        "Fill bowl1 with pot1's contents using robot1",
-    ])
+    _run(
+        env,
+        [
+            "Pick up pot1 from sink2 using robot1",
+            "Move robot1 from sink2 to board2",
+            "Fill bowl1 with pot1's contents using robot1",
+        ],
+    )
     assert "water1 is inside of bowl1" in env.observation()
     planner = Planner(env.state, env.problem.goal)
     assert planner.plan(env.state, 400) is None

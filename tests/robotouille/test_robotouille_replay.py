@@ -46,9 +46,17 @@ def test_every_trajectory_replays_through_the_environment_api():
     checked = 0
     for name in ALL_FILES:
         record = json.loads((require_data() / "trajectories" / name).read_text())
-        env = RobotouilleEnv(domain=load_domain(DATA), problem_json=record["generated_environment_json"],
-                             source=name, instance_id=name, split="test", task=name, seed=record["seed"],
-                             optimal_steps=None, max_steps=len(record["steps"]) + 1)
+        env = RobotouilleEnv(
+            domain=load_domain(DATA),
+            problem_json=record["generated_environment_json"],
+            source=name,
+            instance_id=name,
+            split="test",
+            task=name,
+            seed=record["seed"],
+            optimal_steps=None,
+            max_steps=len(record["steps"]) + 1,
+        )
         reset = env.reset()
         assert reset.observation == record["initial"]["observation"], name
         for t, step in enumerate(record["steps"], start=1):
@@ -94,7 +102,8 @@ def test_replay_of_an_action_the_engine_rejects(tmp_path):
     changed = tmp_path / "bad_action.json"
     changed.write_text(json.dumps(record))
     assert replay_file(str(changed), data_dir=str(DATA)) == (
-        False, "step 1 ('Fly robot1 to the moon'): action is not valid in our engine"
+        False,
+        "step 1 ('Fly robot1 to the moon'): action is not valid in our engine",
     )
 
 

@@ -29,7 +29,18 @@ def test_each_table_has_run_id_then_the_record_fields_and_a_version():
 
 
 def test_records_round_trip_through_part_files(tmp_path):
-    node = NodeRecord("e1", 3, 1, 2, 0, "cut lettuce", "composite", "done", (NodeVersion(0, "why", ("a", "b"), 4, 9), NodeVersion(1, None, (), None, None)), None)
+    node = NodeRecord(
+        "e1",
+        3,
+        1,
+        2,
+        0,
+        "cut lettuce",
+        "composite",
+        "done",
+        (NodeVersion(0, "why", ("a", "b"), 4, 9), NodeVersion(1, None, (), None, None)),
+        None,
+    )
     records = [
         MessageRecord("e1", 0, "user", "task", "hello", None, True),
         CallRecord("e1", 0, "e1#0", "task", (0,), "offline/expert", "ok", prompt_tokens=10, cost_usd=0.25),
@@ -42,7 +53,13 @@ def test_records_round_trip_through_part_files(tmp_path):
     nodes, bad = read_table(tmp_path, "tree_nodes")
     assert bad == []
     assert nodes.to_pylist() == [record_to_row(node, "run-1")]
-    assert nodes.to_pylist()[0]["versions"][0] == {"version": 0, "think": "why", "subtasks": ["a", "b"], "call_index": 4, "message_seq": 9}
+    assert nodes.to_pylist()[0]["versions"][0] == {
+        "version": 0,
+        "think": "why",
+        "subtasks": ["a", "b"],
+        "call_index": 4,
+        "message_seq": 9,
+    }
     calls, _ = read_table(tmp_path, "llm_calls")
     assert calls.column("window_seqs").to_pylist() == [[0]]
 

@@ -20,21 +20,60 @@ ADDED = ("label", "profile", "ablation", "provider_model")
 RECAP_CFG = json.dumps({"window": 64, "think": "none", "max_level": None, "name_only": False, "shortcut": True})
 
 
-def _v1_row(eid: str, method: str, bench: str, split: str, task: str, inst: str, end: str, error: str | None = None,
-            cfg: str = "{}") -> dict:
-    return {"run_id": "old", "episode_id": f"{eid}-1", "unit_id": eid, "attempt": 1, "benchmark": bench, "split": split,
-            "task": task, "instance_id": inst, "seed": 0, "method": method, "method_config": cfg, "model": "gpt-4o",
-            "end_reason": end, "success": end == "success", "steps": 1, "llm_calls": 1, "prompt_tokens": 1,
-            "cached_prompt_tokens": 0, "completion_tokens": 1, "cost_usd": 0.5, "wall_s": 1.0, "step_cap": 10,
-            "step_multiplier": 4.0, "optimal_steps": None, "max_depth": 0, "error": error, "worker_id": "w",
-            "started_at": 1.0, "ended_at": 2.0, "test_double": False}
+def _v1_row(
+    eid: str, method: str, bench: str, split: str, task: str, inst: str, end: str, error: str | None = None, cfg: str = "{}"
+) -> dict:
+    return {
+        "run_id": "old",
+        "episode_id": f"{eid}-1",
+        "unit_id": eid,
+        "attempt": 1,
+        "benchmark": bench,
+        "split": split,
+        "task": task,
+        "instance_id": inst,
+        "seed": 0,
+        "method": method,
+        "method_config": cfg,
+        "model": "gpt-4o",
+        "end_reason": end,
+        "success": end == "success",
+        "steps": 1,
+        "llm_calls": 1,
+        "prompt_tokens": 1,
+        "cached_prompt_tokens": 0,
+        "completion_tokens": 1,
+        "cost_usd": 0.5,
+        "wall_s": 1.0,
+        "step_cap": 10,
+        "step_multiplier": 4.0,
+        "optimal_steps": None,
+        "max_depth": 0,
+        "error": error,
+        "worker_id": "w",
+        "started_at": 1.0,
+        "ended_at": 2.0,
+        "test_double": False,
+    }
 
 
 ROWS = [
-    _v1_row("u1", "recap[paper,level_3]", "robotouille", "synchronous", "6_burger", "robotouille/synchronous/6_burger@42", "success"),
-    _v1_row("u2", "my-recap", "alfworld", "heat", "pick_heat_then_place_in_recep", "alfworld/heat/game-1", "step_cap", cfg=RECAP_CFG),
-    _v1_row("u3", "react", "robotouille", "", "", "robotouille/asynchronous/2_soup@84", "env_error",
-            "gave up after 3 failed attempts (infrastructure: worker_lost); last: ActorDiedError: gone"),
+    _v1_row(
+        "u1", "recap[paper,level_3]", "robotouille", "synchronous", "6_burger", "robotouille/synchronous/6_burger@42", "success"
+    ),
+    _v1_row(
+        "u2", "my-recap", "alfworld", "heat", "pick_heat_then_place_in_recep", "alfworld/heat/game-1", "step_cap", cfg=RECAP_CFG
+    ),
+    _v1_row(
+        "u3",
+        "react",
+        "robotouille",
+        "",
+        "",
+        "robotouille/asynchronous/2_soup@84",
+        "env_error",
+        "gave up after 3 failed attempts (infrastructure: worker_lost); last: ActorDiedError: gone",
+    ),
     _v1_row("u4", "react", "alfworld", "put", "pick_and_place_simple", "alfworld/put/game-2", "llm_error", "auth: bad key"),
 ]
 
@@ -43,8 +82,17 @@ ROWS = [
 def v1_run(tmp_path):
     """A run folder as recap wrote it under schema version 1 (run.json, plan.json, one part)."""
     (tmp_path / "run.json").write_text(json.dumps({"run_id": "old", "run": "old", "created_at": 1.0, "schema_version": 1}))
-    plan = [{"unit_id": r["unit_id"], "key": r["unit_id"], "instance_id": r["instance_id"], "method": r["method"],
-             "model": "gpt-4o", "seed": 0} for r in ROWS]
+    plan = [
+        {
+            "unit_id": r["unit_id"],
+            "key": r["unit_id"],
+            "instance_id": r["instance_id"],
+            "method": r["method"],
+            "model": "gpt-4o",
+            "seed": 0,
+        }
+        for r in ROWS
+    ]
     (tmp_path / "plan.json").write_text(json.dumps({"hash_version": 1, "units": plan}))
     current = arrow_schema("episodes")
     v1 = pa.schema([f for f in current if f.name not in ADDED], metadata={b"recap_eval_schema_version": b"1"})
@@ -65,8 +113,9 @@ EXPECTED = [
 def test_storage_maps_version_1_episodes(v1_run):
     table, bad = read_table(v1_run, "episodes")
     assert bad == [] and table.schema == arrow_schema("episodes")
-    got = [(r["label"], r["method"], r["profile"], r["ablation"], r["split"], r["task"], r["end_reason"])
-           for r in table.to_pylist()]
+    got = [
+        (r["label"], r["method"], r["profile"], r["ablation"], r["split"], r["task"], r["end_reason"]) for r in table.to_pylist()
+    ]
     assert got == EXPECTED
     assert [r["provider_model"] for r in table.to_pylist()] == [None] * 4
     assert [r["error"] for r in table.to_pylist()] == [r["error"] for r in ROWS]  # kept: the kind reads from it
@@ -94,11 +143,11 @@ def test_a_version_1_run_is_read_not_continued(v1_run):
 # -- version 2 -> 3: llm_calls gained model_name --------------------------------------------------
 V2_CALLS = [
     # (model, deployment) as version 2 wrote them -> the model's name in the sweep
-    ("offline/expert", "expert-a", "expert-a"),                       # labelled: deployment = label
-    ("offline/expert", "offline/expert", "offline/expert"),           # unlabelled
+    ("offline/expert", "expert-a", "expert-a"),  # labelled: deployment = label
+    ("offline/expert", "offline/expert", "offline/expert"),  # unlabelled
     ("openai/gpt-4o", "openai/gpt-4o@http://h:1/v1#KEY", "openai/gpt-4o"),  # unlabelled, base URL + key
     ("openai/gpt-4o", "openai/gpt-4o#KEY", "openai/gpt-4o"),
-    ("", None, None),                                                 # a failed call the agent recorded
+    ("", None, None),  # a failed call the agent recorded
 ]
 
 

@@ -32,11 +32,26 @@ class Browser:
             os.dup2(from_child_w, 4)
 
         self.proc = subprocess.Popen(
-            [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--no-default-browser-check",
-             "--disable-extensions", "--remote-debugging-pipe", f"--user-data-dir={self._profile.name}",
-             f"--window-size={width},{height}", "--hide-scrollbars", "about:blank"],
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            preexec_fn=fds, pass_fds=(3, 4))
+            [
+                chromium,
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--no-first-run",
+                "--no-default-browser-check",
+                "--disable-extensions",
+                "--remote-debugging-pipe",
+                f"--user-data-dir={self._profile.name}",
+                f"--window-size={width},{height}",
+                "--hide-scrollbars",
+                "about:blank",
+            ],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            preexec_fn=fds,
+            pass_fds=(3, 4),
+        )
         os.close(to_child_r)
         os.close(from_child_w)
         self._next = 0
@@ -50,7 +65,9 @@ class Browser:
         self.session = self.send("Target.attachToTarget", targetId=page["targetId"], flatten=True)["sessionId"]
         for domain in ("Page.enable", "Runtime.enable"):
             self.send(domain, session=True)
-        self.send("Emulation.setDeviceMetricsOverride", session=True, width=width, height=height, deviceScaleFactor=1, mobile=False)
+        self.send(
+            "Emulation.setDeviceMetricsOverride", session=True, width=width, height=height, deviceScaleFactor=1, mobile=False
+        )
 
     def _read(self) -> None:
         buf = b""
@@ -98,7 +115,9 @@ class Browser:
     def eval(self, expression: str) -> Any:
         r = self.send("Runtime.evaluate", session=True, expression=expression, returnByValue=True, awaitPromise=True)
         if "exceptionDetails" in r:
-            raise BrowserError(f"script error: {r['exceptionDetails'].get('exception', {}).get('description') or r['exceptionDetails']}")
+            raise BrowserError(
+                f"script error: {r['exceptionDetails'].get('exception', {}).get('description') or r['exceptionDetails']}"
+            )
         return r["result"].get("value")
 
     def wait_for(self, expression: str, timeout: float = 15) -> Any:
@@ -121,8 +140,10 @@ class Browser:
     def wait_ready(self, url_prefix: str = "", ready: str = "data-ready") -> None:
         """The page's script has run (app.js sets data-ready; the report data-report-ready), at a
         URL starting with url_prefix."""
-        self.wait_for(f"document.readyState === 'complete' && location.href.startsWith({json.dumps(url_prefix)}) "
-                      f"&& document.body && document.body.getAttribute({json.dumps(ready)}) === '1'")
+        self.wait_for(
+            f"document.readyState === 'complete' && location.href.startsWith({json.dumps(url_prefix)}) "
+            f"&& document.body && document.body.getAttribute({json.dumps(ready)}) === '1'"
+        )
 
     def screenshot(self, path: Path) -> Path:
         data = self.send("Page.captureScreenshot", session=True, format="png")["data"]

@@ -56,7 +56,7 @@ def shot_ok(b: Browser, path: Path) -> None:
     assert img[:2] == (1280, 900)
     assert count_color(img, HEADER_BLUE) >= 1280 * 25  # the header bar (about 37 px high)
     assert count_color(img, (0x22, 0x22, 0x22), tol=40) >= 500  # dark text in the body
-    assert len(set(img[3][i:i + 3] for i in range(0, 1280 * 900 * img[2], img[2] * 97))) > 4  # not one flat colour
+    assert len(set(img[3][i : i + 3] for i in range(0, 1280 * 900 * img[2], img[2] * 97))) > 4  # not one flat colour
 
 
 def ids_on_page(b: Browser) -> list[str]:
@@ -65,10 +65,14 @@ def ids_on_page(b: Browser) -> list[str]:
 
 def test_runs_page(viewer, browser, real_runs, tmp_path):
     browser.goto(viewer.url)
-    rows = browser.eval("Array.from(document.querySelectorAll('#runs tbody tr')).map(r => "
-                        "[r.dataset.run, r.cells[0].textContent, r.cells[5].textContent, r.cells[6].textContent])")
+    rows = browser.eval(
+        "Array.from(document.querySelectorAll('#runs tbody tr')).map(r => "
+        "[r.dataset.run, r.cells[0].textContent, r.cells[5].textContent, r.cells[6].textContent])"
+    )
     planned = {run_id(d): len(json.loads((d / "plan.json").read_text())["units"]) for d in real_runs}
-    assert sorted(rows) == sorted([[run_id(d), f"view-{d.name}", str(planned[run_id(d)]), str(planned[run_id(d)])] for d in real_runs])
+    assert sorted(rows) == sorted(
+        [[run_id(d), f"view-{d.name}", str(planned[run_id(d)]), str(planned[run_id(d)])] for d in real_runs]
+    )
     no_errors(browser)
     shot_ok(browser, tmp_path / "runs.png")
 
@@ -88,13 +92,17 @@ def test_list_filter_and_search(viewer, browser, real_runs, tmp_path):
     # search: a line of one instance's task message, typed in another letter case; every
     # episode with a message that holds it (in any letter case), in any method
     messages = table(real_runs, "messages")
-    task_lines = Counter(line for m in messages if m["kind"] == "task" for line in set(m["content"].splitlines()) if len(line) > 12)
+    task_lines = Counter(
+        line for m in messages if m["kind"] == "task" for line in set(m["content"].splitlines()) if len(line) > 12
+    )
     phrase = sorted(line for line, n in task_lines.items() if 0 < n < len(episodes) // 2)[0]
     expected = sorted({m["episode_id"] for m in messages if phrase.lower() in m["content"].lower()})
     assert 0 < len(expected) < len(episodes)
     browser.goto(viewer.url + "episodes")
-    browser.eval(f"document.getElementById('q').value = {json.dumps(phrase.swapcase())}; "
-                 "document.getElementById('filters').requestSubmit()")
+    browser.eval(
+        f"document.getElementById('q').value = {json.dumps(phrase.swapcase())}; "
+        "document.getElementById('filters').requestSubmit()"
+    )
     browser.wait_ready(viewer.url + "episodes?")
     assert sorted(ids_on_page(browser)) == expected
     no_errors(browser)
@@ -118,9 +126,11 @@ def test_episode_tree_and_call_window(viewer, browser, real_runs, tmp_path):
     browser.eval("document.getElementById('expand-all').click()")
     assert browser.eval("document.querySelectorAll('#tree details.node:not([open])').length") == 0
     # every version of every node, with its subtasks, in order
-    shown = browser.eval("Object.fromEntries(Array.from(document.querySelectorAll('#tree details.node')).map(d => [d.dataset.node, "
-                         "Array.from(d.querySelector(':scope > ol.versions').children).map(v => "
-                         "Array.from(v.querySelectorAll('ol.subtasks > li')).map(li => li.textContent))]))")
+    shown = browser.eval(
+        "Object.fromEntries(Array.from(document.querySelectorAll('#tree details.node')).map(d => [d.dataset.node, "
+        "Array.from(d.querySelector(':scope > ol.versions').children).map(v => "
+        "Array.from(v.querySelectorAll('ol.subtasks > li')).map(li => li.textContent))]))"
+    )
     assert shown == {str(k): [list(v["subtasks"]) for v in n["versions"]] for k, n in mine.items()}
 
     # the call with the longest window: its exact messages, in window order
@@ -129,8 +139,10 @@ def test_episode_tree_and_call_window(viewer, browser, real_runs, tmp_path):
     content = {m["seq"]: m["content"] for m in table(real_runs, "messages") if m["episode_id"] == eid}
     browser.eval(f"document.querySelector('a.window[data-call=\"{call['call_index']}\"]').click()")
     browser.wait_for(f"document.getElementById('window-panel').getAttribute('data-call') === '{call['call_index']}'")
-    got = browser.eval("Array.from(document.querySelectorAll('#window-panel li.msg')).map(li => [Number(li.dataset.seq), "
-                       "li.querySelector('pre').textContent])")
+    got = browser.eval(
+        "Array.from(document.querySelectorAll('#window-panel li.msg')).map(li => [Number(li.dataset.seq), "
+        "li.querySelector('pre').textContent])"
+    )
     assert got == [[s, content[s]] for s in call["window_seqs"]]
     assert len(got) >= 3
     no_errors(browser)
@@ -149,15 +161,25 @@ def test_compare_two_runs(viewer, browser, real_runs, tmp_path):
     assert len(pairs) == 8 and a_only > 0
 
     browser.goto(viewer.url + "compare")
-    browser.eval(f"var f = document.getElementById('compare-run'); f.elements.a.value = {json.dumps(a)}; "
-                 f"f.elements.b.value = {json.dumps(b)}; f.requestSubmit()")
+    browser.eval(
+        f"var f = document.getElementById('compare-run'); f.elements.a.value = {json.dumps(a)}; "
+        f"f.elements.b.value = {json.dumps(b)}; f.requestSubmit()"
+    )
     browser.wait_ready(viewer.url + "compare?")
     summary = browser.eval("Array.from(document.querySelectorAll('#summary tbody td')).map(td => td.textContent)")
     p = mcnemar_exact(a_only, b_only)
-    assert summary[:6] == [str(len(pairs)), str(sum(x["success"] for x, _ in pairs)), str(sum(y["success"] for _, y in pairs)),
-                           str(a_only), str(b_only), "<0.0001" if p < Fraction(1, 10000) else f"{float(p):.4f}"]
-    links = browser.eval("Array.from(document.querySelectorAll('#discordant tbody tr')).map(r => "
-                         "Array.from(r.querySelectorAll('a.ep')).map(a => a.textContent))")
+    assert summary[:6] == [
+        str(len(pairs)),
+        str(sum(x["success"] for x, _ in pairs)),
+        str(sum(y["success"] for _, y in pairs)),
+        str(a_only),
+        str(b_only),
+        "<0.0001" if p < Fraction(1, 10000) else f"{float(p):.4f}",
+    ]
+    links = browser.eval(
+        "Array.from(document.querySelectorAll('#discordant tbody tr')).map(r => "
+        "Array.from(r.querySelectorAll('a.ep')).map(a => a.textContent))"
+    )
     assert sorted(links) == sorted([x["episode_id"], y["episode_id"]] for x, y in pairs if x["success"] != y["success"])
     shot_ok(browser, tmp_path / "compare.png")
     # a discordant pair's B episode opens
@@ -184,7 +206,9 @@ def test_report_episode_ids_link_to_the_viewer(viewer, browser, real_runs, tmp_p
     port = viewer.server_address[1]
     browser.goto(page + f"?viewer={port}", "data-report-ready")
     browser.wait_for(f"document.body.getAttribute('data-viewer') === 'http://127.0.0.1:{port}/'")
-    links = browser.eval("Array.from(document.querySelectorAll('.ep-link')).map(el => [el.dataset.episode, el.querySelector('a').href])")
+    links = browser.eval(
+        "Array.from(document.querySelectorAll('.ep-link')).map(el => [el.dataset.episode, el.querySelector('a').href])"
+    )
     assert links and all(eid in ids and href.startswith(f"http://127.0.0.1:{port}/episode?id={eid}") for eid, href in links)
     browser.eval("document.querySelector('.ep-link a').click()")
     browser.wait_ready(viewer.url + "episode?")

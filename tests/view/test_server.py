@@ -32,7 +32,9 @@ def run(tmp_path_factory) -> Path:
         r["spec_yaml"] = spec
     for f in (folder / "run").glob("*.parquet"):
         f.unlink()
-    pq.write_table(__import__("pyarrow").Table.from_pylist(rows, schema=arrow_schema("run")), folder / "run" / "part-t-000001.parquet")
+    pq.write_table(
+        __import__("pyarrow").Table.from_pylist(rows, schema=arrow_schema("run")), folder / "run" / "part-t-000001.parquet"
+    )
     return folder
 
 
@@ -59,28 +61,31 @@ def error_line(body: str) -> str:
     return m.group(1)
 
 
-@pytest.mark.parametrize("path, status, message", [
-    ("/nope", 404, "no page /nope"),
-    ("/episodes?sort=password", 400, "cannot sort by &#x27;password&#x27;"),
-    ("/episodes?page=0", 400, "page must be between 1 and 1000000"),
-    ("/episodes?page=x", 400, "page and per must be whole numbers"),
-    ("/episodes?per=7", 400, "per must be one of 25, 50, 100, 200"),
-    ("/episodes?mode=nosuch", 400, "no episode has mode = &#x27;nosuch&#x27;"),
-    ("/episodes?success=maybe", 400, "success must be true or false"),
-    ("/episodes?debug=1", 400, "unknown parameter(s): debug"),
-    ("/episodes?q=" + "x" * 201, 400, "search text longer than 200 characters"),
-    ("/episode", 400, "missing parameter id"),
-    ("/episode?id=nope", 404, "no episode &#x27;nope&#x27; in these runs"),
-    ("/episode?id=A-recap-t2-42&run=other", 404, "no episode &#x27;A-recap-t2-42&#x27; in run &#x27;other&#x27;"),
-    ("/window?id=A-recap-t2-42&call=-1", 400, "call must be a whole number &gt;= 0"),
-    ("/window?id=A-recap-t2-42&call=999", 404, "episode &#x27;A-recap-t2-42&#x27; has no call 999"),
-    ("/window?id=A-recap-t2-42&call=1&call=2", 400, "give call once"),
-    ("/compare?kind=run&a=runA&b=runA", 400, "choose two different runs"),
-    ("/compare?kind=model&a=x", 400, "compare what? kind must be run or arm"),
-    ("/compare?kind=arm&a=nosuch&b=react", 400, "no arm named &#x27;nosuch&#x27;"),
-    ("/spec?run=nosuch", 404, "no sweep file recorded for run &#x27;nosuch&#x27;"),
-    ("/static/../data.py", 404, "no page /static/../data.py"),
-])
+@pytest.mark.parametrize(
+    "path, status, message",
+    [
+        ("/nope", 404, "no page /nope"),
+        ("/episodes?sort=password", 400, "cannot sort by &#x27;password&#x27;"),
+        ("/episodes?page=0", 400, "page must be between 1 and 1000000"),
+        ("/episodes?page=x", 400, "page and per must be whole numbers"),
+        ("/episodes?per=7", 400, "per must be one of 25, 50, 100, 200"),
+        ("/episodes?mode=nosuch", 400, "no episode has mode = &#x27;nosuch&#x27;"),
+        ("/episodes?success=maybe", 400, "success must be true or false"),
+        ("/episodes?debug=1", 400, "unknown parameter(s): debug"),
+        ("/episodes?q=" + "x" * 201, 400, "search text longer than 200 characters"),
+        ("/episode", 400, "missing parameter id"),
+        ("/episode?id=nope", 404, "no episode &#x27;nope&#x27; in these runs"),
+        ("/episode?id=A-recap-t2-42&run=other", 404, "no episode &#x27;A-recap-t2-42&#x27; in run &#x27;other&#x27;"),
+        ("/window?id=A-recap-t2-42&call=-1", 400, "call must be a whole number &gt;= 0"),
+        ("/window?id=A-recap-t2-42&call=999", 404, "episode &#x27;A-recap-t2-42&#x27; has no call 999"),
+        ("/window?id=A-recap-t2-42&call=1&call=2", 400, "give call once"),
+        ("/compare?kind=run&a=runA&b=runA", 400, "choose two different runs"),
+        ("/compare?kind=model&a=x", 400, "compare what? kind must be run or arm"),
+        ("/compare?kind=arm&a=nosuch&b=react", 400, "no arm named &#x27;nosuch&#x27;"),
+        ("/spec?run=nosuch", 404, "no sweep file recorded for run &#x27;nosuch&#x27;"),
+        ("/static/../data.py", 404, "no page /static/../data.py"),
+    ],
+)
 def test_bad_requests_are_4xx_with_one_line(viewer, path, status, message):
     code, headers, body = get(viewer, path)
     assert (code, error_line(body)) == (status, message)
@@ -111,15 +116,17 @@ def test_no_secret_is_served(viewer):
 
 def test_redact_spec():
     text = "models:\n  - model: m\n    api_key: abc\n    token: null\n    api_key_env: K\nnote: key sk-abcdefgh12345678 here\n"
-    assert D.redact_spec(text) == ("models:\n  - model: m\n    api_key: <redacted>\n    token: null\n    api_key_env: K\n"
-                                   "note: key <redacted> here\n")
+    assert D.redact_spec(text) == (
+        "models:\n  - model: m\n    api_key: <redacted>\n    token: null\n    api_key_env: K\nnote: key <redacted> here\n"
+    )
 
 
 def test_call_window_is_rebuilt_exactly(viewer):
     code, _, body = get(viewer, "/window?id=A-recap-t2-42&call=3&fragment=1")
     assert code == 200
-    assert body.startswith('<div class="window" data-run="runA" data-episode="A-recap-t2-42" data-call="3"><p class="window-head">'
-                           "Window of call 3 (")
+    assert body.startswith(
+        '<div class="window" data-run="runA" data-episode="A-recap-t2-42" data-call="3"><p class="window-head">Window of call 3 ('
+    )
     assert re.findall(r'<li class="msg [^"]*" id="msg-(\d+)"', body) == ["0", "1", "6", "7"]
     assert "reply stored as message 8" in body
     assert "<pre>Done: prepare onion. Observation: You hold the onion.</pre>" in body
@@ -151,8 +158,10 @@ def test_new_part_files_show_up(tmp_path):
         assert catalog.refresh() is False
         t = pq.read_table(sorted((folder / "episodes").glob("part-*.parquet"))[0]).slice(0, 1).to_pylist()
         t[0]["episode_id"], t[0]["unit_id"] = "LIVE-1", "live-unit"
-        pq.write_table(__import__("pyarrow").Table.from_pylist(t, schema=arrow_schema("episodes")),
-                       folder / "episodes" / "part-live-000001.parquet")
+        pq.write_table(
+            __import__("pyarrow").Table.from_pylist(t, schema=arrow_schema("episodes")),
+            folder / "episodes" / "part-live-000001.parquet",
+        )
         assert catalog.refresh() is True
         snap = catalog.snap
         assert snap.query("SELECT count(*) FROM _episode_list").rows[0][0] == before + 1
@@ -163,8 +172,12 @@ def test_new_part_files_show_up(tmp_path):
 
 def test_the_connection_reaches_no_file(viewer, run):
     con = viewer.catalog.snap.con
-    for sql in (f"SELECT * FROM read_parquet('{run}/episodes/*.parquet')", "SELECT * FROM read_csv('/etc/passwd')",
-                f"COPY (SELECT 1) TO '{run}/x.csv'", "SET enable_external_access = true"):
+    for sql in (
+        f"SELECT * FROM read_parquet('{run}/episodes/*.parquet')",
+        "SELECT * FROM read_csv('/etc/passwd')",
+        f"COPY (SELECT 1) TO '{run}/x.csv'",
+        "SET enable_external_access = true",
+    ):
         with pytest.raises(duckdb.Error):
             con.execute(sql)
     assert not (run / "x.csv").exists()
@@ -173,7 +186,8 @@ def test_the_connection_reaches_no_file(viewer, run):
 def test_observation_diff():
     assert observation_diff(None, "a\nb") == "a\nb"
     assert observation_diff("a\nb\nc", "a\nB\nc\nd") == (
-        '<span class="same">a</span>\n<del>b</del>\n<ins>B</ins>\n<span class="same">c</span>\n<ins>d</ins>')
+        '<span class="same">a</span>\n<del>b</del>\n<ins>B</ins>\n<span class="same">c</span>\n<ins>d</ins>'
+    )
 
 
 def test_view_command_errors(tmp_path, capsys):
@@ -188,8 +202,16 @@ def test_pages_render(viewer):
 
     arms = viewer.catalog.snap.options["arm"]
     assert len(arms) >= 2
-    for path in ("/", "/episodes", "/episode?id=A-recap-t2-42", "/compare", "/compare?" + urlencode({"kind": "arm", "a": arms[0], "b": arms[1]}),
-                 "/static/app.js", "/static/app.css", "/ping.gif"):
+    for path in (
+        "/",
+        "/episodes",
+        "/episode?id=A-recap-t2-42",
+        "/compare",
+        "/compare?" + urlencode({"kind": "arm", "a": arms[0], "b": arms[1]}),
+        "/static/app.js",
+        "/static/app.css",
+        "/ping.gif",
+    ):
         code, _, body = get(viewer, path)
         assert code == 200, (path, body[:300])
     with urllib.request.urlopen(viewer.url + "episode?id=A-recap-t2-42") as r:

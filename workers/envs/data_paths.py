@@ -92,8 +92,7 @@ def _layout_problem(loc: DataLocation, path: Path) -> str | None:
     return None
 
 
-def search(loc: DataLocation, data_dir: str | os.PathLike[str] | None = None, *,
-           stop_at_first: bool = True) -> list[Rung]:
+def search(loc: DataLocation, data_dir: str | os.PathLike[str] | None = None, *, stop_at_first: bool = True) -> list[Rung]:
     """The rungs of the search in order; the last one is ``found`` if a folder qualified.
 
     With ``stop_at_first=False`` every rung is evaluated (``recap data list`` shows them all;

@@ -135,9 +135,7 @@ def get_benchmark(name: str) -> Benchmark:
     try:
         source = _SOURCES[name]
     except KeyError:
-        raise UnknownInstanceError(
-            f"unknown benchmark {name!r}; known: {', '.join(_SOURCES)}"
-        ) from None
+        raise UnknownInstanceError(f"unknown benchmark {name!r}; known: {', '.join(_SOURCES)}") from None
     bench = _resolve(name, source)
     with _lock:
         if _SOURCES.get(name) is source:  # not unregistered meanwhile
@@ -149,8 +147,7 @@ def split_id(instance_id: str) -> tuple[str, str]:
     bench, sep, rest = instance_id.partition("/")
     if not sep or not rest:
         raise UnknownInstanceError(
-            f"instance id {instance_id!r} must look like <benchmark>/<instance>, "
-            f"benchmarks: {', '.join(_SOURCES)}"
+            f"instance id {instance_id!r} must look like <benchmark>/<instance>, benchmarks: {', '.join(_SOURCES)}"
         )
     return bench, rest
 

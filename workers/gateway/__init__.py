@@ -108,8 +108,7 @@ __all__ = [
     "require_prices",
 ]
 
-_RAY_NAMES = {"BudgetActor": "actors", "GatewayActor": "actors", "RunGateways": "actors",
-              "GatewayClient": "client"}
+_RAY_NAMES = {"BudgetActor": "actors", "GatewayActor": "actors", "RunGateways": "actors", "GatewayClient": "client"}
 
 
 def __getattr__(name: str) -> Any:

@@ -76,9 +76,18 @@ def _ledger_restored_event(run_dir: str, ledger: BudgetLedger) -> None:
         return
     stats = ledger.stats()
     detail = {"orphans": ledger.restored_orphans, "spent_usd": stats["spent_usd"]}
-    PartWriter(Path(run_dir), f"budget-{uuid.uuid4().hex[:6]}").write_records(run_id, [EventRecord(
-        ts=time.time(), source="gateway", kind="ledger_restored", severity="warning",
-        detail=json.dumps(detail, sort_keys=True))])
+    PartWriter(Path(run_dir), f"budget-{uuid.uuid4().hex[:6]}").write_records(
+        run_id,
+        [
+            EventRecord(
+                ts=time.time(),
+                source="gateway",
+                kind="ledger_restored",
+                severity="warning",
+                detail=json.dumps(detail, sort_keys=True),
+            )
+        ],
+    )
 
 
 @ray.remote(num_cpus=0, concurrency_groups={CONTROL: 2})
@@ -87,12 +96,25 @@ class BudgetActor(LocalBudget):
     methods (begin, reserve, settle, ...) are LocalBudget's; control methods run in their own
     concurrency group so they never wait behind requests."""
 
-    def __init__(self, run_dir: str, run_cap_usd: float | None = None,
-                 model_caps_usd: Mapping[str, float] | None = None, durable_reservations: bool = True,
-                 group_commit: bool = True, provider_models: Mapping[str, str] | None = None):
-        super().__init__(BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
-                                      durable_reservations=durable_reservations, provider_models=provider_models),
-                         group_commit=group_commit)
+    def __init__(
+        self,
+        run_dir: str,
+        run_cap_usd: float | None = None,
+        model_caps_usd: Mapping[str, float] | None = None,
+        durable_reservations: bool = True,
+        group_commit: bool = True,
+        provider_models: Mapping[str, str] | None = None,
+    ):
+        super().__init__(
+            BudgetLedger(
+                run_dir,
+                run_cap_usd=run_cap_usd,
+                model_caps_usd=model_caps_usd,
+                durable_reservations=durable_reservations,
+                provider_models=provider_models,
+            ),
+            group_commit=group_commit,
+        )
         _ledger_restored_event(run_dir, self.ledger)
 
     @ray.method(concurrency_group=CONTROL)
@@ -100,8 +122,7 @@ class BudgetActor(LocalBudget):
         return self.ledger.stats()
 
     @ray.method(concurrency_group=CONTROL)
-    async def set_caps(self, run_cap_usd: float | None = None,
-                       model_caps_usd: Mapping[str, float] | None = None) -> None:
+    async def set_caps(self, run_cap_usd: float | None = None, model_caps_usd: Mapping[str, float] | None = None) -> None:
         self.ledger.set_caps(run_cap_usd, model_caps_usd)
 
 
@@ -118,12 +139,12 @@ class RemoteBudget:
     async def reserve(self, call_key: str, name: str, worst_pico: int, owner: str) -> Any:
         return await self.handle.reserve.remote(call_key, name, worst_pico, owner)
 
-    async def settle(self, rid: int, cost_pico: int, status: str, result: Any, cache_key: str | None,
-                     litellm_cost_usd: float | None) -> None:
+    async def settle(
+        self, rid: int, cost_pico: int, status: str, result: Any, cache_key: str | None, litellm_cost_usd: float | None
+    ) -> None:
         # not awaited: the reservation already bounds this call's cost, so the caller need
         # not wait a round trip; if the settlement is lost, a restart charges the worst case
-        self._unconfirmed.append(self.handle.settle.remote(rid, cost_pico, status, result, cache_key,
-                                                           litellm_cost_usd))
+        self._unconfirmed.append(self.handle.settle.remote(rid, cost_pico, status, result, cache_key, litellm_cost_usd))
         if len(self._unconfirmed) > 256:
             _, self._unconfirmed = ray.wait(self._unconfirmed, num_returns=len(self._unconfirmed), timeout=0)
 
@@ -150,10 +171,17 @@ class GatewayActor:
     for a single-deployment run). ``secret_env``: API keys set in this actor's process only.
     ``group_commit``: for the own ledger, see :class:`LocalBudget` (False only for benches)."""
 
-    def __init__(self, config: DeploymentConfig | Mapping[str, Any], run_dir: str, run_id: str | None = None,
-                 budget: Any = None, run_cap_usd: float | None = None,
-                 model_caps_usd: Mapping[str, float] | None = None, secret_env: SecretEnv | None = None,
-                 group_commit: bool = True):
+    def __init__(
+        self,
+        config: DeploymentConfig | Mapping[str, Any],
+        run_dir: str,
+        run_id: str | None = None,
+        budget: Any = None,
+        run_cap_usd: float | None = None,
+        model_caps_usd: Mapping[str, float] | None = None,
+        secret_env: SecretEnv | None = None,
+        group_commit: bool = True,
+    ):
         from workers.gateway.core import DeploymentGateway
         from workers.log_setup import configure_from_env
 
@@ -165,8 +193,9 @@ class GatewayActor:
 
         cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
         if budget is None:  # the gateway keeps the run's ledger itself
-            own = BudgetLedger(run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
-                               provider_models={cfg.deployment_name: cfg.model})
+            own = BudgetLedger(
+                run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd, provider_models={cfg.deployment_name: cfg.model}
+            )
             gate: Any = LocalBudget(own, group_commit=group_commit)
         else:
             gate = RemoteBudget(budget)
@@ -215,8 +244,7 @@ class GatewayActor:
         await self._on_core_loop(self.core.resume)
 
     @ray.method(concurrency_group=CONTROL)
-    async def set_limits(self, rpm: int | None = None, tpm: int | None = None,
-                         max_concurrency: int | None = None) -> None:
+    async def set_limits(self, rpm: int | None = None, tpm: int | None = None, max_concurrency: int | None = None) -> None:
         await self._on_core_loop(lambda: self.core.set_limits(rpm=rpm, tpm=tpm, max_concurrency=max_concurrency))
 
     async def close(self) -> None:
@@ -236,9 +264,16 @@ class RunGateways:
     (False only for the bench's before figures).
     """
 
-    def __init__(self, configs: Sequence[DeploymentConfig], run_dir: Path | str, run_id: str,
-                 run_cap_usd: float | None = None, model_caps_usd: Mapping[str, float] | None = None,
-                 budget: Any = "auto", group_commit: bool = True):
+    def __init__(
+        self,
+        configs: Sequence[DeploymentConfig],
+        run_dir: Path | str,
+        run_id: str,
+        run_cap_usd: float | None = None,
+        model_caps_usd: Mapping[str, float] | None = None,
+        budget: Any = "auto",
+        group_commit: bool = True,
+    ):
         self.run_dir = str(run_dir)
         self.run_id = run_id
         self.configs = list(configs)
@@ -251,15 +286,19 @@ class RunGateways:
             if len(self.configs) != 1:
                 raise ValueError("budget='local' needs exactly one deployment (caps are per run)")
             self.budget = None
-            self.actors = {names[0]: GatewayActor.remote(self.configs[0], self.run_dir, run_id, None,
-                                                         run_cap_usd, model_caps_usd, group_commit=group_commit)}
+            self.actors = {
+                names[0]: GatewayActor.remote(
+                    self.configs[0], self.run_dir, run_id, None, run_cap_usd, model_caps_usd, group_commit=group_commit
+                )
+            }
             return
         providers = {c.deployment_name: c.model for c in self.configs}
-        self.budget = (BudgetActor.remote(self.run_dir, run_cap_usd, model_caps_usd, group_commit=group_commit,
-                                          provider_models=providers)
-                       if budget == "shared" else budget)
-        self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget)
-                       for c in self.configs}
+        self.budget = (
+            BudgetActor.remote(self.run_dir, run_cap_usd, model_caps_usd, group_commit=group_commit, provider_models=providers)
+            if budget == "shared"
+            else budget
+        )
+        self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget) for c in self.configs}
 
     def client(self, name: str) -> Any:
         from workers.gateway.client import GatewayClient

@@ -45,8 +45,7 @@ def writer_name(deployment: str) -> str:
 
 
 class CallLog:
-    def __init__(self, run_dir: Path | str, run_id: str, writer: str, *, max_rows: int = 256,
-                 flush_interval_s: float = 1.0):
+    def __init__(self, run_dir: Path | str, run_id: str, writer: str, *, max_rows: int = 256, flush_interval_s: float = 1.0):
         self.run_id = run_id
         self.flush_interval_s = flush_interval_s
         self.max_rows = max_rows
@@ -67,9 +66,21 @@ class CallLog:
 
         ``unit_id`` stays empty: resume reads attempt numbers from events that name a unit,
         and a call attempt is not a unit attempt."""
-        self._events.append(record_to_row(check_vocabulary(EventRecord(
-            ts=time.time(), source="gateway", kind=kind, severity=severity, episode_id=episode_id,
-            detail=json.dumps(detail, sort_keys=True, default=str))), self.run_id))
+        self._events.append(
+            record_to_row(
+                check_vocabulary(
+                    EventRecord(
+                        ts=time.time(),
+                        source="gateway",
+                        kind=kind,
+                        severity=severity,
+                        episode_id=episode_id,
+                        detail=json.dumps(detail, sort_keys=True, default=str),
+                    )
+                ),
+                self.run_id,
+            )
+        )
         if len(self._events) >= self.max_rows:
             self.flush()
 

@@ -55,6 +55,5 @@ class GatewayClient:
     def resume(self) -> None:
         ray.get(self.actor.resume.remote())
 
-    def set_limits(self, *, rpm: int | None = None, tpm: int | None = None,
-                   max_concurrency: int | None = None) -> None:
+    def set_limits(self, *, rpm: int | None = None, tpm: int | None = None, max_concurrency: int | None = None) -> None:
         ray.get(self.actor.set_limits.remote(rpm, tpm, max_concurrency))

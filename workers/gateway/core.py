@@ -131,11 +131,20 @@ class _Call:
 class DeploymentGateway:
     """Admission, retries, budget, idempotency, cache and records for one deployment."""
 
-    def __init__(self, config: DeploymentConfig, *, run_dir: Path | str, run_id: str | None = None,
-                 budget: Any = None, prices: PriceTable | None = None,
-                 run_cap_usd: float | None = None, model_caps_usd: dict[str, float] | None = None,
-                 call_log: CallLog | None = None, durable_reservations: bool = True,
-                 clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        config: DeploymentConfig,
+        *,
+        run_dir: Path | str,
+        run_id: str | None = None,
+        budget: Any = None,
+        prices: PriceTable | None = None,
+        run_cap_usd: float | None = None,
+        model_caps_usd: dict[str, float] | None = None,
+        call_log: CallLog | None = None,
+        durable_reservations: bool = True,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         get_litellm()  # import now (seconds), not inside the first call
         self.config = config
         self.run_dir = Path(run_dir)
@@ -145,15 +154,29 @@ class DeploymentGateway:
         self.price = config.resolved_price(prices)
         self.test_double = config.is_test_double(prices)
         self.markers = BreakpointPlanner() if config.uses_cache_markers(prices) else None
-        self.budget = budget if budget is not None else LocalBudget(
-            BudgetLedger(self.run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd,
-                         durable_reservations=durable_reservations,
-                         provider_models={self.deployment: config.model}))
+        self.budget = (
+            budget
+            if budget is not None
+            else LocalBudget(
+                BudgetLedger(
+                    self.run_dir,
+                    run_cap_usd=run_cap_usd,
+                    model_caps_usd=model_caps_usd,
+                    durable_reservations=durable_reservations,
+                    provider_models={self.deployment: config.model},
+                )
+            )
+        )
         self.admission = AdmissionController(
-            rpm=config.rpm, tpm=config.tpm, window_s=config.window_s, pad_s=config.window_pad_s,
+            rpm=config.rpm,
+            tpm=config.tpm,
+            window_s=config.window_s,
+            pad_s=config.window_pad_s,
             max_concurrency=config.max_concurrency,
-            rate_limit_default_wait_s=config.rate_limit_default_wait_s, anchor=config.window_anchor,
-            clock=clock)
+            rate_limit_default_wait_s=config.rate_limit_default_wait_s,
+            anchor=config.window_anchor,
+            clock=clock,
+        )
         self.call_log = call_log or CallLog(self.run_dir, self.run_id, writer_name(self.deployment))
         self._clock = clock
         self._inflight: dict[str, asyncio.Future] = {}
@@ -224,11 +247,15 @@ class DeploymentGateway:
         sizing = size_request(cfg.model, messages, params)
         counted = sizing.counted
         call = _Call(
-            request=request, messages=messages, params=params,
-            window_tokens=counted.tokens + sizing.max_tokens * sizing.choices, sizing=sizing,
+            request=request,
+            messages=messages,
+            params=params,
+            window_tokens=counted.tokens + sizing.max_tokens * sizing.choices,
+            sizing=sizing,
             worst=worst_case_pico(self.price, sizing),
             cache_key=request_fingerprint(cfg.model, params, messages) if cfg.cache else None,
-            deadline=t0 + cfg.total_timeout_s)
+            deadline=t0 + cfg.total_timeout_s,
+        )
         if self.markers is not None:
             call.send = mark(self.markers, request.episode_id, messages)
         try:
@@ -251,9 +278,12 @@ class DeploymentGateway:
         usage, cost = settled.usage, settled.cost_pico
         if settled.rejected:  # impossible usage: charged at the worst case, visible as an event
             self.counts["usage_rejected"] += 1
-            self.call_log.add_event(USAGE_REJECTED_EVENT, "error", {
-                "deployment": self.deployment, "call_key": request.call_key, **settled.event_detail()},
-                episode_id=request.episode_id)
+            self.call_log.add_event(
+                USAGE_REJECTED_EVENT,
+                "error",
+                {"deployment": self.deployment, "call_key": request.call_key, **settled.event_detail()},
+                episode_id=request.episode_id,
+            )
         # a reply that echoes the API key or the base URL's credentials is stored and returned
         # without them (ledger, cache, records and the agent all see the redacted text)
         secrets = self._secrets()
@@ -266,12 +296,21 @@ class DeploymentGateway:
         self.spent_pico += total
         self.counts["ok"] += 1
         resp = LLMResponse(
-            text=text, model=cfg.model, prompt_tokens=usage.prompt_tokens,
-            cached_prompt_tokens=usage.cached_prompt_tokens, completion_tokens=usage.completion_tokens,
-            cost_usd=pico_to_usd(total), latency_s=self._clock() - t0, retries=call.attempts - 1,
-            token_count_source=usage.token_count_source, served_from=served_from(cfg.model),
-            deployment=self.deployment, test_double=self.test_double,
-            finish_reason=finish, provider_cost_usd=settled.provider_cost_usd)
+            text=text,
+            model=cfg.model,
+            prompt_tokens=usage.prompt_tokens,
+            cached_prompt_tokens=usage.cached_prompt_tokens,
+            completion_tokens=usage.completion_tokens,
+            cost_usd=pico_to_usd(total),
+            latency_s=self._clock() - t0,
+            retries=call.attempts - 1,
+            token_count_source=usage.token_count_source,
+            served_from=served_from(cfg.model),
+            deployment=self.deployment,
+            test_double=self.test_double,
+            finish_reason=finish,
+            provider_cost_usd=settled.provider_cost_usd,
+        )
         self._record(request, resp, usage.cache_write_tokens)
         return resp
 
@@ -292,7 +331,11 @@ class DeploymentGateway:
 
         retrying = AsyncRetrying(
             stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
-            wait=wait, retry=retry_if_exception_type(_Retryable), reraise=True, before_sleep=before_sleep)
+            wait=wait,
+            retry=retry_if_exception_type(_Retryable),
+            reraise=True,
+            before_sleep=before_sleep,
+        )
         async for attempt_ctx in retrying:
             with attempt_ctx:
                 return await self._one_attempt(call)
@@ -333,8 +376,9 @@ class DeploymentGateway:
         if answer["status"] == "recorded":
             raise _Served(answer["result"], answer["served_from"])
         refusal = answer.get("refusal")
-        raise _Final(Classified("budget", answer["message"],
-                                refusal=BudgetRefusal.from_dict(refusal) if refusal is not None else None))
+        raise _Final(
+            Classified("budget", answer["message"], refusal=BudgetRefusal.from_dict(refusal) if refusal is not None else None)
+        )
 
     async def _one_attempt(self, call: _Call) -> Attempt:
         cfg = self.config
@@ -346,8 +390,15 @@ class DeploymentGateway:
         try:
             api_key = cfg.api_key()
             timeout_s = max(0.001, min(cfg.attempt_timeout_s, call.deadline - self._clock()))
-            kwargs = litellm_kwargs(cfg, call.send or call.messages, call.params, timeout_s=timeout_s,
-                                    call_key=call.request.call_key, hints=call.request.hints, api_key=api_key)
+            kwargs = litellm_kwargs(
+                cfg,
+                call.send or call.messages,
+                call.params,
+                timeout_s=timeout_s,
+                call_key=call.request.call_key,
+                hints=call.request.hints,
+                api_key=api_key,
+            )
             attempt = await asyncio.wait_for(attempt_async(kwargs), timeout_s + _TIMEOUT_BACKSTOP_S)
         except DeploymentConfigError as exc:
             self.admission.cancel(ticket)
@@ -357,8 +408,7 @@ class DeploymentGateway:
             raise
         except Exception as exc:
             c = classify(exc, secrets=[api_key, *self._url_secrets])
-            too_long = (c.kind == "rate_limit" and c.retry_after_s is not None
-                        and c.retry_after_s > cfg.max_retry_after_s)
+            too_long = c.kind == "rate_limit" and c.retry_after_s is not None and c.retry_after_s > cfg.max_retry_after_s
             # a Retry-After beyond the cap does not pause the deployment (nobody waits an hour)
             self.admission.release(ticket, c.kind, retry_after_s=c.retry_after_s, pause=not too_long)
             self.errors[c.kind] += 1
@@ -367,10 +417,15 @@ class DeploymentGateway:
                 call.rid = None
             if too_long:
                 self.counts["retry_after_refused"] += 1
-                raise _Final(dataclasses.replace(c, message=(
-                    f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
-                    f"max_retry_after_s={cfg.max_retry_after_s:g}: the call fails instead of pausing; "
-                    + c.message)[:500])) from None
+                raise _Final(
+                    dataclasses.replace(
+                        c,
+                        message=(
+                            f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
+                            f"max_retry_after_s={cfg.max_retry_after_s:g}: the call fails instead of pausing; " + c.message
+                        )[:500],
+                    )
+                ) from None
             raise (_Retryable if c.retryable else _Final)(c) from None
         actual = None  # the token window learns the reported usage only when it is plausible
         try:
@@ -395,37 +450,66 @@ class DeploymentGateway:
         """A response recorded earlier (ledger / cache), at no cost."""
         self.counts[f"served_{source}"] += 1
         resp = LLMResponse(
-            text=result["text"], model=self.config.model, prompt_tokens=int(result["prompt_tokens"]),
+            text=result["text"],
+            model=self.config.model,
+            prompt_tokens=int(result["prompt_tokens"]),
             cached_prompt_tokens=int(result["cached_prompt_tokens"]),
-            completion_tokens=int(result["completion_tokens"]), cost_usd=0.0,
-            latency_s=self._clock() - t0, retries=0, token_count_source=str(result["token_count_source"]),
-            served_from=source, deployment=self.deployment, test_double=self.test_double)
+            completion_tokens=int(result["completion_tokens"]),
+            cost_usd=0.0,
+            latency_s=self._clock() - t0,
+            retries=0,
+            token_count_source=str(result["token_count_source"]),
+            served_from=source,
+            deployment=self.deployment,
+            test_double=self.test_double,
+        )
         self._record(request, resp)
         return resp
 
     def _attempt_event(self, kind: EventKind, severity: Severity, call: _Call, c: Classified, attempt: int) -> None:
         """An ``events`` row per failed attempt: ``retry`` when another follows, ``call_failed``
         when the call gives up - so provider trouble that retries absorbed stays visible."""
-        detail: dict[str, Any] = {"deployment": self.deployment, "call_key": call.request.call_key,
-                                  "call_attempt": attempt, "kind": c.kind, "status": c.status_code,
-                                  "message": scrub(c.message)[:300]}
+        detail: dict[str, Any] = {
+            "deployment": self.deployment,
+            "call_key": call.request.call_key,
+            "call_attempt": attempt,
+            "kind": c.kind,
+            "status": c.status_code,
+            "message": scrub(c.message)[:300],
+        }
         if c.retry_after_s is not None:
             detail["retry_after_s"] = c.retry_after_s
-        log.info("%s: %s %s of call %s (attempt %d): %s", self.deployment, kind, c.kind, call.request.call_key, attempt,
-                 detail["message"])
+        log.info(
+            "%s: %s %s of call %s (attempt %d): %s",
+            self.deployment,
+            kind,
+            c.kind,
+            call.request.call_key,
+            attempt,
+            detail["message"],
+        )
         self.call_log.add_event(kind, severity, detail, episode_id=call.request.episode_id)
 
-    def _fail(self, request: LLMRequest, c: Classified, t0: float, attempts: int, charged: int,
-              source: str) -> LLMError:
+    def _fail(self, request: LLMRequest, c: Classified, t0: float, attempts: int, charged: int, source: str) -> LLMError:
         self.counts["failed"] += 1
         self.counts[f"failed_{c.kind}"] += 1
         self.spent_pico += charged
         message = scrub(c.message)
         retries = max(0, attempts - 1)
-        self._add(error_record(
-            request, model=self.config.model, kind=c.kind, message=message, cost_usd=pico_to_usd(charged),
-            latency_s=self._clock() - t0, retries=retries, token_count_source=source,
-            deployment=self.deployment, test_double=self.test_double))
+        self._add(
+            error_record(
+                request,
+                model=self.config.model,
+                kind=c.kind,
+                message=message,
+                cost_usd=pico_to_usd(charged),
+                latency_s=self._clock() - t0,
+                retries=retries,
+                token_count_source=source,
+                deployment=self.deployment,
+                test_double=self.test_double,
+            )
+        )
         return LLMError(c.kind, message, retries=retries, cost_usd=pico_to_usd(charged), refusal=c.refusal)
 
     def _record(self, request: LLMRequest, resp: LLMResponse, cache_write_tokens: int = 0) -> None:
@@ -445,8 +529,7 @@ class DeploymentGateway:
     def resume(self) -> None:
         self.admission.resume()
 
-    def set_limits(self, *, rpm: int | None = None, tpm: int | None = None,
-                   max_concurrency: int | None = None) -> None:
+    def set_limits(self, *, rpm: int | None = None, tpm: int | None = None, max_concurrency: int | None = None) -> None:
         self.admission.set_limits(rpm=rpm, tpm=tpm, max_concurrency=max_concurrency)
 
     def stats(self) -> dict[str, Any]:
@@ -464,5 +547,8 @@ class DeploymentGateway:
 
 
 def response_as_result(resp: LLMResponse) -> dict[str, Any]:
-    return {k: v for k, v in dataclasses.asdict(resp).items()
-            if k in ("text", "prompt_tokens", "cached_prompt_tokens", "completion_tokens", "token_count_source")}
+    return {
+        k: v
+        for k, v in dataclasses.asdict(resp).items()
+        if k in ("text", "prompt_tokens", "cached_prompt_tokens", "completion_tokens", "token_count_source")
+    }

@@ -119,7 +119,8 @@ class KeyMap:
             raise LedgerKeyError(
                 f"{self.where} was written before spend was kept per model name: its entries name model "
                 f"{model!r}, which {', '.join(repr(n) for n in sorted(names))} of this sweep share, so their "
-                "spend cannot be split between them; resume with one sweep entry on that model, or use a new output folder")
+                "spend cannot be split between them; resume with one sweep entry on that model, or use a new output folder"
+            )
         return names[0] if names else model
 
 

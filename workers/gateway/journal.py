@@ -79,14 +79,13 @@ def scan(data: bytes) -> BadLine | None:
         if not line.strip(b" \t\r") or _entry_ok(line):  # an entry, or plain whitespace
             good_end += len(line) + (0 if last else 1)
             continue
-        torn = all(_blank(r) for r in lines[i + 1:])
+        torn = all(_blank(r) for r in lines[i + 1 :])
         return BadLine(i + 1, max(n_lines, i + 1), torn, good_end, len(data))
     return None
 
 
 class Journal:
-    def __init__(self, path: Path | str, *, fsync: bool = True, lock_timeout_s: float = 10.0,
-                 sync_interval_s: float = 1.0):
+    def __init__(self, path: Path | str, *, fsync: bool = True, lock_timeout_s: float = 10.0, sync_interval_s: float = 1.0):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fsync = fsync
@@ -137,9 +136,11 @@ class Journal:
                 continue
             entry = self._parse(line)
             if entry is None:
-                if any(rest.strip(b" \t\r\n\x00") for rest in lines[i + 1:]):
-                    raise JournalError(f"{self.path}: line {i + 1} is corrupt and not the last one; "
-                                       "the spend cannot be restored from it (restore the file from a backup)")
+                if any(rest.strip(b" \t\r\n\x00") for rest in lines[i + 1 :]):
+                    raise JournalError(
+                        f"{self.path}: line {i + 1} is corrupt and not the last one; "
+                        "the spend cannot be restored from it (restore the file from a backup)"
+                    )
                 break
             if is_last:  # complete JSON cut just before its newline
                 self._fh.seek(0, os.SEEK_END)

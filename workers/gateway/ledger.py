@@ -56,10 +56,17 @@ class BudgetLedger:
     written before entries were kept by name be replayed (:class:`workers.gateway.entries.KeyMap`;
     None: such entries keep their model string)."""
 
-    def __init__(self, run_dir: Path | str, *, run_cap_usd: float | None = None,
-                 model_caps_usd: Mapping[str, float] | None = None, fsync: bool = True,
-                 durable_reservations: bool = True, lock_timeout_s: float = 10.0,
-                 provider_models: Mapping[str, str] | None = None):
+    def __init__(
+        self,
+        run_dir: Path | str,
+        *,
+        run_cap_usd: float | None = None,
+        model_caps_usd: Mapping[str, float] | None = None,
+        fsync: bool = True,
+        durable_reservations: bool = True,
+        lock_timeout_s: float = 10.0,
+        provider_models: Mapping[str, str] | None = None,
+    ):
         self.run_dir = Path(run_dir)
         self._lock = threading.RLock()
         self.run_cap = None if run_cap_usd is None else usd_to_pico(run_cap_usd)
@@ -126,8 +133,16 @@ class BudgetLedger:
 
     def _write_settle(self, rid: int, pico: int, status: str, **extra: Any) -> None:
         key, name, _reserved, _owner = self.open[rid]
-        entry = {"op": "settle", "rid": rid, "key": key, NAME_FIELD: name, "pico": int(pico),
-                 "status": status, "t": time.time(), **extra}
+        entry = {
+            "op": "settle",
+            "rid": rid,
+            "key": key,
+            NAME_FIELD: name,
+            "pico": int(pico),
+            "status": status,
+            "t": time.time(),
+            **extra,
+        }
         self._journal.append(entry)
         self._settle_state(rid, int(pico), entry)
 
@@ -147,8 +162,16 @@ class BudgetLedger:
         return None
 
     # ---- public API (all amounts pico-USD; results are plain dicts so they cross Ray) ----
-    def begin(self, call_key: str, name: str, worst_pico: int | None, cache_key: str | None = None,
-              owner: str = "", *, defer_sync: bool = False) -> dict[str, Any]:
+    def begin(
+        self,
+        call_key: str,
+        name: str,
+        worst_pico: int | None,
+        cache_key: str | None = None,
+        owner: str = "",
+        *,
+        defer_sync: bool = False,
+    ) -> dict[str, Any]:
         """A recorded result for this call (idempotency / cache), or a reservation, or a refusal.
 
         A reservation is on disk when this returns, unless ``defer_sync``: then it is written
@@ -160,8 +183,9 @@ class BudgetLedger:
                 return {"status": "recorded", "served_from": "cache", "result": self.cache[cache_key]}
             return self._reserve(call_key, name, worst_pico, owner, defer_sync)
 
-    def reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str = "", *,
-                defer_sync: bool = False) -> dict[str, Any]:
+    def reserve(
+        self, call_key: str, name: str, worst_pico: int | None, owner: str = "", *, defer_sync: bool = False
+    ) -> dict[str, Any]:
         """Another reservation for the same call (the previous attempt's was charged)."""
         with self._lock:
             return self._reserve(call_key, name, worst_pico, owner, defer_sync)
@@ -172,8 +196,7 @@ class BudgetLedger:
         if self.durable_reservations:
             await self._journal.commit()
 
-    def _reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str,
-                 defer_sync: bool = False) -> dict[str, Any]:
+    def _reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str, defer_sync: bool = False) -> dict[str, Any]:
         refusal = self._refusal(name, worst_pico)
         if refusal is not None:
             self.refusals += 1
@@ -181,14 +204,22 @@ class BudgetLedger:
         rid = self._next_rid
         self._next_rid += 1
         pico = int(worst_pico or 0)
-        self._journal.append({"op": "reserve", "rid": rid, "key": call_key, NAME_FIELD: name,
-                              "pico": pico, "owner": owner, "t": time.time()},
-                             sync=self.durable_reservations and not defer_sync)
+        self._journal.append(
+            {"op": "reserve", "rid": rid, "key": call_key, NAME_FIELD: name, "pico": pico, "owner": owner, "t": time.time()},
+            sync=self.durable_reservations and not defer_sync,
+        )
         self._open(rid, call_key, name, pico, owner)
         return {"status": "reserved", "rid": rid}
 
-    def settle(self, rid: int, cost_pico: int, status: str, result: Mapping[str, Any] | None = None,
-               cache_key: str | None = None, litellm_cost_usd: float | None = None) -> None:
+    def settle(
+        self,
+        rid: int,
+        cost_pico: int,
+        status: str,
+        result: Mapping[str, Any] | None = None,
+        cache_key: str | None = None,
+        litellm_cost_usd: float | None = None,
+    ) -> None:
         """Close a reservation at the actual cost (``status``: ok, error, charged).
 
         A reservation that is no longer open was settled at its worst case when the ledger
@@ -221,8 +252,11 @@ class BudgetLedger:
         """Settle at worst case the open reservations of a dead gateway of ``deployment``
         (owners are ``<deployment>:<instance>``; ``keep_owner`` is the live instance)."""
         with self._lock:
-            dead = [rid for rid, (_k, _m, _p, owner) in self.open.items()
-                    if owner.rsplit(":", 1)[0] == deployment and owner != keep_owner]
+            dead = [
+                rid
+                for rid, (_k, _m, _p, owner) in self.open.items()
+                if owner.rsplit(":", 1)[0] == deployment and owner != keep_owner
+            ]
             for rid in dead:
                 self._write_settle(rid, self.open[rid][2], "orphaned")
             return len(dead)
@@ -274,12 +308,12 @@ class LocalBudget:
         self.owned = owned
         self.group_commit = group_commit
 
-    async def begin(self, call_key: str, name: str, worst_pico: int | None, cache_key: str | None,
-                    owner: str) -> Mapping[str, Any]:
+    async def begin(
+        self, call_key: str, name: str, worst_pico: int | None, cache_key: str | None, owner: str
+    ) -> Mapping[str, Any]:
         if not self.group_commit:
             return self.ledger.begin(call_key, name, worst_pico, cache_key, owner)
-        return await self._durable(self.ledger.begin(call_key, name, worst_pico, cache_key, owner,
-                                                     defer_sync=True))
+        return await self._durable(self.ledger.begin(call_key, name, worst_pico, cache_key, owner, defer_sync=True))
 
     async def reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str) -> Mapping[str, Any]:
         if not self.group_commit:
@@ -299,8 +333,15 @@ class LocalBudget:
             raise
         return answer
 
-    async def settle(self, rid: int, cost_pico: int, status: str, result: Mapping[str, Any] | None,
-                     cache_key: str | None, litellm_cost_usd: float | None) -> None:
+    async def settle(
+        self,
+        rid: int,
+        cost_pico: int,
+        status: str,
+        result: Mapping[str, Any] | None,
+        cache_key: str | None,
+        litellm_cost_usd: float | None,
+    ) -> None:
         self.ledger.settle(rid, cost_pico, status, result, cache_key, litellm_cost_usd)
 
     async def charge_worst(self, rid: int) -> int:

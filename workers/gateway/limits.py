@@ -120,9 +120,18 @@ class Ticket:
 
 
 class AdmissionController:
-    def __init__(self, *, rpm: int | None, tpm: int | None, window_s: float, pad_s: float,
-                 max_concurrency: int, rate_limit_default_wait_s: float = 5.0, anchor: str = "response",
-                 clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        *,
+        rpm: int | None,
+        tpm: int | None,
+        window_s: float,
+        pad_s: float,
+        max_concurrency: int,
+        rate_limit_default_wait_s: float = 5.0,
+        anchor: str = "response",
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self._clock = clock
         self.requests = SlidingWindow(rpm, window_s + pad_s, anchor)
         self.tokens = SlidingWindow(tpm, window_s + pad_s, anchor)
@@ -172,16 +181,14 @@ class AdmissionController:
         """Wait for a concurrency slot, the end of any Retry-After pause and window room."""
         if self.tokens.limit is not None and tokens > self.tokens.limit:
             raise AdmissionError(
-                f"request needs {tokens} tokens (prompt + max output), more than the deployment's "
-                f"TPM limit {self.tokens.limit}"
+                f"request needs {tokens} tokens (prompt + max output), more than the deployment's TPM limit {self.tokens.limit}"
             )
         await self._enter()
         try:
             async with self._window_lock:
                 while True:
                     now = self._clock()
-                    wait = max(self.requests.wait_s(1, now), self.tokens.wait_s(tokens, now),
-                               self.paused_until - now)
+                    wait = max(self.requests.wait_s(1, now), self.tokens.wait_s(tokens, now), self.paused_until - now)
                     if wait <= 0 and not self.paused:
                         break
                     await self._sleep_interruptibly(wait if wait > 0 else 0.05)
@@ -191,8 +198,15 @@ class AdmissionController:
             self._wake()
             raise
 
-    def release(self, ticket: Ticket, outcome: str, *, actual_tokens: int | None = None,
-                retry_after_s: float | None = None, pause: bool = True) -> None:
+    def release(
+        self,
+        ticket: Ticket,
+        outcome: str,
+        *,
+        actual_tokens: int | None = None,
+        retry_after_s: float | None = None,
+        pause: bool = True,
+    ) -> None:
         """``outcome``: ``ok`` or an error kind. Corrects the token entry on success.
 
         A ``rate_limit`` outcome pauses every new attempt for ``retry_after_s`` (or the default
@@ -238,8 +252,7 @@ class AdmissionController:
         self._window_changed.set()
         self._wake()
 
-    def set_limits(self, *, rpm: int | None = None, tpm: int | None = None,
-                   max_concurrency: int | None = None) -> None:
+    def set_limits(self, *, rpm: int | None = None, tpm: int | None = None, max_concurrency: int | None = None) -> None:
         if rpm is not None:
             self.requests.limit = rpm
         if tpm is not None:

@@ -103,11 +103,11 @@ class Sizing:
         return self.max_tokens * self.choices + COMPLETION_SLACK_TOKENS
 
 
-def size_request(model: str, messages: list[dict[str, str]], params: Mapping[str, Any],
-                 counted: TokenCount | None = None) -> Sizing:
+def size_request(
+    model: str, messages: list[dict[str, str]], params: Mapping[str, Any], counted: TokenCount | None = None
+) -> Sizing:
     counted = counted or count_prompt_tokens(model, messages)
-    return Sizing(counted, prompt_token_bound(model, messages, counted), int(params["max_tokens"]),
-                  output_choices(params))
+    return Sizing(counted, prompt_token_bound(model, messages, counted), int(params["max_tokens"]), output_choices(params))
 
 
 def worst_case_pico(price: Price | None, sizing: Sizing) -> int | None:
@@ -145,10 +145,13 @@ class Settlement:
 
     def event_detail(self) -> dict[str, Any]:
         """The ``usage_rejected`` event's detail (no text, no secrets: numbers only)."""
-        return {"problems": list(self.problems), "reported": dict(self.reported),
-                "charged_usd": self.cost_pico / 1e12,
-                "worst_case_usd": None if self.worst_pico is None else self.worst_pico / 1e12,
-                "floor_usd": self.floor_pico / 1e12}
+        return {
+            "problems": list(self.problems),
+            "reported": dict(self.reported),
+            "charged_usd": self.cost_pico / 1e12,
+            "worst_case_usd": None if self.worst_pico is None else self.worst_pico / 1e12,
+            "floor_usd": self.floor_pico / 1e12,
+        }
 
 
 def usage_problems(attempt: Attempt, sizing: Sizing, reply_tokens: int) -> list[str]:
@@ -171,11 +174,12 @@ def usage_problems(attempt: Attempt, sizing: Sizing, reply_tokens: int) -> list[
         if c < 0:
             problems.append(f"completion_tokens {c} is negative")
         elif c < low:
-            problems.append(f"completion_tokens {c} below {low} (our count of the reply {reply_tokens} "
-                            f"/ {PROMPT_FLOOR_DIVISOR})")
+            problems.append(f"completion_tokens {c} below {low} (our count of the reply {reply_tokens} / {PROMPT_FLOOR_DIVISOR})")
         elif c > sizing.output_bound:
-            problems.append(f"completion_tokens {c} above max_tokens {sizing.max_tokens} x {sizing.choices} "
-                            f"choice(s) + {COMPLETION_SLACK_TOKENS}")
+            problems.append(
+                f"completion_tokens {c} above max_tokens {sizing.max_tokens} x {sizing.choices} "
+                f"choice(s) + {COMPLETION_SLACK_TOKENS}"
+            )
     written = attempt.cache_write_tokens
     if cached < 0:
         problems.append(f"cached prompt tokens {cached} is negative")
@@ -205,22 +209,23 @@ def settle(model: str, price: Price | None, attempt: Attempt, sizing: Sizing) ->
         cost = worst if worst is not None else 0
         return Settlement(usage, cost, tuple(problems), floor, worst, provider_cost, dict(attempt.reported))
     assert attempt.prompt_tokens is not None and attempt.completion_tokens is not None
-    usage = CallUsage(attempt.prompt_tokens, attempt.cached_prompt_tokens, attempt.completion_tokens, "provider",
-                      attempt.cache_write_tokens)
+    usage = CallUsage(
+        attempt.prompt_tokens, attempt.cached_prompt_tokens, attempt.completion_tokens, "provider", attempt.cache_write_tokens
+    )
     if price is None:
         cost = usd_to_pico(provider_cost) if provider_cost is not None else 0
         return Settlement(usage, cost, (), 0, None, provider_cost, dict(attempt.reported))
     floor = price.cost_pico(counted.tokens, min(usage.cached_prompt_tokens, counted.tokens), reply_floor)
-    cost = max(price.cost_pico(usage.prompt_tokens, usage.cached_prompt_tokens, usage.completion_tokens,
-                               usage.cache_write_tokens), floor)
+    cost = max(
+        price.cost_pico(usage.prompt_tokens, usage.cached_prompt_tokens, usage.completion_tokens, usage.cache_write_tokens), floor
+    )
     return Settlement(usage, cost, (), floor, worst, provider_cost, dict(attempt.reported))
 
 
 def cost_pico(price: Price | None, usage: CallUsage, litellm_cost_usd: float | None) -> int:
     """The cost of known usage (no checks: :func:`settle` is what calls are charged by)."""
     if price is not None:
-        return price.cost_pico(usage.prompt_tokens, usage.cached_prompt_tokens, usage.completion_tokens,
-                               usage.cache_write_tokens)
+        return price.cost_pico(usage.prompt_tokens, usage.cached_prompt_tokens, usage.completion_tokens, usage.cache_write_tokens)
     valid = valid_cost_usd(litellm_cost_usd)
     return usd_to_pico(valid) if valid is not None else 0
 
@@ -233,25 +238,62 @@ def ok_record(request: Any, resp: Any, cache_write_tokens: int = 0) -> CallRecor
     """The ``llm_calls`` row of a successful call (``request``: LLMRequest, ``resp``: LLMResponse;
     the response carries no cache writes, so the caller passes them from the settlement)."""
     return CallRecord(
-        episode_id=request.episode_id, call_index=request.call_index, call_key=request.call_key,
-        purpose=request.purpose, window_seqs=tuple(request.window_seqs), model=resp.model,
-        status="ok", node_id=request.node_id, response_seq=request.response_seq,
-        prompt_tokens=resp.prompt_tokens, cached_prompt_tokens=resp.cached_prompt_tokens,
-        completion_tokens=resp.completion_tokens, cost_usd=resp.cost_usd, latency_s=resp.latency_s,
-        retries=resp.retries, token_count_source=resp.token_count_source, served_from=resp.served_from,
-        deployment=resp.deployment, test_double=resp.test_double,
-        finish_reason=resp.finish_reason, provider_cost_usd=resp.provider_cost_usd,
-        cache_write_tokens=cache_write_tokens)
+        episode_id=request.episode_id,
+        call_index=request.call_index,
+        call_key=request.call_key,
+        purpose=request.purpose,
+        window_seqs=tuple(request.window_seqs),
+        model=resp.model,
+        status="ok",
+        node_id=request.node_id,
+        response_seq=request.response_seq,
+        prompt_tokens=resp.prompt_tokens,
+        cached_prompt_tokens=resp.cached_prompt_tokens,
+        completion_tokens=resp.completion_tokens,
+        cost_usd=resp.cost_usd,
+        latency_s=resp.latency_s,
+        retries=resp.retries,
+        token_count_source=resp.token_count_source,
+        served_from=resp.served_from,
+        deployment=resp.deployment,
+        test_double=resp.test_double,
+        finish_reason=resp.finish_reason,
+        provider_cost_usd=resp.provider_cost_usd,
+        cache_write_tokens=cache_write_tokens,
+    )
 
 
-def error_record(request: Any, *, model: str, kind: LLMErrorKind, message: str, cost_usd: float, latency_s: float,
-                 retries: int, token_count_source: str, deployment: str | None,
-                 test_double: bool) -> CallRecord:
+def error_record(
+    request: Any,
+    *,
+    model: str,
+    kind: LLMErrorKind,
+    message: str,
+    cost_usd: float,
+    latency_s: float,
+    retries: int,
+    token_count_source: str,
+    deployment: str | None,
+    test_double: bool,
+) -> CallRecord:
     """The ``llm_calls`` row of a failed call (message already scrubbed)."""
     return CallRecord(
-        episode_id=request.episode_id, call_index=request.call_index, call_key=request.call_key,
-        purpose=request.purpose, window_seqs=tuple(request.window_seqs), model=model,
-        status="error", node_id=request.node_id, response_seq=request.response_seq,
-        error_kind=kind, error_message=message, cost_usd=cost_usd, latency_s=latency_s,
-        retries=retries, token_count_source=token_count_source, served_from=served_from(model),
-        deployment=deployment, test_double=test_double)
+        episode_id=request.episode_id,
+        call_index=request.call_index,
+        call_key=request.call_key,
+        purpose=request.purpose,
+        window_seqs=tuple(request.window_seqs),
+        model=model,
+        status="error",
+        node_id=request.node_id,
+        response_seq=request.response_seq,
+        error_kind=kind,
+        error_message=message,
+        cost_usd=cost_usd,
+        latency_s=latency_s,
+        retries=retries,
+        token_count_source=token_count_source,
+        served_from=served_from(model),
+        deployment=deployment,
+        test_double=test_double,
+    )

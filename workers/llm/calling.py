@@ -53,9 +53,16 @@ class Attempt:
     cache_write_tokens: int = 0
 
 
-def litellm_kwargs(config: DeploymentConfig, messages: list[dict[str, str]], params: Mapping[str, Any],
-                   *, timeout_s: float, call_key: str, hints: Mapping[str, Any] | None,
-                   api_key: str | None) -> dict[str, Any]:
+def litellm_kwargs(
+    config: DeploymentConfig,
+    messages: list[dict[str, str]],
+    params: Mapping[str, Any],
+    *,
+    timeout_s: float,
+    call_key: str,
+    hints: Mapping[str, Any] | None,
+    api_key: str | None,
+) -> dict[str, Any]:
     kwargs: dict[str, Any] = {
         "model": config.model,
         "messages": messages,

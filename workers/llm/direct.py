@@ -48,8 +48,13 @@ class _Retry(_Failed):
 
 
 class LiteLLMClient:
-    def __init__(self, config: DeploymentConfig, *, prices: PriceTable | None = None,
-                 record_sink: Callable[[CallRecord], Any] | None = None):
+    def __init__(
+        self,
+        config: DeploymentConfig,
+        *,
+        prices: PriceTable | None = None,
+        record_sink: Callable[[CallRecord], Any] | None = None,
+    ):
         self.config = config
         self.price = config.resolved_price(prices)
         self.test_double = config.is_test_double(prices)
@@ -86,45 +91,77 @@ class LiteLLMClient:
             try:
                 api_key = cfg.api_key()
                 timeout_s = max(0.001, min(cfg.attempt_timeout_s, deadline - time.monotonic()))
-                return attempt_sync(litellm_kwargs(cfg, send, params, timeout_s=timeout_s,
-                                                   call_key=request.call_key, hints=request.hints,
-                                                   api_key=api_key))
+                return attempt_sync(
+                    litellm_kwargs(
+                        cfg, send, params, timeout_s=timeout_s, call_key=request.call_key, hints=request.hints, api_key=api_key
+                    )
+                )
             except DeploymentConfigError as exc:
                 raise _Failed(Classified("auth", str(exc))) from None
             except Exception as exc:
                 c = classify(exc, secrets=[api_key, *url_secrets(cfg.api_base)])
                 if c.kind == "rate_limit" and c.retry_after_s is not None and c.retry_after_s > cfg.max_retry_after_s:
-                    raise _Failed(dataclasses.replace(c, message=(
-                        f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
-                        f"max_retry_after_s={cfg.max_retry_after_s:g}: the call fails instead of pausing; "
-                        + c.message)[:500])) from None
+                    raise _Failed(
+                        dataclasses.replace(
+                            c,
+                            message=(
+                                f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
+                                f"max_retry_after_s={cfg.max_retry_after_s:g}: the call fails instead of pausing; " + c.message
+                            )[:500],
+                        )
+                    ) from None
                 raise (_Retry if c.retryable else _Failed)(c) from None
 
         try:
-            attempt = Retrying(stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
-                               wait=wait, retry=retry_if_exception_type(_Retry), reraise=True)(one)
+            attempt = Retrying(
+                stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
+                wait=wait,
+                retry=retry_if_exception_type(_Retry),
+                reraise=True,
+            )(one)
         except _Failed as exc:
             c = exc.classified
             if self.record_sink is not None:
-                self.record_sink(error_record(
-                    request, model=cfg.model, kind=c.kind, message=c.message, cost_usd=0.0,
-                    latency_s=time.monotonic() - t0, retries=attempts - 1, token_count_source=counted.source,
-                    deployment=cfg.deployment_name, test_double=self.test_double))
+                self.record_sink(
+                    error_record(
+                        request,
+                        model=cfg.model,
+                        kind=c.kind,
+                        message=c.message,
+                        cost_usd=0.0,
+                        latency_s=time.monotonic() - t0,
+                        retries=attempts - 1,
+                        token_count_source=counted.source,
+                        deployment=cfg.deployment_name,
+                        test_double=self.test_double,
+                    )
+                )
             raise LLMError(c.kind, c.message, retries=attempts - 1) from None
         settled = settle(cfg.model, self.price, attempt, sizing)
         usage = settled.usage
         if settled.rejected:
-            log.warning("%s: provider usage rejected (%s); charged the worst case $%.6f",
-                        cfg.deployment_name, "; ".join(settled.problems), pico_to_usd(settled.cost_pico))
+            log.warning(
+                "%s: provider usage rejected (%s); charged the worst case $%.6f",
+                cfg.deployment_name,
+                "; ".join(settled.problems),
+                pico_to_usd(settled.cost_pico),
+            )
         resp = LLMResponse(
-            text=redact_known(attempt.text, cfg.secrets()), model=cfg.model, prompt_tokens=usage.prompt_tokens,
-            cached_prompt_tokens=usage.cached_prompt_tokens, completion_tokens=usage.completion_tokens,
+            text=redact_known(attempt.text, cfg.secrets()),
+            model=cfg.model,
+            prompt_tokens=usage.prompt_tokens,
+            cached_prompt_tokens=usage.cached_prompt_tokens,
+            completion_tokens=usage.completion_tokens,
             cost_usd=pico_to_usd(settled.cost_pico),
-            latency_s=time.monotonic() - t0, retries=attempts - 1, token_count_source=usage.token_count_source,
-            served_from=served_from(cfg.model), deployment=cfg.deployment_name, test_double=self.test_double,
-            finish_reason=None if attempt.finish_reason is None else
-            redact_known(str(attempt.finish_reason), cfg.secrets())[:64],
-            provider_cost_usd=settled.provider_cost_usd)
+            latency_s=time.monotonic() - t0,
+            retries=attempts - 1,
+            token_count_source=usage.token_count_source,
+            served_from=served_from(cfg.model),
+            deployment=cfg.deployment_name,
+            test_double=self.test_double,
+            finish_reason=None if attempt.finish_reason is None else redact_known(str(attempt.finish_reason), cfg.secrets())[:64],
+            provider_cost_usd=settled.provider_cost_usd,
+        )
         if self.record_sink is not None:
             self.record_sink(ok_record(request, resp, usage.cache_write_tokens))
         return resp

@@ -125,8 +125,13 @@ def _http_date(value: str) -> float | None:
     return max(0.0, when.timestamp() - time.time())
 
 
-_CONTEXT_MARKERS = ("context_length_exceeded", "maximum context length", "context window",
-                    "too many tokens", "prompt is too long")
+_CONTEXT_MARKERS = (
+    "context_length_exceeded",
+    "maximum context length",
+    "context window",
+    "too many tokens",
+    "prompt is too long",
+)
 
 
 def _kind_of_status(status: int | None, text: str) -> LLMErrorKind | None:
@@ -170,11 +175,13 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
         kind = "timeout"
     elif isinstance(exc, (litellm.AuthenticationError, litellm.PermissionDeniedError)):
         kind = "auth"
-    elif isinstance(exc, (litellm.InternalServerError, litellm.ServiceUnavailableError,
-                          litellm.BadGatewayError, litellm.APIConnectionError)):
+    elif isinstance(
+        exc, (litellm.InternalServerError, litellm.ServiceUnavailableError, litellm.BadGatewayError, litellm.APIConnectionError)
+    ):
         kind = "server_error"
-    elif isinstance(exc, (litellm.BadRequestError, litellm.NotFoundError,
-                          litellm.UnprocessableEntityError, litellm.UnsupportedParamsError)):
+    elif isinstance(
+        exc, (litellm.BadRequestError, litellm.NotFoundError, litellm.UnprocessableEntityError, litellm.UnsupportedParamsError)
+    ):
         kind = _kind_of_status(400, str(exc)) or "bad_request"
     else:
         kind = _kind_of_status(status, str(exc))
@@ -183,8 +190,7 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
             kind = "server_error"
             unreadable = True
     billed = kind == "timeout" or unreadable or any(m in str(exc) for m in _UNREADABLE_REPLY_MARKERS)
-    return Classified(kind, message, retry_after_seconds(exc) if kind == "rate_limit" else None, status,
-                      maybe_billed=billed)
+    return Classified(kind, message, retry_after_seconds(exc) if kind == "rate_limit" else None, status, maybe_billed=billed)
 
 
 #: loggers of the HTTP clients under litellm that print request URLs (and so a base URL's

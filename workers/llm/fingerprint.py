@@ -17,9 +17,7 @@ def _canonical(obj: Any) -> str:
 
 
 def messages_fingerprint(messages: Sequence[Mapping[str, Any]]) -> str:
-    return hashlib.sha256(
-        _canonical([[str(m["role"]), str(m["content"])] for m in messages]).encode()
-    ).hexdigest()
+    return hashlib.sha256(_canonical([[str(m["role"]), str(m["content"])] for m in messages]).encode()).hexdigest()
 
 
 def request_fingerprint(model: str, params: Mapping[str, Any], messages: Sequence[Mapping[str, Any]]) -> str:

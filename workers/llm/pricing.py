@@ -87,18 +87,24 @@ class Price:
         r_in, r_cached, _ = self.rates()
         return max(r_in, r_cached, self.write_rate())
 
-    def cost_pico(self, prompt_tokens: int, cached_prompt_tokens: int, completion_tokens: int,
-                  cache_write_tokens: int = 0) -> int:
+    def cost_pico(
+        self, prompt_tokens: int, cached_prompt_tokens: int, completion_tokens: int, cache_write_tokens: int = 0
+    ) -> int:
         """Cost in pico-USD; cached (read) and cache-write tokens are parts of the prompt tokens
         (clamped so that together they never exceed it)."""
         cached = max(0, min(cached_prompt_tokens, prompt_tokens))
         written = max(0, min(cache_write_tokens, prompt_tokens - cached))
         r_in, r_cached, r_out = self.rates()
-        return ((prompt_tokens - cached - written) * r_in + cached * r_cached + written * self.write_rate()
-                + completion_tokens * r_out)
+        return (
+            (prompt_tokens - cached - written) * r_in
+            + cached * r_cached
+            + written * self.write_rate()
+            + completion_tokens * r_out
+        )
 
-    def cost_usd(self, prompt_tokens: int, cached_prompt_tokens: int, completion_tokens: int,
-                 cache_write_tokens: int = 0) -> float:
+    def cost_usd(
+        self, prompt_tokens: int, cached_prompt_tokens: int, completion_tokens: int, cache_write_tokens: int = 0
+    ) -> float:
         return pico_to_usd(self.cost_pico(prompt_tokens, cached_prompt_tokens, completion_tokens, cache_write_tokens))
 
     @classmethod
@@ -177,15 +183,15 @@ def default_prices() -> PriceTable:
     return PriceTable.load()
 
 
-def resolve_price(model: str, override: Price | Mapping[str, Any] | None = None,
-                  table: PriceTable | None = None) -> Price | None:
+def resolve_price(model: str, override: Price | Mapping[str, Any] | None = None, table: PriceTable | None = None) -> Price | None:
     if override is not None:
         return override if isinstance(override, Price) else Price.from_mapping(override, f"override {model}")
     return (table or default_prices()).get(model)
 
 
-def require_prices(models: Iterable[str], overrides: Mapping[str, Any] | None = None,
-                   table: PriceTable | None = None) -> dict[str, Price]:
+def require_prices(
+    models: Iterable[str], overrides: Mapping[str, Any] | None = None, table: PriceTable | None = None
+) -> dict[str, Price]:
     """Every model's price, or one PriceError naming all models without one.
 
     A capped sweep calls this before it starts: a cap cannot be enforced for a model whose

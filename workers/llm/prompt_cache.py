@@ -167,15 +167,25 @@ class _Entries:
 class PromptCache:
     """One provider's prompt cache (see the module doc for the rules)."""
 
-    def __init__(self, rule: str = "openai", *, ttl_s: float | None = None, max_entries: int = 100_000,
-                 min_tokens: int | None = None, recent_prompts: int = 64):
+    def __init__(
+        self,
+        rule: str = "openai",
+        *,
+        ttl_s: float | None = None,
+        max_entries: int = 100_000,
+        min_tokens: int | None = None,
+        recent_prompts: int = 64,
+    ):
         if rule not in RULES:
             raise ValueError(f"unknown cache rule {rule!r}; known: {', '.join(RULES)}")
         self.rule = rule
         self.ttl_s = DEFAULT_TTL_S[rule] if ttl_s is None else float(ttl_s)
         self.max_entries = max_entries
-        self.min_tokens = min_tokens if min_tokens is not None else (
-            ANTHROPIC_MIN_TOKENS if rule == "anthropic" else OPENAI_MIN_TOKENS if rule == "openai" else 0)
+        self.min_tokens = (
+            min_tokens
+            if min_tokens is not None
+            else (ANTHROPIC_MIN_TOKENS if rule == "anthropic" else OPENAI_MIN_TOKENS if rule == "openai" else 0)
+        )
         self._entries: dict[str, _Entries] = {}
         #: deepseek: the hash chains of recent prompts (to detect common prefixes); lcp: flat texts
         self._recent: dict[str, deque] = {}
@@ -220,8 +230,9 @@ class PromptCache:
                 store.touch(h, now)
         return CacheOutcome(prompt, min(openai_cached(hit), prompt))
 
-    def _anthropic(self, store: _Entries, messages: Sequence[Message], hashes: list[str], tokens: list[int],
-                   prompt: int, now: float) -> CacheOutcome:
+    def _anthropic(
+        self, store: _Entries, messages: Sequence[Message], hashes: list[str], tokens: list[int], prompt: int, now: float
+    ) -> CacheOutcome:
         breaks = [i for i, m in enumerate(messages) if m.breakpoint][:ANTHROPIC_MAX_BREAKPOINTS]
         if not breaks:
             return CacheOutcome(prompt)
@@ -242,8 +253,17 @@ class PromptCache:
         write = tokens[written_to] - read if written_to > read_at else 0
         return CacheOutcome(prompt, read, write)
 
-    def _deepseek(self, model: str, store: _Entries, messages: Sequence[Message], hashes: list[str],
-                  tokens: list[int], prompt: int, now: float, reply: str | None) -> CacheOutcome:
+    def _deepseek(
+        self,
+        model: str,
+        store: _Entries,
+        messages: Sequence[Message],
+        hashes: list[str],
+        tokens: list[int],
+        prompt: int,
+        now: float,
+        reply: str | None,
+    ) -> CacheOutcome:
         hit = 0
         for k in range(len(hashes) - 1, -1, -1):
             if store.alive(hashes[k], now):

@@ -20,8 +20,18 @@ from workers.llm.pricing import Price, PriceTable, default_prices, resolve_price
 
 #: generation settings passed through to litellm (anything else is refused: typos surface)
 ALLOWED_PARAMS = frozenset(
-    {"temperature", "max_tokens", "top_p", "seed", "stop", "presence_penalty",
-     "frequency_penalty", "response_format", "n", "logit_bias"}
+    {
+        "temperature",
+        "max_tokens",
+        "top_p",
+        "seed",
+        "stop",
+        "presence_penalty",
+        "frequency_penalty",
+        "response_format",
+        "n",
+        "logit_bias",
+    }
 )
 #: params that multiply the output a provider generates and bills (choices per call). Agents
 #: read one choice and the budget reserves one, so any value but 1 is refused at config time.
@@ -33,17 +43,23 @@ OFFLINE_PREFIX = "offline/"
 #: numeric generation params: (integer only, lowest, highest); a wrong value would be refused
 #: by the provider on every call of a run, so it is refused here, before the first
 _NUMERIC_PARAMS: dict[str, tuple[bool, float | None, float | None]] = {
-    "temperature": (False, 0.0, 2.0), "top_p": (False, 0.0, 1.0), "max_tokens": (True, 1, None),
-    "n": (True, 1, None), "seed": (True, None, None),
-    "presence_penalty": (False, -2.0, 2.0), "frequency_penalty": (False, -2.0, 2.0),
+    "temperature": (False, 0.0, 2.0),
+    "top_p": (False, 0.0, 1.0),
+    "max_tokens": (True, 1, None),
+    "n": (True, 1, None),
+    "seed": (True, None, None),
+    "presence_penalty": (False, -2.0, 2.0),
+    "frequency_penalty": (False, -2.0, 2.0),
 }
 
 
 def _param_problem(name: str, value: Any) -> str | None:
     """What is wrong with one generation param's value (None when nothing is)."""
     if name in SINGLE_CHOICE_PARAMS and (isinstance(value, bool) or value != 1):
-        return ("must be 1: the gateway sends one choice per call (agents read one, and the budget "
-                "reserves the worst case of one); leave it out")
+        return (
+            "must be 1: the gateway sends one choice per call (agents read one, and the budget "
+            "reserves the worst case of one); leave it out"
+        )
     if name in _NUMERIC_PARAMS:
         integer, low, high = _NUMERIC_PARAMS[name]
         kind = "an integer" if integer else "a number"
@@ -58,8 +74,23 @@ def _param_problem(name: str, value: Any) -> str | None:
 
 
 #: query parameters of a base URL that carry credentials (dropped from every displayed name)
-SECRET_QUERY_PARAMS = frozenset({"key", "api_key", "apikey", "api-key", "token", "access_token",
-                                 "auth", "auth_token", "secret", "password", "sig", "signature", "code"})
+SECRET_QUERY_PARAMS = frozenset(
+    {
+        "key",
+        "api_key",
+        "apikey",
+        "api-key",
+        "token",
+        "access_token",
+        "auth",
+        "auth_token",
+        "secret",
+        "password",
+        "sig",
+        "signature",
+        "code",
+    }
+)
 
 
 def _is_secret_param(name: str) -> bool:
@@ -274,13 +305,10 @@ class DeploymentConfig(BaseModel):
             return None
         key = os.environ.get(self.api_key_env)
         if not key:
-            raise DeploymentConfigError(
-                f"environment variable {self.api_key_env} (API key of {self.model}) is not set"
-            )
+            raise DeploymentConfigError(f"environment variable {self.api_key_env} (API key of {self.model}) is not set")
         return key
 
-    def generation_params(self, temperature: float | None, max_tokens: int | None,
-                          json_mode: bool) -> dict[str, Any]:
+    def generation_params(self, temperature: float | None, max_tokens: int | None, json_mode: bool) -> dict[str, Any]:
         """The settings one request is sent with; max_tokens always set (bounds the cost)."""
         params = dict(self.params)
         if temperature is not None:

@@ -58,9 +58,7 @@ def _content(message: Mapping[str, Any]) -> str:
 
 def estimate_prompt_tokens(messages: Sequence[Mapping[str, Any]]) -> int:
     """Estimate of a chat prompt: per message ceil(chars/4) + 3, plus 3 for the reply."""
-    return REPLY_PRIMING_TOKENS + sum(
-        TOKENS_PER_MESSAGE + estimate_text_tokens(_content(m)) for m in messages
-    )
+    return REPLY_PRIMING_TOKENS + sum(TOKENS_PER_MESSAGE + estimate_text_tokens(_content(m)) for m in messages)
 
 
 def _bundled_encoding_available(name: str) -> bool:
@@ -81,7 +79,7 @@ def _encoding_for(model: str) -> Any:
     base = model
     for prefix in _OPENAI_PREFIXES:
         if base.startswith(prefix):
-            base = base[len(prefix):]
+            base = base[len(prefix) :]
             break
     else:
         if "/" in base:  # another provider's model: no bundled tokenizer
@@ -118,13 +116,9 @@ def count_text_tokens(model: str, text: str) -> TokenCount:
     return TokenCount(len(enc.encode(text, disallowed_special=())), "tokenizer")
 
 
-def prompt_token_bound(
-    model: str, messages: Sequence[Mapping[str, Any]], counted: TokenCount | None = None
-) -> int:
+def prompt_token_bound(model: str, messages: Sequence[Mapping[str, Any]], counted: TokenCount | None = None) -> int:
     """An upper bound on the prompt tokens any provider will bill for these messages."""
     counted = counted or count_prompt_tokens(model, messages)
     if counted.source == "tokenizer":
         return counted.tokens + BOUND_TOKENS_PER_REQUEST
-    return BOUND_TOKENS_PER_REQUEST + sum(
-        BOUND_TOKENS_PER_MESSAGE + len(_content(m).encode("utf-8")) for m in messages
-    )
+    return BOUND_TOKENS_PER_REQUEST + sum(BOUND_TOKENS_PER_MESSAGE + len(_content(m).encode("utf-8")) for m in messages)

@@ -64,6 +64,7 @@ def show_valid_actions_for(style: str) -> bool:
     """
     return style in STYLES_SHOWING_VALID_ACTIONS
 
+
 #: selectors meaning "every evaluation game"
 _ALL = ("all", "eval_out_of_distribution", "valid_unseen")
 
@@ -160,8 +161,7 @@ class AlfworldBenchmark(Benchmark):
         games = self.games(instance_id, data_dir=primary)
         if len(games) != 1:
             raise UnknownInstanceError(
-                f"{instance_id!r} names {len(games)} ALFWorld games; make() needs one full id "
-                f"such as {games[0].instance_id}"
+                f"{instance_id!r} names {len(games)} ALFWorld games; make() needs one full id such as {games[0].instance_id}"
             )
         return games[0]
 

@@ -33,8 +33,9 @@ def member_path(member: str) -> str | None:
 
 
 #: the optional 2.1.2 folder (same games, 2.1.2 wording, walkthroughs), found by its own rule
-LOCATION_2_1_2 = data_paths.DataLocation(name="alfworld-2.1.2", title="ALFWorld (game files 2.1.2)",
-                                         env_var=DATA_ENV_2_1_2, marker=LOCATION.marker)
+LOCATION_2_1_2 = data_paths.DataLocation(
+    name="alfworld-2.1.2", title="ALFWorld (game files 2.1.2)", env_var=DATA_ENV_2_1_2, marker=LOCATION.marker
+)
 
 
 def search_2_1_2(data_dir: str | None) -> tuple[list[data_paths.Rung], data_paths.Rung | None]:

@@ -90,8 +90,7 @@ _PUT = _Demo(
     ),
     recap=(
         (
-            "First I need a cellphone, then I bring it to the bed. Phones usually lie on a desk, a "
-            "dresser or a sidetable.",
+            "First I need a cellphone, then I bring it to the bed. Phones usually lie on a desk, a dresser or a sidetable.",
             ("find and take a cellphone", "go to bed 1", "place the cellphone on bed 1"),
         ),
         (
@@ -281,8 +280,7 @@ _COOL = _Demo(
     steps=(
         (
             "go to diningtable 1",
-            "I need a tomato, chilled in the fridge, then placed on a countertop. The diningtable "
-            "often has vegetables on it.",
+            "I need a tomato, chilled in the fridge, then placed on a countertop. The diningtable often has vegetables on it.",
         ),
         ("take tomato 1 from diningtable 1", "tomato 1 is on diningtable 1; I pick it up."),
         ("go to fridge 1", "I hold tomato 1. I go to the fridge to cool it."),
@@ -415,8 +413,7 @@ _PUTTWO = _Demo(
     ),
     recap=(
         (
-            "Two remotes must end up in the armchair, one trip each because I can carry only one "
-            "item at a time.",
+            "Two remotes must end up in the armchair, one trip each because I can carry only one item at a time.",
             ("bring the first remotecontrol to armchair 1", "bring the second remotecontrol to armchair 1"),
         ),
         (
@@ -499,9 +496,7 @@ def script_for(short_type: str, version: str = "2.1.1") -> DemoScript:
         actions=tuple(to_version(a, version) for a, _ in demo.steps),
         step_thoughts=tuple(t for _, t in demo.steps),
         plan_thought=plan_think(demo),
-        decomposition=tuple(
-            (think, tuple(to_version(s, version) for s in subtasks)) for think, subtasks in demo.recap
-        ),
+        decomposition=tuple((think, tuple(to_version(s, version) for s in subtasks)) for think, subtasks in demo.recap),
     )
 
 
@@ -555,9 +550,7 @@ def _demo(short_type: str) -> _Demo:
     try:
         return _DEMOS[short_type]
     except KeyError:
-        raise ValueError(
-            f"no ALFWorld demonstration for {short_type!r}; task types: {', '.join(_DEMOS)}"
-        ) from None
+        raise ValueError(f"no ALFWorld demonstration for {short_type!r}; task types: {', '.join(_DEMOS)}") from None
 
 
 def demo_task_types() -> Sequence[str]:

@@ -37,10 +37,7 @@ def _import_engine(primary: Path) -> tuple[Any, Any, Any, Any]:
         from textworld import EnvInfos
     except ImportError as exc:
         missing = (exc.name or "alfworld").split(".")[0]
-        raise EnvError(
-            f"ALFWorld games need the optional package {missing!r}, which is not installed: "
-            f"{INSTALL_HINT}"
-        ) from None
+        raise EnvError(f"ALFWorld games need the optional package {missing!r}, which is not installed: {INSTALL_HINT}") from None
     return textworld.gym, EnvInfos, AlfredDemangler, AlfredInfos
 
 

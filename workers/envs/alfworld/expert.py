@@ -16,6 +16,7 @@ from workers.envs.alfworld.wording import to_version
 
 class WalkthroughExpert:
     """The walkthrough of one game as an expert: the winning commands (in the game version's wording) not yet executed."""
+
     def __init__(self, walkthrough: Sequence[str], version: str):
         self.plan = tuple(to_version(a, version) for a in walkthrough)
         self._next = 0

@@ -30,6 +30,7 @@ from workers.envs.alfworld.wording import extract_goal, strip_banner
 class AlfworldEnvironment(Environment):
     """One ALFWorld game file as an Environment: any command costs a step (an inadmissible one changes nothing),
     success is the game's ``won`` flag, the episode ends on a win or at ``max_steps``."""
+
     benchmark = "alfworld"
     invalid_action_mode = "step"
     partially_observed = True

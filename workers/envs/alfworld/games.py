@@ -133,9 +133,7 @@ def resolve_data_dir(data_dir: str | os.PathLike[str] | None = None) -> Path:
     return path
 
 
-def resolve_data_dir_2_1_2(
-    primary: Path, data_dir_2_1_2: str | os.PathLike[str] | None = None
-) -> Path | None:
+def resolve_data_dir_2_1_2(primary: Path, data_dir_2_1_2: str | os.PathLike[str] | None = None) -> Path | None:
     """The 2.1.2 folder: ``data_dir_2_1_2``, else ``$ALFWORLD_DATA_2_1_2``, else the sibling
     ``<primary>/../alfworld-2.1.2``; None when none is configured and no sibling exists.
 
@@ -193,9 +191,7 @@ def load_walkthrough(data_dir_2_1_2: Path, game: Game) -> tuple[str, ...]:
     """The winning command list stored in the 2.1.2 game file (2.1.2 wording)."""
     path = game.game_file(data_dir_2_1_2)
     if not path.is_file():
-        raise DataNotFoundError(
-            f"ALFWorld 2.1.2 game file missing: {path}; the 2.1.2 folder must hold all 134 games"
-        )
+        raise DataNotFoundError(f"ALFWorld 2.1.2 game file missing: {path}; the 2.1.2 folder must hold all 134 games")
     walkthrough = _read_json(path).get("walkthrough")
     if not isinstance(walkthrough, list) or not all(isinstance(a, str) for a in walkthrough):
         raise DataNotFoundError(f"ALFWorld 2.1.2 game file {path} has no walkthrough list")

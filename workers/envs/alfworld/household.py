@@ -26,6 +26,7 @@ _FIXED_OBJECTS = ("desklamp",)  # usable in place, never picked up
 class Place:
     """A receptacle of a demonstration scene: its name with number, the loc number shown on arrival, what it
     holds, and whether it opens (then its contents are hidden until opened)."""
+
     name: str  # "fridge 1"
     loc: int  # the number shown on arrival in 2.1.1 ("You arrive at loc 16.")
     contents: tuple[str, ...] = ()
@@ -35,6 +36,7 @@ class Place:
 @dataclass(frozen=True)
 class Scene:
     """An invented household for one demonstration: its receptacles, and the task sentence (without its final period)."""
+
     places: tuple[Place, ...]
     goal: str  # the task sentence without its final period
 
@@ -92,9 +94,7 @@ class _Household:
                     cmds.append(self._put_command(self.holding, here))
                 else:
                     cmds += [
-                        f"take {obj} from {here}"
-                        for obj in self.contents[here]
-                        if _kind_and_number(obj)[0] not in _FIXED_OBJECTS
+                        f"take {obj} from {here}" for obj in self.contents[here] if _kind_and_number(obj)[0] not in _FIXED_OBJECTS
                     ]
             verb = _TOOL_VERBS.get(_kind_and_number(here)[0])
             if verb and self.holding:
@@ -104,18 +104,13 @@ class _Household:
 
     def opening(self, goal: str) -> str:
         around = _listing(list(self.places))
-        return (
-            f"You are in the middle of a room. Looking quickly around you, you see {around}."
-            f"\n\nYour task is to: {goal}."
-        )
+        return f"You are in the middle of a room. Looking quickly around you, you see {around}.\n\nYour task is to: {goal}."
 
     def play(self, action: str) -> str:
         """Apply an admissible ``action`` and return the game's answer."""
         verb, _, rest = action.partition(" ")
         if action == "inventory":
-            return f"You are carrying: a {self.holding}." if self.holding else (
-                "You are not carrying anything."
-            )
+            return f"You are carrying: a {self.holding}." if self.holding else ("You are not carrying anything.")
         if action == "look":
             if self.at is None:
                 return "You are in the middle of a room. Looking quickly around you, you see nothing."
@@ -155,9 +150,7 @@ class _Household:
         raise ValueError(f"the household recorder does not model {action!r}")
 
 
-def record(
-    scene: Scene, actions: Sequence[str], *, name: str, split: str, task: str, version: str
-) -> Recording:
+def record(scene: Scene, actions: Sequence[str], *, name: str, split: str, task: str, version: str) -> Recording:
     """Play ``actions`` on ``scene``; the last action is the one that wins the game."""
     house = _Household(scene, version)
     start_valid = house.admissible()

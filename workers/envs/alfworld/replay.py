@@ -25,6 +25,7 @@ NOTHING_HAPPENS = "Nothing happens."
 @dataclass(frozen=True)
 class RecordedStep:
     """One recorded step: the command, the game's reply, the valid actions after it, and whether it won the game."""
+
     action: str
     observation: str
     valid_actions: tuple[str, ...]
@@ -35,6 +36,7 @@ class RecordedStep:
 class Recording:
     """A written demonstration episode: its task type (``split`` short, ``task`` ALFRED's), the opening text,
     goal and valid actions, and the recorded steps."""
+
     name: str
     split: str  # short task type, "heat"
     task: str  # ALFRED task type
@@ -52,6 +54,7 @@ class Recording:
 class ReplayEnvironment(Environment):
     """A recording played back as an Environment with a real game's rules: an invalid command gets "Nothing
     happens." and uses a step; a valid command other than the recorded one raises EnvError."""
+
     benchmark = "alfworld"
     invalid_action_mode = "step"
     partially_observed = True
@@ -104,10 +107,7 @@ class ReplayEnvironment(Environment):
             expected = self.recording.steps[self._next] if self._next < len(self.recording.steps) else None
             if expected is None or action != expected.action:
                 want = expected.action if expected else "nothing (the recording has ended)"
-                raise EnvError(
-                    f"{self.instance_id}: replay cannot follow {action!r}; "
-                    f"the recording continues with {want!r}"
-                )
+                raise EnvError(f"{self.instance_id}: replay cannot follow {action!r}; the recording continues with {want!r}")
             self._next += 1
             observation, self._valid, won = expected.observation, expected.valid_actions, expected.won
         else:

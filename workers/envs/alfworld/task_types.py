@@ -26,6 +26,4 @@ def short_name(task_type: str) -> str:
     try:
         return SHORT_NAMES[task_type]
     except KeyError:
-        raise ValueError(
-            f"unknown ALFWorld task type {task_type!r}; known: {', '.join(SHORT_NAMES)}"
-        ) from None
+        raise ValueError(f"unknown ALFWorld task type {task_type!r}; known: {', '.join(SHORT_NAMES)}") from None

@@ -23,9 +23,7 @@ _GOAL = re.compile(r"^Your task is to: (.+?)\s*$", re.MULTILINE)
 def check_version(version: str) -> str:
     """``version`` itself when it is a known game-file version; ValueError otherwise."""
     if version not in VERSIONS:
-        raise ValueError(
-            f"unknown ALFWorld game-file version {version!r}; use one of: {', '.join(VERSIONS)}"
-        )
+        raise ValueError(f"unknown ALFWorld game-file version {version!r}; use one of: {', '.join(VERSIONS)}")
     return version
 
 

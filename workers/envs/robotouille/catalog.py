@@ -51,6 +51,7 @@ _ID = re.compile(r"^(?P<split>[a-z]+)/(?P<task>[0-9A-Za-z_.]+)@(?P<seed>-?\d+)$"
 @dataclass(frozen=True)
 class InstanceRef:
     """One benchmark instance (split, task, seed), the parsed form of an instance id."""
+
     split: str
     task: str
     seed: int
@@ -82,7 +83,7 @@ def all_refs() -> list[InstanceRef]:
 
 def _strip_prefix(text: str) -> str:
     prefix = BENCHMARK_NAME + "/"
-    return text[len(prefix):] if text.startswith(prefix) else text
+    return text[len(prefix) :] if text.startswith(prefix) else text
 
 
 def parse_id(instance_id: str) -> InstanceRef:
@@ -101,9 +102,7 @@ def parse_id(instance_id: str) -> InstanceRef:
             f"unknown Robotouille task {split}/{task!r} in {instance_id!r}; tasks: {', '.join(tasks(split))}"
         )
     if seed not in SEEDS:
-        raise UnknownInstanceError(
-            f"unknown seed {seed} in {instance_id!r}; seeds: {', '.join(map(str, SEEDS))}"
-        )
+        raise UnknownInstanceError(f"unknown seed {seed} in {instance_id!r}; seeds: {', '.join(map(str, SEEDS))}")
     return InstanceRef(split, task, seed)
 
 
@@ -121,16 +120,13 @@ def select(selector: str | None = None) -> list[InstanceRef]:
         return [parse_id(text)]
     split, _, task = text.partition("/")
     if split not in OPTIMAL_STEPS:
-        raise UnknownInstanceError(
-            f"unknown Robotouille selector {selector!r}: splits are {', '.join(SPLITS)}"
-        )
+        raise UnknownInstanceError(f"unknown Robotouille selector {selector!r}: splits are {', '.join(SPLITS)}")
     if not task:
         return [r for r in refs if r.split == split]
     names = tasks(split)
     chosen = [t for t in names if t == task or t.split("_", 1)[0] == task]
     if len(chosen) != 1:
         raise UnknownInstanceError(
-            f"unknown Robotouille task {split}/{task!r} in selector {selector!r}; "
-            f"tasks: {', '.join(names)}"
+            f"unknown Robotouille task {split}/{task!r} in selector {selector!r}; tasks: {', '.join(names)}"
         )
     return [r for r in refs if r.split == split and r.task == chosen[0]]

@@ -77,8 +77,7 @@ def read_json(path: Path) -> Any:
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise DataFileError(
-            f"malformed JSON in Robotouille data file {str(path)!r}: {exc.msg} "
-            f"(line {exc.lineno}, column {exc.colno})"
+            f"malformed JSON in Robotouille data file {str(path)!r}: {exc.msg} (line {exc.lineno}, column {exc.colno})"
         ) from None
 
 

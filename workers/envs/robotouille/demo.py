@@ -84,7 +84,7 @@ def _action_list_node(descend_think: str, actions: list[str], thinks: list[str],
     """
     replies = [_reply(descend_think, actions)]
     for k in range(len(actions) - 1):
-        replies.append(_reply(thinks[k], actions[k + 1:]))
+        replies.append(_reply(thinks[k], actions[k + 1 :]))
     if closing is not None:
         replies.append(_reply(closing, []))
     return replies
@@ -95,20 +95,24 @@ def decomposition() -> list[Step]:
     root_plan = [PREPARE, STACK_ONION_TASK, CHEESE_TASK, BREAD_TASK]
     r: list[Step] = []
     # call 0: root decomposition
-    r.append(_reply(
-        "The sandwich needs a bottom slice of bread directly on a table, a cut onion and cheese1 on it, "
-        "and a second slice on top. bread1 already lies alone on table1, so it can stay there as the "
-        "bottom slice. The onion is the only ingredient that needs work: it must be cut on a board. "
-        "After that I stack onion, cheese and bread2 on bread1, in that order.",
-        root_plan,
-    ))
+    r.append(
+        _reply(
+            "The sandwich needs a bottom slice of bread directly on a table, a cut onion and cheese1 on it, "
+            "and a second slice on top. bread1 already lies alone on table1, so it can stay there as the "
+            "bottom slice. The onion is the only ingredient that needs work: it must be cut on a board. "
+            "After that I stack onion, cheese and bread2 on bread1, in that order.",
+            root_plan,
+        )
+    )
     # descend into PREPARE (composite, three children)
-    r.append(_reply(
-        "To cut an onion I need an empty cutting board. board1 holds lettuce1 and board2 holds bottombun1; "
-        "neither is part of this sandwich, so I free board1 by moving the lettuce to an empty table. "
-        "Then I fetch onion1 from fryer1, put it on board1 and cut it three times.",
-        [CLEAR_TASK, FETCH_TASK, CUT_TASK],
-    ))
+    r.append(
+        _reply(
+            "To cut an onion I need an empty cutting board. board1 holds lettuce1 and board2 holds bottombun1; "
+            "neither is part of this sandwich, so I free board1 by moving the lettuce to an empty table. "
+            "Then I fetch onion1 from fryer1, put it on board1 and cut it three times.",
+            [CLEAR_TASK, FETCH_TASK, CUT_TASK],
+        )
+    )
     r += _action_list_node(
         "I stand at stove1. I go to board1, pick up lettuce1 and leave it on table2, which is empty.",
         CLEAR_BOARD,
@@ -119,10 +123,12 @@ def decomposition() -> list[Step]:
         ],
         "lettuce1 is on table2 and board1 is empty now. This subtask is done.",
     )
-    r.append(_reply(
-        "board1 is free. Next I bring onion1 over from fryer1, then cut it.",
-        [FETCH_TASK, CUT_TASK],
-    ))
+    r.append(
+        _reply(
+            "board1 is free. Next I bring onion1 over from fryer1, then cut it.",
+            [FETCH_TASK, CUT_TASK],
+        )
+    )
     r += _action_list_node(
         "onion1 lies alone on fryer1. I walk there, pick it up, return to board1 and place it on the board.",
         FETCH_ONION,
@@ -133,10 +139,12 @@ def decomposition() -> list[Step]:
         ],
         "onion1 is on board1 with nothing above it. This subtask is done.",
     )
-    r.append(_reply(
-        "The onion is on the cutting board and I am standing there. All that is left is to cut it.",
-        [CUT_TASK],
-    ))
+    r.append(
+        _reply(
+            "The onion is on the cutting board and I am standing there. All that is left is to cut it.",
+            [CUT_TASK],
+        )
+    )
     r += _action_list_node(
         "A cut only counts after three cuts in a row, so I cut onion1 three times.",
         CUT_ONION,
@@ -146,16 +154,20 @@ def decomposition() -> list[Step]:
         ],
         "The observation now says onion1 is cut. This subtask is done.",
     )
-    r.append(_reply(
-        "onion1 is cut, so preparing the onion is finished.",
-        [],
-    ))
+    r.append(
+        _reply(
+            "onion1 is cut, so preparing the onion is finished.",
+            [],
+        )
+    )
     # back at the root
-    r.append(_reply(
-        "The cut onion is waiting on board1. Now I build the sandwich on bread1 at table1: onion first, "
-        "then cheese1, then bread2 on top.",
-        root_plan[1:],
-    ))
+    r.append(
+        _reply(
+            "The cut onion is waiting on board1. Now I build the sandwich on bread1 at table1: onion first, "
+            "then cheese1, then bread2 on top.",
+            root_plan[1:],
+        )
+    )
     r += _action_list_node(
         "I am at board1 next to the cut onion. I pick it up, go to table1 and stack it on bread1.",
         STACK_ONION,
@@ -165,10 +177,12 @@ def decomposition() -> list[Step]:
         ],
         "onion1 sits directly on bread1. This subtask is done.",
     )
-    r.append(_reply(
-        "The onion is on the bottom slice. Next the cheese, then the top slice.",
-        root_plan[2:],
-    ))
+    r.append(
+        _reply(
+            "The onion is on the bottom slice. Next the cheese, then the top slice.",
+            root_plan[2:],
+        )
+    )
     r += _action_list_node(
         "cheese1 lies alone on sink3. I fetch it and stack it on the onion at table1.",
         STACK_CHEESE,
@@ -179,10 +193,12 @@ def decomposition() -> list[Step]:
         ],
         "cheese1 is on top of the onion. This subtask is done.",
     )
-    r.append(_reply(
-        "Bread, onion and cheese are stacked. Only the top slice is missing: bread2 on stove1.",
-        root_plan[3:],
-    ))
+    r.append(
+        _reply(
+            "Bread, onion and cheese are stacked. Only the top slice is missing: bread2 on stove1.",
+            root_plan[3:],
+        )
+    )
     r += _action_list_node(
         "bread2 lies alone on stove1. I fetch it and put it on top of the cheese to close the sandwich.",
         TOP_BREAD,
@@ -232,8 +248,9 @@ PLAN_THINK = (
 
 def script() -> DemoScript:
     """The example written once; every method derives its own replies from it."""
-    return DemoScript(actions=tuple(ACTIONS), step_thoughts=tuple(REACT_THINKS), plan_thought=PLAN_THINK,
-                      decomposition=tuple(decomposition()))
+    return DemoScript(
+        actions=tuple(ACTIONS), step_thoughts=tuple(REACT_THINKS), plan_thought=PLAN_THINK, decomposition=tuple(decomposition())
+    )
 
 
 def make_demonstration(make_env: Callable[[], Environment]) -> Demonstration:

@@ -19,6 +19,7 @@ EFFECT_KINDS = ("immediate", "delayed", "repetitive", "conditional", "creation",
 @dataclass(frozen=True)
 class PredicateDef:
     """A predicate of the domain: its argument types and, per argument, the sentence that describes it from that object's side."""
+
     name: str
     param_types: tuple[str, ...]
     #: sentence template per argument position ("{0} is at {1}")
@@ -37,6 +38,7 @@ class Literal:
 @dataclass(frozen=True)
 class CreatedObject:
     """The object a creation effect makes: its name, type, and the action parameter it is made from."""
+
     name: str
     type: str
     param: str
@@ -57,6 +59,7 @@ class EffectSpec:
 @dataclass(frozen=True)
 class ActionDef:
     """An action of the domain: its parameters, preconditions, immediate and special effects, and its language description."""
+
     name: str
     #: (parameter, object type) in order of first appearance
     params: tuple[tuple[str, str], ...]
@@ -70,6 +73,7 @@ class ActionDef:
 class Domain:
     """A parsed domain file: object types, predicates (in file order, which orders the sentences of an
     observation) and actions. Immutable, shared by every state."""
+
     name: str
     object_types: tuple[str, ...]
     predicates: tuple[PredicateDef, ...]

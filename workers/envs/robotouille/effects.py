@@ -85,6 +85,7 @@ class EffectTarget(Protocol):
 
     def delete_object(self, name: str) -> None: ...
 
+
 _TRAILING_DIGITS = re.compile(r"\d+$")
 
 

@@ -55,8 +55,11 @@ STATION_KINDS = ("board", "stove", "table", "fryer", "sink")
 ITEM_KINDS = ("bottombun", "lettuce", "patty", "topbun", "bread", "cheese", "tomato", "onion", "chicken", "potato")
 #: the predicate an extra item of a kind starts with (kinds not listed get none)
 _KIND_PREDICATE = {
-    "patty": "iscookable", "chicken": "iscookable",
-    "lettuce": "iscuttable", "onion": "iscuttable", "tomato": "iscuttable",
+    "patty": "iscookable",
+    "chicken": "iscookable",
+    "lettuce": "iscuttable",
+    "onion": "iscuttable",
+    "tomato": "iscuttable",
 }
 #: the name an extra object has until its kind is drawn (it fixes the key order: name first)
 STATION_WILDCARD = "station"
@@ -147,8 +150,7 @@ def randomize(problem: dict[str, Any], seed: int) -> dict[str, Any]:
 
 def _extra_stations(rng: random.Random, width: int, height: int) -> list[dict[str, Any]]:
     count = rng.randrange(0, width * height)
-    stations = [{"name": STATION_WILDCARD, "x": rng.randrange(0, width), "y": rng.randrange(0, height)}
-                for _ in range(count)]
+    stations = [{"name": STATION_WILDCARD, "x": rng.randrange(0, width), "y": rng.randrange(0, height)} for _ in range(count)]
     for station in stations:  # all cells are drawn before any kind
         station["name"] = rng.choice(STATION_KINDS)
     return stations
@@ -209,8 +211,7 @@ class _Grid:
     def _cells(self) -> Iterable[tuple[int, int]]:
         return ((x, y) for y in range(self.height) for x in range(self.width))
 
-    def _bordering(self, start: tuple[int, int], occupied: set[tuple[int, int]],
-                   seen: set[tuple[int, int]] | None = None) -> int:
+    def _bordering(self, start: tuple[int, int], occupied: set[tuple[int, int]], seen: set[tuple[int, int]] | None = None) -> int:
         """Number of distinct stations next to the open region containing ``start``."""
         seen = set() if seen is None else seen
         touched: set[tuple[int, int]] = set()
@@ -242,8 +243,9 @@ def _index_of(objs: list[dict[str, Any]], target: dict[str, Any]) -> int:
     return objs.index(target)
 
 
-def _place_stations(rng: random.Random, grid: _Grid, candidates: list[dict[str, Any]],
-                    players: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def _place_stations(
+    rng: random.Random, grid: _Grid, candidates: list[dict[str, Any]], players: list[dict[str, Any]]
+) -> list[dict[str, Any]]:
     placed: list[dict[str, Any]] = []
     # an extra station is checked against the player's drawn cell (upstream passes the players
     # still to be placed); a forced one against no player at all
@@ -324,8 +326,9 @@ def _force_item(holders: list[dict[str, Any]], placed: list[dict[str, Any]], ite
     raise GenerationFailed("a required item has nowhere to go")
 
 
-def _place_containers(holders: list[dict[str, Any]], items: list[dict[str, Any]],
-                      candidates: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def _place_containers(
+    holders: list[dict[str, Any]], items: list[dict[str, Any]], candidates: list[dict[str, Any]]
+) -> list[dict[str, Any]]:
     """Containers go on free holders; ``items`` loses an extra item a forced container displaces."""
     placed: list[dict[str, Any]] = []
     for container in candidates:
@@ -349,8 +352,9 @@ def _place_containers(holders: list[dict[str, Any]], items: list[dict[str, Any]]
     return placed
 
 
-def _force_container(holders: list[dict[str, Any]], items: list[dict[str, Any]],
-                     placed: list[dict[str, Any]], container: dict[str, Any]) -> None:
+def _force_container(
+    holders: list[dict[str, Any]], items: list[dict[str, Any]], placed: list[dict[str, Any]], container: dict[str, Any]
+) -> None:
     for holder in holders:
         boxes = _at(placed, holder["x"], holder["y"])
         things = _at(items, holder["x"], holder["y"])
@@ -418,8 +422,12 @@ def write_instances(root: Path, dest: Path) -> list[str]:
     from . import catalog
 
     written: list[str] = []
-    benchmark = [(f"{split}/{task}", seed, catalog.OPTIMAL_STEPS[split][task])
-                 for split in catalog.SPLITS for task in catalog.tasks(split) for seed in catalog.SEEDS]
+    benchmark = [
+        (f"{split}/{task}", seed, catalog.OPTIMAL_STEPS[split][task])
+        for split in catalog.SPLITS
+        for task in catalog.tasks(split)
+        for seed in catalog.SEEDS
+    ]
     train = [(f"{split}/{task}", TRAIN_SEED, None) for split, task in TRAIN_KITCHENS]
     for folder, wanted in (("instances", benchmark), ("instances_train", train)):
         rows = []

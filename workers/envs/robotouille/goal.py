@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # pragma: no cover
 @dataclass(frozen=True)
 class GoalLiteral:
     """One goal entry: a predicate over goal ids, and whether it must hold or must not."""
+
     predicate: str
     vars: tuple[int, ...]  # goal ids
     is_true: bool = True
@@ -37,6 +38,7 @@ class GoalLiteral:
 class Goal:
     """A parsed goal: its entries and, per goal id, the object name it stands for and the objects it may be
     assigned (distinct ids take distinct objects)."""
+
     literals: tuple[GoalLiteral, ...]
     #: goal id -> object name it stands for (``bread``)
     var_names: dict[int, str]

@@ -298,7 +298,7 @@ class Planner:
         fixed = {v: self.assign[v] for v in dish.all_vars() if v in self.assign}
         pins = self.roles.match_stack(dish, stack, view, fixed)
         good = stack[: len(pins)]
-        return good, stack[len(pins):]
+        return good, stack[len(pins) :]
 
     def dish_next(self, dish: StackDish, view: View) -> list[int]:
         """Variables that may go onto the dish next (given its correct bottom part)."""
@@ -412,9 +412,7 @@ class Planner:
                 added = all(view.added.get(self.assign[i]) == water for i in soup.ingredients)
                 bowl_at = view.container_at.get(bowl)
                 if added and bowl_at is not None and (table is None or bowl_at == table) and view.true("container_empty", bowl):
-                    return self.goto(view, bowl_at) or self.act(
-                        view, "fill-bowl", c1=bowl, c2=c, m1=water, s1=bowl_at
-                    )
+                    return self.goto(view, bowl_at) or self.act(view, "fill-bowl", c1=bowl, c2=c, m1=water, s1=bowl_at)
                 return self.park(view)
             if c == self.assign[soup.bowl] and soup.table is not None:
                 table = self.assign[soup.table]

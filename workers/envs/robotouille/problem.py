@@ -24,6 +24,7 @@ KIND_KEYS = {"station": "stations", "item": "items", "player": "players", "conta
 @dataclass
 class Problem:
     """A built problem: the initial engine state, the goal, and the goal sentence shown to the agent."""
+
     state: State
     goal: Goal
     goal_description: str

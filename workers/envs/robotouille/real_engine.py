@@ -38,6 +38,7 @@ def make_real_env(ref: catalog.InstanceRef, step_multiplier: float = 4.0) -> Env
 class RealRobotouilleEnv(Environment):
     """The original Robotouille package behind our Environment interface, for cross-checks: invalid actions are
     rejected (no step used), success is the real engine's ``done``."""
+
     benchmark = "robotouille"
     invalid_action_mode = "reject"
 

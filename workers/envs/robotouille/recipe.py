@@ -36,6 +36,7 @@ class UnsupportedGoal(ValueError):
 class StackDish:
     """A dish stacked on a table: the base item on the table, the items above it, exact placements (``atop``) and
     the item that must end on top."""
+
     table: int
     base: int
     #: every item variable in the stack above the base, in goal order
@@ -53,6 +54,7 @@ class StackDish:
 @dataclass
 class Soup:
     """A soup: water in a bowl, boiled when ``boil``, with items added, and the table the bowl must end on (None: anywhere)."""
+
     water: int
     bowl: int
     table: int | None
@@ -63,6 +65,7 @@ class Soup:
 @dataclass
 class Recipe:
     """A goal read as cooking work for the planner: the dishes, the soups, and what preparation each item variable needs."""
+
     dishes: list[StackDish]
     soups: list[Soup]
     #: item variable -> preparation predicates it needs

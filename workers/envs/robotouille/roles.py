@@ -60,9 +60,7 @@ class RoleChooser:
         prev_var = dish.base
         for obj in stack[1:]:
             chained = [a for a, b in dish.below.items() if b == prev_var]
-            options = chained or [
-                v for v in dish.members if v not in pins and v not in dish.below
-            ]
+            options = chained or [v for v in dish.members if v not in pins and v not in dish.below]
             chosen = None
             for v in options:
                 if v in pins or not fits(v, obj):
@@ -114,9 +112,7 @@ class RoleChooser:
             if prep == "iscut":
                 if not view.true("iscuttable", obj):
                     return INF
-                count = next(
-                    (e.counter for e in view.st.effects if e.spec.kind == "repetitive" and e.arg == obj), 0
-                )
+                count = next((e.counter for e in view.st.effects if e.spec.kind == "repetitive" and e.arg == obj), 0)
                 cost += max(3 - count, 1) + (0 if in_place else TRANSPORT)
             elif prep == "iscooked":
                 if not view.true("iscookable", obj):

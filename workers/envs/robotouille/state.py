@@ -61,7 +61,7 @@ class State:
 
     def create_object(self, name: str, obj_type: str) -> str:
         """A new object ``<name><k>``, k one past the highest number used by ``name``."""
-        used = [int(o[len(name):]) for o in self.types if base_name(o) == name and o[len(name):].isdigit()]
+        used = [int(o[len(name) :]) for o in self.types if base_name(o) == name and o[len(name) :].isdigit()]
         new = f"{name}{max(used, default=0) + 1}"
         self.add_object(new, obj_type)
         self._valid = None

@@ -63,7 +63,7 @@ def group_plan(plan: Sequence[str], chunk_size: int | None = None) -> list[str]:
     if not plan:
         return []
     size = chunk_size or math.ceil(len(plan) / MAX_ROOT_CHUNKS)
-    return [chunk_name(k + 1, plan[i:i + size]) for k, i in enumerate(range(0, len(plan), size))]
+    return [chunk_name(k + 1, plan[i : i + size]) for k, i in enumerate(range(0, len(plan), size))]
 
 
 def _actions_of(item: str) -> list[str]:
@@ -79,7 +79,7 @@ def _on_plan_run(items: Sequence[str], plan: Sequence[str]) -> tuple[list[str], 
         pos = 0
         for item in items[start:]:
             acts = _actions_of(item)
-            if list(plan[pos:pos + len(acts)]) == acts:
+            if list(plan[pos : pos + len(acts)]) == acts:
                 kept.append(item)
                 pos += len(acts)
             else:

@@ -29,8 +29,7 @@ _REPLY_MAKERS: dict[str, Callable[[Mapping[str, Any], Knobs, str], dict[str, Any
 MODELS = ("expert", "random", "replay")
 
 
-def offline_text(name: str, messages: list[dict[str, str]], metadata: Mapping[str, Any] | None,
-                 api_base: str | None) -> str:
+def offline_text(name: str, messages: list[dict[str, str]], metadata: Mapping[str, Any] | None, api_base: str | None) -> str:
     """The reply text of test double ``name`` (without the ``offline/`` prefix)."""
     meta = dict((metadata or {}).get(METADATA_KEY) or {})
     call_key = str(meta.get("call_key", ""))
@@ -56,8 +55,9 @@ def _make_provider_class() -> type:
     class OfflineProvider(CustomLLM):
         """TEST DOUBLE provider for ``offline/expert``, ``offline/random``, ``offline/replay``."""
 
-        def _fill(self, model: str, messages: list, api_base: str | None, model_response: Any,
-                  litellm_params: Mapping[str, Any] | None) -> Any:
+        def _fill(
+            self, model: str, messages: list, api_base: str | None, model_response: Any, litellm_params: Mapping[str, Any] | None
+        ) -> Any:
             msgs = [{"role": str(m["role"]), "content": str(m.get("content") or "")} for m in messages]
             try:
                 text = offline_text(model, msgs, (litellm_params or {}).get("metadata"), api_base)
@@ -71,15 +71,46 @@ def _make_provider_class() -> type:
             model_response.usage = Usage(prompt_tokens=prompt, completion_tokens=completion, total_tokens=prompt + completion)
             return model_response
 
-        def completion(self, model, messages, api_base, custom_prompt_dict, model_response, print_verbose,
-                       encoding, api_key, logging_obj, optional_params, acompletion=None,
-                       litellm_params=None, logger_fn=None, headers={}, timeout=None, client=None):  # noqa: B006  (litellm's CustomLLM signature; never mutated)
+        def completion(
+            self,
+            model,
+            messages,
+            api_base,
+            custom_prompt_dict,
+            model_response,
+            print_verbose,
+            encoding,
+            api_key,
+            logging_obj,
+            optional_params,
+            acompletion=None,
+            litellm_params=None,
+            logger_fn=None,
+            headers={},  # noqa: B006
+            timeout=None,
+            client=None,
+        ):  # litellm's CustomLLM signature (headers={} is never mutated)
             return self._fill(model, messages, api_base, model_response, litellm_params)
 
-        async def acompletion(self, model, messages, api_base, custom_prompt_dict, model_response,
-                              print_verbose, encoding, api_key, logging_obj, optional_params,
-                              acompletion=None, litellm_params=None, logger_fn=None, headers={},  # noqa: B006  (litellm's signature)
-                              timeout=None, client=None):
+        async def acompletion(
+            self,
+            model,
+            messages,
+            api_base,
+            custom_prompt_dict,
+            model_response,
+            print_verbose,
+            encoding,
+            api_key,
+            logging_obj,
+            optional_params,
+            acompletion=None,
+            litellm_params=None,
+            logger_fn=None,
+            headers={},  # noqa: B006  (litellm's signature)
+            timeout=None,
+            client=None,
+        ):
             return self._fill(model, messages, api_base, model_response, litellm_params)
 
     return OfflineProvider
