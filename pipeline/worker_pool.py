@@ -89,22 +89,60 @@ class WorkerPool(Protocol):
     def shutdown(self) -> None: ...
 
 
-class RayWorkerPool:
-    """Episode workers as Ray actors (:func:`workers.episode_worker.worker_actor`)."""
+class _SlotBook:
+    """What both pools keep alike: the workers (slots), the idle ones, and the attempts in
+    flight by their wait key; each pool adds how a worker is made and how an attempt runs."""
 
-    def __init__(self, worker_cls: Any, run_id: str, sink: Any, factory: Any, *, session: str) -> None:
-        self.worker_cls = worker_cls
-        self.run_id = run_id
-        self.sink = sink
-        self.factory = factory
+    def __init__(self, session: str, prefix: str) -> None:
         self.session = session
         self.slots: list[Slot] = []
         self.idle: list[Slot] = []
         self._inflight: dict[Any, tuple[Slot, Pending, float]] = {}
+        self._prefix = prefix
         self._seq = itertools.count(1)
 
+    def _next_id(self) -> str:
+        return f"{self.session}-{self._prefix}{next(self._seq):03d}"
+
     def _new_slot(self) -> Slot:
-        wid = f"{self.session}-w{next(self._seq):03d}"
+        raise NotImplementedError
+
+    def has_idle(self) -> bool:
+        """Whether a worker waits for an attempt."""
+        return bool(self.idle)
+
+    def in_flight(self) -> int:
+        """Attempts handed out and not yet collected."""
+        return len(self._inflight)
+
+    def release(self, fin: Finished) -> None:
+        """Return a finished attempt's worker to the idle ones."""
+        self.idle.append(fin.slot)
+
+    def restore(self, fin: Finished) -> None:
+        """Put a collected attempt back in flight (its result is read again later)."""
+        self._inflight[fin.key] = (fin.slot, fin.pending, fin.started)
+
+    def add_worker(self) -> Slot:
+        """A new idle worker (replacing one that died)."""
+        slot = self._new_slot()
+        self.slots.append(slot)
+        self.idle.append(slot)
+        return slot
+
+
+class RayWorkerPool(_SlotBook):
+    """Episode workers as Ray actors (:func:`workers.episode_worker.worker_actor`)."""
+
+    def __init__(self, worker_cls: Any, run_id: str, sink: Any, factory: Any, *, session: str) -> None:
+        super().__init__(session, "w")
+        self.worker_cls = worker_cls
+        self.run_id = run_id
+        self.sink = sink
+        self.factory = factory
+
+    def _new_slot(self) -> Slot:
+        wid = self._next_id()
         return Slot(wid, self.worker_cls.remote(wid, self.run_id, self.sink, self.factory))
 
     def start(self, n: int) -> dict[str, str]:
@@ -121,18 +159,12 @@ class RayWorkerPool:
         self.idle = list(self.slots)
         return {s.worker_id: node for s, node in zip(self.slots, nodes)}
 
-    def has_idle(self) -> bool:
-        return bool(self.idle)
-
     def submit(self, pending: Pending) -> Slot:
         slot = self.idle.pop()
         ref = slot.handle.run_unit.remote(pending.unit.work(), pending.attempt)
         log.debug("unit %s attempt %d -> worker %s", pending.unit.unit_id, pending.attempt, slot.worker_id)
         self._inflight[ref] = (slot, pending, time.time())
         return slot
-
-    def in_flight(self) -> int:
-        return len(self._inflight)
 
     def wait(self, timeout: float) -> list[Any]:
         """Every attempt that is ready once the first one is (at most ``timeout`` seconds), so a burst is
@@ -197,18 +229,6 @@ class RayWorkerPool:
         self.idle.append(slot)
         return fin
 
-    def release(self, fin: Finished) -> None:
-        self.idle.append(fin.slot)
-
-    def restore(self, fin: Finished) -> None:
-        self._inflight[fin.key] = (fin.slot, fin.pending, fin.started)
-
-    def add_worker(self) -> Slot:
-        slot = self._new_slot()
-        self.slots.append(slot)
-        self.idle.append(slot)
-        return slot
-
     def shutdown(self) -> None:
         """Kill every actor (errors ignored: an actor may already be gone)."""
         import ray
@@ -221,7 +241,7 @@ class RayWorkerPool:
         self.idle = []
 
 
-class InProcessWorkerPool:
+class InProcessWorkerPool(_SlotBook):
     """Episode runners on threads of the driver's process.
 
     ``make_runner(worker_id)`` builds a :class:`workers.episode_worker.EpisodeRunner` (with the
@@ -229,16 +249,12 @@ class InProcessWorkerPool:
     runner, so an agent's state is never shared between threads."""
 
     def __init__(self, make_runner: Callable[[str], Any], *, session: str) -> None:
+        super().__init__(session, "t")
         self.make_runner = make_runner
-        self.session = session
-        self.slots: list[Slot] = []
-        self.idle: list[Slot] = []
-        self._inflight: dict[cf.Future[EpisodeOutcome], tuple[Slot, Pending, float]] = {}
         self._executor: cf.ThreadPoolExecutor | None = None
-        self._seq = itertools.count(1)
 
     def _new_slot(self) -> Slot:
-        wid = f"{self.session}-t{next(self._seq):03d}"
+        wid = self._next_id()
         return Slot(wid, self.make_runner(wid))
 
     def start(self, n: int) -> dict[str, str]:
@@ -248,18 +264,12 @@ class InProcessWorkerPool:
         self.idle = list(self.slots)
         return {s.worker_id: "local" for s in self.slots}
 
-    def has_idle(self) -> bool:
-        return bool(self.idle)
-
     def submit(self, pending: Pending) -> Slot:
         assert self._executor is not None, "start() first"
         slot = self.idle.pop()
         fut = self._executor.submit(slot.handle.run_unit, pending.unit.work(), pending.attempt)
         self._inflight[fut] = (slot, pending, time.time())
         return slot
-
-    def in_flight(self) -> int:
-        return len(self._inflight)
 
     def wait(self, timeout: float) -> list[Any]:
         if not self._inflight:
@@ -280,18 +290,6 @@ class InProcessWorkerPool:
             slot.units += 1
         self.idle.append(slot)
         return fin
-
-    def release(self, fin: Finished) -> None:
-        self.idle.append(fin.slot)
-
-    def restore(self, fin: Finished) -> None:
-        self._inflight[fin.key] = (fin.slot, fin.pending, fin.started)
-
-    def add_worker(self) -> Slot:
-        slot = self._new_slot()
-        self.slots.append(slot)
-        self.idle.append(slot)
-        return slot
 
     def shutdown(self) -> None:
         """Stop the threads without waiting: queued attempts are cancelled, a running one finishes unseen."""
