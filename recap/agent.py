@@ -255,6 +255,8 @@ class Agent(ABC):
 
 
 def format_transcript(messages: list[MessageRecord]) -> str:
+    """The demonstration run's messages as the text pinned in prompts: each labelled as an example
+    prompt or reply, framed as one complete example that reaches the goal."""
     parts = ["Here is a complete example of the interaction, from the first prompt to the goal being reached."]
     for m in messages:
         label = "Example prompt" if m.role == "user" else "Example reply"

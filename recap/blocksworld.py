@@ -140,6 +140,10 @@ def expert_plan_for(s: _State, goal: list[str]) -> list[str]:
 
 
 class BlocksworldEnv(Environment):
+    """One Blocksworld instance: start ``towers`` (each listed bottom to top) and a ``goal`` tower,
+    bottom up. Invalid actions are rejected; the episode ends at the goal or after ``max_steps``
+    (``step_multiplier`` x the expert plan's length)."""
+
     benchmark = "blocksworld"
     invalid_action_mode = "reject"
 

@@ -35,6 +35,9 @@ class DataNotFoundError(FileNotFoundError):
 
 @dataclass(frozen=True)
 class Reset:
+    """What :meth:`Environment.reset` returns: the first observation, the valid actions (None: an
+    open action space) and the goal as text."""
+
     observation: str
     valid_actions: tuple[str, ...] | None
     goal: str
@@ -42,6 +45,10 @@ class Reset:
 
 @dataclass(frozen=True)
 class Step:
+    """What :meth:`Environment.step` returns: the new observation and valid actions (None: an open
+    action space), whether the episode is over (``done``) and whether the goal was reached; ``info``
+    holds environment-specific extras."""
+
     observation: str
     valid_actions: tuple[str, ...] | None
     done: bool

@@ -46,6 +46,9 @@ class SeqCounter:
 
 @dataclass(frozen=True)
 class Entry:
+    """One message of a :class:`History`: its episode-wide ``seq``, the message, the template it
+    came from (``kind``), the tree node it belongs to (None: none) and whether it is pinned."""
+
     seq: int
     message: ChatMessage
     kind: str
@@ -54,6 +57,10 @@ class Entry:
 
 
 class History:
+    """One context's message history: pins that are never trimmed plus a window of at most
+    ``window`` messages, enforced on every insertion (see the module docstring); every message added
+    is emitted as a ``messages`` row. Raises ValueError for a window below 2 or an unknown mode."""
+
     def __init__(
         self,
         episode_id: str,

@@ -44,6 +44,8 @@ class LLMError(RuntimeError):
 
 @dataclass(frozen=True)
 class ChatMessage:
+    """One chat message as the provider receives it (``role``: user, assistant or system)."""
+
     role: str  # "user" | "assistant" | "system"
     content: str
 
@@ -78,6 +80,10 @@ class LLMRequest:
 
 @dataclass(frozen=True)
 class LLMResponse:
+    """A model's answer to one call, as the agent sees it: the text, tokens, cost (USD from our
+    price table), latency and retries, who counted the tokens (``token_count_source``) and where the
+    answer came from (``served_from``: provider, ledger, cache or replay)."""
+
     text: str
     model: str
     prompt_tokens: int = 0

@@ -80,6 +80,8 @@ def registered_method(name: str, agent_cls: type[Agent], config_cls: type[AgentC
 
 
 def method_classes(method: str) -> tuple[type[Agent], type[AgentConfig]]:
+    """The (agent class, config class) registered as ``method``; raises ConfigError naming the known
+    methods."""
     if method not in METHODS:
         raise ConfigError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
     return METHODS[method]

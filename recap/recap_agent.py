@@ -38,6 +38,10 @@ from recap.tree import Node
 
 
 class ReCAPAgent(Agent):
+    """ReCAP: recursive plan-ahead decomposition in one shared sliding-window context, re-injecting
+    the parent's think and remaining subtasks on every return (see the module docstring for the
+    control flow)."""
+
     style = "recap"
     config_cls = ReCAPConfig
     expected_format = P.reply_format(True)

@@ -12,12 +12,17 @@ from collections.abc import Sequence
 
 
 def reply_format(with_think: bool) -> str:
+    """The JSON reply every ReCAP call asks for: the (refined) subtask list, after the thought
+    unless ``think`` is off. Shown in the system text and in JSON repair messages."""
     if with_think:
         return '{"think": "<your reasoning>", "subtasks": ["<subtask>", ...]}'
     return '{"subtasks": ["<subtask>", ...]}'
 
 
 def system_text(with_think: bool) -> str:
+    """ReCAP's system text, at the head of the pinned task prompt: how recursive planning works (a
+    subtask list per task, its head carried out next, the list revised on return), the reply format
+    and what each field must hold."""
     think_line = '- "think": your reasoning about the current task and the latest observation.\n' if with_think else ""
     return (
         "You are an agent that reaches a goal in an environment by planning recursively. "
@@ -37,10 +42,15 @@ def system_text(with_think: bool) -> str:
 
 
 def numbered(items: Sequence[str]) -> str:
+    """Items as ``1. item`` lines, ``(none)`` when empty: how return prompts show the remaining
+    subtasks and earlier thoughts."""
     return "\n".join(f"{i}. {s}" for i, s in enumerate(items, 1)) if items else "(none)"
 
 
 def task_prompt(*, rules: str, observation: str, goal: str, with_think: bool, preamble: bool) -> str:
+    """The pinned task prompt, ReCAP's first call (the root decomposition): the system text and
+    rules (left out when rendering a demonstration, ``preamble=False``), the initial observation and
+    the goal, asking for high-level subtasks."""
     parts = []
     if preamble:
         parts += [system_text(with_think), f"Rules of the environment:\n{rules}"]
@@ -53,10 +63,14 @@ def task_prompt(*, rules: str, observation: str, goal: str, with_think: bool, pr
 
 
 def descend_prompt(task: str) -> str:
+    """The prompt of a descend call, on entering a child node: names the child's task and asks for
+    its own subtask list."""
     return f"OK.\n\nYour current task: {task}\n\nWrite the list of subtasks for this task."
 
 
 def depth_cap_prompt(task: str) -> str:
+    """The prompt of a descend call at ``max_level`` (kind ``depth_cap``): names the task and asks
+    for exactly one valid action instead of a decomposition."""
     return (
         f"OK.\n\nYour current task: {task}\n\n"
         "This task may not be broken down any further. Reply with a list holding exactly one "
@@ -146,4 +160,6 @@ def shortcut_reply(action: str, with_think: bool) -> str:
 
 
 def reminder(rules: str) -> str:
+    """The rules again, prepended to whichever prompt is sent next when a reminder is due (every
+    ``reminder_period`` calls or control-loop iterations)."""
     return f"Reminder of the environment rules:\n{rules}"

@@ -51,6 +51,8 @@ class EpisodeEnd(Exception):
 
 
 def repair_prompt(problem: str, expected: str) -> str:
+    """The user message that re-asks after a reply that could not be used: what was wrong with it
+    (``problem``) and the JSON form expected."""
     return (
         f"I could not use your last reply: {problem}.\n"
         f"Answer again with a single JSON object of the form {expected} and nothing else."
@@ -59,6 +61,9 @@ def repair_prompt(problem: str, expected: str) -> str:
 
 @dataclass
 class Usage:
+    """Running totals of one episode's model calls (tokens, USD, JSON repairs), shared by all its
+    contexts; the episode's call, token and cost caps are checked against them."""
+
     calls: int = 0
     prompt_tokens: int = 0
     cached_prompt_tokens: int = 0

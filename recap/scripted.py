@@ -23,10 +23,16 @@ class ScriptExhausted(RuntimeError):
 
 
 def estimate_tokens(text: str) -> int:
+    """The scripted model's token estimate: ceil(characters / 4), at least 1 (no tokenizer in the
+    pure core)."""
     return max(1, (len(text) + 3) // 4)
 
 
 class ScriptedClient:
+    """A test-double :class:`~recap.llm.LLMClient` answering each call with the next scripted
+    :data:`Item`; keeps every request in ``requests`` and raises ScriptExhausted when the script
+    runs out."""
+
     def __init__(
         self,
         replies: Iterable[Item],

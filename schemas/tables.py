@@ -136,4 +136,7 @@ def record_to_row(record: Any, run_id: str) -> dict[str, Any]:
 
 
 def rows_to_table(table: str, rows: list[dict[str, Any]]) -> pa.Table:
+    """Rows of ``table`` (dicts of its columns, ``run_id`` included) as an Arrow table with the
+    table's pinned schema, so every part file of it has the same column types; pyarrow raises on a
+    value that does not fit its column."""
     return pa.Table.from_pylist(rows, schema=arrow_schema(table))

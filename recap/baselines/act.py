@@ -12,6 +12,8 @@ __all__ = ["ActAgent", "ReActConfig"]
 
 
 class ActAgent(ReActAgent):
+    """Act: ReAct without the thought; each reply names the next action alone."""
+
     style = "act"
     expected_format = P.action_format(False)
     with_think = False

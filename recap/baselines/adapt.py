@@ -174,6 +174,10 @@ class TaskNode(Node):
 
 
 class ADaPTAgent(Agent):
+    """ADaPT: an executor tries each task action by action and, only when it fails, a planner splits
+    the task into and/or subtasks, recursively up to ``max_depth`` (see the module docstring).
+    Executor runs and planner calls each get their own context."""
+
     style = "adapt"
     config_cls = ADaPTConfig
     expected_format = P.EXECUTOR_FORMAT

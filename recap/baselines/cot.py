@@ -50,6 +50,9 @@ class PlanConfig(AgentConfig):
 
 
 class CoTAgent(Agent):
+    """CoT: one call returns the reasoning and the whole plan, which then runs open-loop without
+    asking the model again (see the module docstring for invalid planned actions)."""
+
     style = "cot"
     config_cls = PlanConfig
     expected_format = P.plan_format(True)

@@ -41,6 +41,9 @@ PLANNER_FORMAT = '{"think": "<your reasoning>", "subtasks": ["<subtask>", ...], 
 
 
 def action_system_text(with_think: bool) -> str:
+    """The system text of ReAct (``with_think``) or Act, at the head of the pinned task prompt: one
+    action per turn, invalid actions are not carried out, the reply format and what each field
+    holds."""
     think_line = (
         '- "think": your reasoning before acting: what the goal still needs, what the latest '
         "observation and your earlier steps tell you, and why the action you choose moves you "
@@ -61,6 +64,9 @@ def action_system_text(with_think: bool) -> str:
 
 
 def plan_system_text(with_think: bool) -> str:
+    """The system text of CoT (``with_think``) or Standard, at the head of their one prompt: write
+    the complete plan at once, since it runs without asking again; the reply format and what each
+    field holds."""
     think_line = (
         '- "think": your reasoning: what the goal requires, which steps get there, and how each '
         "action changes the state that the following actions start from.\n"
@@ -81,6 +87,9 @@ def plan_system_text(with_think: bool) -> str:
 
 
 def executor_system_text() -> str:
+    """The system text of an ADaPT executor run, at the head of its pinned task prompt: carry out
+    one task action by action and stop with a done or failed status; the reply forms and what each
+    field holds."""
     return (
         "You are the executor of a planning system: you carry out one task in an environment, one "
         "action at a time. After each action I show you what happened. An action that is not one "
@@ -98,6 +107,9 @@ def executor_system_text() -> str:
 
 
 def planner_system_text() -> str:
+    """The system text of an ADaPT planner call: break a task the executor could not do into
+    self-contained subtasks combined by ``and``/``or`` logic; the reply format and what each field
+    holds."""
     return (
         "You are the planner of a planning system. An executor tried to carry out a task in an "
         "environment and did not manage it on its own. Break the task into a short list of "
@@ -185,6 +197,8 @@ def planner_task_prompt(
 
 
 def observation_prompt(observation: str) -> str:
+    """The user message after an action that reached the environment (ReAct, Act, ADaPT executor):
+    the new observation."""
     return f"Observation:\n{observation}"
 
 

@@ -90,6 +90,9 @@ def flat_context(ep: Episode, goal: str) -> dict[str, Any]:
 
 
 class ReActAgent(Agent):
+    """ReAct: one call per step; each reply is a thought and the next action, and the next prompt is
+    the new observation or the error feedback."""
+
     style = "react"
     config_cls = ReActConfig
     expected_format = P.action_format(True)

@@ -11,6 +11,8 @@ __all__ = ["StandardAgent", "PlanConfig"]
 
 
 class StandardAgent(CoTAgent):
+    """Standard (I/O): CoT without the thought; one call returns the whole plan alone."""
+
     style = "standard"
     expected_format = P.plan_format(False)
     with_think = False
