@@ -16,6 +16,9 @@ from workers.envs.registry import Benchmark
 
 
 class BlocksworldBenchmark(Benchmark):
+    """The registry's adapter for the built-in Blocksworld of :mod:`recap.blocksworld` (the pure
+    core cannot import the registry, so the adapter lives here)."""
+
     name = _PURE.name
 
     def list_instances(self, selector: str | None = None) -> list[str]:

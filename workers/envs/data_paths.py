@@ -45,6 +45,8 @@ def recap_cache_root() -> Path:
 
 
 def checkout_data_root() -> Path:
+    """``<checkout>/../shared/data``: the last place a benchmark folder is looked for, one folder
+    beside the checkout that several checkouts share."""
     return CHECKOUT_DATA_ROOT
 
 

@@ -18,6 +18,8 @@ from workers.envs.data_paths import DataLocation, Rung
 
 
 def is_url(text: str) -> bool:
+    """True when ``text`` starts with a URL scheme (``https://``, ``file://``, ...); anything else
+    is a local path."""
     return bool(re.match(r"^[A-Za-z][A-Za-z0-9+.-]*://", text))
 
 

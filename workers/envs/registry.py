@@ -144,6 +144,8 @@ def get_benchmark(name: str) -> Benchmark:
 
 
 def split_id(instance_id: str) -> tuple[str, str]:
+    """``(benchmark, rest)`` of an instance id ``<benchmark>/<rest>``; raises UnknownInstanceError
+    for an id without both parts."""
     bench, sep, rest = instance_id.partition("/")
     if not sep or not rest:
         raise UnknownInstanceError(
@@ -153,6 +155,8 @@ def split_id(instance_id: str) -> tuple[str, str]:
 
 
 def make_env(instance_id: str, **options: Any) -> Environment:
+    """The environment of ``instance_id``, made by its benchmark with ``options``; raises
+    UnknownInstanceError for an unknown benchmark."""
     bench, _ = split_id(instance_id)
     return get_benchmark(bench).make(instance_id, **options)
 

@@ -18,6 +18,10 @@ from workers.llm.providers import DeploymentConfig
 
 
 class BlockingGateway:
+    """A synchronous :class:`recap.llm.LLMClient` over one deployment's gateway core, which runs on
+    a private event-loop thread (see the module docstring); use it as a context manager so the
+    gateway is closed."""
+
     def __init__(self, config: DeploymentConfig, **gateway_kwargs: Any):
         self.core = DeploymentGateway(config, **gateway_kwargs)
         self._loop = asyncio.new_event_loop()

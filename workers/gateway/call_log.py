@@ -40,11 +40,16 @@ def run_id_of(run_dir: Path | str) -> str:
 
 
 def writer_name(deployment: str) -> str:
+    """A part-file writer name for one gateway of ``deployment``: a slug of the name plus a random
+    suffix, so a restarted gateway never shares a name with its predecessor."""
     slug = re.sub(r"[^A-Za-z0-9]+", "-", deployment).strip("-")[:40] or "gateway"
     return f"gw-{slug}-{uuid.uuid4().hex[:6]}"
 
 
 class CallLog:
+    """Buffers one gateway's ``llm_calls`` and ``events`` rows and writes them as part files in
+    batches (see the module docstring for when)."""
+
     def __init__(self, run_dir: Path | str, run_id: str, writer: str, *, max_rows: int = 256, flush_interval_s: float = 1.0):
         self.run_id = run_id
         self.flush_interval_s = flush_interval_s

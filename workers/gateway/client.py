@@ -24,6 +24,9 @@ def _unwrap(envelope: tuple) -> LLMResponse:
 
 
 class GatewayClient:
+    """The picklable :class:`recap.llm.LLMClient` of one deployment's ``GatewayActor`` (see the
+    module docstring); ``timeout_s`` None: wait for the answer however long it takes."""
+
     def __init__(self, actor: Any, *, deployment: str | None = None, timeout_s: float | None = None):
         self.actor = actor
         self.deployment = deployment

@@ -547,6 +547,8 @@ class DeploymentGateway:
 
 
 def response_as_result(resp: LLMResponse) -> dict[str, Any]:
+    """The fields of a response that a recorded result keeps (text, token counts and their source):
+    what a duplicate of a call already in flight is served from, at no cost."""
     return {
         k: v
         for k, v in dataclasses.asdict(resp).items()

@@ -85,6 +85,10 @@ def scan(data: bytes) -> BadLine | None:
 
 
 class Journal:
+    """The budget ledger's append-only journal file (see the module docstring). Opening takes the
+    file's exclusive lock, waiting up to ``lock_timeout_s`` (then JournalError); ``fsync=False``
+    never syncs."""
+
     def __init__(self, path: Path | str, *, fsync: bool = True, lock_timeout_s: float = 10.0, sync_interval_s: float = 1.0):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)

@@ -120,6 +120,10 @@ class Ticket:
 
 
 class AdmissionController:
+    """Decides when one deployment's next attempt may go out: the RPM/TPM sliding windows, the AIMD
+    in-flight limit and Retry-After pauses (see the module docstring). ``acquire`` waits for room;
+    ``release`` or ``cancel`` gives it back."""
+
     def __init__(
         self,
         *,

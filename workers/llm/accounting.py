@@ -61,6 +61,9 @@ REPLAY_MODEL = "offline/replay"
 
 @dataclass(frozen=True)
 class CallUsage:
+    """The token counts a call is recorded with: the provider's when its usage passed the checks
+    (``token_count_source`` ``provider``), else our own counts of the prompt and the reply."""
+
     prompt_tokens: int
     cached_prompt_tokens: int
     completion_tokens: int
@@ -106,6 +109,9 @@ class Sizing:
 def size_request(
     model: str, messages: list[dict[str, str]], params: Mapping[str, Any], counted: TokenCount | None = None
 ) -> Sizing:
+    """What is known of a request before it is sent (:class:`Sizing`): our prompt count
+    (``counted``, when the caller already has it), its upper bound, ``max_tokens`` (``params`` must
+    hold it) and the choices."""
     counted = counted or count_prompt_tokens(model, messages)
     return Sizing(counted, prompt_token_bound(model, messages, counted), int(params["max_tokens"]), output_choices(params))
 
@@ -231,6 +237,8 @@ def cost_pico(price: Price | None, usage: CallUsage, litellm_cost_usd: float | N
 
 
 def served_from(model: str) -> str:
+    """The ``served_from`` of a provider answer: ``replay`` for the offline/replay test double, else
+    ``provider``."""
     return "replay" if model == REPLAY_MODEL else "provider"
 
 

@@ -63,6 +63,9 @@ def litellm_kwargs(
     hints: Mapping[str, Any] | None,
     api_key: str | None,
 ) -> dict[str, Any]:
+    """The keyword arguments of one litellm call to this deployment: its params, litellm's and the
+    SDK's own retries off, the endpoint and key, and for offline/ test doubles the call key, hints
+    and options as metadata (hints never reach a real provider)."""
     kwargs: dict[str, Any] = {
         "model": config.model,
         "messages": messages,
@@ -101,6 +104,9 @@ def _whole(value: Any) -> int | None:
 
 
 def parse_response(response: Any) -> Attempt:
+    """What we keep of a litellm answer (:class:`Attempt`): the first choice's text and finish
+    reason, and the usage as reported. A count that is not a whole number becomes None and is listed
+    in ``malformed``, for accounting to refuse."""
     choices = getattr(response, "choices", None) or []
     choice = choices[0] if choices else None
     text = ""
@@ -153,10 +159,14 @@ def _cache_writes(usage: Any, details: Any) -> Any:
 
 
 async def attempt_async(kwargs: dict[str, Any]) -> Attempt:
+    """One litellm ``acompletion`` call, parsed; provider exceptions propagate for the caller to
+    classify and retry."""
     response = await get_litellm().acompletion(**kwargs)
     return parse_response(response)
 
 
 def attempt_sync(kwargs: dict[str, Any]) -> Attempt:
+    """One litellm ``completion`` call (blocking), parsed; provider exceptions propagate for the
+    caller to classify and retry."""
     response = get_litellm().completion(**kwargs)
     return parse_response(response)

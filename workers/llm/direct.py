@@ -48,6 +48,10 @@ class _Retry(_Failed):
 
 
 class LiteLLMClient:
+    """A Ray-free :class:`recap.llm.LLMClient` for one deployment (see the module docstring): the
+    gateway's request building, retries, accounting and prices; each call's row goes to
+    ``record_sink`` when given."""
+
     def __init__(
         self,
         config: DeploymentConfig,

@@ -57,6 +57,10 @@ def scrub(text: str, secrets: Iterable[str | None] = ()) -> str:
 
 @dataclass(frozen=True)
 class Classified:
+    """What one failed attempt was: its error kind, a message with API keys scrubbed, and what the
+    retry policy and the accounting need (Retry-After, HTTP status, whether it may have been billed,
+    the cap that refused it)."""
+
     kind: LLMErrorKind
     message: str
     #: seconds the provider asked us to wait (Retry-After), if it said

@@ -17,6 +17,8 @@ def _canonical(obj: Any) -> str:
 
 
 def messages_fingerprint(messages: Sequence[Mapping[str, Any]]) -> str:
+    """The hex SHA-256 of the messages' (role, content) pairs in order (other message fields are
+    ignored): how offline/replay matches a request."""
     return hashlib.sha256(_canonical([[str(m["role"]), str(m["content"])] for m in messages]).encode()).hexdigest()
 
 

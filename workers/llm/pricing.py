@@ -133,6 +133,8 @@ class Price:
 
 
 def pico_to_usd(pico: int) -> float:
+    """An integer amount of pico-USD (1e-12 USD) as float USD, for display and records; sums and cap
+    checks stay in pico."""
     return pico / PICO
 
 
@@ -184,6 +186,8 @@ def default_prices() -> PriceTable:
 
 
 def resolve_price(model: str, override: Price | Mapping[str, Any] | None = None, table: PriceTable | None = None) -> Price | None:
+    """The price of ``model``: the sweep's ``override`` when given (a mapping is validated,
+    PriceError), else the table's (default: the repo table); None when it has none."""
     if override is not None:
         return override if isinstance(override, Price) else Price.from_mapping(override, f"override {model}")
     return (table or default_prices()).get(model)

@@ -80,6 +80,9 @@ class Message:
 
 @dataclass(frozen=True)
 class CacheOutcome:
+    """What the simulated provider cache reports for one prompt: its tokens, those read from the
+    cache and those written to it."""
+
     prompt_tokens: int
     cached_tokens: int = 0  # read from the cache
     cache_write_tokens: int = 0  # written to the cache (billed only where writes are priced)
@@ -108,6 +111,7 @@ def normalize(messages: Sequence[Mapping[str, Any]]) -> list[Message]:
 
 
 def message_tokens(m: Message) -> int:
+    """One message's tokens by the documented estimate: 3 + ceil(characters / 4)."""
     return TOKENS_PER_MESSAGE + estimate_text_tokens(m.text)
 
 

@@ -42,6 +42,9 @@ _OPENAI_PREFIXES = ("openai/", "azure/", "text-completion-openai/")
 
 @dataclass(frozen=True)
 class TokenCount:
+    """A token count and how it was made: ``tokenizer`` (the model's own tokenizer) or ``estimate``
+    (characters / 4)."""
+
     tokens: int
     source: str  # "tokenizer" | "estimate"
 

@@ -70,6 +70,9 @@ _ALL = ("all", "eval_out_of_distribution", "valid_unseen")
 
 
 class AlfworldBenchmark(Benchmark):
+    """ALFWorld's registry entry: lists the evaluation games as instances and makes one (options:
+    see the module docstring). ``data_dir`` is the data folder used when a call names none."""
+
     name = BENCHMARK_NAME
 
     def __init__(self, data_dir: str | os.PathLike[str] | None = None):

@@ -554,4 +554,6 @@ def _demo(short_type: str) -> _Demo:
 
 
 def demo_task_types() -> Sequence[str]:
+    """The short task types that have a written demonstration (one per ALFWorld task type), in the
+    order they are written."""
     return tuple(_DEMOS)

@@ -29,6 +29,9 @@ DEMO_MAX_STEPS = 100
 
 
 class RobotouilleBenchmark(Benchmark):
+    """Robotouille's registry entry: the catalog's instances, made on our engine from the data
+    folder (``engine="real"``: on the upstream package, when installed)."""
+
     name = catalog.BENCHMARK_NAME
 
     def data_folders(self) -> Mapping[str, DataFolder]:
@@ -56,6 +59,9 @@ class RobotouilleBenchmark(Benchmark):
 
 
 def make_instance_env(root: Path, ref: catalog.InstanceRef, step_multiplier: float = 4.0) -> RobotouilleEnv:
+    """Our engine on one catalog instance of the data folder ``root`` (its
+    ``generated_environment_json``), with the training kitchen as its demonstration; raises
+    DataFileError for a malformed instance file."""
     path = instance_path(root, ref.split, ref.task, ref.seed)
     raw = read_json(path)
     problem = require(raw, "generated_environment_json", path)

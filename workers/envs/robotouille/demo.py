@@ -254,4 +254,6 @@ def script() -> DemoScript:
 
 
 def make_demonstration(make_env: Callable[[], Environment]) -> Demonstration:
+    """Robotouille's one-shot demonstration: the example written once (:func:`script`), played on
+    the environment ``make_env`` builds."""
     return Demonstration(name=DEMO_NAME, make_env=make_env, script=script())

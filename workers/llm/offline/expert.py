@@ -44,6 +44,8 @@ DEFAULT_REPLY_FIELDS = ("think", "subtasks")
 
 
 def chunk_name(index: int, actions: Sequence[str]) -> str:
+    """The name of root chunk ``index``: the action itself for a one-action chunk (so ReCAP takes
+    its shortcut), else ``subgoal <index>: a; b; ...``, which :func:`chunk_actions` parses back."""
     if len(actions) == 1:
         return actions[0]
     return f"{CHUNK_PREFIX} {index}: " + ACTION_SEPARATOR.join(actions)
@@ -90,6 +92,8 @@ def _on_plan_run(items: Sequence[str], plan: Sequence[str]) -> tuple[list[str], 
 
 
 def recap_subtasks(hints: Mapping[str, Any], knobs: Knobs) -> list[str]:
+    """The ``subtasks`` offline/expert gives a ReCAP call with these hints, following the expert
+    plan (the rule per purpose is in the module docstring)."""
     plan = list(hints.get("expert_plan") or [])
     purpose = str(hints.get("purpose", ""))
     depth = int(hints.get("depth", 0) or 0)

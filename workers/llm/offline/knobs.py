@@ -26,6 +26,9 @@ class OfflineOptionsError(ValueError):
 
 @dataclass(frozen=True)
 class Knobs:
+    """The options of an offline/ test double (a sweep model's ``options``): the seed and rates of
+    the injected errors, and offline/expert's root chunk size."""
+
     seed: int = 0
     invalid_action_rate: float = 0.0
     malformed_json_rate: float = 0.0
@@ -60,4 +63,6 @@ def call_rng(call_key: str, seed: int, salt: str) -> random.Random:
 
 
 def draw(call_key: str, seed: int, salt: str) -> float:
+    """A number in [0, 1) fixed by (seed, call_key, salt): compared with a rate, it decides whether
+    this call gets an injected error (``salt`` keeps the kinds of error independent)."""
     return call_rng(call_key, seed, salt).random()

@@ -24,6 +24,10 @@ class ReplayError(LookupError):
 
 @dataclass
 class ReplayIndex:
+    """The replayable calls of one recorded run: responses keyed by the hash of their request's
+    messages (see the module docstring); ``answer`` raises ReplayError for a request that was never
+    recorded."""
+
     run_dir: Path
     #: messages hash -> [(call_key, response text), ...] in recorded order
     answers: dict[str, list[tuple[str, str]]] = field(default_factory=dict)
