@@ -17,6 +17,9 @@ from workers.episode_worker import ClientFactory
 
 @dataclass(frozen=True)
 class Spend:
+    """Dollars spent so far in the run: the run total and the spend of each model, keyed by the
+    model's name in the sweep."""
+
     total_usd: float = 0.0
     by_model: dict[str, float] = field(default_factory=dict)
 
@@ -35,6 +38,11 @@ class RateStats:
 
 
 class ModelBackend(Protocol):
+    """What the driver needs of a model backend (the gateway, or a test double): start it, hand the
+    workers a client factory, report spend and rate use, set the run cap, flush and close.
+    ``writes_llm_calls`` True: the backend writes the ``llm_calls`` rows itself, so the workers do
+    not."""
+
     writes_llm_calls: bool
 
     def start(self, *, run_dir: str, run_id: str, runtime_env: dict[str, Any] | None, node_id: str | None) -> None:

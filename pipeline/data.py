@@ -133,6 +133,8 @@ def folders() -> dict[str, DataFolder]:
 
 
 def manifest_file(bench: DataFolder) -> Path:
+    """The sha256 manifest this repository carries for ``bench``
+    (``pipeline/manifests/<bench>.sha256``): the recorded files its folder must hold."""
     return MANIFEST_DIR / f"{bench.name}.sha256"
 
 
@@ -156,10 +158,13 @@ def read_manifest(path: Path) -> dict[str, str]:
 
 
 def write_manifest(path: Path, entries: dict[str, str]) -> None:
+    """Write ``entries`` (``{relative path: sha256}``) in ``sha256sum`` format, sorted by path, so
+    :func:`read_manifest` and ``sha256sum -c`` can read it back."""
     path.write_text("".join(f"{entries[rel]}  ./{rel}\n" for rel in sorted(entries)), encoding="utf-8")
 
 
 def sha256_file(path: Path) -> str:
+    """The hex sha256 of a file's contents, read in chunks so a large file never sits in memory whole."""
     digest = hashlib.sha256()
     with path.open("rb") as f:
         for chunk in iter(lambda: f.read(_CHUNK), b""):
@@ -184,6 +189,8 @@ def _describe(rung: data_paths.Rung) -> str:
 
 
 def cmd_list(benches: list[DataFolder], data_dir: str | None, out: TextIO) -> list[str]:
+    """``recap data list``: print every place each benchmark's folder is looked for, marking the one
+    used. Returns one failure line per benchmark without a folder (empty: all found)."""
     failures = []
     for bench in benches:
         rungs, used = search(bench, data_dir)
@@ -213,6 +220,10 @@ def _not_found(bench: DataFolder, rungs: list[data_paths.Rung]) -> str:
 
 @dataclass
 class CheckResult:
+    """What :func:`check_folder` found in one folder: files checked, missing ones counted by group
+    prefix (required and optional apart) and mismatched ones. ``ok`` ignores optional files;
+    ``line`` is the report line of ``recap data check``."""
+
     bench: DataFolder
     folder: Path
     source: str = ""  # the rung it was found on ("checkout", "$ROBOTOUILLE_DATA", ...)
@@ -282,6 +293,9 @@ def check_folder(bench: DataFolder, folder: Path, only: Callable[[Group], bool] 
 
 
 def cmd_check(benches: list[DataFolder], data_dir: str | None, out: TextIO) -> list[str]:
+    """``recap data check``: verify the folder each benchmark uses against its manifest, one printed
+    line each. Returns one failure line per benchmark that is not found, cannot be read or is not
+    intact (empty: all verified)."""
     failures = []
     for bench in benches:
         rungs, used = search(bench, data_dir)
@@ -318,6 +332,9 @@ def _local_path(location: str) -> Path | None:
 
 
 def check_mirror(mirror: str | None) -> None:
+    """Refuse a ``--mirror`` that cannot work before anything is downloaded: a local folder that
+    does not exist, or a URL that is not file://, http:// or https:// (UsageError). None: no mirror,
+    nothing to check."""
     if mirror is None:
         return
     local = _local_path(mirror)
@@ -516,6 +533,8 @@ def _note_precedence(bench: DataFolder, dest: Path, out: TextIO) -> None:
 
 
 def default_dest(bench: DataFolder, dest: str | None, several: bool) -> Path:
+    """Where ``fetch`` puts ``bench``: recap-eval's cache without ``--dest``; else ``--dest``
+    itself, or ``--dest/<bench>`` when several benchmarks are fetched at once."""
     if dest is None:
         return data_paths.recap_cache_root() / bench.name
     root = Path(dest).expanduser()
@@ -523,6 +542,9 @@ def default_dest(bench: DataFolder, dest: str | None, several: bool) -> Path:
 
 
 def cmd_fetch(benches: list[DataFolder], dest: str | None, mirror: str | None, out: TextIO) -> list[str]:
+    """``recap data fetch``: fetch, verify and move each benchmark's folder into place. Returns one
+    failure line per benchmark that failed (nothing of it is written); a bad mirror raises
+    UsageError before any fetch."""
     check_mirror(mirror)
     failures = []
     for bench in benches:

@@ -36,6 +36,10 @@ def _tokens(text: str) -> int:
 
 @dataclass
 class InstanceShape:
+    """What the estimate needs of one instance: optimal and allowed steps, the tokens of the pinned
+    prompt (rules, first observation, demonstration) and of one observation. ``measured`` False:
+    defaults, because the instance could not be built here."""
+
     optimal: int
     max_steps: int
     pinned_tokens: int
@@ -44,6 +48,9 @@ class InstanceShape:
 
 
 def measure_instance(instance_id: str, step_multiplier: float, options: dict[str, Any]) -> InstanceShape:
+    """Build ``instance_id`` once and measure its :class:`InstanceShape` (4 characters per token).
+    Any failure (data missing, an optional package absent) gives default figures with
+    ``measured=False``, so one instance never fails the estimate."""
     from workers.envs.registry import make_env
 
     try:
@@ -63,6 +70,8 @@ def measure_instance(instance_id: str, step_multiplier: float, options: dict[str
 
 @dataclass
 class Range:
+    """A low-high interval that sums: the calls, tokens or dollars of an estimate."""
+
     low: float = 0.0
     high: float = 0.0
 
@@ -73,6 +82,9 @@ class Range:
 
 @dataclass
 class GroupEstimate:
+    """The estimate of one (method, model) pair: its units and the summed ranges of calls, tokens
+    and dollars (``cost`` None: the model has no price)."""
+
     method: str
     model: str
     test_double: bool
@@ -112,6 +124,9 @@ def _prompt_total(calls: float, shape: InstanceShape, window: int) -> float:
 
 
 def estimate(plan: Plan) -> list[GroupEstimate]:
+    """One :class:`GroupEstimate` per (method label, model label) of the plan, in the order first
+    seen. Calls come from the method's call shape and the instance's steps, clipped to
+    ``max_llm_calls``; tokens from the sliding-window model; dollars from the model's price."""
     spec = plan.spec
     shapes: dict[str, InstanceShape] = {}
     groups: dict[tuple[str, str], GroupEstimate] = {}
@@ -148,6 +163,8 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
 
 
 def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
+    """Print the estimate on ``console`` (a rich Console): one row per group, the run's totals, and
+    whether the run cap fits the cost range."""
     from rich.markup import escape
     from rich.table import Table
 

@@ -77,6 +77,9 @@ class GatewayFactory:
 
 
 class GatewayBackend:
+    """The product's :class:`pipeline.backend.ModelBackend`: starts the budget actor and one gateway
+    actor per sweep model on the driver's node, and reads spend and rate use from them."""
+
     writes_llm_calls = True
 
     def __init__(self, spec: SweepSpec) -> None:
@@ -194,4 +197,5 @@ class GatewayBackend:
 
 
 def make_backend(spec: SweepSpec) -> GatewayBackend:
+    """The backend ``recap run`` uses for ``spec`` (the one place the CLI names the gateway)."""
     return GatewayBackend(spec)

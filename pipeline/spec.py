@@ -257,6 +257,10 @@ SPEC_ONLY_FIELDS = frozenset({"cap_usd"})
 
 
 class ModelSpec(_Strict):
+    """One ``models:`` entry of a sweep: the model string, its label, the params sent with every
+    call and the test-double options (part of a unit's identity), then transport settings that are
+    not: rate limits, retries, timeout, prices, endpoint, cap."""
+
     model: Annotated[str, Field(min_length=1, max_length=LONG_MAX), AfterValidator(_model_string)]
     label: Label | None = None
     #: sent with every call (temperature override, top_p, provider options, test-double knobs)
@@ -351,6 +355,10 @@ class ModelSpec(_Strict):
 
 
 class MethodSpec(_Strict):
+    """One ``methods:`` entry: a registered method with an optional profile, ablation and explicit
+    settings (all part of a unit's identity). ``name`` is its label, else
+    ``method[profile,ablation]``."""
+
     method: Name
     label: Label | None = None
     profile: Name | None = None
@@ -371,6 +379,9 @@ class MethodSpec(_Strict):
 
 
 class EnvSpec(_Strict):
+    """One ``environments:`` entry: a benchmark and which of its instances to run (selectors,
+    explicit ids, a per-selector limit), plus make() options that are not part of a unit's identity."""
+
     benchmark: Name
     #: selectors handed to the benchmark's list_instances (split, task, task type...)
     tasks: list[Selector] = Field(default_factory=list, max_length=SELECTORS_MAX)
@@ -433,6 +444,10 @@ def check_ray_address(v: str) -> str:
 
 
 class RaySpec(_Strict):
+    """The ``ray:`` section: the cluster to join (``address``; None: start a local Ray unless the
+    command line names one), the resources of a Ray started here, and the CPU share of each episode
+    worker."""
+
     address: Annotated[str, Field(max_length=NAME_MAX), AfterValidator(check_ray_address)] | None = None
     num_cpus: Annotated[int, _NOT_BOOL, Field(gt=0, le=NUM_CPUS_MAX)] | None = None
     dashboard: bool = False
@@ -442,6 +457,9 @@ class RaySpec(_Strict):
 
 
 class SweepSpec(_Strict):
+    """A validated sweep file: models x methods x environments x seeds make the units; limits, caps,
+    attempts, start order and Ray settings say how they run. Unknown keys are errors."""
+
     run: Annotated[str, Field(max_length=NAME_MAX)]
     output: Annotated[str, Field(min_length=1, max_length=PATH_MAX)]
     models: list[ModelSpec] = Field(min_length=1, max_length=LIST_MAX)
@@ -771,6 +789,8 @@ def with_overrides(spec: SweepSpec, **changes: Any) -> SweepSpec:
 
 
 def text_hash(text: str) -> str:
+    """A short content hash of ``text`` (the first 16 hex digits of its sha256), e.g. the
+    ``spec_hash`` of the sweep file a run records."""
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

@@ -31,6 +31,9 @@ def available(benchmark: str) -> str | None:
 
 
 def main(src: str, dst: str) -> int:
+    """Copy the sweep ``src`` to ``dst`` keeping only the environments this machine has data for
+    (the built-in blocksworld when none), printing why each other one is left out; returns the exit
+    status (0)."""
     spec = yaml.safe_load(Path(src).read_text())
     kept = []
     for env in spec["environments"]:
