@@ -29,3 +29,20 @@ def ray_address():
     yield ray.get_runtime_context().gcs_address
     if started:
         ray.shutdown()
+
+
+@pytest.fixture(autouse=True)
+def _reset_our_loggers():
+    """``recap`` commands run in-process set our packages' log level and stream handler
+    (workers.log_setup); put them back after each test, so a later test's log capture sees every
+    record as if no command had run before it."""
+    import logging
+
+    from workers.log_setup import PACKAGES
+
+    yield
+    for package in PACKAGES:
+        logger = logging.getLogger(package)
+        logger.setLevel(logging.NOTSET)
+        for h in [h for h in logger.handlers if getattr(h, "_recap", False)]:
+            logger.removeHandler(h)

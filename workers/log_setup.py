@@ -20,27 +20,27 @@ LEVEL_VAR = "RECAP_LOG_LEVEL"
 LEVELS = ("debug", "info", "warning", "error")
 DEFAULT_LEVEL = "warning"
 _FORMAT = "recap %(levelname)s %(name)s: %(message)s"
-#: chatty third-party loggers held at WARNING unless the user asked for debug
-_QUIET = ("httpx", "httpcore", "LiteLLM", "litellm", "urllib3", "filelock", "asyncio")
+#: our packages: the loggers ``--log-level`` governs. Third-party loggers (asyncio, litellm,
+#: httpx, Ray) keep their own set-up, so raising our level never floods the terminal with theirs.
+PACKAGES = ("recap", "workers", "pipeline", "schemas", "reports")
 
 
 def configure(level: str = DEFAULT_LEVEL) -> None:
-    """Send log records at ``level`` and above to stderr, one line each, and export the level
-    for Ray workers started afterwards."""
+    """Send our packages' log records at ``level`` and above to stderr, one line each, and
+    export the level for Ray workers started afterwards."""
     name = level.lower()
     if name not in LEVELS:
         raise ValueError(f"unknown log level {level!r}; one of {', '.join(LEVELS)}")
     numeric = getattr(logging, name.upper())
-    root = logging.getLogger()
-    for h in [h for h in root.handlers if getattr(h, "_recap", False)]:
-        root.removeHandler(h)
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter(_FORMAT))
     handler._recap = True  # type: ignore[attr-defined]  # ours to replace on the next configure()
-    root.addHandler(handler)
-    root.setLevel(numeric)
-    for noisy in _QUIET:
-        logging.getLogger(noisy).setLevel(numeric if name == "debug" else max(numeric, logging.WARNING))
+    for package in PACKAGES:
+        logger = logging.getLogger(package)
+        for h in [h for h in logger.handlers if getattr(h, "_recap", False)]:
+            logger.removeHandler(h)
+        logger.addHandler(handler)
+        logger.setLevel(numeric)
     os.environ[LEVEL_VAR] = name
 
 

@@ -15,13 +15,8 @@ from workers import log_setup
 
 
 @pytest.fixture(autouse=True)
-def _restore_logging(monkeypatch):
-    monkeypatch.delenv(log_setup.LEVEL_VAR, raising=False)
-    root = logging.getLogger()
-    level, handlers = root.level, list(root.handlers)
-    yield
-    root.setLevel(level)
-    root.handlers[:] = handlers
+def _no_level_in_the_environment(monkeypatch):
+    monkeypatch.delenv(log_setup.LEVEL_VAR, raising=False)  # (tests/conftest.py resets the loggers)
 
 
 @pytest.mark.parametrize(
@@ -53,9 +48,11 @@ def test_a_bad_level_is_one_line_and_exit_2(argv, message, capsys):
     assert capsys.readouterr().err == f"recap: error: {message}\n"
 
 
-def test_configure_sets_the_root_level_and_exports_it_for_ray_workers(capsys):
+def test_configure_sets_our_packages_level_and_exports_it_for_ray_workers(capsys):
+    root_level = logging.getLogger().level
     log_setup.configure("info")
-    assert logging.getLogger().level == logging.INFO
+    assert [logging.getLogger(p).level for p in log_setup.PACKAGES] == [logging.INFO] * 5
+    assert logging.getLogger().level == root_level  # third-party loggers keep their own set-up
     assert os.environ[log_setup.LEVEL_VAR] == "info"
     assert runtime_env()["env_vars"][log_setup.LEVEL_VAR] == "info"
     EventBuffer().add("unit_failed", severity="error", unit_id="u1", episode_id="u1-0", attempt=0)
@@ -65,13 +62,14 @@ def test_configure_sets_the_root_level_and_exports_it_for_ray_workers(capsys):
     log_setup.configure("warning")  # a second call replaces the handler, no duplicate lines
     logging.getLogger("pipeline.x").warning("once")
     assert capsys.readouterr().err == "recap WARNING pipeline.x: once\n"
-    assert logging.getLogger("httpx").level == logging.WARNING
+    logging.getLogger("asyncio").error("not ours")  # e.g. a garbage-collected task: not on our stream
+    assert "not ours" not in capsys.readouterr().err
 
 
 def test_an_actor_takes_the_level_from_the_environment(monkeypatch):
     monkeypatch.setenv(log_setup.LEVEL_VAR, "debug")
     log_setup.configure_from_env()
-    assert logging.getLogger().level == logging.DEBUG
+    assert logging.getLogger("workers").level == logging.DEBUG
     monkeypatch.setenv(log_setup.LEVEL_VAR, "nonsense")  # ignored: an actor never fails on it
     log_setup.configure_from_env()
-    assert logging.getLogger().level == logging.DEBUG
+    assert logging.getLogger("workers").level == logging.DEBUG
