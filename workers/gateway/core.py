@@ -73,7 +73,7 @@ from workers.llm.accounting import (
 )
 from workers.llm.cache_markers import BreakpointPlanner, mark
 from workers.llm.calling import Attempt, attempt_async, litellm_kwargs
-from workers.llm.errors import Classified, classify, redact_known, scrub
+from workers.llm.errors import Classified, classify, redact_known, refused_retry_after, scrub
 from workers.llm.fingerprint import request_fingerprint
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.pricing import PriceTable, pico_to_usd
@@ -408,24 +408,16 @@ class DeploymentGateway:
             raise
         except Exception as exc:
             c = classify(exc, secrets=[api_key, *self._url_secrets])
-            too_long = c.kind == "rate_limit" and c.retry_after_s is not None and c.retry_after_s > cfg.max_retry_after_s
+            refused = refused_retry_after(c, cfg.max_retry_after_s)
             # a Retry-After beyond the cap does not pause the deployment (nobody waits an hour)
-            self.admission.release(ticket, c.kind, retry_after_s=c.retry_after_s, pause=not too_long)
+            self.admission.release(ticket, c.kind, retry_after_s=c.retry_after_s, pause=refused is None)
             self.errors[c.kind] += 1
             if c.maybe_billed and call.rid is not None:
                 call.charged += await self.budget.charge_worst(call.rid)
                 call.rid = None
-            if too_long:
+            if refused is not None:
                 self.counts["retry_after_refused"] += 1
-                raise _Final(
-                    dataclasses.replace(
-                        c,
-                        message=(
-                            f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
-                            f"max_retry_after_s={cfg.max_retry_after_s:g}: the call fails instead of pausing; " + c.message
-                        )[:500],
-                    )
-                ) from None
+                raise _Final(refused) from None
             raise (_Retryable if c.retryable else _Final)(c) from None
         actual = None  # the token window learns the reported usage only when it is plausible
         try:

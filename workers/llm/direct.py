@@ -9,7 +9,6 @@ go to ``record_sink`` (e.g. a :class:`workers.gateway.call_log.CallLog`'s ``add`
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from collections.abc import Callable
@@ -29,7 +28,7 @@ from schemas.records import CallRecord
 from workers.llm.accounting import error_record, ok_record, served_from, settle, size_request
 from workers.llm.cache_markers import BreakpointPlanner, mark
 from workers.llm.calling import Attempt, attempt_sync, litellm_kwargs
-from workers.llm.errors import Classified, classify, redact_known
+from workers.llm.errors import Classified, classify, redact_known, refused_retry_after
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.pricing import PriceTable, pico_to_usd
 from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provider_messages, url_secrets
@@ -104,16 +103,9 @@ class LiteLLMClient:
                 raise _Failed(Classified("auth", str(exc))) from None
             except Exception as exc:
                 c = classify(exc, secrets=[api_key, *url_secrets(cfg.api_base)])
-                if c.kind == "rate_limit" and c.retry_after_s is not None and c.retry_after_s > cfg.max_retry_after_s:
-                    raise _Failed(
-                        dataclasses.replace(
-                            c,
-                            message=(
-                                f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
-                                f"max_retry_after_s={cfg.max_retry_after_s:g}: the call fails instead of pausing; " + c.message
-                            )[:500],
-                        )
-                    ) from None
+                refused = refused_retry_after(c, cfg.max_retry_after_s)
+                if refused is not None:
+                    raise _Failed(refused) from None
                 raise (_Retry if c.retryable else _Failed)(c) from None
 
         try:

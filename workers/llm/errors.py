@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from schemas.kinds import LLMErrorKind
@@ -76,6 +76,18 @@ class Classified:
     @property
     def retryable(self) -> bool:
         return self.kind in RETRYABLE_KINDS
+
+
+def refused_retry_after(c: Classified, max_retry_after_s: float) -> Classified | None:
+    """The call's failure when a 429 asks for a longer wait than ``max_retry_after_s`` (the call
+    fails instead of pausing the deployment: nobody waits an hour), else None."""
+    if c.kind != "rate_limit" or c.retry_after_s is None or c.retry_after_s <= max_retry_after_s:
+        return None
+    message = (
+        f"provider asked to wait {c.retry_after_s:g}s (Retry-After), more than "
+        f"max_retry_after_s={max_retry_after_s:g}: the call fails instead of pausing; " + c.message
+    )
+    return replace(c, message=message[:500])
 
 
 def _header(headers: Any, name: str) -> str | None:

@@ -86,32 +86,14 @@ def _make_provider_class() -> type:
             acompletion=None,
             litellm_params=None,
             logger_fn=None,
-            headers={},  # noqa: B006
+            headers={},  # noqa: B006  (never mutated)
             timeout=None,
             client=None,
-        ):  # litellm's CustomLLM signature (headers={} is never mutated)
+        ):  # litellm's CustomLLM signature; litellm passes every argument by keyword
             return self._fill(model, messages, api_base, model_response, litellm_params)
 
-        async def acompletion(
-            self,
-            model,
-            messages,
-            api_base,
-            custom_prompt_dict,
-            model_response,
-            print_verbose,
-            encoding,
-            api_key,
-            logging_obj,
-            optional_params,
-            acompletion=None,
-            litellm_params=None,
-            logger_fn=None,
-            headers={},  # noqa: B006  (litellm's signature)
-            timeout=None,
-            client=None,
-        ):
-            return self._fill(model, messages, api_base, model_response, litellm_params)
+        async def acompletion(self, *args, **kwargs):  # the same answer, awaited (litellm's async path)
+            return self.completion(*args, **kwargs)
 
     return OfflineProvider
 
