@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 from recap.config import OMITTED_OBSERVATION, AgentConfig
@@ -222,22 +223,7 @@ class Agent(ABC):
             replies = type(self).demo_replies(demo.script)
         if replies is None:
             raise DemonstrationError(f"demonstration {demo.name!r} has no replies for style {self.style!r}")
-        agent = type(self)(self.demo_config())
-        agent.demo_mode = True
-        messages: list[MessageRecord] = []
-
-        def keep(record: Any) -> None:
-            if isinstance(record, MessageRecord):
-                messages.append(record)
-
-        shaped = [self.shape_demo_reply(r) for r in replies]
-        result = agent.run(
-            self.demo_env(demo),
-            ScriptedClient(shaped, model="demonstration"),
-            episode_id=f"demo:{demo.name}",
-            emit=keep,
-            demonstration=False,
-        )
+        messages, result = self.scripted_demo_run(demo, [self.shape_demo_reply(r) for r in replies], f"demo:{demo.name}")
         if not result.success:
             raise DemonstrationError(
                 f"demonstration {demo.name!r} does not reach the goal with {type(self).__name__} ({result.end_reason}: {result.error})"
@@ -245,6 +231,31 @@ class Agent(ABC):
         text = format_transcript(messages)
         _DEMO_CACHE[key] = text
         return text
+
+    def scripted_demo_run(
+        self, demo: Demonstration, replies: list[Any], episode_id: str, prepare: Callable[[Agent], None] | None = None
+    ) -> tuple[list[MessageRecord], EpisodeResult]:
+        """Play ``demo`` with a demo-mode copy of this agent answering from ``replies``; the
+        messages it exchanged (the demonstration's text) and the result. ``prepare`` adjusts the
+        copy first (ADaPT picks which of its parts plays)."""
+        agent = type(self)(self.demo_config())
+        agent.demo_mode = True
+        if prepare is not None:
+            prepare(agent)
+        messages: list[MessageRecord] = []
+
+        def keep(record: Any) -> None:
+            if isinstance(record, MessageRecord):
+                messages.append(record)
+
+        result = agent.run(
+            self.demo_env(demo),
+            ScriptedClient(replies, model="demonstration"),
+            episode_id=episode_id,
+            emit=keep,
+            demonstration=False,
+        )
+        return messages, result
 
     def demo_env(self, demo: Demonstration) -> Environment:
         """The demonstration's environment, with observations left out as configured."""

@@ -79,7 +79,6 @@ from recap.history import History
 from recap.jsonreply import ReplyFormatError, action_reply, recap_reply
 from recap.recap_agent import ReCAPAgent
 from recap.runtime import Conversation, Episode, EpisodeEnd
-from recap.scripted import ScriptedClient
 from recap.tree import Node
 from schemas.kinds import NodeKind
 from schemas.records import MessageRecord, NodeVersion
@@ -370,23 +369,11 @@ class ADaPTAgent(Agent):
         return _DEMOS[key]
 
     def _render_run(self, demo: Demonstration, replies: list[Any], part: str) -> tuple[list[MessageRecord], Any]:
-        agent = type(self)(self.demo_config())
-        agent.demo_mode = True
-        agent.demo_part = part
-        messages: list[MessageRecord] = []
+        def play_part(agent: Agent) -> None:
+            assert isinstance(agent, ADaPTAgent)
+            agent.demo_part = part
 
-        def keep(record: Any) -> None:
-            if isinstance(record, MessageRecord):
-                messages.append(record)
-
-        result = agent.run(
-            self.demo_env(demo),
-            ScriptedClient(replies, model="demonstration"),
-            episode_id=f"demo:{demo.name}:{part}",
-            emit=keep,
-            demonstration=False,
-        )
-        return messages, result
+        return self.scripted_demo_run(demo, replies, f"demo:{demo.name}:{part}", play_part)
 
     def _demo_texts(self, ep: Episode) -> tuple[str | None, str | None]:
         """(executor demonstration, planner demonstration) for this episode's contexts."""
