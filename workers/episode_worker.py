@@ -30,7 +30,7 @@ from recap.env import Environment
 from recap.llm import LLMClient, LLMRequest, LLMResponse
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
-from schemas.tables import record_to_row
+from schemas.tables import check_vocabulary, record_to_row
 from workers.log_setup import configure_from_env
 
 log = logging.getLogger(__name__)
@@ -158,7 +158,8 @@ class RecordForwarder:
     def __call__(self, record: Any) -> None:
         if self.skip_calls and isinstance(record, CallRecord):
             return
-        self.buffer.setdefault(type(record).table, []).append(record_to_row(record, self.run_id))
+        # the agent's records (tree nodes, calls) meet the same vocabulary check as the driver's
+        self.buffer.setdefault(type(record).table, []).append(record_to_row(check_vocabulary(record), self.run_id))
         self.n += 1
         if self.n >= self.batch_rows:
             self._ship()

@@ -86,3 +86,20 @@ def test_a_record_outside_its_vocabulary_is_refused_by_its_writer():
 
     with pytest.raises(VocabularyError, match=r"EventRecord.kind: 'cap_hit'"):
         EventBuffer().add("cap_hit")  # type: ignore[arg-type]
+
+
+def test_the_agents_records_meet_the_vocabulary_on_their_way_to_the_sink():
+    from workers.episode_worker import RecordForwarder
+
+    sent: list = []
+    forward = RecordForwarder("r", sent.append, lambda ref: None, skip_calls=False, batch_rows=1)
+    node = NodeRecord(episode_id="e", node_id=0, parent_id=None, depth=0, child_index=0, task="t", kind="root", status="done")
+    forward(node)
+    with pytest.raises(VocabularyError, match=r"NodeRecord.status: 'finished' is not one of \['done', 'failed', 'open'\]"):
+        forward(
+            NodeRecord(
+                episode_id="e", node_id=1, parent_id=0, depth=1, child_index=0, task="t", kind="primitive", status="finished"
+            )
+        )  # type: ignore[arg-type]
+    forward.close()
+    assert [rows["tree_nodes"][0]["status"] for rows in sent] == ["done"]
