@@ -31,7 +31,7 @@ from typing import Any
 import pyarrow as pa
 
 from pipeline.errors import RunFolderError
-from schemas.parts import RUN_FILE, BadPart, inspect_parts, read_parts
+from schemas.parts import RUN_FILE, BadPart, inspect_parts, is_part_name, part_files, read_parts
 from schemas.records import SCHEMA_VERSION
 from schemas.tables import TABLES
 from schemas.versions import continues
@@ -427,14 +427,9 @@ class RunStore:
 
             sel = pafs.FileSelector(f"{self.root}/{table}", allow_not_found=True)
             return sorted(
-                i.path
-                for i in self.fs.get_file_info(sel)
-                if i.type == pafs.FileType.File and i.base_name.startswith("part-") and i.base_name.endswith(".parquet")
+                i.path for i in self.fs.get_file_info(sel) if i.type == pafs.FileType.File and is_part_name(i.base_name)
             )
-        folder = self.path / table
-        if not folder.is_dir():
-            return []
-        return sorted(str(p) for p in folder.glob("part-*.parquet"))
+        return [str(p) for p in part_files(self.path, table)]
 
     def _open_part(self, path: str) -> Any:
         return self.fs.open_input_file(path) if self.remote else path

@@ -87,13 +87,18 @@ class BadPart:
     error: str
 
 
+def is_part_name(name: str) -> bool:
+    """Whether a file name is a part file's (``part-*.parquet``); writers' temp files are not."""
+    return name.startswith("part-") and name.endswith(".parquet")
+
+
 def part_files(run_dir: Path, table: str) -> list[Path]:
-    """The part files of ``table`` in a local run folder (``part-*.parquet``, sorted; temp files are not parts);
+    """The part files of ``table`` in a local run folder (:func:`is_part_name`, sorted);
     [] when the table has no folder."""
     folder = Path(run_dir) / table
     if not folder.is_dir():
         return []
-    return sorted(p for p in folder.glob("part-*.parquet"))
+    return sorted(p for p in folder.iterdir() if p.is_file() and is_part_name(p.name))
 
 
 def schema_problem(table: str, found: pa.Schema) -> str | None:
