@@ -4,7 +4,7 @@
 -- model/method/profile/split/window on the units both finished (paired on task, instance, seed;
 -- the arms swapped per instance, all its seeds together: clustered_mcnemar_p, which is the exact
 -- McNemar test when every instance ran one seed). original_only / variant_only are the discordant
--- pairs; p_value is NULL without paired units. instances and deff (the design effect of several
+-- pairs; paired_instances the instances they ran; p_value is NULL without paired units. instances and deff (the design effect of several
 -- seeds per instance, instance_deff) say how the 95% interval was widened.
 WITH per_unit AS (
   SELECT model_label, method, coalesce(profile, '') AS pr, env_split, coalesce(window_size, -1) AS w, ablation,
@@ -25,6 +25,7 @@ WITH per_unit AS (
     count(*) AS pairs,
     count(*) FILTER (WHERE o.success AND NOT v.success) AS original_only,
     count(*) FILTER (WHERE v.success AND NOT o.success) AS variant_only,
+    count(DISTINCT instance_key(v.benchmark, v.split, v.task, v.instance_id)) AS paired_instances,
     clustered_mcnemar_p(list(pair_obs(v.benchmark, v.split, v.task, v.instance_id, o.success, v.success))) AS p_value
   FROM per_unit v
   JOIN per_unit o
@@ -40,7 +41,7 @@ SELECT r.model_label, r.method, r.profile, r.env_split, r.window_size, r.ablatio
   cluster_wilson_low(r.obs) AS ci_low,
   cluster_wilson_high(r.obs) AS ci_high,
   r.instances, instance_deff(r.obs) AS deff,
-  p.pairs, p.original_only, p.variant_only, p.p_value
+  p.pairs, p.paired_instances, p.original_only, p.variant_only, p.p_value
 FROM rates r
 LEFT JOIN pairs p
   ON p.model_label = r.model_label AND p.method = r.method AND p.pr = coalesce(r.profile, '') AND p.env_split = r.env_split
