@@ -9,7 +9,7 @@ numbers did not use.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from reports.stats import EXACT_MAX, SAMPLES, SEED, SignFlipTest
@@ -19,7 +19,7 @@ def _num(x: float) -> str:
     return f"{x:.0f}" if float(x).is_integer() else f"{x:.2f}"
 
 
-def _span(values: list[float], fmt: str = "{:.2f}") -> str:
+def _span(values: Sequence[float], fmt: str = "{:.2f}") -> str:
     lo, hi = min(values), max(values)
     return fmt.format(lo) if fmt.format(lo) == fmt.format(hi) else f"{fmt.format(lo)} to {fmt.format(hi)}"
 
