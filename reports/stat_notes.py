@@ -119,7 +119,7 @@ def permutation_note(tests: Iterable[SignFlipTest | None], what: str = "cost p")
     exact = [t for t in exact if t.units > 0]
     if trivial:
         parts.append(
-            f"{len(trivial)} with no instance's difference non-zero, p = 1"
+            f"{_tests(len(trivial))} with no instance's difference non-zero, p = 1"
             if exact or sampled
             else "no instance's difference is non-zero, p = 1"
         )
