@@ -4,9 +4,12 @@ Every number comes from ``reports/sql/paper_cells.sql``, ``paper_pairs.sql`` and
 ``paper_trees.sql``; this module only picks cells, pivots them into the paper's layout and adds
 the paper's numbers (:mod:`reports.paper`). A success cell is four columns: ours as
 ``rate [95% CI] k/n`` (Wilson's interval widened for repeated seeds of one instance: the SQL
-macros ``cluster_wilson_low/high``), the paper's value, the difference in points, and an exact
-McNemar p-value against ReCAP on the units both arms ran (ablations: against the original),
-with Holm's adjustment over the table beside it.
+macros ``cluster_wilson_low/high``), the paper's value, the difference in points, and a McNemar
+p-value against ReCAP on the units both arms ran (ablations: against the original), clustered by
+instance (``clustered_mcnemar_p``: the exact McNemar test when each instance ran one seed), with
+Holm's adjustment over the table beside it. Cost p-values flip the signs of whole instances
+(:func:`reports.stats.clustered_permutation_test`). Each table's note names its interval and
+tests from the cells it shows (:mod:`reports.stat_notes`).
 
 A paper number stands only beside an arm that ran the paper's protocol for that table (model,
 profile, window, step multipliers, tasks: :func:`reports.paper.mismatch`); elsewhere the paper
@@ -24,7 +27,8 @@ from typing import Any
 
 from reports import paper
 from reports.model import Column, Section, Table, format_value
-from reports.stats import holm, paired_permutation_p
+from reports.stat_notes import interval_note, mcnemar_note, permutation_note
+from reports.stats import SignFlipTest, clustered_permutation_test, holm
 from reports.views import Result
 
 Query = Callable[[str], Result]
@@ -38,8 +42,10 @@ BENCH_ROWS = (
 INTRO = (
     "The ReCAP paper's tables, filled from this run. A success cell is: ours as success % [95% interval] "
     "successes/episodes (Wilson's interval, widened by the design effect when an instance ran with several seeds), "
-    "the paper's value, ours minus the paper's in points (diff), and the exact McNemar p-value against ReCAP on the "
-    "units both arms ran (ablations: against the original), with Holm's adjustment over the table. Only units that "
+    "the paper's value, ours minus the paper's in points (diff), and a McNemar p-value against ReCAP on the "
+    "units both arms ran (ablations: against the original; the arms swapped per instance with all its seeds, the "
+    "exact McNemar test when each instance ran one seed), with Holm's adjustment over the table. Each table's note "
+    "names its interval and tests. Only units that "
     "finished on their own merits count (capped and infrastructure-failed units are in the coverage table). A paper "
     "number stands only beside an arm run under the paper's protocol for that table (model, profile, window, step "
     "multipliers, tasks); otherwise its cell holds a mark [n] and the note says why."
@@ -186,11 +192,19 @@ class _Cells:
         )
 
 
-def _p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]]) -> float | None:
+def _p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]], used: list[dict[str, Any]]) -> float | None:
+    """The McNemar p of ``cell`` against its reference; the pair row is appended to ``used`` (for the note)."""
     if cell["method"] == "recap" and cell["ablation"] == "original":
         return None
     pr = cells.pair(cell, cells.reference(cell, pool))
+    if pr:
+        used.append(pr)
     return pr["p_value"] if pr else None
+
+
+def _test_notes(shown: list[dict[str, Any]], used: list[dict[str, Any]]) -> str:
+    """The note's words for a success table's intervals (the cells ``shown``) and p-values (the pairs ``used``)."""
+    return _join(interval_note(shown), mcnemar_note((u["pairs"], u["instances"]) for u in used))
 
 
 # -- the tables ------------------------------------------------------------------------------------
@@ -215,6 +229,7 @@ def main_table(cells: _Cells) -> Table | str:
     for _, label in arms:
         cols += _rate_columns(label, label)
     notes = Footnotes()
+    used: list[dict[str, Any]] = []
     rows: list[dict[str, Any]] = []
     row_keys = sorted(
         {(c["benchmark"], c["split"], c["model_label"]) for c in pool},
@@ -235,12 +250,13 @@ def main_table(cells: _Cells) -> Table | str:
                 continue
             ref = paper.main_reference(f"{bench}/{split}", c["method"])
             why = paper.FOREIGN.get((bench, c["method"])) or paper.mismatch(paper.PROTOCOLS["main"], arm_protocol(c))
-            _fill_rate(row, c["arm_label"], c, ref, why, notes, _p(cells, c, pool))
+            _fill_rate(row, c["arm_label"], c, ref, why, notes, _p(cells, c, pool, used))
         rows.append(row)
     m = _add_holm(rows, [a[1] for a in arms])
     note = _join(
-        f"Columns: method arms in the paper's order (ReCAP, ADaPT, ReAct, CoT, Act, Standard). p: exact McNemar "
-        f"against the ReCAP arm of the same model, profile and window; {m} comparisons (Holm over the table).",
+        "Columns: method arms in the paper's order (ReCAP, ADaPT, ReAct, CoT, Act, Standard). p: against the ReCAP "
+        f"arm of the same model, profile and window; {m} comparisons (Holm over the table).",
+        _test_notes(pool, used),
         notes.text(),
     )
     return Table(
@@ -266,6 +282,7 @@ def per_task_tables(cells: _Cells, split: str) -> list[Table] | str:
         for _, label in arms:
             cols += _rate_columns(label, label)
         notes = Footnotes()
+        used: list[dict[str, Any]] = []
         rows = []
         tasks = sorted({c["task"] for c in mt}, key=lambda t: (paper.task_index(t) is None, paper.task_index(t) or 0, t))
         for task in tasks:
@@ -276,20 +293,21 @@ def per_task_tables(cells: _Cells, split: str) -> list[Table] | str:
                     continue
                 ref = paper.PER_TASK[split].get(idx, {}).get(c["method"]) if idx is not None else None
                 why = paper.mismatch(paper.PROTOCOLS["per_task"], arm_protocol(c), [f"{split}:{idx}"])
-                _fill_rate(row, c["arm_label"], c, ref, why, notes, _p(cells, c, mt))
+                _fill_rate(row, c["arm_label"], c, ref, why, notes, _p(cells, c, mt, used))
             rows.append(row)
         avg: dict[str, Any] = {"task": "Average"}
         for c in ms:
             ref = paper.PER_TASK_AVERAGE[split].get(c["method"])
             why = paper.mismatch(paper.PROTOCOLS["per_task"], arm_protocol(c))
-            _fill_rate(avg, c["arm_label"], c, ref, why, notes, _p(cells, c, ms))
+            _fill_rate(avg, c["arm_label"], c, ref, why, notes, _p(cells, c, ms, used))
         rows.append(avg)
         m = _add_holm(rows, [a[1] for a in arms])
         note = _join(
             f"model: {model}. Rows: the benchmark's tasks in order (the paper shows each recipe as a picture); "
             "Average: all episodes of the split pooled (the paper's average of ten equal tasks). Columns: the "
-            f"paper's order (ReCAP, ReAct, ADaPT, Act, CoT, Std). p: exact McNemar against ReCAP; {m} comparisons "
+            f"paper's order (ReCAP, ReAct, ADaPT, Act, CoT, Std). p: against ReCAP; {m} comparisons "
             "(Holm over the table).",
+            _test_notes(mt + ms, used),
             notes.text(),
         )
         slug = re.sub(r"[^0-9A-Za-z]+", "_", model).strip("_")
@@ -334,6 +352,7 @@ def cross_model_table(cells: _Cells) -> Table | str:
     for model in models:
         cols += _rate_columns(model, model)
     notes = Footnotes()
+    used: list[dict[str, Any]] = []
     rows = []
     for method, label in arms:
         row: dict[str, Any] = {"method": label}
@@ -345,12 +364,13 @@ def cross_model_table(cells: _Cells) -> Table | str:
             why = paper.mismatch(paper.PROTOCOLS["cross_model"], proto)
             # a model the paper did not run still gets its footnote (why is then always set)
             ref = paper.CROSS_MODEL.get(pm or "", paper.CROSS_MODEL["gpt-4o"] if why else {}).get(method)
-            _fill_rate(row, c["model_label"], c, ref, why, notes, _p(cells, c, pool))
+            _fill_rate(row, c["model_label"], c, ref, why, notes, _p(cells, c, pool, used))
         rows.append(row)
     m = _add_holm(rows, models)
     note = _join(
-        "Robotouille synchronous tasks 2, 4 and 6, 64-message window. p (on the ReAct rows): exact McNemar "
-        f"against ReCAP of the same model on the same units; {m} comparisons (Holm over the table).",
+        "Robotouille synchronous tasks 2, 4 and 6, 64-message window. p (on the ReAct rows): against ReCAP of the "
+        f"same model on the same units; {m} comparisons (Holm over the table).",
+        _test_notes(pool, used),
         notes.text(),
     )
     return Table(
@@ -385,6 +405,7 @@ def ablation_table(cells: _Cells) -> Table | str:
     for v in variants:
         cols += _rate_columns(v, v)
     notes = Footnotes()
+    used: list[dict[str, Any]] = []
     rows = []
     for model, profile in row_keys:
         row: dict[str, Any] = {"model": model, "profile": profile}
@@ -402,13 +423,15 @@ def ablation_table(cells: _Cells) -> Table | str:
                 ref = next((r for r in mine if r["ablation"] == "original"), None)
                 pr = cells.pair(c, ref)
                 p = pr["p_value"] if pr else None
+                if pr:
+                    used.append(pr)
             _fill_rate(row, v, c, paper.ABLATIONS.get(v), why, notes, p)
         rows.append(row)
     m = _add_holm(rows, variants)
     note = _join(
-        "Robotouille synchronous task 6, 128-message window; columns in the paper's order. p: exact McNemar of "
-        f"each variant against the original (same model and profile) on the units both ran; {m} comparisons "
-        "(Holm over the table).",
+        "Robotouille synchronous task 6, 128-message window; columns in the paper's order. p: each variant against "
+        f"the original (same model and profile) on the units both ran; {m} comparisons (Holm over the table).",
+        _test_notes(pool, used),
         notes.text(),
     )
     return Table(
@@ -421,11 +444,20 @@ def ablation_table(cells: _Cells) -> Table | str:
     )
 
 
-def _cost_p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]]) -> float | None:
+def _cost_test(pr: dict[str, Any]) -> SignFlipTest:
+    """The permutation test of a pair row's cost differences, flipping whole instances."""
+    return clustered_permutation_test(pr["cost_diffs"], pr["cost_instances"])
+
+
+def _cost_p(cells: _Cells, cell: dict[str, Any], pool: list[dict[str, Any]], used: list[SignFlipTest]) -> float | None:
+    """The cost p of ``cell`` against its reference; the test is appended to ``used`` (for the note)."""
     if cell["method"] == "recap" and cell["ablation"] == "original":
         return None
     pr = cells.pair(cell, cells.reference(cell, pool))
-    return paired_permutation_p(pr["cost_diffs"]) if pr else None
+    if not pr:
+        return None
+    used.append(_cost_test(pr))
+    return used[-1].p
 
 
 def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
@@ -436,6 +468,7 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
         return "ALFWorld costs: no arm without an ablation ran ALFWorld."
     pool.sort(key=lambda c: (*_test_double_last(c["model_label"]), _method_rank(paper.MAIN_ORDER, c["method"]), c["arm_label"]))
     notes = Footnotes()
+    tests: list[SignFlipTest] = []
     totals = paper.COSTS["alfworld_134_games_usd"]
     rows = []
     for c in pool:
@@ -451,7 +484,7 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
             "tokens": c["tokens"],
             "cost": c["cost_usd"],
             "per_game": c["cost_per_episode"],
-            "p": _cost_p(cells, c, pool),
+            "p": _cost_p(cells, c, pool, tests),
         }
         if ref is not None and why is None:
             row["paper"], row["diff"] = f"${ref:,.2f}", c["cost_usd"] - ref
@@ -476,12 +509,13 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
         rows,
         "paper_cells",
         _join(
-            "p: paired permutation test of the per-game cost difference against ReCAP of the same model, profile and window, "
-            "on the games both ran.",
+            "p: the per-game cost difference against ReCAP of the same model, profile and window, on the games both ran.",
+            permutation_note(tests, "p"),
             notes.text(),
         ),
     )
     ratio_notes = Footnotes()
+    ratio_tests: list[SignFlipTest] = []
     ratio_rows = []
     paper_ratio = totals["recap"] / totals["react"]
     for c in pool:
@@ -502,8 +536,9 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
             "recap_cost": pr["ref_cost"],
             "react_cost": pr["arm_cost"],
             "ratio": pr["ref_cost"] / pr["arm_cost"],
-            "p": paired_permutation_p(pr["cost_diffs"]),
+            "p": _cost_test(pr).p,
         }
+        ratio_tests.append(_cost_test(pr))
         if why is None:
             row["paper"], row["diff"] = f"{paper_ratio:.2f}", row["ratio"] - paper_ratio
         else:
@@ -530,8 +565,8 @@ def alfworld_cost_tables(cells: _Cells) -> list[Table] | str:
                 ratio_rows,
                 "paper_pairs",
                 _join(
-                    "ratio = ReCAP's total / ReAct's total over the paired games; p: paired permutation test of the per-game "
-                    "cost difference.",
+                    "ratio = ReCAP's total / ReAct's total over the paired games; p: the per-game cost difference.",
+                    permutation_note(ratio_tests, "p"),
                     ratio_notes.text(),
                 ),
             )
@@ -552,6 +587,7 @@ def task6_cost_table(cells: _Cells) -> Table | str:
     pool.sort(key=lambda c: (*_test_double_last(c["model_label"]), _method_rank(paper.MAIN_ORDER, c["method"]), c["arm_label"]))
     ref = paper.COSTS["robotouille_sync_task6"]
     notes = Footnotes()
+    tests: list[SignFlipTest] = []
     rows = []
     for c in pool:
         row = {
@@ -564,7 +600,7 @@ def task6_cost_table(cells: _Cells) -> Table | str:
             "tokens": c["tokens_per_episode"],
             "cost": c["cost_per_episode"],
             "cost_sd": c["cost_sd"],
-            "p": _cost_p(cells, c, pool),
+            "p": _cost_p(cells, c, pool, tests),
         }
         if c["method"] == "recap":
             why = paper.mismatch(paper.PROTOCOLS["costs_task6"], arm_protocol(c))
@@ -599,8 +635,8 @@ def task6_cost_table(cells: _Cells) -> Table | str:
         "paper_cells",
         _join(
             "The paper's task-6 cost is taken to come from its 20 task-6 runs (128-message window, as its tree analysis). "
-            "p: paired permutation test of the per-episode cost difference against ReCAP of the same model, profile "
-            "and window.",
+            "p: the per-episode cost difference against ReCAP of the same model, profile and window.",
+            permutation_note(tests, "p"),
             notes.text(),
         ),
     )

@@ -1,7 +1,8 @@
 """The report's sections: each runs its SQL files and lays the results out as tables and plots.
 
 Numbers come only from the SQL in ``reports/sql/`` (the cost permutation test is computed from
-the per-pair differences that ``paired_methods.sql`` returns). Pivoting a long SQL result into
+the per-pair differences and their instances that ``paired_methods.sql`` returns). Each table's
+note names its intervals and tests from the rows shown (:mod:`reports.stat_notes`). Pivoting a long SQL result into
 the paper's layout (methods x splits) happens here; the long results themselves go to CSV.
 """
 
@@ -15,7 +16,8 @@ import duckdb
 
 from reports import paper, svg
 from reports.model import Column, Plot, Section, Table
-from reports.stats import comparisons, holm, paired_permutation_p
+from reports.stat_notes import interval_note, mcnemar_note, permutation_note, rate_clustered
+from reports.stats import clustered_permutation_test, comparisons, holm
 from reports.views import Result, named_query
 
 Query = Callable[[str], Result]
@@ -269,8 +271,10 @@ def success(q: Query) -> Section:
     sec = Section(
         "success",
         "Success rates",
-        "pass@1 over the latest attempt of every unit; cells are success % [95% Wilson interval] "
-        "successes/episodes. Paired tests use units both arms ran (same task, instance and seed).",
+        "pass@1 over the latest attempt of every unit; cells are success % [95% interval] successes/episodes "
+        "(Wilson's; widened by the design effect where an instance ran several seeds: each table's note says which). "
+        "Paired tests use units both arms ran (same task, instance and seed) and swap the arms per instance, all its "
+        "seeds together.",
     )
     main = q("success_by_split").dicts()
     splits = _unique(r["env_split"] for r in main)
@@ -284,7 +288,14 @@ def success(q: Query) -> Section:
                 row[r["env_split"]] = _rate_ci(r)
         rows.append(row)
     sec.tables.append(
-        Table("main", "Success rate by method and environment split", cols, rows, "success_by_split", PAPER_POINTER)
+        Table(
+            "main",
+            "Success rate by method and environment split",
+            cols,
+            rows,
+            "success_by_split",
+            f"{interval_note(main)} {PAPER_POINTER}".strip(),
+        )
     )
 
     models = _unique(r["model_label"] for r in main)
@@ -293,12 +304,15 @@ def success(q: Query) -> Section:
     errors = {
         (r["env_split"], _series_label(r["model_label"], r["arm"], models)): (100 * r["ci_low"], 100 * r["ci_high"]) for r in main
     }
+    plot_title = "Success rate by environment split (95% Wilson intervals{})".format(
+        ", widened by the design effect where an instance ran several seeds" if rate_clustered(main) else ""
+    )
     sec.plots.append(
         Plot(
             "success_by_split",
-            "Success rate by environment split (95% Wilson intervals)",
+            plot_title,
             svg.grouped_bars(
-                "Success rate by environment split (95% Wilson intervals)",
+                plot_title,
                 splits,
                 arms,
                 values,
@@ -323,7 +337,7 @@ def success(q: Query) -> Section:
                 if r["task"] == task:
                     row[_series_label(r["model_label"], r["arm"], split_models)] = _rate_ci(r)
             rows.append(row)
-        note = "model: " + ", ".join(split_models) if len(split_models) == 1 else ""
+        note = ("model: " + ", ".join(split_models) + ". " if len(split_models) == 1 else "") + interval_note(rs)
         sec.tables.append(
             Table(
                 f"tasks_{_slug(s)}",
@@ -352,7 +366,7 @@ def success(q: Query) -> Section:
             cols,
             rows,
             "success_by_model",
-            PAPER_POINTER,
+            f"{interval_note(by_model)} {PAPER_POINTER}".strip(),
         )
     )
 
@@ -364,7 +378,7 @@ def success(q: Query) -> Section:
         sec.tables.append(
             Table(
                 "ablations",
-                "Success rate by ablation, with an exact McNemar test against the original settings",
+                "Success rate by ablation, with a paired McNemar test against the original settings",
                 [
                     Column("model_label", "model"),
                     Column("method", "method"),
@@ -381,6 +395,10 @@ def success(q: Query) -> Section:
                 abl,
                 "success_by_ablation",
                 "orig. only / variant only: paired units only one of the two solved. "
+                + interval_note(abl)
+                + " "
+                + mcnemar_note((r["pairs"], r["paired_instances"]) for r in abl if r["pairs"])
+                + " "
                 + PAPER_POINTER
                 + " "
                 + _comparisons_note(comparisons([r["p_value"] for r in abl]), "McNemar test"),
@@ -391,7 +409,8 @@ def success(q: Query) -> Section:
     for r in paired:
         r["a_rate"] = r["a_successes"] / r["pairs"]
         r["b_rate"] = r["b_successes"] / r["pairs"]
-        r["cost_p"] = paired_permutation_p(r["cost_diffs"])
+        r["cost_test"] = clustered_permutation_test(r["cost_diffs"], r["cost_instances"])
+        r["cost_p"] = r["cost_test"].p
     for key in ("p_value", "cost_p"):
         for r, adj in zip(paired, holm([r[key] for r in paired])):
             r[f"{key}_holm"] = adj
@@ -417,9 +436,11 @@ def success(q: Query) -> Section:
             ],
             paired,
             "paired_methods",
-            "McNemar: exact two-sided test on the discordant pairs (A only, B only). cost p: paired "
-            "permutation (sign-flip) test of the mean cost difference, exact up to 16 non-zero "
-            "differences, else 20,000 random sign patterns. "
+            "A only / B only: the discordant pairs. McNemar "
+            + mcnemar_note((r["pairs"], r["instances"]) for r in paired)
+            + " "
+            + permutation_note((r["cost_test"] for r in paired), "cost p (mean cost difference)")
+            + " "
             + _comparisons_note(comparisons([r["p_value"] for r in paired]), "McNemar test")
             + " "
             + _comparisons_note(comparisons([r["cost_p"] for r in paired]), "cost test", "Holm cost p"),

@@ -1,64 +1,207 @@
 """Statistics the SQL cannot express compactly, and reference implementations of the SQL macros.
 
-Success-rate intervals (Wilson, widened for repeated seeds of one instance) and the exact McNemar
-test are SQL macros (``reports/sql/macros.sql``) so that ad-hoc queries get them too; the Python
-versions here are what the tests check those macros against. For binary outcomes the exact paired
-permutation test *is* the exact McNemar test, so :func:`paired_permutation_p` is used for
-continuous paired quantities (dollars per episode between two arms on the same units).
-:func:`holm` adjusts the p-values of a table that makes several comparisons.
+Success-rate intervals (Wilson, widened for repeated seeds of one instance) and the clustered
+McNemar test are SQL macros (``reports/sql/macros.sql``) so that ad-hoc queries get them too; the
+Python versions here are what the tests check those macros against.
+
+Several seeds of one instance are not independent units, so every paired test here permutes
+whole instances: under H0 the two arms are exchangeable *within an instance*, so the sign of
+the instance's total paired difference (summed over its seeds) is flipped as one unit. The
+intervals already respect the same clustering (the design effect). With one seed per instance
+each instance is one pair and the tests are the ordinary ones: the paired sign-flip test, and
+for binary outcomes the exact McNemar (binomial) test.
+
+* :func:`sign_flip_test` / :func:`clustered_permutation_test`: the cost (continuous) test, exact
+  over all 2**k sign patterns up to k = :data:`EXACT_MAX` instances, Monte Carlo above that.
+* :func:`clustered_mcnemar_exact`: the success (binary) test, exact for any k (the totals are
+  integers, so the permutation distribution is counted by convolution, not enumerated).
+* :func:`holm` adjusts the p-values of a table that makes several comparisons.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
+from dataclasses import dataclass
 from fractions import Fraction
 
 import numpy as np
 
-#: enumerate every sign pattern up to this many non-zero differences (2**16 patterns)
-EXACT_MAX = 16
+#: enumerate every sign pattern up to this many instances with a non-zero total (2**20 patterns)
+EXACT_MAX = 20
 #: Monte Carlo sign patterns above EXACT_MAX (fixed seed: the same data gives the same p)
 SAMPLES = 20_000
 SEED = 20251
 
 
-def paired_permutation_p(
-    diffs: Sequence[float], *, exact_max: int = EXACT_MAX, samples: int = SAMPLES, seed: int = SEED
-) -> float:
-    """Two-sided p-value of H0 "mean paired difference is 0" by random sign flips.
+@dataclass(frozen=True)
+class SignFlipTest:
+    """A sign-flip permutation test's p-value and how it was computed (for the table notes).
 
-    Under H0 each pair's difference is as likely to be +d as -d. The p-value is the share of
-    sign patterns whose |sum| is at least the observed |sum|: exact (all 2**n patterns) when at
-    most ``exact_max`` differences are non-zero, otherwise ``(hits + 1) / (samples + 1)`` over
-    ``samples`` random patterns. Zero differences do not change the sum and are dropped.
+    ``units`` is the number of sign-flip units (instances) with a non-zero total; ``exact``
+    says whether all ``patterns`` = 2**units sign patterns were enumerated, else ``patterns``
+    random ones were drawn with ``seed`` and p = (hits + 1) / (patterns + 1).
     """
-    d = np.asarray([x for x in diffs if x != 0 and not math.isnan(x)], dtype=np.float64)
-    n = d.size
-    if n == 0:
-        return 1.0
+
+    p: float
+    units: int
+    exact: bool
+    patterns: int
+    seed: int | None = None
+
+
+def cluster_totals(diffs: Sequence[float | None], clusters: Sequence[Hashable] | None = None) -> list[float]:
+    """Sum the paired differences of each cluster (instance), in first-appearance order.
+
+    ``clusters[i]`` is the instance of pair ``i``; ``None`` makes every pair its own cluster
+    (one seed per instance). None or NaN differences (a pair without a cost) are left out.
+    """
+    if clusters is None:
+        return [float(d) for d in diffs if d is not None and not math.isnan(d)]
+    if len(clusters) != len(diffs):
+        raise ValueError(f"{len(diffs)} differences but {len(clusters)} cluster keys")
+    totals: dict[Hashable, float] = {}
+    for d, c in zip(diffs, clusters):
+        if d is not None and not math.isnan(d):
+            totals[c] = totals.get(c, 0.0) + float(d)
+    return list(totals.values())
+
+
+def _half_sums(v: np.ndarray) -> np.ndarray:
+    """sum(s_i v_i) for every sign pattern s of ``v`` (2**len(v) values)."""
+    n = v.size
+    patterns = ((np.arange(2**n)[:, None] >> np.arange(n)[None, :]) & 1) * 2 - 1
+    return patterns @ v
+
+
+def sign_flip_test(
+    totals: Sequence[float], *, exact_max: int = EXACT_MAX, samples: int = SAMPLES, seed: int = SEED
+) -> SignFlipTest:
+    """Two-sided sign-flip permutation test of H0 "the mean of ``totals`` is 0".
+
+    Under H0 each unit's total is as likely to be +t as -t (the two arms are exchangeable within
+    the unit), and the p-value is the share of sign patterns whose |sum| is at least the
+    observed |sum| (Fisher's randomisation test on matched units; at the level of the cluster,
+    the unit of the design: Gail, Mark, Carroll, Green and Pee, "On design considerations and
+    randomization-based inference for community intervention trials", Statistics in Medicine
+    15, 1996). Zero totals do not change the sum and are dropped; k units remain.
+
+    Exact when k <= ``exact_max``: the 2**k sums are split in two halves of 2**(k/2) sums each,
+    and for each sum of one half the sums of the other that reach the observed |sum| are counted
+    by binary search (2**20 patterns cost two arrays of 1024). Above that, ``samples`` random
+    patterns from ``numpy.random.default_rng(seed)``, p = (hits + 1) / (samples + 1) (the
+    observed pattern counts as one; Phipson and Smyth, "Permutation p-values should never be
+    zero", Stat. Appl. Genet. Mol. Biol. 9, 2010).
+    """
+    d = np.asarray([x for x in totals if x != 0 and not math.isnan(x)], dtype=np.float64)
+    k = d.size
+    if k == 0:
+        return SignFlipTest(1.0, 0, True, 1)
     observed = abs(float(d.sum()))
-    tol = 1e-9 * max(1.0, observed)
-    if n <= exact_max:
-        patterns = ((np.arange(2**n)[:, None] >> np.arange(n)[None, :]) & 1) * 2 - 1
-        sums = np.abs(patterns @ d)
-        return float(np.count_nonzero(sums >= observed - tol)) / float(2**n)
+    threshold = observed - 1e-9 * max(1.0, observed)  # ties in exact arithmetic count
+    if threshold <= 0:  # observed sum 0: every pattern reaches it
+        return SignFlipTest(1.0, k, k <= exact_max, 2**k if k <= exact_max else samples, None if k <= exact_max else seed)
+    if k <= exact_max:
+        left = _half_sums(d[: k // 2])
+        right = np.sort(_half_sums(d[k // 2 :]))
+        # |a + b| >= t  <=>  b >= t - a  or  b <= -t - a (disjoint since t > 0)
+        high = right.size - np.searchsorted(right, threshold - left, side="left")
+        low = np.searchsorted(right, -threshold - left, side="right")
+        hits = int(high.sum() + low.sum())
+        return SignFlipTest(hits / float(2**k), k, True, 2**k)
     # a random sign pattern = random bits; sum(s_i d_i) = 2 * sum(d_i where bit) - sum(d_i).
     # Work in blocks with one reused float buffer (allocating the whole matrix is much slower).
     rng = np.random.default_rng(seed)
     total = float(d.sum())
     block = 1000
-    buf = np.empty((block, n), dtype=np.float64)
+    buf = np.empty((block, k), dtype=np.float64)
     hits = 0
     done = 0
     while done < samples:
-        k = min(block, samples - done)
-        bits = np.unpackbits(rng.integers(0, 256, size=(k, (n + 7) // 8), dtype=np.uint8), axis=1, count=n)
-        np.copyto(buf[:k], bits)
-        sums = np.abs(2.0 * (buf[:k] @ d) - total)
-        hits += int(np.count_nonzero(sums >= observed - tol))
-        done += k
-    return (hits + 1) / (samples + 1)
+        m = min(block, samples - done)
+        bits = np.unpackbits(rng.integers(0, 256, size=(m, (k + 7) // 8), dtype=np.uint8), axis=1, count=k)
+        np.copyto(buf[:m], bits)
+        sums = np.abs(2.0 * (buf[:m] @ d) - total)
+        hits += int(np.count_nonzero(sums >= threshold))
+        done += m
+    return SignFlipTest((hits + 1) / (samples + 1), k, False, samples, seed)
+
+
+def clustered_permutation_test(
+    diffs: Sequence[float | None],
+    clusters: Sequence[Hashable] | None = None,
+    *,
+    exact_max: int = EXACT_MAX,
+    samples: int = SAMPLES,
+    seed: int = SEED,
+) -> SignFlipTest:
+    """The paired permutation test of a mean difference (e.g. dollars per episode, arm A minus
+    arm B on the same units), permuting whole instances: ``diffs`` are per pair (instance, seed),
+    ``clusters`` their instances (:func:`cluster_totals`), and the sign of each instance's total
+    is flipped together (:func:`sign_flip_test`). With one pair per instance (``clusters`` None or
+    all distinct) it is the ordinary paired sign-flip test."""
+    return sign_flip_test(cluster_totals(diffs, clusters), exact_max=exact_max, samples=samples, seed=seed)
+
+
+def paired_permutation_p(
+    diffs: Sequence[float | None],
+    clusters: Sequence[Hashable] | None = None,
+    *,
+    exact_max: int = EXACT_MAX,
+    samples: int = SAMPLES,
+    seed: int = SEED,
+) -> float:
+    """The p-value of :func:`clustered_permutation_test` (every pair its own instance without ``clusters``)."""
+    return clustered_permutation_test(diffs, clusters, exact_max=exact_max, samples=samples, seed=seed).p
+
+
+def instance_discordance(
+    a_success: Sequence[bool], b_success: Sequence[bool], clusters: Sequence[Hashable] | None = None
+) -> list[int]:
+    """b_i - c_i per instance: the instance's pairs only A solved minus those only B solved
+    (``clusters[j]`` the instance of pair j; None: every pair its own instance)."""
+    diffs = [int(bool(a)) - int(bool(b)) for a, b in zip(a_success, b_success, strict=True)]
+    return [int(t) for t in cluster_totals([float(x) for x in diffs], clusters)]
+
+
+def clustered_mcnemar_exact(discordance: Sequence[int]) -> Fraction:
+    """Exact two-sided clustered McNemar p-value from each instance's b_i - c_i.
+
+    The permutation test that swaps the two arms within each instance (all its seeds together):
+    under H0 each instance's D_i = b_i - c_i is as likely to be -D_i, and p = P[|sum s_i D_i| >=
+    |sum D_i|] over the 2**k equally likely sign patterns s of the k instances with D_i != 0.
+    Its statistic standardised by its permutation variance, (sum D_i)^2 / sum D_i^2, is the
+    clustered McNemar statistic of Durkalski, Palesch, Lipsitz and Rust ("Analysis of clustered
+    matched-pair data", Statistics in Medicine 22, 2003), which refers it to chi-square(1); this
+    is the exact version of that test (also the cluster-level McNemar of Obuchowski, "On the
+    comparison of correlated proportions for clustered data", Statistics in Medicine 17, 1998,
+    with the variance taken under H0). The D_i are integers, so the distribution is counted by
+    convolution, exactly, for any k (no enumeration, no sampling).
+
+    With one pair per instance the D_i are +-1 and this is exactly the exact McNemar test
+    (:func:`mcnemar_exact`): X ~ Bin(b + c, 1/2), p = min(1, 2 P[X <= min(b, c)]).
+    Mirrors the SQL macro ``clustered_mcnemar_p``.
+    """
+    ds = [abs(int(x)) for x in discordance if int(x) != 0]
+    k = len(ds)
+    if k == 0:
+        return Fraction(1)
+    half = sum(ds)
+    counts = np.zeros(2 * half + 1, dtype=object)  # Python ints: exact for any k
+    counts[:] = 0
+    counts[0] = 1  # index j <-> partial sum j - (the |D| processed so far); grows by 2|D| each step
+    width = 1
+    for d in ds:
+        nxt = np.zeros(width + 2 * d, dtype=object)
+        nxt[:] = 0
+        nxt[:width] += counts[:width]  # s_i = -1
+        nxt[2 * d :] += counts[:width]  # s_i = +1
+        counts[: width + 2 * d] = nxt
+        width += 2 * d
+    observed = abs(sum(int(x) for x in discordance))
+    sums = np.arange(width) - half
+    hits = int(sum(counts[np.abs(sums) >= observed]))
+    return Fraction(hits, 2**k)
 
 
 # -- reference implementations (used by tests to check the SQL macros) ---------------------------

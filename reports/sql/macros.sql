@@ -36,9 +36,12 @@ CREATE MACRO kish_deff(g, n, k, q, mm) AS
     ELSE 1.0
   END;
 
+-- The instance an episode ran: several seeds of one instance form one cluster.
+CREATE MACRO instance_key(benchmark, split, task, instance_id) AS concat_ws('/', benchmark, split, task, instance_id);
+
 -- One episode's entry of obs: its instance (benchmark, split, task, instance id) and its success.
 CREATE MACRO episode_obs(benchmark, split, task, instance_id, success) AS
-  {'instance': concat_ws('/', benchmark, split, task, instance_id), 'success': success};
+  {'instance': instance_key(benchmark, split, task, instance_id), 'success': success};
 
 -- Per-instance counts of obs: m episodes and y successes per instance (one row per instance).
 CREATE MACRO instance_counts(obs) AS TABLE
@@ -62,11 +65,44 @@ CREATE MACRO cluster_wilson_high(obs) AS (
 );
 
 -- Exact two-sided McNemar test on the discordant pairs b (only A succeeded) and c (only B):
--- p = min(1, 2 * P[X <= min(b, c)]) with X ~ Binomial(b + c, 1/2). For binary outcomes this is
--- also the exact paired permutation (sign-flip) test of the difference in success counts.
+-- p = min(1, 2 * P[X <= min(b, c)]) with X ~ Binomial(b + c, 1/2). It treats every pair as
+-- independent: with several seeds per instance use clustered_mcnemar_p, which equals it when each
+-- instance ran one seed.
 CREATE MACRO mcnemar_p(b, c) AS (
   SELECT least(1.0, 2 * sum(exp(lgamma(b + c + 1) - lgamma(k + 1) - lgamma(b + c - k + 1) - (b + c) * ln(2))))
   FROM range(0, least(b, c) + 1) AS t(k)
+);
+
+-- Exact two-sided sign-flip permutation p-value of integer totals ds (one per instance):
+-- P[|sum s_i d_i| >= |sum d_i|] over the 2^k equally likely sign patterns s of the k non-zero
+-- totals. The distribution of the signed sum is built by convolution (list index j <-> sum
+-- j - 1 - sum |d|), each step halving, so it is exact up to rounding for any k.
+CREATE MACRO sign_flip_int_p(ds) AS (
+  SELECT least(1.0, list_sum(list_transform(dist, lambda x, j: CASE WHEN abs(j - 1 - h) >= o THEN x ELSE 0.0 END)))
+  FROM (
+    SELECT list_reduce(
+        list_filter(list_transform(ds, lambda d: abs(d)::BIGINT), lambda d: d > 0),
+        lambda acc, d: list_transform(range(1, len(acc) + 2 * d + 1),
+          lambda j: ((CASE WHEN j <= len(acc) THEN acc[j] ELSE 0.0 END) + (CASE WHEN j > 2 * d THEN acc[j - 2 * d] ELSE 0.0 END)) / 2),
+        [1.0]::DOUBLE[]) AS dist,
+      coalesce(list_sum(list_transform(ds, lambda d: abs(d))), 0) AS h,
+      abs(coalesce(list_sum(ds), 0)) AS o
+  )
+);
+
+-- One paired unit's entry of a clustered McNemar test: its instance and A's success minus B's
+-- (1: only A succeeded, -1: only B, 0: concordant).
+CREATE MACRO pair_obs(benchmark, split, task, instance_id, a_success, b_success) AS
+  {'instance': instance_key(benchmark, split, task, instance_id), 'd': a_success::INTEGER - b_success::INTEGER};
+
+-- Clustered McNemar test over obs = list(pair_obs(...)) (one entry per paired unit): the exact
+-- permutation test that swaps the two arms within each instance, all its seeds together (the
+-- signs of the per-instance totals b_i - c_i flipped; the exact form of Durkalski et al.'s
+-- clustered McNemar statistic, Statistics in Medicine 22, 2003). One seed per instance gives
+-- exactly mcnemar_p(b, c). Reference implementation: reports/stats.py (clustered_mcnemar_exact).
+CREATE MACRO clustered_mcnemar_p(obs) AS (
+  SELECT sign_flip_int_p(coalesce(list(d), []::BIGINT[]))
+  FROM (SELECT sum(o.d)::BIGINT AS d FROM (SELECT unnest(obs) AS o) GROUP BY o.instance)
 );
 
 -- "gpt-4o" or "scripted (test double)": every table labels test-double models.

@@ -1,9 +1,12 @@
 -- Paired comparisons: every two arms of the same model and environment split, on the units both
 -- finished (same task, instance and seed; the outcomes view). a_only / b_only are the discordant pairs;
--- p_value is the exact two-sided McNemar test. cost_diffs (arm_a minus arm_b, per pair, in pair
--- order) feed the paired permutation test of the mean cost difference.
+-- p_value is the clustered McNemar test (clustered_mcnemar_p: the arms swapped per instance, all its
+-- seeds together; the exact McNemar test when every instance ran one seed); instances counts the
+-- paired instances. cost_diffs (arm_a minus arm_b, per pair, in pair order) and cost_instances (each
+-- pair's instance, same order) feed the paired permutation test of the mean cost difference, which
+-- flips the signs of whole instances (reports.stats.clustered_permutation_test).
 WITH per_unit AS (
-  SELECT model_label, env_split, arm, task, instance_id, seed,
+  SELECT model_label, env_split, arm, benchmark, split, task, instance_id, seed,
     arg_max(success, ended_at) AS success,
     arg_max(cost_usd, ended_at) AS cost_usd
   FROM outcomes
@@ -15,18 +18,21 @@ WITH per_unit AS (
     count(*) FILTER (WHERE b.success) AS b_successes,
     count(*) FILTER (WHERE a.success AND NOT b.success) AS a_only,
     count(*) FILTER (WHERE b.success AND NOT a.success) AS b_only,
+    count(DISTINCT instance_key(a.benchmark, a.split, a.task, a.instance_id)) AS instances,
+    clustered_mcnemar_p(list(pair_obs(a.benchmark, a.split, a.task, a.instance_id, a.success, b.success))) AS p_value,
     avg(a.cost_usd - b.cost_usd) AS mean_cost_diff,
-    list(a.cost_usd - b.cost_usd ORDER BY a.task, a.instance_id, a.seed) AS cost_diffs
+    list(a.cost_usd - b.cost_usd ORDER BY a.task, a.instance_id, a.seed) AS cost_diffs,
+    list(instance_key(a.benchmark, a.split, a.task, a.instance_id) ORDER BY a.task, a.instance_id, a.seed) AS cost_instances
   FROM per_unit a
   JOIN per_unit b
     ON a.model_label = b.model_label AND a.env_split = b.env_split AND a.arm < b.arm
+   AND a.benchmark = b.benchmark AND a.split = b.split
    AND a.task = b.task AND a.instance_id = b.instance_id AND a.seed = b.seed
-  GROUP BY ALL
+  GROUP BY a.model_label, a.env_split, a.arm, b.arm
 )
 SELECT model_label, env_split, arm_a, arm_b, pairs, a_successes, b_successes,
   (a_successes - b_successes) / pairs AS rate_diff,
-  a_only, b_only,
-  mcnemar_p(a_only, b_only) AS p_value,
-  mean_cost_diff, cost_diffs
+  a_only, b_only, instances, p_value,
+  mean_cost_diff, cost_diffs, cost_instances
 FROM counted
 ORDER BY env_split, model_label, arm_a, arm_b;

@@ -18,7 +18,8 @@ WITH scoped AS (SELECT * FROM paper_scoped), cells AS (
     count(*) FILTER (WHERE success) AS successes,
     cluster_wilson_low(list(episode_obs(benchmark, split, task, instance_id, success))) AS ci_low,
     cluster_wilson_high(list(episode_obs(benchmark, split, task, instance_id, success))) AS ci_high,
-    count(DISTINCT instance_id) AS instances,
+    instance_deff(list(episode_obs(benchmark, split, task, instance_id, success))) AS deff,
+    count(DISTINCT instance_key(benchmark, split, task, instance_id)) AS instances,
     sum(cost_usd) AS cost_usd,
     avg(cost_usd) AS cost_per_episode,
     stddev_samp(cost_usd) AS cost_sd,
@@ -42,7 +43,7 @@ SELECT c.scope, c.model_label, c.arm_label, c.method, c.ablation, c.benchmark, c
   c.profiles, c.provider_models, c.test_double, c.windows,
   CASE WHEN c.level = 'split' THEN p.task_multipliers
        ELSE list_filter(p.task_multipliers, lambda x: x.task = c.task) END AS task_multipliers,
-  c.episodes, c.successes, c.successes / c.episodes AS success_rate, c.ci_low, c.ci_high, c.instances,
+  c.episodes, c.successes, c.successes / c.episodes AS success_rate, c.ci_low, c.ci_high, c.instances, c.deff,
   c.cost_usd, c.cost_per_episode, c.cost_sd, c.calls, c.calls_per_episode, c.calls_sd, c.tokens, c.tokens_per_episode
 FROM cells c
 JOIN protocol p USING (scope, model_label, arm_label, benchmark, split)

@@ -5,7 +5,9 @@ SELECT model_label, arm, method, ablation,
   count(*) FILTER (WHERE success) AS successes,
   count(*) FILTER (WHERE success) / count(*) AS success_rate,
   cluster_wilson_low(list(episode_obs(benchmark, split, task, instance_id, success))) AS ci_low,
-  cluster_wilson_high(list(episode_obs(benchmark, split, task, instance_id, success))) AS ci_high
+  cluster_wilson_high(list(episode_obs(benchmark, split, task, instance_id, success))) AS ci_high,
+  count(DISTINCT instance_key(benchmark, split, task, instance_id)) AS instances,
+  instance_deff(list(episode_obs(benchmark, split, task, instance_id, success))) AS deff
 FROM outcomes
 GROUP BY model_label, arm, method, ablation
 ORDER BY model_label, arm;

@@ -36,7 +36,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from reports.sections import PLAN_FILE, load_plans
-from reports.stats import mcnemar_exact, paired_permutation_p
+from reports.stats import SignFlipTest, clustered_mcnemar_exact, clustered_permutation_test, instance_discordance
 from reports.views import ReportError, Result, materialize, named_query, open_runs_checked, run_query, scan_runs
 from schemas.parts import RUN_FILE, read_run_file
 from schemas.tables import TABLES
@@ -615,8 +615,11 @@ def call_window(snap: Snapshot, run_id: str, episode_id: str, call_index: int) -
 
 @dataclass
 class Comparison:
-    """Two runs or two arms (``kind``) compared on the units both ran: successes, discordant pairs with the exact
-    McNemar p, cost difference (a minus b) with a permutation p, overall and per task."""
+    """Two runs or two arms (``kind``) compared on the units both ran: successes, discordant pairs with the
+    clustered McNemar p, cost difference (a minus b) with a permutation p, overall and per task. Both tests swap
+    the two sides within an instance, all its seeds together (:mod:`reports.stats`); with one seed per instance
+    they are the exact McNemar test and the ordinary paired sign-flip test. ``instances`` counts the paired
+    instances (group, split, task, instance); ``cost_test`` says how the cost p was computed."""
 
     kind: str  # "run" or "arm"
     a: str
@@ -632,6 +635,8 @@ class Comparison:
     cost_p: float | None
     discordant: list[dict[str, Any]]
     elapsed_ms: float
+    instances: int = 0
+    cost_test: SignFlipTest | None = None
 
 
 #: per-unit outcomes. Two runs: each run's latest attempt of each unit, paired on the unit's arm,
@@ -686,6 +691,8 @@ def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
     FROM x JOIN y ON x.grp = y.grp AND x.env_split = y.env_split AND x.task = y.task AND x.instance_id = y.instance_id AND x.seed = y.seed
     ORDER BY x.grp, x.env_split, x.task, x.instance_id, x.seed"""
     pairs = snap.query(sql, {"a": a, "b": b}).dicts()
+    # the unit of the tests: one instance of one group (arm and model, or model) and split
+    inst = [(p["grp"], p["env_split"], p["task"], p["instance_id"]) for p in pairs]
     per: dict[tuple[str, str, str], dict[str, Any]] = {}
     for p in pairs:
         t = per.setdefault(
@@ -700,6 +707,9 @@ def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
                 "a_only": 0,
                 "b_only": 0,
                 "cost_diffs": [],
+                "a_ok": [],
+                "b_ok": [],
+                "instances": [],
             },
         )
         t["pairs"] += 1
@@ -708,15 +718,22 @@ def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
         t["a_only"] += bool(p["a_success"] and not p["b_success"])
         t["b_only"] += bool(p["b_success"] and not p["a_success"])
         t["cost_diffs"].append((p["a_cost"] or 0.0) - (p["b_cost"] or 0.0))
+        t["a_ok"].append(bool(p["a_success"]))
+        t["b_ok"].append(bool(p["b_success"]))
+        t["instances"].append(p["instance_id"])
     per_task = []
     for t in per.values():
         diffs = t.pop("cost_diffs")
-        t["p_value"] = float(mcnemar_exact(t["a_only"], t["b_only"]))
+        keys = t.pop("instances")
+        t["p_value"] = float(clustered_mcnemar_exact(instance_discordance(t.pop("a_ok"), t.pop("b_ok"), keys)))
+        t["instances"] = len(set(keys))
         t["mean_cost_diff"] = sum(diffs) / len(diffs)
         per_task.append(t)
     diffs = [(p["a_cost"] or 0.0) - (p["b_cost"] or 0.0) for p in pairs]
     a_only = sum(1 for p in pairs if p["a_success"] and not p["b_success"])
     b_only = sum(1 for p in pairs if p["b_success"] and not p["a_success"])
+    discordance = instance_discordance([bool(p["a_success"]) for p in pairs], [bool(p["b_success"]) for p in pairs], inst)
+    cost_test = clustered_permutation_test(diffs, inst) if diffs else None
     return Comparison(
         kind,
         a,
@@ -727,11 +744,13 @@ def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
         sum(bool(p["b_success"]) for p in pairs),
         a_only,
         b_only,
-        float(mcnemar_exact(a_only, b_only)),
+        float(clustered_mcnemar_exact(discordance)),
         sum(diffs) / len(diffs) if diffs else None,
-        paired_permutation_p(diffs) if diffs else None,
+        cost_test.p if cost_test else None,
         [p for p in pairs if bool(p["a_success"]) != bool(p["b_success"])],
         (time.perf_counter() - t0) * 1000,
+        len(set(inst)),
+        cost_test,
     )
 
 

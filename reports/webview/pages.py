@@ -18,6 +18,7 @@ from urllib.parse import urlencode
 
 from reports.model import format_value
 from reports.observations import observation_change
+from reports.stat_notes import mcnemar_note, permutation_note
 from reports.viewer import ranges
 from reports.webview import data as D
 
@@ -456,6 +457,12 @@ def window_page(snap: D.Snapshot, run_id: str, episode_id: str, call: dict[str, 
 # -- compare -----------------------------------------------------------------------------------------
 
 
+def compare_tests_note(cmp: D.Comparison) -> str:
+    """What the comparison's McNemar p and cost p are, from the pairs it made (:mod:`reports.stat_notes`)."""
+    pairings = [(cmp.pairs, cmp.instances)] + [(t["pairs"], t["instances"]) for t in cmp.per_task]
+    return " ".join(x for x in (mcnemar_note(pairings).replace("p: ", "McNemar p: ", 1), permutation_note([cmp.cost_test])) if x)
+
+
 def compare_page(snap: D.Snapshot, choices: dict[str, list[str]], cmp: D.Comparison | None, kind: str, a: str, b: str) -> str:
     """The compare page: the two choice forms and, once a comparison ``cmp`` is made, its totals, per-task table
     and discordant pairs (at most MAX_DISCORDANT)."""
@@ -475,9 +482,10 @@ def compare_page(snap: D.Snapshot, choices: dict[str, list[str]], cmp: D.Compari
         "".join(forms),
         '<p class="note">Two runs: each unit\'s latest attempt in each run, paired on method, model and instance (task, '
         "instance, seed). Two arms: the terminal rows of the two arms, paired on model, split, task, instance and seed. "
-        "p: exact two-sided McNemar test on the discordant pairs; cost p: paired sign-flip permutation test.</p>",
+        "Both tests swap A and B within an instance, all its seeds together.</p>",
     ]
     if cmp is not None:
+        body.append(f'<p class="note" id="tests">{_e(compare_tests_note(cmp))}</p>')
         body.append(
             f'<section id="result" data-pairs="{cmp.pairs}" data-ms="{cmp.elapsed_ms:.1f}"><h2>{_e(cmp.a)} (A) vs {_e(cmp.b)} (B)</h2>'
             '<table class="data" id="summary"><thead><tr><th>pairs</th><th>A successes</th><th>B successes</th><th>only A</th>'

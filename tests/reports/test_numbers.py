@@ -186,7 +186,10 @@ def test_paired_comparisons(con_a):
                 "mean_cost_diff": 0.0,
                 "cost_diffs": [0.0],
             },
-            # react vs recap on the 5 sync units: recap alone solved t2/84, t6/42, t6/126 -> p = 2/2^3
+            # react vs recap on the 5 sync units: recap alone solved t2/84, t6/42, t6/126. The arms are
+            # swapped per instance (all its seeds together): b_i - c_i = -1 (i2), -2 (i6); of the 4
+            # patterns +-1 +-2 those with |sum| >= 3 are the 2 same-sign ones -> p = 2/4 (pairs treated
+            # as independent gave 2/2^3 = 0.25)
             {
                 "model_label": "gpt-4o",
                 "env_split": SYNC,
@@ -198,9 +201,11 @@ def test_paired_comparisons(con_a):
                 "rate_diff": -0.6,
                 "a_only": 0,
                 "b_only": 3,
-                "p_value": 0.25,
+                "instances": 2,
+                "p_value": 0.5,
                 "mean_cost_diff": -1.65,
                 "cost_diffs": [-0.5, -1.5, -2.0, -3.75, -0.5],
+                "cost_instances": ["robotouille/synchronous/t2/i2"] * 2 + ["robotouille/synchronous/t6/i6"] * 3,
             },
             # level_3 finished t6/42 (F, $2) and t6/126 (S, $1): react $1.0/$1.5 both F, recap $3/$2 both S
             {
@@ -235,8 +240,10 @@ def test_paired_comparisons(con_a):
             },
         ],
     )
-    # the 5 cost differences all have the same sign: only the 2 all-same-sign patterns of 32 reach |sum| 8.25
+    # the 5 cost differences all have the same sign: pair by pair only the 2 all-same-sign patterns of 32
+    # reach |sum| 8.25; flipping whole instances (i2 total -2.0, i6 -6.25) it is 2 of 4
     assert paired_permutation_p(rows[2]["cost_diffs"]) == 2 / 32
+    assert paired_permutation_p(rows[2]["cost_diffs"], rows[2]["cost_instances"]) == 2 / 4
 
 
 def test_costs(con_a):

@@ -18,7 +18,7 @@ import yaml
 
 from reports import paper
 from reports.build import ReportOptions, build_report
-from reports.stats import cluster_wilson, holm, mcnemar_exact, paired_permutation_p
+from reports.stats import cluster_wilson, clustered_mcnemar_exact, holm, instance_discordance, paired_permutation_p
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = REPO / "examples" / "paper"
@@ -157,10 +157,14 @@ def rate(rows: list[dict[str, Any]]) -> tuple[int, int, float, float]:
 def mcnemar(arm: list[dict[str, Any]], ref: list[dict[str, Any]]) -> float | None:
     key = lambda r: (r["split"], r["task"], r["instance_id"], r["seed"])  # noqa: E731
     refs = {key(r): r["success"] for r in ref}
-    pairs = [(refs[key(r)], r["success"]) for r in arm if key(r) in refs]
-    if not pairs:
+    paired = [r for r in arm if key(r) in refs]
+    if not paired:
         return None
-    return float(mcnemar_exact(sum(a and not b for a, b in pairs), sum(b and not a for a, b in pairs)))
+    # the arms are swapped per instance, all its seeds together (the clustered McNemar test)
+    inst = [key(r)[:3] for r in paired]
+    return float(
+        clustered_mcnemar_exact(instance_discordance([refs[key(r)] for r in paired], [r["success"] for r in paired], inst))
+    )
 
 
 def assert_rate(got: Any, want: tuple[int, int, float, float]) -> None:
@@ -313,13 +317,17 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
         )
         assert row.get("paper") == ("[1]" if row["method"] in paper.COSTS["alfworld_134_games_usd"] else None)
         assert row.get("diff") is None
-        diffs = [r["cost_usd"] - recap_cost[key(r)] for r in sorted(mine, key=key) if key(r) in recap_cost]
-        assert_p(row["p"], None if row["method"] == "recap" else paired_permutation_p(diffs))
+        both = [r for r in sorted(mine, key=key) if key(r) in recap_cost]
+        diffs = [r["cost_usd"] - recap_cost[key(r)] for r in both]
+        # signs flipped per instance (all its seeds together)
+        assert_p(row["p"], None if row["method"] == "recap" else paired_permutation_p(diffs, [key(r)[:2] for r in both]))
     (ratio,) = tables["paper_cost_ratio"].rows
     react = sorted((r for r in alf if r["label"] == "react"), key=key)
     assert (ratio["games"], ratio["paper"]) == (len(react), "[1]")
     assert ratio["ratio"] == pytest.approx(sum(recap_cost[key(r)] for r in react) / sum(r["cost_usd"] for r in react))
-    assert ratio["p"] == pytest.approx(paired_permutation_p([r["cost_usd"] - recap_cost[key(r)] for r in react]))
+    assert ratio["p"] == pytest.approx(
+        paired_permutation_p([r["cost_usd"] - recap_cost[key(r)] for r in react], [key(r)[:2] for r in react])
+    )
 
     # task-6 costs and trees from the main runs (window 64): no paper number (test double)
     t6 = [r for r in units if r["split"] == "synchronous" and paper.task_index(r["task"]) == 6]

@@ -66,7 +66,8 @@ def test_markdown_main_table(report_dir):
     assert "paper |" not in success and "84.0" not in success and "91.0" not in success
     assert "[1] profile none, the paper's runs are profile paper." in md[md.index("## The paper's tables") :]
     assert (
-        "| gpt-4o | robotouille/synchronous | react | recap | 5 | 20.0 | 80.0 | 0 | 3 | 0.2500 | 1.0000 | -$1.6500 | 0.0625 | 0.3125 |"
+        # McNemar and cost p swap the arms per instance (i2: 2 seeds, i6: 3): 2 of 4 sign patterns each
+        "| gpt-4o | robotouille/synchronous | react | recap | 5 | 20.0 | 80.0 | 0 | 3 | 0.5000 | 1.0000 | -$1.6500 | 0.5000 | 1.0000 |"
         in md
     )
     assert (
@@ -76,7 +77,10 @@ def test_markdown_main_table(report_dir):
         "| gpt-4o | recap | robotouille/synchronous | 2 | 3.50 | 2.50 | 0.71 | 1.75 | 0.35 | 3 | 5.50 | 0.50 | 1 | 1.00 |" in md
     )
     assert "| gpt-4o | invalid_action_loop | 1 | 7.1 | $1.0000 | 1.00 | 4.00 | A-react-t6-42 |" in md
-    assert "![Success rate by environment split (95% Wilson intervals)](plots/success_by_split.svg)" in md
+    assert (
+        "![Success rate by environment split (95% Wilson intervals, widened by the design effect where an instance ran "
+        "several seeds)](plots/success_by_split.svg)" in md
+    )
 
 
 def test_test_doubles_are_labelled_everywhere(report_dir):
@@ -115,6 +119,8 @@ def test_csv_is_the_long_sql_result(report_dir):
         "success_rate",
         "ci_low",
         "ci_high",
+        "instances",
+        "deff",
     ]
     assert rows[6][:8] == ["gpt-4o", "recap", "robotouille/synchronous", "recap", "original", "5", "4", "0.8"]
     modes = list(csv.DictReader((report_dir / "csv" / "failure_modes.csv").open()))

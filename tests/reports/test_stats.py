@@ -1,18 +1,39 @@
-"""reports/stats.py and the SQL macros it mirrors: Holm's adjustment, the clamped Wilson interval
-and the instance-clustered Wilson interval, each against hand-computed values and an independent
-computation (the step-down procedure itself; ANOVA from the raw 0/1 data; the score test solved
-by bisection)."""
+"""reports/stats.py and the SQL macros it mirrors: Holm's adjustment, the clamped Wilson interval,
+the instance-clustered Wilson interval and the paired tests that permute whole instances (the
+cost sign-flip test and the clustered McNemar test), each against hand-computed values and an
+independent computation (the step-down procedure itself; ANOVA from the raw 0/1 data; the score
+test solved by bisection; every sign pattern listed); and the notes' words for them."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
+from fractions import Fraction
 
 import duckdb
 import numpy as np
 import pytest
 
-from reports.stats import Z95, cluster_wilson, comparisons, design_effect, holm, wilson
+from reports.stat_notes import interval_note, mcnemar_note, permutation_note
+from reports.stats import (
+    SAMPLES,
+    SEED,
+    Z95,
+    SignFlipTest,
+    cluster_totals,
+    cluster_wilson,
+    clustered_mcnemar_exact,
+    clustered_permutation_test,
+    comparisons,
+    design_effect,
+    holm,
+    instance_discordance,
+    mcnemar_exact,
+    paired_permutation_p,
+    sign_flip_test,
+    wilson,
+)
 from reports.views import load_sql, split_statements
 
 
@@ -183,3 +204,246 @@ def test_sql_clustered_interval_in_a_grouped_query(con):
     assert got[0][1:] == pytest.approx(wilson(1, 2), rel=1e-12)
     assert got[1][1:] == pytest.approx(wilson(1, 2), rel=1e-12)
     assert not math.isclose(got[0][1], wilson(2, 4)[0])
+
+
+# -- paired tests that permute whole instances -------------------------------------------------------
+#
+# Reference: every sign pattern listed with itertools and counted in exact arithmetic.
+
+
+def _brute_force_p(totals: list[Fraction]) -> Fraction:
+    nz = [t for t in totals if t != 0]
+    observed = abs(sum(nz, Fraction(0)))
+    hits = sum(1 for s in itertools.product((1, -1), repeat=len(nz)) if abs(sum(x * t for x, t in zip(s, nz))) >= observed)
+    return Fraction(hits, 2 ** len(nz))
+
+
+#: the issue's run: 6 instances x 3 seeds, arm A cheaper on every one of the 18 paired units
+SIX_BY_THREE_COST = [
+    -0.25,
+    -0.5,
+    -1.0,
+    -0.75,
+    -0.5,
+    -0.25,
+    -2.0,
+    -0.5,
+    -1.5,
+    -0.125,
+    -0.25,
+    -0.375,
+    -1.0,
+    -1.0,
+    -1.0,
+    -3.0,
+    -0.5,
+    -0.5,
+]
+SIX_BY_THREE_INSTANCES = [f"i{i}" for i in range(1, 7) for _ in range(3)]
+
+
+def test_cost_permutation_flips_whole_instances_the_issue_example():
+    # pair by pair all 18 differences have one sign: 2 of 2^18 patterns reach |sum| (the report printed
+    # 0.0001 when it sampled them); with the 6 instances flipped as units it is 2 of 2^6
+    t = clustered_permutation_test(SIX_BY_THREE_COST, SIX_BY_THREE_INSTANCES)
+    assert t == SignFlipTest(2 / 64, 6, True, 64, None)
+    assert t.p == 0.03125
+    assert clustered_permutation_test(SIX_BY_THREE_COST) == SignFlipTest(2 / 2**18, 18, True, 2**18, None)
+    # the pairs' order does not matter, only which instance each belongs to
+    order = list(range(18))
+    random.Random(3).shuffle(order)
+    assert paired_permutation_p([SIX_BY_THREE_COST[i] for i in order], [SIX_BY_THREE_INSTANCES[i] for i in order]) == 2 / 64
+
+
+def test_cost_permutation_by_hand_with_mixed_signs():
+    # instance totals -1.75 (i1: -1, -1, +0.25), +0.5 (i2), -0.5 (i3: -1, +0.5), 0 (i4: +1, -1, dropped):
+    # sum -1.75; of the 8 patterns +-1.75 +-0.5 +-0.5 those with |sum| >= 1.75: all with 1.75's sign
+    # against... 1.75 + 0.5 + 0.5 = 2.75, 1.75 + 0.5 - 0.5 = 1.75 (twice), 1.75 - 1 = 0.75 -> 3 of 4, x2 signs
+    diffs = [-1.0, -1.0, 0.25, 0.5, -1.0, 0.5, 1.0, -1.0]
+    keys = ["i1", "i1", "i1", "i2", "i3", "i3", "i4", "i4"]
+    assert cluster_totals(diffs, keys) == [-1.75, 0.5, -0.5, 0.0]
+    assert clustered_permutation_test(diffs, keys) == SignFlipTest(6 / 8, 3, True, 8, None)
+    assert paired_permutation_p([0.0, 0.0], ["a", "b"]) == 1.0
+    assert paired_permutation_p([1.0, -1.0], ["a", "a"]) == 1.0  # one instance, total 0
+    assert paired_permutation_p([1.0, float("nan"), None], ["a", "b", "c"]) == 1.0  # one instance left: both signs tie
+    with pytest.raises(ValueError, match="^3 differences but 2 cluster keys$"):
+        cluster_totals([1.0, 2.0, 3.0], ["a", "b"])
+
+
+def test_cost_permutation_with_one_seed_per_instance_is_the_ordinary_sign_flip_test():
+    rng = random.Random(11)
+    for _ in range(60):
+        n = rng.randint(1, 12)
+        diffs = [rng.choice([0.0, rng.uniform(-3, 3), float(rng.randint(-3, 3))]) for _ in range(n)]
+        keys = [f"i{j}" for j in range(n)]
+        assert clustered_permutation_test(diffs, keys) == clustered_permutation_test(diffs)
+        want = _brute_force_p([Fraction(d) for d in diffs])
+        assert paired_permutation_p(diffs, keys) == pytest.approx(float(want), abs=1e-15), diffs
+
+
+def test_cost_permutation_exact_up_to_20_instances_against_full_enumeration():
+    rng = np.random.default_rng(5)
+    for k in (1, 2, 7, 13, 17):  # the same split-in-halves code counts 2^20
+        totals = rng.normal(size=k).round(2)
+        totals[0] = -abs(totals[1:]).sum() * 0.3 if k > 1 else totals[0]
+        signs = ((np.arange(2**k)[:, None] >> np.arange(k)[None, :]) & 1) * 2 - 1
+        sums = np.abs(signs.astype(np.float64) @ totals)
+        observed = abs(totals.sum())
+        want = np.count_nonzero(sums >= observed - 1e-9 * max(1.0, observed)) / 2**k
+        got = sign_flip_test(list(totals))
+        assert (got.p, got.units, got.exact, got.patterns) == (want, k, True, 2**k)
+
+
+def test_cost_permutation_samples_above_20_instances_with_a_fixed_reported_seed():
+    t = sign_flip_test([1.0] * 21)
+    assert (t.units, t.exact, t.patterns, t.seed) == (21, False, SAMPLES, SEED) == (21, False, 20_000, 20251)
+    # with this seed 1 of the 20,000 random patterns of 21 signs is all one sign (expected 20,000 / 2^20 = 0.02):
+    # (1 + 1) / (20,000 + 1)
+    assert t.p == 2 / 20_001
+    assert sign_flip_test([1.0] * 30).p == 1 / 20_001  # none of 30: (0 + 1) / (m + 1)
+    many = [((-1) ** j) * (1 + j % 5) + 0.5 for j in range(40)]
+    assert sign_flip_test(many) == sign_flip_test(many)  # reproducible
+    assert sign_flip_test(many, seed=1).seed == 1
+    # per instance: 40 pairs in 8 instances are enumerated exactly again
+    assert clustered_permutation_test(many, [j // 5 for j in range(40)]).exact
+
+
+# -- clustered McNemar ----------------------------------------------------------------------------------
+
+
+def _pairs_6x3() -> list[tuple[str, bool, bool]]:
+    """6 instances x 3 seeds: (instance, A solved, B solved) per paired unit.
+
+    i1: A alone 3 times (D = 3); i2: A alone twice, both once (2); i3: A alone twice, neither once (2);
+    i4: A alone once (1); i5: B alone once (-1); i6: A alone once and B alone once (0).
+    b = 9 units only A solved, c = 2 only B."""
+    rows = {
+        "i1": [(1, 0), (1, 0), (1, 0)],
+        "i2": [(1, 0), (1, 0), (1, 1)],
+        "i3": [(1, 0), (1, 0), (0, 0)],
+        "i4": [(1, 0), (0, 0), (1, 1)],
+        "i5": [(0, 1), (0, 0), (1, 1)],
+        "i6": [(1, 0), (0, 1), (0, 0)],
+    }
+    return [(i, bool(a), bool(b)) for i, units in rows.items() for a, b in units]
+
+
+def test_clustered_mcnemar_by_hand_6_instances_x_3_seeds():
+    pairs = _pairs_6x3()
+    d = instance_discordance([a for _, a, _ in pairs], [b for _, _, b in pairs], [i for i, _, _ in pairs])
+    assert d == [3, 2, 2, 1, -1, 0]
+    # |D| = 3, 2, 2, 1, 1 (sum 9), observed |sum D| = 7. Flipping a subset F gives 9 - 2 sum(F): at least 7
+    # in absolute value when sum(F) <= 1 ({}, {1}, {1'}) or >= 8 (their complements): 6 of 2^5
+    assert clustered_mcnemar_exact(d) == Fraction(6, 32)
+    # the pairs taken as independent: b = 9, c = 2 -> 2 (1 + 11 + 55) / 2^11
+    assert mcnemar_exact(9, 2) == Fraction(134, 2048)
+    assert clustered_mcnemar_exact(d) == _brute_force_p([Fraction(x) for x in d])
+
+
+def test_clustered_mcnemar_with_one_seed_per_instance_is_the_exact_mcnemar_test(con):
+    for b in range(13):
+        for c in range(13):
+            d = [1] * b + [-1] * c + [0] * 3
+            assert clustered_mcnemar_exact(d) == mcnemar_exact(b, c), (b, c)
+            (sql,) = con.execute("SELECT sign_flip_int_p(?)", [d]).fetchone()
+            (plain,) = con.execute(f"SELECT mcnemar_p({b}, {c})").fetchone()
+            assert sql == pytest.approx(plain, rel=1e-12) and sql == pytest.approx(float(mcnemar_exact(b, c)), rel=1e-12)
+
+
+def _sql_pairs(con, pairs: list[tuple[str, bool, bool]]) -> float:
+    (p,) = con.execute(
+        "SELECT clustered_mcnemar_p(list(pair_obs('robotouille', 'synchronous', 't6', inst, a, b))) "
+        "FROM (SELECT unnest(?::STRUCT(inst VARCHAR, a BOOLEAN, b BOOLEAN)[], recursive := true))",
+        [[{"inst": i, "a": a, "b": b} for i, a, b in pairs]],
+    ).fetchone()
+    return p
+
+
+def test_clustered_mcnemar_sql_macro_agrees_with_the_reference(con):
+    assert _sql_pairs(con, _pairs_6x3()) == pytest.approx(6 / 32, rel=1e-12)
+    rng = random.Random(17)
+    for case in range(40):
+        k = rng.choice([1, 2, 5, 9, 20, 35, 80])  # beyond 20 instances too: both are exact for any k
+        pairs = []
+        for i in range(k):
+            for _ in range(rng.randint(1, 4)):
+                pairs.append((f"i{i}", rng.random() < 0.6, rng.random() < 0.4))
+        d = instance_discordance([a for _, a, _ in pairs], [b for _, _, b in pairs], [i for i, _, _ in pairs])
+        assert _sql_pairs(con, pairs) == pytest.approx(float(clustered_mcnemar_exact(d)), rel=1e-12), case
+    assert con.execute("SELECT clustered_mcnemar_p([]::STRUCT(instance VARCHAR, d INTEGER)[])").fetchone() == (1.0,)
+
+
+def test_paired_methods_query_tests_per_instance():
+    """paired_methods.sql over a hand-made outcomes table of 6 instances x 3 seeds: the McNemar p is
+    the clustered one, and cost_diffs / cost_instances give the per-instance cost test."""
+    c = duckdb.connect(":memory:")
+    for statement in split_statements(load_sql("macros")):
+        c.execute(statement)
+    rows = []
+    for j, (inst, a, b) in enumerate(_pairs_6x3()):
+        seed = j % 3
+        for arm, ok, cost in (("a", a, 1.0), ("b", b, 1.0 - SIX_BY_THREE_COST[j])):
+            rows.append(("m", "robotouille/synchronous", arm, "robotouille", "synchronous", "t6", inst, seed, ok, cost, 1.0))
+    c.execute(
+        "CREATE TABLE outcomes (model_label VARCHAR, env_split VARCHAR, arm VARCHAR, benchmark VARCHAR, split VARCHAR, "
+        "task VARCHAR, instance_id VARCHAR, seed BIGINT, success BOOLEAN, cost_usd DOUBLE, ended_at DOUBLE)"
+    )
+    c.executemany("INSERT INTO outcomes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
+    cur = c.execute(load_sql("paired_methods"))
+    names = [d[0] for d in cur.description]
+    (row,) = [dict(zip(names, r)) for r in cur.fetchall()]
+    assert (row["pairs"], row["instances"], row["a_only"], row["b_only"]) == (18, 6, 9, 2)
+    assert row["p_value"] == pytest.approx(6 / 32, rel=1e-12)
+    assert row["cost_diffs"] == pytest.approx(SIX_BY_THREE_COST)
+    assert row["cost_instances"] == [f"robotouille/synchronous/t6/{i}" for i in SIX_BY_THREE_INSTANCES]
+    assert paired_permutation_p(row["cost_diffs"], row["cost_instances"]) == 2 / 64
+    c.close()
+
+
+# -- the notes' words -------------------------------------------------------------------------------------
+
+
+def test_interval_note_names_the_interval():
+    one = {"episodes": 6, "instances": 6, "deff": 1.0}
+    assert interval_note([one, one]) == "Intervals: Wilson 95% (one seed per instance)."
+    assert interval_note([]) == ""
+    # 6 instances x 3 seeds with deff 1.84: ICC = 0.84 / (3 - 1) = 0.42
+    six = {"episodes": 18, "instances": 6, "deff": 1.84}
+    assert interval_note([six]) == (
+        "Intervals: Wilson 95%, widened by the design effect where an instance ran several seeds (6 instances x 3 seeds; "
+        "ICC 0.42, deff 1.84): Wilson's interval at n / deff, deff = 1 + (m - 1) ICC (Kish) with the ICC by one-way "
+        "ANOVA over the instances, truncated at 0 (deff 1: not widened)."
+    )
+    single = {"episodes": 3, "instances": 1, "deff": 1.0}
+    assert interval_note([six, {"episodes": 10, "instances": 4, "deff": 1.0}, single, one]) == (
+        "Intervals: Wilson 95%, widened by the design effect where an instance ran several seeds (3 of the 4 cells: "
+        "1 instance x 3 seeds, 4 instances x 2.50 seeds (mean), 6 instances x 3 seeds; ICC 0.00 to 0.42, deff 1.00 to "
+        "1.84; a single instance: no ICC estimate, deff 1): Wilson's interval at n / deff, deff = 1 + (m - 1) ICC "
+        "(Kish) with the ICC by one-way ANOVA over the instances, truncated at 0 (deff 1: not widened). The other "
+        "cells: plain Wilson 95% (one seed per instance)."
+    )
+
+
+def test_test_notes_name_the_test():
+    assert mcnemar_note([(5, 5), (0, 0)]) == (
+        "p: exact McNemar test (two-sided, binomial on the discordant pairs; one seed per instance)."
+    )
+    assert mcnemar_note([(18, 6)]).startswith(
+        "p: clustered McNemar test, exact: the two arms swapped within each instance, all its seeds together"
+    )
+    assert mcnemar_note([]) == ""
+    head = (
+        "cost p: two-sided sign-flip permutation test over instances (each instance's paired differences summed over "
+        "its seeds, the sign flipped per instance): "
+    )
+    six = clustered_permutation_test(SIX_BY_THREE_COST, SIX_BY_THREE_INSTANCES)
+    assert permutation_note([six, None]) == head + "exact, all 2^6 patterns."
+    three = clustered_permutation_test([1.0, 2.0, 3.0])
+    sampled = sign_flip_test([1.0] * 21)
+    zero = sign_flip_test([0.0])
+    assert permutation_note([six, three, sampled, zero]) == head + (
+        "1 test with no instance's difference non-zero, p = 1; exact, all 2^3 to 2^6 patterns (2 tests); 20,000 "
+        "random sign patterns with numpy seed 20251, p = (hits + 1) / (patterns + 1), where more than 20 instances "
+        "differ (1 test)."
+    )
+    assert permutation_note([]) == ""

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from reports.stats import mcnemar_exact
+from reports.stats import clustered_mcnemar_exact, instance_discordance
 from reports.webview.server import serve, stop
 from tests.reports.png import count_color, read_png
 from tests.view.cdp import Browser
@@ -167,7 +167,14 @@ def test_compare_two_runs(viewer, browser, real_runs, tmp_path):
     )
     browser.wait_ready(viewer.url + "compare?")
     summary = browser.eval("Array.from(document.querySelectorAll('#summary tbody td')).map(td => td.textContent)")
-    p = mcnemar_exact(a_only, b_only)
+    # the arms are swapped per instance (all its seeds together): the clustered McNemar test
+    p = clustered_mcnemar_exact(
+        instance_discordance(
+            [x["success"] for x, _ in pairs],
+            [y["success"] for _, y in pairs],
+            [(x["method"], x["instance_id"]) for x, _ in pairs],
+        )
+    )
     assert summary[:6] == [
         str(len(pairs)),
         str(sum(x["success"] for x, _ in pairs)),

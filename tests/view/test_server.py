@@ -217,3 +217,26 @@ def test_pages_render(viewer):
     with urllib.request.urlopen(viewer.url + "episode?id=A-recap-t2-42") as r:
         page = r.read().decode()
     assert 'data-episode="A-recap-t2-42"' in page and 'href="/window?run=runA&amp;id=A-recap-t2-42&amp;call=3"' in page
+
+
+def test_compare_tests_swap_whole_instances(viewer):
+    """react vs recap on run A: 7 paired units in 4 instances (gpt-4o: ALFWorld p1, sync i2 x 2 seeds, i6 x 3;
+    the test double: ALFWorld p1). recap alone solved 5 units; per instance only-A minus only-B is -1, -1, -1, -2:
+    |sum| 5 is reached only by the 2 one-sign patterns of 2^4 (pair by pair it was 2 of 2^5). Cost differences
+    per instance: -0.5, 0.0 (dropped), -2.0, -6.25 -> 2 of 2^3."""
+    from urllib.parse import urlencode
+
+    code, _, body = get(viewer, "/compare?" + urlencode({"kind": "arm", "a": "react", "b": "recap"}))
+    assert code == 200
+    summary = re.search(r'<table class="data" id="summary">.*?<tbody>(.*?)</tbody>', body, re.S)
+    assert summary
+    cells = re.findall(r'<td class="num">(.*?)</td>', summary.group(1))
+    assert cells[:6] == ["7", "1", "6", "0", "5", "0.1250"] and cells[7] == "0.2500"
+    note = re.search(r'<p class="note" id="tests">(.*?)</p>', body, re.S)
+    assert note and note.group(1).startswith(
+        "McNemar p: clustered McNemar test, exact: the two arms swapped within each instance, all its seeds together"
+    )
+    assert note.group(1).endswith(
+        "cost p: two-sided sign-flip permutation test over instances (each instance&#x27;s paired differences summed "
+        "over its seeds, the sign flipped per instance): exact, all 2^3 patterns."
+    )
