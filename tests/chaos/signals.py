@@ -1,0 +1,234 @@
+"""Signals to ``recap run`` through the real CLI: Ctrl-C once or twice, and SIGKILL + resume.
+
+* sigint (``presses=1``): a Ctrl-C (SIGINT to the command's process group, as a terminal sends
+  it) while calls are in flight: no unit starts any more, the episodes in flight finish, exit
+  130 with a ``recap resume`` hint; every call the provider answered is in the ledger and in
+  ``llm_calls``; the resume finishes the rest and pays no call twice.
+* sigint (``presses=2``): the second Ctrl-C cuts the episodes in flight: exit 130, every call the
+  provider answered is in the ledger (settled, or held at its worst case), every settled call
+  has its ``llm_calls`` row; the resume re-runs only the cut attempts.
+* orphans: ``recap run`` on a local Ray cluster of its own, SIGKILLed mid-run: the cluster's
+  processes it leaves are counted; ``recap resume`` stops them, says so in one line, finishes;
+  afterwards no process of either session's cluster is left, and the only calls paid again are
+  those of the attempts in flight at the kill.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from tests.chaos.harness import (
+    Lab,
+    ScenarioResult,
+    attempt_of,
+    blocks,
+    calls_by_episode,
+    fake_model,
+    journal,
+    rows,
+    sweep,
+    terminal,
+    unit_of,
+    wait_until,
+)
+
+
+def _first_reserve(ledger: Path) -> bool:
+    return ledger.exists() and b'"op":"reserve"' in ledger.read_bytes()
+
+
+def _cli(lab: Lab, args: list[str], env: dict[str, str]) -> subprocess.Popen:
+    """The CLI in a session of its own: a signal to its process group is a terminal's Ctrl-C."""
+    return lab.cli(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+
+
+def _output(proc: subprocess.Popen, timeout: float = 600) -> str:
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return out or ""
+
+
+def _money(out: Path) -> dict[str, Any]:
+    """The ledger journal read per call: settled ok, charged (worst case, orphaned), still open."""
+    entries = journal(out)
+    reserved = {e["key"] for e in entries if e.get("op") == "reserve"}
+    settled = {e["key"]: e for e in entries if e.get("op") == "settle"}
+    return {
+        "ok": {k for k, e in settled.items() if e.get("status") == "ok"},
+        "charged": {k for k, e in settled.items() if e.get("status") != "ok" and e.get("pico", 0) > 0},
+        "open": reserved - set(settled),
+        "reserved": reserved,
+    }
+
+
+def _served(server: Any) -> int:
+    return sum(1 for c in server.log if c.status == 200 and c.mode == "ok")
+
+
+def _repaid(out: Path, done_at_stop: dict[str, int], cut: set[str]) -> tuple[int, set[str]]:
+    """Calls paid (settled ok or charged) by attempts cut at the stop, and the units completed
+    at the stop that were run again (must be none)."""
+    money = _money(out)
+    paid = money["ok"] | money["charged"]
+    repaid_calls = sum(1 for k in paid if k.rsplit("#", 1)[0] in cut)
+    rerun = {unit_of(k.rsplit("#", 1)[0]) for k in money["reserved"]}
+    rerun = {
+        u
+        for u in rerun
+        if u in done_at_stop
+        and any(
+            unit_of(k.rsplit("#", 1)[0]) == u and attempt_of(k.rsplit("#", 1)[0]) > done_at_stop[u] for k in money["reserved"]
+        )
+    }
+    return repaid_calls, rerun
+
+
+def sigint(lab: Lab, presses: int = 1, units: int = 6) -> ScenarioResult:
+    """Ctrl-C ``presses`` times during ``recap run``, then ``recap resume``."""
+    res = ScenarioResult(f"SIGINT x{presses} + recap resume")
+    res.begin_run()
+    address = lab.ray_address()
+    server = lab.server(latency_s=0.3, prefix_memory=0)
+    base = lab.folder(f"sigint-{presses}")
+    out = base / "run"
+    spec = base / "sweep.yaml"
+    spec.write_text(sweep(out, fake_model(server.base_url), blocks(units), workers=2, llm_calls=6))
+    common = ["--address", address, "--progress", "lines"]
+    proc = _cli(lab, ["run", str(spec), *common], lab.env())
+    started = wait_until(lambda: proc.poll() is not None or _first_reserve(out / "gateway" / "ledger.jsonl"), 300, 0.05)
+    res.check("calls were in flight when Ctrl-C came", started and proc.poll() is None, proc.poll())
+    os.killpg(proc.pid, signal.SIGINT)
+    if presses > 1:
+        time.sleep(0.4)
+        os.killpg(proc.pid, signal.SIGINT)
+    text = _output(proc)
+    res.check("exit status 130", proc.returncode == 130, f"exit {proc.returncode}: {text.strip().splitlines()[-3:]}")
+    res.check(
+        "says it stops and waits for the episodes in flight",
+        "recap: stopping: no new units; waiting up to 60s for the 2 episodes in flight to finish (Ctrl-C again to stop now)"
+        in text,
+        text[-600:],
+    )
+    if presses > 1:
+        res.check(
+            "the second Ctrl-C cuts them",
+            "recap: stopping now: 2 episodes in flight are cut; the calls they made stay recorded and the resume runs them again"
+            in text,
+            text[-600:],
+        )
+    hint = f"continue with: recap resume {out}"
+    res.check("prints the resume hint", hint in text, text[-300:])
+    term = terminal(out)
+    done_at_stop = {u: r["attempt"] for u, r in term.completed.items()}
+    finished = {r["episode_id"] for r in term.rows}
+    money = _money(out)
+    reserved_eps = {k.rsplit("#", 1)[0] for k in money["reserved"]}
+    cut = reserved_eps - finished
+    calls = calls_by_episode(out)
+    short = [r["episode_id"] for r in term.rows if len(calls.get(r["episode_id"], [])) != r["llm_calls"]]
+    res.check("every finished episode has all its llm_calls rows", not short, short[:3])
+    rows_n = len(rows(out, "llm_calls", ["call_key"]))
+    res.check(
+        "every settled call has its llm_calls row", rows_n == len(money["ok"]), f"{rows_n} rows, {len(money['ok'])} settled"
+    )
+    served = _served(server)
+    if presses == 1:
+        res.check("no episode was cut", not cut, sorted(cut))
+        res.check(
+            "the ledger's settled calls are exactly the calls the provider answered",
+            len(money["ok"]) == served and not money["open"],
+            f"{len(money['ok'])} settled, {len(money['open'])} open, {served} served",
+        )
+    else:
+        res.check("the episodes in flight were cut", len(cut) == 2, sorted(cut))
+        res.check(
+            "every call the provider answered is in the ledger (settled or held at its worst case)",
+            served <= len(money["ok"]) + len(money["open"]) + len(money["charged"]),
+            f"{len(money['ok'])} settled, {len(money['open'])} open, {len(money['charged'])} charged, {served} served",
+        )
+    in_flight_calls = sum(1 for k in money["reserved"] if k.rsplit("#", 1)[0] in cut)
+    resume = _cli(lab, ["resume", str(out), *common], lab.env())
+    text2 = _output(resume)
+    res.check("the resume exits 0", resume.returncode == 0, f"exit {resume.returncode}: {text2.strip().splitlines()[-3:]}")
+    term = terminal(out)
+    res.check("lost 0, duplicated 0", not term.lost and term.duplicated == 0, (len(term.lost), term.duplicated))
+    res.lost += len(term.lost)
+    res.duplicated += term.duplicated
+    repaid_calls, rerun = _repaid(out, done_at_stop, cut)
+    res.check("no unit finished before the stop was run again", not rerun, sorted(rerun))
+    if presses == 1:
+        res.check("no call paid twice", repaid_calls == 0, repaid_calls)
+    res.add_overspend(0.0)
+    res.notes.append(
+        f"exit 130; {len(done_at_stop)}/{units} units done at the stop, {len(cut)} episodes cut; "
+        f"calls re-paid {repaid_calls} (in flight at the stop: {in_flight_calls})"
+    )
+    res.end_run()
+    return res
+
+
+def orphans(lab: Lab, units: int = 6) -> ScenarioResult:
+    """SIGKILL ``recap run`` (which started its own local Ray) mid-run, then ``recap resume``."""
+    from pipeline.local_cluster import ENDED_FILE, OWNER_FILE, processes
+
+    res = ScenarioResult("driver SIGKILL: orphan Ray processes + recap resume")
+    res.begin_run()
+    server = lab.server(latency_s=0.3, prefix_memory=0)
+    base = lab.folder("orphans")
+    out = base / "run"
+    spec = base / "sweep.yaml"
+    spec.write_text(sweep(out, fake_model(server.base_url), blocks(units), workers=2, llm_calls=6, extra="ray: {num_cpus: 2}\n"))
+    root = Path(tempfile.mkdtemp(prefix="rr", dir="/tmp"))  # short: Ray's socket paths live under it
+    env = lab.env(RECAP_RAY_TMP=str(root))
+    try:
+        proc = _cli(lab, ["run", str(spec), "--progress", "off"], env)
+        started = wait_until(lambda: proc.poll() is not None or _first_reserve(out / "gateway" / "ledger.jsonl"), 300, 0.05)
+        res.check("calls were in flight at the kill", started and proc.poll() is None, proc.poll())
+        time.sleep(lab.rng("orphans").uniform(0.5, 2.0))
+        os.kill(proc.pid, signal.SIGKILL)  # the driver alone, as the OOM killer does
+        proc.wait()
+        time.sleep(3.0)  # what Ray's fate-sharing takes with the driver is gone by now
+        folders = [p for p in root.iterdir() if p.is_dir()]
+        left = sum(len(processes(f)) for f in folders)
+        res.check("the killed driver's cluster left processes behind (before the resume)", left > 0, left)
+        term = terminal(out)
+        done_at_kill = {u: r["attempt"] for u, r in term.completed.items()}
+        finished = {r["episode_id"] for r in term.rows}
+        cut = {k.rsplit("#", 1)[0] for k in _money(out)["reserved"]} - finished
+        resume = _cli(lab, ["resume", str(out), "--progress", "off"], env)
+        text = _output(resume)
+        res.check("the resume exits 0", resume.returncode == 0, f"exit {resume.returncode}: {text.strip().splitlines()[-3:]}")
+        said = [line for line in text.splitlines() if line.startswith("recap: stopped ")]
+        expected = f"of the local Ray cluster left by driver pid {proc.pid} (run {out}), which ended without shutting it down"
+        res.check("the resume says it stopped them, in one line", len(said) == 1 and expected in said[0], said or text[-400:])
+        time.sleep(1.0)
+        after = {f.name: processes(f) for f in root.iterdir() if f.is_dir()}
+        orphans_left = sum(len(p) for p in after.values())
+        res.check("no process of either cluster is left", orphans_left == 0, after)
+        records = sorted((f.name, (f / OWNER_FILE).exists(), (f / ENDED_FILE).exists()) for f in root.iterdir() if f.is_dir())
+        res.check("both clusters' records are marked ended", [r[1:] for r in records] == [(False, True)] * 2, records)
+        term = terminal(out)
+        res.check("lost 0, duplicated 0", not term.lost and term.duplicated == 0, (len(term.lost), term.duplicated))
+        res.lost += len(term.lost)
+        res.duplicated += term.duplicated
+        repaid_calls, rerun = _repaid(out, done_at_kill, cut)
+        res.check("no unit finished before the kill was run again", not rerun, sorted(rerun))
+        res.add_overspend(0.0)
+        res.notes.append(
+            f"orphan processes after the kill {left}, after the resume {orphans_left}; "
+            f"calls re-paid {repaid_calls}, all of the {len(cut)} attempts in flight at the kill"
+        )
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    res.end_run()
+    return res
