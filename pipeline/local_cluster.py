@@ -89,6 +89,14 @@ class Owner:
         """Whether the driver that started the cluster still runs (same pid, same start time)."""
         if self.host != socket.gethostname():
             return True  # another machine's (a shared /tmp): not ours to judge
+        if not _PROC.is_dir():  # no /proc: the pid alone
+            try:
+                os.kill(self.pid, 0)
+            except ProcessLookupError:
+                return False
+            except OSError:
+                return True
+            return True
         now = _start_ticks(self.pid)
         return now is not None and (self.start_ticks is None or now == self.start_ticks)
 

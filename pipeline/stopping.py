@@ -23,6 +23,7 @@ session's loop, which wakes at least every half second, acts on them.
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 from types import FrameType
@@ -41,29 +42,64 @@ class StopRequests:
         self.count = 0
         self.armed = False
         self._previous: dict[int, Any] = {}
+        self._pipe: tuple[int, int] | None = None
+        self._previous_fd = -1
 
     def install(self) -> None:
         """Take over SIGINT and SIGTERM (a no-op off the main thread); again after ``ray.init``,
-        which sets a SIGTERM handler of its own (``sys.exit``)."""
+        which sets a SIGTERM handler of its own (``sys.exit``).
+
+        Python runs a handler once for all the deliveries of a signal that arrived while the
+        main thread sat in one blocking call (a quick double Ctrl-C during a ``ray.wait``), so
+        the deliveries are counted from a wakeup pipe, which gets one byte per delivery."""
         if threading.current_thread() is not threading.main_thread():
             return
         for sig in _SIGNALS:
             previous = signal.signal(sig, self._handle)
             self._previous.setdefault(sig, previous)
+        if self._pipe is None:
+            r, w = os.pipe()
+            os.set_blocking(r, False)
+            os.set_blocking(w, False)
+            try:
+                self._previous_fd = signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+            except ValueError:
+                os.close(r)
+                os.close(w)
+                return
+            self._pipe = (r, w)
 
     def restore(self) -> None:
         """Give SIGINT and SIGTERM back to their previous handlers."""
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous.clear()
+        if self._pipe is not None:
+            signal.set_wakeup_fd(self._previous_fd)
+            for fd in self._pipe:
+                os.close(fd)
+            self._pipe = None
         self.armed = False
+
+    def _deliveries(self) -> int:
+        """SIGINT/SIGTERM deliveries since the last handler call (at least the current one)."""
+        n = 0
+        if self._pipe is not None:
+            try:
+                while chunk := os.read(self._pipe[0], 512):
+                    n += sum(1 for b in chunk if b in _SIGNALS)
+            except BlockingIOError:
+                pass
+            except OSError:
+                pass
+        return max(1, n)
 
     def arm(self) -> None:
         """From now on the first two signals only set flags (the session's loop runs)."""
         self.armed = True
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
-        self.count += 1
+        self.count += self._deliveries()
         if not self.armed or self.count >= 3:
             raise KeyboardInterrupt
 

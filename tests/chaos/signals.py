@@ -20,6 +20,7 @@ import shutil
 import signal
 import subprocess
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -49,13 +50,41 @@ def _cli(lab: Lab, args: list[str], env: dict[str, str]) -> subprocess.Popen:
     return lab.cli(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
 
 
+class _Reader:
+    """The command's output as it comes (a second Ctrl-C waits until the first one was seen:
+    two signals that arrive while the interpreter is inside one blocking call count once)."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.proc = proc
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line)
+
+    def saw(self, text: str) -> bool:
+        return any(text in line for line in self.lines)
+
+    def wait(self, timeout: float = 600) -> str:
+        try:
+            self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self._thread.join(30)
+        return "".join(self.lines)
+
+
 def _output(proc: subprocess.Popen, timeout: float = 600) -> str:
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    return out or ""
+    return _Reader(proc).wait(timeout)
+
+
+def _said(text: str) -> list[str]:
+    """The command's own lines (``recap: ...``, the resume hint): the details of a check."""
+    return [line for line in text.splitlines() if line.startswith("recap:") or "recap resume" in line]
 
 
 def _money(out: Path) -> dict[str, Any]:
@@ -105,29 +134,33 @@ def sigint(lab: Lab, presses: int = 1, units: int = 6) -> ScenarioResult:
     spec.write_text(sweep(out, fake_model(server.base_url), blocks(units), workers=2, llm_calls=6))
     common = ["--address", address, "--progress", "lines"]
     proc = _cli(lab, ["run", str(spec), *common], lab.env())
+    reader = _Reader(proc)
     started = wait_until(lambda: proc.poll() is not None or _first_reserve(out / "gateway" / "ledger.jsonl"), 300, 0.05)
     res.check("calls were in flight when Ctrl-C came", started and proc.poll() is None, proc.poll())
     os.killpg(proc.pid, signal.SIGINT)
+    # episodes under way at Ctrl-C: their calls reserved, no terminal row yet
+    at_signal = {k.rsplit("#", 1)[0] for k in _money(out)["reserved"]} - {r["episode_id"] for r in terminal(out).rows}
     if presses > 1:
-        time.sleep(0.4)
+        seen = wait_until(lambda: proc.poll() is not None or reader.saw("recap: stopping: "), 60, 0.02)
+        res.check("the first Ctrl-C was seen before the second", seen and proc.poll() is None, proc.poll())
         os.killpg(proc.pid, signal.SIGINT)
-    text = _output(proc)
-    res.check("exit status 130", proc.returncode == 130, f"exit {proc.returncode}: {text.strip().splitlines()[-3:]}")
+    text = reader.wait()
+    res.check("exit status 130", proc.returncode == 130, f"exit {proc.returncode}: {_said(text)}")
     res.check(
         "says it stops and waits for the episodes in flight",
         "recap: stopping: no new units; waiting up to 60s for the 2 episodes in flight to finish (Ctrl-C again to stop now)"
         in text,
-        text[-600:],
+        _said(text),
     )
     if presses > 1:
         res.check(
             "the second Ctrl-C cuts them",
             "recap: stopping now: 2 episodes in flight are cut; the calls they made stay recorded and the resume runs them again"
             in text,
-            text[-600:],
+            _said(text),
         )
     hint = f"continue with: recap resume {out}"
-    res.check("prints the resume hint", hint in text, text[-300:])
+    res.check("prints the resume hint", hint in text, _said(text))
     term = terminal(out)
     done_at_stop = {u: r["attempt"] for u, r in term.completed.items()}
     finished = {r["episode_id"] for r in term.rows}
@@ -170,8 +203,8 @@ def sigint(lab: Lab, presses: int = 1, units: int = 6) -> ScenarioResult:
         res.check("no call paid twice", repaid_calls == 0, repaid_calls)
     res.add_overspend(0.0)
     res.notes.append(
-        f"exit 130; {len(done_at_stop)}/{units} units done at the stop, {len(cut)} episodes cut; "
-        f"calls re-paid {repaid_calls} (in flight at the stop: {in_flight_calls})"
+        f"exit 130; {len(at_signal)} episodes in flight at the first Ctrl-C, {len(cut)} of them cut; "
+        f"{len(done_at_stop)}/{units} units done at the stop; calls re-paid {repaid_calls} (calls of the cut episodes: {in_flight_calls})"
     )
     res.end_run()
     return res

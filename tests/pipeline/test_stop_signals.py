@@ -50,3 +50,23 @@ def test_stop_grace_must_be_a_finite_positive_number(value, capsys):
     out, err = capsys.readouterr()
     assert out == "" and len(err.splitlines()) == 1
     assert err.startswith("recap: error: run: argument --stop-grace: ")
+
+
+def test_two_deliveries_seen_by_one_handler_call_count_twice():
+    """A quick double Ctrl-C while the main thread sits in one blocking call reaches Python as
+    one handler call; the wakeup pipe holds a byte per delivery (the first one's byte is written
+    here by hand, as the C-level handler writes it), so it counts as two: stop now."""
+    stop = StopRequests()
+    stop.install()
+    try:
+        stop.arm()
+        assert stop._pipe is not None
+        os.write(stop._pipe[1], bytes([signal.SIGINT]))
+        os.kill(os.getpid(), signal.SIGINT)
+        assert (stop.count, stop.now) == (2, True)
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGTERM)
+        assert stop.count == 3
+    finally:
+        stop.restore()
+    assert signal.set_wakeup_fd(-1) == -1  # the wakeup fd given back
