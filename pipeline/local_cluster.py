@@ -24,6 +24,12 @@ and only those.
   ended; the command prints one line per cluster that still had processes.
 * :func:`release` (the driver's own clean end, after ``ray.shutdown()``): stragglers of its own
   cluster are stopped the same way and the record is marked ended.
+* :func:`watch` (started with the cluster): a small watcher process, in a session of its own,
+  reads a pipe whose other end only the driver holds; when the driver dies, however it dies,
+  the pipe ends and the watcher stops the cluster's processes at once (logging to
+  ``recap-watcher.log`` in the folder) - unless the driver had released it. So a killed driver's
+  cluster is usually gone within seconds; :func:`reap_dead` is for when the watcher was killed
+  too (``kill -9`` of everything, a container's OOM kill).
 
 The Ray session's logs stay in the folder (they are what explains a crash). Linux only (it
 reads ``/proc``); elsewhere nothing is reaped.
@@ -36,6 +42,8 @@ import os
 import secrets
 import signal
 import socket
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -51,6 +59,10 @@ ENDED_FILE = "recap-ended.json"
 #: seconds a process gets to end after SIGTERM before SIGKILL
 TERM_WAIT_S = 5.0
 _PROC = Path("/proc")
+_PROJECT_ROOT = Path(__file__).resolve().parents[1]
+#: the write ends of the watchers' pipes: held (never written) until this process ends
+_watch_pipes: dict[Path, int] = {}
+_WATCHER = "pipeline.local_cluster watch "
 
 
 def cluster_root() -> Path:
@@ -157,6 +169,8 @@ def processes(folder: Path) -> list[int]:
             cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
         except OSError:
             continue
+        if _WATCHER in cmdline:
+            continue  # the cluster's watcher is no part of it
         if (mark in cmdline or _holds_file_under(entry, prefix)) and _is_ray_program(entry):
             found.append(int(entry.name))
     return found
@@ -217,11 +231,59 @@ def _mark_ended(folder: Path) -> None:
 
 
 def release(folder: Path) -> int:
-    """This driver's own cluster after ``ray.shutdown()``: stop what is left of it and mark its
-    record ended; returns how many processes had to be stopped."""
+    """This driver's own cluster after ``ray.shutdown()``: stop what is left of it, mark its
+    record ended and let its watcher go; returns how many processes had to be stopped."""
     n = stop(processes(folder))
     _mark_ended(folder)
+    w = _watch_pipes.pop(folder, None)
+    if w is not None:
+        os.close(w)  # the watcher finds the record ended and leaves
     return n
+
+
+def watch(folder: Path) -> int | None:
+    """Start the watcher of this process's cluster in ``folder`` (see the module docstring);
+    its pid, or None where it cannot run (no ``/proc``)."""
+    if not _PROC.is_dir():
+        return None
+    r, w = os.pipe()  # both ends non-inheritable: Ray's own subprocesses never hold the write end
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(_PROJECT_ROOT), env.get("PYTHONPATH", "")) if p)
+    with open(folder / "recap-watcher.log", "ab") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pipeline.local_cluster", "watch", str(folder)],
+            stdin=r,
+            stdout=log,
+            stderr=log,
+            env=env,
+            cwd=str(_PROJECT_ROOT),
+            start_new_session=True,  # a terminal's Ctrl-C or hang-up does not reach it
+        )
+    os.close(r)
+    _watch_pipes[folder] = w
+    return proc.pid
+
+
+def _watch_main(folder: Path) -> int:
+    """The watcher: wait for the driver's end of the pipe to close, then stop the cluster unless
+    the driver released it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while sys.stdin.buffer.read(4096):
+        pass
+    if not (folder / OWNER_FILE).exists():
+        return 0  # released (or already reaped)
+    try:
+        owner = json.loads((folder / OWNER_FILE).read_text()).get("pid")
+    except (OSError, ValueError):
+        owner = "?"
+    n = stop(processes(folder))
+    _mark_ended(folder)
+    print(
+        f"{time.strftime('%Y-%m-%dT%H:%M:%S')} driver pid {owner} ended without shutting its Ray cluster down; "
+        f"stopped {n} processes",
+        flush=True,
+    )
+    return 0
 
 
 @dataclass(frozen=True)
@@ -253,3 +315,9 @@ def reap_dead() -> list[Reaped]:
         if n:
             out.append(Reaped(owner, n))
     return out
+
+
+if __name__ == "__main__":  # the watcher (see :func:`watch`)
+    if len(sys.argv) == 3 and sys.argv[1] == "watch":
+        sys.exit(_watch_main(Path(sys.argv[2])))
+    sys.exit(f"usage: {sys.executable} -m pipeline.local_cluster watch FOLDER")

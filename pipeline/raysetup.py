@@ -79,6 +79,7 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
             ray.init(address=address, **common)
     else:
         folder = local_cluster.claim(run)
+        local_cluster.watch(folder)  # stops the cluster if this process dies without shutting it down
         try:
             with _loopback_node():
                 ray.init(

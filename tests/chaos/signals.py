@@ -210,8 +210,50 @@ def sigint(lab: Lab, presses: int = 1, units: int = 6) -> ScenarioResult:
     return res
 
 
-def orphans(lab: Lab, units: int = 6) -> ScenarioResult:
-    """SIGKILL ``recap run`` (which started its own local Ray) mid-run, then ``recap resume``."""
+def _watcher_of(folder: Path) -> list[int]:
+    mark = f"pipeline.local_cluster watch {folder}".encode()
+    out = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and mark in (entry / "cmdline").read_bytes().replace(b"\0", b" "):
+                out.append(int(entry.name))
+        except OSError:
+            continue
+    return out
+
+
+def _kill_mid_run(
+    lab: Lab, args: list[str], env: dict[str, str], out: Path, root: Path, salt: str, with_watcher: bool
+) -> dict[str, Any]:
+    """Start ``recap ARGS``, SIGKILL it (and its cluster's watcher) while calls are in flight."""
+    ledger = out / "gateway" / "ledger.jsonl"
+    size = ledger.stat().st_size if ledger.exists() else 0
+    # no pipe: a process the killed driver started might hold its write end
+    proc = lab.cli(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    started = wait_until(lambda: proc.poll() is not None or (ledger.exists() and ledger.stat().st_size > size), 300, 0.05)
+    time.sleep(lab.rng(salt).uniform(0.5, 2.0))
+    folder = next((f for f in root.iterdir() if f.name.startswith(f"{proc.pid}-")), None)
+    watchers = _watcher_of(folder) if folder is not None else []
+    if with_watcher:
+        for pid in watchers:
+            os.kill(pid, signal.SIGKILL)  # everything the driver started outside Ray: kill -9 of it all
+    os.kill(proc.pid, signal.SIGKILL)  # the driver, as the OOM killer does
+    proc.wait()
+    term = terminal(out)
+    finished = {r["episode_id"] for r in term.rows}
+    return {
+        "pid": proc.pid,
+        "running": started and proc.returncode == -signal.SIGKILL,
+        "folder": folder,
+        "watchers": watchers,
+        "done": {u: r["attempt"] for u, r in term.completed.items()},
+        "cut": {k.rsplit("#", 1)[0] for k in _money(out)["reserved"]} - finished,
+    }
+
+
+def orphans(lab: Lab, units: int = 8) -> ScenarioResult:
+    """SIGKILL ``recap run`` (its own local Ray) mid-run; then SIGKILL ``recap resume`` and its
+    cluster's watcher; then ``recap resume`` to the end."""
     from pipeline.local_cluster import ENDED_FILE, OWNER_FILE, processes
 
     res = ScenarioResult("driver SIGKILL: orphan Ray processes + recap resume")
@@ -224,42 +266,56 @@ def orphans(lab: Lab, units: int = 6) -> ScenarioResult:
     root = Path(tempfile.mkdtemp(prefix="rr", dir="/tmp"))  # short: Ray's socket paths live under it
     env = lab.env(RECAP_RAY_TMP=str(root))
     try:
-        proc = _cli(lab, ["run", str(spec), "--progress", "off"], env)
-        started = wait_until(lambda: proc.poll() is not None or _first_reserve(out / "gateway" / "ledger.jsonl"), 300, 0.05)
-        res.check("calls were in flight at the kill", started and proc.poll() is None, proc.poll())
-        time.sleep(lab.rng("orphans").uniform(0.5, 2.0))
-        os.kill(proc.pid, signal.SIGKILL)  # the driver alone, as the OOM killer does
-        proc.wait()
+        # 1. the driver alone is killed: its cluster's watcher stops the cluster within seconds
+        k1 = _kill_mid_run(lab, ["run", str(spec), "--progress", "off"], env, out, root, "orphans-1", with_watcher=False)
+        res.check("first kill: calls were in flight", k1["running"] and k1["folder"] is not None, k1)
+        res.check("the cluster has one watcher", len(k1["watchers"]) == 1, k1["watchers"])
+        folder1 = k1["folder"]
+        gone = wait_until(lambda: not processes(folder1) and (folder1 / ENDED_FILE).exists(), 30, 0.1)
+        left1 = len(processes(folder1))
+        log = (folder1 / "recap-watcher.log").read_text() if (folder1 / "recap-watcher.log").exists() else ""
+        res.check("the watcher stopped the killed driver's cluster", gone and left1 == 0, (left1, log))
+        res.check(
+            "the watcher logged it",
+            f"driver pid {k1['pid']} ended without shutting its Ray cluster down; stopped " in log,
+            log,
+        )
+        # 2. the resume is killed together with its watcher: its cluster's processes stay
+        k2 = _kill_mid_run(lab, ["resume", str(out), "--progress", "off"], env, out, root, "orphans-2", with_watcher=True)
+        res.check("second kill (driver and watcher): calls were in flight", k2["running"] and k2["folder"] is not None, k2)
         time.sleep(3.0)  # what Ray's fate-sharing takes with the driver is gone by now
-        folders = [p for p in root.iterdir() if p.is_dir()]
-        left = sum(len(processes(f)) for f in folders)
-        res.check("the killed driver's cluster left processes behind (before the resume)", left > 0, left)
-        term = terminal(out)
-        done_at_kill = {u: r["attempt"] for u, r in term.completed.items()}
-        finished = {r["episode_id"] for r in term.rows}
-        cut = {k.rsplit("#", 1)[0] for k in _money(out)["reserved"]} - finished
+        left2 = len(processes(k2["folder"]))
+        res.check("the processes of that cluster stay behind", left2 > 0, left2)
+        # 3. the next resume stops them, says so, finishes
         resume = _cli(lab, ["resume", str(out), "--progress", "off"], env)
         text = _output(resume)
-        res.check("the resume exits 0", resume.returncode == 0, f"exit {resume.returncode}: {text.strip().splitlines()[-3:]}")
+        res.check("the resume exits 0", resume.returncode == 0, f"exit {resume.returncode}: {_said(text)}")
         said = [line for line in text.splitlines() if line.startswith("recap: stopped ")]
-        expected = f"of the local Ray cluster left by driver pid {proc.pid} (run {out}), which ended without shutting it down"
-        res.check("the resume says it stopped them, in one line", len(said) == 1 and expected in said[0], said or text[-400:])
+        expected = (
+            f"of the local Ray cluster left by driver pid {k2['pid']} (run {out}), which ended without shutting it down; "
+            f"its Ray logs are in {k2['folder']}"
+        )
+        res.check("the resume says it stopped them, in one line", len(said) == 1 and expected in said[0], said or _said(text))
         time.sleep(1.0)
         after = {f.name: processes(f) for f in root.iterdir() if f.is_dir()}
         orphans_left = sum(len(p) for p in after.values())
-        res.check("no process of either cluster is left", orphans_left == 0, after)
+        res.check("no process of any of the three clusters is left", orphans_left == 0, after)
+        watchers_left = [p for f in root.iterdir() if f.is_dir() for p in _watcher_of(f)]
+        res.check("no watcher is left", not watchers_left, watchers_left)
         records = sorted((f.name, (f / OWNER_FILE).exists(), (f / ENDED_FILE).exists()) for f in root.iterdir() if f.is_dir())
-        res.check("both clusters' records are marked ended", [r[1:] for r in records] == [(False, True)] * 2, records)
+        res.check("the three clusters' records are marked ended", [r[1:] for r in records] == [(False, True)] * 3, records)
         term = terminal(out)
         res.check("lost 0, duplicated 0", not term.lost and term.duplicated == 0, (len(term.lost), term.duplicated))
         res.lost += len(term.lost)
         res.duplicated += term.duplicated
-        repaid_calls, rerun = _repaid(out, done_at_kill, cut)
-        res.check("no unit finished before the kill was run again", not rerun, sorted(rerun))
+        repaid1, rerun1 = _repaid(out, k1["done"], k1["cut"])
+        repaid2, rerun2 = _repaid(out, k2["done"], k2["cut"])
+        res.check("no unit finished before a kill was run again", not (rerun1 | rerun2), sorted(rerun1 | rerun2))
         res.add_overspend(0.0)
         res.notes.append(
-            f"orphan processes after the kill {left}, after the resume {orphans_left}; "
-            f"calls re-paid {repaid_calls}, all of the {len(cut)} attempts in flight at the kill"
+            f"orphan processes: driver killed {left1} (its watcher stopped them), driver + watcher killed {left2}, "
+            f"after recap resume 0; calls re-paid {repaid1 + repaid2}, all of the "
+            f"{len(k1['cut']) + len(k2['cut'])} attempts in flight at the kills"
         )
     finally:
         shutil.rmtree(root, ignore_errors=True)

@@ -120,3 +120,59 @@ def test_an_owner_is_dead_when_its_pid_is_gone_a_zombie_or_reused(tmp_path):
     zombie.wait()
     assert not Owner(tmp_path, zombie.pid, None, host, "", 0.0).alive()
     assert Owner(tmp_path, 1, None, "another-host", "", 0.0).alive()  # not ours to judge
+
+
+_DRIVER = """
+import subprocess, sys, time
+from pipeline.local_cluster import claim, release, watch
+folder = claim("runs/w")
+watcher = watch(folder)
+child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)", f"--temp-dir={folder}"], start_new_session=True)
+print(folder, watcher, child.pid, flush=True)
+if sys.argv[1] == "release":
+    time.sleep(0.5)
+    print(release(folder), flush=True)
+else:
+    time.sleep(120)
+"""
+
+
+def _start_driver(how: str) -> tuple[subprocess.Popen, Path, int, int]:
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.Popen([sys.executable, "-c", _DRIVER, how], stdout=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    assert p.stdout is not None
+    folder, watcher, child = p.stdout.readline().split()
+    return p, Path(folder), int(watcher), int(child)
+
+
+def _gone(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[-1].split()[0]
+    except OSError:
+        return True
+    return state == "Z"
+
+
+def test_the_watcher_stops_the_cluster_of_a_driver_killed_with_sigkill(root):
+    driver, folder, watcher, child = _start_driver("kill")
+    try:
+        assert processes(folder) == [child]  # the watcher is no part of the cluster
+        driver.kill()
+        driver.wait()
+        assert _wait(lambda: _gone(child) and _gone(watcher))
+        assert (folder / ENDED_FILE).exists() and not (folder / OWNER_FILE).exists()
+        log = (folder / "recap-watcher.log").read_text()
+        assert log.endswith(f" driver pid {driver.pid} ended without shutting its Ray cluster down; stopped 1 processes\n")
+        assert reap_dead() == []
+    finally:
+        if not _gone(child):
+            os.kill(child, signal.SIGKILL)
+
+
+def test_after_a_clean_release_the_watcher_leaves_without_a_word(root):
+    driver, folder, watcher, child = _start_driver("release")
+    out, _ = driver.communicate(timeout=60)
+    assert (driver.returncode, out) == (0, "1\n")  # the straggler stopped by release
+    assert _wait(lambda: _gone(child) and _gone(watcher))
+    assert (folder / ENDED_FILE).exists()
+    assert (folder / "recap-watcher.log").read_text() == ""
