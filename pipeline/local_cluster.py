@@ -278,6 +278,8 @@ def _watch_main(folder: Path) -> int:
         owner = "?"
     n = stop(processes(folder))
     _mark_ended(folder)
+    if n == 0:
+        return 0  # a plain ray.shutdown() had ended it (the record is only marked)
     print(
         f"{time.strftime('%Y-%m-%dT%H:%M:%S')} driver pid {owner} ended without shutting its Ray cluster down; "
         f"stopped {n} processes",
