@@ -45,9 +45,9 @@ input, a folder in use or a sink that stayed dead):
   (:mod:`pipeline.stopping`); either way what was paid for is written and ``recap resume``
   continues.
 
-Ray: a local cluster this driver starts is shut down at the end of the session, and one left
-by a driver that was killed is stopped by the next ``recap run``/``recap resume``
-(:mod:`pipeline.local_cluster`).
+Ray: a local cluster this driver starts is shut down at the end of the session; should the
+driver be killed, the cluster's watcher stops it, or else the next ``recap run``/``recap resume``
+does (:mod:`pipeline.local_cluster`).
 """
 
 from __future__ import annotations
