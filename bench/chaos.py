@@ -15,8 +15,9 @@ The scenarios (``--only NAME``; the functions live in ``tests/chaos/MODULE.py``)
     driver    kills     ``recap run`` / ``recap resume`` SIGKILLed, then resumed to the end
     sigint    signals   Ctrl-C once during ``recap run``: episodes in flight finish, exit 130, resume
     sigint2   signals   Ctrl-C twice: episodes in flight cut, every paid call kept, exit 130, resume
-    orphans   signals   ``recap run`` on its own local Ray SIGKILLed: Ray processes left behind, then
-                        ``recap resume`` stops them (says so) and finishes; calls re-paid vs in flight
+    orphans   signals   ``recap run`` on its own local Ray SIGKILLed: its watcher stops the cluster;
+                        driver + watcher SIGKILLed: processes left, the next ``recap resume`` stops
+                        them (says so) and finishes; orphans left, calls re-paid vs in flight
     sink      kills     the sink actor SIGKILLed mid-run (Ray restarts it), then ``recap resume``
     sinkgone  kills     the sink SIGKILLed with no restart left: the driver stops; ``recap resume``
     faults    faults    transient provider faults and context-length errors

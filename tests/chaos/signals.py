@@ -8,9 +8,10 @@
   provider answered is in the ledger (settled, or held at its worst case), every settled call
   has its ``llm_calls`` row; the resume re-runs only the cut attempts.
 * orphans: ``recap run`` on a local Ray cluster of its own, SIGKILLed mid-run: the cluster's
-  processes it leaves are counted; ``recap resume`` stops them, says so in one line, finishes;
-  afterwards no process of either session's cluster is left, and the only calls paid again are
-  those of the attempts in flight at the kill.
+  watcher stops what the driver left within seconds; then ``recap resume`` SIGKILLed together
+  with its cluster's watcher: the processes left are counted; the next ``recap resume`` stops
+  them, says so in one line, finishes; afterwards no process of any of the three clusters is
+  left, and the only calls paid again are those of the attempts in flight at the kills.
 """
 
 from __future__ import annotations
