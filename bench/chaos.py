@@ -13,6 +13,11 @@ The scenarios (``--only NAME``; the functions live in ``tests/chaos/MODULE.py``)
     worker    kills     episode workers SIGKILLed at random points of 20 episodes
     gateway   kills     the gateway and budget actors SIGKILLed under a binding run cap
     driver    kills     ``recap run`` / ``recap resume`` SIGKILLed, then resumed to the end
+    sigint    signals   Ctrl-C once during ``recap run``: episodes in flight finish, exit 130, resume
+    sigint2   signals   Ctrl-C twice: episodes in flight cut, every paid call kept, exit 130, resume
+    orphans   signals   ``recap run`` on its own local Ray SIGKILLed: its watcher stops the cluster;
+                        driver + watcher SIGKILLed: processes left, the next ``recap resume`` stops
+                        them (says so) and finishes; orphans left, calls re-paid vs in flight
     sink      kills     the sink actor SIGKILLed mid-run (Ray restarts it), then ``recap resume``
     sinkgone  kills     the sink SIGKILLed with no restart left: the driver stops; ``recap resume``
     faults    faults    transient provider faults and context-length errors
@@ -29,7 +34,7 @@ The scenarios (``--only NAME``; the functions live in ``tests/chaos/MODULE.py``)
     python bench/chaos.py --runs 3 --seed 7        # more randomised runs of the kill scenarios
     python bench/chaos.py --storm-s 30 --keep      # the 429 storm's length; keep the run folders
 
-The kill, fault, folder and exposure scenarios are asserted by ``tests/chaos/test_chaos_slow.py``
+The kill, signal, fault, folder and exposure scenarios are asserted by ``tests/chaos/test_chaos_slow.py``
 and ``tests/chaos/test_chaos_sink.py`` (``pytest -m slow tests/chaos``); the guards borrow the
 attacks and helpers of ``tests/reports/test_sql_read_only.py``, ``tests/gateway/test_hostile_provider.py``
 and ``tests/pipeline/test_driver_lock.py``, which assert them one by one. Prints a table; exit
@@ -56,6 +61,9 @@ SCENARIOS: dict[str, tuple] = {
     "worker": ("kills", "worker_kill", True),
     "gateway": ("kills", "gateway_kill", True),
     "driver": ("kills", "driver_kill", True),
+    "sigint": ("signals", "sigint", False, {"presses": 1}),
+    "sigint2": ("signals", "sigint", False, {"presses": 2}),
+    "orphans": ("signals", "orphans", False),
     "sink": ("kills", "sink_kill", True, {"restarts": True}),
     "sinkgone": ("kills", "sink_kill", True, {"restarts": False}),
     "faults": ("faults", "provider_faults", False),

@@ -21,6 +21,7 @@ os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 
 from pipeline.errors import PipelineError, one_line  # noqa: E402
+from pipeline.stopping import DEFAULT_GRACE_S  # noqa: E402
 from workers.log_setup import DEFAULT_LEVEL as DEFAULT_LOG_LEVEL  # noqa: E402
 from workers.log_setup import LEVEL_VAR as LOG_LEVEL_VAR  # noqa: E402
 from workers.log_setup import LEVELS as LOG_LEVELS  # noqa: E402
@@ -123,6 +124,12 @@ exit status:
        rate-limited too long, a worker kept dying): fix the cause, then retry with
        recap resume RUN
   130  interrupted (Ctrl-C or SIGTERM): continue with recap resume RUN
+
+Ctrl-C once (or SIGTERM): no new unit starts, the episodes in flight finish (up to
+--stop-grace seconds), everything is written. Twice: the episodes in flight are cut at once;
+the calls they made stay recorded, the resume runs those units again.
+A local Ray cluster left running by a driver that was killed (kill -9, out of memory) is
+stopped by the next recap run or recap resume, which says so.
 
 A torn last line in the ledger journal (a crash mid-write; recap status names it) is cut by
 recap resume RUN --repair (a backup is kept; a corrupt line in the middle is refused).
@@ -262,6 +269,15 @@ def _parser() -> argparse.ArgumentParser:
             help="where episodes run: ray (default) - one Ray actor per worker; in-process - threads of "
             "this process (no actor start-up, debugger breakpoints work; the sink and the gateways "
             "stay Ray actors)",
+        )
+        sp.add_argument(
+            "--stop-grace",
+            type=_finite_positive,
+            dest="stop_grace",
+            default=DEFAULT_GRACE_S,
+            metavar="SECONDS",
+            help="after a first Ctrl-C (or SIGTERM) no unit starts and the episodes in flight get this long "
+            f"to finish before they are cut; a second Ctrl-C cuts them at once (default {DEFAULT_GRACE_S:g})",
         )
 
     r = sub.add_parser(
@@ -440,9 +456,12 @@ def _print_plan(prepared: Any, console: Any) -> None:
 
 def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any = None) -> int:
     from pipeline.driver import Driver
+    from pipeline.local_cluster import reap_dead
     from pipeline.summary import collect, render
 
     console = _console()
+    for reaped in reap_dead():  # a killed driver's local Ray cluster (pipeline.local_cluster)
+        print(f"recap: {reaped.describe()}", file=sys.stderr, flush=True)
     backend = backend if backend is not None else _backend(prepared.spec)
     driver = Driver(
         prepared,
@@ -452,8 +471,13 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
         address=args.address,
         retry=getattr(args, "retry", "infra"),
         executor=args.executor,
+        stop_grace_s=args.stop_grace,
     )
-    summary = driver.run()
+    try:
+        summary = driver.run()
+    except KeyboardInterrupt:  # a third Ctrl-C, or one while Ray was starting
+        _interrupted_hint(prepared.store)
+        return 130
     _render(render, collect(prepared.store))
     if summary.stopped:
         console.print(
@@ -465,7 +489,8 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
         )
         console.print(_plain(f"continue with a higher cap: recap resume {prepared.store.location} --run-cap <USD>"))
     if summary.interrupted:
-        console.print(_styled(f"interrupted; continue with: recap resume {prepared.store.location}", "yellow"))
+        cut = f" ({summary.cut} episodes in flight were cut and run again on resume)" if summary.cut else ""
+        console.print(_styled(f"interrupted{cut}; continue with: recap resume {prepared.store.location}", "yellow"))
     if summary.retried_errors:
         console.print(
             _plain(
@@ -482,6 +507,16 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
         )
     console.print(_plain(f"run folder: {prepared.store.location}   report: recap report {prepared.store.location}"))
     return summary.exit_code()
+
+
+def _interrupted_hint(store: Any) -> None:
+    """The line of a session stopped by a raised interrupt: how to continue."""
+    from pipeline.store import RUN_FILE
+
+    if store.exists(RUN_FILE):
+        print(f"recap: interrupted; continue with: recap resume {store.location}", file=sys.stderr)
+    else:
+        print("recap: interrupted before the run started; nothing was written", file=sys.stderr)
 
 
 _CHECKED: set[str] = set()

@@ -40,13 +40,19 @@ input, a folder in use or a sink that stayed dead):
 * 3 - work remains: a cap stopped the session (or units were not started);
 * 4 - at least one unit ended this session in an infrastructure failure (``EXIT_INFRA``): fix
   the cause and retry those units with ``recap resume RUN``;
-* 130 - interrupted (Ctrl-C / SIGTERM).
+* 130 - interrupted (Ctrl-C / SIGTERM) with work left: the first signal stops starting units and
+  lets the episodes in flight finish (up to ``stop_grace_s``), the second cuts them
+  (:mod:`pipeline.stopping`); either way what was paid for is written and ``recap resume``
+  continues.
+
+Ray: a local cluster this driver starts is shut down at the end of the session; should the
+driver be killed, the cluster's watcher stops it, or else the next ``recap run``/``recap resume``
+does (:mod:`pipeline.local_cluster`).
 """
 
 from __future__ import annotations
 
 import json
-import signal
 import socket
 import subprocess
 import sys
@@ -64,7 +70,7 @@ from pipeline.errors import PipelineError, RunFolderError
 from pipeline.events import EventBuffer
 from pipeline.preflight import preflight
 from pipeline.progress import ProgressView, Snapshot
-from pipeline.raysetup import PROJECT_ROOT, init_ray
+from pipeline.raysetup import PROJECT_ROOT, init_ray, shutdown_ray
 from pipeline.resume import (
     INFRA_ERROR,
     RETRY_MODES,
@@ -80,6 +86,7 @@ from pipeline.resume import (
 )
 from pipeline.sink_channel import SinkChannel, SinkLost
 from pipeline.spec import SweepSpec, text_hash
+from pipeline.stopping import DEFAULT_GRACE_S, StopRequests
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
 from pipeline.summary import TEST_DOUBLE_LABEL
 from pipeline.units import Plan, PlanDiff, Unit, diff_plans, expand, order_units
@@ -183,6 +190,9 @@ class RunSummary:
     #: units queued again because their latest completing row ended env_error / llm_error
     #: (``retry="errors"``, ``recap resume RUN --retry errors``)
     retried_errors: int = 0
+    #: attempts in flight when the session was stopped (cut by a second Ctrl-C or the end of
+    #: the grace period; 0 after a graceful stop that let them finish)
+    cut: int = 0
 
     @property
     def all_done(self) -> bool:
@@ -244,6 +254,7 @@ class Driver:
         address: str | None = None,
         retry: Retry = "infra",
         executor: Executor = "ray",
+        stop_grace_s: float = DEFAULT_GRACE_S,
     ) -> None:
         if retry not in RETRY_MODES:
             raise PipelineError(f"--retry must be one of {', '.join(RETRY_MODES)}, got {retry!r}")
@@ -273,6 +284,10 @@ class Driver:
         self.failures: dict[str, int] = {}
         self.run_id = ""
         self.n_workers = 0
+        #: SIGINT/SIGTERM during the session (pipeline.stopping): the first stops gracefully
+        self.stop = StopRequests()
+        #: seconds a graceful stop waits for the episodes in flight before cutting them
+        self.stop_grace_s = stop_grace_s
 
     @property
     def sink(self) -> Any:
@@ -506,10 +521,12 @@ class Driver:
     def run(self) -> RunSummary:
         """One session: lock the folder, run what is left, write the terminal rows, unlock."""
         self.p.store.acquire_lock()
+        self.stop.install()
         try:
             self._recheck_folder()
             return self._run_locked()
         finally:
+            self.stop.restore()
             self.p.store.release_lock()
 
     def _recheck_folder(self) -> None:
@@ -558,7 +575,8 @@ class Driver:
         # rows a sink had acknowledged when the last session died with it (a driver kill)
         recovered = recover_wal(store.path) if self.p.identity is not None else None
         state: RunState = load_state(store, retry=self.retry)
-        started_ray = init_ray(spec.ray, self.address)
+        started_ray = init_ray(spec.ray, self.address, run=self.p.store.location)
+        self.stop.install()  # ray.init set a SIGTERM handler of its own
         self.channel = SinkChannel(store.path, self.run_id, self.events, session=self.session)
         try:
             node_id = ray.get_runtime_context().get_node_id()
@@ -592,7 +610,7 @@ class Driver:
                 self.pool.shutdown()
             self.channel.kill()
             if started_ray:
-                ray.shutdown()
+                shutdown_ray()
             try:
                 self._push()  # whatever reached the mirror, also after a failure
             except Exception:
@@ -657,24 +675,25 @@ class Driver:
         self.n_workers = max(1, min(spec.workers, len(self.queue))) if len(self.queue) else 0
         nodes = self.pool.start(self.n_workers)
         self._event("workers_started", workers=nodes, nodes=len(set(nodes.values())))
-        interrupted = False
-        previous = signal.getsignal(signal.SIGTERM)
-
-        def _term(signum: int, frame: Any) -> None:
-            raise KeyboardInterrupt
-
-        try:
-            signal.signal(signal.SIGTERM, _term)
-        except ValueError:  # not the main thread
-            previous = None
+        stop = self.stop
         title = f"recap run {spec.run} -> {self.p.store.location}"
         last_tick = 0.0
         spend = Spend()
+        stop_since: float | None = None
+        cut_reason: str | None = None
         try:
             with ProgressView(self.progress_mode, title=title) as view:
+                stop.arm()  # from here a signal stops the session gracefully (pipeline.stopping)
                 try:
                     while True:
-                        self._dispatch()
+                        if stop.graceful and stop_since is None:
+                            stop_since = time.monotonic()
+                            self._stop_requested(view)
+                        if stop_since is None:
+                            self._dispatch()
+                        elif self.pool.in_flight() and (stop.now or time.monotonic() - stop_since >= self.stop_grace_s):
+                            cut_reason = "signal" if stop.now else "grace_expired"
+                            break
                         if not self.pool.in_flight():
                             break
                         ready = self.pool.wait(0.5)
@@ -701,18 +720,22 @@ class Driver:
                     # for a resume; the attempts in flight were cut, not failed
                     self._finish_ready_before_stop()
                     self.channel.on_lost(str(exc))
+                if cut_reason is not None:
+                    self._cut_now(cut_reason, view)
                 spend = self.backend.spend()
                 self.caps.check(spend)
                 view.update(self._snapshot(spend), force=True)
         except KeyboardInterrupt:
-            interrupted = True
-            self._event("interrupted", severity="warning", running=self.pool.in_flight(), pending=len(self.queue))
-        finally:
-            if previous is not None:
-                signal.signal(signal.SIGTERM, previous)
-        self.summary.interrupted = interrupted
+            # a third signal: stop where we are (what is written stays; the finishing below still runs)
+            stop.count = max(stop.count, 2)
+            self._event("interrupted", severity="warning", mode="raised", running=self.pool.in_flight(), pending=len(self.queue))
+            self.pool.shutdown()
         lost = self.channel.lost
-        cut = self.pool.in_flight() if (interrupted or lost is not None) else 0
+        cut = self.pool.in_flight() if (stop.graceful or lost is not None) else 0
+        # a stop asked for while the last episodes finished left nothing to resume
+        interrupted = stop.graceful and (len(self.queue) + cut > 0)
+        self.summary.interrupted = interrupted
+        self.summary.cut = cut if stop.graceful else 0
         self.summary.not_started = len(self.queue) + cut
         self.summary.stopped = self.caps.stopped
         if self.records_out:
@@ -743,6 +766,39 @@ class Driver:
                 f"{self.summary.not_started} units were not finished; continue with: recap resume {self.p.store.location}"
             )
         return self.summary
+
+    def _stop_requested(self, view: ProgressView) -> None:
+        """The first SIGINT/SIGTERM: nothing new starts; say how long the episodes in flight get."""
+        assert self.pool is not None
+        running = self.pool.in_flight()
+        self._event(
+            "interrupted",
+            severity="warning",
+            mode="graceful",
+            running=running,
+            pending=len(self.queue),
+            grace_s=self.stop_grace_s,
+        )
+        if running:
+            view.note(
+                f"recap: stopping: no new units; waiting up to {self.stop_grace_s:g}s for the {running} episodes in flight "
+                "to finish (Ctrl-C again to stop now)"
+            )
+
+    def _cut_now(self, reason: str, view: ProgressView) -> None:
+        """A second signal, or the grace period over: the episodes in flight are cut. Their workers
+        are stopped first, so no new call starts; the calls they completed are in the ledger
+        journal (and reach ``llm_calls`` with the gateway's flush), one still at the provider
+        stays charged at its worst case, and the resume runs those units again."""
+        assert self.pool is not None
+        running = self.pool.in_flight()
+        self._event("interrupted", severity="warning", mode=reason, running=running, pending=len(self.queue))
+        view.note(
+            f"recap: stopping now: {running} episodes in flight are cut"
+            + (" (the grace period is over)" if reason == "grace_expired" else "")
+            + "; the calls they made stay recorded and the resume runs them again"
+        )
+        self.pool.shutdown()
 
     def _finish_ready_before_stop(self) -> None:
         """Results already returned when the sink was lost: their rows were acknowledged by

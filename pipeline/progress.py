@@ -151,6 +151,16 @@ class ProgressView:
             t.add_row("stopped", f"[yellow]{escape(s.stopped)}[/yellow]")
         return Panel(t, title=escape(self.title))
 
+    def note(self, text: str) -> None:
+        """One line the user must see whatever the mode (a stop under way): above the live
+        panel, else on stderr."""
+        if self._live is not None:
+            from rich.text import Text
+
+            self._live.console.print(Text(text, style="yellow"))
+        else:
+            print(text, file=sys.stderr, flush=True)
+
     def update(self, s: Snapshot, *, force: bool = False) -> None:
         """Show ``s``: the live panel at once; in ``lines`` mode a line at most every ``line_every_s`` seconds
         unless ``force`` (the final line)."""

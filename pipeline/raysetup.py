@@ -4,7 +4,10 @@ Why a module: every process of a run — the driver, the gateway, the episode wo
 must import litellm offline (``LITELLM_LOCAL_MODEL_COST_MAP``), find this project and the
 benchmark data folders. Locally the project may not be pip-installed (a checkout), so its root
 is put on the workers' ``PYTHONPATH``; on a cluster the nodes have it installed (cluster.yaml).
-A local Ray listens on the loopback only (see :func:`_loopback_node`).
+A local Ray listens on the loopback only (see :func:`_loopback_node`), in a Ray temp folder of
+its own with an owner record (:mod:`pipeline.local_cluster`), so that the processes a killed
+driver leaves behind can be found - and only those - and stopped by the next ``recap run`` or
+``recap resume``; :func:`shutdown_ray` ends it and stops any straggler.
 """
 
 from __future__ import annotations
@@ -43,10 +46,19 @@ def runtime_env() -> dict[str, Any]:
     return {"env_vars": env_vars}
 
 
-def init_ray(ray_spec: RaySpec, address: str | None = None) -> bool:
+#: the temp folder of the local cluster this process started (None: none, or joined one)
+_owned: Path | None = None
+
+
+def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") -> bool:
     """Start a local Ray (or join ``address``). Returns True when this call started Ray (and so
-    must shut it down); an already initialised Ray (tests share one) is reused as is."""
+    must shut it down, with :func:`shutdown_ray`); an already initialised Ray (tests share one)
+    is reused as is. A local cluster gets its own temp folder, recording this process as its
+    owner and ``run`` (the run folder) for the message of whoever cleans up after a crash."""
+    global _owned
     import ray
+
+    from pipeline import local_cluster
 
     os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -66,15 +78,38 @@ def init_ray(ray_spec: RaySpec, address: str | None = None) -> bool:
         else:
             ray.init(address=address, **common)
     else:
-        with _loopback_node():
-            ray.init(
-                num_cpus=ray_spec.num_cpus or os.cpu_count() or 2,
-                include_dashboard=ray_spec.dashboard,
-                dashboard_host="127.0.0.1",
-                object_store_memory=ray_spec.object_store_mb * 1024 * 1024,
-                **common,
-            )
+        folder = local_cluster.claim(run)
+        local_cluster.watch(folder)  # stops the cluster if this process dies without shutting it down
+        try:
+            with _loopback_node():
+                ray.init(
+                    num_cpus=ray_spec.num_cpus or os.cpu_count() or 2,
+                    include_dashboard=ray_spec.dashboard,
+                    dashboard_host="127.0.0.1",
+                    object_store_memory=ray_spec.object_store_mb * 1024 * 1024,
+                    _temp_dir=str(folder),
+                    **common,
+                )
+        except BaseException:
+            ray.shutdown()
+            local_cluster.release(folder)
+            raise
+        _owned = folder
     return True
+
+
+def shutdown_ray() -> None:
+    """``ray.shutdown()``; for a local cluster this process started, also stop any of its
+    processes still there and mark its owner record ended (:func:`pipeline.local_cluster.release`)."""
+    global _owned
+    import ray
+
+    from pipeline import local_cluster
+
+    ray.shutdown()
+    folder, _owned = _owned, None
+    if folder is not None:
+        local_cluster.release(folder)
 
 
 def _is_loopback(address: str) -> bool:

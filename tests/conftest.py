@@ -22,13 +22,13 @@ def ray_address():
     ``--address``. Shut down after the module only if this fixture started it."""
     import ray
 
-    from pipeline.raysetup import init_ray
+    from pipeline.raysetup import init_ray, shutdown_ray
     from pipeline.spec import RaySpec
 
     started = init_ray(RaySpec(num_cpus=2))
     yield ray.get_runtime_context().gcs_address
     if started:
-        ray.shutdown()
+        shutdown_ray()
 
 
 @pytest.fixture(autouse=True)

@@ -160,9 +160,9 @@ class Lab:
                 pass
         self._servers.clear()
         if self._ray_started:
-            import ray
+            from pipeline.raysetup import shutdown_ray
 
-            ray.shutdown()
+            shutdown_ray()
             self._ray_started = False
             self._address = None
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.chaos import exposure, faults, folders, kills
+from tests.chaos import exposure, faults, folders, kills, signals
 from tests.chaos.harness import ScenarioResult
 
 pytestmark = pytest.mark.slow
@@ -56,3 +56,21 @@ def test_corrupt_parts_are_reported_and_resume_reruns_only_lost_units(lab):
 def test_no_key_in_files_logs_or_output_and_every_socket_on_loopback(lab):
     res = exposure.secrets_and_sockets(lab)
     assert_clean(res, 1, overspend=False)
+
+
+def test_ctrl_c_once_lets_the_episodes_in_flight_finish_exits_130_and_the_resume_pays_nothing_twice(lab):
+    res = signals.sigint(lab, presses=1)
+    assert_clean(res, 1, overspend=True)
+    assert "no call paid twice" in [c.name for c in res.checks]
+
+
+def test_ctrl_c_twice_cuts_the_episodes_in_flight_and_keeps_every_paid_call(lab):
+    res = signals.sigint(lab, presses=2)
+    assert_clean(res, 1, overspend=True)
+    assert "the second Ctrl-C cuts them" in [c.name for c in res.checks]
+
+
+def test_a_sigkilled_drivers_ray_processes_are_stopped_by_its_watcher_or_else_by_the_resume_which_says_so(lab):
+    res = signals.orphans(lab)
+    assert_clean(res, 1, overspend=True)
+    assert "no process of any of the three clusters is left" in [c.name for c in res.checks]
