@@ -277,7 +277,7 @@ class DeploymentGateway:
         settled = call.settlement or settle(cfg.model, self.price, attempt, call.sizing)
         usage, cost = settled.usage, settled.cost_pico
         if settled.rejected:  # impossible usage: charged at the worst case, visible as an event
-            self.counts["usage_rejected"] += 1
+            self.counts["usage_rejected"] += 1  # past max_usage_rejections: no more calls (_untrusted)
             self.call_log.add_event(
                 USAGE_REJECTED_EVENT,
                 "error",
@@ -348,6 +348,9 @@ class DeploymentGateway:
         concurrency limit or the windows do not hold reservations (they would starve the cap).
         The first attempt asks ``begin`` (which may answer with a recorded result instead)."""
         cfg = self.config
+        untrusted = self._untrusted()
+        if untrusted is not None:
+            raise _Final(Classified("budget", untrusted.message, refusal=untrusted))
         remaining = call.deadline - self._clock()
         if remaining <= 0:
             raise _Final(Classified("timeout", f"total timeout {cfg.total_timeout_s}s reached"))
@@ -427,6 +430,16 @@ class DeploymentGateway:
         finally:
             self.admission.release(ticket, "ok", actual_tokens=actual)
         return attempt
+
+    def _untrusted(self) -> BudgetRefusal | None:
+        """A ``usage`` refusal once ``max_usage_rejections`` replies of this deployment had impossible
+        usage: each was charged at its worst case, and a provider that keeps lying about what it
+        bills is not called again this session (the calls in flight finish)."""
+        rejected = self.counts["usage_rejected"]
+        if rejected < self.config.max_usage_rejections:
+            return None
+        self.counts["usage_refused"] += 1
+        return BudgetRefusal("usage", self.deployment, rejected=rejected)
 
     # ---- secrets ----
     @property

@@ -103,17 +103,42 @@ def _whole(value: Any) -> int | None:
     return None
 
 
+class UnusableReply(Exception):
+    """An HTTP 200 answer that holds no reply we can use: no choice (``choices`` empty or null), a
+    choice without a message, or a message whose content is null with no tool calls.
+
+    Why an exception and not an empty reply: handed on as ``""``, the agent read it as the
+    model's own failure (a JSON failure no resume retries), although the provider failed - and
+    may have billed the request. The gateway classifies it as a ``server_error`` that may have
+    been billed (:func:`workers.llm.errors.classify`): charged at its reservation, retried
+    within the call's attempts, then the call fails (the episode ends ``infra_error``)."""
+
+
+def unusable_reason(response: Any) -> str | None:
+    """Why a parsed 200 answer holds no usable reply (see :class:`UnusableReply`), or None."""
+    choices = getattr(response, "choices", None)
+    if not choices:
+        return f"the provider answered HTTP 200 with no choices ({'null' if choices is None else 'empty'})"
+    message = getattr(choices[0], "message", None)
+    if message is None:
+        return "the provider answered HTTP 200 with a choice that has no message"
+    if getattr(message, "content", None) is None and not getattr(message, "tool_calls", None):
+        return "the provider answered HTTP 200 with a message whose content is null (and no tool calls)"
+    return None
+
+
 def parse_response(response: Any) -> Attempt:
     """What we keep of a litellm answer (:class:`Attempt`): the first choice's text and finish
     reason, and the usage as reported. A count that is not a whole number becomes None and is listed
-    in ``malformed``, for accounting to refuse."""
+    in ``malformed``, for accounting to refuse. An answer without a usable reply raises
+    :class:`UnusableReply`."""
+    reason = unusable_reason(response)
+    if reason is not None:
+        raise UnusableReply(reason)
     choices = getattr(response, "choices", None) or []
-    choice = choices[0] if choices else None
-    text = ""
-    finish = None
-    if choice is not None:
-        text = (getattr(choice.message, "content", None) or "") if getattr(choice, "message", None) else ""
-        finish = getattr(choice, "finish_reason", None)
+    choice = choices[0]
+    text = getattr(choice.message, "content", None) or ""
+    finish = getattr(choice, "finish_reason", None)
     usage = getattr(response, "usage", None)
     details = getattr(usage, "prompt_tokens_details", None) if usage is not None else None
     raw = {
