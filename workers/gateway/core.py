@@ -13,8 +13,14 @@ One call (:meth:`DeploymentGateway.complete`):
    reservation), later ones reserve again only if the previous reservation was charged;
    then one litellm call. 429 shrinks concurrency and pauses, 5xx/timeouts back off
    exponentially; context_length, bad_request, auth return at once. An attempt that may have
-   been billed (a timeout, or a 200 reply the client could not read, such as fractional token
-   counts) has its reservation charged at worst case. The budget keeps this deployment's
+   been billed (a timeout, or an HTTP 200 we cannot turn into a usable reply: a body that is not
+   JSON or cut short, an HTML page, fractional token counts, no choice, a choice without a
+   message, null content - :func:`workers.llm.errors.unreadable_reply`) has its reservation
+   charged at worst case; the unusable 200 is a retryable ``server_error``, so a call that never
+   gets a usable reply fails as one (its episode ends ``infra_error``, which a resume retries,
+   under the same caps: the charges are in the ledger journal). After ``max_usage_rejections``
+   replies whose usage was impossible, the deployment's further calls are refused
+   (``LLMError("budget")`` with a ``usage`` refusal: the driver stops that model's units). The budget keeps this deployment's
    reservations, spend and cap under its name (``deployment_name``), never under the model
    string another deployment may share;
 3. check the provider's usage and settle the reservation (:func:`workers.llm.accounting.settle`:

@@ -226,7 +226,7 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
     from workers.llm.litellm_import import import_litellm
 
     litellm = import_litellm()
-    unreadable = False
+    unreadable = reply_200 = False
     message = scrub(f"{type(exc).__name__}: {exc}", secrets)[:MAX_MESSAGE_CHARS]
     status = getattr(exc, "status_code", None)
     status = status if isinstance(status, int) else None
@@ -243,10 +243,10 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
         exc, (litellm.InternalServerError, litellm.ServiceUnavailableError, litellm.BadGatewayError, litellm.APIConnectionError)
     ):
         kind = "server_error"
-        unreadable = unreadable_reply(exc)
+        unreadable = reply_200 = unreadable_reply(exc)
     elif unreadable_reply(exc):  # our own UnusableReply, or a decoding error litellm let through
         kind = "server_error"
-        unreadable = True
+        unreadable = reply_200 = True
     elif isinstance(
         exc, (litellm.BadRequestError, litellm.NotFoundError, litellm.UnprocessableEntityError, litellm.UnsupportedParamsError)
     ):
@@ -258,6 +258,8 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
             kind = "server_error"
             unreadable = True
     billed = kind == "timeout" or unreadable
+    if reply_200:
+        status = 200  # what the provider answered (litellm reports a made-up 500)
     return Classified(kind, message, retry_after_seconds(exc) if kind == "rate_limit" else None, status, maybe_billed=billed)
 
 
