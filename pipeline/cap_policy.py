@@ -26,6 +26,13 @@ from schemas.outcomes import BudgetRefusal
 EPS = 1e-12
 
 
+def usd(amount: float) -> str:
+    """A cap as its lines show it: cents when that is exact (``$5.00``), else every digit that
+    matters (``$0.005``, never a rounded ``$0.01``)."""
+    cents = f"{amount:.2f}"
+    return "$" + (cents if float(cents) == amount else f"{amount:.6f}".rstrip("0"))
+
+
 class CapPolicy:
     """Which models (or the whole run) the driver no longer starts episodes for."""
 
@@ -55,10 +62,10 @@ class CapPolicy:
         """Stop what the live spend has reached the cap of."""
         cap = self.spec.run_cap_usd
         if self.run_stopped is None and cap is not None and spend.total_usd >= cap - EPS:
-            self.stop_run(f"run cap ${cap:.2f} reached")
+            self.stop_run(f"run cap {usd(cap)} reached")
         for m in self.spec.models:
             if m.cap_usd is not None and m.name not in self.stopped_models and spend.by_model.get(m.name, 0.0) >= m.cap_usd - EPS:
-                self.stop_model(m.name, f"model cap ${m.cap_usd:.2f} of {m.name} reached")
+                self.stop_model(m.name, f"model cap {usd(m.cap_usd)} of {m.name} reached")
 
     def on_refusal(self, model_label: str, refusal: BudgetRefusal | None, error: str | None, spend: Spend) -> None:
         """An episode of ``model_label`` was refused a call: stop what refused it. Only the model
@@ -70,12 +77,12 @@ class CapPolicy:
             self.stop_model(m.name, f"{m.name} stopped: {refusal.message}", kind="model_stopped")
         elif (refusal is not None and refusal.scope == "run") or m.cap_usd is None:
             self.stop_run(
-                f"run cap ${run_cap:.2f} reached"
+                f"run cap {usd(run_cap)} reached"
                 if run_cap is not None
                 else f"a model call was refused for lack of budget: {error}"
             )
         else:
-            self.stop_model(m.name, f"model cap ${m.cap_usd:.2f} of {m.name} reached")
+            self.stop_model(m.name, f"model cap {usd(m.cap_usd)} of {m.name} reached")
 
     def stop_run(self, why: str) -> None:
         """Stop starting any unit (recorded once, with ``why``, as a ``run_cap_reached`` event); running episodes go on."""
