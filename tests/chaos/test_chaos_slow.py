@@ -56,3 +56,13 @@ def test_corrupt_parts_are_reported_and_resume_reruns_only_lost_units(lab):
 def test_no_key_in_files_logs_or_output_and_every_socket_on_loopback(lab):
     res = exposure.secrets_and_sockets(lab)
     assert_clean(res, 1, overspend=False)
+
+
+def test_unreadable_200_cap_attacks_never_overspend_across_sessions(lab):
+    from tests.chaos.guards import unreadable_attacks
+    from tests.doubles.fake_server import UNREADABLE_MODES
+
+    res = unreadable_attacks(lab)
+    n = len(UNREADABLE_MODES) + 1
+    assert_clean(res, n, overspend=True)
+    assert res.name == f"unreadable-200 cap attacks ({n} tried, max overspend $0.000000)"
