@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from workers.llm.errors import install_log_scrubber
+from workers.llm.errors import UnusableReply, install_log_scrubber
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.offline.wire import OFFLINE_METADATA_KEY
 from workers.llm.providers import DeploymentConfig
@@ -101,17 +101,6 @@ def _whole(value: Any) -> int | None:
     if isinstance(value, float) and math.isfinite(value) and value.is_integer():
         return int(value)
     return None
-
-
-class UnusableReply(Exception):
-    """An HTTP 200 answer that holds no reply we can use: no choice (``choices`` empty or null), a
-    choice without a message, or a message whose content is null with no tool calls.
-
-    Why an exception and not an empty reply: handed on as ``""``, the agent read it as the
-    model's own failure (a JSON failure no resume retries), although the provider failed - and
-    may have billed the request. The gateway classifies it as a ``server_error`` that may have
-    been billed (:func:`workers.llm.errors.classify`): charged at its reservation, retried
-    within the call's attempts, then the call fails (the episode ends ``infra_error``)."""
 
 
 def unusable_reason(response: Any) -> str | None:

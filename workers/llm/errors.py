@@ -183,6 +183,17 @@ _UNREADABLE_REPLY_MARKERS = (
 )
 
 
+class UnusableReply(Exception):
+    """An HTTP 200 answer that holds no reply we can use: no choice (``choices`` empty or null), a
+    choice without a message, or a message whose content is null with no tool calls.
+
+    Why an exception and not an empty reply: handed on as ``""``, the agent read it as the
+    model's own failure (a JSON failure no resume retries), although the provider failed - and
+    may have billed the request. The gateway classifies it as a ``server_error`` that may have
+    been billed (:func:`classify`): charged at its reservation, retried
+    within the call's attempts, then the call fails (the episode ends ``infra_error``)."""
+
+
 def _chain(exc: BaseException) -> list[BaseException]:
     """``exc`` and the exceptions it was raised from or during, in order (no cycles)."""
     out: list[BaseException] = []
@@ -202,10 +213,8 @@ def unreadable_reply(exc: BaseException) -> bool:
     cannot tell it from a real provider 5xx. What tells them apart is the chain of exceptions: a
     real HTTP error was raised from the HTTP client's status error (``httpx.HTTPStatusError``, or
     the OpenAI SDK's ``APIStatusError`` carrying the provider's body); an unreadable 200 from a
-    JSON decoding error, from our own :class:`workers.llm.calling.UnusableReply`, or from
+    JSON decoding error, from our own :class:`UnusableReply`, or from
     litellm's conversion of the reply (:data:`_UNREADABLE_REPLY_MARKERS`)."""
-    from workers.llm.calling import UnusableReply
-
     chain = _chain(exc)
     for link in chain:
         module = type(link).__module__
