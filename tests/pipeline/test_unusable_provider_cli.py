@@ -123,6 +123,20 @@ def test_unreadable_200s_are_charged_so_run_and_resumes_never_pass_the_cap(
     assert re.search(rf"; spend \{spent}\n", status), status
     assert len(server.log) == len(settles)  # the resumes sent nothing the journal does not hold
 
+    # status reads the journal, not the llm_calls rows: a call cut by a kill has no row, yet its
+    # reservation is open (shown beside the spend) and, once charged as an orphan, spent
+    pico = 1_234_000_000
+    with open(out / JOURNAL_NAME, "a") as fh:
+        fh.write(json.dumps({"op": "reserve", "rid": 999, "key": "x#0", "name": "flaky", "pico": pico, "owner": "dead:1"}) + "\n")
+    assert main(["status", str(out)]) == 0
+    assert f"; spend {spent} (+ $0.0012 reserved by calls in flight)\n" in capsys.readouterr().out
+    with open(out / JOURNAL_NAME, "a") as fh:
+        fh.write(
+            json.dumps({"op": "settle", "rid": 999, "key": "x#0", "name": "flaky", "pico": pico, "status": "orphaned"}) + "\n"
+        )
+    assert main(["status", str(out)]) == 0
+    assert f"; spend ${ledger.spent_usd + pico / 1e12:.4f}\n" in capsys.readouterr().out
+
 
 def test_a_lying_provider_is_stopped_after_bounded_replies_and_the_honest_model_finishes(
     ray_address, tmp_path, capsys, monkeypatch, server_factory
