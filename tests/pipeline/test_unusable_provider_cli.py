@@ -7,6 +7,9 @@ CLI on a local Ray (issue 24, classes 1 and 5):
   each reply was charged $0 and every resume paid again;
 * the stop line, ``recap status`` and the ledger journal print one spend figure on that run,
   whose calls were all charged at their worst case;
+* a 200 without a usable choice (``choices: []``, null content) is the provider's failure: the
+  unit ends ``infra_error`` (exit 4), which ``recap resume`` retries - not a JSON failure of the
+  model that no resume retries;
 * two models in one sweep, one whose usage is always impossible: its units stop after
   ``max_usage_rejections`` replies with one line and a ``model_stopped`` event, the honest one
   finishes all its units.
@@ -21,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from pipeline.cli import main
-from pipeline.driver import EXIT_WORK_REMAINS
+from pipeline.driver import EXIT_INFRA, EXIT_WORK_REMAINS
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
 from tests.doubles.fake_server import FakeServer, FakeServerConfig
@@ -166,3 +169,21 @@ def test_a_lying_provider_is_stopped_after_bounded_replies_and_the_honest_model_
     )
     assert ("honest", 4) in done  # the honest model finished every unit
     assert q(out, "select count(*) from episodes where model = 'honest' and end_reason = 'budget_exhausted'") == [(0,)]
+
+
+def test_a_200_without_a_usable_choice_ends_the_unit_infra_error_and_resume_retries_it(
+    ray_address, tmp_path, capsys, monkeypatch, server_factory
+):
+    monkeypatch.setenv(KEY_ENV, "not-a-secret")
+    server = server_factory(fault_rates={"nullcontent": 0.5, "nochoices": 1.0})
+    out, spec_file = _sweep(tmp_path, "nochoices", MODEL.format(label="empty", url=server.base_url, max_tokens=32), 1)
+    assert main(["run", str(spec_file), "--progress", "off"]) == EXIT_INFRA
+    assert "1 units ended in an infrastructure failure (server_error 1)" in capsys.readouterr().out
+    assert main(["resume", str(out), "--progress", "off"]) == EXIT_INFRA
+    rows = q(out, "select attempt, end_reason, split_part(error, ':', 1) from episodes order by attempt")
+    assert rows == [(1, "infra_error", "server_error"), (2, "infra_error", "server_error")]
+    # each unit attempt made one call of 2 attempts (retries: 1), each charged at its reservation
+    assert len(server.log) == 4 and {c.mode for c in server.log} <= {"nullcontent", "nochoices"}
+    assert q(out, "select count(*), min(retries), min(cost_usd) > 0 from llm_calls") == [(2, 1, True)]
+    ledger = journal_spend((out / JOURNAL_NAME).read_bytes())
+    assert ledger.spent_pico >= bill_pico(server) > 0
