@@ -478,11 +478,14 @@ def _execute(prepared: Any, args: argparse.Namespace, command: str, backend: Any
     except KeyboardInterrupt:  # a third Ctrl-C, or one while Ray was starting
         _interrupted_hint(prepared.store)
         return 130
-    _render(render, collect(prepared.store))
+    report = collect(prepared.store)
+    _render(render, report)
     if summary.stopped:
         console.print(
             _styled(
-                f"stopped: {summary.stopped}; {summary.not_started} units not started, "
+                # the spend figure is the summary's above (the ledger journal's), not the one
+                # of the moment the cap stopped the run: calls in flight settled after it
+                f"stopped: {summary.stopped} (spent {report.spend_line}); {summary.not_started} units not started, "
                 f"{summary.budget_stopped} episodes ended budget_exhausted this session",
                 "yellow",
             )

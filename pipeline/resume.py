@@ -169,6 +169,14 @@ def journal_episode_ids(store: RunStore) -> set[str]:
     return entries.episode_ids(store.read_bytes(JOURNAL_FILE))
 
 
+def run_spend(store: RunStore) -> entries.JournalSpend | None:
+    """What the run spent by the gateway's ledger journal (None: no journal, e.g. a backend
+    without the gateway): the figure ``recap status``, the end-of-run lines and the stop line
+    print, the same the ledger counts against the caps (:func:`workers.gateway.entries.journal_spend`)."""
+    data = store.read_bytes(JOURNAL_FILE)
+    return entries.journal_spend(data) if data else None
+
+
 def attempt_spend(store: RunStore, episode_id: str) -> AttemptSpend:
     """The spend of ``episode_id`` by the gateway's ledger journal
     (:func:`workers.gateway.entries.attempt_spend`). For the row of a unit the driver gave up

@@ -24,7 +24,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue
+from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue, run_spend
 from pipeline.store import PLAN_FILE, RunStore
 from schemas.parts import BadPart, inspect_parts, read_parts
 
@@ -85,6 +85,14 @@ class StatusReport:
     failed_kinds: dict[str, int] = field(default_factory=dict)
     #: done units whose completing row ended env_error / llm_error (not infrastructure)
     errored: int = 0
+    #: reservations still open in the ledger journal (calls in flight, or orphans of a crash)
+    reserved_usd: float = 0.0
+
+    @property
+    def spend_line(self) -> str:
+        """The run's spend as every line prints it (``spend_usd``: the ledger journal's)."""
+        reserved = f" (+ ${self.reserved_usd:.4f} reserved by calls in flight)" if self.reserved_usd > 0 else ""
+        return f"${self.spend_usd:.4f}{reserved}"
 
     @property
     def remaining(self) -> int:
@@ -159,11 +167,16 @@ def collect(store: RunStore) -> StatusReport:
         if issue is not None:
             problems.append(issue.describe().replace("<run>", store.location))
     failed_kinds: dict[str, int] = defaultdict(int)
-    spend = (
-        float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist()))
-        if calls.num_rows
-        else float(sum(r["cost_usd"] for r in rows))
-    )
+    # one figure for spend: the ledger journal's (worst-case charges of calls that have no
+    # llm_calls row of their own - cut, orphaned - included); the rows only without a journal
+    ledger = run_spend(store)
+    reserved = 0.0
+    if ledger is not None:
+        spend, reserved = ledger.spent_usd, ledger.reserved_usd
+    elif calls.num_rows:
+        spend = float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist()))
+    else:
+        spend = float(sum(r["cost_usd"] for r in rows))
     groups: dict[tuple[str, str], GroupRow] = {}
     for u in units:
         key = (u["method"], u["model"])
@@ -205,6 +218,7 @@ def collect(store: RunStore) -> StatusReport:
         failed=sum(g.failed for g in groups.values()),
         failed_kinds=dict(failed_kinds),
         errored=sum(g.errored for g in groups.values()),
+        reserved_usd=reserved,
     )
 
 
@@ -250,7 +264,7 @@ def render(report: StatusReport, console: Any) -> None:
         f"units {report.completed}/{report.total} done, {report.success} succeeded, "
         f"{report.budget_stopped} stopped by a budget cap, {failed}"
         f"{report.remaining - report.budget_stopped - report.failed} not finished; "
-        f"spend ${report.spend_usd:.4f}"
+        f"spend {report.spend_line}"
     )
     hint = report.retry_hint()
     if hint:

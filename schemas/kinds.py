@@ -72,6 +72,7 @@ EventKind = Literal[
     "unit_abandoned",
     "run_cap_reached",
     "model_cap_reached",
+    "model_stopped",
     "sink_lost",
     "sink_log_recovered",
     # the gateway and its budget ledger

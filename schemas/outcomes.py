@@ -17,9 +17,10 @@ from typing import Any, Literal
 
 from schemas.kinds import EndReason
 
-#: which cap refused a call: the run's, the model's, or a capped run that cannot price the model
-RefusalScope = Literal["run", "model", "unpriced"]
-REFUSAL_SCOPES: tuple[RefusalScope, ...] = ("run", "model", "unpriced")
+#: which cap refused a call: the run's, the model's, or a capped run that cannot price the model;
+#: or ``usage``: the model's provider reported impossible usage too often, its calls are refused
+RefusalScope = Literal["run", "model", "unpriced", "usage"]
+REFUSAL_SCOPES: tuple[RefusalScope, ...] = ("run", "model", "unpriced", "usage")
 
 #: where an attempt crashed (not: ended): the model client, or the agent's own code
 CrashSource = Literal["client", "agent"]
@@ -45,6 +46,8 @@ class BudgetRefusal:
     cap_pico: int | None = None
     committed_pico: int = 0
     worst_pico: int | None = None
+    #: scope ``usage``: the replies whose usage was rejected as impossible (the limit reached)
+    rejected: int = 0
 
     def __post_init__(self) -> None:
         if self.scope not in REFUSAL_SCOPES:
@@ -58,6 +61,11 @@ class BudgetRefusal:
                 f"no price for model {self.model}: a capped run cannot price its calls "
                 "(add it to workers/pricing/prices.yaml or pass a price override)"
             )
+        if self.scope == "usage":
+            return (
+                f"{self.model}: provider usage rejected as impossible in {self.rejected} replies "
+                "(each charged at its worst case); no more calls to it this session"
+            )
         who = "run" if self.scope == "run" else self.model
         return (
             f"{who} budget: committed {_usd(self.committed_pico)} + this call's worst case "
@@ -66,13 +74,16 @@ class BudgetRefusal:
 
     def to_dict(self) -> dict[str, Any]:
         """The refusal as plain JSON types, as the ledger answers a gateway's reservation (:meth:`from_dict` reads it back)."""
-        return {
+        out: dict[str, Any] = {
             "scope": self.scope,
             "model": self.model,
             "cap_pico": self.cap_pico,
             "committed_pico": self.committed_pico,
             "worst_pico": self.worst_pico,
         }
+        if self.scope == "usage":
+            out["rejected"] = self.rejected
+        return out
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> BudgetRefusal:
@@ -83,6 +94,7 @@ class BudgetRefusal:
             cap_pico=d.get("cap_pico"),
             committed_pico=int(d.get("committed_pico") or 0),
             worst_pico=d.get("worst_pico"),
+            rejected=int(d.get("rejected") or 0),
         )
 
 

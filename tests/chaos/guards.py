@@ -9,6 +9,10 @@
   slipping past the config; a negative / NaN / infinite cost figure), called until the budget
   refuses: the ledger never passes the cap, and never bills less than the provider really
   generated (the fake server's own token counts at the model's price).
+* unreadable: a provider that answers only HTTP 200s nobody can use (not JSON, cut short, HTML,
+  no choices, no message, null content - each mode alone, then all at random) against a small
+  run cap, over three gateway sessions on one run folder (a run and two resumes): the provider's
+  own bill never passes the cap, and the later sessions send nothing.
 * lock: synchronised contenders for one run folder's driver lock (threads, then processes),
   each trial on a fresh folder (half the thread trials over a stale lock file): exactly one
   winner each, the others refused with one line.
@@ -252,6 +256,87 @@ def cap_attacks(lab: Lab, cap_usd: float = 0.001) -> ScenarioResult:
     res.name = f"cap attacks ({len(attacks)} tried, max overspend ${pico_to_usd(worst_over):.6f})"
     res.notes.append(
         f"{len(attacks)} attacks on a ${cap_usd} cap, max overspend ${pico_to_usd(worst_over):.6f}, "
+        f"max under-billed ${pico_to_usd(worst_under):.6f}"
+    )
+    res.notes += per_attack
+    return res
+
+
+def unreadable_attacks(lab: Lab, cap_usd: float = 0.001, sessions: int = 3) -> ScenarioResult:
+    """A provider that answers only HTTP 200s nobody can use, against a small run cap, over
+    ``sessions`` gateway sessions on one run folder (a run, then resumes: each replays the ledger
+    journal): the provider's own bill never passes the cap, the ledger never bills less than it."""
+    from recap.llm import LLMError
+    from tests.doubles.fake_server import UNREADABLE_MODES
+    from tests.gateway.test_hostile_provider import config, spend_until_refused, true_bill_pico
+    from workers.gateway.core import DeploymentGateway
+    from workers.llm.litellm_setup import get_litellm
+    from workers.llm.pricing import pico_to_usd, usd_to_pico
+
+    get_litellm()
+    res = ScenarioResult("unreadable-200 cap attacks")
+    cap_pico = usd_to_pico(cap_usd)
+    # each mode alone, then all of them at random (seeded) from one provider
+    attacks: list[tuple[str, dict[str, float]]] = [(m, {m: 1.0}) for m in UNREADABLE_MODES]
+    attacks.append(("all modes at random", {m: 1.0 / (len(UNREADABLE_MODES) - i) for i, m in enumerate(UNREADABLE_MODES)}))
+    worst_over, worst_under = 0, 0
+    per_attack: list[str] = []
+    for name, rates in attacks:
+        res.begin_run()
+        server = lab.server(fault_rates=rates, seed=lab.seed)
+        run_dir = _run_dir(lab, "unreadable-" + name.split()[0])
+        spent, stats, sent = 0, {}, []
+        errors: list[LLMError] = []
+        try:
+            for session in range(sessions):
+                before = len(server.log)
+                gw = DeploymentGateway(config(server), run_dir=run_dir, run_cap_usd=cap_usd)
+                out, stats = spend_until_refused(gw, lambda i, s=session: f"session {s} question {i:03d}")
+                errors += [r for r in out if isinstance(r, LLMError)]
+                sent.append(len(server.log) - before)
+                res.check(
+                    f"{name}: session {session + 1} got no reply it could use",
+                    all(isinstance(r, LLMError) for r in out),
+                    sorted({type(r).__name__ for r in out}),
+                )
+        except Exception as exc:
+            res.check(f"{name}: the attack ran", False, f"{type(exc).__name__}: {exc}"[:300])
+            res.end_run()
+            continue
+        spent, bill = int(stats["spent_pico"]), true_bill_pico(server)
+        over, under = max(0, spent - cap_pico, bill - cap_pico), max(0, bill - spent)
+        worst_over, worst_under = max(worst_over, over), max(worst_under, under)
+        res.check(
+            f"{name}: every reply was a 200 of the attack's modes",
+            bool(server.log) and all(c.status == 200 and c.mode in rates for c in server.log),
+            sorted({(c.status, c.mode) for c in server.log}),
+        )
+        res.check(
+            f"{name}: each call failed as server_error (charged) or was refused by the budget",
+            {e.kind for e in errors} <= {"server_error", "budget"}
+            and all(e.cost_usd > 0 for e in errors if e.kind == "server_error"),
+            sorted({(e.kind, e.cost_usd > 0) for e in errors}),
+        )
+        res.check(
+            f"{name}: ledger spend within the cap across {sessions} sessions, nothing reserved, no overrun",
+            spent <= cap_pico and stats["reserved_usd"] == 0 and stats["overruns"] == 0,
+            f"spent ${pico_to_usd(spent):.6f} of ${cap_usd}",
+        )
+        res.check(
+            f"{name}: the provider's bill within the cap and never above the ledger",
+            bill <= cap_pico and spent >= bill > 0,
+            f"provider ${pico_to_usd(bill):.6f}, ledger ${pico_to_usd(spent):.6f}",
+        )
+        res.check(f"{name}: the later sessions sent nothing (the charges persisted)", sent[1:] == [0] * (sessions - 1), sent)
+        per_attack.append(
+            f"{name}: {len(server.log)} replies ({'+'.join(map(str, sent))} per session), "
+            f"provider ${pico_to_usd(bill):.6f}, ledger ${pico_to_usd(spent):.6f}"
+        )
+        res.end_run()
+    res.overspend_usd = pico_to_usd(worst_over)
+    res.name = f"unreadable-200 cap attacks ({len(attacks)} tried, max overspend ${pico_to_usd(worst_over):.6f})"
+    res.notes.append(
+        f"{len(attacks)} attacks x {sessions} sessions on a ${cap_usd} cap, max overspend ${pico_to_usd(worst_over):.6f}, "
         f"max under-billed ${pico_to_usd(worst_under):.6f}"
     )
     res.notes += per_attack

@@ -74,3 +74,13 @@ def test_a_sigkilled_drivers_ray_processes_are_stopped_by_its_watcher_or_else_by
     res = signals.orphans(lab)
     assert_clean(res, 1, overspend=True)
     assert "no process of any of the three clusters is left" in [c.name for c in res.checks]
+
+
+def test_unreadable_200_cap_attacks_never_overspend_across_sessions(lab):
+    from tests.chaos.guards import unreadable_attacks
+    from tests.doubles.fake_server import UNREADABLE_MODES
+
+    res = unreadable_attacks(lab)
+    n = len(UNREADABLE_MODES) + 1
+    assert_clean(res, n, overspend=True)
+    assert res.name == f"unreadable-200 cap attacks ({n} tried, max overspend $0.000000)"

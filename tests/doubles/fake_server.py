@@ -19,7 +19,10 @@ HTTP exchange through litellm's own client, without a paid provider. The server:
 - injects latency, 5xx, hangs (timeouts), empty and malformed bodies - at random with
   ``fault_rates`` (seeded) or per request with a directive in the last message:
   ``FAKE:<mode>`` (always) or ``FAKE:<mode>*<n>`` (the first n arrivals of that exact request),
-  modes: 429 500 502 503 hang empty malformed ctx 400 401, and the lying-provider modes
+  modes: 429 500 502 503 hang ctx 400 401, the unreadable-200 modes of :data:`UNREADABLE_MODES`
+  (empty malformed notjson html nochoices nullchoices nomessage nullcontent: a reply generated
+  and billed, then unusable), ``textplain`` (a good reply under a text/plain content type), and
+  the lying-provider modes
   ``retrylong`` (429 with ``Retry-After: long_retry_after_s``, 3600 by default), ``echokey`` (the
   reply text repeats the API key the request carried), ``negusage`` / ``zerousage`` /
   ``hugeusage`` / ``fracusage`` / ``nousage`` / ``negcached`` (the usage block reports negative, zero,
@@ -78,7 +81,21 @@ FAULT_MODES = (
     "fracusage",
     "nousage",
     "negcached",
+    "notjson",
+    "html",
+    "textplain",
+    "nochoices",
+    "nullchoices",
+    "nomessage",
+    "nullcontent",
 )
+#: modes answering HTTP 200 with a reply no client can use: a body that is not JSON (``notjson``,
+#: ``html``; ``malformed`` cut mid-JSON, ``empty``), or a chat completion without a usable choice
+#: (``nochoices``: ``choices: []``, ``nullchoices``: ``choices: null``, ``nomessage``: a choice
+#: without ``message``, ``nullcontent``: content null and no tool calls). The provider generated the
+#: reply: it bills prompt + completion (the log records the tokens it generated, so tests can
+#: compute the bill). ``textplain`` (a good reply under a ``text/plain`` content type) is readable.
+UNREADABLE_MODES = ("empty", "malformed", "notjson", "html", "nochoices", "nullchoices", "nomessage", "nullcontent")
 #: usage blocks of the lying-provider modes (None: the field is left out)
 _USAGE_FAULTS: dict[str, dict[str, Any]] = {
     "negusage": {"prompt_tokens": -1_000_000, "completion_tokens": -1_000_000},
@@ -87,6 +104,23 @@ _USAGE_FAULTS: dict[str, dict[str, Any]] = {
     "fracusage": {"prompt_tokens": 10.5, "completion_tokens": 2.25},
     "nousage": {"prompt_tokens": None, "completion_tokens": None, "cached_tokens": None, "cache_write_tokens": None},
     "negcached": {"cached_tokens": -1_000_000},
+}
+#: the bodies of the unreadable modes that are not JSON: (bytes, content type)
+_NOT_JSON_BODIES: dict[str, tuple[bytes, str]] = {
+    "empty": (b"", "application/json"),
+    "malformed": (b'{"id": "chatcmpl-fake", "choices": [{"mess', "application/json"),
+    "notjson": (b"upstream answered: OK", "application/json"),
+    "html": (b"<html><head><title>502 Bad Gateway</title></head><body><h1>502 Bad Gateway</h1></body></html>", "text/html"),
+}
+#: the choices of the unreadable modes whose body is a chat completion
+_CHOICE_FAULTS: dict[str, Any] = {
+    "nochoices": lambda choices: [],
+    "nullchoices": lambda choices: None,
+    "nomessage": lambda choices: [{"index": c["index"], "finish_reason": c["finish_reason"]} for c in choices],
+    "nullcontent": lambda choices: [
+        {"index": c["index"], "message": {"role": "assistant", "content": None}, "finish_reason": c["finish_reason"]}
+        for c in choices
+    ],
 }
 _DIRECTIVE = re.compile(r"FAKE:([a-z0-9]+)(?:\*(\d+))?")
 
@@ -439,12 +473,10 @@ class FakeServer:
             return web.json_response(
                 _error_body("The server had an error while processing your request.", "server_error", None), status=int(mode)
             )
-        if mode == "empty":
-            self._record(now, 200, mode, model, prompt_tokens, 0, 0, max_tokens, admitted)
-            return web.Response(body=b"", status=200, content_type="application/json")
-        if mode == "malformed":
-            self._record(now, 200, mode, model, prompt_tokens, 0, 0, max_tokens, admitted)
-            return web.Response(body=b'{"id": "chatcmpl-fake", "choices": [{"mess', status=200, content_type="application/json")
+        if mode in _NOT_JSON_BODIES:  # the reply was generated (and billed), then lost on the way
+            self._record(now, 200, mode, model, prompt_tokens, completion_tokens, 0, max_tokens, admitted)
+            body_bytes, content_type = _NOT_JSON_BODIES[mode]
+            return web.Response(body=body_bytes, status=200, content_type=content_type)
 
         rule = cfg.rule_for(model)
         outcome = self.cache_for(model).serve(model, seen, now + self._clock_offset, reply=reply)
@@ -452,7 +484,7 @@ class FakeServer:
         self._record(
             now,
             200,
-            mode if mode in _USAGE_FAULTS or mode == "echokey" else "ok",
+            mode if mode in _USAGE_FAULTS or mode in UNREADABLE_MODES or mode in ("echokey", "textplain") else "ok",
             model,
             prompt_tokens,
             completion_tokens,
@@ -494,6 +526,10 @@ class FakeServer:
         }
         if usage:
             payload["usage"] = usage
+        if mode in _CHOICE_FAULTS:
+            payload["choices"] = _CHOICE_FAULTS[mode](payload["choices"])
+        if mode == "textplain":
+            return web.Response(text=json.dumps(payload), status=200, content_type="text/plain")
         return web.json_response(payload)
 
 

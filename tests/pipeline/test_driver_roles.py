@@ -68,17 +68,38 @@ def test_a_typed_refusal_stops_the_run_or_only_the_model_it_names(spec):
     assert (caps.allows("small"), caps.allows("big"), caps.run_stopped) == (False, True, None)
     # a refusal for the run's cap stops everything, even coming from a capped model
     caps.on_refusal("small", BudgetRefusal("run", "offline/expert", 5 * pico, 5 * pico, 1), "x", Spend(4.25, {}))
-    assert caps.run_stopped == "run cap $5.00 reached (spent $4.2500)" and not caps.allows("big")
+    # no spend figure in the line: the one printed beside it is the ledger journal's (class 5 of #24)
+    assert caps.run_stopped == "run cap $5.00 reached" and not caps.allows("big")
     # a model without a cap of its own: whatever refused it is the run's budget
     caps2 = CapPolicy(spec, EventBuffer().add)
     caps2.on_refusal("big", BudgetRefusal("unpriced", "offline/random"), "no price", Spend())
-    assert caps2.run_stopped == "run cap $5.00 reached (spent $0.0000)"
+    assert caps2.run_stopped == "run cap $5.00 reached"
     assert (
         model_refusal.message == "offline/expert budget: committed $0.900000 + this call's worst case $0.125000 > cap $1.000000"
     )
     assert BudgetRefusal.from_dict(model_refusal.to_dict()) == model_refusal
     with pytest.raises(ValueError, match="unknown refusal scope 'team'"):
         BudgetRefusal("team", "m")  # type: ignore[arg-type]
+
+
+def test_a_provider_stopped_for_its_usage_stops_only_its_model_even_without_a_cap(spec):
+    """A ``usage`` refusal (the gateway stopped calling a provider that kept reporting impossible
+    usage) stops that model's units only - also a model without a cap of its own, which a budget
+    refusal would have stopped the whole run for - with one ``model_stopped`` event."""
+    buf = EventBuffer()
+    caps = CapPolicy(spec, buf.add)
+    lying = BudgetRefusal("usage", "big", rejected=3)
+    assert BudgetRefusal.from_dict(lying.to_dict()) == lying
+    why = "big stopped: big: provider usage rejected as impossible in 3 replies (each charged at its worst case); no more calls to it this session"
+    caps.on_refusal("big", lying, lying.message, Spend(0.1, {"big": 0.1}))
+    caps.on_refusal("big", lying, lying.message, Spend(0.1, {"big": 0.1}))  # recorded once
+    assert (caps.allows("big"), caps.allows("small"), caps.run_stopped, caps.stopped) == (False, True, None, why)
+    caps.check(Spend(1.0, {"small": 1.0}))
+    assert caps.stopped == f"small capped; {why}"
+    assert _events(buf) == [
+        ("model_stopped", {"model": "big", "reason": why}),
+        ("model_cap_reached", {"model": "small", "reason": "model cap $1.00 of small reached"}),
+    ]
 
 
 def test_the_ledger_answers_with_the_cap_that_refused(tmp_path):

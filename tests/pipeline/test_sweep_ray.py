@@ -174,7 +174,8 @@ def test_run_cap_stops_new_work_and_resume_with_higher_cap_continues(ray_address
     text, spec = make_spec(out, CAPPED)
     first = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
     assert first.exit_code() == 3
-    assert first.stopped is not None and first.stopped.startswith("run cap $0.01 reached")
+    # every digit of the cap (it read "$0.01" before)
+    assert first.stopped == "run cap $0.015 reached"
     con, _ = open_tables(RunStore(out))
     spent = q(con, "select sum(cost_usd) from llm_calls")[0][0]
     assert 0 < spent <= 0.015

@@ -13,8 +13,14 @@ One call (:meth:`DeploymentGateway.complete`):
    reservation), later ones reserve again only if the previous reservation was charged;
    then one litellm call. 429 shrinks concurrency and pauses, 5xx/timeouts back off
    exponentially; context_length, bad_request, auth return at once. An attempt that may have
-   been billed (a timeout, or a 200 reply the client could not read, such as fractional token
-   counts) has its reservation charged at worst case. The budget keeps this deployment's
+   been billed (a timeout, or an HTTP 200 we cannot turn into a usable reply: a body that is not
+   JSON or cut short, an HTML page, fractional token counts, no choice, a choice without a
+   message, null content - :func:`workers.llm.errors.unreadable_reply`) has its reservation
+   charged at worst case; the unusable 200 is a retryable ``server_error``, so a call that never
+   gets a usable reply fails as one (its episode ends ``infra_error``, which a resume retries,
+   under the same caps: the charges are in the ledger journal). After ``max_usage_rejections``
+   replies whose usage was impossible, the deployment's further calls are refused
+   (``LLMError("budget")`` with a ``usage`` refusal: the driver stops that model's units). The budget keeps this deployment's
    reservations, spend and cap under its name (``deployment_name``), never under the model
    string another deployment may share;
 3. check the provider's usage and settle the reservation (:func:`workers.llm.accounting.settle`:
@@ -277,7 +283,7 @@ class DeploymentGateway:
         settled = call.settlement or settle(cfg.model, self.price, attempt, call.sizing)
         usage, cost = settled.usage, settled.cost_pico
         if settled.rejected:  # impossible usage: charged at the worst case, visible as an event
-            self.counts["usage_rejected"] += 1
+            self.counts["usage_rejected"] += 1  # past max_usage_rejections: no more calls (_untrusted)
             self.call_log.add_event(
                 USAGE_REJECTED_EVENT,
                 "error",
@@ -348,6 +354,9 @@ class DeploymentGateway:
         concurrency limit or the windows do not hold reservations (they would starve the cap).
         The first attempt asks ``begin`` (which may answer with a recorded result instead)."""
         cfg = self.config
+        untrusted = self._untrusted()
+        if untrusted is not None:
+            raise _Final(Classified("budget", untrusted.message, refusal=untrusted))
         remaining = call.deadline - self._clock()
         if remaining <= 0:
             raise _Final(Classified("timeout", f"total timeout {cfg.total_timeout_s}s reached"))
@@ -427,6 +436,16 @@ class DeploymentGateway:
         finally:
             self.admission.release(ticket, "ok", actual_tokens=actual)
         return attempt
+
+    def _untrusted(self) -> BudgetRefusal | None:
+        """A ``usage`` refusal once ``max_usage_rejections`` replies of this deployment had impossible
+        usage: each was charged at its worst case, and a provider that keeps lying about what it
+        bills is not called again this session (the calls in flight finish)."""
+        rejected = self.counts["usage_rejected"]
+        if rejected < self.config.max_usage_rejections:
+            return None
+        self.counts["usage_refused"] += 1
+        return BudgetRefusal("usage", self.deployment, rejected=rejected)
 
     # ---- secrets ----
     @property

@@ -89,6 +89,44 @@ def attempt_spend(data: bytes | None, episode_id: str) -> AttemptSpend:
     return AttemptSpend(calls, prompt, cached, completion, pico_to_usd(pico))
 
 
+@dataclass(frozen=True)
+class JournalSpend:
+    """What a run spent by its ledger journal: the one figure every place that prints spend shows.
+
+    ``spent_pico``: the settled reservations (answers at their checked cost, attempts that may
+    have been billed and cut or orphaned calls at their worst case, failures at 0) - exactly what
+    :class:`workers.gateway.ledger.BudgetLedger` counts against the caps (``spent_usd`` of its
+    stats). ``reserved_pico``: reservations still open (calls in flight; after a crash, what the
+    next session charges as orphans)."""
+
+    spent_pico: int = 0
+    reserved_pico: int = 0
+    settled: int = 0
+
+    @property
+    def spent_usd(self) -> float:
+        return pico_to_usd(self.spent_pico)
+
+    @property
+    def reserved_usd(self) -> float:
+        return pico_to_usd(self.reserved_pico)
+
+
+def journal_spend(data: bytes | None) -> JournalSpend:
+    """The spend a journal's bytes record (:class:`JournalSpend`), read as the ledger replays it."""
+    open_: dict[Any, int] = {}
+    spent = settled = 0
+    for e in entries(data):
+        op = e.get("op")
+        if op == "reserve":
+            open_[e.get("rid")] = int(e.get("pico") or 0)
+        elif op == "settle":
+            open_.pop(e.get("rid"), None)
+            spent += int(e.get("pico") or 0)
+            settled += 1
+    return JournalSpend(spent, sum(open_.values()), settled)
+
+
 class KeyMap:
     """The deployment name an entry is kept under.
 

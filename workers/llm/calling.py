@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from workers.llm.errors import install_log_scrubber
+from workers.llm.errors import UnusableReply, install_log_scrubber
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.offline.wire import OFFLINE_METADATA_KEY
 from workers.llm.providers import DeploymentConfig
@@ -103,17 +103,31 @@ def _whole(value: Any) -> int | None:
     return None
 
 
+def unusable_reason(response: Any) -> str | None:
+    """Why a parsed 200 answer holds no usable reply (see :class:`UnusableReply`), or None."""
+    choices = getattr(response, "choices", None)
+    if not choices:
+        return f"the provider answered HTTP 200 with no choices ({'null' if choices is None else 'empty'})"
+    message = getattr(choices[0], "message", None)
+    if message is None:
+        return "the provider answered HTTP 200 with a choice that has no message"
+    if getattr(message, "content", None) is None and not getattr(message, "tool_calls", None):
+        return "the provider answered HTTP 200 with a message whose content is null (and no tool calls)"
+    return None
+
+
 def parse_response(response: Any) -> Attempt:
     """What we keep of a litellm answer (:class:`Attempt`): the first choice's text and finish
     reason, and the usage as reported. A count that is not a whole number becomes None and is listed
-    in ``malformed``, for accounting to refuse."""
+    in ``malformed``, for accounting to refuse. An answer without a usable reply raises
+    :class:`UnusableReply`."""
+    reason = unusable_reason(response)
+    if reason is not None:
+        raise UnusableReply(reason)
     choices = getattr(response, "choices", None) or []
-    choice = choices[0] if choices else None
-    text = ""
-    finish = None
-    if choice is not None:
-        text = (getattr(choice.message, "content", None) or "") if getattr(choice, "message", None) else ""
-        finish = getattr(choice, "finish_reason", None)
+    choice = choices[0]
+    text = getattr(choice.message, "content", None) or ""
+    finish = getattr(choice, "finish_reason", None)
     usage = getattr(response, "usage", None)
     details = getattr(usage, "prompt_tokens_details", None) if usage is not None else None
     raw = {

@@ -25,7 +25,7 @@ from tenacity import (
 
 from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.records import CallRecord
-from workers.llm.accounting import error_record, ok_record, served_from, settle, size_request
+from workers.llm.accounting import error_record, ok_record, served_from, settle, size_request, worst_case_pico
 from workers.llm.cache_markers import BreakpointPlanner, mark
 from workers.llm.calling import Attempt, attempt_sync, litellm_kwargs
 from workers.llm.errors import Classified, classify, redact_known, refused_retry_after
@@ -75,6 +75,10 @@ class LiteLLMClient:
         counted = sizing.counted
         send = mark(self.markers, request.episode_id, messages) if self.markers is not None else messages
         attempts = 0
+        # attempts that may have been billed (a timeout, an unreadable 200) count at worst case,
+        # as the gateway charges them: the recorded cost never reads $0 for a reply the provider billed
+        charged = 0
+        worst = worst_case_pico(self.price, sizing) or 0
         backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
 
         def wait(rs: RetryCallState) -> float:
@@ -88,7 +92,7 @@ class LiteLLMClient:
             return min(pause, max(0.0, deadline - time.monotonic()))
 
         def one() -> Attempt:
-            nonlocal attempts
+            nonlocal attempts, charged
             attempts += 1
             api_key = None
             try:
@@ -103,6 +107,8 @@ class LiteLLMClient:
                 raise _Failed(Classified("auth", str(exc))) from None
             except Exception as exc:
                 c = classify(exc, secrets=[api_key, *url_secrets(cfg.api_base)])
+                if c.maybe_billed:
+                    charged += worst
                 refused = refused_retry_after(c, cfg.max_retry_after_s)
                 if refused is not None:
                     raise _Failed(refused) from None
@@ -124,7 +130,7 @@ class LiteLLMClient:
                         model=cfg.model,
                         kind=c.kind,
                         message=c.message,
-                        cost_usd=0.0,
+                        cost_usd=pico_to_usd(charged),
                         latency_s=time.monotonic() - t0,
                         retries=attempts - 1,
                         token_count_source=counted.source,
@@ -132,7 +138,7 @@ class LiteLLMClient:
                         test_double=self.test_double,
                     )
                 )
-            raise LLMError(c.kind, c.message, retries=attempts - 1) from None
+            raise LLMError(c.kind, c.message, retries=attempts - 1, cost_usd=pico_to_usd(charged)) from None
         settled = settle(cfg.model, self.price, attempt, sizing)
         usage = settled.usage
         if settled.rejected:
@@ -148,7 +154,7 @@ class LiteLLMClient:
             prompt_tokens=usage.prompt_tokens,
             cached_prompt_tokens=usage.cached_prompt_tokens,
             completion_tokens=usage.completion_tokens,
-            cost_usd=pico_to_usd(settled.cost_pico),
+            cost_usd=pico_to_usd(settled.cost_pico + charged),
             latency_s=time.monotonic() - t0,
             retries=attempts - 1,
             token_count_source=usage.token_count_source,

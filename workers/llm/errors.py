@@ -10,6 +10,7 @@ reach any record, log line or exception, because providers echo keys back in aut
 from __future__ import annotations
 
 import asyncio
+import json
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
@@ -66,8 +67,9 @@ class Classified:
     #: seconds the provider asked us to wait (Retry-After), if it said
     retry_after_s: float | None = None
     status_code: int | None = None
-    #: the provider may have generated (and billed) an answer we could not use: a timeout, a
-    #: reply body the client could not read (e.g. fractional token counts), a dropped connection.
+    #: the provider may have generated (and billed) an answer we could not use: a timeout, or an
+    #: HTTP 200 we could not turn into a usable reply (:func:`unreadable_reply`: a body that is not
+    #: JSON or cut short, an HTML page, fractional token counts, no choice, a null message).
     #: Such an attempt is charged at its reservation (the worst case), never at zero.
     maybe_billed: bool = False
     #: a ``budget`` refusal: which cap refused the call (the driver stops the run or the model by it)
@@ -169,8 +171,63 @@ def _kind_of_status(status: int | None, text: str) -> LLMErrorKind | None:
 
 
 #: litellm's words when an HTTP 200 reply could not be turned into a response (it then raises a
-#: 500-class error although the provider answered, and may have billed, the request)
-_UNREADABLE_REPLY_MARKERS = ("Invalid response object", "convert_to_model_response_object")
+#: 500-class error although the provider answered, and may have billed, the request): a body
+#: that is not JSON (or cut short), an HTML page, ``choices`` that is not a list, a choice it
+#: cannot convert
+_UNREADABLE_REPLY_MARKERS = (
+    "Invalid response object",
+    "convert_to_model_response_object",
+    "Empty or invalid response from LLM endpoint",
+    "returned 'choices' that is not a list",
+    "[200 OK]",
+)
+
+
+class UnusableReply(Exception):
+    """An HTTP 200 answer that holds no reply we can use: no choice (``choices`` empty or null), a
+    choice without a message, or a message whose content is null with no tool calls.
+
+    Why an exception and not an empty reply: handed on as ``""``, the agent read it as the
+    model's own failure (a JSON failure no resume retries), although the provider failed - and
+    may have billed the request. The gateway classifies it as a ``server_error`` that may have
+    been billed (:func:`classify`): charged at its reservation, retried
+    within the call's attempts, then the call fails (the episode ends ``infra_error``)."""
+
+
+def _chain(exc: BaseException) -> list[BaseException]:
+    """``exc`` and the exceptions it was raised from or during, in order (no cycles)."""
+    out: list[BaseException] = []
+    seen: set[int] = set()
+    link: BaseException | None = exc
+    while link is not None and id(link) not in seen:
+        seen.add(id(link))
+        out.append(link)
+        link = link.__cause__ or link.__context__
+    return out
+
+
+def unreadable_reply(exc: BaseException) -> bool:
+    """Did the provider answer HTTP 200 with a body we could not use? Then it may have billed it.
+
+    litellm reports such a reply as a 500-class error (with a made-up status 500), so the status
+    cannot tell it from a real provider 5xx. What tells them apart is the chain of exceptions: a
+    real HTTP error was raised from the HTTP client's status error (``httpx.HTTPStatusError``, or
+    the OpenAI SDK's ``APIStatusError`` carrying the provider's body); an unreadable 200 from a
+    JSON decoding error, from our own :class:`UnusableReply`, or from
+    litellm's conversion of the reply (:data:`_UNREADABLE_REPLY_MARKERS`)."""
+    chain = _chain(exc)
+    for link in chain:
+        module = type(link).__module__
+        if type(link).__name__ == "HTTPStatusError" and module.startswith("httpx"):
+            return False
+        if module.startswith("openai") and isinstance(getattr(link, "body", None), dict):
+            return False  # the SDK read the provider's error body: a real HTTP error status
+    for link in chain:
+        if isinstance(link, (UnusableReply, json.JSONDecodeError)):
+            return True
+        if any(m in str(link) for m in _UNREADABLE_REPLY_MARKERS):
+            return True
+    return False
 
 
 def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classified:
@@ -178,7 +235,7 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
     from workers.llm.litellm_import import import_litellm
 
     litellm = import_litellm()
-    unreadable = False
+    unreadable = reply_200 = False
     message = scrub(f"{type(exc).__name__}: {exc}", secrets)[:MAX_MESSAGE_CHARS]
     status = getattr(exc, "status_code", None)
     status = status if isinstance(status, int) else None
@@ -195,6 +252,10 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
         exc, (litellm.InternalServerError, litellm.ServiceUnavailableError, litellm.BadGatewayError, litellm.APIConnectionError)
     ):
         kind = "server_error"
+        unreadable = reply_200 = unreadable_reply(exc)
+    elif unreadable_reply(exc):  # our own UnusableReply, or a decoding error litellm let through
+        kind = "server_error"
+        unreadable = reply_200 = True
     elif isinstance(
         exc, (litellm.BadRequestError, litellm.NotFoundError, litellm.UnprocessableEntityError, litellm.UnsupportedParamsError)
     ):
@@ -205,7 +266,9 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
             # unknown failure inside the client (malformed body, dropped connection): transient
             kind = "server_error"
             unreadable = True
-    billed = kind == "timeout" or unreadable or any(m in str(exc) for m in _UNREADABLE_REPLY_MARKERS)
+    billed = kind == "timeout" or unreadable
+    if reply_200:
+        status = 200  # what the provider answered (litellm reports a made-up 500)
     return Classified(kind, message, retry_after_seconds(exc) if kind == "rate_limit" else None, status, maybe_billed=billed)
 
 

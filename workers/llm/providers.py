@@ -194,6 +194,10 @@ class DeploymentConfig(BaseModel):
     #: the longest Retry-After the gateway honours: a 429 asking for more fails the call at
     #: once as ``LLMError("rate_limit")`` (and does not pause the deployment) instead of sleeping
     max_retry_after_s: float = Field(default=120.0, ge=0)
+    #: replies whose usage is rejected as impossible (each charged at its worst case) after which
+    #: the gateway refuses this deployment's further calls for the session (a ``usage`` refusal:
+    #: the driver stops starting the model's units, the other models go on)
+    max_usage_rejections: int = Field(default=3, gt=0)
     params: dict[str, Any] = Field(default_factory=dict)
     price: Price | None = None
     #: serve identical requests (model, params, messages) from the ledger's response cache
