@@ -322,3 +322,18 @@ def test_elided_environment_keeps_what_the_agent_acts_on():
     step = env.step("unstack C from A")
     assert step.observation == OMITTED_OBSERVATION and "put down C" in step.valid_actions
     assert env.max_steps == inner.max_steps and env.steps_taken == 1
+
+
+def test_history_keep_never_drops_the_first_reply_even_on_a_context_error():
+    from recap.history import History
+
+    h = History("ep", 6, keep=1)
+    h.pin("user", "task", "t")
+    for i in range(5):
+        h.add("assistant", "reply", f"r{i}")
+        h.add("user", "observation", f"o{i}")
+    assert [m.content for m in h.messages()] == ["t", "r0", "o2", "r3", "o3", "r4", "o4"]
+    assert h.drop_oldest(32) == 4  # a context-length error: whole pairs after the kept reply
+    assert [m.content for m in h.messages()] == ["t", "r0", "o4"]
+    with pytest.raises(ValueError, match=r"^keep must be in \[0, window\), got 6$"):
+        History("ep", 6, keep=6)
