@@ -106,6 +106,9 @@ class Environment(ABC):
     #: location), so a context opened later also needs the episode's first observation; False
     #: when every observation shows the whole state (Robotouille, blocksworld).
     partially_observed: bool = False
+    #: True when every observation already ends with the currently valid actions (ALFWorld with
+    #: ``show_valid_actions``), so feedback that names them need not repeat the list
+    lists_valid_actions: bool = False
     optimal_steps: int | None = None
     #: environment steps allowed (ceil(optimal x multiplier), or a benchmark's fixed cap)
     max_steps: int = 50

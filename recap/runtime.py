@@ -106,6 +106,7 @@ class Conversation:
                 block=config.window_block,
                 emit=emit,
                 counts_pins=config.history_counts_pins(),
+                keep=config.history_keep(),
             )
         )
         self.usage = usage if usage is not None else Usage()
@@ -133,6 +134,7 @@ class Conversation:
                 emit=self.emit,
                 counter=self.history.counter,
                 counts_pins=cfg.history_counts_pins(),
+                keep=cfg.history_keep(),
             ),
         )
 

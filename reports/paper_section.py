@@ -88,6 +88,7 @@ def arm_protocol(cell: dict[str, Any]) -> paper.ArmProtocol:
         benchmark=cell["benchmark"],
         split=cell["split"],
         tasks=tasks,
+        method=cell.get("method") or "recap",
     )
 
 

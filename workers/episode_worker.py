@@ -70,7 +70,7 @@ def env_options_for(unit: UnitWork, agent: Agent) -> dict[str, Any]:
     options, which win."""
     from workers.envs.registry import get_benchmark
 
-    options = dict(get_benchmark(unit.benchmark).options_for_agent(agent.style))
+    options = dict(get_benchmark(unit.benchmark).options_for_agent(agent.style, agent.config))
     options.update({k: v for k, v in unit.env_options if v is not None})
     return options
 

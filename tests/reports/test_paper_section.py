@@ -56,7 +56,7 @@ def _arm(**kw: Any) -> paper.ArmProtocol:
         provider_model="openai/gpt-4o-2024-08-06",
         test_double=False,
         profile="paper",
-        windows=(64,),
+        windows=(128,),
         benchmark="robotouille",
         split="synchronous",
         tasks=tuple((f"{i}_t", (paper.step_multiplier("synchronous", i),)) for i in range(10)),
@@ -71,7 +71,27 @@ def test_mismatch_names_the_first_protocol_difference():
     assert paper.mismatch(main, _arm(provider_model="gpt-4o-mini")) == "model gpt-4o-mini, the paper used GPT-4o"
     assert paper.mismatch(main, _arm(provider_model="gpt-4o-2024-11-20")) == "model gpt-4o-2024-11-20, the paper used GPT-4o"
     assert paper.mismatch(main, _arm(profile="released")) == "profile released, the paper's runs are profile paper"
-    assert paper.mismatch(main, _arm(windows=(128,))) == "window 128 messages, the paper used 64"
+    # windows count messages: ReCAP 128 (K = 64 rounds), the released ReAct 64 on Robotouille and
+    # 128 on ALFWorld; Act keeps its whole history, so its window is not checked
+    assert paper.mismatch(main, _arm(windows=(64,))) == "window 64 messages, the paper used 128"
+    react_tasks = tuple((f"{i}_t", (paper.step_multiplier("synchronous", i, "react"),)) for i in range(10))
+    assert paper.mismatch(main, _arm(method="react", windows=(64,), tasks=react_tasks)) is None
+    assert paper.mismatch(main, _arm(method="react", windows=(128,), tasks=react_tasks)) == (
+        "window 128 messages, the paper used 64"
+    )
+    act_tasks = tuple((f"{i}_t", (2.0,)) for i in range(10))
+    assert paper.mismatch(main, _arm(method="act", windows=(128,), tasks=act_tasks)) is None
+    # step caps per method and task (the released configs): ReAct x2 on synchronous 9, Act x2
+    assert [paper.step_multiplier("synchronous", i, "react") for i in range(10)] == [4, 4, 3, 4, 3, 4, 3, 4, 4, 2]
+    assert [paper.step_multiplier("asynchronous", i, "react") for i in range(10)] == [4, 4, 2, 4, 3, 4, 3, 4, 4, 4]
+    assert [paper.step_multiplier("asynchronous", i, "recap") for i in range(10)] == [4] * 10
+    assert {
+        paper.step_multiplier(s, i, m) for s in ("synchronous", "asynchronous") for i in range(10) for m in ("adapt", "cot")
+    } == {4}
+    assert paper.step_multiplier("synchronous", 3, "standard") == 1.5
+    assert paper.mismatch(main, _arm(method="act", tasks=react_tasks)) == (
+        "step cap x4 on synchronous:0, the released configs use x2"
+    )
     assert paper.mismatch(main, _arm(tasks=(("2_t", (3.0,)), ("6_t", (3.0,))))) == (
         "ran 2 of the paper's 10 tasks (missing synchronous:0, synchronous:1, synchronous:3, synchronous:4, "
         "synchronous:5, synchronous:7, synchronous:8, synchronous:9)"
@@ -80,13 +100,21 @@ def test_mismatch_names_the_first_protocol_difference():
     assert paper.mismatch(main, _arm(tasks=all_x4)) == "step cap x4 on synchronous:2, the released configs use x3"
     cross = paper.PROTOCOLS["cross_model"]
     t246 = tuple((f"{i}_t", (3.0,)) for i in (2, 4, 6))
-    assert paper.mismatch(cross, _arm(tasks=t246, provider_model="together_ai/Qwen/Qwen2.5-72B-Instruct-Turbo")) is None
+    assert paper.mismatch(cross, _arm(tasks=t246)) == "window 128 messages, the paper used 64"
+    assert paper.mismatch(cross, _arm(tasks=t246, windows=(64,), method="react")) is None
+    cross_arm = {"windows": (64,)}
     assert (
-        paper.mismatch(cross, _arm(tasks=t246, provider_model="deepinfra/meta-llama/Llama-4-Maverick-17B-128E-Instruct-FP8"))
+        paper.mismatch(cross, _arm(tasks=t246, provider_model="together_ai/Qwen/Qwen2.5-72B-Instruct-Turbo", **cross_arm)) is None
+    )
+    assert (
+        paper.mismatch(
+            cross, _arm(tasks=t246, provider_model="deepinfra/meta-llama/Llama-4-Maverick-17B-128E-Instruct-FP8", **cross_arm)
+        )
         is None
     )
     assert (
-        paper.mismatch(cross, _arm(tasks=t246 + (("7_t", (4.0,)),))) == "ran tasks the paper's number leaves out (synchronous:7)"
+        paper.mismatch(cross, _arm(tasks=t246 + (("7_t", (4.0,)),), **cross_arm))
+        == "ran tasks the paper's number leaves out (synchronous:7)"
     )
     alf = _arm(benchmark="alfworld", split="valid_unseen", tasks=tuple((t, (4.0,)) for t in paper.ALFWORLD_TYPES))
     assert paper.mismatch(main, alf) is None

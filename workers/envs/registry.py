@@ -23,6 +23,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from recap.config import AgentConfig
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
 
@@ -61,9 +62,10 @@ class Benchmark(ABC):
         """A fresh environment for ``instance_id`` (options: step_multiplier, data_dir...)."""
 
     # -- hooks ----------------------------------------------------------------------------------
-    def options_for_agent(self, style: str) -> dict[str, Any]:
-        """``make()`` options an agent ``style`` (``recap``, ``react``...) runs with unless the
-        sweep sets them (ALFWorld: whether observations list the valid actions). Default: none."""
+    def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
+        """``make()`` options an agent ``style`` (``recap``, ``react``...) with its resolved
+        settings ``config`` runs with unless the sweep sets them (ALFWorld: whether observations
+        list the valid actions). Default: none."""
         return {}
 
     def data_folders(self) -> Mapping[str, DataFolder]:

@@ -1,0 +1,194 @@
+"""ReAct and Act on a real ALFWorld game under the ``paper`` and ``released`` profiles (issue 25,
+item 1): the exact first and later prompts - the valid actions after the first observation and
+after every valid command, none in the demonstration, the explained feedback after an invalid
+command, "OK." after a thought (no step used) - and ``profile: none`` unchanged."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+
+from recap.llm import LLMError
+from recap.methods import make_agent
+from recap.scripted import ScriptedClient
+from tests.alfworld.helpers import DATA, HEAT_ID, HEAT_START
+from tests.alfworld.test_alfworld_valid_actions import ARRIVE_LIST, HEAT_ARRIVE, START_LIST
+from workers.envs.alfworld import AlfworldBenchmark
+from workers.envs.alfworld.demos import demonstration_for
+from workers.envs.alfworld.rules import rules_text
+from workers.episode_worker import env_options_for
+
+#: ends a scripted episode after the prompts under test
+STOP = LLMError("server_error", "end of the script")
+GOAL = "heat some apple and put it in fridge"
+REACT_SYSTEM = (
+    "You are an agent that reaches a goal in an environment one action at a time. At every turn you think about "
+    "the latest observation, then choose exactly one action; I carry it out and show you what happened. An action "
+    "that is not one of the valid actions is not carried out, and I tell you so.\n\n"
+    "Answer every time with one JSON object and nothing else:\n"
+    '{"think": "<your reasoning>", "action": "<one valid action>"}\n'
+    '- "think": your reasoning before acting: what the goal still needs, what the latest observation and your '
+    "earlier steps tell you, and why the action you choose moves you towards the goal. If your last action was "
+    "rejected, first work out why it was not valid.\n"
+    '- "action": the single next action, written exactly as it appears among the valid actions.\n'
+    'To think without acting, write the action as "think: <your thought>"; I answer "OK." and no step is used.'
+)
+ACT_SYSTEM = (
+    "You are an agent that reaches a goal in an environment one action at a time. At every turn you choose "
+    "exactly one action; I carry it out and show you what happened. An action that is not one of the valid "
+    "actions is not carried out, and I tell you so.\n\n"
+    "Answer every time with one JSON object and nothing else:\n"
+    '{"action": "<one valid action>"}\n'
+    '- "action": the single next action, written exactly as it appears among the valid actions.\n'
+    'To think without acting, reply {"think": "<your thought>"} with no "action"; I answer "OK." and no step is used.'
+)
+
+
+def feedback(action: str, thought_hint: str, observation: str) -> str:
+    return (
+        f"'{action}' is not one of the valid actions, so it changed nothing. Likely causes:\n"
+        "1. The command is not an exact copy of a valid action: copy it word for word, numbers included.\n"
+        f"2. You meant to think rather than act: to think, {thought_hint}.\n"
+        "3. Something you assumed about the situation does not hold: check the latest observation.\n\n"
+        f"Observation:\n{observation}"
+    )
+
+
+@pytest.fixture(scope="module")
+def bench() -> AlfworldBenchmark:
+    return AlfworldBenchmark(DATA)
+
+
+def _run(bench, method, profile, replies):
+    """One episode of ``method`` under ``profile`` on the heat game, made the way a worker makes it."""
+    agent = make_agent(method, profile=profile, benchmark="alfworld")
+    work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
+    options = env_options_for(work, agent)  # type: ignore[arg-type]
+    env = bench.make(HEAT_ID, **options)
+    client = ScriptedClient(replies)
+    try:
+        result = agent.run(env, client, episode_id="ep", demonstration=True)
+    finally:
+        env.close()
+    return agent, options, result, client
+
+
+def _task_prompt(system: str, rules: str) -> str:
+    return (
+        f"{system}\n\nRules of the environment:\n{rules}\n\n"
+        f"Initial observation:\n{HEAT_START}{START_LIST}\n\nYour goal:\n{GOAL}\n\nReply with your first action."
+    )
+
+
+@pytest.mark.parametrize("method", ["react", "act"])
+def test_paper_and_released_differ_only_in_temperature(method):
+    """The paper states no baseline protocol beyond T = 0.5, so ``paper`` runs the released one:
+    one game per method below covers both profiles."""
+    paper = make_agent(method, profile="paper", benchmark="alfworld").config
+    released = make_agent(method, profile="released", benchmark="alfworld").config
+    assert (paper.temperature, released.temperature) == (0.5, None)
+    assert dataclasses.replace(paper, temperature=None) == released
+
+
+def test_react_sees_valid_actions_feedback_and_ok(bench):
+    replies = [
+        {"think": "Where is an apple?", "action": "think: an apple is likely in the garbagecan"},
+        {"think": "Take it.", "action": "take apple 2 from garbagecan 1"},
+        {"think": "Go there first.", "action": "go to garbagecan 1"},
+    ]
+    agent, options, result, client = _run(bench, "react", "released", replies + [STOP])
+    assert options == {"show_valid_actions": True, "demo_valid_actions": False}
+    first = client.requests[0].messages
+    # pins: the demonstration (Yao et al.'s way: no valid-action lists) and the task prompt
+    assert len(first) == 2 and "Valid actions:" not in first[0].content
+    assert first[1].content == _task_prompt(REACT_SYSTEM, rules_text("2.1.1", 50))
+    later = [r.messages[-1].content for r in client.requests[1:]]
+    assert later == [
+        "OK.",
+        feedback(
+            "take apple 2 from garbagecan 1", 'write the action as "think: <your thought>"', "Nothing happens." + START_LIST
+        ),
+        f"Observation:\n{HEAT_ARRIVE}{ARRIVE_LIST}",
+    ]
+    # the thought used no step: 2 commands reached the game
+    assert (result.steps, result.invalid_actions, result.llm_calls) == (2, 1, 4)
+    assert [r.purpose for r in client.requests] == ["task", "thought", "feedback", "observation"]
+
+
+def test_act_sees_valid_actions_feedback_and_ok(bench):
+    replies = [
+        {"think": "an apple is likely in the garbagecan"},
+        {"action": "take apple 2 from garbagecan 1"},
+        {"action": "go to garbagecan 1"},
+        # the released Act answers "OK." to any reply holding a think, even one that acted
+        {"think": "take it now", "action": "take apple 2 from garbagecan 1"},
+    ]
+    agent, options, result, client = _run(bench, "act", "released", replies + [STOP])
+    assert options == {"show_valid_actions": True, "demo_valid_actions": False}
+    first = client.requests[0].messages
+    assert len(first) == 2 and "Valid actions:" not in first[0].content
+    assert first[1].content == _task_prompt(ACT_SYSTEM, rules_text("2.1.1", 50))
+    later = [r.messages[-1].content for r in client.requests[1:]]
+    assert later == [
+        "OK.",
+        feedback(
+            "take apple 2 from garbagecan 1",
+            'reply {"think": "<your thought>"} with no "action"',
+            "Nothing happens." + START_LIST,
+        ),
+        f"Observation:\n{HEAT_ARRIVE}{ARRIVE_LIST}",
+        "OK.",
+    ]
+    assert (result.steps, result.invalid_actions) == (3, 1)
+    # no window: every call sees the whole history
+    assert [len(r.messages) for r in client.requests] == [2, 4, 6, 8, 10]
+    assert json.loads(client.requests[4].messages[2].content) == {"think": "an apple is likely in the garbagecan"}
+
+
+def test_without_a_profile_react_is_unchanged(bench):
+    """``profile: none``: no lists, a thought is a command the game answers, no explained feedback."""
+    replies = [
+        {"think": "Where is an apple?", "action": "think: an apple is likely in the garbagecan"},
+        {"think": "Go there.", "action": "go to garbagecan 1"},
+    ]
+    agent, options, result, client = _run(bench, "react", None, replies + [STOP])
+    assert options == {"show_valid_actions": False}
+    assert "Valid actions:" not in client.requests[0].messages[1].content
+    assert [r.messages[-1].content for r in client.requests[1:]] == [
+        "Observation:\nNothing happens.",
+        f"Observation:\n{HEAT_ARRIVE}",
+    ]
+    assert (result.steps, result.invalid_actions) == (2, 1)
+
+
+def test_explained_feedback_lists_the_valid_actions_when_the_observation_does_not():
+    """With the lists switched off by a setting, the feedback still carries them (as released);
+    the demonstration's replay of the cool game stands in for a game here (same rules, fast)."""
+    agent = make_agent("react", profile="released", benchmark="alfworld", valid_actions="hidden")
+    work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
+    assert env_options_for(work, agent) == {"show_valid_actions": False}  # type: ignore[arg-type]
+    env = demonstration_for("cool", show_valid_actions=False).make_env()
+    start = env.reset()
+    client = ScriptedClient([{"think": "t", "action": "open the fridge"}, STOP])
+    agent.run(env, client, episode_id="ep", demonstration=False)
+    assert client.requests[1].messages[-1].content == feedback(
+        "open the fridge", 'write the action as "think: <your thought>"', "Nothing happens."
+    ) + "\n\nValid actions:\n" + "\n".join(start.valid_actions)
+
+
+def test_valid_actions_setting_maps_to_the_game_options(bench):
+    for choice, want in (
+        ("shown", {"show_valid_actions": True}),
+        ("episode", {"show_valid_actions": True, "demo_valid_actions": False}),
+        ("hidden", {"show_valid_actions": False}),
+    ):
+        assert bench.options_for_agent("react", make_agent("react", valid_actions=choice).config) == want
+    # no setting: the per-style choice (ReCAP sees them, the others do not)
+    assert bench.options_for_agent("recap", make_agent("recap").config) == {"show_valid_actions": True}
+    assert bench.options_for_agent("cot", make_agent("cot", profile="released", benchmark="alfworld").config) == {
+        "show_valid_actions": False
+    }
+    with pytest.raises(ValueError, match=r"^demo_valid_actions must be true, false or null \(None\), got 'no'$"):
+        bench.make(HEAT_ID, demo_valid_actions="no")
