@@ -5,10 +5,21 @@ Everything else — pins, observations, error feedback, window, caps — is ReAc
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from recap.baselines import prompts as P
 from recap.baselines.react import ReActAgent, ReActConfig
 
-__all__ = ["ActAgent", "ReActConfig"]
+__all__ = ["ActAgent", "ActConfig", "ReActConfig"]
+
+
+@dataclass(frozen=True)
+class ActConfig(ReActConfig):
+    """ReAct's settings; only the released profile differs: on ALFWorld the released Act asks for
+    JSON (alfworld-recap/act_alfworld/act.py:165-168, ``response_format`` json_object), so
+    ``released`` keeps ``reply_format: json`` there."""
+
+    released_text = False
 
 
 class ActAgent(ReActAgent):

@@ -35,6 +35,8 @@ from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
+from recap.baselines.react_text import demo_texts, play_text
+from recap.baselines.reply_format import check_reply_format, text_reply_defaults
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
@@ -55,6 +57,12 @@ class ReActConfig(AgentConfig):
     invalid_streak: int | None = None
     invalid_rounds: int = 3
     history: Literal["window", "last"] = "window"
+    #: ``json`` (ours) or ``text``: the released code's plain-text replies and parsing
+    #: (recap.baselines.react_text); ``text`` needs ``json_mode: false``
+    reply_format: Literal["json", "text"] = "json"
+    #: the text layout: ``labelled`` (Robotouille's "Reasoning:" / "Action:" lines) or ``yao``
+    #: (ALFWorld's one line: "think: ..." or the command)
+    text_layout: Literal["labelled", "yao"] = "labelled"
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
@@ -65,7 +73,13 @@ class ReActConfig(AgentConfig):
             out.update(history="last", invalid_streak=5, invalid_rounds=3)
         elif benchmark == "alfworld":
             out.update(history="window", invalid_streak=None)
+        if profile == "released":
+            out.update(text_reply_defaults(cls.released_text, benchmark))
         return out
+
+    #: whether the released code's agent replies in plain text on ALFWorld (ReAct: react.py;
+    #: Act's act.py asks for JSON)
+    released_text: ClassVar[bool] = True
 
     def history_window(self) -> int:
         return 2 if self.history == "last" else self.window
@@ -81,6 +95,9 @@ class ReActConfig(AgentConfig):
             raise ConfigError(f"invalid_streak must be >= 1 or null, got {self.invalid_streak}")
         if self.invalid_rounds < 1:
             raise ConfigError(f"invalid_rounds must be >= 1, got {self.invalid_rounds}")
+        check_reply_format(self)
+        if self.text_layout not in ("labelled", "yao"):
+            raise ConfigError(f"text_layout must be labelled or yao, got {self.text_layout!r}")
 
 
 def flat_context(ep: Episode, goal: str) -> dict[str, Any]:
@@ -113,7 +130,14 @@ class ReActAgent(Agent):
     def reply_format(self) -> str:
         return P.action_format(self.with_think)
 
+    def shape_demo_replies(self, replies: list[Any]) -> list[Any]:
+        if self.config.reply_format == "text":
+            return demo_texts(self, replies)
+        return super().shape_demo_replies(replies)
+
     def play(self, ep: Episode, reset: Reset) -> None:
+        if self.config.reply_format == "text":
+            return play_text(self, ep, reset)
         cfg, d = self.config, ep.driver
         ep.conv.pin(
             "task",
