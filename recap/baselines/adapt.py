@@ -1,5 +1,9 @@
 """ADaPT (Prasad et al., 2023, "As-Needed Decomposition and Planning with Language Models").
 
+``algorithm: plan_once`` (the ``released`` profile outside ALFWorld) is instead the authors'
+released Robotouille ADaPT, which plans once and never decomposes on failure:
+:mod:`recap.baselines.adapt_released`. Everything below is ``algorithm: as_needed``.
+
 Control flow (the paper's Algorithm 1, with the released code's depth rule):
 
     solve(task, depth):
