@@ -202,6 +202,12 @@ class Agent(ABC):
         """A demonstration reply in this configuration's reply format (ablations drop fields)."""
         return reply
 
+    def shape_demo_replies(self, replies: list[Any]) -> list[Any]:
+        """The demonstration's replies in call order, each through :meth:`shape_demo_reply`; a
+        method whose reply format splits one reply into several calls (plain-text ReAct on
+        ALFWorld: the thought, then the command) overrides this."""
+        return [self.shape_demo_reply(r) for r in replies]
+
     def demo_config(self) -> AgentConfig:
         """Settings for rendering a demonstration: nothing trimmed, no caps that could cut it."""
         return dataclasses.replace(
@@ -223,7 +229,7 @@ class Agent(ABC):
             replies = type(self).demo_replies(demo.script)
         if replies is None:
             raise DemonstrationError(f"demonstration {demo.name!r} has no replies for style {self.style!r}")
-        messages, result = self.scripted_demo_run(demo, [self.shape_demo_reply(r) for r in replies], f"demo:{demo.name}")
+        messages, result = self.scripted_demo_run(demo, self.shape_demo_replies(list(replies)), f"demo:{demo.name}")
         if not result.success:
             raise DemonstrationError(
                 f"demonstration {demo.name!r} does not reach the goal with {type(self).__name__} ({result.end_reason}: {result.error})"

@@ -149,12 +149,16 @@ class Conversation:
         *,
         node_id: int | None = None,
         context: Mapping[str, Any] | None = None,
+        decode: Callable[[str], dict[str, Any]] = parse_json_object,
     ) -> tuple[dict[str, Any], int]:
         """Send ``prompt`` and return (parsed reply, seq of the reply message).
 
         ``prompt`` None means the prompt is already in the history (the pinned task prompt).
         A malformed reply is answered with a repair message, at most ``max_json_repairs`` times;
-        then the episode ends with ``json_failures``.
+        then the episode ends with ``json_failures``. ``decode`` turns the reply text into the
+        object ``parse`` checks (JSON by default; the plain-text formats of
+        :mod:`recap.baselines.textreply` pass the text through and handle malformed replies
+        themselves, as the released code does).
         """
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
@@ -163,7 +167,7 @@ class Conversation:
         while True:
             text, seq = self._call(purpose, node_id, context or {})
             try:
-                return parse(parse_json_object(text)), seq
+                return parse(decode(text)), seq
             except ReplyFormatError as exc:
                 if repairs >= self.config.max_json_repairs:
                     raise EpisodeEnd("json_failures", str(exc)) from None

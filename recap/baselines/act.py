@@ -17,7 +17,12 @@ __all__ = ["ActAgent", "ActConfig", "ReActConfig"]
 
 @dataclass(frozen=True)
 class ActConfig(ReActConfig):
-    """Act settings: ReAct's, with the released Act's history under the profiles."""
+    """Act settings: ReAct's, with the released Act's history under the profiles and its reply
+    format under ``released``: on ALFWorld the released Act asks for JSON
+    (alfworld-recap/act_alfworld/act.py:165-168, ``response_format`` json_object), so
+    ``released`` keeps ``reply_format: json`` there (Robotouille's Act: the labelled text)."""
+
+    released_text = False
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:

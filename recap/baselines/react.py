@@ -24,6 +24,10 @@ give up after 3 rounds of 5 consecutive invalid actions), Act with no window; on
 released react.py / act.py (valid actions in every observation, "OK." for a thought, explained
 feedback after an invalid command, 128 messages counting the pins; Act with no window).
 
+``reply_format: text`` (the ``released`` profile's choice where the release reads plain text)
+runs the same episode through :mod:`recap.baselines.react_text`: other reply parsing, the same
+history, observations and explained feedback (:meth:`ReActAgent.explained_feedback`).
+
 Message kinds (also the call purposes): ``task`` (pinned), ``observation``, ``feedback`` (after
 a rejected or, explained, an invalid action), ``thought`` (after a thought), ``repair``. Hints
 for offline models: ``task`` (the goal), ``depth`` 0, ``valid_actions``.
@@ -36,6 +40,8 @@ from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
+from recap.baselines.react_text import demo_texts, play_text
+from recap.baselines.reply_format import check_reply_format, text_reply_defaults
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
@@ -74,6 +80,12 @@ class ReActConfig(AgentConfig):
     window_keeps_first: bool = False
     think_actions: bool = False
     invalid_feedback: Literal["plain", "explained"] = "plain"
+    #: ``json`` (ours) or ``text``: the released code's plain-text replies and parsing
+    #: (recap.baselines.react_text); ``text`` needs ``json_mode: false``
+    reply_format: Literal["json", "text"] = "json"
+    #: the text layout: ``labelled`` (Robotouille's "Reasoning:" / "Action:" lines) or ``yao``
+    #: (ALFWorld's one line: "think: ..." or the command)
+    text_layout: Literal["labelled", "yao"] = "labelled"
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
@@ -111,7 +123,15 @@ class ReActConfig(AgentConfig):
                 invalid_feedback="explained",
                 valid_actions="episode",
             )
+        if profile == "released":
+            # the released agents' plain-text replies (recap.baselines.reply_format); the history,
+            # window and feedback above apply to the text loop unchanged
+            out.update(text_reply_defaults(cls.released_text, benchmark))
         return out
+
+    #: whether the released code's agent replies in plain text on ALFWorld (ReAct: react.py;
+    #: Act's act.py asks for JSON)
+    released_text: ClassVar[bool] = True
 
     def history_window(self) -> int:
         if self.history == "last":
@@ -136,6 +156,9 @@ class ReActConfig(AgentConfig):
             raise ConfigError(f"invalid_feedback must be plain or explained, got {self.invalid_feedback!r}")
         if self.window_keeps_first and self.history == "window" and self.window < 4:
             raise ConfigError("window must be >= 4 messages when it keeps the first reply")
+        check_reply_format(self)
+        if self.text_layout not in ("labelled", "yao"):
+            raise ConfigError(f"text_layout must be labelled or yao, got {self.text_layout!r}")
 
 
 def flat_context(ep: Episode, goal: str) -> dict[str, Any]:
@@ -189,7 +212,22 @@ class ReActAgent(Agent):
             return True
         return self.with_think and action.lower().startswith(THOUGHT_PREFIX)
 
+    def explained_feedback(self, ep: Episode, action: str) -> str:
+        """The message after a command that reached the game but was not valid
+        (``invalid_feedback: explained``), for the JSON and the text loop alike: the valid
+        actions are listed unless the game's answer already lists them."""
+        d = ep.driver
+        listed = ep.env.lists_valid_actions
+        return P.explained_invalid_prompt(action, d.observation, None if listed else d.valid_actions, with_think=self.with_think)
+
+    def shape_demo_replies(self, replies: list[Any]) -> list[Any]:
+        if self.config.reply_format == "text":
+            return demo_texts(self, replies)
+        return super().shape_demo_replies(replies)
+
     def play(self, ep: Episode, reset: Reset) -> None:
+        if self.config.reply_format == "text":
+            return play_text(self, ep, reset)
         cfg, d = self.config, ep.driver
         ep.conv.pin(
             "task",
@@ -232,10 +270,6 @@ class ReActAgent(Agent):
                 # acted: the action runs, its observation is not shown (act_alfworld/act.py:218-219)
                 prompt, kind = P.THOUGHT_ACK, "thought"
             elif not valid and cfg.invalid_feedback == "explained":
-                listed = ep.env.lists_valid_actions
-                prompt = P.explained_invalid_prompt(
-                    action, d.observation, None if listed else d.valid_actions, with_think=self.with_think
-                )
-                kind = "feedback"
+                prompt, kind = self.explained_feedback(ep, action), "feedback"
             else:
                 prompt, kind = P.observation_prompt(d.observation), "observation"

@@ -1,7 +1,9 @@
 """ReAct and Act on a real ALFWorld game under the ``paper`` and ``released`` profiles (issue 25,
 item 1): the exact first and later prompts - the valid actions after the first observation and
 after every valid command, none in the demonstration, the explained feedback after an invalid
-command, "OK." after a thought (no step used) - and ``profile: none`` unchanged."""
+command, "OK." after a thought (no step used) - and ``profile: none`` unchanged. ``paper`` runs
+ReAct with our JSON replies, ``released`` with the release's one-line text (item 8); the two loops
+send the same observations and feedback."""
 
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ import json
 
 import pytest
 
+from recap.baselines import text_prompts as T
 from recap.llm import LLMError
 from recap.methods import make_agent
 from recap.scripted import ScriptedClient
@@ -83,38 +86,50 @@ def _task_prompt(system: str, rules: str) -> str:
 
 
 @pytest.mark.parametrize("method", ["react", "act"])
-def test_paper_and_released_differ_only_in_temperature(method):
-    """The paper states no baseline protocol beyond T = 0.5, so ``paper`` runs the released one:
-    one game per method below covers both profiles."""
+def test_paper_and_released_differ_only_in_temperature_and_reacts_reply_format(method):
+    """The paper states no baseline protocol beyond T = 0.5, so ``paper`` runs the released one,
+    with our JSON replies; ``released`` has ReAct reply in Yao et al.'s one line as react.py does
+    (Act's act.py asks for JSON too)."""
     paper = make_agent(method, profile="paper", benchmark="alfworld").config
     released = make_agent(method, profile="released", benchmark="alfworld").config
     assert (paper.temperature, released.temperature) == (0.5, None)
-    assert dataclasses.replace(paper, temperature=None) == released
+    text = {"reply_format": "text", "json_mode": False, "text_layout": "yao"} if method == "react" else {}
+    assert dataclasses.replace(paper, temperature=None, **text) == released
 
 
-def test_react_sees_valid_actions_feedback_and_ok(bench):
-    replies = [
-        {"think": "Where is an apple?", "action": "think: an apple is likely in the garbagecan"},
-        {"think": "Take it.", "action": "take apple 2 from garbagecan 1"},
-        {"think": "Go there first.", "action": "go to garbagecan 1"},
-    ]
-    agent, options, result, client = _run(bench, "react", "released", replies + [STOP])
+@pytest.mark.parametrize("profile", ["paper", "released"])
+def test_react_sees_valid_actions_feedback_and_ok(bench, profile):
+    if profile == "paper":
+        replies: list = [
+            {"think": "Where is an apple?", "action": "think: an apple is likely in the garbagecan"},
+            {"think": "Take it.", "action": "take apple 2 from garbagecan 1"},
+            {"think": "Go there first.", "action": "go to garbagecan 1"},
+        ]
+    else:
+        replies = ["think: an apple is likely in the garbagecan", "take apple 2 from garbagecan 1", "go to garbagecan 1"]
+    agent, options, result, client = _run(bench, "react", profile, replies + [STOP])
     assert options == {"show_valid_actions": True, "demo_valid_actions": False}
     first = client.requests[0].messages
     # pins: the demonstration (Yao et al.'s way: no valid-action lists) and the task prompt
     assert len(first) == 2 and "Valid actions:" not in first[0].content
-    assert first[1].content == _task_prompt(REACT_SYSTEM, rules_text("2.1.1", 50))
+    rules = rules_text("2.1.1", 50)
+    if profile == "paper":
+        assert first[1].content == _task_prompt(REACT_SYSTEM, rules)
+    else:  # the first observation with its list, as released (react.py:209); it states the goal
+        assert first[1].content == f"{T.yao_system()}\n\nRules of the environment:\n{rules}\n\n{HEAT_START}{START_LIST}"
+    arrive = f"{HEAT_ARRIVE}{ARRIVE_LIST}"
     later = [r.messages[-1].content for r in client.requests[1:]]
     assert later == [
         "OK.",
         feedback(
             "take apple 2 from garbagecan 1", 'write the action as "think: <your thought>"', "Nothing happens." + START_LIST
         ),
-        f"Observation:\n{HEAT_ARRIVE}{ARRIVE_LIST}",
+        f"Observation:\n{arrive}" if profile == "paper" else arrive,
     ]
     # the thought used no step: 2 commands reached the game
     assert (result.steps, result.invalid_actions, result.llm_calls) == (2, 1, 4)
     assert [r.purpose for r in client.requests] == ["task", "thought", "feedback", "observation"]
+    assert {r.json_mode for r in client.requests} == {profile == "paper"}
 
 
 def test_act_sees_valid_actions_feedback_and_ok(bench):
@@ -163,15 +178,17 @@ def test_without_a_profile_react_is_unchanged(bench):
     assert (result.steps, result.invalid_actions) == (2, 1)
 
 
-def test_explained_feedback_lists_the_valid_actions_when_the_observation_does_not():
+@pytest.mark.parametrize("profile", ["paper", "released"])
+def test_explained_feedback_lists_the_valid_actions_when_the_observation_does_not(profile):
     """With the lists switched off by a setting, the feedback still carries them (as released);
     the demonstration's replay of the cool game stands in for a game here (same rules, fast)."""
-    agent = make_agent("react", profile="released", benchmark="alfworld", valid_actions="hidden")
+    agent = make_agent("react", profile=profile, benchmark="alfworld", valid_actions="hidden")
     work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
     assert env_options_for(work, agent) == {"show_valid_actions": False}  # type: ignore[arg-type]
     env = demonstration_for("cool", show_valid_actions=False).make_env()
     start = env.reset()
-    client = ScriptedClient([{"think": "t", "action": "open the fridge"}, STOP])
+    reply = {"think": "t", "action": "open the fridge"} if profile == "paper" else "open the fridge"
+    client = ScriptedClient([reply, STOP])
     agent.run(env, client, episode_id="ep", demonstration=False)
     assert client.requests[1].messages[-1].content == feedback(
         "open the fridge", 'write the action as "think: <your thought>"', "Nothing happens."

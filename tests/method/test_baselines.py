@@ -214,7 +214,13 @@ def test_registry_maps_every_method_to_its_agent_and_config():
 def test_make_agent_applies_profile_ablation_and_settings():
     a = make_agent("react", profile="released", invalid_streak=5)
     assert isinstance(a, ReActAgent) and a.config == ReActConfig(
-        window=128, temperature=None, window_counts_pins=True, invalid_streak=5, max_tokens=None
+        window=128,
+        temperature=None,
+        window_counts_pins=True,
+        invalid_streak=5,
+        max_tokens=None,
+        reply_format="text",
+        json_mode=False,
     )
     a = make_agent("adapt", profile="paper", max_depth=4)
     assert isinstance(a, ADaPTAgent) and a.config == ADaPTConfig(window=128, temperature=0.5, max_depth=4, max_tokens=None)

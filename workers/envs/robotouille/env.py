@@ -28,6 +28,8 @@ class RobotouilleEnv(Environment):
 
     benchmark = "robotouille"
     invalid_action_mode = "reject"
+    #: every observation ends with its "Valid Actions:" list
+    lists_valid_actions = True
 
     def __init__(
         self,
