@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -72,6 +73,11 @@ class AgentConfig:
     #: the one-shot demonstration shows every observation (all), only the first one (first),
     #: or none of them (none); left-out observations read OMITTED_OBSERVATION
     demo_observations: DemoObservations = "all"
+    #: whose prompt text the episode pins first: ``ours`` (our demonstration), or the authors'
+    #: released files (``release:<sha256 of the text>``, set by the planner from a sweep's
+    #: ``prompts: release``; ``release`` until the digest is known). Left out of :meth:`to_json`
+    #: while ``ours``, so the hashes of units planned before it existed do not change.
+    prompts: str = "ours"
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
@@ -106,6 +112,8 @@ class AgentConfig:
             raise ConfigError(f"demo_observations must be all, first or none, got {self.demo_observations!r}")
         if self.window_counts_pins and self.window < 4:
             raise ConfigError("window must be >= 4 messages when it counts the two pins")
+        if not re.fullmatch(r"ours|release(:[0-9a-f]{64})?", str(self.prompts)):
+            raise ConfigError(f"prompts must be ours or release, got {self.prompts!r}")
 
     def history_window(self) -> int:
         """K as the shared history applies it (ReAct's ``history: last`` narrows it)."""
@@ -116,7 +124,10 @@ class AgentConfig:
 
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): part of a unit's content hash and of episode rows."""
-        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+        values = dataclasses.asdict(self)
+        if values.get("prompts") == "ours":
+            del values["prompts"]
+        return json.dumps(values, sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str) -> AgentConfig:
@@ -133,7 +144,7 @@ class AgentConfig:
         if not isinstance(values, dict):
             raise ConfigError(f"{cls.__name__}: resolved settings must be a JSON object")
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown, missing = sorted(set(values) - names), sorted(names - set(values))
+        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - {"prompts"})
         if unknown or missing:
             raise ConfigError(
                 f"{cls.__name__}: resolved settings do not match this version "
