@@ -236,7 +236,9 @@ def build_config(
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(overrides) - names)
     if unknown:
-        raise ConfigError(f"unknown setting(s) {', '.join(unknown)} for {cls.__name__}; known: {', '.join(sorted(names))}")
+        raise ConfigError(
+            f"unknown setting(s) {', '.join(unknown)} for {cls.__name__}; known: {', '.join(sorted(names - {'prompts'}))}"
+        )
     values.update(overrides)
     cfg = cls(**values)
     cfg.validate()
