@@ -364,10 +364,15 @@ class MethodSpec(_Strict):
     profile: Name | None = None
     ablation: Name | None = None
     settings: dict[str, Any] = Field(default_factory=dict)
+    #: ``ours`` (default): our own prompt text; ``release``: the authors' released prompt and
+    #: demonstration files, read at run time (``recap data fetch recap-release``; workers/release)
+    prompts: Literal["ours", "release"] = "ours"
 
     @field_validator("settings")
     @classmethod
     def _settings(cls, v: dict[str, Any]) -> dict[str, Any]:
+        if "prompts" in v:
+            raise ValueError("prompts is the method entry's own field (prompts: release), not a setting")
         return _check_free_form(v, "settings")
 
     @property
@@ -375,6 +380,8 @@ class MethodSpec(_Strict):
         if self.label:
             return self.label
         suffix = [x for x in (self.profile, None if self.ablation in (None, "original") else self.ablation) if x]
+        if self.prompts == "release":
+            suffix.append("release-prompts")
         return self.method + (f"[{','.join(suffix)}]" if suffix else "")
 
 

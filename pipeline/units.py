@@ -213,7 +213,10 @@ def resolve_methods(spec: SweepSpec, benchmark: str | None = None) -> list[tuple
     for i, m in enumerate(spec.methods):
         settings = {**limits, **m.settings}
         try:
-            agent = build_agent(m.method, profile=m.profile, ablation=m.ablation, settings=settings, benchmark=benchmark)
+            extra = {"prompts": "release"} if m.prompts == "release" else {}
+            agent = build_agent(
+                m.method, profile=m.profile, ablation=m.ablation, settings={**settings, **extra}, benchmark=benchmark
+            )
         except ConfigError as exc:
             raise SpecError(f"methods[{i}] ({m.name}): {exc}") from None
         except TypeError as exc:
@@ -250,11 +253,13 @@ def expand(spec: SweepSpec) -> Plan:
     methods_by_benchmark: dict[str, list[tuple[Any, dict[str, Any], str]]] = {}
     units: list[Unit] = []
     seen: dict[str, str] = {}
+    release: dict[tuple[str, str], str] = {}
     for inst, options in instances:
         benchmark = inst.split("/", 1)[0]
         if benchmark not in methods_by_benchmark:
             methods_by_benchmark[benchmark] = resolve_methods(spec, benchmark)
-        for m, settings, cfg in methods_by_benchmark[benchmark]:
+        for m, settings, resolved in methods_by_benchmark[benchmark]:
+            cfg = with_release_digest(spec, m, inst, resolved, release) if m.prompts == "release" else resolved
             for model in spec.models:
                 for seed in spec.seeds:
                     uid = unit_hash(
@@ -289,6 +294,36 @@ def expand(spec: SweepSpec) -> Plan:
                     seen[uid] = u.key
                     units.append(u)
     return Plan(spec, units)
+
+
+def with_release_digest(spec: SweepSpec, m: Any, instance_id: str, method_config: str, cache: dict[tuple[str, str], str]) -> str:
+    """``method_config`` with ``prompts`` pinned to the digest of the released text this instance's
+    episode will show (``release:<sha256>``), so the unit's hash covers that text: an edited release
+    file makes a different unit. SpecError (naming the fetch command) when the release folder is
+    missing or has no prompts for the method here: before anything runs."""
+    from workers.release.texts import ReleaseMissing, ReleaseUnavailable, release_folder, release_text
+
+    bench, split, task = place_of(instance_id)
+    key = (method_config, f"{bench}/{split}/{task}")
+    if key not in cache:
+        where = f"methods[{spec.methods.index(m)}] ({m.name}): prompts: release"
+        values = json.loads(method_config)
+        try:
+            text = release_text(
+                release_folder(),
+                m.method,
+                bench,
+                split,
+                task,
+                think=values.get("think", "latest"),
+                name_only=bool(values.get("name_only", False)),
+            )
+        except ReleaseMissing as exc:
+            raise SpecError(f"{where}: {exc}") from None
+        except ReleaseUnavailable as exc:
+            raise SpecError(f"{where}: {exc} (use prompts: ours there)") from None
+        cache[key] = json.dumps({**values, "prompts": f"release:{text.digest}"}, sort_keys=True)
+    return cache[key]
 
 
 # --------------------------------------------------------------------------------------------

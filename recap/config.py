@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -92,6 +93,11 @@ class AgentConfig:
     demo_observations: DemoObservations = "all"
     #: see ValidActions (None: the benchmark decides per method)
     valid_actions: ValidActions | None = None
+    #: whose prompt text the episode pins first: ``ours`` (our demonstration), or the authors'
+    #: released files (``release:<sha256 of the text>``, set by the planner from a sweep's
+    #: ``prompts: release``; ``release`` until the digest is known). Left out of :meth:`to_json`
+    #: while ``ours``, so the hashes of units planned before it existed do not change.
+    prompts: str = "ours"
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
@@ -132,6 +138,8 @@ class AgentConfig:
             raise ConfigError("window must be >= 4 messages when it counts the two pins")
         if self.valid_actions not in (None, "shown", "episode", "hidden"):
             raise ConfigError(f"valid_actions must be shown, episode, hidden or null, got {self.valid_actions!r}")
+        if not re.fullmatch(r"ours|release(:[0-9a-f]{64})?", str(self.prompts)):
+            raise ConfigError(f"prompts must be ours or release, got {self.prompts!r}")
 
     def history_window(self) -> int:
         """K as the shared history applies it (ReAct's ``history: last`` narrows it)."""
@@ -147,7 +155,10 @@ class AgentConfig:
 
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): part of a unit's content hash and of episode rows."""
-        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+        values = dataclasses.asdict(self)
+        if values.get("prompts") == "ours":
+            del values["prompts"]
+        return json.dumps(values, sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str) -> AgentConfig:
@@ -164,7 +175,7 @@ class AgentConfig:
         if not isinstance(values, dict):
             raise ConfigError(f"{cls.__name__}: resolved settings must be a JSON object")
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown, missing = sorted(set(values) - names), sorted(names - set(values))
+        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - {"prompts"})
         if unknown or missing:
             raise ConfigError(
                 f"{cls.__name__}: resolved settings do not match this version "
@@ -258,7 +269,9 @@ def build_config(
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(overrides) - names)
     if unknown:
-        raise ConfigError(f"unknown setting(s) {', '.join(unknown)} for {cls.__name__}; known: {', '.join(sorted(names))}")
+        raise ConfigError(
+            f"unknown setting(s) {', '.join(unknown)} for {cls.__name__}; known: {', '.join(sorted(names - {'prompts'}))}"
+        )
     values.update(overrides)
     cfg = cls(**values)
     cfg.validate()

@@ -1,0 +1,273 @@
+"""``prompts: release``: the authors' prompt files fetched at a pinned commit, refused when absent,
+and pinned as an episode's first message when asked for.
+
+Every release file here is a fixture this test writes, laid out like the release (the paths the
+loader reads), in our own words: no text of the authors' is in this repository.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import pipeline.data as data
+import workers.release.folder as release_folder_mod
+from pipeline.errors import SpecError
+from pipeline.spec import parse_spec
+from pipeline.units import expand
+from workers.envs.data_sources import Source
+from workers.episode_worker import EpisodeRunner, release_demonstration
+from workers.release.texts import few_shot_literal, release_text
+
+ROOT = Path(__file__).resolve().parents[2]
+SHARED = ROOT.parent / "shared" / "data"
+HAVE_ROBOTOUILLE = (SHARED / "robotouille" / "domain" / "robotouille.json").is_file()
+REAL_MIRROR = Path("/work/.mirror/ReCAP-Stanford+ReCAP/repo")
+
+REACT_YML = "robotouille-baselines/agents/prompt_builder/prompts/ReAct/1.0.0-original.yml"
+REACT_EXAMPLE = "robotouille-baselines/agents/in_context_examples/data/synchronous/react_examples_omitted_obs/0_demo.txt"
+RECAP_PY = "robotouille-recap/MATRIX/MATRIX/prompts.py"
+SYSTEM = "Fixture system line: act in the kitchen."
+INSTRUCTIONS = "Fixture instructions: reply with one action."
+EXAMPLE = "Fixture example: pick up the bread, then place it.\n"
+#: what the loader must make of the ReAct fixture: system, instructions, the example file
+REACT_TEXT = f"{SYSTEM}\n\n{INSTRUCTIONS}\n\n{EXAMPLE}"
+
+FILES = {
+    "LICENSE": "fixture licence\n",
+    REACT_YML: f"version: 1.0.0\nsystem: |\n  {SYSTEM}\ninstructions: |\n  {INSTRUCTIONS}\n",
+    REACT_EXAMPLE: EXAMPLE,
+    # a top-level statement that would stop the test if the file were run rather than parsed
+    RECAP_PY: (
+        "raise SystemExit('never executed')\n\n"
+        "def get_few_shot():\n"
+        "    return [{'role': 'user', 'content': 'fixture first observation'},\n"
+        "            {'role': 'assistant', 'content': '{\"subtasks\": [\"a\"]}'}]\n"
+    ),
+}
+
+
+def write_release(root: Path, files: dict[str, str] = FILES) -> Path:
+    """A folder laid out like the release, holding ``files``."""
+    for rel, text in files.items():
+        path = root / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    return root
+
+
+def git_repo(root: Path, files: dict[str, str] = FILES) -> str:
+    """A git repository holding ``files`` in one commit; returns the commit."""
+    write_release(root, files)
+    env = {
+        **os.environ,
+        "GIT_AUTHOR_NAME": "t",
+        "GIT_AUTHOR_EMAIL": "t@t",
+        "GIT_COMMITTER_NAME": "t",
+        "GIT_COMMITTER_EMAIL": "t@t",
+    }
+    for args in (["init", "-q"], ["add", "-A"], ["commit", "-q", "-m", "fixture"]):
+        subprocess.run(["git", "-C", str(root), *args], check=True, env=env, capture_output=True)
+    return subprocess.run(
+        ["git", "-C", str(root), "rev-parse", "HEAD"], check=True, capture_output=True, text=True
+    ).stdout.strip()
+
+
+@pytest.fixture
+def fixture_source(tmp_path, monkeypatch):
+    """The release folder's source pinned to a fixture repository's commit, and a manifest of its
+    files: ``(repo, manifest entries)``; the test may edit the manifest before fetching."""
+    repo = tmp_path / "mirror"
+    commit = git_repo(repo)
+    folder = release_folder_mod.FOLDER
+    monkeypatch.setattr(
+        release_folder_mod,
+        "FOLDER",
+        dataclasses.replace(folder, sources=(Source("ReCAP", "https://invalid.example/x.git", "git", ref=commit),)),
+    )
+    manifests = tmp_path / "manifests"
+    manifests.mkdir()
+    monkeypatch.setattr(data, "MANIFEST_DIR", manifests)
+    entries = {rel: hashlib.sha256(text.encode()).hexdigest() for rel, text in FILES.items()}
+    data.write_manifest(manifests / "recap-release.sha256", entries)
+    return repo, entries
+
+
+def run_data(*argv: str) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    rc = data.data_main(list(argv), out, err)
+    return rc, out.getvalue(), err.getvalue()
+
+
+def test_fetch_from_a_local_git_mirror_verifies_every_file(fixture_source, tmp_path):
+    repo, entries = fixture_source
+    dest = tmp_path / "release"
+    rc, out, err = run_data("fetch", "recap-release", "--mirror", str(repo), "--dest", str(dest))
+    assert (rc, err) == (0, "")
+    assert f"recap-release: {dest}: {len(entries)} files fetched and verified" in out
+    assert (dest / REACT_EXAMPLE).read_text() == EXAMPLE
+    assert data.read_manifest(dest / data.MANIFEST_NAME) == entries
+    rc, out, err = run_data("check", "recap-release", "--data-dir", str(dest))
+    assert (rc, out, err) == (0, f"recap-release: {dest} (data_dir): {len(entries)} files checked: OK\n", "")
+
+
+def test_a_file_that_does_not_match_the_manifest_is_refused_and_nothing_is_written(fixture_source, tmp_path):
+    repo, entries = fixture_source
+    entries = {**entries, REACT_YML: hashlib.sha256(b"the pinned text").hexdigest()}
+    data.write_manifest(data.MANIFEST_DIR / "recap-release.sha256", entries)
+    dest = tmp_path / "out" / "release"
+    rc, _out, err = run_data("fetch", "recap-release", "--mirror", str(repo), "--dest", str(dest))
+    assert rc == 1
+    assert err.startswith(f"recap: error: data fetch: recap-release: {REACT_YML} from {repo}@")
+    assert "does not match the manifest" in err and err.rstrip().endswith("nothing was written")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_mirror_that_is_not_a_repository_is_refused(fixture_source, tmp_path):
+    plain = write_release(tmp_path / "plain")
+    rc, _out, err = run_data("fetch", "recap-release", "--mirror", str(plain), "--dest", str(tmp_path / "d"))
+    assert (rc, err) == (
+        1,
+        f"recap: error: data fetch: recap-release: {plain} is not a git repository (the mirror of ReCAP must be a clone of it); nothing was written\n",
+    )
+
+
+def test_the_release_is_not_part_of_all():
+    assert [name for name, f in data.folders().items() if not f.in_all] == ["recap-release"]
+
+
+@pytest.mark.skipif(not REAL_MIRROR.is_dir(), reason=f"no local mirror of the authors' repository at {REAL_MIRROR}")
+def test_fetch_from_the_real_mirror_matches_the_pinned_manifest(tmp_path):
+    dest = tmp_path / "release"
+    rc, out, err = run_data("fetch", "recap-release", "--mirror", str(REAL_MIRROR), "--dest", str(dest))
+    n = len(data.read_manifest(data.MANIFEST_DIR / "recap-release.sha256"))
+    assert (rc, err) == (0, "")
+    assert f"{n} files fetched and verified" in out
+
+
+def test_python_prompt_files_are_parsed_never_run(tmp_path):
+    write_release(tmp_path)
+    assert few_shot_literal(FILES[RECAP_PY], "get_few_shot")[0] == {"role": "user", "content": "fixture first observation"}
+    text = release_text(tmp_path, "recap", "robotouille", "synchronous", "6_x")
+    assert text.text == 'user: fixture first observation\nassistant: {"subtasks": ["a"]}'
+    assert release_text(tmp_path, "react", "robotouille", "synchronous", "6_x").text == REACT_TEXT
+
+
+# --------------------------------------------------------------------------------------------
+# the sweep side
+
+SPEC = """run: release-prompts
+output: {out}
+models:
+  - model: offline/expert
+methods:
+  - method: react
+    prompts: {prompts}
+environments:
+{envs}
+seeds: [0]
+"""
+BLOCKS = '  - benchmark: blocksworld\n    tasks: ["3"]\n    limit: 1'
+ROBOTOUILLE = "  - benchmark: robotouille\n    tasks: [synchronous/0]\n    limit: 1"
+
+
+def _env(tmp_path: Path, release: Path | None) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k != "RECAP_RELEASE_DATA"}
+    env.update(PYTHONPATH=str(ROOT), RECAP_EVAL_CACHE=str(tmp_path / "cache"), LITELLM_LOCAL_MODEL_COST_MAP="True")
+    env["RAY_USAGE_STATS_ENABLED"] = "0"
+    if release is not None:
+        env["RECAP_RELEASE_DATA"] = str(release)
+    return env
+
+
+def test_run_refuses_release_prompts_when_the_release_is_missing(tmp_path):
+    if (SHARED / "recap-release").exists():
+        pytest.skip(f"{SHARED / 'recap-release'} exists: the release cannot be missing here")
+    out = tmp_path / "run"
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(SPEC.format(out=out, prompts="release", envs=BLOCKS))
+    done = subprocess.run(
+        [sys.executable, "-m", "pipeline.cli", "run", str(spec)],
+        cwd=ROOT,
+        env=_env(tmp_path, None),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 2
+    assert done.stderr == (
+        f"recap: error: {spec.name}: methods[0] (react[release-prompts]): prompts: release: the authors' released "
+        "prompt files (recap-release) are not found: run `recap data fetch recap-release`\n"
+    )
+    assert not out.exists()
+
+
+def test_a_benchmark_without_released_prompts_is_refused(tmp_path, monkeypatch):
+    monkeypatch.setenv("RECAP_RELEASE_DATA", str(write_release(tmp_path / "release")))
+    with pytest.raises(SpecError) as info:
+        expand(parse_spec(SPEC.format(out=tmp_path / "run", prompts="release", envs=BLOCKS), "sweep.yaml"))
+    assert str(info.value) == (
+        "methods[0] (react[release-prompts]): prompts: release: the release has no prompts for benchmark "
+        "'blocksworld' (use prompts: ours there)"
+    )
+
+
+@pytest.mark.skipif(not HAVE_ROBOTOUILLE, reason=f"no Robotouille data at {SHARED / 'robotouille'}")
+def test_unit_hash_covers_the_released_text_and_ours_is_unchanged(tmp_path, monkeypatch):
+    release = write_release(tmp_path / "release")
+    monkeypatch.setenv("RECAP_RELEASE_DATA", str(release))
+    ours = expand(parse_spec(SPEC.format(out=tmp_path / "run", prompts="ours", envs=ROBOTOUILLE), "s.yaml")).units[0]
+    first = expand(parse_spec(SPEC.format(out=tmp_path / "run", prompts="release", envs=ROBOTOUILLE), "s.yaml")).units[0]
+    assert "prompts" not in json.loads(ours.method_config)  # units planned before the field keep their hash
+    digest = hashlib.sha256(REACT_TEXT.encode()).hexdigest()
+    assert json.loads(first.method_config)["prompts"] == f"release:{digest}"
+    (release / REACT_EXAMPLE).write_text("Another example.\n")
+    second = expand(parse_spec(SPEC.format(out=tmp_path / "run", prompts="release", envs=ROBOTOUILLE), "s.yaml")).units[0]
+    assert len({ours.unit_id, first.unit_id, second.unit_id}) == 3
+
+
+class _Expert:
+    """Offline client double: the expert's next action as a ReAct JSON reply."""
+
+    def complete(self, request):
+        from recap.llm import LLMResponse
+
+        plan = request.hints.get("expert_plan") or ["noop"]
+        return LLMResponse(json.dumps({"think": "next", "action": plan[0]}), model="test/expert", test_double=True)
+
+
+class _Factory:
+    writes_llm_calls = False
+
+    def client(self, model):
+        return _Expert()
+
+
+@pytest.mark.skipif(not HAVE_ROBOTOUILLE, reason=f"no Robotouille data at {SHARED / 'robotouille'}")
+def test_a_release_prompts_episode_pins_the_released_text_first(tmp_path, monkeypatch):
+    release = write_release(tmp_path / "release")
+    monkeypatch.setenv("RECAP_RELEASE_DATA", str(release))
+    unit = expand(parse_spec(SPEC.format(out=tmp_path / "run", prompts="release", envs=ROBOTOUILLE), "s.yaml")).units[0]
+    rows: list[dict] = []
+    runner = EpisodeRunner(
+        "w0", "run", _Factory(), send=lambda batch: rows.extend(batch.get("messages", [])), wait=lambda _ref: None
+    )
+    outcome = runner.run_unit(unit.work(), 1)
+    assert outcome.crash is None and outcome.result is not None and outcome.result.success
+    messages = sorted(rows, key=lambda r: r["seq"])
+    assert (messages[0]["seq"], messages[0]["kind"], messages[0]["content"]) == (0, "demonstration", REACT_TEXT)
+    assert REACT_TEXT not in messages[1]["content"]  # our task prompt follows, the released text once
+
+    # a release file edited after the plan: the episode is not played with other text than hashed
+    (release / REACT_EXAMPLE).write_text("Edited after the plan.\n")
+    with pytest.raises(RuntimeError, match=r"changed since the plan"):
+        release_demonstration(unit.work(), runner._agent(unit.work()))
+    assert runner.run_unit(unit.work(), 2).result.end_reason == "env_error"

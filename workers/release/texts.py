@@ -1,0 +1,219 @@
+"""What a method shows under ``prompts: release``: the authors' own text, read from their files.
+
+The worker pins the text :func:`release_text` returns as the episode's first message, in place of
+our rendered demonstration; the method's own task prompt follows it unchanged. The text is read
+from the fetched release folder (:mod:`.folder`) at run time, never stored here, and each file
+yields exactly the part the released code sends before the episode's first observation:
+
+* Python prompt files (``MATRIX/MATRIX/prompts.py``): the list of example messages a
+  ``get_few_shot*`` function returns, read with :mod:`ast` (a literal, never executed), joined
+  one ``role: content`` line per message as ``chatbot.py`` joins them
+  (``robotouille-recap/MATRIX/MATRIX/chatbot.py:401``, ``alfworld-recap/MATRIX/MATRIX/chatbot.py:390``);
+* JSON demonstration files (ALFWorld): the value under the task's key (a message list joined the
+  same way, or a ReAct/Act transcript string as is);
+* YAML prompt templates (Robotouille baselines, ``agents/prompt_builder/prompts``): their
+  ``system`` and ``instructions`` fields;
+* in-context example files (``agents/in_context_examples/data/<split>/<kind>/*.txt``): each file whole.
+
+Parts are joined by one blank line. What each method reads (and the released file that makes it
+so) is :func:`sources`. The released code's framing sentences around a demonstration live in
+its Python code, not in these files, and are not reproduced.
+"""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from recap.env import DataNotFoundError
+from workers.envs import data_paths
+from workers.release.folder import FETCH_COMMAND, LOCATION, NAME
+
+_TEMPLATES = "robotouille-baselines/agents/prompt_builder/prompts"
+_EXAMPLES = "robotouille-baselines/agents/in_context_examples/data"
+_ALFWORLD = "alfworld-recap"
+#: ALFWorld task type (our short names) -> the key suffix of the released demonstration files
+#: (alfworld-recap/main.py:12-18, react_alfworld/react.py:185-192): the same names
+ALFWORLD_TASKS = ("put", "clean", "heat", "cool", "examine", "puttwo")
+
+
+class ReleaseMissing(DataNotFoundError):
+    """The release folder is not found (or a file the method needs is absent or unreadable)."""
+
+
+class ReleaseUnavailable(ValueError):
+    """The release has no prompts for this method on this benchmark."""
+
+
+@dataclass(frozen=True)
+class Part:
+    """One piece of a release text: a file, and which part of it (``few_shot:get_few_shot``,
+    ``key:matrix_put_0``, ``yaml:system+instructions``, ``whole``)."""
+
+    path: str
+    pick: str
+
+
+@dataclass(frozen=True)
+class ReleaseText:
+    """The text a method pins under ``prompts: release``, the files it came from and its digest
+    (what a unit's hash covers, so an edited release file makes a different unit)."""
+
+    parts: tuple[Part, ...]
+    text: str
+
+    @property
+    def digest(self) -> str:
+        return hashlib.sha256(self.text.encode("utf-8")).hexdigest()
+
+    @property
+    def files(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(p.path for p in self.parts))
+
+
+def release_folder(data_dir: str | None = None) -> Path:
+    """The release folder by the shared search (``RECAP_RELEASE_DATA``, recap-eval's cache,
+    ``../shared/data/recap-release``); ReleaseMissing, naming the fetch command, when none qualifies."""
+    rungs = data_paths.search(LOCATION, data_dir)
+    used = data_paths.chosen(rungs)
+    if used is not None and used.path is not None:
+        return used.path
+    bad = data_paths.first_explicit_error(rungs)
+    where = f"{bad.path} (from {bad.step}) is not a {NAME} folder; " if bad is not None else ""
+    raise ReleaseMissing(f"the authors' released prompt files ({NAME}) are not found: {where}run `{FETCH_COMMAND}`")
+
+
+def sources(
+    method: str, benchmark: str, split: str, task: str, think: str = "latest", name_only: bool = False
+) -> tuple[Part, ...]:
+    """The release files (and parts) ``method`` shows on ``benchmark`` (``split``/``task`` of the
+    instance; ``think``/``name_only``: ReCAP's ablation settings); ReleaseUnavailable when the
+    release has none."""
+    if benchmark == "robotouille":
+        if split not in ("synchronous", "asynchronous"):
+            raise ReleaseUnavailable(f"no released {method} prompts for Robotouille split {split!r}")
+        if method == "recap":
+            # robotouille-recap/MATRIX/MATRIX/session/SessionManager.py:70-97: the ablation picks the list
+            fn = "get_few_shot_no_think" if think == "none" else "get_few_shot_name_only" if name_only else "get_few_shot"
+            return (Part("robotouille-recap/MATRIX/MATRIX/prompts.py", f"few_shot:{fn}"),)
+        # robotouille-baselines/conf/experiments/<method>/<split>/original_0.yaml (IO, IO-CoT: io.yaml,
+        # io-cot.yaml): the template (prompts.action_proposal_prompt) and example_dir_path
+        examples = {"react": "react_examples_omitted_obs", "adapt": "react_examples_omitted_obs"}
+        examples.update(standard="io_examples", cot="io-cot_examples")
+        template = {
+            "react": "ReAct/1.0.0-original.yml",
+            "act": "Act/1.0.0-original.yml",  # the Act configs name no examples
+            "standard": "IO/1.0.0-io.yml",
+            "cot": "IO/1.1.0-io-cot.yml",
+            "adapt": "Adapt/custom-executor.yml",
+        }
+        if method not in template:
+            raise ReleaseUnavailable(f"the release has no {method} prompts for robotouille")
+        parts: list[Part] = []
+        if method == "adapt":  # the planner's own system text and examples (ADaPT_agent.py reads both)
+            parts += [
+                Part(f"{_TEMPLATES}/Adapt/planner_system.txt", "whole"),
+                Part(f"{_TEMPLATES}/Adapt/planner_fewshot.txt", "whole"),
+            ]
+        parts.append(Part(f"{_TEMPLATES}/{template[method]}", "yaml:system+instructions"))
+        if method in examples:
+            parts.append(Part(f"{_EXAMPLES}/{split}/{examples[method]}", "every file"))
+        return tuple(parts)
+    if benchmark == "alfworld":
+        if task not in ALFWORLD_TASKS:
+            raise ReleaseUnavailable(f"no released {method} prompts for ALFWorld task {task!r}")
+        if method == "recap":  # alfworld-recap/MATRIX/MATRIX/chatbot.py:388, chatbot_no_think.py:378
+            name = (
+                "alfworld_3prompts_no_json_all_loc_no_think.json" if think == "none" else "alfworld_3prompts_no_json_all_loc.json"
+            )
+            return (Part(f"{_ALFWORLD}/MATRIX/MATRIX/{name}", f"key:matrix_{task}_0"),)
+        if method == "react":  # alfworld-recap/react_alfworld/react.py:125, 206
+            return (Part(f"{_ALFWORLD}/react_alfworld/alfworld_3prompts_fixed.json", f"key:react_{task}_0"),)
+        if method == "act":  # alfworld-recap/act_alfworld/act.py:151, 297
+            return (Part(f"{_ALFWORLD}/act_alfworld/alfworld_3prompts_act.json", f"key:react_{task}_0"),)
+        raise ReleaseUnavailable(f"the release has no {method} prompts for alfworld")
+    raise ReleaseUnavailable(f"the release has no prompts for benchmark {benchmark!r}")
+
+
+def release_text(
+    folder: Path, method: str, benchmark: str, split: str, task: str, think: str = "latest", name_only: bool = False
+) -> ReleaseText:
+    """The text ``method`` pins on ``benchmark`` under ``prompts: release``, read from ``folder``.
+    ReleaseUnavailable: the release has none; ReleaseMissing: a file is absent or unreadable."""
+    parts = sources(method, benchmark, split, task, think, name_only)
+    return ReleaseText(parts, "\n\n".join(_read(folder, p) for p in parts))
+
+
+def _read(folder: Path, part: Part) -> str:
+    path = folder / part.path
+    try:
+        if part.pick == "every file":
+            files = sorted(p for p in path.iterdir() if p.is_file())
+            if not files:
+                raise ReleaseMissing(f"{NAME}: {part.path} holds no example file; run `{FETCH_COMMAND}`")
+            return "\n\n".join(p.read_text(encoding="utf-8") for p in files)
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise ReleaseMissing(f"{NAME}: {part.path} is missing in {folder}; run `{FETCH_COMMAND}`") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ReleaseMissing(f"{NAME}: cannot read {part.path}: {exc}") from None
+    kind, _, arg = part.pick.partition(":")
+    try:
+        if kind == "few_shot":
+            return join_messages(few_shot_literal(text, arg))
+        if kind == "key":
+            return _demo_value(json.loads(text)[arg])
+        if kind == "yaml":
+            return _yaml_fields(text, arg.split("+"))
+        return text
+    except (KeyError, ValueError, TypeError, SyntaxError) as exc:
+        raise ReleaseMissing(
+            f"{NAME}: {part.path} does not hold the expected {part.pick} ({type(exc).__name__}: {exc})"
+        ) from None
+
+
+def few_shot_literal(source: str, function: str) -> list[dict[str, str]]:
+    """The message list ``function`` returns in a Python file, read as a literal with :mod:`ast`
+    (the file is parsed, never run). ValueError when the function does not return one literal list."""
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.FunctionDef) and node.name == function:
+            for stmt in node.body:
+                if isinstance(stmt, ast.Return) and stmt.value is not None:
+                    return _messages(ast.literal_eval(stmt.value))
+            raise ValueError(f"{function}() returns no literal")
+    raise ValueError(f"no function {function}()")
+
+
+def _messages(value: Any) -> list[dict[str, str]]:
+    if not isinstance(value, list) or not all(
+        isinstance(m, dict) and isinstance(m.get("role"), str) and isinstance(m.get("content"), str) for m in value
+    ):
+        raise ValueError("not a list of {role, content} messages")
+    return value
+
+
+def join_messages(messages: Sequence[dict[str, str]]) -> str:
+    """One ``role: content`` line per message, as the released ReCAP joins its example
+    (robotouille-recap/MATRIX/MATRIX/chatbot.py:401)."""
+    return "\n".join(f"{m['role']}: {m['content']}" for m in messages)
+
+
+def _demo_value(value: Any) -> str:
+    return value if isinstance(value, str) else join_messages(_messages(value))
+
+
+def _yaml_fields(text: str, fields: list[str]) -> str:
+    import yaml
+
+    data = yaml.safe_load(text)
+    if not isinstance(data, dict):
+        raise ValueError("not a mapping")
+    values = [data[f] for f in fields]
+    if not all(isinstance(v, str) for v in values):
+        raise ValueError(f"{'/'.join(fields)} must be text")
+    return "\n\n".join(v.strip("\n") for v in values)
