@@ -358,3 +358,47 @@ def test_a_refused_model_in_process_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown provider 'nosuchprovider'" in err[0]
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------------------------
+# 4. method settings (free-form in the file, bounded by the method's config)
+# --------------------------------------------------------------------------------------------
+def test_every_number_setting_of_every_built_in_method_has_a_range():
+    import dataclasses
+
+    from recap.config import SETTING_BOUNDS
+    from recap.methods import METHODS
+
+    missing = []
+    for method, (_, config_cls) in METHODS.items():
+        hints = typing.get_type_hints(config_cls)
+        for f in dataclasses.fields(config_cls):
+            kinds = set(typing.get_args(hints[f.name])) | {hints[f.name]}
+            if kinds & {int, float} and f.name not in SETTING_BOUNDS:
+                missing.append(f"{method}.{f.name}")
+    assert missing == []
+    for name, (lo, hi) in SETTING_BOUNDS.items():
+        assert lo < hi < float("inf"), name
+
+
+@pytest.mark.parametrize(
+    "method, settings, message",
+    [
+        ("recap", {"window": 10**9}, "window 1000000000 is out of range [2, 100000]"),
+        ("recap", {"window": 64.5}, "window must be an integer in [2, 100000], got 64.5"),
+        ("recap", {"max_tokens": 10**12}, "max_tokens 1000000000000 is out of range [1, 262144]"),
+        ("react", {"max_episode_cost_usd": 1e-300}, "max_episode_cost_usd 1e-300 is out of range [1e-06, 1000000]"),
+        ("adapt", {"executor_steps": 10**7}, "executor_steps 10000000 is out of range [1, 100000]"),
+    ],
+)
+def test_method_settings_out_of_range_are_refused_by_the_cli(tmp_path, capsys, method, settings, message):
+    out = tmp_path / "out"
+    spec = tmp_path / "sweep.yaml"
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["output"] = str(out)
+    data["methods"] = [{"method": method, "settings": settings}]
+    spec.write_text(yaml.safe_dump(data))
+    assert main(["estimate", str(spec)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"recap: error: sweep.yaml: methods[0] ({method}): {message}"]
+    assert not out.exists()
