@@ -153,6 +153,34 @@ def check_models(spec: SweepSpec) -> None:
             )
 
 
+def check_output_caps(plan: Plan) -> None:
+    """Every request of the plan asks for an output cap its model can give: a method's own
+    ``max_tokens`` (ReCAP's 3072) above a model's output limit, with no ``params.max_tokens`` on
+    the model to bound it, would be refused by the provider on every call. Raises SpecError."""
+    import json
+
+    from pipeline.errors import SpecError
+    from workers.llm.providers import DEFAULT_MAX_TOKENS
+
+    spec = plan.spec
+    seen: set[tuple[str, str]] = set()
+    for u in plan.units:
+        if (u.model_label, u.method_config) in seen:
+            continue
+        seen.add((u.model_label, u.method_config))
+        i, m = next((i, m) for i, m in enumerate(spec.models) if m.name == u.model_label)
+        if m.test_double or m.params.get("max_tokens"):
+            continue  # a model cap bounds every request (and check_models held it to the limit)
+        limit = model_output_limit(m.model)
+        asked = json.loads(u.method_config).get("max_tokens") or DEFAULT_MAX_TOKENS
+        if limit is not None and asked > limit:
+            j = next((j for j, x in enumerate(spec.methods) if x.name == u.method_label), 0)
+            raise SpecError(
+                f"models[{i}] ({m.name}): methods[{j}] ({u.method_label}) asks for max_tokens {asked} but the model's "
+                f"output limit is {limit} (litellm's max_output_tokens); give the model params: {{max_tokens: {limit}}}"
+            )
+
+
 def check_prices(spec: SweepSpec) -> None:
     """Every model under a cap (the run cap covers all models) must have a price."""
     from workers.llm.pricing import PriceError, require_prices
@@ -231,6 +259,7 @@ def check_plan(plan: Plan) -> None:
     from workers.envs import registry
     from workers.episode_worker import agent_from_config, env_options_for
 
+    check_output_caps(plan)
     spec = plan.spec
     method_index = {m.name: i for i, m in enumerate(spec.methods)}
 

@@ -402,3 +402,24 @@ def test_method_settings_out_of_range_are_refused_by_the_cli(tmp_path, capsys, m
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"recap: error: sweep.yaml: methods[0] ({method}): {message}"]
     assert not out.exists()
+
+
+def test_a_method_output_cap_above_the_model_limit_is_refused_unless_the_model_caps_it(tmp_path, capsys):
+    """ReCAP asks for 3072 output tokens; a model whose output limit is 2048 would refuse every
+    call unless its own params.max_tokens bounds the requests."""
+    out = tmp_path / "out"
+    spec = tmp_path / "sweep.yaml"
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["output"] = str(out)
+    data["methods"] = [{"method": "react"}, {"method": "recap"}]
+    data["models"] = [{"model": "azure_ai/Meta-Llama-3-70B-Instruct", "label": "llama"}]
+    spec.write_text(yaml.safe_dump(data))
+    assert main(["estimate", str(spec)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "recap: error: sweep.yaml: models[0] (llama): methods[1] (recap) asks for max_tokens 3072 but the model's output "
+        "limit is 2048 (litellm's max_output_tokens); give the model params: {max_tokens: 2048}"
+    ]
+    data["models"][0]["params"] = {"max_tokens": 2048}
+    spec.write_text(yaml.safe_dump(data))
+    assert main(["estimate", str(spec)]) == 0
+    assert not out.exists()
