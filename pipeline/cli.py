@@ -629,13 +629,14 @@ def cmd_status(args: argparse.Namespace) -> int:
 def cmd_estimate(args: argparse.Namespace) -> int:
     """``recap estimate SPEC``: the plan and its expected cost, without connecting to Ray or calling any model."""
     from pipeline.estimate import estimate, render
-    from pipeline.preflight import check_plan
+    from pipeline.preflight import check_models, check_plan
     from pipeline.spec import load_spec
     from pipeline.units import expand
 
     spec, _ = load_spec(args.spec)
     with _named(Path(args.spec).name):
         plan = expand(spec)
+        check_models(spec)  # what run refuses before any call, estimate refuses too (keys aside)
         check_plan(plan)
     _render(render, plan, estimate(plan))
     return 0
