@@ -649,11 +649,17 @@ def _local_run_dir(arg: str) -> str:
     """One run-folder argument of ``recap sql`` / ``recap report`` as a local folder: an object-store
     run is pulled to its local mirror first. The reports package calls this for run-folder arguments
     only (never for a query, a title or an output folder); its errors are one line (RunDirError)."""
+    from pipeline.spec import URI_SCHEMES
     from reports.views import RunDirError
     from workers.sink import is_uri
 
     if not is_uri(arg):
         return arg
+    scheme = arg.split("://", 1)[0].lower()
+    if scheme not in URI_SCHEMES:
+        raise RunDirError(
+            f"{arg} is not a run folder: unknown URI scheme {scheme!r} (a local folder or {', '.join(s + '://' for s in URI_SCHEMES)})"
+        )
     try:
         _check_location(arg)
         from pipeline.store import RUN_FILE, RunStore

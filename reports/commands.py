@@ -2,8 +2,8 @@
 
 The pipeline CLI hands its remaining arguments to :func:`report_main` or :func:`sql_main`; both
 return an exit status and print one-line errors, never tracebacks. ``recap report``: 0 ok, 1 a
-problem with the runs' data or the options, 2 bad usage or a folder that is not a run folder (no
-run.json; nothing is written then). ``recap sql``: 0 ok, 2 for every error (bad usage, a missing
+problem with the runs' data or the options, 2 bad usage, a folder that is not a run folder (no
+run.json) or an output folder holding files a report did not write (nothing is written then). ``recap sql``: 0 ok, 2 for every error (bad usage, a missing
 or invalid run folder, SQL that does not parse or fails, a refused statement, an unreadable /
 binary / non-SQL ``--file``, the memory or time limit hit), like the rest of the ``recap``
 command; an error about a ``--file`` never quotes the file's text.
@@ -28,7 +28,6 @@ says which limit was hit. The report and ``recap view`` run only their own store
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 import re
@@ -40,10 +39,10 @@ from typing import Any, TextIO
 import duckdb
 
 from reports.build import FORMATS, ReportOptions, build_report, parse_formats, write_report
-from reports.render_csv import result_csv
+from reports.render_text import format_table as format_table
 from reports.sandbox import DEFAULT_MEMORY, DEFAULT_TIMEOUT_S, Limits, parse_size, run_limited
 from reports.viewer import DEFAULT_EPISODES
-from reports.views import QueryError, ReportError, Result, RunDirError, check_read_only, load_sql, resolve_run_dirs, sql_names
+from reports.views import QueryError, ReportError, RunDirError, check_read_only, load_sql, resolve_run_dirs, sql_names
 
 #: turns one run-folder argument into a local folder (the pipeline CLI pulls object-store runs)
 Resolver = Callable[[str], str]
@@ -84,6 +83,10 @@ class _UsageError(Exception):
     pass
 
 
+class OutputFolderError(ReportError):
+    """The report's output folder holds files a report did not write (or is not a folder): refused, exit 2."""
+
+
 class _Exit(Exception):
     """``--help`` was given: the help is printed, the main returns ``status``."""
 
@@ -104,7 +107,7 @@ _REPORT_EPILOG = """examples:
 Writes only under the output folder (RUN_DIR/report or --out), and only into a new or empty
 folder or one that holds an earlier report: a folder with any other file is refused.
 exit status: 0 written; 1 a problem with the run folders' data or the option values; 2 bad usage,
-or a folder that is not a run folder (no run.json)
+a folder that is not a run folder (no run.json), or an output folder with other files in it
 """
 
 
@@ -173,8 +176,8 @@ def check_report_folder(out_dir: Path) -> None:
     if foreign is None:
         return
     if foreign == str(out_dir):
-        raise ReportError(f"output folder {out_dir} is not a folder")
-    raise ReportError(
+        raise OutputFolderError(f"output folder {out_dir} is not a folder")
+    raise OutputFolderError(
         f"output folder {out_dir} holds files a report did not write (such as {foreign}); give a new or empty folder with --out"
     )
 
@@ -200,7 +203,7 @@ def report_main(
         if args.out is None and len(args.run_dirs) > 1:
             raise ReportError("--out is required when reporting several run folders")
         if args.out is not None and "://" in args.out:
-            raise ReportError(f"--out must be a local folder, got {args.out}")
+            raise _UsageError(f"recap report: --out must be a local folder, got {args.out}")
         run_dirs = _run_folders(args.run_dirs, resolve_run)
         out_dir = Path(args.out) if args.out else Path(run_dirs[0]) / "report"
         check_report_folder(out_dir)
@@ -215,7 +218,7 @@ def report_main(
     except _UsageError as exc:
         print(_one_line(str(exc)), file=err)
         return 2
-    except RunDirError as exc:
+    except (RunDirError, OutputFolderError) as exc:
         print(f"error: {exc}", file=err)
         return 2
     except ReportError as exc:
@@ -401,19 +404,6 @@ def sql_main(
         return 2
 
 
-def print_result(result: Result, fmt: str, max_rows: int, out: TextIO) -> None:
-    """Write ``result`` as ``fmt``: ``table`` (at most ``max_rows`` rows), ``csv`` or ``json`` (every row)."""
-    if fmt == "csv":
-        out.write(result_csv(result))
-    elif fmt == "json":
-        out.write(
-            json.dumps([{k: _json_value(v) for k, v in zip(result.columns, r)} for r in result.rows], indent=1, default=str)
-            + "\n"
-        )
-    else:
-        out.write(format_table(result, max_rows=max_rows))
-
-
 def _read_query_file(path: str) -> str:
     """The text of a --file query; errors name the file and never quote what is in it."""
     try:
@@ -458,52 +448,6 @@ def _check_query_file(path: str, text: str) -> None:
 
 def _one_line(text: str) -> str:
     return " ".join(text.split())
-
-
-def _json_value(v: Any) -> Any:
-    if isinstance(v, float) and (math.isnan(v) or math.isinf(v)):
-        return None
-    if isinstance(v, tuple):
-        return list(v)
-    return v
-
-
-def _text(v: Any, width: int) -> str:
-    if v is None:
-        s = "NULL"
-    elif isinstance(v, float):
-        s = f"{v:.6g}"
-    else:
-        s = str(v)
-    s = " ".join(s.split()) if "\n" in s else s
-    return s if len(s) <= width else s[: width - 1] + "…"
-
-
-def format_table(result: Result, *, max_rows: int = 100, width: int = 60) -> str:
-    """An aligned text table, numbers right-aligned, at most ``max_rows`` rows."""
-    shown = result.rows[: max(max_rows, 0)]
-    cells = [[_text(v, width) for v in row] for row in shown]
-
-    def is_number(v: Any) -> bool:
-        return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-    numeric = [
-        any(r[i] is not None for r in shown) and all(is_number(r[i]) for r in shown if r[i] is not None)
-        for i in range(len(result.columns))
-    ]
-    widths = [max([len(c)] + [len(row[i]) for row in cells]) for i, c in enumerate(result.columns)]
-
-    def line(values: list[str]) -> str:
-        return " | ".join(v.rjust(w) if numeric[i] else v.ljust(w) for i, (v, w) in enumerate(zip(values, widths))).rstrip()
-
-    lines = [line(list(result.columns)), "-+-".join("-" * w for w in widths)]
-    lines += [line(row) for row in cells]
-    n = len(result.rows)
-    more = n - len(shown)
-    lines.append(
-        f"({n} row{'s' if n != 1 else ''}" + (f"; {more} not shown, use --max-rows, --csv or --json)" if more > 0 else ")")
-    )
-    return "\n".join(lines) + "\n"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

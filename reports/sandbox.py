@@ -49,7 +49,7 @@ THREADS = 4
 #: how often the parent looks at the child's resident set
 POLL_S = 0.002
 #: the child is stopped this far below the limit, so its peak (one poll of growth later) stays under it
-MARGIN_FRACTION = 0.06
+MARGIN_FRACTION = 0.08
 
 _UNITS = {
     "": None,
@@ -226,24 +226,29 @@ def _feed(dst: Any, payload: bytes) -> None:
 # -- the child -----------------------------------------------------------------------------------
 
 
-def _address_space() -> int | None:
+def _statm() -> tuple[int, int] | None:
+    """(address space, resident) bytes of this process (Linux /proc); None where they cannot be read."""
     try:
         with open("/proc/self/statm", "rb") as fh:
-            return int(fh.read().split()[0]) * _PAGE
-    except (OSError, ValueError, IndexError):
+            size, resident = fh.read().split()[:2]
+        return int(size) * _PAGE, int(resident) * _PAGE
+    except (OSError, ValueError):
         return None
 
 
-def _cap_address_space(extra: int) -> None:
-    """No new mapping past what the process has now plus ``extra`` bytes: one allocation bigger than
-    the whole limit fails at once (an Out of Memory error) instead of being filled until the parent kills."""
+def _cap_address_space(memory_bytes: int) -> None:
+    """No new mapping past what the process has now plus the room left under the limit: new memory
+    needs new mappings, so one allocation bigger than that room fails at once (DuckDB's Out of Memory
+    error, Python's MemoryError) instead of being filled page by page until the parent kills."""
     import resource
 
-    now = _address_space()
+    now = _statm()
     if now is None:
         return
+    size, resident = now
+    room = max(int(memory_bytes * (1 - MARGIN_FRACTION)) - resident, 16 << 20)
     soft, hard = resource.getrlimit(resource.RLIMIT_AS)
-    want = now + extra
+    want = size + room
     if hard != resource.RLIM_INFINITY:
         want = min(want, hard)
     resource.setrlimit(resource.RLIMIT_AS, (want, hard))
@@ -252,7 +257,7 @@ def _cap_address_space(extra: int) -> None:
 def child_main(ready_fd: int, argv: Sequence[str] = ()) -> int:
     """The child: read the job (run_dirs, query, format, max_rows, memory_bytes) from stdin, open the runs,
     say ``ready`` on ``ready_fd``, run the query and print its result; 0, or 2 with one line on stderr."""
-    from reports.commands import print_result
+    from reports.render_text import print_result
     from reports.views import ReportError, open_runs_checked, run_query
 
     job = json.loads(sys.stdin.buffer.read())
