@@ -389,8 +389,12 @@ def sql_main(
             con.close()
         limits = Limits(memory_bytes=args.memory_limit, timeout_s=args.timeout, memory_text=_memory_text(argv))
         fmt = "csv" if args.csv else "json" if args.json else "table"
-        job = {"run_dirs": run_dirs, "query": query, "format": fmt, "max_rows": args.max_rows}
+        # absolute: the query process must not depend on the working folder
+        job = {"run_dirs": [str(d) for d in resolve_run_dirs(run_dirs)], "query": query, "format": fmt, "max_rows": args.max_rows}
         return run_limited(job, limits, out, err).status
+    except KeyboardInterrupt:  # the query process is gone with it (run_limited)
+        print("recap sql: interrupted", file=err)
+        return 130
     except _Exit as exc:
         return exc.status
     except _UsageError as exc:

@@ -122,15 +122,22 @@ def _pump(src: Any, dst: TextIO) -> None:
     import codecs
 
     dec = codecs.getincrementaldecoder("utf-8")("replace")
+    open_ = True
     while True:
         chunk = src.read1(1 << 16) if hasattr(src, "read1") else src.read(1 << 16)
         if not chunk:
             break
-        dst.write(dec.decode(chunk))
-    tail = dec.decode(b"", final=True)
-    if tail:
-        dst.write(tail)
-    dst.flush()
+        if open_:
+            try:
+                dst.write(dec.decode(chunk))
+            except (OSError, ValueError):  # the reader went away (recap sql ... | head): drain, so the child ends
+                open_ = False
+    try:
+        if open_:
+            dst.write(dec.decode(b"", final=True))
+            dst.flush()
+    except (OSError, ValueError):
+        pass
 
 
 _CHILD_CODE = (
@@ -152,7 +159,6 @@ def run_limited(job: dict[str, Any], limits: Limits, out: TextIO, err: TextIO) -
             stderr=subprocess.PIPE,
             pass_fds=(ready_w,),
             env=env,
-            cwd=str(ROOT),
         )
     finally:
         os.close(ready_w)
@@ -260,6 +266,7 @@ def child_main(ready_fd: int, argv: Sequence[str] = ()) -> int:
     from reports.render_text import print_result
     from reports.views import ReportError, open_runs_checked, run_query
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent too; it stops this process
     job = json.loads(sys.stdin.buffer.read())
     memory = int(job["memory_bytes"])
     limit_text = job.get("memory_text", _mb(memory))

@@ -190,3 +190,9 @@ def test_report_writes_only_under_its_output_folder(run, tmp_path, capsys):
     assert added and all(p.startswith("report/") for p in added)
     assert {p: h for p, h in after.items() if p in before} == before
     assert "see https://example.org/x s3://b/y" in (run / "report" / "report.md").read_text()
+
+
+def test_a_relative_run_folder_is_read_from_the_working_folder(run, capsys, monkeypatch):
+    monkeypatch.chdir(run.parent)
+    rc, out, err = _cli(["sql", run.name, "SELECT count(*) AS n FROM episodes", "--csv"], capsys)
+    assert (rc, out, err) == (0, "n\n19\n", "")
