@@ -26,6 +26,7 @@ The scenarios (``--only NAME``; the functions live in ``tests/chaos/MODULE.py``)
     inputs    inputs    bad sweep files and flags: one line, nothing written, no model call
     secrets   exposure  no key in files, logs or output; every socket on loopback
     sql       guards    every write / escape attack through ``recap sql``: exit 2, 0 bytes changed
+    sqlres    guards    memory and time attacks through ``recap sql``: stopped at the limit, peak RSS under it
     caps      guards    a lying provider (usage, n choices, cost figure) against a small run cap
     unreadable guards   HTTP 200s nobody can read against a small run cap, over a run and 2 resumes
     lock      guards    synchronised threads and processes racing for the driver lock: 1 winner
@@ -73,6 +74,7 @@ SCENARIOS: dict[str, tuple] = {
     "inputs": ("inputs", "bad_inputs", False),
     "secrets": ("exposure", "secrets_and_sockets", False),
     "sql": ("guards", "sql_attacks", False),
+    "sqlres": ("guards", "sql_resource_attacks", False),
     "caps": ("guards", "cap_attacks", False),
     "unreadable": ("guards", "unreadable_attacks", False),
     "lock": ("guards", "lock_race", False),

@@ -629,23 +629,24 @@ def cmd_status(args: argparse.Namespace) -> int:
 def cmd_estimate(args: argparse.Namespace) -> int:
     """``recap estimate SPEC``: the plan and its expected cost, without connecting to Ray or calling any model."""
     from pipeline.estimate import estimate, render
-    from pipeline.preflight import check_plan
+    from pipeline.preflight import check_models, check_plan
     from pipeline.spec import load_spec
     from pipeline.units import expand
 
     spec, _ = load_spec(args.spec)
     with _named(Path(args.spec).name):
         plan = expand(spec)
+        check_models(spec)  # what run refuses before any call, estimate refuses too (keys aside)
         check_plan(plan)
     _render(render, plan, estimate(plan))
     return 0
 
 
 def cmd_report(argv: list[str]) -> int:
-    """``recap report ...``: handed to the reports package."""
+    """``recap report ...``: handed to the reports package (object-store run folders pulled to a local copy first)."""
     from reports.commands import report_main
 
-    return int(report_main(argv) or 0)
+    return int(report_main(argv, resolve_run=_local_run_dir) or 0)
 
 
 def cmd_view(argv: list[str]) -> int:
@@ -683,25 +684,39 @@ def dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
     raise AssertionError(args.cmd)
 
 
-def _local_run_args(args: list[str]) -> list[str]:
-    """Object-store run folders among ``args`` replaced by freshly pulled local mirrors (the
-    reports package reads local folders)."""
+def _local_run_dir(arg: str) -> str:
+    """One run-folder argument of ``recap sql`` / ``recap report`` as a local folder: an object-store
+    run is pulled to its local mirror first. The reports package calls this for run-folder arguments
+    only (never for a query, a title or an output folder); its errors are one line (RunDirError)."""
     from pipeline.spec import URI_SCHEMES
-    from pipeline.store import RUN_FILE, RunStore
+    from reports.views import RunDirError
     from workers.sink import is_uri
 
-    out = []
-    for a in args:
-        if is_uri(a) and a.split("://", 1)[0].lower() in URI_SCHEMES:  # not a query that quotes a URL
-            _check_location(a)
-        if is_uri(a) and RunStore(a).exists(RUN_FILE):
-            from pipeline.mirror import mirror_dir, pull
+    if not is_uri(arg):
+        return arg
+    scheme = arg.split("://", 1)[0].lower()
+    if scheme not in URI_SCHEMES:
+        raise RunDirError(
+            f"{arg} is not a run folder: unknown URI scheme {scheme!r} (a local folder or {', '.join(s + '://' for s in URI_SCHEMES)})"
+        )
+    try:
+        _check_location(arg)
+        from pipeline.store import RUN_FILE, RunStore
 
-            local = mirror_dir(a)
-            pull(a, local)
-            a = str(local)
-        out.append(a)
-    return out
+        if not RunStore(arg).exists(RUN_FILE):
+            raise RunDirError(f"{arg} is not a run folder (no {RUN_FILE})")
+        from pipeline.mirror import mirror_dir, pull
+
+        local = mirror_dir(arg)
+        pull(arg, local)
+        return str(local)
+    except RunDirError:
+        raise
+    except PipelineError as exc:
+        raise RunDirError(str(exc)) from None
+    except Exception as exc:  # a URI pyarrow cannot parse or reach: one line, never a traceback
+        detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RunDirError(f"cannot read run folder {arg}: {detail}") from None
 
 
 def cmd_sql(argv: list[str]) -> int:
@@ -709,10 +724,7 @@ def cmd_sql(argv: list[str]) -> int:
     --csv/--json, named queries); object-store run folders are pulled to a local copy first."""
     from reports.commands import sql_main
 
-    return int(sql_main(argv if _HELP & set(argv) else _local_run_args(argv)) or 0)
-
-
-_HELP = {"-h", "--help"}  # help only: no object-store run folder is pulled first
+    return int(sql_main(argv, resolve_run=_local_run_dir) or 0)
 
 
 def _take_log_level(argv: list[str]) -> str | None:
@@ -760,7 +772,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if argv[0] == "view":
                 return cmd_view(argv[1:])
             if argv[0] == "report":
-                return cmd_report(argv[1:] if _HELP & set(argv) else _local_run_args(argv[1:]))
+                return cmd_report(argv[1:])
             return cmd_sql(argv[1:])
         except PipelineError as exc:
             print(f"recap: error: {exc}", file=sys.stderr)

@@ -20,38 +20,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from pipeline.backend import RateStats, Spend
-from pipeline.errors import SpecError
-from pipeline.spec import ModelSpec, SweepSpec
+from pipeline.deployments import deployment_config
+from pipeline.spec import SweepSpec
 
 #: times a call in flight on a gateway (or budget) actor that died is re-sent to its restart;
 #: bounded so that a request that kills the actor every time cannot loop for ever
 TASK_RETRIES = 3
-
-
-def deployment_config(m: ModelSpec, where: str) -> Any:
-    """The gateway's config for one sweep model entry; errors name the entry."""
-    from pydantic import ValidationError
-
-    from workers.llm.offline.knobs import Knobs, OfflineOptionsError
-    from workers.llm.providers import DeploymentConfig
-
-    if m.options and not m.test_double:
-        raise SpecError(f"{where} ({m.name}): 'options' are for offline/ test doubles only")
-    if m.test_double:
-        try:
-            Knobs.from_options(m.options)
-        except OfflineOptionsError as exc:
-            raise SpecError(f"{where} ({m.name}): {exc}") from None
-    try:
-        return DeploymentConfig(**m.deployment_fields())
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        loc = ".".join(str(x) for x in err.get("loc", ()))
-        raise SpecError(
-            f"{where} ({m.name}): {loc + ': ' if loc else ''}{err.get('msg', 'invalid').removeprefix('Value error, ')}"
-        ) from None
-    except ValueError as exc:
-        raise SpecError(f"{where} ({m.name}): {exc}") from None
 
 
 def model_caps(spec: SweepSpec) -> dict[str, float]:

@@ -17,7 +17,7 @@ import re
 from typing import TYPE_CHECKING, Any
 
 from pipeline.errors import PreflightError
-from pipeline.spec import ModelSpec, SweepSpec
+from pipeline.spec import OFFLINE_PREFIX, ModelSpec, SweepSpec
 
 if TYPE_CHECKING:
     from pipeline.units import Plan
@@ -66,6 +66,121 @@ def check_keys(spec: SweepSpec) -> None:
             )
 
 
+# --------------------------------------------------------------------------------------------
+# the models: a provider litellm knows, params within range, an output cap the model has
+# --------------------------------------------------------------------------------------------
+def _providers() -> list[str]:
+    """The provider prefixes litellm routes (``openai``, ``together_ai``, ...)."""
+    from workers.llm.litellm_import import import_litellm
+
+    return sorted({str(getattr(p, "value", p)) for p in import_litellm().provider_list})
+
+
+def provider_problem(m: ModelSpec) -> str | None:
+    """Why no call of model entry ``m`` could reach a provider (None when one can): an unknown
+    provider prefix (``nosuchprovider/zzz``), a model without a prefix litellm does not know
+    (``zzz``), or an ``offline/`` name that is not one of the test doubles. Asked of litellm the
+    way a call asks it (``get_llm_provider``), so ``gpt-4o`` and ``openai/<anything>`` at an
+    ``api_base`` (a self-hosted server) pass."""
+    import difflib
+
+    from workers.llm.litellm_import import import_litellm
+    from workers.llm.offline.provider import MODELS as OFFLINE_MODELS
+
+    if m.test_double:
+        name = m.model.removeprefix(OFFLINE_PREFIX)
+        if name in OFFLINE_MODELS:
+            return None
+        return f"unknown test double {m.model!r}; known: {', '.join(OFFLINE_PREFIX + x for x in OFFLINE_MODELS)}"
+    try:
+        import_litellm().get_llm_provider(m.model, api_base=m.api_base)
+        return None
+    except Exception:
+        pass
+    prefix, slash, rest = m.model.partition("/")
+    known = _providers()
+    if not slash:
+        return (
+            f"litellm does not know the model {m.model!r} and it names no provider; write provider/model "
+            f"(openai/{m.model} for an OpenAI-compatible server at api_base)"
+        )
+    if prefix in known:  # a known provider that needs more than the string (its settings: check_keys)
+        return None
+    lowered = {k.lower(): k for k in [*known, OFFLINE_PREFIX.rstrip("/")]}
+    near = [lowered[x] for x in difflib.get_close_matches(prefix.lower(), list(lowered), n=3, cutoff=0.0)]
+    return (
+        f"unknown provider {prefix!r} in {m.model!r} (nearest known: {', '.join(near)}); "
+        f"an OpenAI-compatible server at api_base is openai/{rest or '<model>'}"
+    )
+
+
+def model_output_limit(model: str) -> int | None:
+    """The most output tokens ``model`` can produce per call by litellm's model map
+    (``max_output_tokens``), None when the map does not say (self-hosted and unknown models)."""
+    from workers.llm.litellm_import import import_litellm
+
+    litellm = import_litellm()
+    try:
+        info = litellm.get_model_info(model)
+    except Exception:
+        return None
+    limit = info.get("max_output_tokens") if isinstance(info, dict) else None
+    return int(limit) if isinstance(limit, (int, float)) and not isinstance(limit, bool) and limit > 0 else None
+
+
+def check_models(spec: SweepSpec) -> None:
+    """Every model entry can be called as written, checked without a call and before anything is
+    written (``recap run``, ``resume`` and ``estimate``): its provider is known
+    (:func:`provider_problem`), its deployment config builds (generation params and test-double
+    options within their ranges: :func:`pipeline.deployments.deployment_config`) and its
+    ``params.max_tokens`` is within the model's own output limit (:func:`model_output_limit`):
+    above it the provider would refuse every call. Raises SpecError (one line)."""
+    from pipeline.deployments import deployment_config
+    from pipeline.errors import SpecError
+
+    for i, m in enumerate(spec.models):
+        where = f"models[{i}] ({m.name})"
+        problem = provider_problem(m)
+        if problem:
+            raise SpecError(f"{where}: {problem}")
+        deployment_config(m, f"models[{i}]")
+        cap = m.params.get("max_tokens")
+        limit = None if m.test_double else model_output_limit(m.model)
+        if isinstance(cap, int) and limit is not None and cap > limit:
+            raise SpecError(
+                f"{where}: params.max_tokens {cap} is above the model's output limit {limit} "
+                f"(litellm's max_output_tokens for {m.model}); use at most {limit}"
+            )
+
+
+def check_output_caps(plan: Plan) -> None:
+    """Every request of the plan asks for an output cap its model can give: a method's own
+    ``max_tokens`` (ReCAP's 3072) above a model's output limit, with no ``params.max_tokens`` on
+    the model to bound it, would be refused by the provider on every call. Raises SpecError."""
+    import json
+
+    from pipeline.errors import SpecError
+    from workers.llm.providers import DEFAULT_MAX_TOKENS
+
+    spec = plan.spec
+    seen: set[tuple[str, str]] = set()
+    for u in plan.units:
+        if (u.model_label, u.method_config) in seen:
+            continue
+        seen.add((u.model_label, u.method_config))
+        i, m = next((i, m) for i, m in enumerate(spec.models) if m.name == u.model_label)
+        if m.test_double or m.params.get("max_tokens"):
+            continue  # a model cap bounds every request (and check_models held it to the limit)
+        limit = model_output_limit(m.model)
+        asked = json.loads(u.method_config).get("max_tokens") or DEFAULT_MAX_TOKENS
+        if limit is not None and asked > limit:
+            j = next((j for j, x in enumerate(spec.methods) if x.name == u.method_label), 0)
+            raise SpecError(
+                f"models[{i}] ({m.name}): methods[{j}] ({u.method_label}) asks for max_tokens {asked} but the model's "
+                f"output limit is {limit} (litellm's max_output_tokens); give the model params: {{max_tokens: {limit}}}"
+            )
+
+
 def check_prices(spec: SweepSpec) -> None:
     """Every model under a cap (the run cap covers all models) must have a price."""
     from workers.llm.pricing import PriceError, require_prices
@@ -82,7 +197,9 @@ def check_prices(spec: SweepSpec) -> None:
 
 
 def preflight(spec: SweepSpec) -> None:
-    """The spend checks of a sweep (prices, then keys); raises PreflightError on the first failure."""
+    """The checks of a sweep before it may spend (the models, prices, then keys); raises
+    SpecError or PreflightError on the first failure."""
+    check_models(spec)
     check_prices(spec)
     check_keys(spec)
 
@@ -142,6 +259,7 @@ def check_plan(plan: Plan) -> None:
     from workers.envs import registry
     from workers.episode_worker import agent_from_config, env_options_for
 
+    check_output_caps(plan)
     spec = plan.spec
     method_index = {m.name: i for i, m in enumerate(spec.methods)}
 

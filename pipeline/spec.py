@@ -44,12 +44,19 @@ Hardening (every rule fails as one line before any model call or write):
   longer than :data:`MAX_SCALAR_CHARS` characters and nesting deeper than :data:`MAX_DEPTH`.
 * Numbers, anywhere in the file (free-form ``params``/``options``/``settings`` included):
   floats must be finite (``.nan``/``.inf`` refused), integers must fit a signed 64-bit column.
-  Every integer field refuses ``true``/``false`` and has a documented range (the ``*_MAX``
-  constants below): seeds 0..2**31-1, workers 1..1024, max_attempts 1..100, rpm 1..10**7,
-  tpm 1..10**11, concurrency 1..10000, retries 0..100, timeout_s and window_s up to a day,
-  limits.llm_calls 1..10**6, limits.tokens 1..10**10, environment limit 1..10**5, ray.num_cpus
-  1..4096, ray.object_store_mb 64..1048576; dollar amounts (caps, limits.usd) up to 10**6,
-  prices up to 10**4 USD per million tokens, step_multiplier up to 1000, worker_cpus up to 1024.
+  Every number field refuses ``true``/``false`` and has a sane range, declared in one table
+  (:data:`NUMBER_BOUNDS`) and said in the refusal (``models[0].window_s: 1e-300 is out of range
+  [0.1, 86400]``): seeds 0..2**31-1, workers 1..1024, max_attempts 1..100, rpm 1..10**7,
+  tpm 1..10**11, concurrency 1..10000, retries 0..100, window_s 0.1 s..a day, timeout_s 0.1..900 s
+  (the gateway's total time per call), limits.llm_calls 1..10**6, limits.tokens 1..10**10,
+  limits.usd 10**-6..10**6, environment limit 1..10**5, ray.num_cpus 1..4096,
+  ray.object_store_mb 64..1048576, ray.worker_cpus 0.001..1024; caps 0..10**6 USD, prices
+  0..10**4 USD per million tokens, step_multiplier 0.1..1000. Generation ``params`` have theirs
+  in :data:`workers.llm.providers.NUMERIC_PARAMS` (max_tokens 1..262144 and at most the model's
+  own output limit: :func:`pipeline.preflight.check_models`).
+* ``api_key_env`` names a credential: a variable ending in ``_KEY``, ``_TOKEN``, ``_SECRET``,
+  ``_PASSWORD`` (...) or one the provider itself reads; any other name (``HOME``) needs
+  ``api_key_env_is_credential: true`` (:func:`pipeline.preflight.check_models`).
 * Strings: run names match ``[A-Za-z0-9][A-Za-z0-9_.-]*`` (at most 200 characters); labels are
   at most 200 characters of letters, digits, space and ``- _ . : @ + / ( ) , = # %`` (no
   brackets, backslashes or control characters: nothing a terminal or Rich markup interprets);
@@ -75,6 +82,7 @@ import os
 import re
 import stat
 import unicodedata
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -85,11 +93,13 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
+    GetCoreSchemaHandler,
     ValidationError,
     ValidationInfo,
     field_validator,
     model_validator,
 )
+from pydantic_core import core_schema
 
 from pipeline.errors import SpecError
 
@@ -115,6 +125,7 @@ SELECTOR_MAX = 1000
 PATH_MAX = 4096
 USD_MAX = 1_000_000.0
 PRICE_MAX = 10_000.0
+STEP_MULTIPLIER_MIN = 0.1
 STEP_MULTIPLIER_MAX = 1000.0
 WORKERS_MAX = 1024
 ATTEMPTS_MAX = 100
@@ -123,11 +134,21 @@ TPM_MAX = 10**11
 CONCURRENCY_MAX = 10_000
 RETRIES_MAX = 100
 SECONDS_MAX = 86_400.0
+#: the shortest quota window and attempt timeout: below it a quota or a timeout means nothing
+SECONDS_MIN = 0.1
+#: an attempt's timeout: every attempt of a call must fit in the gateway's total timeout per
+#: call (``DeploymentConfig.total_timeout_s``, 900 s); a longer one would be cut there silently
+TIMEOUT_MAX = 900.0
+#: the smallest per-episode dollar limit (one micro-dollar: prices have at most 6 decimals)
+EPISODE_USD_MIN = 1e-6
 LLM_CALLS_MAX = 10**6
 TOKENS_MAX = 10**10
 LIMIT_MAX = 100_000
 NUM_CPUS_MAX = 4096
+OBJECT_STORE_MB_MIN = 64
 OBJECT_STORE_MB_MAX = 1 << 20
+#: Ray books fractional CPUs in steps of 0.0001; below a thousandth a share is meaningless
+WORKER_CPUS_MIN = 0.001
 WORKER_CPUS_MAX = 1024.0
 LIST_MAX = 100
 SEEDS_MAX = 10_000
@@ -137,6 +158,98 @@ INSTANCES_TOTAL_MAX = 20_000
 
 #: object-store schemes an output may use (``file://`` is a local folder)
 URI_SCHEMES = ("file", "s3", "gs", "gcs", "hdfs", "abfs", "abfss")
+
+
+@dataclass(frozen=True)
+class Bound:
+    """The sane range of one number field of the sweep file: ``lo <= value <= hi``."""
+
+    lo: float
+    hi: float
+
+    def text(self) -> str:
+        """``[lo, hi]`` as the refusal shows it."""
+        return f"[{number_text(self.lo)}, {number_text(self.hi)}]"
+
+
+#: Every number field of the sweep file and its range, in one place: the ``Bounded(path)`` in a
+#: field's type looks its range up here, and a value outside is refused in one line that says
+#: the range (``models[0].window_s: 1e-300 is out of range [0.1, 86400]``). A number field
+#: without an entry fails tests/pipeline/test_spec_bounds.py. The free-form mappings have their
+#: own tables: ``params`` (:data:`workers.llm.providers.NUMERIC_PARAMS`), ``options`` of a test
+#: double (:class:`workers.llm.offline.knobs.Knobs`), method ``settings`` (the method's config).
+NUMBER_BOUNDS: dict[str, Bound] = {
+    "models[].rpm": Bound(1, RPM_MAX),
+    "models[].tpm": Bound(1, TPM_MAX),
+    "models[].concurrency": Bound(1, CONCURRENCY_MAX),
+    "models[].window_s": Bound(SECONDS_MIN, SECONDS_MAX),
+    "models[].retries": Bound(0, RETRIES_MAX),
+    "models[].timeout_s": Bound(SECONDS_MIN, TIMEOUT_MAX),
+    "models[].prices.input": Bound(0, PRICE_MAX),
+    "models[].prices.output": Bound(0, PRICE_MAX),
+    "models[].prices.cached_input": Bound(0, PRICE_MAX),
+    "models[].prices.cache_write": Bound(0, PRICE_MAX),
+    "models[].cap_usd": Bound(0, USD_MAX),
+    "environments[].limit": Bound(1, LIMIT_MAX),
+    "limits.llm_calls": Bound(1, LLM_CALLS_MAX),
+    "limits.tokens": Bound(1, TOKENS_MAX),
+    "limits.usd": Bound(EPISODE_USD_MIN, USD_MAX),
+    "ray.num_cpus": Bound(1, NUM_CPUS_MAX),
+    "ray.object_store_mb": Bound(OBJECT_STORE_MB_MIN, OBJECT_STORE_MB_MAX),
+    "ray.worker_cpus": Bound(WORKER_CPUS_MIN, WORKER_CPUS_MAX),
+    "seeds[]": Bound(0, SEED_MAX),
+    "step_multiplier": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),
+    "run_cap_usd": Bound(0, USD_MAX),
+    "workers": Bound(1, WORKERS_MAX),
+    "max_attempts": Bound(1, ATTEMPTS_MAX),
+}
+
+
+def number_text(v: float) -> str:
+    """A number as a refusal shows it: integers in full, floats in their shortest form (1e-300)."""
+    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
+        return str(int(v))
+    return repr(float(v))
+
+
+@dataclass(frozen=True)
+class Bounded:
+    """The range check of a number field, found by its path in :data:`NUMBER_BOUNDS` (put in the
+    field's ``Annotated`` type, after the int/float check)."""
+
+    path: str
+
+    def __post_init__(self) -> None:
+        if self.path not in NUMBER_BOUNDS:
+            raise KeyError(f"{self.path} has no entry in NUMBER_BOUNDS")
+
+    @property
+    def bound(self) -> Bound:
+        """This field's range."""
+        return NUMBER_BOUNDS[self.path]
+
+    def check(self, v: Any) -> Any:
+        """``v`` unchanged, or a ValueError that names the range."""
+        b = self.bound
+        if not b.lo <= v <= b.hi:
+            raise ValueError(f"{number_text(v)} is out of range {b.text()}")
+        return v
+
+    def __get_pydantic_core_schema__(self, source: Any, handler: GetCoreSchemaHandler) -> core_schema.CoreSchema:
+        return core_schema.no_info_after_validator_function(self.check, handler(source))
+
+
+#: the last word of a variable name that holds a credential (``OPENAI_API_KEY``, ``HF_TOKEN``,
+#: ``WATSONX_APIKEY``); every key variable litellm reads for a provider ends in one of them
+CREDENTIAL_WORDS = ("KEY", "APIKEY", "TOKEN", "SECRET", "PASSWORD", "PASSWD")
+
+
+def credential_name(name: str) -> bool:
+    """Whether an environment variable's name says it holds a credential: it is one of
+    :data:`CREDENTIAL_WORDS` or ends in ``_`` and one of them (case-insensitive). ``HOME``,
+    ``PATH`` or ``AZURE_API_BASE`` do not, so ``api_key_env`` cannot send them to a provider."""
+    upper = name.upper()
+    return any(upper == w or upper.endswith("_" + w) for w in CREDENTIAL_WORDS)
 
 
 # -- field types ---------------------------------------------------------------------------------
@@ -184,10 +297,6 @@ def _model_string(v: str) -> str:
 Name = Annotated[str, Field(min_length=1, max_length=NAME_MAX), AfterValidator(_printable)]
 Label = Annotated[str, Field(min_length=1, max_length=NAME_MAX), AfterValidator(_label)]
 Selector = Annotated[str, Field(min_length=1, max_length=SELECTOR_MAX), AfterValidator(_printable)]
-Seed = Annotated[int, _NOT_BOOL, Field(ge=0, le=SEED_MAX)]
-Usd = Annotated[float, _NOT_BOOL, Field(ge=0, le=USD_MAX, allow_inf_nan=False)]
-Price = Annotated[float, _NOT_BOOL, Field(ge=0, le=PRICE_MAX, allow_inf_nan=False)]
-Seconds = Annotated[float, _NOT_BOOL, Field(gt=0, le=SECONDS_MAX, allow_inf_nan=False)]
 
 
 def _local_path(v: str) -> str:
@@ -223,10 +332,10 @@ class PriceSpec(_Strict):
     """USD per million tokens; ``cached_input`` (cache reads) and ``cache_write`` (tokens written
     to an explicit-breakpoint cache, Anthropic style) default to ``input``."""
 
-    input: Price
-    output: Price
-    cached_input: Price | None = None
-    cache_write: Price | None = None
+    input: Annotated[float, _NOT_BOOL, Bounded("models[].prices.input")]
+    output: Annotated[float, _NOT_BOOL, Bounded("models[].prices.output")]
+    cached_input: Annotated[float, _NOT_BOOL, Bounded("models[].prices.cached_input")] | None = None
+    cache_write: Annotated[float, _NOT_BOOL, Bounded("models[].prices.cache_write")] | None = None
 
 
 #: The one mapping between a sweep model entry and the gateway's deployment
@@ -252,8 +361,9 @@ DEPLOYMENT_FIELDS: dict[str, str] = {
     "api_base": "api_base",
     "api_key_env": "api_key_env",
 }
-#: model entry fields the gateway's deployment does not carry (the ledger takes the caps)
-SPEC_ONLY_FIELDS = frozenset({"cap_usd"})
+#: model entry fields the gateway's deployment does not carry (the ledger takes the caps; the
+#: preflight reads the key-name override)
+SPEC_ONLY_FIELDS = frozenset({"cap_usd", "api_key_env_is_credential"})
 
 
 class ModelSpec(_Strict):
@@ -269,17 +379,21 @@ class ModelSpec(_Strict):
     #: chunk_size); part of the unit hash
     options: dict[str, Any] = Field(default_factory=dict)
     # --- transport: never part of a unit's identity ---
-    rpm: Annotated[int, _NOT_BOOL, Field(gt=0, le=RPM_MAX)] | None = None
-    tpm: Annotated[int, _NOT_BOOL, Field(gt=0, le=TPM_MAX)] | None = None
-    concurrency: Annotated[int, _NOT_BOOL, Field(gt=0, le=CONCURRENCY_MAX)] | None = None
+    rpm: Annotated[int, _NOT_BOOL, Bounded("models[].rpm")] | None = None
+    tpm: Annotated[int, _NOT_BOOL, Bounded("models[].tpm")] | None = None
+    concurrency: Annotated[int, _NOT_BOOL, Bounded("models[].concurrency")] | None = None
     #: the quota window rpm/tpm count over (60 s for real providers; shorter for test servers)
-    window_s: Seconds | None = None
-    retries: Annotated[int, _NOT_BOOL, Field(ge=0, le=RETRIES_MAX)] | None = None
-    timeout_s: Seconds | None = None
+    window_s: Annotated[float, _NOT_BOOL, Bounded("models[].window_s")] | None = None
+    retries: Annotated[int, _NOT_BOOL, Bounded("models[].retries")] | None = None
+    timeout_s: Annotated[float, _NOT_BOOL, Bounded("models[].timeout_s")] | None = None
     prices: PriceSpec | None = None
     api_base: Annotated[str, Field(min_length=1, max_length=LONG_MAX), AfterValidator(_printable)] | None = None
+    #: the variable named by api_key_env holds a key although its name does not say so (see
+    #: :func:`credential_name`): without this such a name is refused, so that no other variable
+    #: (HOME, PATH) is ever sent to a provider as a key. Before api_key_env: its check reads it.
+    api_key_env_is_credential: bool = False
     api_key_env: Annotated[str, Field(max_length=NAME_MAX)] | None = None
-    cap_usd: Usd | None = None
+    cap_usd: Annotated[float, _NOT_BOOL, Bounded("models[].cap_usd")] | None = None
 
     @property
     def name(self) -> str:
@@ -319,10 +433,22 @@ class ModelSpec(_Strict):
 
     @field_validator("api_key_env")
     @classmethod
-    def _api_key_env(cls, v: str | None) -> str | None:
+    def _api_key_env(cls, v: str | None, info: ValidationInfo) -> str | None:
         if v is not None and not _ENV_VAR.match(v):
             raise ValueError(f"must be an environment variable name (letters, digits, _), got {v!r}")
+        if v is not None and not credential_name(v) and not info.data.get("api_key_env_is_credential"):
+            raise ValueError(
+                f"{v} does not name a credential (a variable ending in {', '.join('_' + w for w in CREDENTIAL_WORDS)}) "
+                "and its value would be sent to the provider as the API key; "
+                "if it does hold the key, add api_key_env_is_credential: true"
+            )
         return v
+
+    @model_validator(mode="after")
+    def _credential_override(self) -> ModelSpec:
+        if self.api_key_env_is_credential and not self.api_key_env:
+            raise ValueError("api_key_env_is_credential: true needs api_key_env (the variable it vouches for)")
+        return self
 
     @field_validator("api_base")
     @classmethod
@@ -395,7 +521,7 @@ class EnvSpec(_Strict):
     #: explicit instance ids
     instances: list[Selector] = Field(default_factory=list, max_length=INSTANCES_MAX)
     #: at most this many instances per selector (in the benchmark's fixed order)
-    limit: Annotated[int, _NOT_BOOL, Field(gt=0, le=LIMIT_MAX)] | None = None
+    limit: Annotated[int, _NOT_BOOL, Bounded("environments[].limit")] | None = None
     #: options for the benchmark's make() (data_dir ...); not part of the unit hash. Path
     #: options (data_dir, *_dir) are resolved here (~ expanded, made absolute).
     options: dict[str, Any] = Field(default_factory=dict)
@@ -415,9 +541,9 @@ class LimitsSpec(_Strict):
     """Per-episode limits, mapped onto AgentConfig max_llm_calls / max_episode_tokens /
     max_episode_cost_usd (a method's own settings win)."""
 
-    llm_calls: Annotated[int, _NOT_BOOL, Field(gt=0, le=LLM_CALLS_MAX)] | None = None
-    tokens: Annotated[int, _NOT_BOOL, Field(gt=0, le=TOKENS_MAX)] | None = None
-    usd: Annotated[float, _NOT_BOOL, Field(gt=0, le=USD_MAX, allow_inf_nan=False)] | None = None
+    llm_calls: Annotated[int, _NOT_BOOL, Bounded("limits.llm_calls")] | None = None
+    tokens: Annotated[int, _NOT_BOOL, Bounded("limits.tokens")] | None = None
+    usd: Annotated[float, _NOT_BOOL, Bounded("limits.usd")] | None = None
 
     def agent_settings(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -456,11 +582,11 @@ class RaySpec(_Strict):
     worker."""
 
     address: Annotated[str, Field(max_length=NAME_MAX), AfterValidator(check_ray_address)] | None = None
-    num_cpus: Annotated[int, _NOT_BOOL, Field(gt=0, le=NUM_CPUS_MAX)] | None = None
+    num_cpus: Annotated[int, _NOT_BOOL, Bounded("ray.num_cpus")] | None = None
     dashboard: bool = False
-    object_store_mb: Annotated[int, _NOT_BOOL, Field(ge=64, le=OBJECT_STORE_MB_MAX)] = 256
+    object_store_mb: Annotated[int, _NOT_BOOL, Bounded("ray.object_store_mb")] = 256
     #: CPU share of one episode worker actor (small: workers wait on the model)
-    worker_cpus: Annotated[float, _NOT_BOOL, Field(ge=0, le=WORKER_CPUS_MAX, allow_inf_nan=False)] = 0.05
+    worker_cpus: Annotated[float, _NOT_BOOL, Bounded("ray.worker_cpus")] = 0.05
 
 
 class SweepSpec(_Strict):
@@ -472,12 +598,14 @@ class SweepSpec(_Strict):
     models: list[ModelSpec] = Field(min_length=1, max_length=LIST_MAX)
     methods: list[MethodSpec] = Field(min_length=1, max_length=LIST_MAX)
     environments: list[EnvSpec] = Field(min_length=1, max_length=LIST_MAX)
-    seeds: list[Seed] = Field(default_factory=lambda: [0], min_length=1, max_length=SEEDS_MAX)
-    step_multiplier: Annotated[float, _NOT_BOOL, Field(gt=0, le=STEP_MULTIPLIER_MAX, allow_inf_nan=False)] = 4.0
+    seeds: list[Annotated[int, _NOT_BOOL, Bounded("seeds[]")]] = Field(
+        default_factory=lambda: [0], min_length=1, max_length=SEEDS_MAX
+    )
+    step_multiplier: Annotated[float, _NOT_BOOL, Bounded("step_multiplier")] = 4.0
     limits: LimitsSpec = Field(default_factory=LimitsSpec)
-    run_cap_usd: Usd | None = None
-    workers: Annotated[int, _NOT_BOOL, Field(gt=0, le=WORKERS_MAX)] = 4
-    max_attempts: Annotated[int, _NOT_BOOL, Field(gt=0, le=ATTEMPTS_MAX)] = 3
+    run_cap_usd: Annotated[float, _NOT_BOOL, Bounded("run_cap_usd")] | None = None
+    workers: Annotated[int, _NOT_BOOL, Bounded("workers")] = 4
+    max_attempts: Annotated[int, _NOT_BOOL, Bounded("max_attempts")] = 3
     #: the order units start in (not part of any unit hash): ``interleaved`` (default) takes the
     #: arms (method x model) in turn and, within an arm, instances in a shuffle seeded by the run
     #: name, so a cap that binds early leaves a balanced subsample; ``plan`` is the plan's own

@@ -245,6 +245,54 @@ ABLATIONS: dict[str, dict[str, Any]] = {
 }
 
 
+#: The range of every number setting of the built-in methods (both ends inclusive), checked by
+#: :func:`build_config` after the method's own checks, so a sweep's ``settings`` can hold no
+#: number out of range (``window: 10000000`` would keep every message of an episode). A number
+#: setting of a built-in config without an entry fails tests/pipeline/test_spec_bounds.py;
+#: an extension method's own settings are its own to check.
+SETTING_BOUNDS: dict[str, tuple[float, float]] = {
+    "window": (2, 100_000),
+    "window_block": (1, 100_000),
+    "temperature": (0, 2),
+    "max_tokens": (1, 262_144),
+    "max_json_repairs": (0, 100),
+    "max_llm_calls": (1, 1_000_000),
+    "max_episode_tokens": (1, 10**10),
+    "max_episode_cost_usd": (1e-6, 1_000_000),
+    "context_drop": (2, 100_000),
+    "max_level": (2, 100),
+    "reminder_period": (1, 100_000),
+    "max_depth": (1, 100),
+    "executor_steps": (1, 100_000),
+    "executor_patience": (1, 100_000),
+    "invalid_streak": (1, 100_000),
+    "invalid_rounds": (1, 100_000),
+}
+
+
+def _number_text(v: float) -> str:
+    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
+        return str(int(v))
+    return repr(float(v))
+
+
+def check_setting_ranges(cfg: AgentConfig) -> None:
+    """Every number setting of ``cfg`` that :data:`SETTING_BOUNDS` names is a number (an integer
+    where the default is one; never true/false) within its range; raises ConfigError with the
+    range in the message."""
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        if f.name not in SETTING_BOUNDS or value is None:
+            continue
+        low, high = SETTING_BOUNDS[f.name]
+        integer = "int" in str(f.type)
+        kind = "an integer" if integer else "a number"
+        if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+            raise ConfigError(f"{f.name} must be {kind} in [{_number_text(low)}, {_number_text(high)}], got {value!r}")
+        if not low <= value <= high:
+            raise ConfigError(f"{f.name} {_number_text(value)} is out of range [{_number_text(low)}, {_number_text(high)}]")
+
+
 def build_config(
     cls: type[AgentConfig],
     profile: str | None = None,
@@ -275,4 +323,5 @@ def build_config(
     values.update(overrides)
     cfg = cls(**values)
     cfg.validate()
+    check_setting_ranges(cfg)
     return cfg

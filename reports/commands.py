@@ -2,39 +2,50 @@
 
 The pipeline CLI hands its remaining arguments to :func:`report_main` or :func:`sql_main`; both
 return an exit status and print one-line errors, never tracebacks. ``recap report``: 0 ok, 1 a
-problem with the runs or the options, 2 bad usage. ``recap sql``: 0 ok, 2 for every error (bad
-usage, a missing or invalid run folder, SQL that does not parse or fails, a refused statement,
-an unreadable / binary / non-SQL ``--file``), like the rest of the ``recap`` command; an error
-about a ``--file`` never quotes the file's text.
+problem with the runs' data or the options, 2 bad usage, a folder that is not a run folder (no
+run.json) or an output folder holding files a report did not write (nothing is written then). ``recap sql``: 0 ok, 2 for every error (bad usage, a missing
+or invalid run folder, SQL that does not parse or fails, a refused statement, an unreadable /
+binary / non-SQL ``--file``, the memory or time limit hit), like the rest of the ``recap``
+command; an error about a ``--file`` never quotes the file's text.
 
     recap report RUN_DIR [RUN_DIR ...] [--out DIR] [--format md,html,tex,csv]
                  [--episodes ID[,ID...]] [--viewer-max N] [--title TEXT] [--paper]
     recap sql RUN_DIR [RUN_DIR ...] "QUERY" [--csv | --json] [--max-rows N]
+              [--memory-limit SIZE] [--timeout S]
     recap sql RUN_DIR [RUN_DIR ...] --file QUERY.sql
     recap sql RUN_DIR "@failure_modes"        # a report query from reports/sql/ by name
 
 Options may come before, between or after the positional arguments (``parse_intermixed_args``);
-``--help`` prints to stdout and returns 0.
+``--help`` prints to stdout and returns 0. Which argument is what never depends on its text: in
+``recap sql`` the last positional is the query (a URL in it is just text), the others are run
+folders; in ``recap report`` every positional is a run folder.
+
+``recap sql`` runs the query in a child process (:mod:`reports.sandbox`) stopped at
+``--memory-limit`` (default 2GB of resident memory) or ``--timeout`` (default 60 s); the line
+says which limit was hit. The report and ``recap view`` run only their own stored queries.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
 import duckdb
 
 from reports.build import FORMATS, ReportOptions, build_report, parse_formats, write_report
-from reports.render_csv import result_csv
+from reports.render_text import format_table as format_table
+from reports.sandbox import DEFAULT_MEMORY, DEFAULT_TIMEOUT_S, Limits, parse_size, run_limited
 from reports.viewer import DEFAULT_EPISODES
-from reports.views import ReportError, Result, load_sql, open_runs_checked, run_query, sql_names
+from reports.views import QueryError, ReportError, RunDirError, check_read_only, load_sql, resolve_run_dirs, sql_names
+
+#: turns one run-folder argument into a local folder (the pipeline CLI pulls object-store runs)
+Resolver = Callable[[str], str]
 
 #: the longest --file read (a query, not a data file; also stops /dev/zero and the like)
 MAX_QUERY_FILE_BYTES = 1 << 20
@@ -72,6 +83,10 @@ class _UsageError(Exception):
     pass
 
 
+class OutputFolderError(ReportError):
+    """The report's output folder holds files a report did not write (or is not a folder): refused, exit 2."""
+
+
 class _Exit(Exception):
     """``--help`` was given: the help is printed, the main returns ``status``."""
 
@@ -89,7 +104,10 @@ _REPORT_EPILOG = """examples:
   recap report runs/paper-main runs/paper-main-x3 --paper --out reports/paper
                                                     only the paper's tables (examples/paper/)
 
-exit status: 0 written; 1 a problem with the run folders or the option values; 2 bad usage
+Writes only under the output folder (RUN_DIR/report or --out), and only into a new or empty
+folder or one that holds an earlier report: a folder with any other file is refused.
+exit status: 0 written; 1 a problem with the run folders' data or the option values; 2 bad usage,
+a folder that is not a run folder (no run.json), or an output folder with other files in it
 """
 
 
@@ -121,9 +139,61 @@ def _report_parser(out: TextIO | None = None) -> _Parser:
     return p
 
 
-def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+#: what a report folder may hold: the files and folders ``recap report`` writes (anything else is not ours)
+_REPORT_FILES = {"report.md", "report.html"}
+_REPORT_DIRS = {"plots": ".svg", "tex": ".tex", "csv": ".csv"}
+
+
+def _foreign_entry(out_dir: Path) -> str | None:
+    """The first entry of ``out_dir`` that a report did not write (a file of the user's, a run folder's
+    run.json, a symlink), or None when the folder is missing, empty, or holds an earlier report only."""
+    if not out_dir.exists() and not out_dir.is_symlink():
+        return None
+    if out_dir.is_symlink() or not out_dir.is_dir():
+        return str(out_dir)
+    for entry in sorted(out_dir.iterdir()):
+        name = entry.name
+        if name.startswith(".tmp-") and entry.is_file() and not entry.is_symlink():
+            continue  # a write of an earlier report cut short
+        if entry.is_symlink():
+            return str(entry)
+        if name in _REPORT_FILES and entry.is_file():
+            continue
+        if name in _REPORT_DIRS and entry.is_dir():
+            for sub in sorted(entry.iterdir()):
+                ours = sub.name.endswith(_REPORT_DIRS[name]) or sub.name.startswith(".tmp-")
+                if sub.is_symlink() or not sub.is_file() or not ours:
+                    return str(sub)
+            continue
+        return str(entry)
+    return None
+
+
+def check_report_folder(out_dir: Path) -> None:
+    """Refuse (ReportError, one line) an output folder that holds anything a report did not write:
+    the report replaces its own files only, never a file of someone else's."""
+    foreign = _foreign_entry(out_dir)
+    if foreign is None:
+        return
+    if foreign == str(out_dir):
+        raise OutputFolderError(f"output folder {out_dir} is not a folder")
+    raise OutputFolderError(
+        f"output folder {out_dir} holds files a report did not write (such as {foreign}); give a new or empty folder with --out"
+    )
+
+
+def report_main(
+    argv: Sequence[str],
+    *,
+    stdout: TextIO | None = None,
+    stderr: TextIO | None = None,
+    resolve_run: Resolver | None = None,
+) -> int:
     """``recap report``: build and write the report (to RUN_DIR/report unless ``--out``); exit 0, 1 for a problem
-    with the runs or options, 2 for bad usage."""
+    with the runs or options, 2 for bad usage and for a folder that is not a run folder.
+
+    Writes only under the output folder, and only into a new or empty one or one that holds an earlier
+    report (:func:`check_report_folder`); ``resolve_run`` makes each run-folder argument local."""
     out, err = stdout or sys.stdout, stderr or sys.stderr
     try:
         args = _report_parser(out).parse_intermixed_args(list(argv))
@@ -132,20 +202,30 @@ def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: Te
             raise ReportError("--viewer-max must be >= 0")
         if args.out is None and len(args.run_dirs) > 1:
             raise ReportError("--out is required when reporting several run folders")
+        if args.out is not None and "://" in args.out:
+            raise _UsageError(f"recap report: --out must be a local folder, got {args.out}")
+        run_dirs = _run_folders(args.run_dirs, resolve_run)
+        out_dir = Path(args.out) if args.out else Path(run_dirs[0]) / "report"
+        check_report_folder(out_dir)
         episodes = tuple(e.strip() for e in args.episodes.split(",") if e.strip()) if args.episodes else None
         options = ReportOptions(
             formats=formats, episodes=episodes, viewer_max=args.viewer_max, title=args.title, paper_only=args.paper
         )
-        report = build_report(args.run_dirs, options)
-        out_dir = Path(args.out) if args.out else Path(args.run_dirs[0]) / "report"
+        report = build_report(run_dirs, options)
         written = write_report(report, out_dir, formats)
     except _Exit as exc:
         return exc.status
     except _UsageError as exc:
         print(_one_line(str(exc)), file=err)
         return 2
+    except (RunDirError, OutputFolderError) as exc:
+        print(f"error: {exc}", file=err)
+        return 2
     except ReportError as exc:
         print(f"error: {exc}", file=err)
+        return 1
+    except OSError as exc:
+        print(_one_line(f"error: cannot write the report: {exc.strerror or type(exc).__name__}: {exc.filename or ''}"), file=err)
         return 1
     for s in report.skipped:
         print(f"warning: {s.line()}", file=err)
@@ -157,15 +237,17 @@ def report_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: Te
 
 
 _SQL_USAGE = """\
-%(prog)s [-h] [--csv | --json] [--max-rows N] RUN_DIR [RUN_DIR ...] QUERY
-       %(prog)s [-h] [--csv | --json] [--max-rows N] RUN_DIR [RUN_DIR ...] @NAME
-       %(prog)s [-h] [--csv | --json] [--max-rows N] --file QUERY.sql RUN_DIR [RUN_DIR ...]"""
+%(prog)s [-h] [--csv | --json] [--max-rows N] [--memory-limit SIZE] [--timeout S] RUN_DIR [RUN_DIR ...] QUERY
+       %(prog)s [-h] [--csv | --json] [--max-rows N] [--memory-limit SIZE] [--timeout S] RUN_DIR [RUN_DIR ...] @NAME
+       %(prog)s [-h] [--csv | --json] [--max-rows N] [--memory-limit SIZE] [--timeout S] --file QUERY.sql RUN_DIR [RUN_DIR ...]"""
 
 _SQL_DESCRIPTION = """\
 Run one read-only SQL query (DuckDB) over the tables and views of one or more run folders
-(several folders are read as one set of tables; run_id tells them apart). The query is the
-last positional argument: SQL text, or @NAME for the report query reports/sql/NAME.sql; with
---file every positional argument is a run folder. Anything but a query is refused."""
+(several folders are read as one set of tables; run_id tells them apart). The query is always
+the last positional argument, whatever it holds (a URL, a path): SQL text, or @NAME for the
+report query reports/sql/NAME.sql; with --file every positional argument is a run folder.
+Anything but a query is refused. The query runs in its own process, stopped when it passes
+--memory-limit (resident memory of that process) or --timeout (seconds since it started)."""
 
 
 def _sql_epilog() -> str:
@@ -180,13 +262,32 @@ examples:
   recap sql runs/a runs/b "select run_id, count(*) from terminal group by 1" --json
   recap sql runs/demo @failure_modes                     a report query by name
   recap sql --file long_query.sql runs/a runs/b --max-rows 500
+  recap sql runs/demo "select * from messages" --csv --memory-limit 8GB --timeout 600
 
 {names}
 tables: episodes, llm_calls, messages, tree_nodes, steps, events, run, bad_parts;
 views: attempts, terminal, calls, nodes, tree_stats, step_patterns, episode_modes, failures
 
-exit status: 0 ok; 2 any error (bad usage, a missing run folder, SQL that fails or is refused)
+exit status: 0 ok; 2 any error (bad usage, a missing run folder, SQL that fails or is refused,
+the memory or the time limit hit: the line says which)
 """
+
+
+def _sql_size(text: str) -> int:
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _seconds(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid number of seconds: {text!r}") from None
+    if not math.isfinite(x) or x <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text!r}")
+    return x
 
 
 def _sql_parser(out: TextIO | None = None) -> _Parser:
@@ -202,29 +303,98 @@ def _sql_parser(out: TextIO | None = None) -> _Parser:
     fmt.add_argument("--csv", action="store_true", help="print CSV (every row)")
     fmt.add_argument("--json", action="store_true", help="print a JSON array of objects (every row)")
     p.add_argument("--max-rows", type=int, default=100, metavar="N", help="rows printed in table output (default 100)")
+    p.add_argument(
+        "--memory-limit",
+        type=_sql_size,
+        default=DEFAULT_MEMORY,
+        metavar="SIZE",
+        help=f"stop the query when its process holds more resident memory (default {DEFAULT_MEMORY}; at least 256MB; "
+        "KB/MB/GB = 1000s, KiB/MiB/GiB = 1024s)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=_seconds,
+        default=DEFAULT_TIMEOUT_S,
+        metavar="S",
+        help=f"stop the query after this many seconds (default {DEFAULT_TIMEOUT_S:g})",
+    )
     return p
 
 
-def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+def _memory_text(argv: Sequence[str]) -> str:
+    """The --memory-limit as the user wrote it (the messages quote it), else the default."""
+    text = DEFAULT_MEMORY
+    for i, a in enumerate(argv):
+        if a == "--memory-limit" and i + 1 < len(argv):
+            text = argv[i + 1]
+        elif a.startswith("--memory-limit="):
+            text = a.split("=", 1)[1]
+    return text.strip()
+
+
+def _run_folders(raw: Sequence[str], resolve: Resolver | None) -> list[str]:
+    """The run-folder arguments, each made local by ``resolve`` and checked (RunDirError, one line)."""
+    local = [resolve(r) if resolve is not None else r for r in raw]
+    resolve_run_dirs(local)
+    return local
+
+
+def _sql_positionals(args: argparse.Namespace) -> tuple[list[str], str]:
+    """(run-folder arguments, query): the last positional is the query unless --file gives it."""
+    if args.file:
+        return list(args.args), _read_query_file(args.file)
+    if len(args.args) < 2:
+        raise _UsageError("recap sql: give at least one RUN_DIR and a QUERY")
+    run_dirs, query = list(args.args[:-1]), args.args[-1]
+    for r in run_dirs:
+        if any(c.isspace() for c in r) and not Path(r).exists():
+            raise _UsageError(
+                f"recap sql: {_one_line(r)[:60]!r} is not a folder; the query comes last: recap sql RUN_DIR ... QUERY"
+            )
+    if query.startswith("@"):
+        query = load_sql(query[1:])
+    return run_dirs, query
+
+
+def sql_main(
+    argv: Sequence[str],
+    *,
+    stdout: TextIO | None = None,
+    stderr: TextIO | None = None,
+    resolve_run: Resolver | None = None,
+) -> int:
     """``recap sql``: run one query (text, ``@name`` of a stored query, or ``--file``) over the runs and print a
-    table, CSV or JSON; every error is one line and exit status 2."""
+    table, CSV or JSON; every error is one line and exit status 2.
+
+    The query runs in a child process (:mod:`reports.sandbox`) under ``--memory-limit`` and ``--timeout``;
+    arguments, run folders and the read-only check are settled here first. ``resolve_run`` makes each
+    run-folder argument local (the pipeline CLI pulls object-store runs); it is never given the query."""
     out, err = stdout or sys.stdout, stderr or sys.stderr
     try:
         args = _sql_parser(out).parse_intermixed_args(list(argv))
+        run_dirs, query = _sql_positionals(args)
+        run_dirs = _run_folders(run_dirs, resolve_run)
         if args.file:
-            run_dirs, query = args.args, _read_query_file(args.file)
             _check_query_file(args.file, query)
-        else:
-            if len(args.args) < 2:
-                raise _UsageError("recap sql: give at least one RUN_DIR and a QUERY")
-            run_dirs, query = args.args[:-1], args.args[-1]
-            if query.startswith("@"):
-                query = load_sql(query[1:])
-        con, skipped = open_runs_checked(run_dirs)
+        con = duckdb.connect(":memory:")
         try:
-            result = run_query(con, query)
+            check_read_only(con, query)
+        except QueryError:
+            if not args.file and query.strip() and Path(query).is_dir():  # recap sql RUN_A RUN_B, no query
+                raise _UsageError(
+                    f"recap sql: the last argument is the query, but {query} is a folder; add the QUERY after the run folders"
+                ) from None
+            raise
         finally:
             con.close()
+        limits = Limits(memory_bytes=args.memory_limit, timeout_s=args.timeout, memory_text=_memory_text(argv))
+        fmt = "csv" if args.csv else "json" if args.json else "table"
+        # absolute: the query process must not depend on the working folder
+        job = {"run_dirs": [str(d) for d in resolve_run_dirs(run_dirs)], "query": query, "format": fmt, "max_rows": args.max_rows}
+        return run_limited(job, limits, out, err).status
+    except KeyboardInterrupt:  # the query process is gone with it (run_limited)
+        print("recap sql: interrupted", file=err)
+        return 130
     except _Exit as exc:
         return exc.status
     except _UsageError as exc:
@@ -236,18 +406,6 @@ def sql_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextI
     except Exception as exc:  # noqa: BLE001 - the contract is one line and status 2, never a traceback
         print(_one_line(f"error: {type(exc).__name__}: {_strip_context(str(exc))}"), file=err)
         return 2
-    for s in skipped:
-        print(f"warning: {s.line()}", file=err)
-    if args.csv:
-        out.write(result_csv(result))
-    elif args.json:
-        out.write(
-            json.dumps([{k: _json_value(v) for k, v in zip(result.columns, r)} for r in result.rows], indent=1, default=str)
-            + "\n"
-        )
-    else:
-        out.write(format_table(result, max_rows=args.max_rows))
-    return 0
 
 
 def _read_query_file(path: str) -> str:
@@ -294,52 +452,6 @@ def _check_query_file(path: str, text: str) -> None:
 
 def _one_line(text: str) -> str:
     return " ".join(text.split())
-
-
-def _json_value(v: Any) -> Any:
-    if isinstance(v, float) and (math.isnan(v) or math.isinf(v)):
-        return None
-    if isinstance(v, tuple):
-        return list(v)
-    return v
-
-
-def _text(v: Any, width: int) -> str:
-    if v is None:
-        s = "NULL"
-    elif isinstance(v, float):
-        s = f"{v:.6g}"
-    else:
-        s = str(v)
-    s = " ".join(s.split()) if "\n" in s else s
-    return s if len(s) <= width else s[: width - 1] + "…"
-
-
-def format_table(result: Result, *, max_rows: int = 100, width: int = 60) -> str:
-    """An aligned text table, numbers right-aligned, at most ``max_rows`` rows."""
-    shown = result.rows[: max(max_rows, 0)]
-    cells = [[_text(v, width) for v in row] for row in shown]
-
-    def is_number(v: Any) -> bool:
-        return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-    numeric = [
-        any(r[i] is not None for r in shown) and all(is_number(r[i]) for r in shown if r[i] is not None)
-        for i in range(len(result.columns))
-    ]
-    widths = [max([len(c)] + [len(row[i]) for row in cells]) for i, c in enumerate(result.columns)]
-
-    def line(values: list[str]) -> str:
-        return " | ".join(v.rjust(w) if numeric[i] else v.ljust(w) for i, (v, w) in enumerate(zip(values, widths))).rstrip()
-
-    lines = [line(list(result.columns)), "-+-".join("-" * w for w in widths)]
-    lines += [line(row) for row in cells]
-    n = len(result.rows)
-    more = n - len(shown)
-    lines.append(
-        f"({n} row{'s' if n != 1 else ''}" + (f"; {more} not shown, use --max-rows, --csv or --json)" if more > 0 else ")")
-    )
-    return "\n".join(lines) + "\n"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

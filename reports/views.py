@@ -106,7 +106,8 @@ class SkippedPart:
 # -- opening runs ------------------------------------------------------------------------------
 
 
-def _resolve_run_dirs(run_dirs: Sequence[str | Path]) -> list[Path]:
+def resolve_run_dirs(run_dirs: Sequence[str | Path]) -> list[Path]:
+    """The run folders as absolute paths, each once; RunDirError (one line) for a missing folder or one without run.json."""
     if isinstance(run_dirs, (str, Path)):
         run_dirs = [run_dirs]
     if not run_dirs:
@@ -116,9 +117,12 @@ def _resolve_run_dirs(run_dirs: Sequence[str | Path]) -> list[Path]:
         p = Path(raw).expanduser().resolve()
         if not p.is_dir():
             raise RunDirError(f"run folder {raw} does not exist or is not a folder")
-        has_table = any((p / t).is_dir() for t in TABLES)
-        if not has_table and not (p / RUN_FILE).is_file():
-            raise RunDirError(f"{raw} is not a run folder (no {RUN_FILE} and no table folder such as {p / 'episodes'})")
+        # the rule of recap status and resume: a run folder has its run.json (table folders alone
+        # are not enough; the report would write its files into any folder that had one)
+        if not (p / RUN_FILE).is_file():
+            raise RunDirError(f"{raw} is not a run folder (no {RUN_FILE})")
+        if read_run_file(p) is None:
+            raise RunDirError(f"{raw} is not a run folder (its {RUN_FILE} is unreadable or not a JSON object)")
         if p not in out:
             out.append(p)
     return out
@@ -132,7 +136,7 @@ def _run_identity(run_dir: Path) -> str | None:
 
 def scan_runs(run_dirs: Sequence[str | Path]) -> tuple[list[Path], dict[str, list[Path]], list[SkippedPart]]:
     """Readable part files per table over all runs, and the broken ones."""
-    dirs = _resolve_run_dirs(run_dirs)
+    dirs = resolve_run_dirs(run_dirs)
     files: dict[str, list[Path]] = {t: [] for t in TABLES}
     skipped: list[SkippedPart] = []
     for d in dirs:
@@ -190,12 +194,18 @@ def open_runs(run_dirs: Sequence[str | Path], *, read_only: bool = True) -> duck
 
 
 def open_runs_checked(
-    run_dirs: Sequence[str | Path], *, read_only: bool = True
+    run_dirs: Sequence[str | Path],
+    *,
+    read_only: bool = True,
+    memory_limit: str | None = None,
+    threads: int | None = None,
 ) -> tuple[duckdb.DuckDBPyConnection, list[SkippedPart]]:
     """:func:`open_runs` that also returns the skipped part files.
 
     ``read_only=False`` leaves DuckDB's file access and configuration as they are (a caller that
     exports on purpose); the part files are still read through pyarrow, never opened by DuckDB.
+    ``memory_limit`` (DuckDB's syntax, e.g. ``'1GB'``) and ``threads`` are set before the
+    configuration is locked, so no query can raise them (``recap sql``'s child process).
     """
     dirs, files, skipped = scan_runs(run_dirs)
     for s in skipped:
@@ -203,6 +213,12 @@ def open_runs_checked(
         # report and status print one warning line each; a second copy from logging would double it)
         log.info(s.line())
     con = duckdb.connect(":memory:")
+    if memory_limit is not None:
+        if not re.fullmatch(r"[0-9]+(\.[0-9]+)?[A-Za-z]+", memory_limit):
+            raise ValueError(f"memory_limit: expected a size such as 1GB, got {memory_limit!r}")
+        con.execute(f"SET memory_limit = '{memory_limit}'")
+    if threads is not None:
+        con.execute(f"SET threads = {int(threads)}")
     for table, parts in files.items():
         _create_table_view(con, table, parts)
     con.execute('CREATE TABLE bad_parts (run_dir VARCHAR, "table" VARCHAR, path VARCHAR, error VARCHAR)')
@@ -226,6 +242,7 @@ def _lock_down(con: duckdb.DuckDBPyConnection) -> None:
     # default, '.tmp' in the working folder, may be inside a run folder); a query bigger than
     # memory fails instead
     con.execute("SET temp_directory = ''")
+    con.execute("SET enable_progress_bar = false")  # not on a pipe to a relaying parent either
     con.execute("SET allowed_paths = []")
     con.execute("SET allowed_directories = []")
     con.execute("SET enable_external_access = false")

@@ -4,6 +4,10 @@
   unlock the connection, or read outside the views) sent through the real ``recap sql`` entry
   against a finished run folder of the real pipeline: each exits 2 with one line on stderr and
   nothing on stdout, and every file of the run folder (hidden ones too) keeps its bytes.
+* sqlres: every memory and time attack of the same test file (1e8-value lists, 1 GB strings,
+  recursive CTEs, huge sorts and results, endless cross joins) through ``recap sql`` as a process
+  with ``--memory-limit 256MB --timeout 2``: each stopped with one line naming the limit, the peak
+  RSS of the command's process tree under 256MB, the run folder unchanged.
 * caps: a gateway with a small run cap against the loopback fake OpenAI server in each hostile
   mode (usage reported negative, zero, huge, fractional, missing, negative cached; n choices
   slipping past the config; a negative / NaN / infinite cost figure), called until the budget
@@ -126,6 +130,59 @@ def sql_attacks(lab: Lab, units: int = 4) -> ScenarioResult:
     res.name = f"SQL write attempts ({len(ATTACKS)} tried, {total_bytes} bytes changed)"
     res.notes.append(
         f"{len(ATTACKS)} attacks, {refused} refused, {total_bytes} bytes changed ({len(first)} files and folders hashed)"
+    )
+    return res
+
+
+def sql_resource_attacks(lab: Lab, units: int = 4) -> ScenarioResult:
+    """Every memory and time attack of ``tests/reports/test_sql_read_only.py`` through ``recap sql`` (a
+    process of its own, peak RSS of its process tree measured) on a finished run: exit 2, one line naming
+    the limit hit, peak RSS under the memory limit, 0 bytes changed."""
+    from tests.reports.test_sql_read_only import (
+        ATTACK_MEMORY,
+        ATTACK_MEMORY_BYTES,
+        ATTACK_TIMEOUT_S,
+        MEMORY_ATTACKS,
+        TIME_ATTACKS,
+        recap_measured,
+    )
+
+    res = ScenarioResult("SQL resource attacks")
+    lab.ray_address()
+    out = lab.folder("sql-resources") / "run"
+    summary, _ = run_driver(sweep(out, "  - model: offline/expert\n", blocks(units), run="sql-resources", workers=2))
+    if not res.check("the run folder was built by a finished run (exit 0)", summary.exit_code() == 0, summary.exit_code()):
+        return res
+    first = _hashes(out)
+    attacks = [(n, q, "memory") for n, q in MEMORY_ATTACKS.items()] + [(n, q, "time") for n, q in TIME_ATTACKS.items()]
+    peak_all, stopped = 0, {"memory": 0, "time": 0}
+    for name, sql, limit in attacks:
+        res.begin_run()
+        argv = ["sql", str(out), sql, "--memory-limit", ATTACK_MEMORY, "--timeout", str(ATTACK_TIMEOUT_S)]
+        try:
+            rc, stdout, stderr, peak = recap_measured(argv)
+        except Exception as exc:  # a crash is not a stop
+            rc, stdout, stderr, peak = None, "", f"{type(exc).__name__}: {exc}", 0
+        peak_all = max(peak_all, peak)
+        want = f"error: {limit} limit {ATTACK_MEMORY if limit == 'memory' else f'{ATTACK_TIMEOUT_S}s'} hit"
+        res.check(f"{name}: exit 2", rc == 2, f"exit {rc}: {stderr.strip()[:200]}")
+        res.check(
+            f"{name}: one line naming the {limit} limit, nothing on stdout",
+            stdout == "" and len(stderr.splitlines()) == 1 and stderr.startswith(want),
+            f"stdout {stdout[:80]!r}, stderr {stderr[:200]!r}",
+        )
+        res.check(f"{name}: peak RSS under {ATTACK_MEMORY}", peak < ATTACK_MEMORY_BYTES, f"{peak / 1e6:.0f}MB")
+        stopped[limit] += int(rc == 2 and stderr.startswith(want))
+        res.end_run()
+    changed = _bytes_changed(first, _hashes(out))[1]
+    res.check("the run folder is byte-identical after every attack", not changed, changed[:5])
+    rc, stdout, stderr = _recap(["sql", str(out), "SELECT count(*) AS n FROM episodes", "--json"])
+    res.check("a query still reads the run (exit 0)", rc == 0 and str(units) in stdout, f"exit {rc}: {stderr[:200]}")
+    res.name = f"SQL resource attacks ({len(attacks)} tried, peak RSS {peak_all / 1e6:.0f}MB, limit {ATTACK_MEMORY})"
+    res.notes.append(
+        f"{len(attacks)} attacks: {stopped['memory']}/{len(MEMORY_ATTACKS)} stopped at the memory limit, "
+        f"{stopped['time']}/{len(TIME_ATTACKS)} at the {ATTACK_TIMEOUT_S}s time limit; peak RSS {peak_all / 1e6:.0f}MB "
+        f"< {ATTACK_MEMORY}"
     )
     return res
 

@@ -69,11 +69,11 @@ CASES = [
     (
         "negative price",
         ("- model: offline/expert", "- model: offline/expert\n    prices: {input: 1.0, output: -2.0}"),
-        "recap: error: sweep.yaml: models[0].prices.output: Input should be greater than or equal to 0",
+        "recap: error: sweep.yaml: models[0].prices.output: -2 is out of range [0, 10000]",
     ),
     (
         "missing price with a cap",
-        ("- model: offline/expert", "- model: openai/no-such-model\n    api_key_env: HOME\n    cap_usd: 1"),
+        ("- model: offline/expert", "- model: openai/no-such-model\n    api_key_env: RECAP_TEST_KEY\n    cap_usd: 1"),
         "recap: error: sweep.yaml: models[0] (openai/no-such-model) has a model cap but no price: no price for model(s) "
         "openai/no-such-model: add them to workers/pricing/prices.yaml or pass a price override (USD per million tokens: input, cached_input, cache_write, output)",
     ),

@@ -55,7 +55,7 @@ def test_defaults_and_unit_count():
         ),
         (
             BASE.replace("- model: offline/expert", "- model: offline/expert\n    prices: {input: -1, output: 2}"),
-            "sweep.yaml: models[0].prices.input: Input should be greater than or equal to 0",
+            "sweep.yaml: models[0].prices.input: -1 is out of range [0, 10000]",
         ),
         (
             BASE.replace("run: unit-test", "run: 'bad name'"),

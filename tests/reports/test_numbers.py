@@ -680,6 +680,7 @@ def test_loop_detector_boundaries(tmp_path):
     ]
     rows += [StepRecord("e6-progress", i, i, "cut", True, f"cut {i}/6", False, False) for i in range(6)]
     PartWriter(tmp_path).write_records("r", rows)
+    (tmp_path / "run.json").write_text('{"run_id": "r"}')
     con = open_runs([tmp_path])
     got = run_query(
         con,

@@ -219,7 +219,7 @@ def test_report_errors(run_a, run_b, tmp_path):
         "error: --out is required when reporting several run folders\n",
     )
     assert _run(report_main, [str(tmp_path / "missing")])[::2] == (
-        1,
+        2,
         f"error: run folder {tmp_path / 'missing'} does not exist or is not a folder\n",
     )
     rc, _, err = _run(report_main, ["--format"])

@@ -341,3 +341,90 @@ def test_missing_or_invalid_run_folder_is_exit_2(tmp_path, capsys):
         rc = reports_main(["sql", str(folder), "SELECT 1"])
         out, err = capsys.readouterr()
         assert (rc, out) == (2, "") and len(err.splitlines()) == 1 and line in err, err
+
+
+# -- resource attacks: memory and time limits -----------------------------------------------------
+
+#: the limits the resource attacks run under (small, so that each stops within seconds)
+ATTACK_MEMORY = "256MB"
+ATTACK_MEMORY_BYTES = 256 * 1000**2
+ATTACK_TIMEOUT_S = 2
+
+#: queries that grow memory without bound (DuckDB's own memory_limit misses the scalar ones and the
+#: conversion of a big result): each must stop at the memory limit
+MEMORY_ATTACKS = {
+    "list of 1e8 values": "SELECT list(i) FROM range(100000000) t(i)",
+    "range() as one list value": "SELECT range(100000000)",
+    "generate_series as one list value": "SELECT generate_series(1, 100000000)",
+    "list_resize": "SELECT list_resize([1], 100000000)",
+    "unnest of a huge list": "SELECT count(*) FROM (SELECT unnest(range(100000000)))",
+    "repeat to 1 GB": "SELECT repeat('x', 1000000000)",
+    "length of a 1 GB repeat": "SELECT length(repeat('x', 1000000000))",
+    "concatenated repeats": "SELECT repeat('ab', 100000000) || repeat('cd', 100000000)",
+    "string_agg of 1e8 numbers": "SELECT string_agg(i::VARCHAR, ',') FROM range(100000000) t(i)",
+    "string_agg of repeats": "SELECT length(string_agg(repeat('x', 1000000), '')) FROM range(1000)",
+    "recursive CTE doubling a string": (
+        "WITH RECURSIVE r(n, s) AS (SELECT 1, 'x' UNION ALL SELECT n + 1, s || s FROM r WHERE n < 40) "
+        "SELECT max(length(s)) FROM r"
+    ),
+    "huge sort": "SELECT i FROM range(100000000) t(i) ORDER BY random()",
+    "count distinct of 1e8 strings": "SELECT count(DISTINCT i::VARCHAR) FROM range(100000000) t(i)",
+    "a 2e7-row result": "SELECT * FROM range(20000000)",
+    "cross join result": "SELECT a.range AS a, b.range AS b FROM range(100000) a, range(100000) b",
+}
+
+#: queries that run forever in constant memory: each must stop at the time limit
+TIME_ATTACKS = {
+    "cross join with a filter that never matches": (
+        "SELECT count(*) FROM range(1000000) a, range(1000000) b WHERE a.range + b.range = -1"
+    ),
+    "count of 1e13 rows": "SELECT count(*) FROM range(10000000000000)",
+    "md5 of 1e13 numbers": "SELECT max(md5(i::VARCHAR)) FROM range(10000000000000) t(i)",
+}
+
+_MEASURE = (
+    "import json, resource, subprocess, sys; p = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
+    "print(json.dumps([p.returncode, p.stdout, p.stderr, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024]))"
+)
+
+
+def recap_measured(argv: list[str]) -> tuple[int, str, str, int]:
+    """``python -m pipeline.cli ARGV`` as a process of its own: (exit status, stdout, stderr, peak RSS in
+    bytes of the largest process in its tree - the CLI or its query process)."""
+    import json
+
+    env = dict(os.environ, PYTHONPATH=str(REPO), LITELLM_LOCAL_MODEL_COST_MAP="True", RAY_USAGE_STATS_ENABLED="0")
+    proc = subprocess.run(
+        [sys.executable, "-c", _MEASURE, sys.executable, "-m", "pipeline.cli", *argv],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    rc, out, err, peak = json.loads(proc.stdout)
+    return rc, out, err, peak
+
+
+MEMORY_LINE = f"error: memory limit {ATTACK_MEMORY} hit"
+TIME_LINE = f"error: time limit {ATTACK_TIMEOUT_S}s hit: the query was stopped; raise it with --timeout\n"
+
+
+@pytest.mark.parametrize("name", list(MEMORY_ATTACKS))
+def test_memory_attack_stops_at_the_limit(name, run):
+    before = _snapshot(run)
+    rc, out, err, peak = recap_measured(["sql", str(run), MEMORY_ATTACKS[name], "--memory-limit", ATTACK_MEMORY])
+    assert (rc, out) == (2, ""), (name, rc, out[:200], err)
+    assert len(err.splitlines()) == 1 and err.startswith(MEMORY_LINE), err
+    assert err.rstrip().endswith("raise it with --memory-limit, or select fewer rows or smaller values"), err
+    assert peak < ATTACK_MEMORY_BYTES, (name, peak)
+    assert _snapshot(run) == before
+
+
+@pytest.mark.parametrize("name", list(TIME_ATTACKS))
+def test_time_attack_stops_at_the_limit(name, run):
+    rc, out, err, peak = recap_measured(
+        ["sql", str(run), TIME_ATTACKS[name], "--timeout", str(ATTACK_TIMEOUT_S), "--memory-limit", ATTACK_MEMORY]
+    )
+    assert (rc, out, err) == (2, "", TIME_LINE), name
+    assert peak < ATTACK_MEMORY_BYTES

@@ -131,6 +131,7 @@ def test_part_missing_a_column_is_skipped_and_named(tmp_path):
     (tmp_path / "episodes").mkdir()
     part = tmp_path / "episodes" / "part-old-000001.parquet"
     pq.write_table(pa.Table.from_pylist([row], schema=old), part)
+    (tmp_path / "run.json").write_text('{"run_id": "old"}')
     con, skipped = open_runs_checked([tmp_path])
     assert [(s.table, s.path, s.error) for s in skipped] == [
         ("episodes", str(part), "ValueError: not a episodes part: missing column(s) test_double, worker_id")
@@ -217,10 +218,16 @@ def test_bad_run_folders(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(RunDirError) as err:
         open_runs([tmp_path / "empty"])
-    assert (
-        str(err.value)
-        == f"{tmp_path / 'empty'} is not a run folder (no run.json and no table folder such as {tmp_path / 'empty' / 'episodes'})"
-    )
+    assert str(err.value) == f"{tmp_path / 'empty'} is not a run folder (no run.json)"
+    # table folders alone do not make a run folder (recap status and resume refuse it too)
+    (tmp_path / "tables" / "episodes").mkdir(parents=True)
+    with pytest.raises(RunDirError) as err:
+        open_runs([tmp_path / "tables"])
+    assert str(err.value) == f"{tmp_path / 'tables'} is not a run folder (no run.json)"
+    (tmp_path / "tables" / "run.json").write_text("[1, 2]")
+    with pytest.raises(RunDirError) as err:
+        open_runs([tmp_path / "tables"])
+    assert str(err.value) == f"{tmp_path / 'tables'} is not a run folder (its run.json is unreadable or not a JSON object)"
     with pytest.raises(RunDirError, match="no run folder given"):
         open_runs([])
 

@@ -41,17 +41,42 @@ DEFAULT_MAX_TOKENS = 1024
 OFFLINE_PREFIX = "offline/"
 
 
-#: numeric generation params: (integer only, lowest, highest); a wrong value would be refused
-#: by the provider on every call of a run, so it is refused here, before the first
-_NUMERIC_PARAMS: dict[str, tuple[bool, float | None, float | None]] = {
+#: our ceiling for ``max_tokens`` (2**18): above every model's output limit in litellm's map but a
+#: few outliers; the preflight also holds a model to its own limit (litellm's max_output_tokens)
+MAX_TOKENS_CEILING = 262_144
+#: the largest ``|bias|`` a logit_bias entry may carry (OpenAI's range) and the most entries
+LOGIT_BIAS_MAX = 100.0
+LOGIT_BIAS_ENTRIES_MAX = 1000
+
+#: numeric generation params: (integer only, lowest, highest), both ends inclusive; a wrong
+#: value would be refused by the provider on every call of a run (or, for max_tokens, lowered
+#: to the method's own cap without a word), so it is refused here, before the first call, with
+#: its range in the message. Every numeric param in ALLOWED_PARAMS has an entry (tests check).
+NUMERIC_PARAMS: dict[str, tuple[bool, float, float]] = {
     "temperature": (False, 0.0, 2.0),
     "top_p": (False, 0.0, 1.0),
-    "max_tokens": (True, 1, None),
-    "n": (True, 1, None),
-    "seed": (True, None, None),
+    "max_tokens": (True, 1, MAX_TOKENS_CEILING),
+    "n": (True, 1, 1),
+    "seed": (True, 0, 2**63 - 1),
     "presence_penalty": (False, -2.0, 2.0),
     "frequency_penalty": (False, -2.0, 2.0),
 }
+
+
+def _num(v: float) -> str:
+    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
+        return str(int(v))
+    return repr(float(v))
+
+
+def _range_problem(value: Any, integer: bool, low: float, high: float) -> str | None:
+    """Why ``value`` is not a number (an integer) within ``[low, high]``; None when it is."""
+    kind = "an integer" if integer else "a number"
+    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+        return f"must be {kind} in [{_num(low)}, {_num(high)}], got {value!r}"
+    if not (low <= value <= high):  # also refuses nan
+        return f"{_num(value)} is out of range [{_num(low)}, {_num(high)}]"
+    return None
 
 
 def _param_problem(name: str, value: Any) -> str | None:
@@ -61,14 +86,15 @@ def _param_problem(name: str, value: Any) -> str | None:
             "must be 1: the gateway sends one choice per call (agents read one, and the budget "
             "reserves the worst case of one); leave it out"
         )
-    if name in _NUMERIC_PARAMS:
-        integer, low, high = _NUMERIC_PARAMS[name]
-        kind = "an integer" if integer else "a number"
-        if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
-            return f"must be {kind}"
-        if (low is not None and value < low) or (high is not None and value > high):
-            bounds = f">= {low}" if high is None else f"within [{low}, {high}]"
-            return f"must be {kind} {bounds}"
+    if name in NUMERIC_PARAMS:
+        return _range_problem(value, *NUMERIC_PARAMS[name])
+    if name == "logit_bias":
+        if not isinstance(value, Mapping) or len(value) > LOGIT_BIAS_ENTRIES_MAX:
+            return f"must be a mapping of token id -> bias with at most {LOGIT_BIAS_ENTRIES_MAX} entries"
+        for token, bias in value.items():
+            problem = _range_problem(bias, False, -LOGIT_BIAS_MAX, LOGIT_BIAS_MAX)
+            if problem:
+                return f"entry {token!r}: {problem}"
     if name == "stop" and not (isinstance(value, str) or (isinstance(value, list) and all(isinstance(x, str) for x in value))):
         return "must be a string or a list of strings"
     return None
@@ -227,7 +253,7 @@ class DeploymentConfig(BaseModel):
         for name, value in v.items():
             problem = _param_problem(name, value)
             if problem:
-                raise ValueError(f"{name} {problem}, got {value!r}")
+                raise ValueError(f"{name} {problem}")
         return v
 
     @field_validator("price", mode="before")

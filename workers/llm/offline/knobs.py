@@ -20,6 +20,22 @@ INVALID_ACTION = "xyzzy the unknown object (injected invalid action)"
 MALFORMED_JSON = '{"think": "the reply stops in the middle of'
 
 
+#: every option's range (both ends inclusive), said in the refusal; a sweep file's numbers all
+#: have one (tests/pipeline/test_spec_bounds.py)
+KNOB_BOUNDS: dict[str, tuple[float, float]] = {
+    "seed": (0, 2**63 - 1),
+    "invalid_action_rate": (0.0, 1.0),
+    "malformed_json_rate": (0.0, 1.0),
+    "chunk_size": (1, 1000),
+}
+
+
+def _text(v: float) -> str:
+    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
+        return str(int(v))
+    return repr(float(v))
+
+
 class OfflineOptionsError(ValueError):
     """Bad options for an offline test double."""
 
@@ -41,18 +57,24 @@ class Knobs:
         unknown = set(options) - {"seed", "invalid_action_rate", "malformed_json_rate", "chunk_size"}
         if unknown:
             raise OfflineOptionsError(f"unknown offline model option(s) {sorted(unknown)}")
+        for name, value in options.items():  # no int() of 2.7 or of true: a number is kept as given
+            integer = name in ("seed", "chunk_size")
+            if value is None and name == "chunk_size":
+                continue
+            if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+                low, high = KNOB_BOUNDS[name]
+                kind = "an integer" if integer else "a number"
+                raise OfflineOptionsError(f"{name} must be {kind} in [{_text(low)}, {_text(high)}], got {value!r}")
         knobs = cls(
-            seed=int(options.get("seed", 0)),
+            seed=options.get("seed", 0),
             invalid_action_rate=float(options.get("invalid_action_rate", 0.0)),
             malformed_json_rate=float(options.get("malformed_json_rate", 0.0)),
-            chunk_size=None if options.get("chunk_size") is None else int(options["chunk_size"]),
+            chunk_size=options.get("chunk_size"),
         )
-        for name in ("invalid_action_rate", "malformed_json_rate"):
-            rate = getattr(knobs, name)
-            if not 0.0 <= rate <= 1.0:
-                raise OfflineOptionsError(f"{name} must be within [0, 1], got {rate}")
-        if knobs.chunk_size is not None and knobs.chunk_size < 1:
-            raise OfflineOptionsError(f"chunk_size must be >= 1, got {knobs.chunk_size}")
+        for name, (low, high) in KNOB_BOUNDS.items():
+            value = getattr(knobs, name)
+            if value is not None and not low <= value <= high:
+                raise OfflineOptionsError(f"{name} {_text(value)} is out of range [{_text(low)}, {_text(high)}]")
         return knobs
 
 
