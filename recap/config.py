@@ -265,6 +265,8 @@ SETTING_BOUNDS: dict[str, tuple[float, float]] = {
     "max_depth": (1, 100),
     "executor_steps": (1, 100_000),
     "executor_patience": (1, 100_000),
+    "executor_window": (2, 100_000),
+    "planner_temperature": (0, 2),
     "invalid_streak": (1, 100_000),
     "invalid_rounds": (1, 100_000),
 }
@@ -284,6 +286,8 @@ def check_setting_ranges(cfg: AgentConfig) -> None:
         value = getattr(cfg, f.name)
         if f.name not in SETTING_BOUNDS or value is None:
             continue
+        if isinstance(value, str) and "Literal" in str(f.type):
+            continue  # a named choice beside the number (ADaPT's planner_temperature: same): validate() checks it
         low, high = SETTING_BOUNDS[f.name]
         integer = "int" in str(f.type)
         kind = "an integer" if integer else "a number"
