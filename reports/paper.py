@@ -112,9 +112,12 @@ ALFWORLD_TYPES = ("clean", "cool", "examine", "heat", "put", "puttwo")
 
 #: the step-cap multipliers of the authors' released Robotouille configs that are not x4:
 #: method -> split -> task index -> multiplier (ReCAP: robotouille-recap/conf/experiments/ReAct/
-#: synchronous/last-reasoning-action-mpc_{2,4,6}.yaml; ReAct: robotouille-baselines/conf/experiments/
-#: ReAct/*/original_*.yaml; Act: Act/*/original_*.yaml, x2 everywhere; Standard: IO/*/io.yaml, x1.5;
-#: ADaPT and CoT (IO-CoT): x4 everywhere)
+#: synchronous/last-reasoning-action-mpc_{2,4,6}.yaml:43; ReAct: robotouille-baselines/conf/experiments/
+#: ReAct/synchronous/original_{2,4,6}.yaml:40, original_9.yaml:39, ReAct/asynchronous/
+#: original_{2,4,6}.yaml:39; Act: Act/*/original_*.yaml:39-40, x2 everywhere; Standard:
+#: IO/*/io.yaml:39, x1.5; ADaPT (Adapt/*/original_*.yaml:39) and CoT (IO-CoT/*/io-cot.yaml:39): x4
+#: everywhere). examples/paper/main-robotouille.yaml runs each method at these
+#: (tests/pipeline/test_step_multipliers.py checks every example unit against this table)
 RELEASED_MULTIPLIERS: dict[str, dict[str, dict[int, float]]] = {
     "recap": {"synchronous": {2: 3.0, 4: 3.0, 6: 3.0}},
     "react": {"synchronous": {2: 3.0, 4: 3.0, 6: 3.0, 9: 2.0}, "asynchronous": {2: 2.0, 4: 3.0, 6: 3.0}},

@@ -32,6 +32,9 @@ class ActConfig(ReActConfig):
             # agents/Act_agent.py:129-131): no window, the oldest pair after the first exchange
             # dropped only on a context-length error (:137-138)
             out.update(history="all", window_keeps_first=True)
+            # no window of its own: ``window`` stays the profile's, unused, rather than ReAct's
+            # 64 (reports show one window per method and benchmark)
+            out.pop("window", None)
         elif benchmark == "alfworld":
             # alfworld-recap/act_alfworld/act.py:50-71 never trims; 32 messages go on a
             # context-length error (:74-77)
