@@ -45,16 +45,10 @@ def _styled(text: str, style: str) -> Any:
 
 
 def _finite_positive(value: str) -> float:
-    """argparse type: a finite number > 0 (``nan``, ``inf`` and ``-1`` are usage errors)."""
-    import math
+    """argparse type: a finite number > 0 (reports.commands.finite_positive's rule)."""
+    from reports.commands import finite_positive
 
-    try:
-        x = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid number: {value!r}") from None
-    if not math.isfinite(x) or x <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {value!r}")
-    return x
+    return finite_positive(value)
 
 
 def _console(stderr: bool = False, *, markup: bool = True) -> Any:

@@ -50,7 +50,7 @@ Hardening (every rule fails as one line before any model call or write):
   (:data:`NUMBER_BOUNDS`) and said in the refusal (``models[0].window_s: 1e-300 is out of range
   [0.1, 86400]``): seeds 0..2**31-1, workers 1..1024, max_attempts 1..100, rpm 1..10**7,
   tpm 1..10**11, concurrency 1..10000, retries 0..100, window_s 0.1 s..a day, timeout_s 0.1..900 s
-  (the gateway's total time per call), limits.llm_calls 1..10**6, limits.tokens 1..10**10,
+  (the gateway's total time per call), max_usage_rejections 1..1000, limits.llm_calls 1..10**6, limits.tokens 1..10**10,
   limits.usd 10**-6..10**6, environment limit 1..10**5, ray.num_cpus 1..4096,
   ray.object_store_mb 64..1048576, ray.worker_cpus 0.001..1024; caps 0..10**6 USD, prices
   0..10**4 USD per million tokens, step_multiplier 0.1..1000 (the sweep's, a method's and
@@ -188,6 +188,7 @@ NUMBER_BOUNDS: dict[str, Bound] = {
     "models[].window_s": Bound(SECONDS_MIN, SECONDS_MAX),
     "models[].retries": Bound(0, RETRIES_MAX),
     "models[].timeout_s": Bound(SECONDS_MIN, TIMEOUT_MAX),
+    "models[].max_usage_rejections": Bound(1, 1000),
     "models[].prices.input": Bound(0, PRICE_MAX),
     "models[].prices.output": Bound(0, PRICE_MAX),
     "models[].prices.cached_input": Bound(0, PRICE_MAX),
@@ -365,6 +366,7 @@ DEPLOYMENT_FIELDS: dict[str, str] = {
     "prices": "price",
     "api_base": "api_base",
     "api_key_env": "api_key_env",
+    "max_usage_rejections": "max_usage_rejections",
 }
 #: model entry fields the gateway's deployment does not carry (the ledger takes the caps; the
 #: preflight reads the key-name override)
@@ -391,6 +393,9 @@ class ModelSpec(_Strict):
     window_s: Annotated[float, _NOT_BOOL, Bounded("models[].window_s")] | None = None
     retries: Annotated[int, _NOT_BOOL, Bounded("models[].retries")] | None = None
     timeout_s: Annotated[float, _NOT_BOOL, Bounded("models[].timeout_s")] | None = None
+    #: replies with impossible usage (charged at their reservation) after which the gateway
+    #: refuses the model's calls and the driver stops its units (default 3)
+    max_usage_rejections: Annotated[int, _NOT_BOOL, Bounded("models[].max_usage_rejections")] | None = None
     prices: PriceSpec | None = None
     api_base: Annotated[str, Field(min_length=1, max_length=LONG_MAX), AfterValidator(_printable)] | None = None
     #: the variable named by api_key_env holds a key although its name does not say so (see

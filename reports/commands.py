@@ -280,14 +280,20 @@ def _sql_size(text: str) -> int:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _seconds(text: str) -> float:
+def finite_positive(text: str, what: str = "number") -> float:
+    """argparse type: a finite number > 0 (``nan``, ``inf`` and ``-1`` are usage errors); ``what``
+    names it in the message. The one rule for every such flag (``recap run --stop-grace`` too)."""
     try:
         x = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid number of seconds: {text!r}") from None
+        raise argparse.ArgumentTypeError(f"invalid {what}: {text!r}") from None
     if not math.isfinite(x) or x <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text!r}")
+        raise argparse.ArgumentTypeError(f"must be a finite {what} > 0, got {text!r}")
     return x
+
+
+def _seconds(text: str) -> float:
+    return finite_positive(text, "number of seconds")
 
 
 def _sql_parser(out: TextIO | None = None) -> _Parser:

@@ -59,6 +59,7 @@ def test_a_model_entry_becomes_its_deployment_field_by_field():
         window_s=30,
         retries=4,
         timeout_s=50,
+        max_usage_rejections=2,
         api_base="http://127.0.0.1:9/v1",
         api_key_env="MY_KEY",
         prices={"input": 1, "output": 2},
@@ -77,6 +78,7 @@ def test_a_model_entry_becomes_its_deployment_field_by_field():
         "window_s": 30.0,
         "max_attempts": 5,
         "attempt_timeout_s": 50.0,
+        "max_usage_rejections": 2,
         "api_base": "http://127.0.0.1:9/v1",
         "api_key_env": "MY_KEY",
     }

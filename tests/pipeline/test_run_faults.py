@@ -158,7 +158,8 @@ def test_sink_gone_for_good_stops_the_run_and_resume_reruns_only_what_was_never_
 def test_two_recap_runs_started_together_give_one_run_and_one_refusal(ray_address, tmp_path):
     out, text = _sweep(tmp_path, "twice")
     spec_file = tmp_path / "sweep.yaml"
-    spec_file.write_text(text)
+    # through the CLI the model is a real test double (the preflight refuses unknown offline/ names)
+    spec_file.write_text(text.replace("offline/tiny", "offline/expert"))
     env = dict(os.environ, PYTHONPATH=str(REPO))
     cmd = [sys.executable, "-m", "pipeline.cli", "run", str(spec_file), "--address", ray_address, "--progress", "off"]
     procs = [subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
