@@ -40,7 +40,8 @@ from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
-from recap.baselines.react_text import demo_texts, play_text
+from recap.baselines.act_json import MALFORMED_JSON, PARSE_ERROR_ACTION, read_reply
+from recap.baselines.react_text import demo_texts, play_text, raw_text
 from recap.baselines.reply_format import check_reply_format, text_reply_defaults
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
@@ -86,6 +87,10 @@ class ReActConfig(AgentConfig):
     #: the text layout: ``labelled`` (Robotouille's "Reasoning:" / "Action:" lines) or ``yao``
     #: (ALFWorld's one line: "think: ..." or the command)
     text_layout: Literal["labelled", "yao"] = "labelled"
+    #: JSON replies: ``repair`` (ours: a malformed reply is answered with a repair request) or
+    #: ``game`` (the released ALFWorld Act: it becomes a command the game answers,
+    #: recap.baselines.act_json)
+    malformed_json: Literal["repair", "game"] = "repair"
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
@@ -157,8 +162,14 @@ class ReActConfig(AgentConfig):
         if self.window_keeps_first and self.history == "window" and self.window < 4:
             raise ConfigError("window must be >= 4 messages when it keeps the first reply")
         check_reply_format(self)
+        if self.malformed_json not in ("repair", "game"):
+            raise ConfigError(f"malformed_json must be repair or game, got {self.malformed_json!r}")
         if self.text_layout not in ("labelled", "yao"):
             raise ConfigError(f"text_layout must be labelled or yao, got {self.text_layout!r}")
+
+
+def _keep(obj: dict[str, Any]) -> dict[str, Any]:
+    return obj
 
 
 def flat_context(ep: Episode, goal: str) -> dict[str, Any]:
@@ -244,7 +255,28 @@ class ReActAgent(Agent):
         kind = "task"
         streak = rounds = 0
         while True:
-            reply, _ = ep.conv.ask(prompt, kind, self.parse_reply, context=flat_context(ep, reset.goal))
+            if cfg.malformed_json == "game":
+                raw, _ = ep.conv.ask(prompt, kind, _keep, context=flat_context(ep, reset.goal), decode=raw_text)
+                read = read_reply(raw["text"])
+                if read.malformed:
+                    # the release sends its placeholder command to the game (a step) and shows
+                    # its own note instead of the game's answer (act_alfworld/act.py:183-199)
+                    try:
+                        d.execute(read.action or PARSE_ERROR_ACTION)
+                    except InvalidActionError:
+                        pass  # an environment that rejects invalid commands takes no step
+                    prompt, kind = MALFORMED_JSON, "feedback"
+                    continue
+                if read.action is None and read.think is None:
+                    # neither field: the release sends its last message again (act.py:221)
+                    prompt = prompt if prompt is not None else reset.observation
+                    continue
+                if read.action is None:  # a thought, whatever think_actions says (act.py:218-219)
+                    prompt, kind = P.THOUGHT_ACK, "thought"
+                    continue
+                reply = read.as_reply()
+            else:
+                reply, _ = ep.conv.ask(prompt, kind, self.parse_reply, context=flat_context(ep, reset.goal))
             if cfg.think_actions and self.is_thought(reply):
                 # a thought: no environment step, no step used (react.py:159-160, act.py:218-219)
                 prompt, kind = P.THOUGHT_ACK, "thought"

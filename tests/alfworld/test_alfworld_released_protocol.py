@@ -94,6 +94,8 @@ def test_paper_and_released_differ_only_in_temperature_and_reacts_reply_format(m
     released = make_agent(method, profile="released", benchmark="alfworld").config
     assert (paper.temperature, released.temperature) == (0.5, None)
     text = {"reply_format": "text", "json_mode": False, "text_layout": "yao"} if method == "react" else {}
+    if method == "act":  # the released Act sends a malformed reply to the game (act.py:181-199)
+        text = {"malformed_json": "game"}
     assert dataclasses.replace(paper, temperature=None, **text) == released
 
 
@@ -160,6 +162,26 @@ def test_act_sees_valid_actions_feedback_and_ok(bench):
     # no window: every call sees the whole history
     assert [len(r.messages) for r in client.requests] == [2, 4, 6, 8, 10]
     assert json.loads(client.requests[4].messages[2].content) == {"think": "an apple is likely in the garbagecan"}
+
+
+def test_released_act_sends_a_malformed_reply_to_the_game(bench):
+    """act.py:181-199, 221: text that is not JSON is the command "json parse error" (the game
+    answers it and counts a step; the next message says the reply was not JSON), an empty action
+    is the command "error", an object with neither field repeats the last message. No repair."""
+    replies = ["```json\n{not json", {"action": ""}, {"foo": 1}, '```json\n{"action": "go to garbagecan 1"}\n```']
+    agent, options, result, client = _run(bench, "act", "released", replies + [STOP])
+    later = [(r.purpose, r.messages[-1].content) for r in client.requests[1:]]
+    explained = feedback("error", 'reply {"think": "<your thought>"} with no "action"', "Nothing happens." + START_LIST)
+    assert later == [
+        ("feedback", "Your reply was not a valid JSON object. Reply with one JSON object that has an 'action' field."),
+        ("feedback", explained),
+        ("feedback", explained),
+        ("observation", f"Observation:\n{HEAT_ARRIVE}{ARRIVE_LIST}"),
+    ]
+    assert (result.steps, result.invalid_actions, result.json_repairs) == (3, 2, 0)
+    assert [len(r.messages) for r in client.requests] == [2, 4, 6, 8, 10]
+    with pytest.raises(ValueError, match="^malformed_json must be repair or game, got 'x'$"):
+        make_agent("act", malformed_json="x")
 
 
 def test_without_a_profile_react_is_unchanged(bench):
