@@ -138,6 +138,15 @@ class ReActConfig(AgentConfig):
     #: Act's act.py asks for JSON)
     released_text: ClassVar[bool] = True
 
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released prompts ask for the released reply layout: Robotouille's "Reasoning:" /
+        "Action:" lines (ReAct/1.0.0-original.yml, Act/1.0.0-original.yml), ALFWorld ReAct's one
+        line (react_alfworld/react.py), ALFWorld Act's JSON (act_alfworld/act.py:165-168)."""
+        if benchmark not in ("robotouille", "alfworld"):
+            return {}
+        return text_reply_defaults(cls.released_text, benchmark) or {"reply_format": "json"}
+
     def history_window(self) -> int:
         if self.history == "last":
             return 2

@@ -37,7 +37,13 @@ REACT_EXAMPLE = "robotouille-baselines/agents/in_context_examples/data/synchrono
 RECAP_PY = "robotouille-recap/MATRIX/MATRIX/prompts.py"
 SYSTEM = "Fixture system line: act in the kitchen."
 INSTRUCTIONS = "Fixture instructions: reply with one action."
-EXAMPLE = "Fixture example: pick up the bread, then place it.\n"
+#: an example file in the released layout (interactions of observation, reasoning, action)
+EXAMPLE = (
+    "Interaction 1\n---------------\n\n\nObservation:\nfixture kitchen, step one\n\nGoal: fixture toast\n\n\n"
+    "Reasoning: Fixture thought one.\n\nAction: Fixture action one\n\n\n"
+    "Interaction 2\n---------------\n\n\nObservation:\nfixture kitchen, step two\n\n\n"
+    "Reasoning: Fixture thought two.\n\nAction: Finish\n"
+)
 #: what the loader must make of the ReAct fixture: system, instructions, the example file
 REACT_TEXT = f"{SYSTEM}\n\n{INSTRUCTIONS}\n\n{EXAMPLE}"
 
@@ -235,13 +241,15 @@ def test_unit_hash_covers_the_released_text_and_ours_is_unchanged(tmp_path, monk
 
 
 class _Expert:
-    """Offline client double: the expert's next action as a ReAct JSON reply."""
+    """Offline client double: the expert's next action as a ReAct reply (JSON, or the released
+    "Reasoning:" / "Action:" lines when the request is not in JSON mode)."""
 
     def complete(self, request):
         from recap.llm import LLMResponse
 
         plan = request.hints.get("expert_plan") or ["noop"]
-        return LLMResponse(json.dumps({"think": "next", "action": plan[0]}), model="test/expert", test_double=True)
+        text = json.dumps({"think": "next", "action": plan[0]}) if request.json_mode else f"Reasoning: next\nAction: {plan[0]}"
+        return LLMResponse(text, model="test/expert", test_double=True)
 
 
 class _Factory:
@@ -263,11 +271,48 @@ def test_a_release_prompts_episode_pins_the_released_text_first(tmp_path, monkey
     outcome = runner.run_unit(unit.work(), 1)
     assert outcome.crash is None and outcome.result is not None and outcome.result.success
     messages = sorted(rows, key=lambda r: r["seq"])
-    assert (messages[0]["seq"], messages[0]["kind"], messages[0]["content"]) == (0, "demonstration", REACT_TEXT)
-    assert REACT_TEXT not in messages[1]["content"]  # our task prompt follows, the released text once
+    # the released structure (serializer.py:53-57, retrieve_example.py:27-37): the template's system
+    # text, its instructions, each example interaction as a user/assistant pair; then the first
+    # turn, the observation alone (no system text or rules of ours)
+    first = [(m["role"], m["kind"], m["pinned"], m["content"]) for m in messages[:6]]
+    from workers.envs.registry import make_env
+
+    start = make_env(unit.instance_id).reset()
+    assert first == [
+        ("system", "release", True, SYSTEM),
+        ("user", "release", True, INSTRUCTIONS),
+        ("user", "release", True, "fixture kitchen, step one\n\nGoal: fixture toast\n\n"),
+        ("assistant", "release", True, "Reasoning: Fixture thought one.\n\nAction: Fixture action one"),
+        ("user", "release", True, "fixture kitchen, step two\n\n"),
+        ("assistant", "release", True, "Reasoning: Fixture thought two.\n\nAction: Finish"),
+    ]
+    assert (messages[6]["role"], messages[6]["kind"], messages[6]["content"]) == (
+        "user",
+        "task",
+        f"Observation:\n{start.observation}" + ("" if start.goal in start.observation else f"\n\nGoal: {start.goal}"),
+    )
+    assert messages[7]["content"].startswith("Reasoning: next\nAction: ")  # the released reply format, chosen
 
     # a release file edited after the plan: the episode is not played with other text than hashed
     (release / REACT_EXAMPLE).write_text("Edited after the plan.\n")
     with pytest.raises(RuntimeError, match=r"changed since the plan"):
         release_demonstration(unit.work(), runner._agent(unit.work()))
     assert runner.run_unit(unit.work(), 2).result.end_reason == "env_error"
+
+
+def test_release_prompts_select_the_released_reply_format_and_refuse_a_contradiction():
+    from recap.baselines.act import ActConfig
+    from recap.baselines.react import ReActConfig
+    from recap.config import ConfigError, build_config
+
+    robot = build_config(ReActConfig, benchmark="robotouille", prompts="release")
+    assert (robot.reply_format, robot.json_mode, robot.text_layout) == ("text", False, "labelled")
+    alf = build_config(ReActConfig, benchmark="alfworld", prompts="release")
+    assert (alf.reply_format, alf.json_mode, alf.text_layout) == ("text", False, "yao")
+    assert build_config(ActConfig, benchmark="alfworld", prompts="release").reply_format == "json"
+    assert build_config(ReActConfig, benchmark="robotouille").reply_format == "json"  # ours: unchanged
+    with pytest.raises(ConfigError) as info:
+        build_config(ReActConfig, benchmark="robotouille", prompts="release", reply_format="json")
+    assert str(info.value) == (
+        'prompts: release asks for the released reply format (reply_format: "text"); drop the contradicting setting'
+    )

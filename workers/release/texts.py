@@ -18,6 +18,10 @@ yields exactly the part the released code sends before the episode's first obser
 Parts are joined by one blank line. What each method reads (and the released file that makes it
 so) is :func:`sources`. The released code's framing sentences around a demonstration live in
 its Python code, not in these files, and are not reproduced.
+
+:func:`release_prompt` builds, from the same files, the messages in the released structure (roles,
+separate example pairs) for the methods it covers (:data:`STRUCTURED`); the agent then pins those
+in place of our demonstration *and* our system text and rules.
 """
 
 from __future__ import annotations
@@ -25,12 +29,14 @@ from __future__ import annotations
 import ast
 import hashlib
 import json
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from recap.env import DataNotFoundError
+from recap.release_prompt import ReleasePrompt
 from workers.envs import data_paths
 from workers.release.folder import FETCH_COMMAND, LOCATION, NAME
 
@@ -217,3 +223,64 @@ def _yaml_fields(text: str, fields: list[str]) -> str:
     if not all(isinstance(v, str) for v in values):
         raise ValueError(f"{'/'.join(fields)} must be text")
     return "\n\n".join(v.strip("\n") for v in values)
+
+
+# -- the released structure (prompts: release) ------------------------------------------------------------
+
+#: the in-context example regexes of the released ReAct/Act agents
+#: (robotouille-baselines/agents/ReAct_agent.py:23-24, Act_agent.py:23-24: the same two)
+_EXAMPLE_REQUEST = re.compile(r"^Observation:\s*(.+?)\nReasoning:", re.M | re.S)
+_EXAMPLE_RESPONSE = re.compile(r"(^Reasoning:\s*.+?\n\nAction:.+?)(?=Observation:|$)", re.M | re.S)
+#: methods whose released messages :func:`release_prompt` builds in the released structure
+STRUCTURED = {"robotouille": ("react", "act")}
+
+
+def release_prompt(
+    folder: Path, method: str, benchmark: str, split: str, task: str, think: str = "latest", name_only: bool = False
+) -> ReleasePrompt | None:
+    """The messages the released code sends before the first observation, with their roles, read
+    from the same files as :func:`release_text` (so the unit's digest covers them); None where
+    this module does not build the released structure yet (the caller pins the joined text).
+
+    Robotouille ReAct/Act (``robotouille-baselines``): the template's ``system`` as the system
+    message and its ``instructions`` as a user message, then its own ``examples`` (serializer.py:53-65),
+    then every in-context example file cut by the agent's regexes into user/assistant pairs
+    (agent.py:54-56, in_context_examples/retrieve_example.py:27-37; all the folder's files, since
+    ``random.sample(files, max(num_examples, len(files)))`` takes each once, here in name order)."""
+    if method not in STRUCTURED.get(benchmark, ()):
+        return None
+    parts = sources(method, benchmark, split, task, think, name_only)
+    messages: list[tuple[str, str]] = []
+    for part in parts:
+        path = folder / part.path
+        try:
+            if part.pick == "every file":
+                for file in sorted(p for p in path.iterdir() if p.is_file()):
+                    text = file.read_text(encoding="utf-8")
+                    pairs = zip(_EXAMPLE_REQUEST.findall(text), _EXAMPLE_RESPONSE.findall(text), strict=False)
+                    for request, response in pairs:
+                        messages += [("user", request), ("assistant", response)]
+                continue
+            data = _yaml_mapping(path.read_text(encoding="utf-8-sig"))
+        except OSError as exc:
+            raise ReleaseMissing(f"{NAME}: cannot read {part.path}: {exc}; run `{FETCH_COMMAND}`") from None
+        except ValueError as exc:
+            raise ReleaseMissing(f"{NAME}: {part.path} does not hold the expected {part.pick} ({exc})") from None
+        messages += [("system", data["system"].strip("\n")), ("user", data["instructions"].strip("\n"))]
+        for example in data.get("examples") or []:
+            key, value = next(iter(example.items()))
+            if key in ("observation", "response"):
+                messages.append(("user" if key == "observation" else "assistant", str(value).strip("\n")))
+    return ReleasePrompt(tuple(messages))
+
+
+def _yaml_mapping(text: str) -> dict[str, Any]:
+    import yaml
+
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ValueError(str(exc).splitlines()[0]) from None
+    if not isinstance(data, dict) or not all(isinstance(data.get(f), str) for f in ("system", "instructions")):
+        raise ValueError("system and instructions must be text")
+    return data
