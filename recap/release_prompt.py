@@ -8,6 +8,11 @@ separate user/assistant messages: ``robotouille-baselines/agents/prompt_builder/
 ``agents/in_context_examples/retrieve_example.py:27-37``). The agent pins them in place of our
 demonstration and then sends its first turn *without* our system text and rules (the release's
 text carries those); the turn framing is the agent's, built in the released structure.
+
+Where the released code puts the template's text into the first *turn* instead of messages of
+its own (ReCAP: ``robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261`` builds the first prompt
+from the YAML's system text and rules), ``system`` and ``rules`` carry that text and the agent
+frames it (and re-sends ``rules`` in its reminders).
 """
 
 from __future__ import annotations
@@ -18,9 +23,12 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class ReleasePrompt:
     """``messages``: (role, content) pairs pinned first, in order (roles ``system``, ``user``,
-    ``assistant``)."""
+    ``assistant``); ``system``/``rules``: the released text the agent's first turn carries in
+    place of ours (None: the method's release has none of its own, as for the baselines)."""
 
     messages: tuple[tuple[str, str], ...]
+    system: str | None = None
+    rules: str | None = None
 
     def __post_init__(self) -> None:
         for role, content in self.messages:

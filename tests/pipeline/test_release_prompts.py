@@ -23,6 +23,7 @@ import workers.release.folder as release_folder_mod
 from pipeline.errors import SpecError
 from pipeline.spec import parse_spec
 from pipeline.units import expand
+from recap.env import DataNotFoundError
 from workers.envs.data_sources import Source
 from workers.episode_worker import EpisodeRunner, release_demonstration
 from workers.release.texts import few_shot_literal, release_text
@@ -35,6 +36,10 @@ REAL_MIRROR = Path("/work/.mirror/ReCAP-Stanford+ReCAP/repo")
 REACT_YML = "robotouille-baselines/agents/prompt_builder/prompts/ReAct/1.0.0-original.yml"
 REACT_EXAMPLE = "robotouille-baselines/agents/in_context_examples/data/synchronous/react_examples_omitted_obs/0_demo.txt"
 RECAP_PY = "robotouille-recap/MATRIX/MATRIX/prompts.py"
+#: the template the released ReCAP's synchronous configs name (its system text and rules)
+RECAP_YML = "robotouille-recap/agents/prompt_builder/prompts/ReAct/1.3.1-last-reasoning-action-mpc.yml"
+RECAP_SYSTEM = "Fixture ReCAP system line: you cook."
+RECAP_RULES = "Fixture ReCAP rule one.\nFixture ReCAP rule two."
 SYSTEM = "Fixture system line: act in the kitchen."
 INSTRUCTIONS = "Fixture instructions: reply with one action."
 #: an example file in the released layout (interactions of observation, reasoning, action)
@@ -51,6 +56,9 @@ FILES = {
     "LICENSE": "fixture licence\n",
     REACT_YML: f"version: 1.0.0\nsystem: |\n  {SYSTEM}\ninstructions: |\n  {INSTRUCTIONS}\n",
     REACT_EXAMPLE: EXAMPLE,
+    RECAP_YML: (
+        f"version: 1.3.1\nsystem: |\n  {RECAP_SYSTEM}\n\ninstructions: |\n  " + RECAP_RULES.replace("\n", "\n  ") + "\n\n"
+    ),
     # a top-level statement that would stop the test if the file were run rather than parsed
     RECAP_PY: (
         "raise SystemExit('never executed')\n\n"
@@ -163,7 +171,11 @@ def test_python_prompt_files_are_parsed_never_run(tmp_path):
     write_release(tmp_path)
     assert few_shot_literal(FILES[RECAP_PY], "get_few_shot")[0] == {"role": "user", "content": "fixture first observation"}
     text = release_text(tmp_path, "recap", "robotouille", "synchronous", "6_x")
-    assert text.text == 'user: fixture first observation\nassistant: {"subtasks": ["a"]}'
+    assert text.text == f'user: fixture first observation\nassistant: {{"subtasks": ["a"]}}\n\n{RECAP_SYSTEM}\n\n{RECAP_RULES}'
+    assert [p.path for p in text.parts] == [RECAP_PY, RECAP_YML]
+    # the asynchronous configs name the -async template (absent here: refused, naming the fetch)
+    with pytest.raises(DataNotFoundError, match=r"1\.3\.1-last-reasoning-action-mpc-async\.yml is missing .*recap data fetch"):
+        release_text(tmp_path, "recap", "robotouille", "asynchronous", "6_x")
     assert release_text(tmp_path, "react", "robotouille", "synchronous", "6_x").text == REACT_TEXT
 
 
@@ -316,3 +328,58 @@ def test_release_prompts_select_the_released_reply_format_and_refuse_a_contradic
     assert str(info.value) == (
         'prompts: release asks for the released reply format (reply_format: "text"); drop the contradicting setting'
     )
+
+
+@pytest.mark.skipif(not HAVE_ROBOTOUILLE, reason=f"no Robotouille data at {SHARED / 'robotouille'}")
+def test_a_release_prompts_recap_episode_frames_the_released_demo_and_template(tmp_path, monkeypatch):
+    from workers.envs.registry import make_env
+    from workers.llm.direct import LiteLLMClient
+    from workers.llm.providers import DeploymentConfig
+
+    class Experts:
+        writes_llm_calls = False
+
+        def client(self, model):
+            return LiteLLMClient(DeploymentConfig(model="offline/expert"))
+
+    monkeypatch.setenv("RECAP_RELEASE_DATA", str(write_release(tmp_path / "release")))
+    spec = SPEC.replace("method: react", "method: recap").format(out=tmp_path / "run", prompts="release", envs=ROBOTOUILLE)
+    unit = expand(parse_spec(spec, "s.yaml")).units[0]
+    rows: list[dict] = []
+    runner = EpisodeRunner(
+        "w0", "run", Experts(), send=lambda batch: rows.extend(batch.get("messages", [])), wait=lambda _ref: None
+    )
+    outcome = runner.run_unit(unit.work(), 1)
+    assert outcome.crash is None and outcome.result is not None
+    assert (outcome.result.success, outcome.result.end_reason) == (True, "success")
+    messages = sorted(rows, key=lambda r: r["seq"])
+    start = make_env(unit.instance_id).reset()
+    # chatbot.py:401-407: the example joined one role: content line per message, framed, as the one
+    # fixed user message (no system message); chatbot.py:247-261: the template's system text and
+    # rules, the observation and the goal in the first prompt; none of our system text or rules
+    assert [(m["role"], m["kind"], m["pinned"], m["content"]) for m in messages[:2]] == [
+        (
+            "user",
+            "release",
+            True,
+            "Below is a worked example of preparing an onion and cheese sandwich:\n"
+            'user: fixture first observation\nassistant: {"subtasks": ["a"]}\n\nEXAMPLE OVER.\n    ',
+        ),
+        (
+            "user",
+            "task",
+            True,
+            f"\n{RECAP_SYSTEM}\n        \nThe environment's rules:\n{RECAP_RULES}\n\n{start.observation}\n\n"
+            f"You are to prepare a new meal. The goal is described as follows:\n{start.goal}\n\n"
+            "Begin the task now. Remember to write more than a single subtask.\n",
+        ),
+    ]
+    assert messages[2]["role"] == "assistant" and json.loads(messages[2]["content"])["subtasks"]
+    # the tenth call's prompt carries the released rules reminder (chatbot.py:431-439), framed as
+    # released: the rules between a sentence and an end marker, then the prompt it rides on
+    reminders = [m for m in messages if "RULES END" in m["content"]]
+    assert len(reminders) == 1 and reminders[0]["role"] == "user"
+    head = f"Many turns have passed, so here are the operating rules again, lest they slip your mind:\n\n{RECAP_RULES}\n\nRULES END\n\n"
+    assert reminders[0]["content"].startswith(head) and reminders[0]["content"][len(head)] != "\n"
+    ours = make_env(unit.instance_id).rules()
+    assert not any(ours in m["content"] for m in messages)  # our rules text is never sent

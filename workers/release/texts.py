@@ -17,7 +17,8 @@ yields exactly the part the released code sends before the episode's first obser
 
 Parts are joined by one blank line. What each method reads (and the released file that makes it
 so) is :func:`sources`. The released code's framing sentences around a demonstration live in
-its Python code, not in these files, and are not reproduced.
+its Python code, not in these files: where :func:`release_prompt` needs them (ReCAP's demo header
+and end line, :func:`recap_demo`) they are rebuilt in our own words in the released layout.
 
 :func:`release_prompt` builds, from the same files, the messages in the released structure (roles,
 separate example pairs) for the methods it covers (:data:`STRUCTURED`); the agent then pins those
@@ -42,6 +43,7 @@ from workers.release.folder import FETCH_COMMAND, LOCATION, NAME
 
 _TEMPLATES = "robotouille-baselines/agents/prompt_builder/prompts"
 _EXAMPLES = "robotouille-baselines/agents/in_context_examples/data"
+_RECAP_TEMPLATES = "robotouille-recap/agents/prompt_builder/prompts"
 _ALFWORLD = "alfworld-recap"
 #: ALFWorld task type (our short names) -> the key suffix of the released demonstration files
 #: (alfworld-recap/main.py:12-18, react_alfworld/react.py:185-192): the same names
@@ -106,7 +108,15 @@ def sources(
         if method == "recap":
             # robotouille-recap/MATRIX/MATRIX/session/SessionManager.py:70-97: the ablation picks the list
             fn = "get_few_shot_no_think" if think == "none" else "get_few_shot_name_only" if name_only else "get_few_shot"
-            return (Part("robotouille-recap/MATRIX/MATRIX/prompts.py", f"few_shot:{fn}"),)
+            # the first prompt's system text and rules: the template's (ReAct_agent.py:58-64 hands
+            # messages[0] and [1] to the SessionManager) named by the released configs
+            # (robotouille-recap/conf/experiments/ReAct/synchronous/last-reasoning-action-mpc_<n>.yaml:
+            # 1.3.1 last-reasoning-action-mpc; asynchronous/last-reasoning-action-mpc_<n>.yaml: its -async)
+            suffix = "-async" if split == "asynchronous" else ""
+            return (
+                Part("robotouille-recap/MATRIX/MATRIX/prompts.py", f"few_shot:{fn}"),
+                Part(f"{_RECAP_TEMPLATES}/ReAct/1.3.1-last-reasoning-action-mpc{suffix}.yml", "yaml:system+instructions"),
+            )
         # robotouille-baselines/conf/experiments/<method>/<split>/original_0.yaml (IO, IO-CoT: io.yaml,
         # io-cot.yaml): the template (prompts.action_proposal_prompt) and example_dir_path
         examples = {"react": "react_examples_omitted_obs", "adapt": "react_examples_omitted_obs"}
@@ -232,7 +242,17 @@ def _yaml_fields(text: str, fields: list[str]) -> str:
 _EXAMPLE_REQUEST = re.compile(r"^Observation:\s*(.+?)\nReasoning:", re.M | re.S)
 _EXAMPLE_RESPONSE = re.compile(r"(^Reasoning:\s*.+?\n\nAction:.+?)(?=Observation:|$)", re.M | re.S)
 #: methods whose released messages :func:`release_prompt` builds in the released structure
-STRUCTURED = {"robotouille": ("react", "act")}
+STRUCTURED = {"robotouille": ("react", "act", "recap")}
+
+
+def recap_demo(few_shot: Sequence[dict[str, str]]) -> str:
+    """ReCAP's one fixed user message on Robotouille: the example joined one ``role: content``
+    line per message between a header line and, after a blank line, an end line with the
+    indented closing of the released literal (``robotouille-recap/MATRIX/MATRIX/chatbot.py:401-407``;
+    the same in every ``chatbot_*.py``). The header and end sentences are ours."""
+    return (
+        f"Below is a worked example of preparing an onion and cheese sandwich:\n{join_messages(few_shot)}\n\nEXAMPLE OVER.\n    "
+    )
 
 
 def release_prompt(
@@ -250,6 +270,8 @@ def release_prompt(
     if method not in STRUCTURED.get(benchmark, ()):
         return None
     parts = sources(method, benchmark, split, task, think, name_only)
+    if method == "recap":
+        return _recap_prompt(folder, parts)
     messages: list[tuple[str, str]] = []
     for part in parts:
         path = folder / part.path
@@ -272,6 +294,23 @@ def release_prompt(
             if key in ("observation", "response"):
                 messages.append(("user" if key == "observation" else "assistant", str(value).strip("\n")))
     return ReleasePrompt(tuple(messages))
+
+
+def _recap_prompt(folder: Path, parts: Sequence[Part]) -> ReleasePrompt:
+    """ReCAP on Robotouille: the framed example as the one pinned user message (the released
+    ``ChatGPTWithMemory`` keeps it as ``fixed_prompt``, chatbot.py:407; no system message), and the
+    template's system text and rules for the agent's first prompt (chatbot.py:410-415)."""
+    examples, template = parts
+    try:
+        few_shot = few_shot_literal((folder / examples.path).read_text(encoding="utf-8-sig"), examples.pick.partition(":")[2])
+        data = _yaml_mapping((folder / template.path).read_text(encoding="utf-8-sig"))
+    except OSError as exc:
+        raise ReleaseMissing(f"{NAME}: cannot read a ReCAP prompt file: {exc}; run `{FETCH_COMMAND}`") from None
+    except (ValueError, SyntaxError) as exc:
+        raise ReleaseMissing(f"{NAME}: a ReCAP prompt file does not hold the expected text ({exc})") from None
+    return ReleasePrompt(
+        (("user", recap_demo(few_shot)),), system=data["system"].strip("\n"), rules=data["instructions"].strip("\n")
+    )
 
 
 def _yaml_mapping(text: str) -> dict[str, Any]:
