@@ -231,3 +231,39 @@ def test_valid_actions_setting_maps_to_the_game_options(bench):
     }
     with pytest.raises(ValueError, match=r"^demo_valid_actions must be true, false or null \(None\), got 'no'$"):
         bench.make(HEAT_ID, demo_valid_actions="no")
+
+
+def test_react_release_prompts_send_the_released_first_messages(bench, tmp_path):
+    """``prompts: release`` (issue 25 item 7): react.py:206-209 sends the task's example transcript
+    after a sentence as one user message, then the first prompt (react.py:132-142: the stated
+    rule, the task heading, the first observation with its valid actions); no system text or rules
+    of ours. The release folder is a fixture in the released layout, in our own words."""
+    from recap.baselines.text_prompts import RELEASE_ALFWORLD_RULE
+    from workers.release.texts import release_prompt
+
+    transcript = "Fixture household, task: warm a fixture.\n> think: fixture thought\nOK.\n> go to fixture 1\nDone.\n"
+    demo = tmp_path / "alfworld-recap/react_alfworld/alfworld_3prompts_fixed.json"
+    demo.parent.mkdir(parents=True)
+    demo.write_text(json.dumps({"react_heat_0": transcript, "react_put_0": "another task's example"}))
+    release = release_prompt(tmp_path, "react", "alfworld", "valid_seen", "heat")
+    assert release is not None
+    assert release.messages == (("user", f"Complete a task by interacting with a household. One example follows.\n{transcript}"),)
+    agent = make_agent("react", profile="released", benchmark="alfworld", prompts="release")
+    work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
+    env = bench.make(HEAT_ID, **env_options_for(work, agent))  # type: ignore[arg-type]
+    client = ScriptedClient(["think: the apple may be in the garbagecan", "go to garbagecan 1", STOP])
+    try:
+        agent.run(env, client, episode_id="ep", demonstration=release)
+    finally:
+        env.close()
+    first = [(m.role, m.content) for m in client.requests[0].messages]
+    assert first == [
+        release.messages[0],
+        (
+            "user",
+            f"\n        \nThe environment's rule:\n{RELEASE_ALFWORLD_RULE}\n\nThe task follows.\n\n{HEAT_START}{START_LIST}\n",
+        ),
+    ]
+    later = [r.messages[-1].content for r in client.requests[1:]]
+    assert later == ["OK.", f"{HEAT_ARRIVE}{ARRIVE_LIST}"]
+    assert {r.json_mode for r in client.requests} == {False}

@@ -242,7 +242,10 @@ def _yaml_fields(text: str, fields: list[str]) -> str:
 _EXAMPLE_REQUEST = re.compile(r"^Observation:\s*(.+?)\nReasoning:", re.M | re.S)
 _EXAMPLE_RESPONSE = re.compile(r"(^Reasoning:\s*.+?\n\nAction:.+?)(?=Observation:|$)", re.M | re.S)
 #: methods whose released messages :func:`release_prompt` builds in the released structure
-STRUCTURED = {"robotouille": ("react", "act", "recap")}
+STRUCTURED = {"robotouille": ("react", "act", "recap"), "alfworld": ("react",)}
+#: the released ALFWorld ReAct's one user message before the task: a sentence, then the example
+#: transcript (alfworld-recap/react_alfworld/react.py:206-208); the sentence is ours
+ALFWORLD_REACT_HEADER = "Complete a task by interacting with a household. One example follows.\n"
 
 
 def recap_demo(few_shot: Sequence[dict[str, str]]) -> str:
@@ -272,6 +275,8 @@ def release_prompt(
     parts = sources(method, benchmark, split, task, think, name_only)
     if method == "recap":
         return _recap_prompt(folder, parts)
+    if benchmark == "alfworld":  # ReAct: the framed transcript as one user message (react.py:208)
+        return ReleasePrompt((("user", ALFWORLD_REACT_HEADER + _read(folder, parts[0])),))
     messages: list[tuple[str, str]] = []
     for part in parts:
         path = folder / part.path
