@@ -40,6 +40,7 @@ from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
+from recap.baselines import text_prompts as T
 from recap.baselines.act_json import MALFORMED_JSON, PARSE_ERROR_ACTION, read_reply
 from recap.baselines.react_text import demo_texts, play_text, raw_text
 from recap.baselines.reply_format import check_reply_format, text_reply_defaults
@@ -249,17 +250,25 @@ class ReActAgent(Agent):
         if self.config.reply_format == "text":
             return play_text(self, ep, reset)
         cfg, d = self.config, ep.driver
-        ep.conv.pin(
-            "task",
-            P.action_task_prompt(
-                rules=ep.env.rules(),
-                observation=reset.observation,
-                goal=reset.goal,
-                with_think=self.with_think,
-                preamble=not self.demo_mode,
-                think_actions=cfg.think_actions,
-            ),
-        )
+        # prompts: release on ALFWorld (Act: the JSON loop): the released first prompt with its
+        # JSON request (act_alfworld/act.py:158-172, 304), and each observation as the release
+        # sends it, without our heading (act.py:211)
+        released = "release" in ep.extra and ep.env.benchmark == "alfworld"
+        if released:
+            goal = "" if reset.goal in reset.observation else f"\n\nGoal: {reset.goal}"
+            ep.conv.pin("task", T.release_alfworld_task(f"{reset.observation}{goal}", json_example=T.RELEASE_JSON_EXAMPLE))
+        else:
+            ep.conv.pin(
+                "task",
+                P.action_task_prompt(
+                    rules=ep.env.rules(),
+                    observation=reset.observation,
+                    goal=reset.goal,
+                    with_think=self.with_think,
+                    preamble=not self.demo_mode,
+                    think_actions=cfg.think_actions,
+                ),
+            )
         prompt: str | None = None  # the first call answers the pinned task prompt
         kind = "task"
         streak = rounds = 0
@@ -313,4 +322,4 @@ class ReActAgent(Agent):
             elif not valid and cfg.invalid_feedback == "explained":
                 prompt, kind = self.explained_feedback(ep, action), "feedback"
             else:
-                prompt, kind = P.observation_prompt(d.observation), "observation"
+                prompt, kind = d.observation if released else P.observation_prompt(d.observation), "observation"

@@ -105,6 +105,10 @@ RELEASE_ALFWORLD_RULE = (
 )
 
 
+#: the JSON reply the released ALFWorld Act's first prompt shows as an example (act.py:167); ours
+RELEASE_JSON_EXAMPLE = '{"action": "open the drawer"}'
+
+
 def release_alfworld_task(observation: str, *, json_example: str | None = None) -> str:
     """The first prompt of the released ALFWorld ReAct/Act (``prompts: release``), in the layout of
     ``react_alfworld/react.py:132-142`` (``act_alfworld/act.py:158-172`` adds a JSON request with an

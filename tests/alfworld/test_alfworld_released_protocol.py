@@ -267,3 +267,55 @@ def test_react_release_prompts_send_the_released_first_messages(bench, tmp_path)
     later = [r.messages[-1].content for r in client.requests[1:]]
     assert later == ["OK.", f"{HEAT_ARRIVE}{ARRIVE_LIST}"]
     assert {r.json_mode for r in client.requests} == {False}
+
+
+def test_act_release_prompts_send_the_released_first_messages(bench, tmp_path):
+    """``prompts: release`` for Act (issue 25 item 7): act.py:297-304 re-reads the task's example
+    (parse_fewshot, act.py:255-281: a ``think:`` reply and the user lines after it drop out, each
+    command becomes ``{"action": ...}``) and sends it after a sentence as one user message, then
+    the first prompt with its JSON request (act.py:158-172); later observations come as the game
+    gives them (act.py:211). The fixture is in the released layout, in our own words."""
+    from workers.release.texts import ALFWORLD_ACT_HEADER, release_prompt
+
+    transcript = (
+        "user: Fixture room with a fixture 1.\nYour task is to: warm a fixture.\n"
+        "assistant: think: first find the fixture.\nuser: OK.\n"
+        "assistant: go to fixture 1\nuser: You reach fixture 1.\nIt is cold.\n"
+        "assistant: think: now warm it.\nuser: OK.\nuser: a second user line after the thought\n"
+        "assistant: warm fixture 1\nuser: Done.\n"
+    )
+    demo = tmp_path / "alfworld-recap/act_alfworld/alfworld_3prompts_act.json"
+    demo.parent.mkdir(parents=True)
+    demo.write_text(json.dumps({"react_heat_0": transcript, "react_put_0": "another task's example"}))
+    release = release_prompt(tmp_path, "act", "alfworld", "valid_seen", "heat")
+    assert release is not None
+    example = (
+        "user: Fixture room with a fixture 1.\nYour task is to: warm a fixture.\n"
+        'assistant: {"action": "go to fixture 1"}\nuser: You reach fixture 1.\nIt is cold.\n'
+        'assistant: {"action": "warm fixture 1"}\nuser: Done.'
+    )
+    assert release.messages == (("user", ALFWORLD_ACT_HEADER + example),)
+    agent = make_agent("act", profile="released", benchmark="alfworld", prompts="release")
+    assert (agent.config.reply_format, agent.config.json_mode) == ("json", True)
+    work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
+    env = bench.make(HEAT_ID, **env_options_for(work, agent))  # type: ignore[arg-type]
+    replies = [{"think": "the apple may be in the garbagecan"}, {"action": "go to garbagecan 1"}, STOP]
+    client = ScriptedClient(replies)
+    try:
+        agent.run(env, client, episode_id="ep", demonstration=release)
+    finally:
+        env.close()
+    first = [(m.role, m.content) for m in client.requests[0].messages]
+    assert first == [
+        release.messages[0],
+        (
+            "user",
+            f"\n        \nThe environment's rule:\n{T.RELEASE_ALFWORLD_RULE}\n\n"
+            "Answer with a JSON object holding an 'action' field, for instance:\n\n"
+            '{"action": "open the drawer"}\n\n'
+            f"The task follows.\n\n{HEAT_START}{START_LIST}\n",
+        ),
+    ]
+    later = [r.messages[-1].content for r in client.requests[1:]]
+    assert later == ["OK.", f"{HEAT_ARRIVE}{ARRIVE_LIST}"]
+    assert {r.json_mode for r in client.requests} == {True}

@@ -242,10 +242,43 @@ def _yaml_fields(text: str, fields: list[str]) -> str:
 _EXAMPLE_REQUEST = re.compile(r"^Observation:\s*(.+?)\nReasoning:", re.M | re.S)
 _EXAMPLE_RESPONSE = re.compile(r"(^Reasoning:\s*.+?\n\nAction:.+?)(?=Observation:|$)", re.M | re.S)
 #: methods whose released messages :func:`release_prompt` builds in the released structure
-STRUCTURED = {"robotouille": ("react", "act", "recap"), "alfworld": ("react",)}
+STRUCTURED = {"robotouille": ("react", "act", "recap"), "alfworld": ("react", "act")}
 #: the released ALFWorld ReAct's one user message before the task: a sentence, then the example
 #: transcript (alfworld-recap/react_alfworld/react.py:206-208); the sentence is ours
 ALFWORLD_REACT_HEADER = "Complete a task by interacting with a household. One example follows.\n"
+#: the released ALFWorld Act's one user message before the task: a sentence asking for JSON, then
+#: the example re-read as JSON replies (alfworld-recap/act_alfworld/act.py:297-303); ours in our words
+ALFWORLD_ACT_HEADER = (
+    "Act in a household until a task is done, answering with a JSON object holding an 'action' field. One example follows.\n"
+)
+
+
+def act_example(transcript: str) -> str:
+    """The released ALFWorld Act's example, as act.py re-reads Yao et al.'s transcript before
+    sending it (``parse_fewshot``, alfworld-recap/act_alfworld/act.py:255-281, joined at :301): the
+    text is cut into blocks, each from a line that begins ``user`` or ``assistant`` up to the next
+    such line; an assistant block that is a ``think:`` line is dropped *and so is every user block
+    after it* until an assistant block that acts; an acting block becomes ``{"action": ...}``
+    (``json.dumps``); the remaining blocks are joined one ``role: content`` line each."""
+    lines = transcript.strip().split("\n")
+    blocks: list[str] = []
+    for n, line in enumerate(lines):
+        if n == 0 or line[:4] == "user" or line[:9] == "assistant":
+            blocks.append(line)
+        else:
+            blocks[-1] += "\n" + line
+    kept: list[dict[str, str]] = []
+    after_thought = False
+    for block in blocks:
+        if block[:4] == "user":
+            if not after_thought:
+                kept.append({"role": "user", "content": block[5:].strip()})
+        elif block[:9] == "assistant":
+            said = block[10:].strip()
+            after_thought = said.startswith("think:")
+            if not after_thought:
+                kept.append({"role": "assistant", "content": json.dumps({"action": said})})
+    return join_messages(kept)
 
 
 def recap_demo(few_shot: Sequence[dict[str, str]]) -> str:
@@ -275,6 +308,8 @@ def release_prompt(
     parts = sources(method, benchmark, split, task, think, name_only)
     if method == "recap":
         return _recap_prompt(folder, parts)
+    if benchmark == "alfworld" and method == "act":  # the re-read example after a sentence (act.py:297-303)
+        return ReleasePrompt((("user", ALFWORLD_ACT_HEADER + act_example(_read(folder, parts[0]))),))
     if benchmark == "alfworld":  # ReAct: the framed transcript as one user message (react.py:208)
         return ReleasePrompt((("user", ALFWORLD_REACT_HEADER + _read(folder, parts[0])),))
     messages: list[tuple[str, str]] = []
