@@ -70,10 +70,10 @@ def play_text(agent: Any, ep: Episode, reset: Reset) -> None:
     """One CoT/Standard episode with a plain-text plan (see the module docstring)."""
     layout = layout_of(agent)
     body = T.turn(reset.observation, goal=reset.goal)
-    ep.conv.pin(
-        "task",
-        T.task_prompt(system=T.plan_system(agent.with_think), rules=ep.env.rules(), body=body, preamble=not agent.demo_mode),
-    )
+    # prompts: release: the authors' system text, instructions and examples are pinned already
+    # (recap.release_prompt); the first turn is the observation alone (IO_agent.py:155 prompts with it)
+    preamble = not agent.demo_mode and "release" not in ep.extra
+    ep.conv.pin("task", T.task_prompt(system=T.plan_system(agent.with_think), rules=ep.env.rules(), body=body, preamble=preamble))
     valid = ep.driver.valid_actions
     context = {"task": reset.goal, "depth": 0, "valid_actions": list(valid) if valid is not None else None, "text_layout": layout}
     raw, _ = ep.conv.ask(None, "task", lambda o: o, context=context, decode=raw_text)

@@ -323,6 +323,11 @@ def test_release_prompts_select_the_released_reply_format_and_refuse_a_contradic
     assert (alf.reply_format, alf.json_mode, alf.text_layout) == ("text", False, "yao")
     assert build_config(ActConfig, benchmark="alfworld", prompts="release").reply_format == "json"
     assert build_config(ReActConfig, benchmark="robotouille").reply_format == "json"  # ours: unchanged
+    from recap.baselines.cot import PlanConfig
+
+    plan = build_config(PlanConfig, benchmark="robotouille", prompts="release")
+    assert (plan.reply_format, plan.json_mode) == ("text", False)  # the I/O agents' plain-text plan
+    assert build_config(PlanConfig, benchmark="robotouille").reply_format == "json"
     with pytest.raises(ConfigError) as info:
         build_config(ReActConfig, benchmark="robotouille", prompts="release", reply_format="json")
     assert str(info.value) == (
@@ -381,5 +386,80 @@ def test_a_release_prompts_recap_episode_frames_the_released_demo_and_template(t
     assert len(reminders) == 1 and reminders[0]["role"] == "user"
     head = f"Many turns have passed, so here are the operating rules again, lest they slip your mind:\n\n{RECAP_RULES}\n\nRULES END\n\n"
     assert reminders[0]["content"].startswith(head) and reminders[0]["content"][len(head)] != "\n"
+    ours = make_env(unit.instance_id).rules()
+    assert not any(ours in m["content"] for m in messages)  # our rules text is never sent
+
+
+IO_YML = "robotouille-baselines/agents/prompt_builder/prompts/IO/1.0.0-io.yml"
+IOCOT_YML = "robotouille-baselines/agents/prompt_builder/prompts/IO/1.1.0-io-cot.yml"
+IO_EXAMPLE = "robotouille-baselines/agents/in_context_examples/data/synchronous/io_examples/0_demo.txt"
+IOCOT_EXAMPLE = "robotouille-baselines/agents/in_context_examples/data/synchronous/io-cot_examples/0_demo.txt"
+#: example files in the released I/O layouts (one interaction: the observation, then the plan)
+IO_EXAMPLE_TEXT = "Interaction 1\n---------------\n\n\nObservation:\nfixture kitchen\n\nGoal: fixture toast\n\n\nPlan:\nFixture one\nFixture two\n"
+IOCOT_EXAMPLE_TEXT = (
+    "Interaction 1\n---------------\n\n\nObservation:\nfixture kitchen\n\nGoal: fixture toast\n\n\n"
+    "Action: Fixture one\nNext State Change: fixture change one\nAction: Fixture two\nNext State Change: done\n"
+)
+IO_FILES = {
+    **FILES,
+    IO_YML: f"version: 1.0.0\nsystem: |\n  {SYSTEM} (plan)\ninstructions: |\n  {INSTRUCTIONS} (plan)\n",
+    IOCOT_YML: f"version: 1.1.0\nsystem: |\n  {SYSTEM} (cot)\ninstructions: |\n  {INSTRUCTIONS} (cot)\n",
+    IO_EXAMPLE: IO_EXAMPLE_TEXT,
+    IOCOT_EXAMPLE: IOCOT_EXAMPLE_TEXT,
+}
+
+
+@pytest.mark.skipif(not HAVE_ROBOTOUILLE, reason=f"no Robotouille data at {SHARED / 'robotouille'}")
+@pytest.mark.parametrize("method", ["standard", "cot"])
+def test_a_release_prompts_plan_episode_sends_the_released_io_messages(tmp_path, monkeypatch, method):
+    """Standard/CoT on Robotouille (issue 25 item 7): the I/O agents send the template's system text,
+    its instructions and each example cut by their own regexes (IO_agent.py:17-18, 37-40;
+    IOCoT_agent.py:17-18, 39-40) as user/assistant pairs, then the observation alone
+    (IO_agent.py:155); the released plain-text plan is selected and played to the goal."""
+    from workers.envs.registry import make_env
+    from workers.llm.direct import LiteLLMClient
+    from workers.llm.providers import DeploymentConfig
+
+    class Experts:
+        writes_llm_calls = False
+
+        def client(self, model):
+            return LiteLLMClient(DeploymentConfig(model="offline/expert"))
+
+    monkeypatch.setenv("RECAP_RELEASE_DATA", str(write_release(tmp_path / "release", IO_FILES)))
+    spec = SPEC.replace("method: react", f"method: {method}").format(out=tmp_path / "run", prompts="release", envs=ROBOTOUILLE)
+    unit = expand(parse_spec(spec, "s.yaml")).units[0]
+    assert json.loads(unit.method_config)["reply_format"] == "text"
+    rows: list[dict] = []
+    runner = EpisodeRunner(
+        "w0", "run", Experts(), send=lambda batch: rows.extend(batch.get("messages", [])), wait=lambda _ref: None
+    )
+    outcome = runner.run_unit(unit.work(), 1)
+    assert outcome.crash is None and outcome.result is not None
+    assert (outcome.result.success, outcome.result.end_reason) == (True, "success")
+    messages = sorted(rows, key=lambda r: r["seq"])
+    start = make_env(unit.instance_id).reset()
+    tag = "plan" if method == "standard" else "cot"
+    answer = (
+        "Plan:\nFixture one\nFixture two\n"
+        if method == "standard"
+        else "Action: Fixture one\nNext State Change: fixture change one\nAction: Fixture two\nNext State Change: done\n"
+    )
+    request = "fixture kitchen\n\nGoal: fixture toast\n\n\n"
+    assert [(m["role"], m["kind"], m["pinned"], m["content"]) for m in messages[:5]] == [
+        ("system", "release", True, f"{SYSTEM} ({tag})"),
+        ("user", "release", True, f"{INSTRUCTIONS} ({tag})"),
+        ("user", "release", True, request),
+        ("assistant", "release", True, answer),
+        (
+            "user",
+            "task",
+            True,
+            f"Observation:\n{start.observation}" + ("" if start.goal in start.observation else f"\n\nGoal: {start.goal}"),
+        ),
+    ]
+    assert messages[5]["role"] == "assistant" and len(messages) == 6
+    reply = messages[5]["content"]  # the released layout, chosen: a Plan: block or Action: lines
+    assert ("Plan:\n" in reply, "\nAction: " in reply) == ((True, False) if method == "standard" else (False, True))
     ours = make_env(unit.instance_id).rules()
     assert not any(ours in m["content"] for m in messages)  # our rules text is never sent

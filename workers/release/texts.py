@@ -241,8 +241,21 @@ def _yaml_fields(text: str, fields: list[str]) -> str:
 #: (robotouille-baselines/agents/ReAct_agent.py:23-24, Act_agent.py:23-24: the same two)
 _EXAMPLE_REQUEST = re.compile(r"^Observation:\s*(.+?)\nReasoning:", re.M | re.S)
 _EXAMPLE_RESPONSE = re.compile(r"(^Reasoning:\s*.+?\n\nAction:.+?)(?=Observation:|$)", re.M | re.S)
+#: the released I/O agents' in-context example regexes: Standard (IO_agent.py:17-18) cuts at ``Plan:``,
+#: CoT (IOCoT_agent.py:17-18) at the first ``Action:``
+_IO_REQUEST = re.compile(r"^Observation:\s*(.+?)Plan:", re.M | re.S)
+_IO_RESPONSE = re.compile(r"(^Plan:\s*\n.+)", re.M | re.S)
+_IOCOT_REQUEST = re.compile(r"^Observation:\s*(.+?)Action:", re.M | re.S)
+_IOCOT_RESPONSE = re.compile(r"(^Action:\s*.+)", re.M | re.S)
+#: method -> the (request, response) regexes its released agent cuts an example file with
+_EXAMPLE_CUTS = {
+    "react": (_EXAMPLE_REQUEST, _EXAMPLE_RESPONSE),
+    "act": (_EXAMPLE_REQUEST, _EXAMPLE_RESPONSE),
+    "standard": (_IO_REQUEST, _IO_RESPONSE),
+    "cot": (_IOCOT_REQUEST, _IOCOT_RESPONSE),
+}
 #: methods whose released messages :func:`release_prompt` builds in the released structure
-STRUCTURED = {"robotouille": ("react", "act", "recap"), "alfworld": ("react", "act")}
+STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot"), "alfworld": ("react", "act")}
 #: the released ALFWorld ReAct's one user message before the task: a sentence, then the example
 #: transcript (alfworld-recap/react_alfworld/react.py:206-208); the sentence is ours
 ALFWORLD_REACT_HEADER = "Complete a task by interacting with a household. One example follows.\n"
@@ -298,9 +311,10 @@ def release_prompt(
     from the same files as :func:`release_text` (so the unit's digest covers them); None where
     this module does not build the released structure yet (the caller pins the joined text).
 
-    Robotouille ReAct/Act (``robotouille-baselines``): the template's ``system`` as the system
+    Robotouille ReAct/Act, Standard and CoT (``robotouille-baselines``; the I/O agents build theirs
+    the same way, IO_agent.py:37-40, IOCoT_agent.py:39-40): the template's ``system`` as the system
     message and its ``instructions`` as a user message, then its own ``examples`` (serializer.py:53-65),
-    then every in-context example file cut by the agent's regexes into user/assistant pairs
+    then every in-context example file cut by the agent's regexes (:data:`_EXAMPLE_CUTS`) into user/assistant pairs
     (agent.py:54-56, in_context_examples/retrieve_example.py:27-37; all the folder's files, since
     ``random.sample(files, max(num_examples, len(files)))`` takes each once, here in name order)."""
     if method not in STRUCTURED.get(benchmark, ()):
@@ -319,9 +333,10 @@ def release_prompt(
             if part.pick == "every file":
                 for file in sorted(p for p in path.iterdir() if p.is_file()):
                     text = file.read_text(encoding="utf-8")
-                    pairs = zip(_EXAMPLE_REQUEST.findall(text), _EXAMPLE_RESPONSE.findall(text), strict=False)
-                    for request, response in pairs:
-                        messages += [("user", request), ("assistant", response)]
+                    request, response = _EXAMPLE_CUTS[method]
+                    pairs = zip(request.findall(text), response.findall(text), strict=False)
+                    for asked, answered in pairs:
+                        messages += [("user", asked), ("assistant", answered)]
                 continue
             data = _yaml_mapping(path.read_text(encoding="utf-8-sig"))
         except OSError as exc:
