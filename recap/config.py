@@ -117,6 +117,12 @@ class AgentConfig:
             out["temperature"] = RELEASED_BASELINE_TEMPERATURE
         return out
 
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """Settings the authors' released prompt implies on ``benchmark`` (its reply format);
+        ``prompts: release`` applies them (:func:`release_settings`). None for most methods."""
+        return {}
+
     def validate(self) -> None:
         if self.window < 2:
             raise ConfigError(f"window must be >= 2 messages, got {self.window}")
@@ -297,6 +303,18 @@ def check_setting_ranges(cfg: AgentConfig) -> None:
             raise ConfigError(f"{f.name} {_number_text(value)} is out of range [{_number_text(low)}, {_number_text(high)}]")
 
 
+def release_settings(cls: type[AgentConfig], benchmark: str | None, overrides: dict[str, Any]) -> dict[str, Any]:
+    """What ``prompts: release`` implies for ``cls`` on ``benchmark`` (the reply format the
+    released prompt asks for, :meth:`AgentConfig.release_prompt_settings`); ConfigError, one line,
+    when an explicit setting contradicts it."""
+    implied = cls.release_prompt_settings(benchmark)
+    clash = sorted(k for k, v in implied.items() if k in overrides and overrides[k] != v)
+    if clash:
+        wants = ", ".join(f"{k}: {json.dumps(implied[k])}" for k in clash)
+        raise ConfigError(f"prompts: release asks for the released reply format ({wants}); drop the contradicting setting")
+    return implied
+
+
 def build_config(
     cls: type[AgentConfig],
     profile: str | None = None,
@@ -324,6 +342,8 @@ def build_config(
         raise ConfigError(
             f"unknown setting(s) {', '.join(unknown)} for {cls.__name__}; known: {', '.join(sorted(names - {'prompts'}))}"
         )
+    if str(overrides.get("prompts", "ours")).startswith("release"):
+        values.update(release_settings(cls, benchmark, overrides))
     values.update(overrides)
     cfg = cls(**values)
     cfg.validate()

@@ -141,6 +141,10 @@ class Conversation:
     def pin(self, kind: str, content: str) -> int:
         return self.history.pin("user", kind, content)
 
+    def pin_message(self, role: str, kind: str, content: str) -> int:
+        """Pin a message with its own role (the authors' system text and example replies)."""
+        return self.history.pin(role, kind, content)
+
     def ask(
         self,
         prompt: str | None,

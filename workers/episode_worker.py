@@ -28,6 +28,7 @@ from recap.agent import Agent
 from recap.config import ConfigError
 from recap.env import Environment
 from recap.llm import LLMClient, LLMRequest, LLMResponse
+from recap.release_prompt import ReleasePrompt
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import check_vocabulary, record_to_row
@@ -211,33 +212,30 @@ class ReleaseChanged(RuntimeError):
     """The released text read now is not the one the unit was planned (and hashed) with."""
 
 
-def release_demonstration(unit: UnitWork, agent: Agent) -> str | bool:
+def release_demonstration(unit: UnitWork, agent: Agent) -> str | bool | ReleasePrompt:
     """What the episode pins first: True (the agent renders our demonstration) unless the unit's
     settings say ``prompts: release:<digest>``; then the authors' text for this instance, read from
     the release folder (:mod:`workers.release.texts`) and checked against the digest the unit's
-    hash covers (ReleaseChanged otherwise). The agent gets it as a plain string: recap/ reads no file."""
+    hash covers (ReleaseChanged otherwise): the released messages with their roles where
+    :func:`workers.release.texts.release_prompt` builds them (the agent then leaves out our system
+    text and rules), else the joined text. Plain strings either way: recap/ reads no file."""
     prompts = getattr(agent.config, "prompts", "ours")
     if not prompts.startswith("release:"):
         return True
     from schemas.labels import place_of
-    from workers.release.texts import release_folder, release_text
+    from workers.release.texts import release_folder, release_prompt, release_text
 
     bench, split, task = place_of(unit.instance_id)
-    text = release_text(
-        release_folder(),
-        unit.method,
-        bench,
-        split,
-        task,
-        think=getattr(agent.config, "think", "latest"),
-        name_only=bool(getattr(agent.config, "name_only", False)),
-    )
+    folder = release_folder()
+    think, name_only = getattr(agent.config, "think", "latest"), bool(getattr(agent.config, "name_only", False))
+    text = release_text(folder, unit.method, bench, split, task, think=think, name_only=name_only)
     if f"release:{text.digest}" != prompts:
         raise ReleaseChanged(
             f"the released text for {unit.method} on {bench}/{split}/{task} changed since the plan "
             f"(sha256 {text.digest[:12]}..., planned {prompts[8:20]}...): re-run the sweep to plan it again"
         )
-    return text.text
+    structured = release_prompt(folder, unit.method, bench, split, task, think=think, name_only=name_only)
+    return structured if structured is not None else text.text
 
 
 class EpisodeRunner:

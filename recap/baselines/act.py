@@ -39,6 +39,10 @@ class ActConfig(ReActConfig):
             # alfworld-recap/act_alfworld/act.py:50-71 never trims; 32 messages go on a
             # context-length error (:74-77)
             out.update(history="all")
+            if profile == "released":
+                # no JSON repair: a malformed reply becomes a command the game answers
+                # (act.py:181-199, recap.baselines.act_json)
+                out["malformed_json"] = "game"
         return out
 
 

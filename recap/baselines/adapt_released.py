@@ -18,7 +18,10 @@ loop that drives both):
   feedback first after an unusable reply. Replies are ``Reasoning:`` / ``Action:`` text, matched
   to the valid actions ignoring case and punctuation (:mod:`recap.baselines.textreply`). The
   executor keeps its whole history up to ``executor_window`` messages after its pins, dropping
-  the oldest pair beyond (ReAct_agent.py:129-130 drops entries once more than 64 are kept).
+  the oldest pair beyond *after its first reply*, which stays: each executor is a released
+  ReActAgent, whose history starts with its first prompt and first reply and which trims with
+  ``del truncated_history[2:4]`` once more than 64 entries are kept (ReAct_agent.py:129-130; the
+  first prompt is our pin, so the kept reply is the window's first message, ``keep=1``).
 * **No success check per subtask**: an executor's run ends only when it replies ``Finish``
   (ReAct_agent.py:272-274), or after ``executor_patience`` unusable replies in a row (a
   malformed reply or an action that matches none: ReAct_agent.py:229-289 gives up after 5 and
@@ -64,10 +67,17 @@ def _keep(obj: dict[str, Any]) -> dict[str, Any]:
 
 
 def open_context(
-    ep: Episode, *, temperature: Any, window: int | None, expected_format: str, reply_fields: tuple[str, ...]
+    ep: Episode,
+    *,
+    temperature: Any,
+    window: int | None,
+    expected_format: str,
+    reply_fields: tuple[str, ...],
+    keep_first: bool = False,
 ) -> Conversation:
     """A fresh context of the episode (usage, caps and message numbering shared) with its own
-    temperature and, when ``window`` is set, a window of that many messages after its pins."""
+    temperature and, when ``window`` is set, a window of that many messages after its pins
+    (``keep_first``: its first reply is never trimmed, as the released ReAct executor keeps it)."""
     main = ep.conv
     cfg = main.config if temperature == "same" else dataclasses.replace(main.config, temperature=temperature)
     h = main.history
@@ -79,6 +89,7 @@ def open_context(
         emit=main.emit,
         counter=h.counter,
         counts_pins=False if window is not None else cfg.history_counts_pins(),
+        keep=1 if keep_first and window is not None else 0,
     )
     return Conversation(
         episode_id=main.episode_id,
@@ -121,7 +132,12 @@ def execute(agent: Any, ep: Episode, node: Any, demo: str | None) -> bool:
     """One executor run on ``node``'s subtask; True when it replied Finish, False when it gave up."""
     cfg, d = agent.config, ep.driver
     conv = open_context(
-        ep, temperature="same", window=cfg.executor_window, expected_format=EXECUTOR_FORMAT, reply_fields=EXECUTOR_FIELDS
+        ep,
+        temperature="same",
+        window=cfg.executor_window,
+        expected_format=EXECUTOR_FORMAT,
+        reply_fields=EXECUTOR_FIELDS,
+        keep_first=True,
     )
     if demo:
         conv.pin("demonstration", demo)

@@ -48,6 +48,12 @@ class PlanConfig(AgentConfig):
     #: 1,286 tokens with a think (bench/protocol.py); 1024 cut it
     max_tokens: int | None = 3072
 
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released I/O prompts ask for the plain-text plan (IO/1.0.0-io.yml, IO/1.1.0-io-cot.yml);
+        the release has them for Robotouille only."""
+        return text_reply_defaults(False, benchmark) if benchmark == "robotouille" else {}
+
     def validate(self) -> None:
         super().validate()
         if self.on_invalid not in ("stop", "skip"):

@@ -20,13 +20,12 @@ A copy that cannot be made (an environment holding an engine process) ends the e
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
 from recap.baselines import text_prompts as T
 from recap.baselines.react_text import raw_text
 from recap.baselines.textreply import parse_action_lines, parse_plan, render, unique_match
-from recap.env import Environment, InvalidActionError, Reset
+from recap.env import EnvError, Environment, InvalidActionError, Reset
 from recap.runtime import Episode, EpisodeEnd
 
 
@@ -43,11 +42,12 @@ def demo_texts(agent: Any, replies: list[dict[str, Any]]) -> list[str]:
 def check_plan(env: Environment, valid: tuple[str, ...] | None, actions: list[str]) -> tuple[list[str], str | None]:
     """The plan matched action by action on a copy of ``env`` (whose valid actions now are
     ``valid``): (the matched valid actions, None) or (those matched so far, why the plan fails).
-    Matching stops once the copy's episode is over (the goal reached or its step cap): our
-    environments end there, and the rest of the plan would not run (the release's engine copy
-    goes on, so it also checks those actions)."""
+    Every action is checked, also those after the copy reaches the goal: the release's engine copy
+    goes on stepping (IO_agent.py:176-187 loops over the whole plan), so a plan that reaches the
+    goal and then names an action that matches nothing is refused whole
+    (:meth:`recap.env.Environment.plan_copy` is the copy that goes on)."""
     try:
-        sim = copy.deepcopy(env)
+        sim = env.plan_copy()
     except Exception as exc:  # noqa: BLE001  (any engine that cannot be copied)
         raise EpisodeEnd("env_error", f"the plan cannot be checked on a copy of the environment: {exc}") from exc
     matched: list[str] = []
@@ -60,8 +60,8 @@ def check_plan(env: Environment, valid: tuple[str, ...] | None, actions: list[st
             step = sim.step(hit)
         except InvalidActionError:
             return matched, f"planned action {i} of {len(actions)} ({action!r}) is not valid"
-        if step.done or step.success:
-            break
+        except EnvError as exc:
+            raise EpisodeEnd("env_error", f"the plan cannot be checked past action {i} on the copy: {exc}") from exc
         valid = step.valid_actions
     return matched, None
 
@@ -70,10 +70,10 @@ def play_text(agent: Any, ep: Episode, reset: Reset) -> None:
     """One CoT/Standard episode with a plain-text plan (see the module docstring)."""
     layout = layout_of(agent)
     body = T.turn(reset.observation, goal=reset.goal)
-    ep.conv.pin(
-        "task",
-        T.task_prompt(system=T.plan_system(agent.with_think), rules=ep.env.rules(), body=body, preamble=not agent.demo_mode),
-    )
+    # prompts: release: the authors' system text, instructions and examples are pinned already
+    # (recap.release_prompt); the first turn is the observation alone (IO_agent.py:155 prompts with it)
+    preamble = not agent.demo_mode and "release" not in ep.extra
+    ep.conv.pin("task", T.task_prompt(system=T.plan_system(agent.with_think), rules=ep.env.rules(), body=body, preamble=preamble))
     valid = ep.driver.valid_actions
     context = {"task": reset.goal, "depth": 0, "valid_actions": list(valid) if valid is not None else None, "text_layout": layout}
     raw, _ = ep.conv.ask(None, "task", lambda o: o, context=context, decode=raw_text)

@@ -40,7 +40,9 @@ from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
-from recap.baselines.react_text import demo_texts, play_text
+from recap.baselines import text_prompts as T
+from recap.baselines.act_json import MALFORMED_JSON, PARSE_ERROR_ACTION, read_reply
+from recap.baselines.react_text import demo_texts, play_text, raw_text
 from recap.baselines.reply_format import check_reply_format, text_reply_defaults
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
@@ -86,6 +88,10 @@ class ReActConfig(AgentConfig):
     #: the text layout: ``labelled`` (Robotouille's "Reasoning:" / "Action:" lines) or ``yao``
     #: (ALFWorld's one line: "think: ..." or the command)
     text_layout: Literal["labelled", "yao"] = "labelled"
+    #: JSON replies: ``repair`` (ours: a malformed reply is answered with a repair request) or
+    #: ``game`` (the released ALFWorld Act: it becomes a command the game answers,
+    #: recap.baselines.act_json)
+    malformed_json: Literal["repair", "game"] = "repair"
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
@@ -133,6 +139,15 @@ class ReActConfig(AgentConfig):
     #: Act's act.py asks for JSON)
     released_text: ClassVar[bool] = True
 
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released prompts ask for the released reply layout: Robotouille's "Reasoning:" /
+        "Action:" lines (ReAct/1.0.0-original.yml, Act/1.0.0-original.yml), ALFWorld ReAct's one
+        line (react_alfworld/react.py), ALFWorld Act's JSON (act_alfworld/act.py:165-168)."""
+        if benchmark not in ("robotouille", "alfworld"):
+            return {}
+        return text_reply_defaults(cls.released_text, benchmark) or {"reply_format": "json"}
+
     def history_window(self) -> int:
         if self.history == "last":
             return 2
@@ -157,8 +172,14 @@ class ReActConfig(AgentConfig):
         if self.window_keeps_first and self.history == "window" and self.window < 4:
             raise ConfigError("window must be >= 4 messages when it keeps the first reply")
         check_reply_format(self)
+        if self.malformed_json not in ("repair", "game"):
+            raise ConfigError(f"malformed_json must be repair or game, got {self.malformed_json!r}")
         if self.text_layout not in ("labelled", "yao"):
             raise ConfigError(f"text_layout must be labelled or yao, got {self.text_layout!r}")
+
+
+def _keep(obj: dict[str, Any]) -> dict[str, Any]:
+    return obj
 
 
 def flat_context(ep: Episode, goal: str) -> dict[str, Any]:
@@ -229,22 +250,51 @@ class ReActAgent(Agent):
         if self.config.reply_format == "text":
             return play_text(self, ep, reset)
         cfg, d = self.config, ep.driver
-        ep.conv.pin(
-            "task",
-            P.action_task_prompt(
-                rules=ep.env.rules(),
-                observation=reset.observation,
-                goal=reset.goal,
-                with_think=self.with_think,
-                preamble=not self.demo_mode,
-                think_actions=cfg.think_actions,
-            ),
-        )
+        # prompts: release on ALFWorld (Act: the JSON loop): the released first prompt with its
+        # JSON request (act_alfworld/act.py:158-172, 304), and each observation as the release
+        # sends it, without our heading (act.py:211)
+        released = "release" in ep.extra and ep.env.benchmark == "alfworld"
+        if released:
+            goal = "" if reset.goal in reset.observation else f"\n\nGoal: {reset.goal}"
+            ep.conv.pin("task", T.release_alfworld_task(f"{reset.observation}{goal}", json_example=T.RELEASE_JSON_EXAMPLE))
+        else:
+            ep.conv.pin(
+                "task",
+                P.action_task_prompt(
+                    rules=ep.env.rules(),
+                    observation=reset.observation,
+                    goal=reset.goal,
+                    with_think=self.with_think,
+                    preamble=not self.demo_mode,
+                    think_actions=cfg.think_actions,
+                ),
+            )
         prompt: str | None = None  # the first call answers the pinned task prompt
         kind = "task"
         streak = rounds = 0
         while True:
-            reply, _ = ep.conv.ask(prompt, kind, self.parse_reply, context=flat_context(ep, reset.goal))
+            if cfg.malformed_json == "game":
+                raw, _ = ep.conv.ask(prompt, kind, _keep, context=flat_context(ep, reset.goal), decode=raw_text)
+                read = read_reply(raw["text"])
+                if read.malformed:
+                    # the release sends its placeholder command to the game (a step) and shows
+                    # its own note instead of the game's answer (act_alfworld/act.py:183-199)
+                    try:
+                        d.execute(read.action or PARSE_ERROR_ACTION)
+                    except InvalidActionError:
+                        pass  # an environment that rejects invalid commands takes no step
+                    prompt, kind = MALFORMED_JSON, "feedback"
+                    continue
+                if read.action is None and read.think is None:
+                    # neither field: the release sends its last message again (act.py:221)
+                    prompt = prompt if prompt is not None else reset.observation
+                    continue
+                if read.action is None:  # a thought, whatever think_actions says (act.py:218-219)
+                    prompt, kind = P.THOUGHT_ACK, "thought"
+                    continue
+                reply = read.as_reply()
+            else:
+                reply, _ = ep.conv.ask(prompt, kind, self.parse_reply, context=flat_context(ep, reset.goal))
             if cfg.think_actions and self.is_thought(reply):
                 # a thought: no environment step, no step used (react.py:159-160, act.py:218-219)
                 prompt, kind = P.THOUGHT_ACK, "thought"
@@ -272,4 +322,4 @@ class ReActAgent(Agent):
             elif not valid and cfg.invalid_feedback == "explained":
                 prompt, kind = self.explained_feedback(ep, action), "feedback"
             else:
-                prompt, kind = P.observation_prompt(d.observation), "observation"
+                prompt, kind = d.observation if released else P.observation_prompt(d.observation), "observation"

@@ -89,7 +89,14 @@ def play_text(agent: Any, ep: Episode, reset: Reset) -> None:
     else:
         system = T.react_system(agent.with_think)
         first = T.turn(reset.observation, goal=reset.goal)
-    ep.conv.pin("task", T.task_prompt(system=system, rules=ep.env.rules(), body=first, preamble=not agent.demo_mode))
+    # prompts: release: the authors' system text and instructions are pinned already
+    # (recap.release_prompt); the first turn is the observation alone, as the release sends it
+    # (ReAct_agent.py:232-241 prompts with the environment's observation text)
+    preamble = not agent.demo_mode and "release" not in ep.extra
+    if yao and "release" in ep.extra:  # ALFWorld: the released first prompt (react.py:132-142, 209)
+        ep.conv.pin("task", T.release_alfworld_task(first))
+    else:
+        ep.conv.pin("task", T.task_prompt(system=system, rules=ep.env.rules(), body=first, preamble=preamble))
     prompt: str | None = None
     kind = "task"
     streak = rounds = 0

@@ -97,6 +97,28 @@ def task_prompt(*, system: str, rules: str, body: str, preamble: bool) -> str:
     return "\n\n".join([*parts, body])
 
 
+#: the one rule the released ALFWorld baselines state, written in their Python code
+#: (alfworld-recap/react_alfworld/react.py:136-137, act_alfworld/act.py:162-163); ours in our words
+RELEASE_ALFWORLD_RULE = (
+    "You can hold only one item at a time. Check your inventory whenever you are unsure what you are "
+    "holding or are about to pick something up."
+)
+
+
+#: the JSON reply the released ALFWorld Act's first prompt shows as an example (act.py:167); ours
+RELEASE_JSON_EXAMPLE = '{"action": "open the drawer"}'
+
+
+def release_alfworld_task(observation: str, *, json_example: str | None = None) -> str:
+    """The first prompt of the released ALFWorld ReAct/Act (``prompts: release``), in the layout of
+    ``react_alfworld/react.py:132-142`` (``act_alfworld/act.py:158-172`` adds a JSON request with an
+    example, ``json_example``): a newline, a whitespace-only line, the rule under a heading, the
+    task heading, then the first observation with its valid actions and a trailing newline. The
+    sentences are ours."""
+    ask = f"Answer with a JSON object holding an 'action' field, for instance:\n\n{json_example}\n\n" if json_example else ""
+    return f"\n        \nThe environment's rule:\n{RELEASE_ALFWORLD_RULE}\n\n{ask}The task follows.\n\n{observation}\n"
+
+
 def turn(observation: str, *, goal: str | None = None, subtask: str | None = None, feedback: str | None = None) -> str:
     """One turn's message: optional error feedback first, the observation, the goal when the
     observation does not already state it (Robotouille's does: the release sends it alone,

@@ -94,6 +94,8 @@ def test_paper_and_released_differ_only_in_temperature_and_reacts_reply_format(m
     released = make_agent(method, profile="released", benchmark="alfworld").config
     assert (paper.temperature, released.temperature) == (0.5, None)
     text = {"reply_format": "text", "json_mode": False, "text_layout": "yao"} if method == "react" else {}
+    if method == "act":  # the released Act sends a malformed reply to the game (act.py:181-199)
+        text = {"malformed_json": "game"}
     assert dataclasses.replace(paper, temperature=None, **text) == released
 
 
@@ -162,6 +164,26 @@ def test_act_sees_valid_actions_feedback_and_ok(bench):
     assert json.loads(client.requests[4].messages[2].content) == {"think": "an apple is likely in the garbagecan"}
 
 
+def test_released_act_sends_a_malformed_reply_to_the_game(bench):
+    """act.py:181-199, 221: text that is not JSON is the command "json parse error" (the game
+    answers it and counts a step; the next message says the reply was not JSON), an empty action
+    is the command "error", an object with neither field repeats the last message. No repair."""
+    replies = ["```json\n{not json", {"action": ""}, {"foo": 1}, '```json\n{"action": "go to garbagecan 1"}\n```']
+    agent, options, result, client = _run(bench, "act", "released", replies + [STOP])
+    later = [(r.purpose, r.messages[-1].content) for r in client.requests[1:]]
+    explained = feedback("error", 'reply {"think": "<your thought>"} with no "action"', "Nothing happens." + START_LIST)
+    assert later == [
+        ("feedback", "Your reply was not a valid JSON object. Reply with one JSON object that has an 'action' field."),
+        ("feedback", explained),
+        ("feedback", explained),
+        ("observation", f"Observation:\n{HEAT_ARRIVE}{ARRIVE_LIST}"),
+    ]
+    assert (result.steps, result.invalid_actions, result.json_repairs) == (3, 2, 0)
+    assert [len(r.messages) for r in client.requests] == [2, 4, 6, 8, 10]
+    with pytest.raises(ValueError, match="^malformed_json must be repair or game, got 'x'$"):
+        make_agent("act", malformed_json="x")
+
+
 def test_without_a_profile_react_is_unchanged(bench):
     """``profile: none``: no lists, a thought is a command the game answers, no explained feedback."""
     replies = [
@@ -209,3 +231,91 @@ def test_valid_actions_setting_maps_to_the_game_options(bench):
     }
     with pytest.raises(ValueError, match=r"^demo_valid_actions must be true, false or null \(None\), got 'no'$"):
         bench.make(HEAT_ID, demo_valid_actions="no")
+
+
+def test_react_release_prompts_send_the_released_first_messages(bench, tmp_path):
+    """``prompts: release`` (issue 25 item 7): react.py:206-209 sends the task's example transcript
+    after a sentence as one user message, then the first prompt (react.py:132-142: the stated
+    rule, the task heading, the first observation with its valid actions); no system text or rules
+    of ours. The release folder is a fixture in the released layout, in our own words."""
+    from recap.baselines.text_prompts import RELEASE_ALFWORLD_RULE
+    from workers.release.texts import release_prompt
+
+    transcript = "Fixture household, task: warm a fixture.\n> think: fixture thought\nOK.\n> go to fixture 1\nDone.\n"
+    demo = tmp_path / "alfworld-recap/react_alfworld/alfworld_3prompts_fixed.json"
+    demo.parent.mkdir(parents=True)
+    demo.write_text(json.dumps({"react_heat_0": transcript, "react_put_0": "another task's example"}))
+    release = release_prompt(tmp_path, "react", "alfworld", "valid_seen", "heat")
+    assert release is not None
+    assert release.messages == (("user", f"Complete a task by interacting with a household. One example follows.\n{transcript}"),)
+    agent = make_agent("react", profile="released", benchmark="alfworld", prompts="release")
+    work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
+    env = bench.make(HEAT_ID, **env_options_for(work, agent))  # type: ignore[arg-type]
+    client = ScriptedClient(["think: the apple may be in the garbagecan", "go to garbagecan 1", STOP])
+    try:
+        agent.run(env, client, episode_id="ep", demonstration=release)
+    finally:
+        env.close()
+    first = [(m.role, m.content) for m in client.requests[0].messages]
+    assert first == [
+        release.messages[0],
+        (
+            "user",
+            f"\n        \nThe environment's rule:\n{RELEASE_ALFWORLD_RULE}\n\nThe task follows.\n\n{HEAT_START}{START_LIST}\n",
+        ),
+    ]
+    later = [r.messages[-1].content for r in client.requests[1:]]
+    assert later == ["OK.", f"{HEAT_ARRIVE}{ARRIVE_LIST}"]
+    assert {r.json_mode for r in client.requests} == {False}
+
+
+def test_act_release_prompts_send_the_released_first_messages(bench, tmp_path):
+    """``prompts: release`` for Act (issue 25 item 7): act.py:297-304 re-reads the task's example
+    (parse_fewshot, act.py:255-281: a ``think:`` reply and the user lines after it drop out, each
+    command becomes ``{"action": ...}``) and sends it after a sentence as one user message, then
+    the first prompt with its JSON request (act.py:158-172); later observations come as the game
+    gives them (act.py:211). The fixture is in the released layout, in our own words."""
+    from workers.release.texts import ALFWORLD_ACT_HEADER, release_prompt
+
+    transcript = (
+        "user: Fixture room with a fixture 1.\nYour task is to: warm a fixture.\n"
+        "assistant: think: first find the fixture.\nuser: OK.\n"
+        "assistant: go to fixture 1\nuser: You reach fixture 1.\nIt is cold.\n"
+        "assistant: think: now warm it.\nuser: OK.\nuser: a second user line after the thought\n"
+        "assistant: warm fixture 1\nuser: Done.\n"
+    )
+    demo = tmp_path / "alfworld-recap/act_alfworld/alfworld_3prompts_act.json"
+    demo.parent.mkdir(parents=True)
+    demo.write_text(json.dumps({"react_heat_0": transcript, "react_put_0": "another task's example"}))
+    release = release_prompt(tmp_path, "act", "alfworld", "valid_seen", "heat")
+    assert release is not None
+    example = (
+        "user: Fixture room with a fixture 1.\nYour task is to: warm a fixture.\n"
+        'assistant: {"action": "go to fixture 1"}\nuser: You reach fixture 1.\nIt is cold.\n'
+        'assistant: {"action": "warm fixture 1"}\nuser: Done.'
+    )
+    assert release.messages == (("user", ALFWORLD_ACT_HEADER + example),)
+    agent = make_agent("act", profile="released", benchmark="alfworld", prompts="release")
+    assert (agent.config.reply_format, agent.config.json_mode) == ("json", True)
+    work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
+    env = bench.make(HEAT_ID, **env_options_for(work, agent))  # type: ignore[arg-type]
+    replies = [{"think": "the apple may be in the garbagecan"}, {"action": "go to garbagecan 1"}, STOP]
+    client = ScriptedClient(replies)
+    try:
+        agent.run(env, client, episode_id="ep", demonstration=release)
+    finally:
+        env.close()
+    first = [(m.role, m.content) for m in client.requests[0].messages]
+    assert first == [
+        release.messages[0],
+        (
+            "user",
+            f"\n        \nThe environment's rule:\n{T.RELEASE_ALFWORLD_RULE}\n\n"
+            "Answer with a JSON object holding an 'action' field, for instance:\n\n"
+            '{"action": "open the drawer"}\n\n'
+            f"The task follows.\n\n{HEAT_START}{START_LIST}\n",
+        ),
+    ]
+    later = [r.messages[-1].content for r in client.requests[1:]]
+    assert later == ["OK.", f"{HEAT_ARRIVE}{ARRIVE_LIST}"]
+    assert {r.json_mode for r in client.requests} == {True}

@@ -185,3 +185,14 @@ def test_robotouille_offline_expert_episode():
     assert len(executor_prompts) >= 1
     assert [p.rsplit("\n\nSubtask: ", 1)[1] for p in executor_prompts] == list(plan[: len(executor_prompts)])
     assert result.steps == len([s for s in records if type(s).__name__ == "StepRecord" and s.valid])
+
+
+def test_an_executor_trims_its_history_by_pairs_but_keeps_its_first_reply():
+    # the release's executor is a ReActAgent: ``del truncated_history[2:4]`` once past its bound
+    # keeps the first prompt (our pin) and the first reply (ReAct_agent.py:129-130)
+    plan = "why\nStep 1: build the tower\nExecution order: Step 1"
+    replies = [plan, *(f"Reasoning: step {i}\nAction: {a}" for i, a in enumerate(DEMO_ACTIONS))]
+    run = run_agent(agent(executor_window=4), replies)
+    assert (run.result.end_reason, run.result.steps) == ("success", 6)
+    assert run.windows() == [(0,), (2,), (2, 3, 4), (2, 3, 4, 5, 6), (2, 3, 6, 7, 8), (2, 3, 8, 9, 10), (2, 3, 10, 11, 12)]
+    assert run.content(3) == f"Reasoning: step 0\nAction: {DEMO_ACTIONS[0]}"

@@ -20,6 +20,7 @@ from recap.baselines.textreply import (
 )
 from recap.blocksworld import RULES
 from recap.config import ConfigError
+from recap.env import EnvError
 from recap.llm import LLMError
 from recap.methods import make_agent
 from tests.method.baseline_harness import DEMO_ACTIONS, GOAL, demo_env, obs_after, run_agent, stepping_env
@@ -235,6 +236,47 @@ def test_standard_checks_the_whole_plan_before_running_any_of_it():
     run = run_agent(StandardAgent(PlanConfig(**TEXT)), [bad])
     assert (run.result.end_reason, run.result.steps) == ("agent_done", 0)
     assert run.result.error == "planned action 3 of 4 ('pick up D') does not match exactly one valid action; no action was run"
+
+
+def test_the_whole_plan_is_checked_also_past_the_goal():
+    # the release's engine copy goes on stepping after the goal (IO_agent.py:176-187): an
+    # action after it that matches nothing refuses the whole plan; one that matches is checked
+    # and the plan runs (the episode ends at the goal)
+    past = "Plan:\n" + "\n".join([*DEMO_ACTIONS, "pick up D"])
+    run = run_agent(StandardAgent(PlanConfig(**TEXT)), [past])
+    assert (run.result.end_reason, run.result.steps) == ("agent_done", 0)
+    assert run.result.error == "planned action 7 of 7 ('pick up D') does not match exactly one valid action; no action was run"
+    run = run_agent(StandardAgent(PlanConfig(**TEXT)), ["Plan:\n" + "\n".join([*DEMO_ACTIONS, "unstack C from B"])])
+    assert (run.result.end_reason, run.result.steps) == ("success", 6)
+
+
+def test_robotouille_plan_copy_steps_past_the_goal():
+    from workers.envs.registry import make_env
+
+    env = make_env("robotouille/synchronous/0_cheese_sandwich@42")
+    env.reset()
+    plan = env.expert_plan()
+    assert plan
+    sim = env.plan_copy()
+    for action in plan:
+        step = sim.step(action)
+    assert (step.done, step.success) == (True, True)
+    after = sim.step(step.valid_actions[0])  # the copy goes on; the episode's env is untouched
+    assert after.valid_actions and env.steps_taken == 0
+    with pytest.raises(EnvError, match="the episode is over"):
+        done = make_env("robotouille/synchronous/0_cheese_sandwich@42")
+        done.reset()
+        for action in plan:
+            done.step(action)
+        done.step(step.valid_actions[0])
+    lines = "\n".join([*plan, "Fly to the moon"])
+    agent = make_agent("standard", "released", benchmark="robotouille")
+    env = make_env("robotouille/synchronous/0_cheese_sandwich@42")
+    run = run_agent(agent, ["Plan:\n" + lines], env=env)
+    assert run.result.error == (
+        f"planned action {len(plan) + 1} of {len(plan) + 1} ('Fly to the moon') does not match exactly one "
+        "valid action; no action was run"
+    )
 
 
 def test_cot_plan_ignoring_case_and_punctuation_runs_to_the_goal():

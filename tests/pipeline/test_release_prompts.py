@@ -23,6 +23,7 @@ import workers.release.folder as release_folder_mod
 from pipeline.errors import SpecError
 from pipeline.spec import parse_spec
 from pipeline.units import expand
+from recap.env import DataNotFoundError
 from workers.envs.data_sources import Source
 from workers.episode_worker import EpisodeRunner, release_demonstration
 from workers.release.texts import few_shot_literal, release_text
@@ -35,9 +36,19 @@ REAL_MIRROR = Path("/work/.mirror/ReCAP-Stanford+ReCAP/repo")
 REACT_YML = "robotouille-baselines/agents/prompt_builder/prompts/ReAct/1.0.0-original.yml"
 REACT_EXAMPLE = "robotouille-baselines/agents/in_context_examples/data/synchronous/react_examples_omitted_obs/0_demo.txt"
 RECAP_PY = "robotouille-recap/MATRIX/MATRIX/prompts.py"
+#: the template the released ReCAP's synchronous configs name (its system text and rules)
+RECAP_YML = "robotouille-recap/agents/prompt_builder/prompts/ReAct/1.3.1-last-reasoning-action-mpc.yml"
+RECAP_SYSTEM = "Fixture ReCAP system line: you cook."
+RECAP_RULES = "Fixture ReCAP rule one.\nFixture ReCAP rule two."
 SYSTEM = "Fixture system line: act in the kitchen."
 INSTRUCTIONS = "Fixture instructions: reply with one action."
-EXAMPLE = "Fixture example: pick up the bread, then place it.\n"
+#: an example file in the released layout (interactions of observation, reasoning, action)
+EXAMPLE = (
+    "Interaction 1\n---------------\n\n\nObservation:\nfixture kitchen, step one\n\nGoal: fixture toast\n\n\n"
+    "Reasoning: Fixture thought one.\n\nAction: Fixture action one\n\n\n"
+    "Interaction 2\n---------------\n\n\nObservation:\nfixture kitchen, step two\n\n\n"
+    "Reasoning: Fixture thought two.\n\nAction: Finish\n"
+)
 #: what the loader must make of the ReAct fixture: system, instructions, the example file
 REACT_TEXT = f"{SYSTEM}\n\n{INSTRUCTIONS}\n\n{EXAMPLE}"
 
@@ -45,6 +56,9 @@ FILES = {
     "LICENSE": "fixture licence\n",
     REACT_YML: f"version: 1.0.0\nsystem: |\n  {SYSTEM}\ninstructions: |\n  {INSTRUCTIONS}\n",
     REACT_EXAMPLE: EXAMPLE,
+    RECAP_YML: (
+        f"version: 1.3.1\nsystem: |\n  {RECAP_SYSTEM}\n\ninstructions: |\n  " + RECAP_RULES.replace("\n", "\n  ") + "\n\n"
+    ),
     # a top-level statement that would stop the test if the file were run rather than parsed
     RECAP_PY: (
         "raise SystemExit('never executed')\n\n"
@@ -157,7 +171,11 @@ def test_python_prompt_files_are_parsed_never_run(tmp_path):
     write_release(tmp_path)
     assert few_shot_literal(FILES[RECAP_PY], "get_few_shot")[0] == {"role": "user", "content": "fixture first observation"}
     text = release_text(tmp_path, "recap", "robotouille", "synchronous", "6_x")
-    assert text.text == 'user: fixture first observation\nassistant: {"subtasks": ["a"]}'
+    assert text.text == f'user: fixture first observation\nassistant: {{"subtasks": ["a"]}}\n\n{RECAP_SYSTEM}\n\n{RECAP_RULES}'
+    assert [p.path for p in text.parts] == [RECAP_PY, RECAP_YML]
+    # the asynchronous configs name the -async template (absent here: refused, naming the fetch)
+    with pytest.raises(DataNotFoundError, match=r"1\.3\.1-last-reasoning-action-mpc-async\.yml is missing .*recap data fetch"):
+        release_text(tmp_path, "recap", "robotouille", "asynchronous", "6_x")
     assert release_text(tmp_path, "react", "robotouille", "synchronous", "6_x").text == REACT_TEXT
 
 
@@ -235,13 +253,15 @@ def test_unit_hash_covers_the_released_text_and_ours_is_unchanged(tmp_path, monk
 
 
 class _Expert:
-    """Offline client double: the expert's next action as a ReAct JSON reply."""
+    """Offline client double: the expert's next action as a ReAct reply (JSON, or the released
+    "Reasoning:" / "Action:" lines when the request is not in JSON mode)."""
 
     def complete(self, request):
         from recap.llm import LLMResponse
 
         plan = request.hints.get("expert_plan") or ["noop"]
-        return LLMResponse(json.dumps({"think": "next", "action": plan[0]}), model="test/expert", test_double=True)
+        text = json.dumps({"think": "next", "action": plan[0]}) if request.json_mode else f"Reasoning: next\nAction: {plan[0]}"
+        return LLMResponse(text, model="test/expert", test_double=True)
 
 
 class _Factory:
@@ -263,11 +283,183 @@ def test_a_release_prompts_episode_pins_the_released_text_first(tmp_path, monkey
     outcome = runner.run_unit(unit.work(), 1)
     assert outcome.crash is None and outcome.result is not None and outcome.result.success
     messages = sorted(rows, key=lambda r: r["seq"])
-    assert (messages[0]["seq"], messages[0]["kind"], messages[0]["content"]) == (0, "demonstration", REACT_TEXT)
-    assert REACT_TEXT not in messages[1]["content"]  # our task prompt follows, the released text once
+    # the released structure (serializer.py:53-57, retrieve_example.py:27-37): the template's system
+    # text, its instructions, each example interaction as a user/assistant pair; then the first
+    # turn, the observation alone (no system text or rules of ours)
+    first = [(m["role"], m["kind"], m["pinned"], m["content"]) for m in messages[:6]]
+    from workers.envs.registry import make_env
+
+    start = make_env(unit.instance_id).reset()
+    assert first == [
+        ("system", "release", True, SYSTEM),
+        ("user", "release", True, INSTRUCTIONS),
+        ("user", "release", True, "fixture kitchen, step one\n\nGoal: fixture toast\n\n"),
+        ("assistant", "release", True, "Reasoning: Fixture thought one.\n\nAction: Fixture action one"),
+        ("user", "release", True, "fixture kitchen, step two\n\n"),
+        ("assistant", "release", True, "Reasoning: Fixture thought two.\n\nAction: Finish"),
+    ]
+    assert (messages[6]["role"], messages[6]["kind"], messages[6]["content"]) == (
+        "user",
+        "task",
+        f"Observation:\n{start.observation}" + ("" if start.goal in start.observation else f"\n\nGoal: {start.goal}"),
+    )
+    assert messages[7]["content"].startswith("Reasoning: next\nAction: ")  # the released reply format, chosen
 
     # a release file edited after the plan: the episode is not played with other text than hashed
     (release / REACT_EXAMPLE).write_text("Edited after the plan.\n")
     with pytest.raises(RuntimeError, match=r"changed since the plan"):
         release_demonstration(unit.work(), runner._agent(unit.work()))
     assert runner.run_unit(unit.work(), 2).result.end_reason == "env_error"
+
+
+def test_release_prompts_select_the_released_reply_format_and_refuse_a_contradiction():
+    from recap.baselines.act import ActConfig
+    from recap.baselines.react import ReActConfig
+    from recap.config import ConfigError, build_config
+
+    robot = build_config(ReActConfig, benchmark="robotouille", prompts="release")
+    assert (robot.reply_format, robot.json_mode, robot.text_layout) == ("text", False, "labelled")
+    alf = build_config(ReActConfig, benchmark="alfworld", prompts="release")
+    assert (alf.reply_format, alf.json_mode, alf.text_layout) == ("text", False, "yao")
+    assert build_config(ActConfig, benchmark="alfworld", prompts="release").reply_format == "json"
+    assert build_config(ReActConfig, benchmark="robotouille").reply_format == "json"  # ours: unchanged
+    from recap.baselines.cot import PlanConfig
+
+    plan = build_config(PlanConfig, benchmark="robotouille", prompts="release")
+    assert (plan.reply_format, plan.json_mode) == ("text", False)  # the I/O agents' plain-text plan
+    assert build_config(PlanConfig, benchmark="robotouille").reply_format == "json"
+    with pytest.raises(ConfigError) as info:
+        build_config(ReActConfig, benchmark="robotouille", prompts="release", reply_format="json")
+    assert str(info.value) == (
+        'prompts: release asks for the released reply format (reply_format: "text"); drop the contradicting setting'
+    )
+
+
+@pytest.mark.skipif(not HAVE_ROBOTOUILLE, reason=f"no Robotouille data at {SHARED / 'robotouille'}")
+def test_a_release_prompts_recap_episode_frames_the_released_demo_and_template(tmp_path, monkeypatch):
+    from workers.envs.registry import make_env
+    from workers.llm.direct import LiteLLMClient
+    from workers.llm.providers import DeploymentConfig
+
+    class Experts:
+        writes_llm_calls = False
+
+        def client(self, model):
+            return LiteLLMClient(DeploymentConfig(model="offline/expert"))
+
+    monkeypatch.setenv("RECAP_RELEASE_DATA", str(write_release(tmp_path / "release")))
+    spec = SPEC.replace("method: react", "method: recap").format(out=tmp_path / "run", prompts="release", envs=ROBOTOUILLE)
+    unit = expand(parse_spec(spec, "s.yaml")).units[0]
+    rows: list[dict] = []
+    runner = EpisodeRunner(
+        "w0", "run", Experts(), send=lambda batch: rows.extend(batch.get("messages", [])), wait=lambda _ref: None
+    )
+    outcome = runner.run_unit(unit.work(), 1)
+    assert outcome.crash is None and outcome.result is not None
+    assert (outcome.result.success, outcome.result.end_reason) == (True, "success")
+    messages = sorted(rows, key=lambda r: r["seq"])
+    start = make_env(unit.instance_id).reset()
+    # chatbot.py:401-407: the example joined one role: content line per message, framed, as the one
+    # fixed user message (no system message); chatbot.py:247-261: the template's system text and
+    # rules, the observation and the goal in the first prompt; none of our system text or rules
+    assert [(m["role"], m["kind"], m["pinned"], m["content"]) for m in messages[:2]] == [
+        (
+            "user",
+            "release",
+            True,
+            "Below is a worked example of preparing an onion and cheese sandwich:\n"
+            'user: fixture first observation\nassistant: {"subtasks": ["a"]}\n\nEXAMPLE OVER.\n    ',
+        ),
+        (
+            "user",
+            "task",
+            True,
+            f"\n{RECAP_SYSTEM}\n        \nThe environment's rules:\n{RECAP_RULES}\n\n{start.observation}\n\n"
+            f"You are to prepare a new meal. The goal is described as follows:\n{start.goal}\n\n"
+            "Begin the task now. Remember to write more than a single subtask.\n",
+        ),
+    ]
+    assert messages[2]["role"] == "assistant" and json.loads(messages[2]["content"])["subtasks"]
+    # the tenth call's prompt carries the released rules reminder (chatbot.py:431-439), framed as
+    # released: the rules between a sentence and an end marker, then the prompt it rides on
+    reminders = [m for m in messages if "RULES END" in m["content"]]
+    assert len(reminders) == 1 and reminders[0]["role"] == "user"
+    head = f"Many turns have passed, so here are the operating rules again, lest they slip your mind:\n\n{RECAP_RULES}\n\nRULES END\n\n"
+    assert reminders[0]["content"].startswith(head) and reminders[0]["content"][len(head)] != "\n"
+    ours = make_env(unit.instance_id).rules()
+    assert not any(ours in m["content"] for m in messages)  # our rules text is never sent
+
+
+IO_YML = "robotouille-baselines/agents/prompt_builder/prompts/IO/1.0.0-io.yml"
+IOCOT_YML = "robotouille-baselines/agents/prompt_builder/prompts/IO/1.1.0-io-cot.yml"
+IO_EXAMPLE = "robotouille-baselines/agents/in_context_examples/data/synchronous/io_examples/0_demo.txt"
+IOCOT_EXAMPLE = "robotouille-baselines/agents/in_context_examples/data/synchronous/io-cot_examples/0_demo.txt"
+#: example files in the released I/O layouts (one interaction: the observation, then the plan)
+IO_EXAMPLE_TEXT = "Interaction 1\n---------------\n\n\nObservation:\nfixture kitchen\n\nGoal: fixture toast\n\n\nPlan:\nFixture one\nFixture two\n"
+IOCOT_EXAMPLE_TEXT = (
+    "Interaction 1\n---------------\n\n\nObservation:\nfixture kitchen\n\nGoal: fixture toast\n\n\n"
+    "Action: Fixture one\nNext State Change: fixture change one\nAction: Fixture two\nNext State Change: done\n"
+)
+IO_FILES = {
+    **FILES,
+    IO_YML: f"version: 1.0.0\nsystem: |\n  {SYSTEM} (plan)\ninstructions: |\n  {INSTRUCTIONS} (plan)\n",
+    IOCOT_YML: f"version: 1.1.0\nsystem: |\n  {SYSTEM} (cot)\ninstructions: |\n  {INSTRUCTIONS} (cot)\n",
+    IO_EXAMPLE: IO_EXAMPLE_TEXT,
+    IOCOT_EXAMPLE: IOCOT_EXAMPLE_TEXT,
+}
+
+
+@pytest.mark.skipif(not HAVE_ROBOTOUILLE, reason=f"no Robotouille data at {SHARED / 'robotouille'}")
+@pytest.mark.parametrize("method", ["standard", "cot"])
+def test_a_release_prompts_plan_episode_sends_the_released_io_messages(tmp_path, monkeypatch, method):
+    """Standard/CoT on Robotouille (issue 25 item 7): the I/O agents send the template's system text,
+    its instructions and each example cut by their own regexes (IO_agent.py:17-18, 37-40;
+    IOCoT_agent.py:17-18, 39-40) as user/assistant pairs, then the observation alone
+    (IO_agent.py:155); the released plain-text plan is selected and played to the goal."""
+    from workers.envs.registry import make_env
+    from workers.llm.direct import LiteLLMClient
+    from workers.llm.providers import DeploymentConfig
+
+    class Experts:
+        writes_llm_calls = False
+
+        def client(self, model):
+            return LiteLLMClient(DeploymentConfig(model="offline/expert"))
+
+    monkeypatch.setenv("RECAP_RELEASE_DATA", str(write_release(tmp_path / "release", IO_FILES)))
+    spec = SPEC.replace("method: react", f"method: {method}").format(out=tmp_path / "run", prompts="release", envs=ROBOTOUILLE)
+    unit = expand(parse_spec(spec, "s.yaml")).units[0]
+    assert json.loads(unit.method_config)["reply_format"] == "text"
+    rows: list[dict] = []
+    runner = EpisodeRunner(
+        "w0", "run", Experts(), send=lambda batch: rows.extend(batch.get("messages", [])), wait=lambda _ref: None
+    )
+    outcome = runner.run_unit(unit.work(), 1)
+    assert outcome.crash is None and outcome.result is not None
+    assert (outcome.result.success, outcome.result.end_reason) == (True, "success")
+    messages = sorted(rows, key=lambda r: r["seq"])
+    start = make_env(unit.instance_id).reset()
+    tag = "plan" if method == "standard" else "cot"
+    answer = (
+        "Plan:\nFixture one\nFixture two\n"
+        if method == "standard"
+        else "Action: Fixture one\nNext State Change: fixture change one\nAction: Fixture two\nNext State Change: done\n"
+    )
+    request = "fixture kitchen\n\nGoal: fixture toast\n\n\n"
+    assert [(m["role"], m["kind"], m["pinned"], m["content"]) for m in messages[:5]] == [
+        ("system", "release", True, f"{SYSTEM} ({tag})"),
+        ("user", "release", True, f"{INSTRUCTIONS} ({tag})"),
+        ("user", "release", True, request),
+        ("assistant", "release", True, answer),
+        (
+            "user",
+            "task",
+            True,
+            f"Observation:\n{start.observation}" + ("" if start.goal in start.observation else f"\n\nGoal: {start.goal}"),
+        ),
+    ]
+    assert messages[5]["role"] == "assistant" and len(messages) == 6
+    reply = messages[5]["content"]  # the released layout, chosen: a Plan: block or Action: lines
+    assert ("Plan:\n" in reply, "\nAction: " in reply) == ((True, False) if method == "standard" else (False, True))
+    ours = make_env(unit.instance_id).rules()
+    assert not any(ours in m["content"] for m in messages)  # our rules text is never sent

@@ -17,7 +17,12 @@ yields exactly the part the released code sends before the episode's first obser
 
 Parts are joined by one blank line. What each method reads (and the released file that makes it
 so) is :func:`sources`. The released code's framing sentences around a demonstration live in
-its Python code, not in these files, and are not reproduced.
+its Python code, not in these files: where :func:`release_prompt` needs them (ReCAP's demo header
+and end line, :func:`recap_demo`) they are rebuilt in our own words in the released layout.
+
+:func:`release_prompt` builds, from the same files, the messages in the released structure (roles,
+separate example pairs) for the methods it covers (:data:`STRUCTURED`); the agent then pins those
+in place of our demonstration *and* our system text and rules.
 """
 
 from __future__ import annotations
@@ -25,17 +30,20 @@ from __future__ import annotations
 import ast
 import hashlib
 import json
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from recap.env import DataNotFoundError
+from recap.release_prompt import ReleasePrompt
 from workers.envs import data_paths
 from workers.release.folder import FETCH_COMMAND, LOCATION, NAME
 
 _TEMPLATES = "robotouille-baselines/agents/prompt_builder/prompts"
 _EXAMPLES = "robotouille-baselines/agents/in_context_examples/data"
+_RECAP_TEMPLATES = "robotouille-recap/agents/prompt_builder/prompts"
 _ALFWORLD = "alfworld-recap"
 #: ALFWorld task type (our short names) -> the key suffix of the released demonstration files
 #: (alfworld-recap/main.py:12-18, react_alfworld/react.py:185-192): the same names
@@ -100,7 +108,15 @@ def sources(
         if method == "recap":
             # robotouille-recap/MATRIX/MATRIX/session/SessionManager.py:70-97: the ablation picks the list
             fn = "get_few_shot_no_think" if think == "none" else "get_few_shot_name_only" if name_only else "get_few_shot"
-            return (Part("robotouille-recap/MATRIX/MATRIX/prompts.py", f"few_shot:{fn}"),)
+            # the first prompt's system text and rules: the template's (ReAct_agent.py:58-64 hands
+            # messages[0] and [1] to the SessionManager) named by the released configs
+            # (robotouille-recap/conf/experiments/ReAct/synchronous/last-reasoning-action-mpc_<n>.yaml:
+            # 1.3.1 last-reasoning-action-mpc; asynchronous/last-reasoning-action-mpc_<n>.yaml: its -async)
+            suffix = "-async" if split == "asynchronous" else ""
+            return (
+                Part("robotouille-recap/MATRIX/MATRIX/prompts.py", f"few_shot:{fn}"),
+                Part(f"{_RECAP_TEMPLATES}/ReAct/1.3.1-last-reasoning-action-mpc{suffix}.yml", "yaml:system+instructions"),
+            )
         # robotouille-baselines/conf/experiments/<method>/<split>/original_0.yaml (IO, IO-CoT: io.yaml,
         # io-cot.yaml): the template (prompts.action_proposal_prompt) and example_dir_path
         examples = {"react": "react_examples_omitted_obs", "adapt": "react_examples_omitted_obs"}
@@ -217,3 +233,148 @@ def _yaml_fields(text: str, fields: list[str]) -> str:
     if not all(isinstance(v, str) for v in values):
         raise ValueError(f"{'/'.join(fields)} must be text")
     return "\n\n".join(v.strip("\n") for v in values)
+
+
+# -- the released structure (prompts: release) ------------------------------------------------------------
+
+#: the in-context example regexes of the released ReAct/Act agents
+#: (robotouille-baselines/agents/ReAct_agent.py:23-24, Act_agent.py:23-24: the same two)
+_EXAMPLE_REQUEST = re.compile(r"^Observation:\s*(.+?)\nReasoning:", re.M | re.S)
+_EXAMPLE_RESPONSE = re.compile(r"(^Reasoning:\s*.+?\n\nAction:.+?)(?=Observation:|$)", re.M | re.S)
+#: the released I/O agents' in-context example regexes: Standard (IO_agent.py:17-18) cuts at ``Plan:``,
+#: CoT (IOCoT_agent.py:17-18) at the first ``Action:``
+_IO_REQUEST = re.compile(r"^Observation:\s*(.+?)Plan:", re.M | re.S)
+_IO_RESPONSE = re.compile(r"(^Plan:\s*\n.+)", re.M | re.S)
+_IOCOT_REQUEST = re.compile(r"^Observation:\s*(.+?)Action:", re.M | re.S)
+_IOCOT_RESPONSE = re.compile(r"(^Action:\s*.+)", re.M | re.S)
+#: method -> the (request, response) regexes its released agent cuts an example file with
+_EXAMPLE_CUTS = {
+    "react": (_EXAMPLE_REQUEST, _EXAMPLE_RESPONSE),
+    "act": (_EXAMPLE_REQUEST, _EXAMPLE_RESPONSE),
+    "standard": (_IO_REQUEST, _IO_RESPONSE),
+    "cot": (_IOCOT_REQUEST, _IOCOT_RESPONSE),
+}
+#: methods whose released messages :func:`release_prompt` builds in the released structure
+STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot"), "alfworld": ("react", "act")}
+#: the released ALFWorld ReAct's one user message before the task: a sentence, then the example
+#: transcript (alfworld-recap/react_alfworld/react.py:206-208); the sentence is ours
+ALFWORLD_REACT_HEADER = "Complete a task by interacting with a household. One example follows.\n"
+#: the released ALFWorld Act's one user message before the task: a sentence asking for JSON, then
+#: the example re-read as JSON replies (alfworld-recap/act_alfworld/act.py:297-303); ours in our words
+ALFWORLD_ACT_HEADER = (
+    "Act in a household until a task is done, answering with a JSON object holding an 'action' field. One example follows.\n"
+)
+
+
+def act_example(transcript: str) -> str:
+    """The released ALFWorld Act's example, as act.py re-reads Yao et al.'s transcript before
+    sending it (``parse_fewshot``, alfworld-recap/act_alfworld/act.py:255-281, joined at :301): the
+    text is cut into blocks, each from a line that begins ``user`` or ``assistant`` up to the next
+    such line; an assistant block that is a ``think:`` line is dropped *and so is every user block
+    after it* until an assistant block that acts; an acting block becomes ``{"action": ...}``
+    (``json.dumps``); the remaining blocks are joined one ``role: content`` line each."""
+    lines = transcript.strip().split("\n")
+    blocks: list[str] = []
+    for n, line in enumerate(lines):
+        if n == 0 or line[:4] == "user" or line[:9] == "assistant":
+            blocks.append(line)
+        else:
+            blocks[-1] += "\n" + line
+    kept: list[dict[str, str]] = []
+    after_thought = False
+    for block in blocks:
+        if block[:4] == "user":
+            if not after_thought:
+                kept.append({"role": "user", "content": block[5:].strip()})
+        elif block[:9] == "assistant":
+            said = block[10:].strip()
+            after_thought = said.startswith("think:")
+            if not after_thought:
+                kept.append({"role": "assistant", "content": json.dumps({"action": said})})
+    return join_messages(kept)
+
+
+def recap_demo(few_shot: Sequence[dict[str, str]]) -> str:
+    """ReCAP's one fixed user message on Robotouille: the example joined one ``role: content``
+    line per message between a header line and, after a blank line, an end line with the
+    indented closing of the released literal (``robotouille-recap/MATRIX/MATRIX/chatbot.py:401-407``;
+    the same in every ``chatbot_*.py``). The header and end sentences are ours."""
+    return (
+        f"Below is a worked example of preparing an onion and cheese sandwich:\n{join_messages(few_shot)}\n\nEXAMPLE OVER.\n    "
+    )
+
+
+def release_prompt(
+    folder: Path, method: str, benchmark: str, split: str, task: str, think: str = "latest", name_only: bool = False
+) -> ReleasePrompt | None:
+    """The messages the released code sends before the first observation, with their roles, read
+    from the same files as :func:`release_text` (so the unit's digest covers them); None where
+    this module does not build the released structure yet (the caller pins the joined text).
+
+    Robotouille ReAct/Act, Standard and CoT (``robotouille-baselines``; the I/O agents build theirs
+    the same way, IO_agent.py:37-40, IOCoT_agent.py:39-40): the template's ``system`` as the system
+    message and its ``instructions`` as a user message, then its own ``examples`` (serializer.py:53-65),
+    then every in-context example file cut by the agent's regexes (:data:`_EXAMPLE_CUTS`) into user/assistant pairs
+    (agent.py:54-56, in_context_examples/retrieve_example.py:27-37; all the folder's files, since
+    ``random.sample(files, max(num_examples, len(files)))`` takes each once, here in name order)."""
+    if method not in STRUCTURED.get(benchmark, ()):
+        return None
+    parts = sources(method, benchmark, split, task, think, name_only)
+    if method == "recap":
+        return _recap_prompt(folder, parts)
+    if benchmark == "alfworld" and method == "act":  # the re-read example after a sentence (act.py:297-303)
+        return ReleasePrompt((("user", ALFWORLD_ACT_HEADER + act_example(_read(folder, parts[0]))),))
+    if benchmark == "alfworld":  # ReAct: the framed transcript as one user message (react.py:208)
+        return ReleasePrompt((("user", ALFWORLD_REACT_HEADER + _read(folder, parts[0])),))
+    messages: list[tuple[str, str]] = []
+    for part in parts:
+        path = folder / part.path
+        try:
+            if part.pick == "every file":
+                for file in sorted(p for p in path.iterdir() if p.is_file()):
+                    text = file.read_text(encoding="utf-8")
+                    request, response = _EXAMPLE_CUTS[method]
+                    pairs = zip(request.findall(text), response.findall(text), strict=False)
+                    for asked, answered in pairs:
+                        messages += [("user", asked), ("assistant", answered)]
+                continue
+            data = _yaml_mapping(path.read_text(encoding="utf-8-sig"))
+        except OSError as exc:
+            raise ReleaseMissing(f"{NAME}: cannot read {part.path}: {exc}; run `{FETCH_COMMAND}`") from None
+        except ValueError as exc:
+            raise ReleaseMissing(f"{NAME}: {part.path} does not hold the expected {part.pick} ({exc})") from None
+        messages += [("system", data["system"].strip("\n")), ("user", data["instructions"].strip("\n"))]
+        for example in data.get("examples") or []:
+            key, value = next(iter(example.items()))
+            if key in ("observation", "response"):
+                messages.append(("user" if key == "observation" else "assistant", str(value).strip("\n")))
+    return ReleasePrompt(tuple(messages))
+
+
+def _recap_prompt(folder: Path, parts: Sequence[Part]) -> ReleasePrompt:
+    """ReCAP on Robotouille: the framed example as the one pinned user message (the released
+    ``ChatGPTWithMemory`` keeps it as ``fixed_prompt``, chatbot.py:407; no system message), and the
+    template's system text and rules for the agent's first prompt (chatbot.py:410-415)."""
+    examples, template = parts
+    try:
+        few_shot = few_shot_literal((folder / examples.path).read_text(encoding="utf-8-sig"), examples.pick.partition(":")[2])
+        data = _yaml_mapping((folder / template.path).read_text(encoding="utf-8-sig"))
+    except OSError as exc:
+        raise ReleaseMissing(f"{NAME}: cannot read a ReCAP prompt file: {exc}; run `{FETCH_COMMAND}`") from None
+    except (ValueError, SyntaxError) as exc:
+        raise ReleaseMissing(f"{NAME}: a ReCAP prompt file does not hold the expected text ({exc})") from None
+    return ReleasePrompt(
+        (("user", recap_demo(few_shot)),), system=data["system"].strip("\n"), rules=data["instructions"].strip("\n")
+    )
+
+
+def _yaml_mapping(text: str) -> dict[str, Any]:
+    import yaml
+
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ValueError(str(exc).splitlines()[0]) from None
+    if not isinstance(data, dict) or not all(isinstance(data.get(f), str) for f in ("system", "instructions")):
+        raise ValueError("system and instructions must be text")
+    return data
