@@ -311,7 +311,8 @@ def release_settings(cls: type[AgentConfig], benchmark: str | None, overrides: d
     clash = sorted(k for k, v in implied.items() if k in overrides and overrides[k] != v)
     if clash:
         wants = ", ".join(f"{k}: {json.dumps(implied[k])}" for k in clash)
-        raise ConfigError(f"prompts: release asks for the released reply format ({wants}); drop the contradicting setting")
+        what = "reply format" if set(clash) <= {"reply_format", "json_mode", "text_layout"} else "settings"
+        raise ConfigError(f"prompts: release asks for the released {what} ({wants}); drop the contradicting setting")
     return implied
 
 

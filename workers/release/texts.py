@@ -254,8 +254,12 @@ _EXAMPLE_CUTS = {
     "standard": (_IO_REQUEST, _IO_RESPONSE),
     "cot": (_IOCOT_REQUEST, _IOCOT_RESPONSE),
 }
+#: how the released ADaPT planner cuts its few-shot file (ADaPT_agent.py:47, 53-54)
+_INTERACTION = re.compile(r"(?i)\bInteraction\s*\d+\s*\n+[-]+\n+")
+_PLANNER_REQUEST = re.compile(r"Observation:(.*?)Reasoning:", re.S)
+_PLANNER_RESPONSE = re.compile(r"Reasoning:(.*)", re.S)
 #: methods whose released messages :func:`release_prompt` builds in the released structure
-STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot"), "alfworld": ("react", "act")}
+STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot", "adapt"), "alfworld": ("react", "act")}
 #: the released ALFWorld ReAct's one user message before the task: a sentence, then the example
 #: transcript (alfworld-recap/react_alfworld/react.py:206-208); the sentence is ours
 ALFWORLD_REACT_HEADER = "Complete a task by interacting with a household. One example follows.\n"
@@ -316,7 +320,10 @@ def release_prompt(
     message and its ``instructions`` as a user message, then its own ``examples`` (serializer.py:53-65),
     then every in-context example file cut by the agent's regexes (:data:`_EXAMPLE_CUTS`) into user/assistant pairs
     (agent.py:54-56, in_context_examples/retrieve_example.py:27-37; all the folder's files, since
-    ``random.sample(files, max(num_examples, len(files)))`` takes each once, here in name order)."""
+    ``random.sample(files, max(num_examples, len(files)))`` takes each once, here in name order).
+    ADaPT on Robotouille: nothing in the main context; the planner's messages (:func:`_adapt_planner`)
+    and each executor's (its template Adapt/custom-executor.yml and the ReAct examples, cut by
+    ReAct's regexes since every executor is a released ReActAgent: ADaPT_agent.py:237-243)."""
     if method not in STRUCTURED.get(benchmark, ()):
         return None
     parts = sources(method, benchmark, split, task, think, name_only)
@@ -326,6 +333,34 @@ def release_prompt(
         return ReleasePrompt((("user", ALFWORLD_ACT_HEADER + act_example(_read(folder, parts[0]))),))
     if benchmark == "alfworld":  # ReAct: the framed transcript as one user message (react.py:208)
         return ReleasePrompt((("user", ALFWORLD_REACT_HEADER + _read(folder, parts[0])),))
+    if method == "adapt":  # two contexts of its own: the planner's, then each executor's
+        planner = _adapt_planner(folder, parts[0], parts[1])
+        return ReleasePrompt((), planner=planner, executor=_template_messages(folder, parts[2:], "react"))
+    return ReleasePrompt(_template_messages(folder, parts, method))
+
+
+def _adapt_planner(folder: Path, system: Part, fewshot: Part) -> tuple[tuple[str, str], ...]:
+    """The released ADaPT planner's messages (ADaPT_agent.py:30-61): the system file's text as the
+    system message, then each interaction of the few-shot file (split at its ``Interaction <n>``
+    headings) as a user message, ``Observation:`` and what follows it up to ``Reasoning:``, and an
+    assistant message, what follows ``Reasoning:``; an interaction lacking either is skipped."""
+    try:
+        text = (folder / system.path).read_text(encoding="utf-8").strip()
+        shots = (folder / fewshot.path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ReleaseMissing(f"{NAME}: cannot read an ADaPT planner file: {exc}; run `{FETCH_COMMAND}`") from None
+    except UnicodeDecodeError as exc:
+        raise ReleaseMissing(f"{NAME}: an ADaPT planner file is not UTF-8 text ({exc})") from None
+    messages: list[tuple[str, str]] = [("system", text)]
+    for block in _INTERACTION.split(shots):
+        asked, answered = _PLANNER_REQUEST.search(block), _PLANNER_RESPONSE.search(block)
+        if asked is not None and answered is not None:
+            messages += [("user", f"Observation:{asked.group(1).strip()}"), ("assistant", answered.group(1).strip())]
+    return tuple(messages)
+
+
+def _template_messages(folder: Path, parts: Sequence[Part], method: str) -> tuple[tuple[str, str], ...]:
+    """A released Robotouille baseline's messages: its template's, then its example pairs."""
     messages: list[tuple[str, str]] = []
     for part in parts:
         path = folder / part.path
@@ -348,7 +383,7 @@ def release_prompt(
             key, value = next(iter(example.items()))
             if key in ("observation", "response"):
                 messages.append(("user" if key == "observation" else "assistant", str(value).strip("\n")))
-    return ReleasePrompt(tuple(messages))
+    return tuple(messages)
 
 
 def _recap_prompt(folder: Path, parts: Sequence[Part]) -> ReleasePrompt:
