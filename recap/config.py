@@ -213,6 +213,12 @@ class ReCAPConfig(AgentConfig):
     shortcut_trace: bool = False
 
     @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released ALFWorld prompts carry no rules reminder (alfworld-recap/MATRIX/MATRIX/
+        chatbot.py sends none), so ``prompts: release`` there sends none either."""
+        return {"reminder_period": None} if benchmark == "alfworld" else {}
+
+    @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
         out = super().profile_defaults(profile, benchmark, ablation)
         if profile == "released":

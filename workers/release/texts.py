@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from recap.baselines.text_prompts import RELEASE_ALFWORLD_RULE
 from recap.env import DataNotFoundError
 from recap.release_prompt import ReleasePrompt
 from workers.envs import data_paths
@@ -259,7 +260,7 @@ _INTERACTION = re.compile(r"(?i)\bInteraction\s*\d+\s*\n+[-]+\n+")
 _PLANNER_REQUEST = re.compile(r"Observation:(.*?)Reasoning:", re.S)
 _PLANNER_RESPONSE = re.compile(r"Reasoning:(.*)", re.S)
 #: methods whose released messages :func:`release_prompt` builds in the released structure
-STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot", "adapt"), "alfworld": ("react", "act")}
+STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot", "adapt"), "alfworld": ("react", "act", "recap")}
 #: the released ALFWorld ReAct's one user message before the task: a sentence, then the example
 #: transcript (alfworld-recap/react_alfworld/react.py:206-208); the sentence is ours
 ALFWORLD_REACT_HEADER = "Complete a task by interacting with a household. One example follows.\n"
@@ -298,6 +299,14 @@ def act_example(transcript: str) -> str:
     return join_messages(kept)
 
 
+def alfworld_recap_demo(few_shot: str) -> str:
+    """ReCAP's one fixed user message on ALFWorld: a header line, the task's example joined one
+    ``role: content`` line per message, then after a blank line an end line
+    (``alfworld-recap/MATRIX/MATRIX/chatbot.py:391-398``; the same in every ``chatbot_*.py``).
+    The header and end sentences are ours."""
+    return f"Solve a task by acting in a household. A worked example follows.\n{few_shot}\n\nEXAMPLE OVER\n"
+
+
 def recap_demo(few_shot: Sequence[dict[str, str]]) -> str:
     """ReCAP's one fixed user message on Robotouille: the example joined one ``role: content``
     line per message between a header line and, after a blank line, an end line with the
@@ -327,6 +336,10 @@ def release_prompt(
     if method not in STRUCTURED.get(benchmark, ()):
         return None
     parts = sources(method, benchmark, split, task, think, name_only)
+    if method == "recap" and benchmark == "alfworld":
+        # the framed example as the fixed message (chatbot.py:391-398); the first prompt has an
+        # empty system text (SessionManager.py:83-84) and the rule main.py:70 hands it
+        return ReleasePrompt((("user", alfworld_recap_demo(_read(folder, parts[0]))),), system="", rules=RELEASE_ALFWORLD_RULE)
     if method == "recap":
         return _recap_prompt(folder, parts)
     if benchmark == "alfworld" and method == "act":  # the re-read example after a sentence (act.py:297-303)
