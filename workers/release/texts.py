@@ -1,7 +1,8 @@
 """What a method shows under ``prompts: release``: the authors' own text, read from their files.
 
-The worker pins the text :func:`release_text` returns as the episode's first message, in place of
-our rendered demonstration; the method's own task prompt follows it unchanged. The text is read
+:func:`release_text` is the text a unit's digest covers (and what a method outside
+:data:`STRUCTURED` would pin as its first message, in place of our rendered demonstration; today
+every method the release has prompts for is structured, :func:`release_prompt`). The text is read
 from the fetched release folder (:mod:`.folder`) at run time, never stored here, and each file
 yields exactly the part the released code sends before the episode's first observation:
 
@@ -332,7 +333,10 @@ def release_prompt(
     ``random.sample(files, max(num_examples, len(files)))`` takes each once, here in name order).
     ADaPT on Robotouille: nothing in the main context; the planner's messages (:func:`_adapt_planner`)
     and each executor's (its template Adapt/custom-executor.yml and the ReAct examples, cut by
-    ReAct's regexes since every executor is a released ReActAgent: ADaPT_agent.py:237-243)."""
+    ReAct's regexes since every executor is a released ReActAgent: ADaPT_agent.py:237-243).
+    ALFWorld: one framed user message each (ReAct: the transcript as is, react.py:206-208; Act: the
+    transcript re-read by :func:`act_example`, act.py:297-303; ReCAP: the example list joined,
+    chatbot.py:391-398, with an empty system text and the released rule for its first prompt)."""
     if method not in STRUCTURED.get(benchmark, ()):
         return None
     parts = sources(method, benchmark, split, task, think, name_only)
