@@ -213,6 +213,12 @@ class ReCAPConfig(AgentConfig):
     shortcut_trace: bool = False
 
     @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released ALFWorld prompts carry no rules reminder (alfworld-recap/MATRIX/MATRIX/
+        chatbot.py sends none), so ``prompts: release`` there sends none either."""
+        return {"reminder_period": None} if benchmark == "alfworld" else {}
+
+    @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
         out = super().profile_defaults(profile, benchmark, ablation)
         if profile == "released":
@@ -311,7 +317,8 @@ def release_settings(cls: type[AgentConfig], benchmark: str | None, overrides: d
     clash = sorted(k for k, v in implied.items() if k in overrides and overrides[k] != v)
     if clash:
         wants = ", ".join(f"{k}: {json.dumps(implied[k])}" for k in clash)
-        raise ConfigError(f"prompts: release asks for the released reply format ({wants}); drop the contradicting setting")
+        what = "reply format" if set(clash) <= {"reply_format", "json_mode", "text_layout"} else "settings"
+        raise ConfigError(f"prompts: release asks for the released {what} ({wants}); drop the contradicting setting")
     return implied
 
 

@@ -91,13 +91,18 @@ class ReCAPAgent(Agent):
             # prompts: release: the released template's system text and rules frame the first
             # prompt (robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261) and its reminders
             st["rules"] = release.rules
-            task = P.release_task_prompt(
-                system=release.system,
-                rules=release.rules,
-                observation=reset.observation,
-                goal=reset.goal,
-                ask_many=cfg.think == "latest" and not cfg.name_only and cfg.max_level is None,
-            )
+            if ep.env.benchmark == "alfworld":  # alfworld-recap/MATRIX/MATRIX/chatbot.py:242-253
+                task = P.release_alfworld_task_prompt(
+                    system=release.system, rules=release.rules, observation=reset.observation, goal=reset.goal
+                )
+            else:
+                task = P.release_task_prompt(
+                    system=release.system,
+                    rules=release.rules,
+                    observation=reset.observation,
+                    goal=reset.goal,
+                    ask_many=cfg.think == "latest" and not cfg.name_only and cfg.max_level is None,
+                )
         else:
             task = P.task_prompt(
                 rules=st["rules"],

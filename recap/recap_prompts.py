@@ -79,6 +79,16 @@ def release_task_prompt(*, system: str, rules: str, observation: str, goal: str,
     )
 
 
+def release_alfworld_task_prompt(*, system: str, rules: str, observation: str, goal: str) -> str:
+    """ReCAP's first prompt under ``prompts: release`` on ALFWorld, in the layout of
+    ``alfworld-recap/MATRIX/MATRIX/chatbot.py:242-253`` (the same in every ``chatbot_*.py``): a
+    leading newline, the system text (empty as released, SessionManager.py:83-84), a blank line,
+    the rule under a heading, the first observation with its valid actions (main.py:76), then the
+    task on a line of its own (the goal the observation states, SessionManager.py:86) and a
+    trailing newline. The framing sentences are ours."""
+    return f"\n{system}\n\nThe environment's rule:\n{rules}\n\n{observation}\n\nThe task at hand: {goal}\n"
+
+
 def release_reminder(rules: str) -> str:
     """The released rules reminder (``robotouille-recap/MATRIX/MATRIX/chatbot.py:431-439``), put
     before the prompt it rides on: a sentence, a blank line, the rules, a blank line, an end

@@ -9,6 +9,11 @@ separate user/assistant messages: ``robotouille-baselines/agents/prompt_builder/
 demonstration and then sends its first turn *without* our system text and rules (the release's
 text carries those); the turn framing is the agent's, built in the released structure.
 
+Where the released method talks in several contexts of its own (ADaPT on Robotouille: a planner
+and one executor per subtask, ``robotouille-baselines/agents/ADaPT_agent.py:37-61, 237-243``),
+``messages`` is empty (nothing goes in the episode's main context) and ``planner``/``executor``
+carry each context's pinned messages.
+
 Where the released code puts the template's text into the first *turn* instead of messages of
 its own (ReCAP: ``robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261`` builds the first prompt
 from the YAML's system text and rules), ``system`` and ``rules`` carry that text and the agent
@@ -24,13 +29,17 @@ from dataclasses import dataclass
 class ReleasePrompt:
     """``messages``: (role, content) pairs pinned first, in order (roles ``system``, ``user``,
     ``assistant``); ``system``/``rules``: the released text the agent's first turn carries in
-    place of ours (None: the method's release has none of its own, as for the baselines)."""
+    place of ours (None: the method's release has none of its own, as for the baselines);
+    ``planner``/``executor``: the messages pinned first in those contexts of a method that opens
+    its own (ADaPT; empty otherwise)."""
 
     messages: tuple[tuple[str, str], ...]
     system: str | None = None
     rules: str | None = None
+    planner: tuple[tuple[str, str], ...] = ()
+    executor: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
-        for role, content in self.messages:
+        for role, content in (*self.messages, *self.planner, *self.executor):
             if role not in ("system", "user", "assistant") or not isinstance(content, str):
                 raise ValueError(f"a release message needs a role system/user/assistant and text, got {role!r}")

@@ -129,6 +129,12 @@ class ADaPTConfig(AgentConfig):
             out.update(algorithm="plan_once", json_mode=False, planner_temperature=0.0, executor_window=64, executor_patience=5)
         return out
 
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released prompts are those of the released algorithm (a planner and ReAct executors
+        in plain text, ADaPT_agent.py): ``plan_once`` on Robotouille, the only benchmark they exist for."""
+        return {"algorithm": "plan_once", "json_mode": False} if benchmark == "robotouille" else {}
+
     def validate(self) -> None:
         super().validate()
         if self.algorithm not in ("as_needed", "plan_once"):

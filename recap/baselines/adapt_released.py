@@ -53,6 +53,7 @@ from recap.baselines.react_text import raw_text
 from recap.baselines.textreply import FINISH_ACTION, match_action, parse_reasoning_action, parse_step_plan, render
 from recap.env import Demonstration, InvalidActionError, Reset
 from recap.history import History
+from recap.release_prompt import ReleasePrompt
 from recap.runtime import Conversation, Episode, EpisodeEnd
 from schemas.records import NodeVersion
 
@@ -109,18 +110,31 @@ def _hints(ep: Episode, node: Any, role: str) -> dict[str, Any]:
     return {"role": role, "task": node.task, "depth": node.depth, "valid_actions": list(valid) if valid is not None else None}
 
 
+def _release(ep: Episode, conv: Conversation, part: str) -> ReleasePrompt | None:
+    """``prompts: release``: pin the authors' messages for ``part`` (``planner``: its system text
+    and examples, ADaPT_agent.py:37-61; ``executor``: the executor template's and the ReAct
+    examples, ADaPT_agent.py:237-243) first in ``conv``, the context just opened; the first turn
+    then goes without our system text and rules. None (nothing pinned): our prompts."""
+    release = ep.extra.get("release")
+    if not isinstance(release, ReleasePrompt):
+        return None
+    for role, text in release.planner if part == "planner" else release.executor:
+        conv.pin_message(role, "release", text)
+    return release
+
+
 def plan(agent: Any, ep: Episode, root: Any, demo: str | None) -> list[str]:
     """The one planner call: the subtasks to run, in order (OR groups cut to their first branch)."""
     cfg, d = agent.config, ep.driver
     conv = open_context(
         ep, temperature=cfg.planner_temperature, window=None, expected_format=PLANNER_FORMAT, reply_fields=PLANNER_FIELDS
     )
+    release = _release(ep, conv, "planner")
     if demo:
         conv.pin("demonstration", demo)
     body = T.planner_turn(d.observation, d.goal)
-    conv.pin(
-        "planner_task", T.task_prompt(system=T.planner_system(), rules=ep.env.rules(), body=body, preamble=not agent.demo_mode)
-    )
+    preamble = not agent.demo_mode and release is None
+    conv.pin("planner_task", T.task_prompt(system=T.planner_system(), rules=ep.env.rules(), body=body, preamble=preamble))
     context = {**_hints(ep, root, "planner"), "text_layout": "step_plan"}
     raw, seq = conv.ask(None, "planner_task", _keep, node_id=root.node_id, context=context, decode=raw_text)
     subtasks = parse_step_plan(raw["text"])
@@ -139,12 +153,12 @@ def execute(agent: Any, ep: Episode, node: Any, demo: str | None) -> bool:
         reply_fields=EXECUTOR_FIELDS,
         keep_first=True,
     )
+    release = _release(ep, conv, "executor")
     if demo:
         conv.pin("demonstration", demo)
     body = T.turn(d.observation, goal=d.goal, subtask=node.task)
-    conv.pin(
-        "executor_task", T.task_prompt(system=T.executor_system(), rules=ep.env.rules(), body=body, preamble=not agent.demo_mode)
-    )
+    preamble = not agent.demo_mode and release is None
+    conv.pin("executor_task", T.task_prompt(system=T.executor_system(), rules=ep.env.rules(), body=body, preamble=preamble))
     prompt: str | None = None
     kind = "executor_task"
     streak = 0

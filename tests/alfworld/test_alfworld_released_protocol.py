@@ -319,3 +319,47 @@ def test_act_release_prompts_send_the_released_first_messages(bench, tmp_path):
     later = [r.messages[-1].content for r in client.requests[1:]]
     assert later == ["OK.", f"{HEAT_ARRIVE}{ARRIVE_LIST}"]
     assert {r.json_mode for r in client.requests} == {True}
+
+
+def test_recap_release_prompts_send_the_released_first_messages(bench, tmp_path):
+    """``prompts: release`` for ReCAP on ALFWorld (issue 25 item 7): the task's example joined one
+    ``role: content`` line per message, framed, as the one fixed user message (chatbot.py:391-398),
+    then the first prompt (chatbot.py:242-253: an empty system text, the rule main.py:70 gives, the
+    first observation with its valid actions, the task); no reminder; no system text or rules of
+    ours. The fixture is in the released layout, in our own words."""
+    from recap.recap_prompts import descend_prompt
+    from workers.release.texts import release_prompt
+
+    demo = tmp_path / "alfworld-recap/MATRIX/MATRIX/alfworld_3prompts_no_json_all_loc.json"
+    demo.parent.mkdir(parents=True)
+    example = [
+        {"role": "user", "content": "Fixture room.\nYour task is to: warm a fixture."},
+        {"role": "assistant", "content": "{}"},
+    ]
+    demo.write_text(json.dumps({"matrix_heat_0": example, "matrix_put_0": []}))
+    release = release_prompt(tmp_path, "recap", "alfworld", "valid_seen", "heat")
+    assert release is not None
+    fixed = (
+        "Solve a task by acting in a household. A worked example follows.\n"
+        "user: Fixture room.\nYour task is to: warm a fixture.\nassistant: {}\n\nEXAMPLE OVER\n"
+    )
+    assert release.messages == (("user", fixed),)
+    agent = make_agent("recap", profile="paper", benchmark="alfworld", prompts="release")
+    assert agent.config.reminder_period is None  # the released ALFWorld code sends no reminder
+    work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
+    env = bench.make(HEAT_ID, **env_options_for(work, agent))  # type: ignore[arg-type]
+    replies = [{"think": "find the apple", "subtasks": ["find an apple", "heat it"]}, STOP]
+    client = ScriptedClient(replies)
+    try:
+        agent.run(env, client, episode_id="ep", demonstration=release)
+    finally:
+        env.close()
+    first = [(m.role, m.content) for m in client.requests[0].messages]
+    assert first == [
+        ("user", fixed),
+        (
+            "user",
+            f"\n\n\nThe environment's rule:\n{T.RELEASE_ALFWORLD_RULE}\n\n{HEAT_START}{START_LIST}\n\nThe task at hand: {GOAL}\n",
+        ),
+    ]
+    assert client.requests[1].messages[-1].content == descend_prompt("find an apple")

@@ -23,6 +23,7 @@ import workers.release.folder as release_folder_mod
 from pipeline.errors import SpecError
 from pipeline.spec import parse_spec
 from pipeline.units import expand
+from recap.baselines.textreply import parse_step_plan
 from recap.env import DataNotFoundError
 from workers.envs.data_sources import Source
 from workers.episode_worker import EpisodeRunner, release_demonstration
@@ -328,6 +329,15 @@ def test_release_prompts_select_the_released_reply_format_and_refuse_a_contradic
     plan = build_config(PlanConfig, benchmark="robotouille", prompts="release")
     assert (plan.reply_format, plan.json_mode) == ("text", False)  # the I/O agents' plain-text plan
     assert build_config(PlanConfig, benchmark="robotouille").reply_format == "json"
+    from recap.baselines.adapt import ADaPTConfig
+
+    adapt = build_config(ADaPTConfig, benchmark="robotouille", prompts="release")
+    assert (adapt.algorithm, adapt.json_mode) == ("plan_once", False)  # the released prompts' algorithm
+    with pytest.raises(ConfigError) as info:
+        build_config(ADaPTConfig, benchmark="robotouille", prompts="release", algorithm="as_needed")
+    assert str(info.value) == (
+        'prompts: release asks for the released settings (algorithm: "plan_once"); drop the contradicting setting'
+    )
     with pytest.raises(ConfigError) as info:
         build_config(ReActConfig, benchmark="robotouille", prompts="release", reply_format="json")
     assert str(info.value) == (
@@ -463,3 +473,78 @@ def test_a_release_prompts_plan_episode_sends_the_released_io_messages(tmp_path,
     assert ("Plan:\n" in reply, "\nAction: " in reply) == ((True, False) if method == "standard" else (False, True))
     ours = make_env(unit.instance_id).rules()
     assert not any(ours in m["content"] for m in messages)  # our rules text is never sent
+
+
+ADAPT_DIR = "robotouille-baselines/agents/prompt_builder/prompts/Adapt"
+#: the planner's few-shot file in the released layout: a byte-order mark, an interaction, and one
+#: without a reasoning (the released reader skips it)
+PLANNER_FEWSHOT = (
+    "\ufeffInteraction 1\n-------\nObservation:\nfixture kitchen\nGoal: fixture toast\n"
+    "Reasoning:\nFixture plan reasoning.\nPlan:\nStep 1: fixture subtask\nExecution order: Step 1\n\n"
+    "Interaction 2\n-------\nObservation:\nan interaction without a reasoning\n"
+)
+ADAPT_FILES = {
+    **FILES,
+    f"{ADAPT_DIR}/planner_system.txt": "\nFixture planner system line.\n\n",
+    f"{ADAPT_DIR}/planner_fewshot.txt": PLANNER_FEWSHOT,
+    f"{ADAPT_DIR}/custom-executor.yml": (
+        f"version: 1.0.0\nsystem: |-\n  {SYSTEM} (executor)\ninstructions: |-\n  {INSTRUCTIONS} (executor)\n"
+        "examples:\n  - observation: |\n      fixture template observation\n  - response: |\n      Reasoning: r\n      Action: a\n"
+    ),
+}
+
+
+@pytest.mark.skipif(not HAVE_ROBOTOUILLE, reason=f"no Robotouille data at {SHARED / 'robotouille'}")
+def test_a_release_prompts_adapt_episode_sends_the_released_planner_and_executor_messages(tmp_path, monkeypatch):
+    """ADaPT on Robotouille (issue 25 item 7): the planner's context starts with the system file's
+    text and the few-shot file's interactions as user/assistant pairs (ADaPT_agent.py:30-61), then
+    the observation; each executor's with the executor template's messages and the ReAct examples
+    (ADaPT_agent.py:237-243, an executor is a released ReActAgent), then the observation and its
+    subtask. Nothing in the main context; none of our system text or rules; plan_once selected."""
+    from workers.envs.registry import make_env
+    from workers.llm.direct import LiteLLMClient
+    from workers.llm.providers import DeploymentConfig
+
+    class Experts:
+        writes_llm_calls = False
+
+        def client(self, model):
+            return LiteLLMClient(DeploymentConfig(model="offline/expert"))
+
+    monkeypatch.setenv("RECAP_RELEASE_DATA", str(write_release(tmp_path / "release", ADAPT_FILES)))
+    spec = SPEC.replace("method: react", "method: adapt").format(out=tmp_path / "run", prompts="release", envs=ROBOTOUILLE)
+    unit = expand(parse_spec(spec, "s.yaml")).units[0]
+    assert json.loads(unit.method_config)["algorithm"] == "plan_once"
+    rows: list[dict] = []
+    runner = EpisodeRunner(
+        "w0", "run", Experts(), send=lambda batch: rows.extend(batch.get("messages", [])), wait=lambda _ref: None
+    )
+    outcome = runner.run_unit(unit.work(), 1)
+    assert outcome.crash is None and outcome.result is not None
+    assert (outcome.result.success, outcome.result.end_reason) == (True, "success")
+    messages = [(m["role"], m["kind"], m["pinned"], m["content"]) for m in sorted(rows, key=lambda r: r["seq"])]
+    start = make_env(unit.instance_id).reset()
+    observation = f"Observation:\n{start.observation}" + ("" if start.goal in start.observation else f"\n\nGoal: {start.goal}")
+    assert messages[:4] == [
+        ("system", "release", True, "Fixture planner system line."),
+        ("user", "release", True, "Observation:fixture kitchen\nGoal: fixture toast"),
+        ("assistant", "release", True, "Fixture plan reasoning.\nPlan:\nStep 1: fixture subtask\nExecution order: Step 1"),
+        ("user", "planner_task", True, observation),
+    ]
+    assert messages[4][:2] == ("assistant", "reply")
+    subtask = parse_step_plan(messages[4][3])[0]
+    assert messages[5:12] == [
+        ("system", "release", True, f"{SYSTEM} (executor)"),
+        ("user", "release", True, f"{INSTRUCTIONS} (executor)"),
+        ("user", "release", True, "fixture template observation"),
+        ("assistant", "release", True, "Reasoning: r\nAction: a"),
+        ("user", "release", True, "fixture kitchen, step one\n\nGoal: fixture toast\n\n"),
+        ("assistant", "release", True, "Reasoning: Fixture thought one.\n\nAction: Fixture action one"),
+        ("user", "release", True, "fixture kitchen, step two\n\n"),
+    ]
+    assert messages[12] == ("assistant", "release", True, "Reasoning: Fixture thought two.\n\nAction: Finish")
+    assert messages[13] == ("user", "executor_task", True, f"{observation}\n\nSubtask: {subtask}")
+    executors = [m for m in messages if m[1] == "executor_task"]
+    assert len(executors) == len([m for m in messages if m[:2] == ("system", "release")]) - 1  # one set per executor
+    ours = make_env(unit.instance_id).rules()
+    assert not any(ours in m[3] for m in messages)  # our rules text is never sent

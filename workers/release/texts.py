@@ -1,7 +1,8 @@
 """What a method shows under ``prompts: release``: the authors' own text, read from their files.
 
-The worker pins the text :func:`release_text` returns as the episode's first message, in place of
-our rendered demonstration; the method's own task prompt follows it unchanged. The text is read
+:func:`release_text` is the text a unit's digest covers (and what a method outside
+:data:`STRUCTURED` would pin as its first message, in place of our rendered demonstration; today
+every method the release has prompts for is structured, :func:`release_prompt`). The text is read
 from the fetched release folder (:mod:`.folder`) at run time, never stored here, and each file
 yields exactly the part the released code sends before the episode's first observation:
 
@@ -36,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from recap.baselines.text_prompts import RELEASE_ALFWORLD_RULE
 from recap.env import DataNotFoundError
 from recap.release_prompt import ReleasePrompt
 from workers.envs import data_paths
@@ -254,8 +256,12 @@ _EXAMPLE_CUTS = {
     "standard": (_IO_REQUEST, _IO_RESPONSE),
     "cot": (_IOCOT_REQUEST, _IOCOT_RESPONSE),
 }
+#: how the released ADaPT planner cuts its few-shot file (ADaPT_agent.py:47, 53-54)
+_INTERACTION = re.compile(r"(?i)\bInteraction\s*\d+\s*\n+[-]+\n+")
+_PLANNER_REQUEST = re.compile(r"Observation:(.*?)Reasoning:", re.S)
+_PLANNER_RESPONSE = re.compile(r"Reasoning:(.*)", re.S)
 #: methods whose released messages :func:`release_prompt` builds in the released structure
-STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot"), "alfworld": ("react", "act")}
+STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot", "adapt"), "alfworld": ("react", "act", "recap")}
 #: the released ALFWorld ReAct's one user message before the task: a sentence, then the example
 #: transcript (alfworld-recap/react_alfworld/react.py:206-208); the sentence is ours
 ALFWORLD_REACT_HEADER = "Complete a task by interacting with a household. One example follows.\n"
@@ -294,6 +300,14 @@ def act_example(transcript: str) -> str:
     return join_messages(kept)
 
 
+def alfworld_recap_demo(few_shot: str) -> str:
+    """ReCAP's one fixed user message on ALFWorld: a header line, the task's example joined one
+    ``role: content`` line per message, then after a blank line an end line
+    (``alfworld-recap/MATRIX/MATRIX/chatbot.py:391-398``; the same in every ``chatbot_*.py``).
+    The header and end sentences are ours."""
+    return f"Solve a task by acting in a household. A worked example follows.\n{few_shot}\n\nEXAMPLE OVER\n"
+
+
 def recap_demo(few_shot: Sequence[dict[str, str]]) -> str:
     """ReCAP's one fixed user message on Robotouille: the example joined one ``role: content``
     line per message between a header line and, after a blank line, an end line with the
@@ -316,16 +330,54 @@ def release_prompt(
     message and its ``instructions`` as a user message, then its own ``examples`` (serializer.py:53-65),
     then every in-context example file cut by the agent's regexes (:data:`_EXAMPLE_CUTS`) into user/assistant pairs
     (agent.py:54-56, in_context_examples/retrieve_example.py:27-37; all the folder's files, since
-    ``random.sample(files, max(num_examples, len(files)))`` takes each once, here in name order)."""
+    ``random.sample(files, max(num_examples, len(files)))`` takes each once, here in name order).
+    ADaPT on Robotouille: nothing in the main context; the planner's messages (:func:`_adapt_planner`)
+    and each executor's (its template Adapt/custom-executor.yml and the ReAct examples, cut by
+    ReAct's regexes since every executor is a released ReActAgent: ADaPT_agent.py:237-243).
+    ALFWorld: one framed user message each (ReAct: the transcript as is, react.py:206-208; Act: the
+    transcript re-read by :func:`act_example`, act.py:297-303; ReCAP: the example list joined,
+    chatbot.py:391-398, with an empty system text and the released rule for its first prompt)."""
     if method not in STRUCTURED.get(benchmark, ()):
         return None
     parts = sources(method, benchmark, split, task, think, name_only)
+    if method == "recap" and benchmark == "alfworld":
+        # the framed example as the fixed message (chatbot.py:391-398); the first prompt has an
+        # empty system text (SessionManager.py:83-84) and the rule main.py:70 hands it
+        return ReleasePrompt((("user", alfworld_recap_demo(_read(folder, parts[0]))),), system="", rules=RELEASE_ALFWORLD_RULE)
     if method == "recap":
         return _recap_prompt(folder, parts)
     if benchmark == "alfworld" and method == "act":  # the re-read example after a sentence (act.py:297-303)
         return ReleasePrompt((("user", ALFWORLD_ACT_HEADER + act_example(_read(folder, parts[0]))),))
     if benchmark == "alfworld":  # ReAct: the framed transcript as one user message (react.py:208)
         return ReleasePrompt((("user", ALFWORLD_REACT_HEADER + _read(folder, parts[0])),))
+    if method == "adapt":  # two contexts of its own: the planner's, then each executor's
+        planner = _adapt_planner(folder, parts[0], parts[1])
+        return ReleasePrompt((), planner=planner, executor=_template_messages(folder, parts[2:], "react"))
+    return ReleasePrompt(_template_messages(folder, parts, method))
+
+
+def _adapt_planner(folder: Path, system: Part, fewshot: Part) -> tuple[tuple[str, str], ...]:
+    """The released ADaPT planner's messages (ADaPT_agent.py:30-61): the system file's text as the
+    system message, then each interaction of the few-shot file (split at its ``Interaction <n>``
+    headings) as a user message, ``Observation:`` and what follows it up to ``Reasoning:``, and an
+    assistant message, what follows ``Reasoning:``; an interaction lacking either is skipped."""
+    try:
+        text = (folder / system.path).read_text(encoding="utf-8").strip()
+        shots = (folder / fewshot.path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ReleaseMissing(f"{NAME}: cannot read an ADaPT planner file: {exc}; run `{FETCH_COMMAND}`") from None
+    except UnicodeDecodeError as exc:
+        raise ReleaseMissing(f"{NAME}: an ADaPT planner file is not UTF-8 text ({exc})") from None
+    messages: list[tuple[str, str]] = [("system", text)]
+    for block in _INTERACTION.split(shots):
+        asked, answered = _PLANNER_REQUEST.search(block), _PLANNER_RESPONSE.search(block)
+        if asked is not None and answered is not None:
+            messages += [("user", f"Observation:{asked.group(1).strip()}"), ("assistant", answered.group(1).strip())]
+    return tuple(messages)
+
+
+def _template_messages(folder: Path, parts: Sequence[Part], method: str) -> tuple[tuple[str, str], ...]:
+    """A released Robotouille baseline's messages: its template's, then its example pairs."""
     messages: list[tuple[str, str]] = []
     for part in parts:
         path = folder / part.path
@@ -348,7 +400,7 @@ def release_prompt(
             key, value = next(iter(example.items()))
             if key in ("observation", "response"):
                 messages.append(("user" if key == "observation" else "assistant", str(value).strip("\n")))
-    return ReleasePrompt(tuple(messages))
+    return tuple(messages)
 
 
 def _recap_prompt(folder: Path, parts: Sequence[Part]) -> ReleasePrompt:
