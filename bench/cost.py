@@ -4,7 +4,8 @@ several block sizes) against ReAct, on the same trajectories.
 Trajectories: the expert test double (``offline/expert``) plays Robotouille synchronous task 6
 (lettuce-tomato cheeseburger) and the ALFWorld heat games, so every method takes the same
 actions and only the prompts differ. Each episode's requests are recorded once per method
-setting (the ``paper`` profile: K = 64, the benchmark's own ReAct protocol) and then replayed
+setting (``--profile``, default ``paper``: the released baselines' protocol, each method's
+environment options as a sweep sets them, so ReAct sees ALFWorld's valid actions) and then replayed
 through each provider's caching rule - the same code the fake server answers with
 (:mod:`workers.llm.prompt_cache`), with the gateway's breakpoints
 (:mod:`workers.llm.cache_markers`) for the provider that needs them - and priced with the
@@ -17,7 +18,7 @@ Token counts are the documented chars / 4 estimate; the reply is the expert's JS
 model writes more "think" text, which is output and not cached: the ratios below are for
 input-dominated traffic, which is ReCAP's case).
 
-    .venv/bin/python bench/cost.py [--alfworld-limit N] [--blocks 16,32,48] [--json out.json]
+    .venv/bin/python bench/cost.py [--profile paper|released] [--alfworld-limit N] [--blocks 16,32,48] [--json out.json]
 """
 
 from __future__ import annotations
@@ -78,18 +79,19 @@ def arms(blocks: list[int]) -> dict[str, tuple[str, dict[str, Any]]]:
     return out
 
 
-def record(instance_id: str, arm: str, method: str, settings: dict[str, Any]) -> Trajectory:
-    from workers.envs.registry import make_env
+def record(instance_id: str, arm: str, method: str, settings: dict[str, Any], profile: str = "paper") -> Trajectory:
+    from workers.envs.registry import get_benchmark, make_env
     from workers.episode_worker import EpisodeClient, build_agent
     from workers.llm.direct import LiteLLMClient
     from workers.llm.providers import DeploymentConfig
 
     benchmark = instance_id.split("/", 1)[0]
     traj = Trajectory(instance_id, arm)
-    env = make_env(instance_id)
+    agent = build_agent(method, profile=profile, benchmark=benchmark, settings=settings)
+    # the environment each method sees in a sweep (ALFWorld: whether the valid actions are listed)
+    env = make_env(instance_id, **get_benchmark(benchmark).options_for_agent(agent.style, agent.config))
     try:
         inner = Recorder(LiteLLMClient(DeploymentConfig(model="offline/expert")), traj)
-        agent = build_agent(method, profile="paper", benchmark=benchmark, settings=settings)
         result = agent.run(env, EpisodeClient(inner, env, seed=0, offline=True), episode_id=f"{arm}:{instance_id}")
         traj.success = bool(result.success)
     finally:
@@ -146,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--robotouille-limit", type=int, help="the first N task-6 instances only (default: all)")
     p.add_argument("--call-gap-s", type=float, default=5.0, help="seconds between an episode's calls")
     p.add_argument("--json", help="write the table as JSON here")
+    p.add_argument("--profile", default="paper", choices=("paper", "released"), help="the methods' profile")
     args = p.parse_args(argv)
     blocks = [int(b) for b in args.blocks.split(",") if b.strip()]
     prices = default_prices()
@@ -159,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
         if not ids:
             print(f"{group}: no instances found (is the benchmark data there? `recap data check`)")
             continue
-        trajs = {arm: [record(i, arm, m, s) for i in ids] for arm, (m, s) in settings.items()}
+        trajs = {arm: [record(i, arm, m, s, args.profile) for i in ids] for arm, (m, s) in settings.items()}
         steps = {arm: sum(len(t.calls) for t in ts) / len(ts) for arm, ts in trajs.items()}
         print(
             f"\n{group}: {len(ids)} episodes; calls/episode "

@@ -40,6 +40,12 @@ this command works on whatever the registered benchmarks declare:
   URLs of ALFWorld 0.3.x's ``alfworld-download``, plus ``logic/alfred.pddl`` and
   ``logic/alfred.twl2`` as shipped in alfworld 0.3.5's package data (alfworld 0.4.2 ships the
   2.1.2 wording). Only the 134 evaluation games are extracted.
+* ``recap-release`` (not a benchmark: the authors' prompt and demonstration files, read only by
+  ``prompts: release`` runs, :mod:`workers.release`): the files its manifest lists, taken with
+  ``git archive`` from the repository ``https://github.com/ReCAP-Stanford/ReCAP.git`` at the pinned
+  commit (a one-commit partial fetch, so the release's large data files are never downloaded), or
+  from ``--mirror``, which here names the repository itself (a local clone, bare or not, or a git
+  URL). It is not part of ``all``: name it.
 * ALFWorld 2.1.2: ``json_2.1.2_tw-pddl.zip`` (the ``TW_PDDL_FILES_URL`` of alfworld 0.4.2's
   ``alfworld-download``).
 
@@ -82,6 +88,7 @@ import hashlib
 import os
 import re
 import shutil
+import subprocess
 import tarfile
 import tempfile
 import urllib.error
@@ -108,6 +115,7 @@ MANIFEST_NAME = "MANIFEST.sha256"
 
 _CHUNK = 1 << 20
 _TIMEOUT_S = 60
+_GIT_TIMEOUT_S = 600
 #: no data file is near this size; a larger member is refused before it fills the disk
 _MAX_FILE_BYTES = 256 << 20
 
@@ -366,6 +374,59 @@ def _obtain(source: Source, mirror: str | None, downloads: Path, out: TextIO) ->
     return target, location
 
 
+def _git_dir(folder: Path) -> Path | None:
+    """The git directory of a local repository folder (a work tree's ``.git``, or a bare one), else None."""
+    if (folder / ".git").exists():
+        return folder / ".git"
+    if (folder / "HEAD").is_file() and (folder / "objects").is_dir():
+        return folder
+    return None
+
+
+def _git(args: list[str], what: str) -> None:
+    """Run git; a failure is a DataError naming ``what`` with git's last line."""
+    try:
+        done = subprocess.run(["git", *args], capture_output=True, text=True, timeout=_GIT_TIMEOUT_S)
+    except FileNotFoundError:
+        raise DataError(f"cannot {what}: git is not installed") from None
+    except subprocess.TimeoutExpired:
+        raise DataError(f"cannot {what}: git took over {_GIT_TIMEOUT_S} s") from None
+    if done.returncode != 0:
+        lines = [line for line in done.stderr.strip().splitlines() if line.strip()]
+        raise DataError(f"cannot {what}: {lines[-1] if lines else f'git exited {done.returncode}'}")
+
+
+def _git_archive(source: Source, mirror: str | None, paths: list[str], downloads: Path, out: TextIO) -> tuple[Path, str]:
+    """The manifest's ``paths`` at the pinned commit ``source.ref``, as a tar.gz in ``downloads``.
+
+    A local repository (``--mirror DIR``: a clone, bare or not) is read in place with ``git
+    archive``; a URL (GitHub by default) is fetched first into a bare repository in ``downloads``:
+    that one commit, without history, and only the blobs the archive reads (a partial clone), so
+    the release's large data files are never downloaded."""
+    location = source.location(mirror)
+    target = downloads / f"{source.name}-{source.ref[:12]}.tar.gz"
+    if is_url(location) and _local_path(location) is None:
+        repo = downloads / f"{source.name}.git"
+        print(f"  fetching {location} at {source.ref[:12]}", file=out, flush=True)
+        _git(["init", "-q", "--bare", str(repo)], f"create {repo}")
+        _git(
+            ["-C", str(repo), "fetch", "-q", "--depth", "1", "--filter=blob:none", location, source.ref],
+            f"fetch {source.ref[:12]} from {location}",
+        )
+        git_dir = repo
+    else:
+        folder = _local_path(location) or Path(location)
+        found = _git_dir(folder)
+        if found is None:
+            raise DataError(f"{folder} is not a git repository (the mirror of {source.name} must be a clone of it)")
+        git_dir = found
+    _git(
+        ["--git-dir", str(git_dir), "archive", "--format=tar.gz", "-o", str(target), source.ref, "--", *paths],
+        f"read {len(paths)} files at {source.ref[:12]} from {location}",
+    )
+    return target, f"{location}@{source.ref[:12]}"
+
+
 def _members(path: Path, kind: str, label: str) -> Iterator[tuple[str, Callable[[], IO[bytes]]]]:
     """(member name, opener) for every regular file of an archive; a broken archive is a DataError."""
     try:
@@ -421,14 +482,17 @@ def _stage(bench: DataFolder, mirror: str | None, stage: Path, out: TextIO) -> d
     got: dict[str, str] = {}
     origin: dict[str, str] = {}
     for source in bench.sources:
-        path, where = _obtain(source, mirror, downloads, out)
+        if source.kind == "git":
+            path, where = _git_archive(source, mirror, sorted(wanted), downloads, out)
+        else:
+            path, where = _obtain(source, mirror, downloads, out)
         if source.kind == "file":
             if source.saves_as in wanted:
                 got[source.saves_as] = _save(_binary_opener(path), data / source.saves_as)
                 origin[source.saves_as] = where
         else:
             try:
-                for member, opener in _members(path, source.kind, source.name):
+                for member, opener in _members(path, "tar.gz" if source.kind == "git" else source.kind, source.name):
                     rel = bench.member_path(member)
                     if rel in wanted and rel not in got:
                         got[rel] = _save(opener, data / rel)
@@ -646,7 +710,7 @@ def data_main(argv: list[str], stdout: TextIO, stderr: TextIO) -> int:
     try:
         args = _parser(stdout).parse_args(argv)
         by_name = folders()
-        benches = list(by_name.values()) if args.bench == "all" else [by_name[args.bench]]
+        benches = [b for b in by_name.values() if b.in_all] if args.bench == "all" else [by_name[args.bench]]
         if getattr(args, "data_dir", None) is not None and args.bench == "all":
             raise UsageError("--data-dir names one benchmark's folder: give BENCH too")
         if args.action == "list":

@@ -128,15 +128,24 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
     seen. Calls come from the method's call shape and the instance's steps, clipped to
     ``max_llm_calls``; tokens from the sliding-window model; dollars from the model's price."""
     spec = plan.spec
-    shapes: dict[str, InstanceShape] = {}
+    # keyed by the step multiplier too: methods of one sweep may run an instance at different caps
+    shapes: dict[tuple[str, float], InstanceShape] = {}
     groups: dict[tuple[str, str], GroupEstimate] = {}
     for u in plan.units:
-        if u.instance_id not in shapes:
-            shapes[u.instance_id] = measure_instance(u.instance_id, u.step_multiplier, dict(u.env_options))
-        shape = shapes[u.instance_id]
+        key = (u.instance_id, float(u.step_multiplier))
+        if key not in shapes:
+            shapes[key] = measure_instance(u.instance_id, u.step_multiplier, dict(u.env_options))
+        shape = shapes[key]
         cfg = json.loads(u.method_config)
         max_calls = int(cfg.get("max_llm_calls") or 10**9)  # None: derived from the step cap (c_high below)
         window = int(cfg.get("window") or 64)
+        # ReAct/Act's history setting narrows or lifts the window (recap.baselines.react): the
+        # released Act keeps everything, Robotouille's "last" ablation two messages
+        history = cfg.get("history")
+        if history == "all":
+            window = 10**9
+        elif history == "last":
+            window = 2
         one_shot, (lo, hi) = call_shape(u.method)
         if one_shot:
             c_low, c_high = 1.0, float(min(max_calls, 1 + int(cfg.get("max_json_repairs", 3))))

@@ -21,6 +21,8 @@ Example::
         ablation: no_think
         settings: {window: 64}
       - method: react
+        step_multiplier: 4            # this method's step cap (default: the sweep's)
+        step_multipliers: {robotouille/synchronous/2: 3}   # per task: <benchmark>/<task selector>
     environments:
       - benchmark: robotouille
         tasks: [synchronous/6, asynchronous]   # selectors given to the benchmark
@@ -51,7 +53,8 @@ Hardening (every rule fails as one line before any model call or write):
   (the gateway's total time per call), max_usage_rejections 1..1000, limits.llm_calls 1..10**6, limits.tokens 1..10**10,
   limits.usd 10**-6..10**6, environment limit 1..10**5, ray.num_cpus 1..4096,
   ray.object_store_mb 64..1048576, ray.worker_cpus 0.001..1024; caps 0..10**6 USD, prices
-  0..10**4 USD per million tokens, step_multiplier 0.1..1000. Generation ``params`` have theirs
+  0..10**4 USD per million tokens, step_multiplier 0.1..1000 (the sweep's, a method's and
+  each value of a method's step_multipliers). Generation ``params`` have theirs
   in :data:`workers.llm.providers.NUMERIC_PARAMS` (max_tokens 1..262144 and at most the model's
   own output limit: :func:`pipeline.preflight.check_models`).
 * ``api_key_env`` names a credential: a variable ending in ``_KEY``, ``_TOKEN``, ``_SECRET``,
@@ -200,6 +203,8 @@ NUMBER_BOUNDS: dict[str, Bound] = {
     "ray.worker_cpus": Bound(WORKER_CPUS_MIN, WORKER_CPUS_MAX),
     "seeds[]": Bound(0, SEED_MAX),
     "step_multiplier": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),
+    "methods[].step_multiplier": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),
+    "methods[].step_multipliers{}": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),
     "run_cap_usd": Bound(0, USD_MAX),
     "workers": Bound(1, WORKERS_MAX),
     "max_attempts": Bound(1, ATTEMPTS_MAX),
@@ -495,17 +500,44 @@ class MethodSpec(_Strict):
     profile: Name | None = None
     ablation: Name | None = None
     settings: dict[str, Any] = Field(default_factory=dict)
+    #: ``ours`` (default): our own prompt text; ``release``: the authors' released prompt and
+    #: demonstration files, read at run time (``recap data fetch recap-release``; workers/release)
+    prompts: Literal["ours", "release"] = "ours"
+    #: the step-cap multiplier of this method's units (None: the sweep's ``step_multiplier``):
+    #: the released configs give each method its own (Act x2, Standard x1.5 on Robotouille)
+    step_multiplier: Annotated[float, _NOT_BOOL, Bounded("methods[].step_multiplier")] | None = None
+    #: per task, over ``step_multiplier``: ``<benchmark>/<task selector>`` (``robotouille/synchronous/2``)
+    #: -> multiplier. Each key is resolved by the benchmark's own selectors when the sweep is
+    #: planned (:func:`pipeline.units.method_step_multipliers`); part of the unit's identity
+    #: through the multiplier it gives
+    step_multipliers: Annotated[
+        dict[Selector, Annotated[float, _NOT_BOOL, Bounded("methods[].step_multipliers{}")]],
+        Field(max_length=SELECTORS_MAX),
+    ] = Field(default_factory=dict)
 
     @field_validator("settings")
     @classmethod
     def _settings(cls, v: dict[str, Any]) -> dict[str, Any]:
+        if "prompts" in v:
+            raise ValueError("prompts is the method entry's own field (prompts: release), not a setting")
         return _check_free_form(v, "settings")
+
+    @field_validator("step_multipliers")
+    @classmethod
+    def _step_multipliers(cls, v: dict[str, float]) -> dict[str, float]:
+        for key in v:
+            bench, _, selector = key.partition("/")
+            if not bench or not selector:
+                raise ValueError(f"key {key!r} must be <benchmark>/<task selector>, e.g. robotouille/synchronous/2")
+        return v
 
     @property
     def name(self) -> str:
         if self.label:
             return self.label
         suffix = [x for x in (self.profile, None if self.ablation in (None, "original") else self.ablation) if x]
+        if self.prompts == "release":
+            suffix.append("release-prompts")
         return self.method + (f"[{','.join(suffix)}]" if suffix else "")
 
 

@@ -213,7 +213,10 @@ def resolve_methods(spec: SweepSpec, benchmark: str | None = None) -> list[tuple
     for i, m in enumerate(spec.methods):
         settings = {**limits, **m.settings}
         try:
-            agent = build_agent(m.method, profile=m.profile, ablation=m.ablation, settings=settings, benchmark=benchmark)
+            extra = {"prompts": "release"} if m.prompts == "release" else {}
+            agent = build_agent(
+                m.method, profile=m.profile, ablation=m.ablation, settings={**settings, **extra}, benchmark=benchmark
+            )
         except ConfigError as exc:
             raise SpecError(f"methods[{i}] ({m.name}): {exc}") from None
         except TypeError as exc:
@@ -250,11 +253,16 @@ def expand(spec: SweepSpec) -> Plan:
     methods_by_benchmark: dict[str, list[tuple[Any, dict[str, Any], str]]] = {}
     units: list[Unit] = []
     seen: dict[str, str] = {}
+    release: dict[tuple[str, str], str] = {}
+    benchmarks = {inst.split("/", 1)[0] for inst, _ in instances}
+    multipliers = [method_step_multipliers(spec, i, benchmarks) for i in range(len(spec.methods))]
     for inst, options in instances:
         benchmark = inst.split("/", 1)[0]
         if benchmark not in methods_by_benchmark:
             methods_by_benchmark[benchmark] = resolve_methods(spec, benchmark)
-        for m, settings, cfg in methods_by_benchmark[benchmark]:
+        for i, (m, settings, resolved) in enumerate(methods_by_benchmark[benchmark]):
+            cfg = with_release_digest(spec, m, inst, resolved, release) if m.prompts == "release" else resolved
+            multiplier = step_multiplier_for(spec, i, inst, multipliers[i])
             for model in spec.models:
                 for seed in spec.seeds:
                     uid = unit_hash(
@@ -264,7 +272,7 @@ def expand(spec: SweepSpec) -> Plan:
                         model=model.model,
                         params={**model.params, **({"options": model.options} if model.options else {})},
                         seed=seed,
-                        step_multiplier=spec.step_multiplier,
+                        step_multiplier=multiplier,
                     )
                     u = Unit(
                         uid,
@@ -279,7 +287,7 @@ def expand(spec: SweepSpec) -> Plan:
                         model.model,
                         dict(model.params),
                         seed,
-                        spec.step_multiplier,
+                        multiplier,
                         options,
                     )
                     if uid in seen:
@@ -289,6 +297,89 @@ def expand(spec: SweepSpec) -> Plan:
                     seen[uid] = u.key
                     units.append(u)
     return Plan(spec, units)
+
+
+#: one resolved ``step_multipliers`` entry of a method: (key, the instance ids it covers, multiplier)
+TaskMultiplier = tuple[str, frozenset[str], float]
+
+
+def method_step_multipliers(spec: SweepSpec, index: int, benchmarks: set[str]) -> list[TaskMultiplier]:
+    """The ``step_multipliers`` of ``spec.methods[index]`` resolved to instance ids: each key's
+    benchmark must exist and its selector must be one the benchmark knows (a typo is refused, not
+    silently run at the default cap). A key for a benchmark the sweep does not run is still
+    checked when its instance list can be read without data, else left out."""
+    from workers.envs.registry import get_benchmark
+
+    m = spec.methods[index]
+    where = f"methods[{index}] ({m.name}): step_multipliers"
+    out: list[TaskMultiplier] = []
+    for key, value in m.step_multipliers.items():
+        bench_name, _, selector = key.partition("/")
+        try:
+            bench = get_benchmark(bench_name)
+        except UnknownInstanceError as exc:
+            raise SpecError(f"{where}: {key!r}: {exc}") from None
+        except (ImportError, AttributeError) as exc:
+            raise SpecError(f"{where}: {key!r}: benchmark {bench_name!r} is not available here ({exc})") from None
+        try:
+            ids = frozenset(bench.list_instances(selector))
+        except DataNotFoundError as exc:
+            if bench_name in benchmarks:
+                raise SpecError(f"{where}: {key!r}: {exc}") from None
+            continue
+        except (UnknownInstanceError, EnvError, ValueError) as exc:
+            raise SpecError(f"{where}: {key!r}: {exc}") from None
+        if not ids:
+            raise SpecError(f"{where}: {key!r} matches no {bench_name} instance")
+        out.append((key, ids, float(value)))
+    return out
+
+
+def step_multiplier_for(spec: SweepSpec, index: int, instance_id: str, task_multipliers: list[TaskMultiplier]) -> float:
+    """The step multiplier of ``spec.methods[index]`` on ``instance_id``: the ``step_multipliers``
+    key that covers the instance, else the method's ``step_multiplier``, else the sweep's. Two keys
+    that cover one instance with different values are refused (which one wins would be a guess)."""
+    m = spec.methods[index]
+    hits = [(key, value) for key, ids, value in task_multipliers if instance_id in ids]
+    if len({value for _, value in hits}) > 1:
+        (k1, v1), (k2, v2) = hits[0], next(h for h in hits if h[1] != hits[0][1])
+        raise SpecError(
+            f"methods[{index}] ({m.name}): step_multipliers: {k1!r} (x{v1:g}) and {k2!r} (x{v2:g}) both cover "
+            f"{instance_id}; give each task one multiplier"
+        )
+    if hits:
+        return hits[0][1]
+    return float(m.step_multiplier if m.step_multiplier is not None else spec.step_multiplier)
+
+
+def with_release_digest(spec: SweepSpec, m: Any, instance_id: str, method_config: str, cache: dict[tuple[str, str], str]) -> str:
+    """``method_config`` with ``prompts`` pinned to the digest of the released text this instance's
+    episode will show (``release:<sha256>``), so the unit's hash covers that text: an edited release
+    file makes a different unit. SpecError (naming the fetch command) when the release folder is
+    missing or has no prompts for the method here: before anything runs."""
+    from workers.release.texts import ReleaseMissing, ReleaseUnavailable, release_folder, release_text
+
+    bench, split, task = place_of(instance_id)
+    key = (method_config, f"{bench}/{split}/{task}")
+    if key not in cache:
+        where = f"methods[{spec.methods.index(m)}] ({m.name}): prompts: release"
+        values = json.loads(method_config)
+        try:
+            text = release_text(
+                release_folder(),
+                m.method,
+                bench,
+                split,
+                task,
+                think=values.get("think", "latest"),
+                name_only=bool(values.get("name_only", False)),
+            )
+        except ReleaseMissing as exc:
+            raise SpecError(f"{where}: {exc}") from None
+        except ReleaseUnavailable as exc:
+            raise SpecError(f"{where}: {exc} (use prompts: ours there)") from None
+        cache[key] = json.dumps({**values, "prompts": f"release:{text.digest}"}, sort_keys=True)
+    return cache[key]
 
 
 # --------------------------------------------------------------------------------------------

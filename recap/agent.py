@@ -25,6 +25,7 @@ from recap.config import OMITTED_OBSERVATION, AgentConfig
 from recap.demo_script import DemoScript
 from recap.env import Demonstration, Environment, Reset, Step
 from recap.llm import LLMClient
+from recap.release_prompt import ReleasePrompt
 from recap.runtime import Conversation, Emit, EnvDriver, Episode, EpisodeEnd, EpisodeResult
 from recap.scripted import ScriptedClient
 from schemas.records import MessageRecord
@@ -139,10 +140,12 @@ class Agent(ABC):
         *,
         episode_id: str = "episode",
         emit: Emit | None = None,
-        demonstration: str | None | bool = True,
+        demonstration: str | None | bool | ReleasePrompt = True,
     ) -> EpisodeResult:
         """Play one episode. ``demonstration``: True renders the env's demo, False/None uses
-        none, a string is used as the demonstration text as is."""
+        none, a string is used as the demonstration text as is, a :class:`ReleasePrompt` pins
+        the authors' messages with their roles (``ep.extra["release"]`` tells ``play`` to leave
+        out our system text and rules)."""
         emit = emit or _discard
         conv = Conversation(
             episode_id=episode_id,
@@ -155,10 +158,15 @@ class Agent(ABC):
         )
         ep = Episode(conv=conv, driver=EnvDriver(env, episode_id, emit), env=env, emit=emit)
         try:
-            demo_text = self.demonstration_text(env) if demonstration is True else (demonstration or None)
+            if isinstance(demonstration, ReleasePrompt):
+                ep.extra["release"] = demonstration
+                pins = [(role, "release", text) for role, text in demonstration.messages]
+            else:
+                demo_text = self.demonstration_text(env) if demonstration is True else (demonstration or None)
+                pins = [("user", "demonstration", demo_text)] if demo_text else []
             reset = ep.driver.reset()
-            if demo_text:
-                conv.pin("demonstration", demo_text)
+            for role, kind, text in pins:
+                conv.pin_message(role, kind, text)
             self.play(ep, reset)
             raise EpisodeEnd("agent_done")
         except EpisodeEnd as end:
@@ -202,6 +210,12 @@ class Agent(ABC):
         """A demonstration reply in this configuration's reply format (ablations drop fields)."""
         return reply
 
+    def shape_demo_replies(self, replies: list[Any]) -> list[Any]:
+        """The demonstration's replies in call order, each through :meth:`shape_demo_reply`; a
+        method whose reply format splits one reply into several calls (plain-text ReAct on
+        ALFWorld: the thought, then the command) overrides this."""
+        return [self.shape_demo_reply(r) for r in replies]
+
     def demo_config(self) -> AgentConfig:
         """Settings for rendering a demonstration: nothing trimmed, no caps that could cut it."""
         return dataclasses.replace(
@@ -223,7 +237,7 @@ class Agent(ABC):
             replies = type(self).demo_replies(demo.script)
         if replies is None:
             raise DemonstrationError(f"demonstration {demo.name!r} has no replies for style {self.style!r}")
-        messages, result = self.scripted_demo_run(demo, [self.shape_demo_reply(r) for r in replies], f"demo:{demo.name}")
+        messages, result = self.scripted_demo_run(demo, self.shape_demo_replies(list(replies)), f"demo:{demo.name}")
         if not result.success:
             raise DemonstrationError(
                 f"demonstration {demo.name!r} does not reach the goal with {type(self).__name__} ({result.end_reason}: {result.error})"

@@ -146,6 +146,8 @@ class BlocksworldEnv(Environment):
 
     benchmark = "blocksworld"
     invalid_action_mode = "reject"
+    #: every observation ends with its "Valid Actions:" list
+    lists_valid_actions = True
 
     def __init__(
         self,

@@ -1,8 +1,9 @@
 """Agent settings: one dataclass per method, ablations as fields, and the two named profiles.
 
 Ablations are configuration of one agent, never copies of it. ``paper`` follows the paper
-(K = 64 messages, temperature 0.5); ``released`` follows the authors' released code (K = 128,
-temperature not sent, so the provider default applies).
+(K = 64 rounds = 128 messages, temperature 0.5, the provider's output cap); ``released`` follows
+the authors' released code (K = 128 messages counting the pins, ReCAP's temperature not sent,
+0.7 for the Robotouille baselines). One unit of ``window`` is one message.
 
 A profile can depend on the benchmark (the paper runs Robotouille's own ReAct protocol on
 Robotouille and Yao et al.'s on ALFWorld) and on the ablation (the released code runs its
@@ -16,26 +17,44 @@ Two settings are *derived* when left at None, from facts known only when an epis
   (:meth:`recap.agent.Agent.call_cap`), so no method is cut by calls before it could use its
   step budget;
 * ``max_tokens``: each config class has a default output cap measured from the longest expert
-  reply in its reply format (``bench/protocol.py`` prints the measurement).
+  reply in its reply format (``bench/protocol.py`` prints the measurement). Both profiles set
+  None instead: the request carries the model's own maximum output
+  (:func:`workers.llm.providers.model_max_output_tokens`), so no reply the provider would have
+  finished is cut by a cap of ours (the paper used the provider default).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from dataclasses import dataclass
 from typing import Any, Literal
 
 PROFILES: dict[str, dict[str, Any]] = {
-    # the paper: K = 64 unpinned messages, T = 0.5; demonstrations show the example's first
-    # observation and leave later ones out on Robotouille (see demo_observations). Trimming stays
-    # the paper's ``pair`` although ``block`` is cheaper under every provider's prompt caching
-    # (bench/cost.py; the README's "Cheap runs" says when to set window_mode: block instead)
-    "paper": {"window": 64, "temperature": 0.5, "window_mode": "pair"},
-    # the released code: K = 128 counted over the whole history (pins included), provider default T;
-    # it trims by the oldest messages too (``pair``)
-    "released": {"window": 128, "temperature": None, "window_counts_pins": True, "window_mode": "pair"},
+    # the paper: K = 64 back-and-forth rounds (Sec. "Sliding Window"), i.e. 128 messages in our
+    # unit (``window`` counts messages, recap/history.py), the released main value (ctx_len 128,
+    # robotouille-recap/main.py:55); T = 0.5 for every method and the provider's default output
+    # cap (appendix "Robotouille Experiment Details"). Trimming stays the paper's ``pair``
+    # although ``block`` is cheaper under every provider's prompt caching (bench/cost.py; the
+    # README's "Cheap runs" says when to set window_mode: block instead)
+    "paper": {"window": 128, "temperature": 0.5, "window_mode": "pair", "max_tokens": None},
+    # the released code: K = 128 messages counted over the whole history, pins included
+    # (robotouille-recap/MATRIX/MATRIX/chatbot.py:72-74, alfworld-recap/MATRIX/MATRIX/chatbot.py:73-74),
+    # no temperature and no output cap sent (chatbot.py:85-90 of both); each method's own
+    # profile_defaults says where the released baselines differ (temperature 0.7 on Robotouille)
+    "released": {"window": 128, "temperature": None, "window_counts_pins": True, "window_mode": "pair", "max_tokens": None},
 }
+
+#: what the released Robotouille baselines sample at (robotouille-baselines/conf/llm/base_llm.yaml:2,
+#: sent by agents/prompt_builder/prompt_llm.py:140-144)
+RELEASED_BASELINE_TEMPERATURE = 0.7
+
+#: whether observations list the currently valid actions, where a benchmark makes that optional
+#: (ALFWorld): ``shown`` in the episode and in the one-shot demonstration, ``episode`` in the
+#: episode only (the demonstration stays as written), ``hidden`` nowhere; None: the benchmark's
+#: own choice for the method (workers.envs.alfworld.benchmark.show_valid_actions_for)
+ValidActions = Literal["shown", "episode", "hidden"]
 
 #: how a demonstration shows the example's observations (see recap.agent.ElidedObservations)
 DemoObservations = Literal["all", "first", "none"]
@@ -72,6 +91,13 @@ class AgentConfig:
     #: the one-shot demonstration shows every observation (all), only the first one (first),
     #: or none of them (none); left-out observations read OMITTED_OBSERVATION
     demo_observations: DemoObservations = "all"
+    #: see ValidActions (None: the benchmark decides per method)
+    valid_actions: ValidActions | None = None
+    #: whose prompt text the episode pins first: ``ours`` (our demonstration), or the authors'
+    #: released files (``release:<sha256 of the text>``, set by the planner from a sweep's
+    #: ``prompts: release``; ``release`` until the digest is known). Left out of :meth:`to_json`
+    #: while ``ours``, so the hashes of units planned before it existed do not change.
+    prompts: str = "ours"
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
@@ -85,7 +111,17 @@ class AgentConfig:
             # with the observations left out; we keep the first one so the example's reasoning
             # can be checked against the state it starts from.
             out["demo_observations"] = "first"
+        if profile == "released" and benchmark == "robotouille":
+            # every released Robotouille baseline (ReAct, Act, ADaPT, I/O, I/O-CoT) samples at the
+            # base config's temperature; ReCAPConfig overrides it (its calls send none)
+            out["temperature"] = RELEASED_BASELINE_TEMPERATURE
         return out
+
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """Settings the authors' released prompt implies on ``benchmark`` (its reply format);
+        ``prompts: release`` applies them (:func:`release_settings`). None for most methods."""
+        return {}
 
     def validate(self) -> None:
         if self.window < 2:
@@ -106,6 +142,10 @@ class AgentConfig:
             raise ConfigError(f"demo_observations must be all, first or none, got {self.demo_observations!r}")
         if self.window_counts_pins and self.window < 4:
             raise ConfigError("window must be >= 4 messages when it counts the two pins")
+        if self.valid_actions not in (None, "shown", "episode", "hidden"):
+            raise ConfigError(f"valid_actions must be shown, episode, hidden or null, got {self.valid_actions!r}")
+        if not re.fullmatch(r"ours|release(:[0-9a-f]{64})?", str(self.prompts)):
+            raise ConfigError(f"prompts must be ours or release, got {self.prompts!r}")
 
     def history_window(self) -> int:
         """K as the shared history applies it (ReAct's ``history: last`` narrows it)."""
@@ -114,9 +154,17 @@ class AgentConfig:
     def history_counts_pins(self) -> bool:
         return self.window_counts_pins
 
+    def history_keep(self) -> int:
+        """Windowed messages at the head of the history that trimming never drops (ReAct's
+        released Robotouille window keeps its first reply); 0 for every other method."""
+        return 0
+
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): part of a unit's content hash and of episode rows."""
-        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+        values = dataclasses.asdict(self)
+        if values.get("prompts") == "ours":
+            del values["prompts"]
+        return json.dumps(values, sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str) -> AgentConfig:
@@ -133,7 +181,7 @@ class AgentConfig:
         if not isinstance(values, dict):
             raise ConfigError(f"{cls.__name__}: resolved settings must be a JSON object")
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown, missing = sorted(set(values) - names), sorted(names - set(values))
+        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - {"prompts"})
         if unknown or missing:
             raise ConfigError(
                 f"{cls.__name__}: resolved settings do not match this version "
@@ -165,10 +213,18 @@ class ReCAPConfig(AgentConfig):
     shortcut_trace: bool = False
 
     @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released ALFWorld prompts carry no rules reminder (alfworld-recap/MATRIX/MATRIX/
+        chatbot.py sends none), so ``prompts: release`` there sends none either."""
+        return {"reminder_period": None} if benchmark == "alfworld" else {}
+
+    @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
         out = super().profile_defaults(profile, benchmark, ablation)
         if profile == "released":
-            out.update(reminder_on="iterations", shortcut_trace=True)
+            # no temperature in ReCAP's released calls (robotouille-recap/MATRIX/MATRIX/chatbot.py:88
+            # has it commented out; alfworld-recap/MATRIX/MATRIX/chatbot.py:79-83 sends none)
+            out.update(reminder_on="iterations", shortcut_trace=True, temperature=None)
             if benchmark == "alfworld":
                 out["reminder_period"] = None  # the released ALFWorld code has no reminder
             if ablation not in (None, "original"):
@@ -221,6 +277,8 @@ SETTING_BOUNDS: dict[str, tuple[float, float]] = {
     "max_depth": (1, 100),
     "executor_steps": (1, 100_000),
     "executor_patience": (1, 100_000),
+    "executor_window": (2, 100_000),
+    "planner_temperature": (0, 2),
     "invalid_streak": (1, 100_000),
     "invalid_rounds": (1, 100_000),
 }
@@ -240,6 +298,8 @@ def check_setting_ranges(cfg: AgentConfig) -> None:
         value = getattr(cfg, f.name)
         if f.name not in SETTING_BOUNDS or value is None:
             continue
+        if isinstance(value, str) and "Literal" in str(f.type):
+            continue  # a named choice beside the number (ADaPT's planner_temperature: same): validate() checks it
         low, high = SETTING_BOUNDS[f.name]
         integer = "int" in str(f.type)
         kind = "an integer" if integer else "a number"
@@ -247,6 +307,19 @@ def check_setting_ranges(cfg: AgentConfig) -> None:
             raise ConfigError(f"{f.name} must be {kind} in [{_number_text(low)}, {_number_text(high)}], got {value!r}")
         if not low <= value <= high:
             raise ConfigError(f"{f.name} {_number_text(value)} is out of range [{_number_text(low)}, {_number_text(high)}]")
+
+
+def release_settings(cls: type[AgentConfig], benchmark: str | None, overrides: dict[str, Any]) -> dict[str, Any]:
+    """What ``prompts: release`` implies for ``cls`` on ``benchmark`` (the reply format the
+    released prompt asks for, :meth:`AgentConfig.release_prompt_settings`); ConfigError, one line,
+    when an explicit setting contradicts it."""
+    implied = cls.release_prompt_settings(benchmark)
+    clash = sorted(k for k, v in implied.items() if k in overrides and overrides[k] != v)
+    if clash:
+        wants = ", ".join(f"{k}: {json.dumps(implied[k])}" for k in clash)
+        what = "reply format" if set(clash) <= {"reply_format", "json_mode", "text_layout"} else "settings"
+        raise ConfigError(f"prompts: release asks for the released {what} ({wants}); drop the contradicting setting")
+    return implied
 
 
 def build_config(
@@ -273,7 +346,11 @@ def build_config(
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(overrides) - names)
     if unknown:
-        raise ConfigError(f"unknown setting(s) {', '.join(unknown)} for {cls.__name__}; known: {', '.join(sorted(names))}")
+        raise ConfigError(
+            f"unknown setting(s) {', '.join(unknown)} for {cls.__name__}; known: {', '.join(sorted(names - {'prompts'}))}"
+        )
+    if str(overrides.get("prompts", "ours")).startswith("release"):
+        values.update(release_settings(cls, benchmark, overrides))
     values.update(overrides)
     cfg = cls(**values)
     cfg.validate()

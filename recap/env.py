@@ -9,12 +9,16 @@ reach the game (ALFWorld answers "Nothing happens.") declare ``invalid_action_mo
 
 from __future__ import annotations
 
+import copy
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from recap.demo_script import DemoReplies, DemoScript
+
+#: the step cap of a :meth:`Environment.plan_copy` (no plan is this long)
+PLAN_COPY_STEPS = 10**9
 
 
 class EnvError(RuntimeError):
@@ -106,6 +110,9 @@ class Environment(ABC):
     #: location), so a context opened later also needs the episode's first observation; False
     #: when every observation shows the whole state (Robotouille, blocksworld).
     partially_observed: bool = False
+    #: True when every observation already ends with the currently valid actions (ALFWorld with
+    #: ``show_valid_actions``), so feedback that names them need not repeat the list
+    lists_valid_actions: bool = False
     optimal_steps: int | None = None
     #: environment steps allowed (ceil(optimal x multiplier), or a benchmark's fixed cap)
     max_steps: int = 50
@@ -126,6 +133,16 @@ class Environment(ABC):
     @abstractmethod
     def demonstration(self) -> Demonstration | None:
         """The one-shot demonstration used for this instance (None: zero-shot)."""
+
+    def plan_copy(self) -> Environment:
+        """A copy of this environment for checking a whole plan before it runs: it takes steps
+        past the goal and past the step cap, as the released I/O agents' check steps its engine
+        copy through every planned action (robotouille-baselines/agents/IO_agent.py:174-187).
+        Raises whatever :func:`copy.deepcopy` raises for an engine that cannot be copied; an
+        environment that refuses steps once its episode is over overrides this."""
+        sim = copy.deepcopy(self)
+        sim.max_steps = PLAN_COPY_STEPS
+        return sim
 
     def failure_hints(self) -> str:
         """Hints shown after an invalid action (e.g. occupied station, inexact name); may be ''."""

@@ -19,6 +19,12 @@ that starts after the pinned task prompt.
 ``counts_pins`` makes K bound the whole history, pins included (the released code's reading:
 "more than ctx_len messages" counts the demonstration and the task prompt); otherwise K bounds
 the messages after the pins.
+
+``keep`` windowed messages at the head of the window are never dropped, though they count
+towards K: the released Robotouille ReAct trims its history with ``del history[2:4]``
+(robotouille-baselines/agents/ReAct_agent.py:129-130, 138), and its history starts with the first
+observation and the first reply, so that reply stays for the whole episode (our pin already
+holds the first observation, so ``keep=1``).
 """
 
 from __future__ import annotations
@@ -71,6 +77,7 @@ class History:
         emit: Callable[[MessageRecord], None] | None = None,
         counter: SeqCounter | None = None,
         counts_pins: bool = False,
+        keep: int = 0,
     ) -> None:
         if window < 2:
             raise ValueError(f"window must be at least 2 messages, got {window}")
@@ -89,6 +96,9 @@ class History:
         self._counter = counter if counter is not None else SeqCounter()
         self.dropped = 0
         self.counts_pins = counts_pins
+        if keep < 0 or keep >= window:
+            raise ValueError(f"keep must be in [0, window), got {keep}")
+        self.keep = keep
 
     @property
     def live_limit(self) -> int:
@@ -139,13 +149,15 @@ class History:
 
     # -- trimming ------------------------------------------------------------------------
     def drop_oldest(self, n: int) -> int:
-        """Drop up to ``n`` (rounded up to even) of the oldest unpinned messages, never the
-        newest one. Returns how many were dropped."""
+        """Drop up to ``n`` (rounded up to even) of the oldest unpinned messages after the
+        ``keep`` kept ones, never the newest one. Returns how many were dropped."""
         n += n % 2
-        n = min(n, max(0, len(self._live) - 1))
+        n = min(n, max(0, len(self._live) - 1 - self.keep))
+        if self.keep:
+            n -= n % 2  # whole (prompt, reply) pairs after a kept reply keep the alternation
         if n <= 0:
             return 0
-        del self._live[:n]
+        del self._live[self.keep : self.keep + n]
         self.dropped += n
         return n
 

@@ -20,6 +20,7 @@ from typing import Any
 from recap.agent import Agent
 from recap.baselines import (
     ActAgent,
+    ActConfig,
     ADaPTAgent,
     ADaPTConfig,
     CoTAgent,
@@ -35,7 +36,7 @@ from recap.recap_agent import ReCAPAgent
 METHODS: dict[str, tuple[type[Agent], type[AgentConfig]]] = {
     "recap": (ReCAPAgent, ReCAPConfig),
     "react": (ReActAgent, ReActConfig),
-    "act": (ActAgent, ReActConfig),
+    "act": (ActAgent, ActConfig),
     "cot": (CoTAgent, PlanConfig),
     "standard": (StandardAgent, PlanConfig),
     "adapt": (ADaPTAgent, ADaPTConfig),

@@ -33,6 +33,7 @@ from recap.config import ReCAPConfig
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
 from recap.jsonreply import recap_reply
+from recap.release_prompt import ReleasePrompt
 from recap.runtime import Episode, EpisodeEnd
 from recap.tree import Node
 
@@ -85,16 +86,32 @@ class ReCAPAgent(Agent):
         with_think = cfg.think != "none"
         root = self._new_node(ep, None, reset.goal)
         root.kind = "root"
-        ep.conv.pin(
-            "task",
-            P.task_prompt(
+        release = st.get("release")
+        if isinstance(release, ReleasePrompt) and release.system is not None and release.rules is not None:
+            # prompts: release: the released template's system text and rules frame the first
+            # prompt (robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261) and its reminders
+            st["rules"] = release.rules
+            if ep.env.benchmark == "alfworld":  # alfworld-recap/MATRIX/MATRIX/chatbot.py:242-253
+                task = P.release_alfworld_task_prompt(
+                    system=release.system, rules=release.rules, observation=reset.observation, goal=reset.goal
+                )
+            else:
+                task = P.release_task_prompt(
+                    system=release.system,
+                    rules=release.rules,
+                    observation=reset.observation,
+                    goal=reset.goal,
+                    ask_many=cfg.think == "latest" and not cfg.name_only and cfg.max_level is None,
+                )
+        else:
+            task = P.task_prompt(
                 rules=st["rules"],
                 observation=reset.observation,
                 goal=reset.goal,
                 with_think=with_think,
                 preamble=not self.demo_mode,
-            ),
-        )
+            )
+        ep.conv.pin("task", task)
         self._ask(ep, root, None, "task")
         self._loop(ep, root)
 
@@ -133,7 +150,11 @@ class ReCAPAgent(Agent):
 
     def _ask(self, ep: Episode, node: Node, prompt: str | None, kind: str, shown: tuple[str, ...] | None = None) -> None:
         if prompt is not None and self._reminder_due(ep):
-            prompt = P.reminder(self._state(ep)["rules"]) + "\n\n" + prompt
+            st = self._state(ep)
+            if isinstance(st.get("release"), ReleasePrompt) and st["release"].rules is not None:
+                prompt = P.release_reminder(st["rules"]) + prompt
+            else:
+                prompt = P.reminder(st["rules"]) + "\n\n" + prompt
         parse = partial(recap_reply, with_think=self.config.think != "none")
         d = ep.driver
         context = {
@@ -186,7 +207,11 @@ class ReCAPAgent(Agent):
         h = ep.conv.history
         prompt = P.descend_prompt(child.task)
         if self._reminder_due(ep):
-            prompt = P.reminder(self._state(ep)["rules"]) + "\n\n" + prompt
+            st = self._state(ep)
+            if isinstance(st.get("release"), ReleasePrompt) and st["release"].rules is not None:
+                prompt = P.release_reminder(st["rules"]) + prompt
+            else:
+                prompt = P.reminder(st["rules"]) + "\n\n" + prompt
         h.add("user", "descend", prompt, child.node_id)
         reply = P.shortcut_reply(child.task, self.config.think != "none")
         return h.add("assistant", "shortcut", reply, child.node_id)

@@ -62,6 +62,40 @@ def task_prompt(*, rules: str, observation: str, goal: str, with_think: bool, pr
     return "\n\n".join(parts)
 
 
+def release_task_prompt(*, system: str, rules: str, observation: str, goal: str, ask_many: bool) -> str:
+    """ReCAP's first prompt under ``prompts: release`` on Robotouille: the released template's
+    system text and rules (``ReleasePrompt.system``/``rules``), the first observation and the
+    goal, in the layout of ``robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261`` (a leading
+    newline, the system text, a whitespace-only line, the rules under a heading, the observation,
+    the goal under a sentence of its own, a closing request and a trailing newline). The framing
+    sentences are ours. ``ask_many``: the main code's closing also asks for more than one subtask
+    and its spacer line holds eight spaces; the ablations' code (``chatbot_no_think.py:238-252``,
+    ``chatbot_name_only.py:238-252``, ``chatbot_think_many.py``, ``chatbot_level_<n>.py``) has neither."""
+    spacer, close = ("        ", " Remember to write more than a single subtask.") if ask_many else ("", "")
+    return (
+        f"\n{system}\n{spacer}\nThe environment's rules:\n{rules}\n\n{observation}\n\n"
+        f"You are to prepare a new meal. The goal is described as follows:\n{goal}\n\n"
+        f"Begin the task now.{close}\n"
+    )
+
+
+def release_alfworld_task_prompt(*, system: str, rules: str, observation: str, goal: str) -> str:
+    """ReCAP's first prompt under ``prompts: release`` on ALFWorld, in the layout of
+    ``alfworld-recap/MATRIX/MATRIX/chatbot.py:242-253`` (the same in every ``chatbot_*.py``): a
+    leading newline, the system text (empty as released, SessionManager.py:83-84), a blank line,
+    the rule under a heading, the first observation with its valid actions (main.py:76), then the
+    task on a line of its own (the goal the observation states, SessionManager.py:86) and a
+    trailing newline. The framing sentences are ours."""
+    return f"\n{system}\n\nThe environment's rule:\n{rules}\n\n{observation}\n\nThe task at hand: {goal}\n"
+
+
+def release_reminder(rules: str) -> str:
+    """The released rules reminder (``robotouille-recap/MATRIX/MATRIX/chatbot.py:431-439``), put
+    before the prompt it rides on: a sentence, a blank line, the rules, a blank line, an end
+    marker and a blank line. The sentences are ours."""
+    return f"Many turns have passed, so here are the operating rules again, lest they slip your mind:\n\n{rules}\n\nRULES END\n\n"
+
+
 def descend_prompt(task: str) -> str:
     """The prompt of a descend call, on entering a child node: names the child's task and asks for
     its own subtask list."""

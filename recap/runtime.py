@@ -106,6 +106,7 @@ class Conversation:
                 block=config.window_block,
                 emit=emit,
                 counts_pins=config.history_counts_pins(),
+                keep=config.history_keep(),
             )
         )
         self.usage = usage if usage is not None else Usage()
@@ -133,11 +134,16 @@ class Conversation:
                 emit=self.emit,
                 counter=self.history.counter,
                 counts_pins=cfg.history_counts_pins(),
+                keep=cfg.history_keep(),
             ),
         )
 
     def pin(self, kind: str, content: str) -> int:
         return self.history.pin("user", kind, content)
+
+    def pin_message(self, role: str, kind: str, content: str) -> int:
+        """Pin a message with its own role (the authors' system text and example replies)."""
+        return self.history.pin(role, kind, content)
 
     def ask(
         self,
@@ -147,12 +153,16 @@ class Conversation:
         *,
         node_id: int | None = None,
         context: Mapping[str, Any] | None = None,
+        decode: Callable[[str], dict[str, Any]] = parse_json_object,
     ) -> tuple[dict[str, Any], int]:
         """Send ``prompt`` and return (parsed reply, seq of the reply message).
 
         ``prompt`` None means the prompt is already in the history (the pinned task prompt).
         A malformed reply is answered with a repair message, at most ``max_json_repairs`` times;
-        then the episode ends with ``json_failures``.
+        then the episode ends with ``json_failures``. ``decode`` turns the reply text into the
+        object ``parse`` checks (JSON by default; the plain-text formats of
+        :mod:`recap.baselines.textreply` pass the text through and handle malformed replies
+        themselves, as the released code does).
         """
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
@@ -161,7 +171,7 @@ class Conversation:
         while True:
             text, seq = self._call(purpose, node_id, context or {})
             try:
-                return parse(parse_json_object(text)), seq
+                return parse(decode(text)), seq
             except ReplyFormatError as exc:
                 if repairs >= self.config.max_json_repairs:
                     raise EpisodeEnd("json_failures", str(exc)) from None

@@ -101,7 +101,7 @@ _REPORT_EPILOG = """examples:
   recap report runs/a runs/b --out reports/ab       two runs in one report (--out required)
   recap report runs/demo --episodes 3f9c0a1b,77d2e0aa --format html
   recap report --viewer-max 0 runs/demo             options go before or after the run folders
-  recap report runs/paper-main runs/paper-main-x3 --paper --out reports/paper
+  recap report runs/paper-main-robotouille runs/paper-main-alfworld --paper --out reports/paper
                                                     only the paper's tables (examples/paper/)
 
 Writes only under the output folder (RUN_DIR/report or --out), and only into a new or empty

@@ -7,8 +7,9 @@ arm run under the same protocol (:func:`mismatch` says why not, in one short phr
 Why a protocol per table: the paper's tables come from different runs - the main and per-task
 tables from the full benchmarks, the cross-model table from synchronous tasks 2, 4, 6 with a
 64-message window, the ablations (and, we take it, the task-tree analysis and the task-6 cost,
-"20 runs" of task 6) with a 128-message window. The step caps follow the authors' released
-configs: optimal steps x 4, but x 3 for synchronous tasks 2, 4 and 6 (Robotouille data README).
+"20 runs" of task 6) with a 128-message window. Windows count messages: the paper's K = 64
+rounds is 128 messages. The step caps follow the authors' released configs per method and task
+(:data:`RELEASED_MULTIPLIERS`).
 """
 
 from __future__ import annotations
@@ -109,9 +110,40 @@ ALFWORLD_GAMES = 134
 ALFWORLD_TYPES = ("clean", "cool", "examine", "heat", "put", "puttwo")
 
 
-def step_multiplier(split: str, task_index: int | None) -> float:
-    """The step-cap multiplier of the authors' released Robotouille configs for one task."""
-    return 3.0 if split == "synchronous" and task_index in (2, 4, 6) else 4.0
+#: the step-cap multipliers of the authors' released Robotouille configs that are not x4:
+#: method -> split -> task index -> multiplier (ReCAP: robotouille-recap/conf/experiments/ReAct/
+#: synchronous/last-reasoning-action-mpc_{2,4,6}.yaml:43; ReAct: robotouille-baselines/conf/experiments/
+#: ReAct/synchronous/original_{2,4,6}.yaml:40, original_9.yaml:39, ReAct/asynchronous/
+#: original_{2,4,6}.yaml:39; Act: Act/*/original_*.yaml:39-40, x2 everywhere; Standard:
+#: IO/*/io.yaml:39, x1.5; ADaPT (Adapt/*/original_*.yaml:39) and CoT (IO-CoT/*/io-cot.yaml:39): x4
+#: everywhere). examples/paper/main-robotouille.yaml runs each method at these
+#: (tests/pipeline/test_step_multipliers.py checks every example unit against this table)
+RELEASED_MULTIPLIERS: dict[str, dict[str, dict[int, float]]] = {
+    "recap": {"synchronous": {2: 3.0, 4: 3.0, 6: 3.0}},
+    "react": {"synchronous": {2: 3.0, 4: 3.0, 6: 3.0, 9: 2.0}, "asynchronous": {2: 2.0, 4: 3.0, 6: 3.0}},
+    "act": {split: dict.fromkeys(range(10), 2.0) for split in ("synchronous", "asynchronous")},
+    "standard": {split: dict.fromkeys(range(10), 1.5) for split in ("synchronous", "asynchronous")},
+}
+
+
+def step_multiplier(split: str, task_index: int | None, method: str = "recap") -> float:
+    """The step-cap multiplier of the authors' released Robotouille configs for one task and method."""
+    if task_index is None:
+        return 4.0
+    return RELEASED_MULTIPLIERS.get(method, {}).get(split, {}).get(task_index, 4.0)
+
+
+def expected_window(protocol: Protocol, benchmark: str, method: str) -> int | None:
+    """The window (messages) ``method`` runs with under ``protocol``; None: not checked (Act keeps
+    its whole history, CoT/Standard make one call). The main tables follow the ``paper`` profile:
+    ReCAP and ADaPT 128 messages (K = 64 rounds), ReAct 64 on Robotouille (the benchmark's
+    original ReAct) and 128 on ALFWorld (the released react.py); tables with a stated window
+    (cross-model 64, ablations 128) use it for every method."""
+    if method in ("act", "cot", "standard"):
+        return None
+    if protocol.fixed_window or method != "react":
+        return protocol.window
+    return 64 if benchmark == "robotouille" else 128
 
 
 def task_index(task: str | None) -> int | None:
@@ -147,14 +179,22 @@ class Protocol:
     profile: str = "paper"
     #: "split:task_index" keys of the Robotouille tasks, or ALFWorld task types; None: every task of the split
     tasks: tuple[str, ...] | None = None
+    #: True: the table states one window for every method (a setting of the sweep); False: each
+    #: method's profile window (:func:`expected_window`)
+    fixed_window: bool = False
 
 
+#: windows in messages (one unit of ``window``): the paper's "K = 64 back-and-forth rounds" is 128
+#: messages, the released main value (robotouille-recap/main.py:55); the cross-model table states
+#: "a hard cap of 64 context messages", the ablations "context length 128 = messages stored"
 PROTOCOLS = {
-    "main": Protocol("main", ("gpt-4o",), 64),
-    "per_task": Protocol("per_task", ("gpt-4o",), 64),
-    "cross_model": Protocol("cross_model", tuple(CROSS_MODEL), 64, tasks=("synchronous:2", "synchronous:4", "synchronous:6")),
-    "ablations": Protocol("ablations", ("gpt-4o",), 128, tasks=("synchronous:6",)),
-    "costs_alfworld": Protocol("costs_alfworld", ("gpt-4o",), 64),
+    "main": Protocol("main", ("gpt-4o",), 128),
+    "per_task": Protocol("per_task", ("gpt-4o",), 128),
+    "cross_model": Protocol(
+        "cross_model", tuple(CROSS_MODEL), 64, tasks=("synchronous:2", "synchronous:4", "synchronous:6"), fixed_window=True
+    ),
+    "ablations": Protocol("ablations", ("gpt-4o",), 128, tasks=("synchronous:6",), fixed_window=True),
+    "costs_alfworld": Protocol("costs_alfworld", ("gpt-4o",), 128),
     "costs_task6": Protocol("costs_task6", ("gpt-4o",), 128, tasks=("synchronous:6",)),
     "trees": Protocol("trees", ("gpt-4o",), 128, tasks=("synchronous:6",)),
 }
@@ -174,6 +214,7 @@ class ArmProtocol:
     split: str
     #: (task, step multipliers seen on it)
     tasks: tuple[tuple[str, tuple[float, ...]], ...]
+    method: str = "recap"
 
 
 def _task_key(split: str, task: str) -> str:
@@ -196,8 +237,9 @@ def mismatch(protocol: Protocol, arm: ArmProtocol, expected_tasks: Iterable[str]
     if arm.profile != protocol.profile:
         return f"profile {arm.profile or 'none'}, the paper's runs are profile {protocol.profile}"
     windows = sorted({w for w in arm.windows if w is not None})
-    if windows != [protocol.window]:
-        return f"window {', '.join(map(str, windows)) or '?'} messages, the paper used {protocol.window}"
+    want_w = expected_window(protocol, arm.benchmark, arm.method)
+    if want_w is not None and windows != [want_w]:
+        return f"window {', '.join(map(str, windows)) or '?'} messages, the paper used {want_w}"
     got = {_task_key(arm.split, t) for t, _ in arm.tasks}
     if expected_tasks is not None:
         want = set(expected_tasks)
@@ -218,7 +260,7 @@ def mismatch(protocol: Protocol, arm: ArmProtocol, expected_tasks: Iterable[str]
         return "ran " + "; ".join(parts)
     if arm.benchmark == "robotouille":
         for task, mults in arm.tasks:
-            want_m = step_multiplier(arm.split, task_index(task))
+            want_m = step_multiplier(arm.split, task_index(task), arm.method)
             if sorted(set(mults)) != [want_m]:
                 got_m = ", ".join(f"x{m:g}" for m in sorted(set(mults)))
                 return f"step cap {got_m} on {_task_key(arm.split, task)}, the released configs use x{want_m:g}"

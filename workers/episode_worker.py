@@ -28,6 +28,7 @@ from recap.agent import Agent
 from recap.config import ConfigError
 from recap.env import Environment
 from recap.llm import LLMClient, LLMRequest, LLMResponse
+from recap.release_prompt import ReleasePrompt
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import check_vocabulary, record_to_row
@@ -70,7 +71,7 @@ def env_options_for(unit: UnitWork, agent: Agent) -> dict[str, Any]:
     options, which win."""
     from workers.envs.registry import get_benchmark
 
-    options = dict(get_benchmark(unit.benchmark).options_for_agent(agent.style))
+    options = dict(get_benchmark(unit.benchmark).options_for_agent(agent.style, agent.config))
     options.update({k: v for k, v in unit.env_options if v is not None})
     return options
 
@@ -207,6 +208,36 @@ def agent_from_config(method: str, method_config: str) -> Agent:
     return agent_cls(config)
 
 
+class ReleaseChanged(RuntimeError):
+    """The released text read now is not the one the unit was planned (and hashed) with."""
+
+
+def release_demonstration(unit: UnitWork, agent: Agent) -> str | bool | ReleasePrompt:
+    """What the episode pins first: True (the agent renders our demonstration) unless the unit's
+    settings say ``prompts: release:<digest>``; then the authors' text for this instance, read from
+    the release folder (:mod:`workers.release.texts`) and checked against the digest the unit's
+    hash covers (ReleaseChanged otherwise): the released messages with their roles where
+    :func:`workers.release.texts.release_prompt` builds them (the agent then leaves out our system
+    text and rules), else the joined text. Plain strings either way: recap/ reads no file."""
+    prompts = getattr(agent.config, "prompts", "ours")
+    if not prompts.startswith("release:"):
+        return True
+    from schemas.labels import place_of
+    from workers.release.texts import release_folder, release_prompt, release_text
+
+    bench, split, task = place_of(unit.instance_id)
+    folder = release_folder()
+    think, name_only = getattr(agent.config, "think", "latest"), bool(getattr(agent.config, "name_only", False))
+    text = release_text(folder, unit.method, bench, split, task, think=think, name_only=name_only)
+    if f"release:{text.digest}" != prompts:
+        raise ReleaseChanged(
+            f"the released text for {unit.method} on {bench}/{split}/{task} changed since the plan "
+            f"(sha256 {text.digest[:12]}..., planned {prompts[8:20]}...): re-run the sweep to plan it again"
+        )
+    structured = release_prompt(folder, unit.method, bench, split, task, think=think, name_only=name_only)
+    return structured if structured is not None else text.text
+
+
 class EpisodeRunner:
     """Plays units; the Ray actor is a thin shell around this (so it can be tested directly)."""
 
@@ -277,9 +308,15 @@ class EpisodeRunner:
             out.env = EnvFacts(
                 benchmark=env.benchmark, split=env.split, task=env.task, optimal_steps=env.optimal_steps, max_steps=env.max_steps
             )
+            try:
+                demonstration = release_demonstration(unit, agent)
+            except Exception as exc:  # the release folder went missing or changed since the plan
+                log.warning("%s: %s", episode_id, exc)
+                out.result = EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000])
+                return out
             client = EpisodeClient(self._client(unit.model_label), env, seed=int(unit.seed), offline=offline)
             try:
-                result = agent.run(env, client, episode_id=episode_id, emit=forward)
+                result = agent.run(env, client, episode_id=episode_id, emit=forward, demonstration=demonstration)
             except ClientError as exc:
                 log.warning("%s: the model client failed: %s", episode_id, exc)
                 out.crash = Crash("client", str(exc)[:2000])

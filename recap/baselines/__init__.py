@@ -4,7 +4,7 @@ to the model only through :class:`recap.runtime.Conversation` and to the environ
 through :class:`recap.runtime.EnvDriver`.
 """
 
-from recap.baselines.act import ActAgent
+from recap.baselines.act import ActAgent, ActConfig
 from recap.baselines.adapt import ADaPTAgent, ADaPTConfig
 from recap.baselines.cot import CoTAgent, PlanConfig
 from recap.baselines.react import ReActAgent, ReActConfig
@@ -14,6 +14,7 @@ __all__ = [
     "ADaPTAgent",
     "ADaPTConfig",
     "ActAgent",
+    "ActConfig",
     "CoTAgent",
     "PlanConfig",
     "ReActAgent",

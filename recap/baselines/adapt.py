@@ -1,5 +1,9 @@
 """ADaPT (Prasad et al., 2023, "As-Needed Decomposition and Planning with Language Models").
 
+``algorithm: plan_once`` (the ``released`` profile outside ALFWorld) is instead the authors'
+released Robotouille ADaPT, which plans once and never decomposes on failure:
+:mod:`recap.baselines.adapt_released`. Everything below is ``algorithm: as_needed``.
+
 Control flow (the paper's Algorithm 1, with the released code's depth rule):
 
     solve(task, depth):
@@ -68,9 +72,10 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 from recap.agent import Agent, DemonstrationError, format_transcript
+from recap.baselines import adapt_released
 from recap.baselines import prompts as P
 from recap.baselines.react import ReActAgent
 from recap.config import AgentConfig, ConfigError
@@ -105,9 +110,42 @@ class ADaPTConfig(AgentConfig):
     executor_steps: int = 20
     executor_patience: int | None = 5
     initial_observation: bool = False
+    #: ``as_needed``: the ADaPT paper's execute-first / decompose-on-failure (this module);
+    #: ``plan_once``: the authors' released Robotouille ADaPT (recap.baselines.adapt_released),
+    #: plain-text replies, so it needs ``json_mode: false``
+    algorithm: Literal["as_needed", "plan_once"] = "as_needed"
+    #: plan_once: the planner call's temperature ("same": the agent's ``temperature``)
+    planner_temperature: float | None | Literal["same"] = "same"
+    #: plan_once: messages an executor keeps after its pins (None: the agent's window rules)
+    executor_window: int | None = None
+
+    @classmethod
+    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
+        out = super().profile_defaults(profile, benchmark, ablation)
+        if profile == "released" and benchmark != "alfworld":
+            # the release's ADaPT (Robotouille only): plan once at temperature 0.0
+            # (ADaPT_agent.py:21), executors trimmed past 64 messages (ReAct_agent.py:129) and
+            # given up after 5 unusable replies in a row (ReAct_agent.py:62,231)
+            out.update(algorithm="plan_once", json_mode=False, planner_temperature=0.0, executor_window=64, executor_patience=5)
+        return out
+
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released prompts are those of the released algorithm (a planner and ReAct executors
+        in plain text, ADaPT_agent.py): ``plan_once`` on Robotouille, the only benchmark they exist for."""
+        return {"algorithm": "plan_once", "json_mode": False} if benchmark == "robotouille" else {}
 
     def validate(self) -> None:
         super().validate()
+        if self.algorithm not in ("as_needed", "plan_once"):
+            raise ConfigError(f"algorithm must be as_needed or plan_once, got {self.algorithm!r}")
+        if self.algorithm == "plan_once" and self.json_mode:
+            raise ConfigError("algorithm: plan_once needs json_mode: false (its replies are plain text)")
+        t = self.planner_temperature
+        if t != "same" and t is not None and (isinstance(t, bool) or not isinstance(t, int | float) or not 0 <= t <= 2):
+            raise ConfigError(f'planner_temperature must be in [0, 2], null or "same", got {t!r}')
+        if self.executor_window is not None and self.executor_window < 2:
+            raise ConfigError(f"executor_window must be >= 2 messages or null, got {self.executor_window}")
         if self.max_depth < 1:
             raise ConfigError(f"max_depth must be >= 1 (the root task is depth 1), got {self.max_depth}")
         if self.executor_steps < 1:
@@ -195,6 +233,8 @@ class ADaPTAgent(Agent):
 
     # -- one episode ------------------------------------------------------------------------------
     def play(self, ep: Episode, reset: Reset) -> None:
+        if self.config.algorithm == "plan_once":
+            return adapt_released.play(self, ep, reset)
         st = ep.extra
         st.update(nodes=[], max_depth=0, rules=ep.env.rules(), initial=reset.observation, last_action=None)
         st["executor_demo"], st["planner_demo"] = self._demo_texts(ep)
@@ -342,6 +382,13 @@ class ADaPTAgent(Agent):
 
     def render_demonstration(self, demo: Demonstration) -> str:
         key = self._key("executor", demo)
+        if key not in _DEMOS and self.config.algorithm == "plan_once":
+            released = demo.replies.get(EXECUTOR_DEMO_KEY) or demo.replies.get(ReActAgent.style)
+            if released is None:
+                raise DemonstrationError(
+                    f"demonstration {demo.name!r} has no 'adapt_executor' or 'react' replies for the ADaPT executor"
+                )
+            _DEMOS[key] = adapt_released.executor_demonstration(self, demo, list(released))
         if key not in _DEMOS:
             replies = demo.replies.get(EXECUTOR_DEMO_KEY) or demo.replies.get(ReActAgent.style)
             if replies is None:
@@ -358,6 +405,8 @@ class ADaPTAgent(Agent):
 
     def render_planner_demonstration(self, demo: Demonstration) -> str:
         key = self._key("planner", demo)
+        if key not in _DEMOS and self.config.algorithm == "plan_once":
+            _DEMOS[key] = adapt_released.planner_demonstration(self, demo, planner_demo_reply(demo))
         if key not in _DEMOS:
             messages, result = self._render_run(demo, [planner_demo_reply(demo)], "planner")
             if result.end_reason != "agent_done" or result.llm_calls != 1:

@@ -26,7 +26,9 @@ from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
+from recap.baselines.plan_text import demo_texts, play_text
 from recap.baselines.react import flat_context
+from recap.baselines.reply_format import check_reply_format, text_reply_defaults
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
@@ -39,14 +41,32 @@ class PlanConfig(AgentConfig):
     """CoT / Standard settings: what an invalid planned action does in ``reject`` mode."""
 
     on_invalid: Literal["stop", "skip"] = "stop"
+    #: ``json`` (ours) or ``text``: the released I/O agents' plain-text plan, checked whole
+    #: first (recap.baselines.plan_text); ``text`` needs ``json_mode: false``
+    reply_format: Literal["json", "text"] = "json"
     #: the whole plan in one reply: the longest expert plan (async 9 @420, 103 actions) is
     #: 1,286 tokens with a think (bench/protocol.py); 1024 cut it
     max_tokens: int | None = 3072
+
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released I/O prompts ask for the plain-text plan (IO/1.0.0-io.yml, IO/1.1.0-io-cot.yml);
+        the release has them for Robotouille only."""
+        return text_reply_defaults(False, benchmark) if benchmark == "robotouille" else {}
 
     def validate(self) -> None:
         super().validate()
         if self.on_invalid not in ("stop", "skip"):
             raise ConfigError(f"on_invalid must be 'stop' or 'skip', got {self.on_invalid!r}")
+        check_reply_format(self)
+
+    @classmethod
+    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
+        out = super().profile_defaults(profile, benchmark, ablation)
+        if profile == "released":
+            # the released I/O agents exist for Robotouille only; ALFWorld keeps our JSON plan
+            out.update(text_reply_defaults(False, benchmark))
+        return out
 
 
 class CoTAgent(Agent):
@@ -75,7 +95,14 @@ class CoTAgent(Agent):
     def reply_format(self) -> str:
         return P.plan_format(self.with_think)
 
+    def shape_demo_replies(self, replies: list[Any]) -> list[Any]:
+        if self.config.reply_format == "text":
+            return demo_texts(self, replies)
+        return super().shape_demo_replies(replies)
+
     def play(self, ep: Episode, reset: Reset) -> None:
+        if self.config.reply_format == "text":
+            return play_text(self, ep, reset)
         ep.conv.pin(
             "task",
             P.plan_task_prompt(

@@ -12,6 +12,8 @@ demonstration shows only what changes from one episode to the next.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 # -- reply formats (also shown to the model in repair messages) ---------------------------------
 
 
@@ -135,10 +137,24 @@ def _with_preamble(system: str, rules: str, body: list[str], preamble: bool) -> 
     return "\n\n".join([*parts, *body])
 
 
-def action_task_prompt(*, rules: str, observation: str, goal: str, with_think: bool, preamble: bool) -> str:
-    """The pinned task prompt of ReAct / Act."""
+def thought_line(with_think: bool) -> str:
+    """How ReAct (``with_think``) or Act thinks without acting, when thoughts are answered "OK."
+    (``think_actions``; the released ALFWorld ReAct and Act, whose examples think this way)."""
+    if with_think:
+        return 'To think without acting, write the action as "think: <your thought>"; I answer "OK." and no step is used.'
+    return 'To think without acting, reply {"think": "<your thought>"} with no "action"; I answer "OK." and no step is used.'
+
+
+def action_task_prompt(
+    *, rules: str, observation: str, goal: str, with_think: bool, preamble: bool, think_actions: bool = False
+) -> str:
+    """The pinned task prompt of ReAct / Act (``think_actions``: the system text says how to think
+    without acting)."""
     body = [f"Initial observation:\n{observation}", f"Your goal:\n{goal}", "Reply with your first action."]
-    return _with_preamble(action_system_text(with_think), rules, body, preamble)
+    system = action_system_text(with_think)
+    if think_actions:
+        system = f"{system}\n{thought_line(with_think)}"
+    return _with_preamble(system, rules, body, preamble)
 
 
 def plan_task_prompt(*, rules: str, observation: str, goal: str, with_think: bool, preamble: bool) -> str:
@@ -209,6 +225,33 @@ def invalid_action_prompt(action: str, observation: str) -> str:
         "and nothing changed. Choose an action exactly as it is written among the valid actions.\n\n"
         f"Observation:\n{observation}"
     )
+
+
+#: the answer to a thought (``think_actions``), as in the released ALFWorld ReAct and Act
+THOUGHT_ACK = "OK."
+
+
+def explained_invalid_prompt(action: str, observation: str, valid_actions: Sequence[str] | None, *, with_think: bool) -> str:
+    """Feedback after a command that reached the game but is not a valid action (ALFWorld under
+    the profiles): what happened, three numbered likely causes, then the game's answer and, when
+    that answer does not already list them, the valid actions. Our words; it carries what the
+    released feedback carries (alfworld-recap/react_alfworld/react.py:161-170): the command is not
+    among the valid actions, assumptions may be wrong, inexact wording, a thought not marked as
+    one, and the list."""
+    thought = (
+        'write the action as "think: <your thought>"' if with_think else 'reply {"think": "<your thought>"} with no "action"'
+    )
+    lines = [
+        f"'{action}' is not one of the valid actions, so it changed nothing. Likely causes:",
+        "1. The command is not an exact copy of a valid action: copy it word for word, numbers included.",
+        f"2. You meant to think rather than act: to think, {thought}.",
+        "3. Something you assumed about the situation does not hold: check the latest observation.",
+        "",
+        f"Observation:\n{observation}",
+    ]
+    if valid_actions is not None:
+        lines += ["", "Valid actions:", *valid_actions]
+    return "\n".join(lines)
 
 
 def planner_transcript(prompt: str, reply: str) -> str:

@@ -13,33 +13,49 @@ One episode:
   environment, whose answer ("Nothing happens.") is the next observation;
 * it runs until the episode ends: success, the step cap, the call cap, JSON failures, a model
   error or a budget. ``invalid_streak`` optionally reproduces Robotouille's give-up rule;
-* ``history``: ``window`` keeps the last K messages (Yao et al.'s ReAct, bounded by the shared
-  window); ``last`` keeps only the last reply and the message after it (Robotouille's own ReAct,
-  "last reasoning and action": the model sees the pins, its previous think + action and the
-  current observation or error feedback).
+* ``history``: ``window`` keeps the last K messages (optionally keeping the first reply);
+  ``last`` keeps only the last reply and the message after it (Robotouille's "last reasoning and
+  action" ablation); ``all`` keeps everything (the released Act).
 
-The ``paper`` and ``released`` profiles use Robotouille's protocol on Robotouille (``history:
-last``, give up after 3 rounds of 5 consecutive invalid actions) and Yao et al.'s on ALFWorld
-(``history: window``, no give-up rule; invalid commands reach the game as in their setting).
+The ``paper`` and ``released`` profiles follow the authors' released baselines (see
+:meth:`ReActConfig.profile_defaults` for the file and line of each item): on Robotouille the
+benchmark's "original" ReAct (the whole history trimmed past 64 messages, first exchange kept;
+give up after 3 rounds of 5 consecutive invalid actions), Act with no window; on ALFWorld the
+released react.py / act.py (valid actions in every observation, "OK." for a thought, explained
+feedback after an invalid command, 128 messages counting the pins; Act with no window).
+
+``reply_format: text`` (the ``released`` profile's choice where the release reads plain text)
+runs the same episode through :mod:`recap.baselines.react_text`: other reply parsing, the same
+history, observations and explained feedback (:meth:`ReActAgent.explained_feedback`).
 
 Message kinds (also the call purposes): ``task`` (pinned), ``observation``, ``feedback`` (after
-a rejected action), ``repair``. Hints for offline models: ``task`` (the goal), ``depth`` 0,
-``valid_actions``.
+a rejected or, explained, an invalid action), ``thought`` (after a thought), ``repair``. Hints
+for offline models: ``task`` (the goal), ``depth`` 0, ``valid_actions``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
 from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
+from recap.baselines import text_prompts as T
+from recap.baselines.act_json import MALFORMED_JSON, PARSE_ERROR_ACTION, read_reply
+from recap.baselines.react_text import demo_texts, play_text, raw_text
+from recap.baselines.reply_format import check_reply_format, text_reply_defaults
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
 from recap.jsonreply import action_reply
 from recap.runtime import Episode, EpisodeEnd
+
+#: how a ReAct action that only thinks starts (``think_actions``)
+THOUGHT_PREFIX = "think:"
+
+
+#: ``history: all`` keeps every message (no window): a bound no episode reaches
+UNBOUNDED_WINDOW = 10**9
 
 
 @dataclass(frozen=True)
@@ -50,37 +66,120 @@ class ReActConfig(AgentConfig):
     actions (a "round"; it uses 5) and ends the episode after ``invalid_rounds`` such rounds (it
     uses 3). None (default) switches the rule off: the paper states no such rule, and the call
     cap bounds the episode anyway.
+
+    ``history``: ``window`` (the last K messages), ``last`` (the last reply and the message after
+    it), ``all`` (no window: the released Act); ``window_keeps_first``: the first reply is never
+    trimmed (the released Robotouille ReAct). ``think_actions``: an action written as a thought
+    (``think: ...``; Act: a reply with a ``think`` field) is answered "OK." without reaching the
+    environment or using a step. ``invalid_feedback``: after an action that reached the game but
+    was not valid (``step`` mode), ``plain`` shows the game's answer alone, ``explained`` adds
+    that it was not a valid action, three numbered likely causes and the valid actions.
     """
 
     invalid_streak: int | None = None
     invalid_rounds: int = 3
-    history: Literal["window", "last"] = "window"
+    history: Literal["window", "last", "all"] = "window"
+    window_keeps_first: bool = False
+    think_actions: bool = False
+    invalid_feedback: Literal["plain", "explained"] = "plain"
+    #: ``json`` (ours) or ``text``: the released code's plain-text replies and parsing
+    #: (recap.baselines.react_text); ``text`` needs ``json_mode: false``
+    reply_format: Literal["json", "text"] = "json"
+    #: the text layout: ``labelled`` (Robotouille's "Reasoning:" / "Action:" lines) or ``yao``
+    #: (ALFWorld's one line: "think: ..." or the command)
+    text_layout: Literal["labelled", "yao"] = "labelled"
+    #: JSON replies: ``repair`` (ours: a malformed reply is answered with a repair request) or
+    #: ``game`` (the released ALFWorld Act: it becomes a command the game answers,
+    #: recap.baselines.act_json)
+    malformed_json: Literal["repair", "game"] = "repair"
 
     @classmethod
     def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
         out = super().profile_defaults(profile, benchmark, ablation)
         if benchmark == "robotouille":
-            # the benchmark's ReAct: last reasoning + action only; after 5 consecutive invalid
-            # actions it starts a new round of feedback, and the third such round ends the episode
-            out.update(history="last", invalid_streak=5, invalid_rounds=3)
+            # the benchmark's ReAct with the "original" prompt, as every released main config runs
+            # it (robotouille-baselines/conf/experiments/ReAct/{synchronous,asynchronous}/original_*.yaml:
+            # prompt_description original, every is_*_history flag false): the whole history,
+            # trimmed once it passes 64 messages by dropping the oldest pair after the first
+            # exchange (agents/ReAct_agent.py:129-130), 2 messages on a context-length error
+            # (:138); after 5 consecutive invalid actions a new round of feedback, the third round
+            # ends the episode (:62-64, :284-288)
+            out.update(
+                history="window",
+                window=64,
+                window_counts_pins=False,
+                window_keeps_first=True,
+                context_drop=2,
+                invalid_streak=5,
+                invalid_rounds=3,
+            )
         elif benchmark == "alfworld":
-            out.update(history="window", invalid_streak=None)
+            # alfworld-recap/react_alfworld/react.py: the valid actions after the first observation
+            # (:209) and every valid action's observation (:172), "OK." for a thought (:159-160),
+            # the explained feedback after an invalid command (:161-170); 128 messages counted over
+            # the whole history, oldest pair dropped (:51-52), 32 on a context-length error (:69);
+            # Yao et al.'s example has no valid-action lists (:206-208)
+            out.update(
+                history="window",
+                window=128,
+                window_counts_pins=True,
+                context_drop=32,
+                invalid_streak=None,
+                think_actions=True,
+                invalid_feedback="explained",
+                valid_actions="episode",
+            )
+        if profile == "released":
+            # the released agents' plain-text replies (recap.baselines.reply_format); the history,
+            # window and feedback above apply to the text loop unchanged
+            out.update(text_reply_defaults(cls.released_text, benchmark))
         return out
 
+    #: whether the released code's agent replies in plain text on ALFWorld (ReAct: react.py;
+    #: Act's act.py asks for JSON)
+    released_text: ClassVar[bool] = True
+
+    @classmethod
+    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
+        """The released prompts ask for the released reply layout: Robotouille's "Reasoning:" /
+        "Action:" lines (ReAct/1.0.0-original.yml, Act/1.0.0-original.yml), ALFWorld ReAct's one
+        line (react_alfworld/react.py), ALFWorld Act's JSON (act_alfworld/act.py:165-168)."""
+        if benchmark not in ("robotouille", "alfworld"):
+            return {}
+        return text_reply_defaults(cls.released_text, benchmark) or {"reply_format": "json"}
+
     def history_window(self) -> int:
-        return 2 if self.history == "last" else self.window
+        if self.history == "last":
+            return 2
+        return UNBOUNDED_WINDOW if self.history == "all" else self.window
 
     def history_counts_pins(self) -> bool:
-        return False if self.history == "last" else self.window_counts_pins
+        return False if self.history != "window" else self.window_counts_pins
+
+    def history_keep(self) -> int:
+        return 1 if self.window_keeps_first and self.history != "last" else 0
 
     def validate(self) -> None:
         super().validate()
-        if self.history not in ("window", "last"):
-            raise ConfigError(f"history must be window or last, got {self.history!r}")
+        if self.history not in ("window", "last", "all"):
+            raise ConfigError(f"history must be window, last or all, got {self.history!r}")
         if self.invalid_streak is not None and self.invalid_streak < 1:
             raise ConfigError(f"invalid_streak must be >= 1 or null, got {self.invalid_streak}")
         if self.invalid_rounds < 1:
             raise ConfigError(f"invalid_rounds must be >= 1, got {self.invalid_rounds}")
+        if self.invalid_feedback not in ("plain", "explained"):
+            raise ConfigError(f"invalid_feedback must be plain or explained, got {self.invalid_feedback!r}")
+        if self.window_keeps_first and self.history == "window" and self.window < 4:
+            raise ConfigError("window must be >= 4 messages when it keeps the first reply")
+        check_reply_format(self)
+        if self.malformed_json not in ("repair", "game"):
+            raise ConfigError(f"malformed_json must be repair or game, got {self.malformed_json!r}")
+        if self.text_layout not in ("labelled", "yao"):
+            raise ConfigError(f"text_layout must be labelled or yao, got {self.text_layout!r}")
+
+
+def _keep(obj: dict[str, Any]) -> dict[str, Any]:
+    return obj
 
 
 def flat_context(ep: Episode, goal: str) -> dict[str, Any]:
@@ -113,25 +212,95 @@ class ReActAgent(Agent):
     def reply_format(self) -> str:
         return P.action_format(self.with_think)
 
+    def parse_reply(self, obj: dict[str, Any]) -> dict[str, Any]:
+        """The reply's fields. With ``think_actions``, Act also takes a reply that holds a
+        ``think`` and no action (a thought) and keeps the think of one that holds both."""
+        if self.config.think_actions and not self.with_think:
+            think = obj.get("think")
+            if isinstance(think, str) and "action" not in obj:
+                return {"think": think, "action": None}
+            reply = action_reply(obj, with_think=False)
+            if isinstance(think, str):
+                reply["think"] = think
+            return reply
+        return action_reply(obj, with_think=self.with_think)
+
+    def is_thought(self, reply: dict[str, Any]) -> bool:
+        """A reply that only thinks (``think_actions``): ReAct's action ``think: ...``
+        (alfworld-recap/react_alfworld/react.py:159), Act's reply without an action."""
+        action = reply["action"]
+        if action is None:
+            return True
+        return self.with_think and action.lower().startswith(THOUGHT_PREFIX)
+
+    def explained_feedback(self, ep: Episode, action: str) -> str:
+        """The message after a command that reached the game but was not valid
+        (``invalid_feedback: explained``), for the JSON and the text loop alike: the valid
+        actions are listed unless the game's answer already lists them."""
+        d = ep.driver
+        listed = ep.env.lists_valid_actions
+        return P.explained_invalid_prompt(action, d.observation, None if listed else d.valid_actions, with_think=self.with_think)
+
+    def shape_demo_replies(self, replies: list[Any]) -> list[Any]:
+        if self.config.reply_format == "text":
+            return demo_texts(self, replies)
+        return super().shape_demo_replies(replies)
+
     def play(self, ep: Episode, reset: Reset) -> None:
+        if self.config.reply_format == "text":
+            return play_text(self, ep, reset)
         cfg, d = self.config, ep.driver
-        ep.conv.pin(
-            "task",
-            P.action_task_prompt(
-                rules=ep.env.rules(),
-                observation=reset.observation,
-                goal=reset.goal,
-                with_think=self.with_think,
-                preamble=not self.demo_mode,
-            ),
-        )
-        parse = partial(action_reply, with_think=self.with_think)
+        # prompts: release on ALFWorld (Act: the JSON loop): the released first prompt with its
+        # JSON request (act_alfworld/act.py:158-172, 304), and each observation as the release
+        # sends it, without our heading (act.py:211)
+        released = "release" in ep.extra and ep.env.benchmark == "alfworld"
+        if released:
+            goal = "" if reset.goal in reset.observation else f"\n\nGoal: {reset.goal}"
+            ep.conv.pin("task", T.release_alfworld_task(f"{reset.observation}{goal}", json_example=T.RELEASE_JSON_EXAMPLE))
+        else:
+            ep.conv.pin(
+                "task",
+                P.action_task_prompt(
+                    rules=ep.env.rules(),
+                    observation=reset.observation,
+                    goal=reset.goal,
+                    with_think=self.with_think,
+                    preamble=not self.demo_mode,
+                    think_actions=cfg.think_actions,
+                ),
+            )
         prompt: str | None = None  # the first call answers the pinned task prompt
         kind = "task"
         streak = rounds = 0
         while True:
-            reply, _ = ep.conv.ask(prompt, kind, parse, context=flat_context(ep, reset.goal))
+            if cfg.malformed_json == "game":
+                raw, _ = ep.conv.ask(prompt, kind, _keep, context=flat_context(ep, reset.goal), decode=raw_text)
+                read = read_reply(raw["text"])
+                if read.malformed:
+                    # the release sends its placeholder command to the game (a step) and shows
+                    # its own note instead of the game's answer (act_alfworld/act.py:183-199)
+                    try:
+                        d.execute(read.action or PARSE_ERROR_ACTION)
+                    except InvalidActionError:
+                        pass  # an environment that rejects invalid commands takes no step
+                    prompt, kind = MALFORMED_JSON, "feedback"
+                    continue
+                if read.action is None and read.think is None:
+                    # neither field: the release sends its last message again (act.py:221)
+                    prompt = prompt if prompt is not None else reset.observation
+                    continue
+                if read.action is None:  # a thought, whatever think_actions says (act.py:218-219)
+                    prompt, kind = P.THOUGHT_ACK, "thought"
+                    continue
+                reply = read.as_reply()
+            else:
+                reply, _ = ep.conv.ask(prompt, kind, self.parse_reply, context=flat_context(ep, reset.goal))
+            if cfg.think_actions and self.is_thought(reply):
+                # a thought: no environment step, no step used (react.py:159-160, act.py:218-219)
+                prompt, kind = P.THOUGHT_ACK, "thought"
+                continue
             action = reply["action"]
+            valid = d.is_valid(action)
             try:
                 d.execute(action)
             except InvalidActionError:
@@ -146,4 +315,11 @@ class ReActAgent(Agent):
                         ) from None
                 continue
             streak = 0
-            prompt, kind = P.observation_prompt(d.observation), "observation"
+            if cfg.think_actions and reply.get("think") is not None and not self.with_think:
+                # the released Act answers "OK." to any reply with a think, even one that also
+                # acted: the action runs, its observation is not shown (act_alfworld/act.py:218-219)
+                prompt, kind = P.THOUGHT_ACK, "thought"
+            elif not valid and cfg.invalid_feedback == "explained":
+                prompt, kind = self.explained_feedback(ep, action), "feedback"
+            else:
+                prompt, kind = d.observation if released else P.observation_prompt(d.observation), "observation"

@@ -11,7 +11,9 @@
 --                think_many, name_only, level_N, no_shortcut (several joined with '+').
 --   window_size  method_config.window (messages kept in the LLM context).
 --   arm          the arm's label, plus ' ctx N' when the same label appears with several window
---                sizes in the data (several runs in one report).
+--                sizes on one benchmark in the data (several runs in one report). A window that
+--                differs only from one benchmark to another is the protocol's, not a variant (the
+--                released ReAct keeps 64 messages on Robotouille, 128 on ALFWorld): one arm.
 --   model_label  the model, with ' (test double)' for test-double models.
 --   env_split    benchmark/split: robotouille/synchronous, robotouille/asynchronous,
 --                alfworld/valid_unseen (ALFWorld is one split; its task types are the tasks).
@@ -36,14 +38,15 @@ WITH parsed AS (
   FROM parsed p
 ), marked AS (
   SELECT s.*,
-    s.end_reason <> 'budget_exhausted' AND s.infra_kind IS NULL AS finished
+    s.end_reason <> 'budget_exhausted' AND s.infra_kind IS NULL AS finished,
+    count(DISTINCT s.window_size) OVER (PARTITION BY s.label, s.benchmark) AS _windows_here
   FROM settings s
 )
-SELECT s.*,
+SELECT s.* EXCLUDE (_windows_here),
   model_label(s.model, s.test_double) AS model_label,
   s.benchmark || '/' || s.split AS env_split,
   s.label
-    || CASE WHEN count(DISTINCT s.window_size) OVER (PARTITION BY s.label) > 1
+    || CASE WHEN max(s._windows_here) OVER (PARTITION BY s.label) > 1
             THEN ' ctx ' || coalesce(CAST(s.window_size AS VARCHAR), '?') ELSE '' END AS arm,
   row_number() OVER (
     PARTITION BY s.unit_id ORDER BY s.attempt DESC, s.ended_at DESC, s.run_id DESC, s.episode_id DESC

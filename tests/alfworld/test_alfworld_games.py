@@ -98,7 +98,7 @@ def test_bad_options(bench):
         bench.make(HEAT_ID, max_step=3)
     assert str(err.value) == (
         "unknown ALFWorld option(s) max_step; accepted: data_dir, data_dir_2_1_2, version, "
-        "max_steps, step_multiplier, seed, show_valid_actions"
+        "max_steps, step_multiplier, seed, show_valid_actions, demo_valid_actions"
     )
     with pytest.raises(ValueError, match="^max_steps must be a positive integer, got 0$"):
         bench.make(HEAT_ID, max_steps=0)

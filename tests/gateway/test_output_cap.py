@@ -21,6 +21,23 @@ def test_generation_params_send_the_method_cap_unless_the_model_caps_it():
     assert capped.generation_params(0.5, None, True)["max_tokens"] == 512
 
 
+def test_no_method_cap_sends_the_models_whole_output():
+    """The paper/released profiles send max_tokens None (issue 25 item 9): the request carries the
+    model's own maximum, so no reply the provider would finish is cut by us."""
+    from recap.methods import make_agent
+    from workers.llm.providers import model_max_output_tokens
+
+    for method in ("recap", "react", "act", "cot", "standard", "adapt"):
+        for profile in ("paper", "released"):
+            assert make_agent(method, profile=profile, benchmark="robotouille").config.max_tokens is None
+    assert make_agent("recap").config.max_tokens == 3072  # no profile: the measured cap, unchanged
+    gpt4o = DeploymentConfig(model="openai/gpt-4o-2024-08-06")
+    assert gpt4o.generation_params(0.5, None, True)["max_tokens"] == model_max_output_tokens("openai/gpt-4o-2024-08-06") == 16384
+    assert DeploymentConfig(model="deepseek/deepseek-chat").generation_params(None, None, True)["max_tokens"] == 8192
+    assert model_max_output_tokens("openai/x") is None  # unknown: DEFAULT_MAX_TOKENS above
+    assert DeploymentConfig(model="offline/expert").generation_params(None, None, True)["max_tokens"] == DEFAULT_MAX_TOKENS
+
+
 def test_a_plan_cut_by_the_provider_ends_as_truncated(fake_server):
     # a long CoT plan: 400 characters = 100 estimated tokens, cut at the method's cap of 40
     plan = '{"think": "' + "step " * 70 + '", "actions": ["pick up A"]}'

@@ -46,6 +46,8 @@ class SteppingBlocksworld(BlocksworldEnv):
     valid takes a step and is answered "Nothing happens."."""
 
     invalid_action_mode = "step"
+    #: its "Nothing happens." lists no valid actions
+    lists_valid_actions = False
 
     def step(self, action: str) -> Step:
         if action in self._valid:

@@ -202,7 +202,7 @@ def test_registry_maps_every_method_to_its_agent_and_config():
     assert {m: (a.__name__, c.__name__) for m, (a, c) in METHODS.items()} == {
         "recap": ("ReCAPAgent", "ReCAPConfig"),
         "react": ("ReActAgent", "ReActConfig"),
-        "act": ("ActAgent", "ReActConfig"),
+        "act": ("ActAgent", "ActConfig"),
         "cot": ("CoTAgent", "PlanConfig"),
         "standard": ("StandardAgent", "PlanConfig"),
         "adapt": ("ADaPTAgent", "ADaPTConfig"),
@@ -214,10 +214,16 @@ def test_registry_maps_every_method_to_its_agent_and_config():
 def test_make_agent_applies_profile_ablation_and_settings():
     a = make_agent("react", profile="released", invalid_streak=5)
     assert isinstance(a, ReActAgent) and a.config == ReActConfig(
-        window=128, temperature=None, window_counts_pins=True, invalid_streak=5
+        window=128,
+        temperature=None,
+        window_counts_pins=True,
+        invalid_streak=5,
+        max_tokens=None,
+        reply_format="text",
+        json_mode=False,
     )
     a = make_agent("adapt", profile="paper", max_depth=4)
-    assert isinstance(a, ADaPTAgent) and a.config == ADaPTConfig(window=64, temperature=0.5, max_depth=4)
+    assert isinstance(a, ADaPTAgent) and a.config == ADaPTConfig(window=128, temperature=0.5, max_depth=4, max_tokens=None)
     assert make_agent("standard", on_invalid="skip").config == PlanConfig(on_invalid="skip")
     r = make_agent("recap", ablation="level_3")
     assert isinstance(r, ReCAPAgent) and r.config.max_level == 3

@@ -10,7 +10,7 @@ import json
 import pytest
 
 from recap.agent import ElidedObservations
-from recap.baselines import ActAgent, ADaPTConfig, CoTAgent, PlanConfig, ReActAgent, ReActConfig, StandardAgent
+from recap.baselines import ActAgent, ActConfig, ADaPTConfig, CoTAgent, PlanConfig, ReActAgent, ReActConfig, StandardAgent
 from recap.blocksworld import BENCHMARK, DEMONSTRATION, RULES
 from recap.config import OMITTED_OBSERVATION, ConfigError, ReCAPConfig, build_config
 from recap.llm import LLMResponse
@@ -35,17 +35,58 @@ def reminded_calls(run) -> list[int]:
 
 # -- profiles per benchmark ------------------------------------------------------------------
 def test_paper_profile_per_method_and_benchmark():
+    # K = 64 rounds = 128 messages (one unit of window is a message); no output cap of ours
     recap_r = build_config(ReCAPConfig, "paper", None, "robotouille")
-    assert (recap_r.window, recap_r.temperature, recap_r.window_counts_pins) == (64, 0.5, False)
+    assert (recap_r.window, recap_r.temperature, recap_r.window_counts_pins) == (128, 0.5, False)
     assert (recap_r.reminder_on, recap_r.reminder_period, recap_r.shortcut, recap_r.shortcut_trace) == ("calls", 10, True, False)
-    assert recap_r.demo_observations == "first" and recap_r.max_tokens == 3072 and recap_r.max_llm_calls is None
+    assert recap_r.demo_observations == "first" and recap_r.max_tokens is None and recap_r.max_llm_calls is None
     assert build_config(ReCAPConfig, "paper", None, "alfworld").demo_observations == "all"
+    # the released baselines' protocol under both profiles; the paper's temperature
     react_r = build_config(ReActConfig, "paper", None, "robotouille")
-    assert (react_r.history, react_r.invalid_streak, react_r.invalid_rounds) == ("last", 5, 3)
+    assert (react_r.history, react_r.window, react_r.window_keeps_first, react_r.context_drop) == ("window", 64, True, 2)
+    assert (react_r.invalid_streak, react_r.invalid_rounds, react_r.temperature) == (5, 3, 0.5)
     react_a = build_config(ReActConfig, "paper", None, "alfworld")
-    assert (react_a.history, react_a.invalid_streak) == ("window", None)
-    assert build_config(PlanConfig, "paper", None, "robotouille").max_tokens == 3072
-    assert build_config(ReActConfig, "paper", None, None).history == "window"  # no benchmark: generic
+    assert (react_a.history, react_a.window, react_a.window_counts_pins, react_a.invalid_streak) == ("window", 128, True, None)
+    assert (react_a.think_actions, react_a.invalid_feedback, react_a.valid_actions) == (True, "explained", "episode")
+    assert build_config(ActConfig, "paper", None, "robotouille").history == "all"
+    assert build_config(ActConfig, "paper", None, "alfworld").history == "all"
+    assert build_config(PlanConfig, "paper", None, "robotouille").max_tokens is None
+    generic = build_config(ReActConfig, "paper", None, None)  # no benchmark: generic
+    assert (generic.history, generic.think_actions, generic.valid_actions) == ("window", False, None)
+    # no profile: every protocol item at its default (today's behaviour)
+    plain = build_config(ReActConfig, None, None, "alfworld")
+    assert (plain.history, plain.think_actions, plain.invalid_feedback, plain.valid_actions, plain.max_tokens) == (
+        "window",
+        False,
+        "plain",
+        None,
+        1024,
+    )
+
+
+def test_released_temperatures_per_method_and_benchmark():
+    """Robotouille baselines 0.7 (base_llm.yaml:2), ReCAP none (its calls send none), ALFWorld
+    ReAct/Act none (react.py / act.py send none); the paper: 0.5 for every method."""
+    got = {
+        (cls.__name__, bench): build_config(cls, "released", None, bench).temperature
+        for cls in (ReCAPConfig, ReActConfig, ActConfig, PlanConfig, ADaPTConfig)
+        for bench in ("robotouille", "alfworld")
+    }
+    assert got == {
+        ("ReCAPConfig", "robotouille"): None,
+        ("ReCAPConfig", "alfworld"): None,
+        ("ReActConfig", "robotouille"): 0.7,
+        ("ReActConfig", "alfworld"): None,
+        ("ActConfig", "robotouille"): 0.7,
+        ("ActConfig", "alfworld"): None,
+        ("PlanConfig", "robotouille"): 0.7,
+        ("PlanConfig", "alfworld"): None,
+        ("ADaPTConfig", "robotouille"): 0.7,
+        ("ADaPTConfig", "alfworld"): None,
+    }
+    for cls in (ReCAPConfig, ReActConfig, ActConfig, PlanConfig, ADaPTConfig):
+        for bench in ("robotouille", "alfworld", None):
+            assert build_config(cls, "paper", None, bench).temperature == 0.5
 
 
 def test_released_profile_per_benchmark_and_ablation():
@@ -74,7 +115,7 @@ def test_protocol_settings_are_validated(bad):
     with pytest.raises(ConfigError):
         build_config(ReCAPConfig, **bad)
     with pytest.raises(ConfigError):
-        build_config(ReActConfig, history="all")
+        build_config(ReActConfig, history="some")
 
 
 # -- rule reminder cadence -------------------------------------------------------------------
@@ -206,10 +247,10 @@ def test_react_paper_profile_on_robotouille_gives_up_after_three_rounds_of_five(
     result, client, msgs = run_flat(agent, [bad] * 20)
     assert result.end_reason == "agent_done" and result.llm_calls == 15 and result.invalid_actions == 15
     assert result.error == "3 rounds of 5 consecutive invalid actions"
-    # history last: every call sees the pins and the last rejected reply + its feedback
-    assert all(len(r.window_seqs) <= 4 for r in client.requests)
+    # the whole history (15 exchanges stay under 64 messages)
+    assert [len(r.window_seqs) for r in client.requests] == [2 + 2 * i for i in range(15)]
     act = make_agent("act", profile="paper", benchmark="robotouille")
-    assert isinstance(act, ActAgent) and (act.config.history, act.config.invalid_streak) == ("last", 5)
+    assert isinstance(act, ActAgent) and (act.config.history, act.config.invalid_streak) == ("all", 5)
 
 
 # -- derived call cap --------------------------------------------------------------------------
@@ -281,3 +322,18 @@ def test_elided_environment_keeps_what_the_agent_acts_on():
     step = env.step("unstack C from A")
     assert step.observation == OMITTED_OBSERVATION and "put down C" in step.valid_actions
     assert env.max_steps == inner.max_steps and env.steps_taken == 1
+
+
+def test_history_keep_never_drops_the_first_reply_even_on_a_context_error():
+    from recap.history import History
+
+    h = History("ep", 6, keep=1)
+    h.pin("user", "task", "t")
+    for i in range(5):
+        h.add("assistant", "reply", f"r{i}")
+        h.add("user", "observation", f"o{i}")
+    assert [m.content for m in h.messages()] == ["t", "r0", "o2", "r3", "o3", "r4", "o4"]
+    assert h.drop_oldest(32) == 4  # a context-length error: whole pairs after the kept reply
+    assert [m.content for m in h.messages()] == ["t", "r0", "o4"]
+    with pytest.raises(ValueError, match=r"^keep must be in \[0, window\), got 6$"):
+        History("ep", 6, keep=6)

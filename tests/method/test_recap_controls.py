@@ -202,8 +202,9 @@ def test_shortcut_off_asks_for_valid_action_children():
 def test_profiles_and_bad_settings():
     paper = build_config(ReCAPConfig, profile="paper")
     released = build_config(ReCAPConfig, profile="released")
-    assert (paper.window, paper.temperature) == (64, 0.5)
-    assert (released.window, released.temperature) == (128, None)
+    # one unit of window is one message: the paper's K = 64 rounds is 128 messages
+    assert (paper.window, paper.temperature, paper.max_tokens) == (128, 0.5, None)
+    assert (released.window, released.temperature, released.max_tokens) == (128, None, None)
     assert build_config(ReCAPConfig, ablation="level_3").max_level == 3
     with pytest.raises(ConfigError, match="unknown ablation 'level_9'"):
         build_config(ReCAPConfig, ablation="level_9")

@@ -66,6 +66,8 @@ def _number_fields(model: type[BaseModel], prefix: str = "") -> dict[str, tuple[
                 walk(arg, path, meta)
         elif origin is list:
             walk(typing.get_args(tp)[0], path + "[]", meta)
+        elif origin is dict and typing.get_args(tp)[1] is not typing.Any:
+            walk(typing.get_args(tp)[1], path + "{}", meta)  # a typed mapping's values (step_multipliers)
         elif origin is dict or tp in (str, bool, type(None)) or origin is typing.Literal:
             return  # free-form mappings have their own tables (tested below); no numbers otherwise
         elif isinstance(tp, type) and issubclass(tp, BaseModel):
@@ -107,6 +109,10 @@ def _set(data: dict[str, Any], path: str, value: Any) -> str:
                 node.append({})
             node = node[0]
             continue
+        if part.endswith("{}"):  # a typed mapping: one entry (its key names it in the refusal)
+            key = "blocksworld/3"
+            node[part[:-2]] = {key: value}
+            return shown + "." + part[:-2] + "." + key
         shown += ("." if shown else "") + part
         if last:
             node[part] = value

@@ -90,7 +90,7 @@ def test_spec_errors_are_one_line(text, message):
             ("- method: recap", "- method: recap\n    settings: {windw: 3}"),
             "methods[0] (recap): unknown setting(s) windw for ReCAPConfig; known: context_drop, demo_observations, json_mode, "
             "max_episode_cost_usd, max_episode_tokens, max_json_repairs, max_level, max_llm_calls, max_tokens, name_only, "
-            "reminder_on, reminder_period, shortcut, shortcut_trace, temperature, think, window, window_block, "
+            "reminder_on, reminder_period, shortcut, shortcut_trace, temperature, think, valid_actions, window, window_block, "
             "window_counts_pins, window_mode",
         ),
         (
@@ -222,14 +222,21 @@ def test_profiles_resolve_per_benchmark_in_the_unit_config(monkeypatch):
     )
     plan = expand(spec_of(text))
     cfg = {u.instance_id.split("/")[0]: json.loads(u.method_config) for u in plan.units}
-    assert (cfg["robotouille"]["history"], cfg["robotouille"]["invalid_streak"], cfg["robotouille"]["demo_observations"]) == (
-        "last",
+    rob, bw = cfg["robotouille"], cfg["blocksworld"]
+    # Robotouille: the released "original" ReAct (64 messages, first reply kept); elsewhere the shared window
+    assert (rob["history"], rob["window"], rob["window_keeps_first"], rob["invalid_streak"], rob["demo_observations"]) == (
+        "window",
+        64,
+        True,
         5,
         "first",
     )
-    assert (cfg["blocksworld"]["history"], cfg["blocksworld"]["invalid_streak"], cfg["blocksworld"]["demo_observations"]) == (
+    assert (bw["history"], bw["window"], bw["window_keeps_first"], bw["invalid_streak"], bw["demo_observations"]) == (
         "window",
+        128,
+        False,
         None,
         "all",
     )
-    assert cfg["robotouille"]["max_llm_calls"] is None and cfg["robotouille"]["max_tokens"] == 1024
+    # no cap of ours under the profiles: the request carries the model's whole output
+    assert rob["max_llm_calls"] is None and rob["max_tokens"] is None

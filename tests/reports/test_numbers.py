@@ -694,3 +694,44 @@ def test_loop_detector_boundaries(tmp_path):
         ("e5-bad-x3", 1, 3, True, None),
         ("e6-progress", 0, 0, False, None),
     ]
+
+
+def test_a_window_that_differs_only_between_benchmarks_keeps_one_arm(tmp_path):
+    """The released ReAct keeps 64 messages on Robotouille and 128 on ALFWorld: one protocol, one
+    arm; two windows on one benchmark are two variants (``ctx N``) on every benchmark."""
+    import dataclasses
+
+    from recap.config import AgentConfig, build_config
+    from schemas.parts import PartWriter
+    from tests.reports.known_run import ALF as ALF_BENCH
+    from tests.reports.known_run import REACT, episode
+    from tests.reports.known_run import SYNC as SYNC_BENCH
+
+    kw = {"cost": 0.1, "prompt": 10, "cached": 0, "completion": 1, "calls": 1, "steps": 1}
+
+    def row(eid: str, method: str, window: int, bench: tuple[str, str], task: str) -> object:
+        r = episode(eid, method, REACT, "gpt-4o", bench, task, f"{task}-1", 0, "success", **kw)
+        cfg = build_config(AgentConfig, window=window).to_json()
+        return dataclasses.replace(r, unit_id=eid, method_config=cfg)
+
+    rows = [
+        row("react-sync", "react", 64, SYNC_BENCH, "t2"),
+        row("react-alf", "react", 128, ALF_BENCH, "heat"),
+        row("recap-sync-64", "recap", 64, SYNC_BENCH, "t2"),
+        row("recap-sync-128", "recap", 128, SYNC_BENCH, "t3"),
+        row("recap-alf", "recap", 128, ALF_BENCH, "heat"),
+    ]
+    run = tmp_path / "runC"
+    run.mkdir()
+    (run / "run.json").write_text('{"run_id": "runC", "spec_hash": "hashC"}')
+    PartWriter(run, writer="sink0001").write_records("runC", rows)
+    con = open_runs([run])
+    got = sorted(run_query(con, "SELECT episode_id, arm FROM attempts").rows)
+    con.close()
+    assert got == [
+        ("react-alf", "react"),
+        ("react-sync", "react"),
+        ("recap-alf", "recap ctx 128"),
+        ("recap-sync-128", "recap ctx 128"),
+        ("recap-sync-64", "recap ctx 64"),
+    ]

@@ -56,7 +56,7 @@ def _arm(**kw: Any) -> paper.ArmProtocol:
         provider_model="openai/gpt-4o-2024-08-06",
         test_double=False,
         profile="paper",
-        windows=(64,),
+        windows=(128,),
         benchmark="robotouille",
         split="synchronous",
         tasks=tuple((f"{i}_t", (paper.step_multiplier("synchronous", i),)) for i in range(10)),
@@ -71,7 +71,27 @@ def test_mismatch_names_the_first_protocol_difference():
     assert paper.mismatch(main, _arm(provider_model="gpt-4o-mini")) == "model gpt-4o-mini, the paper used GPT-4o"
     assert paper.mismatch(main, _arm(provider_model="gpt-4o-2024-11-20")) == "model gpt-4o-2024-11-20, the paper used GPT-4o"
     assert paper.mismatch(main, _arm(profile="released")) == "profile released, the paper's runs are profile paper"
-    assert paper.mismatch(main, _arm(windows=(128,))) == "window 128 messages, the paper used 64"
+    # windows count messages: ReCAP 128 (K = 64 rounds), the released ReAct 64 on Robotouille and
+    # 128 on ALFWorld; Act keeps its whole history, so its window is not checked
+    assert paper.mismatch(main, _arm(windows=(64,))) == "window 64 messages, the paper used 128"
+    react_tasks = tuple((f"{i}_t", (paper.step_multiplier("synchronous", i, "react"),)) for i in range(10))
+    assert paper.mismatch(main, _arm(method="react", windows=(64,), tasks=react_tasks)) is None
+    assert paper.mismatch(main, _arm(method="react", windows=(128,), tasks=react_tasks)) == (
+        "window 128 messages, the paper used 64"
+    )
+    act_tasks = tuple((f"{i}_t", (2.0,)) for i in range(10))
+    assert paper.mismatch(main, _arm(method="act", windows=(128,), tasks=act_tasks)) is None
+    # step caps per method and task (the released configs): ReAct x2 on synchronous 9, Act x2
+    assert [paper.step_multiplier("synchronous", i, "react") for i in range(10)] == [4, 4, 3, 4, 3, 4, 3, 4, 4, 2]
+    assert [paper.step_multiplier("asynchronous", i, "react") for i in range(10)] == [4, 4, 2, 4, 3, 4, 3, 4, 4, 4]
+    assert [paper.step_multiplier("asynchronous", i, "recap") for i in range(10)] == [4] * 10
+    assert {
+        paper.step_multiplier(s, i, m) for s in ("synchronous", "asynchronous") for i in range(10) for m in ("adapt", "cot")
+    } == {4}
+    assert paper.step_multiplier("synchronous", 3, "standard") == 1.5
+    assert paper.mismatch(main, _arm(method="act", tasks=react_tasks)) == (
+        "step cap x4 on synchronous:0, the released configs use x2"
+    )
     assert paper.mismatch(main, _arm(tasks=(("2_t", (3.0,)), ("6_t", (3.0,))))) == (
         "ran 2 of the paper's 10 tasks (missing synchronous:0, synchronous:1, synchronous:3, synchronous:4, "
         "synchronous:5, synchronous:7, synchronous:8, synchronous:9)"
@@ -80,13 +100,21 @@ def test_mismatch_names_the_first_protocol_difference():
     assert paper.mismatch(main, _arm(tasks=all_x4)) == "step cap x4 on synchronous:2, the released configs use x3"
     cross = paper.PROTOCOLS["cross_model"]
     t246 = tuple((f"{i}_t", (3.0,)) for i in (2, 4, 6))
-    assert paper.mismatch(cross, _arm(tasks=t246, provider_model="together_ai/Qwen/Qwen2.5-72B-Instruct-Turbo")) is None
+    assert paper.mismatch(cross, _arm(tasks=t246)) == "window 128 messages, the paper used 64"
+    assert paper.mismatch(cross, _arm(tasks=t246, windows=(64,), method="react")) is None
+    cross_arm = {"windows": (64,)}
     assert (
-        paper.mismatch(cross, _arm(tasks=t246, provider_model="deepinfra/meta-llama/Llama-4-Maverick-17B-128E-Instruct-FP8"))
+        paper.mismatch(cross, _arm(tasks=t246, provider_model="together_ai/Qwen/Qwen2.5-72B-Instruct-Turbo", **cross_arm)) is None
+    )
+    assert (
+        paper.mismatch(
+            cross, _arm(tasks=t246, provider_model="deepinfra/meta-llama/Llama-4-Maverick-17B-128E-Instruct-FP8", **cross_arm)
+        )
         is None
     )
     assert (
-        paper.mismatch(cross, _arm(tasks=t246 + (("7_t", (4.0,)),))) == "ran tasks the paper's number leaves out (synchronous:7)"
+        paper.mismatch(cross, _arm(tasks=t246 + (("7_t", (4.0,)),), **cross_arm))
+        == "ran tasks the paper's number leaves out (synchronous:7)"
     )
     alf = _arm(benchmark="alfworld", split="valid_unseen", tasks=tuple((t, (4.0,)) for t in paper.ALFWORLD_TYPES))
     assert paper.mismatch(main, alf) is None
@@ -111,8 +139,8 @@ def derived_spec(name: str, out: Path) -> tuple[dict[str, Any], Path]:
     for e in spec["environments"]:
         tasks = []
         for sel in e["tasks"]:
-            if sel == "asynchronous":
-                tasks += [f"asynchronous/{i}" for i in range(10)]
+            if sel in ("synchronous", "asynchronous"):
+                tasks += [f"{sel}/{i}" for i in range(10)]
             elif sel == "all":
                 tasks += list(paper.ALFWORLD_TYPES)
             else:
@@ -197,7 +225,7 @@ def paper_runs(ray_local, tmp_path_factory) -> dict[str, Path]:
 
     base = tmp_path_factory.mktemp("paper")
     runs = {}
-    for name in ("main-robotouille-x4", "main-robotouille-x3", "main-alfworld", "cross-model", "ablations"):
+    for name in ("main-robotouille", "main-alfworld", "cross-model", "ablations"):
         out = base / "runs" / name
         out.parent.mkdir(parents=True, exist_ok=True)
         _, path = derived_spec(name, out)
@@ -227,20 +255,19 @@ def _check_holm(t, keys: list[str]) -> None:
 
 
 def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
-    main_dirs = [paper_runs["main-robotouille-x4"], paper_runs["main-robotouille-x3"], paper_runs["main-alfworld"]]
+    main_dirs = [paper_runs["main-robotouille"], paper_runs["main-alfworld"]]
     report = build_report(main_dirs, ReportOptions(formats=("md",), paper_only=True))
     assert [s.key for s in report.sections] == ["paper"]
     tables = {t.name: t for t in report.sections[0].tables}
     units = [r for d in main_dirs for r in unit_rows(d)]
     assert {r["model"] for r in units} == {"gpt-4o"} and all(r["test_double"] for r in units)
     model = "gpt-4o (test double)"
-    # the main runs hold ReAct and ReCAP on synchronous 2, 4, 6 with a 64-message window: the
-    # cross-model table's protocol too
+    # no cross-model table from the main runs: their ReAct keeps 64 messages on Robotouille (the
+    # released baseline) but their ReCAP 128 (K = 64 rounds), so no model has both at 64
     assert list(tables) == [
         "paper_main",
         "paper_tasks_synchronous_gpt_4o_test_double",
         "paper_tasks_asynchronous_gpt_4o_test_double",
-        "paper_cross_model",
         "paper_costs_alfworld",
         "paper_cost_ratio",
         "paper_costs_task6",
@@ -292,10 +319,11 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
                 assert cell["paper"] == "[1]" and cell["diff"] is None
                 assert_p(cell["p"], None if label == "recap" else mcnemar(mine, [r for r in scope if r["label"] == "recap"]))
         _check_holm(t, task_order)
-        # step caps: x3 on synchronous 2, 4, 6, x4 elsewhere (the released configs)
-        assert {(r["task"], r["step_multiplier"]) for r in here} == {
-            (task, paper.step_multiplier(split, paper.task_index(task))) for task in tasks
+        # step caps: each method at its released multiplier on each task (recorded on every row)
+        assert {(r["task"], r["label"], r["step_multiplier"]) for r in here} == {
+            (task, label, paper.step_multiplier(split, paper.task_index(task), label)) for task in tasks for label in task_order
         }
+        assert all(r["step_cap"] == math.ceil(r["optimal_steps"] * r["step_multiplier"]) for r in here)
 
     # ALFWorld costs: totals per method, paired permutation p against ReCAP; the ReCAP/ReAct ratio
     alf = [r for r in units if r["benchmark"] == "alfworld"]
@@ -329,7 +357,7 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
         paired_permutation_p([r["cost_usd"] - recap_cost[key(r)] for r in react], [key(r)[:2] for r in react])
     )
 
-    # task-6 costs and trees from the main runs (window 64): no paper number (test double)
+    # task-6 costs and trees from the main runs (ReAct 64 messages, the others 128): no paper number (test double)
     t6 = [r for r in units if r["split"] == "synchronous" and paper.task_index(r["task"]) == 6]
     t = tables["paper_costs_task6"]
     assert [r["method"] for r in t.rows] == ["recap", "adapt", "react", "cot", "act", "standard"]
@@ -339,16 +367,21 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
             1,
             mine["llm_calls"],
             pytest.approx(mine["cost_usd"]),
-            "64",
+            "64" if row["method"] == "react" else "128",
         )
         assert row.get("paper_calls") == ("[1]" if row["method"] == "recap" else None)
     (tree_row,) = tables["paper_trees"].rows
     (recap6,) = [r for r in t6 if r["label"] == "recap"]
-    check_tree(tree_row, [recap6], _read(paper_runs["main-robotouille-x3"], "tree_nodes"))
+    check_tree(tree_row, [recap6], _read(paper_runs["main-robotouille"], "tree_nodes"))
 
-    # what these three runs do not hold: one line each
+    # what these runs do not hold: one line each
     assert tables["paper_omitted"].rows == [
-        {"table": "Ablation table", "missing": "no ReCAP ablation ran Robotouille synchronous task 6 with a 128-message window."}
+        {
+            "table": "Cross-model table",
+            "missing": "no model has both a ReAct and a ReCAP arm without an ablation on Robotouille synchronous tasks 2, "
+            "4, 6 with a 64-message window.",
+        },
+        {"table": "Ablation table", "missing": "no ReCAP ablation ran Robotouille synchronous task 6 with a 128-message window."},
     ]
 
     # the cross-model example

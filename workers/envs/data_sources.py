@@ -45,12 +45,15 @@ class Source:
 
     name: str
     url: str
-    kind: str  # "zip", "tar.gz" or "file"
+    kind: str  # "zip", "tar.gz", "file", or "git" (a repository: ``ref`` is the pinned commit)
     saves_as: str = ""
+    ref: str = ""
 
     def location(self, mirror: str | None) -> str:
         if mirror is None:
             return self.url
+        if self.kind == "git":  # a mirror of a repository is the repository itself (a folder or a git URL)
+            return mirror if is_url(mirror) else str(Path(mirror).expanduser())
         if is_url(mirror):
             return mirror.rstrip("/") + "/" + self.name
         return str(Path(mirror).expanduser() / self.name)
@@ -73,6 +76,9 @@ class DataFolder:
     #: the folder's own search when it does not follow the shared rule of workers/envs/data_paths.py
     #: (ALFWorld 2.1.2: option, variable, next to the ALFWorld folder): every rung and the one used
     search: Callable[[str | None], tuple[list[Rung], Rung | None]] | None = None
+    #: part of ``recap data ... all``; False for a folder asked for by name only (the authors'
+    #: released prompts: only ``prompts: release`` runs need it, so its absence fails nothing else)
+    in_all: bool = True
 
     def group_of(self, rel: str) -> Group:
         for group in self.groups:

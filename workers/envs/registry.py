@@ -23,6 +23,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from recap.config import AgentConfig
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
 
@@ -39,6 +40,7 @@ __all__ = [
     "data_folder",
     "data_folders",
     "data_env_vars",
+    "register_data_folder",
 ]
 
 
@@ -61,9 +63,10 @@ class Benchmark(ABC):
         """A fresh environment for ``instance_id`` (options: step_multiplier, data_dir...)."""
 
     # -- hooks ----------------------------------------------------------------------------------
-    def options_for_agent(self, style: str) -> dict[str, Any]:
-        """``make()`` options an agent ``style`` (``recap``, ``react``...) runs with unless the
-        sweep sets them (ALFWorld: whether observations list the valid actions). Default: none."""
+    def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
+        """``make()`` options an agent ``style`` (``recap``, ``react``...) with its resolved
+        settings ``config`` runs with unless the sweep sets them (ALFWorld: whether observations
+        list the valid actions). Default: none."""
         return {}
 
     def data_folders(self) -> Mapping[str, DataFolder]:
@@ -161,9 +164,35 @@ def make_env(instance_id: str, **options: Any) -> Environment:
     return get_benchmark(bench).make(instance_id, **options)
 
 
+#: data folders no benchmark reads (the authors' released prompts), by name: "module:ATTRIBUTE"
+_EXTRA_FOLDERS: dict[str, str] = {}
+
+
+def register_data_folder(name: str, source: str) -> None:
+    """Make a data folder that no benchmark declares known to ``recap data`` and to the workers'
+    environment: ``source`` is ``"package.module:ATTRIBUTE"`` naming a DataFolder (imported on
+    first use)."""
+    with _lock:
+        if name in _EXTRA_FOLDERS:
+            raise ValueError(f"data folder {name!r} is already registered")
+        _EXTRA_FOLDERS[name] = source
+
+
+def _extra_folders() -> dict[str, DataFolder]:
+    out: dict[str, DataFolder] = {}
+    for name, source in list(_EXTRA_FOLDERS.items()):
+        module, _, attr = source.partition(":")
+        folder = getattr(importlib.import_module(module), attr)
+        if not isinstance(folder, DataFolder) or folder.name != name:
+            raise TypeError(f"data folder {name!r}: {source} is not a DataFolder named {name!r}")
+        out[name] = folder
+    return out
+
+
 def data_folders() -> dict[str, DataFolder]:
-    """Every registered benchmark's data folders by name, in registration order. Imports the
-    benchmarks; one that cannot be imported here declares nothing."""
+    """Every registered benchmark's data folders by name, in registration order, then the folders
+    registered on their own (:func:`register_data_folder`). Imports the benchmarks; one that
+    cannot be imported here declares nothing."""
     out: dict[str, DataFolder] = {}
     for name in benchmark_names():
         try:
@@ -172,6 +201,8 @@ def data_folders() -> dict[str, DataFolder]:
             continue
         for key, folder in folders.items():
             out.setdefault(key, folder)
+    for key, folder in _extra_folders().items():
+        out.setdefault(key, folder)
     return out
 
 
@@ -193,6 +224,7 @@ def data_env_vars() -> tuple[str, ...]:
             out.extend(get_benchmark(name).data_env_vars())
         except ImportError:
             continue
+    out.extend(folder.location.env_var for folder in _extra_folders().values())
     return tuple(dict.fromkeys(out))
 
 
@@ -200,3 +232,5 @@ def data_env_vars() -> tuple[str, ...]:
 register_benchmark("blocksworld", "workers.envs.blocksworld")
 register_benchmark("robotouille", "workers.envs.robotouille")
 register_benchmark("alfworld", "workers.envs.alfworld")
+#: the authors' released prompt and demonstration files (``prompts: release``): read by no benchmark
+register_data_folder("recap-release", "workers.release.folder:FOLDER")

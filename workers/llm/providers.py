@@ -9,6 +9,7 @@ it, read at call time, so no config, record or log line can carry a key.
 from __future__ import annotations
 
 import base64
+import functools
 import os
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal
@@ -339,7 +340,13 @@ class DeploymentConfig(BaseModel):
         return key
 
     def generation_params(self, temperature: float | None, max_tokens: int | None, json_mode: bool) -> dict[str, Any]:
-        """The settings one request is sent with; max_tokens always set (bounds the cost)."""
+        """The settings one request is sent with; max_tokens always set (bounds the cost).
+
+        A request without its own cap (``max_tokens`` None: the ``paper`` and ``released``
+        profiles, which used the provider's default) gets the model's whole output
+        (:func:`model_max_output_tokens`), so no reply the provider would have finished is cut
+        by us; a model litellm does not know gets DEFAULT_MAX_TOKENS (set ``params: {max_tokens:
+        N}`` on the model for another bound)."""
         params = dict(self.params)
         if temperature is not None:
             params["temperature"] = temperature
@@ -347,12 +354,28 @@ class DeploymentConfig(BaseModel):
             # the user's own cap for this model bounds every request (and the budget's worst case)
             cap = int(self.params["max_tokens"])
             params["max_tokens"] = min(int(max_tokens), cap) if max_tokens else cap
-        else:
+        elif max_tokens:
             # otherwise the method's measured need (AgentConfig.max_tokens) is sent as is
-            params["max_tokens"] = int(max_tokens) if max_tokens else DEFAULT_MAX_TOKENS
+            params["max_tokens"] = int(max_tokens)
+        else:
+            params["max_tokens"] = (None if self.is_offline else model_max_output_tokens(self.model)) or DEFAULT_MAX_TOKENS
         if json_mode and "response_format" not in params:
             params["response_format"] = {"type": "json_object"}
         return params
+
+
+@functools.lru_cache(maxsize=256)
+def model_max_output_tokens(model: str) -> int | None:
+    """The most output tokens ``model`` can produce, from litellm's model map (the provider
+    prefix is tried with and without: ``openai/gpt-4o-2024-08-06`` -> 16384); None when unknown."""
+    import litellm
+
+    names = [model] + ([model.split("/", 1)[1]] if "/" in model else [])
+    for name in names:
+        value = (litellm.model_cost.get(name) or {}).get("max_output_tokens")
+        if isinstance(value, int) and value > 0:
+            return value
+    return None
 
 
 def provider_messages(messages: Sequence[Any]) -> list[dict[str, str]]:

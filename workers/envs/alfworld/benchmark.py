@@ -29,6 +29,7 @@ import os
 from collections.abc import Mapping
 from typing import Any
 
+from recap.config import AgentConfig
 from recap.env import Environment
 from workers.envs.alfworld.data_folders import FOLDER, FOLDER_2_1_2
 from workers.envs.alfworld.game_env import AlfworldEnvironment
@@ -49,6 +50,8 @@ from workers.envs.registry import Benchmark, DataNotFoundError, UnknownInstanceE
 DEFAULT_MAX_STEPS = 50
 #: the make() option that appends the valid actions to every observation (True / False / None)
 SHOW_VALID_ACTIONS = "show_valid_actions"
+#: the make() option that decides whether the one-shot demonstration lists them (None: as the episode)
+DEMO_VALID_ACTIONS = "demo_valid_actions"
 #: agent styles whose ALFWorld observations list the valid actions (see show_valid_actions_for)
 STYLES_SHOWING_VALID_ACTIONS = frozenset({"recap"})
 
@@ -78,9 +81,16 @@ class AlfworldBenchmark(Benchmark):
     def __init__(self, data_dir: str | os.PathLike[str] | None = None):
         self.data_dir = data_dir
 
-    def options_for_agent(self, style: str) -> dict[str, Any]:
-        """make() options an agent style runs with unless a sweep sets them (the pipeline asks)."""
-        return {SHOW_VALID_ACTIONS: show_valid_actions_for(style)}
+    def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
+        """make() options an agent style runs with unless a sweep sets them (the pipeline asks):
+        the method's ``valid_actions`` setting when it has one (the profiles set it for ReAct and
+        Act), else the per-style choice of :func:`show_valid_actions_for`."""
+        choice = config.valid_actions if config is not None else None
+        if choice is None:
+            return {SHOW_VALID_ACTIONS: show_valid_actions_for(style)}
+        if choice == "episode":
+            return {SHOW_VALID_ACTIONS: True, DEMO_VALID_ACTIONS: False}
+        return {SHOW_VALID_ACTIONS: choice == "shown"}
 
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The primary (2.1.1) folder and the optional 2.1.2 one (:mod:`.data_folders`)."""
@@ -124,15 +134,17 @@ class AlfworldBenchmark(Benchmark):
         step_multiplier: float | None = None,
         seed: int = 0,
         show_valid_actions: bool | None = None,
+        demo_valid_actions: bool | None = None,
         **unknown: Any,
     ) -> Environment:
         if unknown:
             raise ValueError(
                 f"unknown ALFWorld option(s) {', '.join(sorted(unknown))}; accepted: data_dir, "
-                "data_dir_2_1_2, version, max_steps, step_multiplier, seed, show_valid_actions"
+                "data_dir_2_1_2, version, max_steps, step_multiplier, seed, show_valid_actions, demo_valid_actions"
             )
         check_version(version)
         show = check_show_valid_actions(show_valid_actions)
+        demo = None if demo_valid_actions is None else check_show_valid_actions(demo_valid_actions, DEMO_VALID_ACTIONS)
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
         primary = resolve_data_dir(data_dir if data_dir is not None else self.data_dir)
@@ -156,6 +168,7 @@ class AlfworldBenchmark(Benchmark):
             max_steps=max_steps,
             walkthrough=walkthrough,
             show_valid_actions=show,
+            demo_valid_actions=demo,
         )
         env.seed = seed
         return env

@@ -7,7 +7,8 @@ the game never signals a loss, so an episode ends on a win or when the step budg
 
 With ``show_valid_actions`` every observation (at reset and after every step, "Nothing
 happens." included) is followed by the admissible commands, in the game's order (format in
-:mod:`~workers.envs.alfworld.observation`); the one-shot demonstration uses the same setting.
+:mod:`~workers.envs.alfworld.observation`); the one-shot demonstration uses the same setting
+unless ``demo_valid_actions`` sets its own.
 The game shows only what is at the agent's location, so the environment is partially observed.
 """
 
@@ -45,6 +46,7 @@ class AlfworldEnvironment(Environment):
         max_steps: int,
         walkthrough: tuple[str, ...] | None,
         show_valid_actions: bool = False,
+        demo_valid_actions: bool | None = None,
     ):
         self.game = game
         self.instance_id = game.instance_id
@@ -55,6 +57,9 @@ class AlfworldEnvironment(Environment):
         self.game_file = game_file
         #: append the valid actions to every observation (resolved: never None here)
         self.show_valid_actions = show_valid_actions
+        self.lists_valid_actions = show_valid_actions
+        #: whether the one-shot demonstration lists them (None: as the episode does)
+        self.demo_valid_actions = show_valid_actions if demo_valid_actions is None else demo_valid_actions
         self._expert = WalkthroughExpert(walkthrough, version) if walkthrough is not None else None
         self._env = open_game(game_file, primary, max_steps)
         self._steps_taken = 0
@@ -126,10 +131,13 @@ class AlfworldEnvironment(Environment):
         return failure_hints_text()
 
     def demonstration(self) -> Demonstration:
-        """The one-shot demonstration for this game's split and version, showing the valid actions exactly when this game does."""
+        """The one-shot demonstration for this game's split and version, showing the valid actions when
+        ``demo_valid_actions`` says so (by default exactly when this game does)."""
         # the demonstration keeps the default cap: a game played with a tight cap still needs
-        # its full demonstration episode to render; it shows the valid actions iff the episode does
-        return demonstration_for(self.split, self.version, show_valid_actions=self.show_valid_actions)
+        # its full demonstration episode to render; it shows the valid actions iff the episode
+        # does, unless demo_valid_actions says otherwise (the released ReAct/Act: lists in the
+        # episode, none in Yao et al.'s example)
+        return demonstration_for(self.split, self.version, show_valid_actions=self.demo_valid_actions)
 
     def expert_plan(self) -> list[str] | None:
         """The walkthrough's remaining commands; None when the game file has no walkthrough."""

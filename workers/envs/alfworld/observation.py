@@ -29,14 +29,15 @@ VALID_ACTIONS_HEADER = "Valid actions:"
 NO_VALID_ACTIONS = "(none)"
 
 
-def check_show_valid_actions(value: object) -> bool:
+def check_show_valid_actions(value: object, name: str = "show_valid_actions") -> bool:
     """The setting as the environment uses it: True/False as given, None (not decided by the
-    environment; the caller fills it per method) means off. Anything else is an error."""
+    environment; the caller fills it per method) means off. Anything else is an error that names
+    the option (``name``)."""
     if value is None:
         return False
     if isinstance(value, bool):
         return value
-    raise ValueError(f"show_valid_actions must be true, false or null (None), got {value!r}")
+    raise ValueError(f"{name} must be true, false or null (None), got {value!r}")
 
 
 def with_valid_actions(text: str, valid: Sequence[str]) -> str:

@@ -78,6 +78,7 @@ class ReplayEnvironment(Environment):
         self._hints = failure_hints
         self._expert = expert
         self.show_valid_actions = show_valid_actions
+        self.lists_valid_actions = show_valid_actions
         self._next = 0
         self._steps_taken = 0
         self._valid: tuple[str, ...] = recording.valid_actions

@@ -28,6 +28,8 @@ class RobotouilleEnv(Environment):
 
     benchmark = "robotouille"
     invalid_action_mode = "reject"
+    #: every observation ends with its "Valid Actions:" list
+    lists_valid_actions = True
 
     def __init__(
         self,
@@ -65,6 +67,8 @@ class RobotouilleEnv(Environment):
         self._pristine = True
         self._steps_taken = 0
         self._done = False
+        #: a plan_copy: steps go on after the episode is over
+        self._endless = False
         self._started = False
         self._last_rejected: str | None = None
 
@@ -122,7 +126,7 @@ class RobotouilleEnv(Environment):
         step used); ``info`` says whether the step cap cut the episode (``truncated``)."""
         if not self._started:
             raise EnvError(f"{self.instance_id}: step() before reset()")
-        if self._done:
+        if self._done and not self._endless:
             raise EnvError(f"{self.instance_id}: the episode is over ({self._steps_taken} steps)")
         if not isinstance(action, str):
             raise InvalidActionError(f"invalid action {action!r}: actions are strings")
@@ -141,6 +145,14 @@ class RobotouilleEnv(Environment):
             "truncated": done and not success,
         }
         return Step(self.observation(), self.valid_actions(), done, success, info)
+
+    def plan_copy(self) -> RobotouilleEnv:
+        """A copy that goes on stepping after the goal (the released I/O check steps its engine
+        copy through the whole plan, robotouille-baselines/agents/IO_agent.py:174-187)."""
+        sim = super().plan_copy()
+        assert isinstance(sim, RobotouilleEnv)
+        sim._endless = True
+        return sim
 
     # ------------------------------------------------------------ helpers
     def rules(self) -> str:

@@ -9,7 +9,11 @@ and never the method's name:
   (``think``, ``subtasks``, ``action``, ``actions``);
 - ``purpose``: which prompt this is (``task``, ``descend``, refine kinds, ``depth_cap`` ...);
 - ``task``, ``depth``, ``remaining`` (the node's current list), ``valid_actions``;
-- ``expert_plan``: the remaining expert actions from the current environment state.
+- ``expert_plan``: the remaining expert actions from the current environment state;
+- ``text_layout`` (plain-text agents): the provider writes the reply in that layout
+  (:func:`recap.baselines.textreply.render`) instead of JSON;
+- ``finish_action`` and ``run_actions`` (the released ADaPT's executors): ``action`` is the
+  finish word once the run has taken exactly the actions its task (a chunk) names.
 
 ``subtasks`` (the call order of recap/recap_agent.py):
 - root (``task``): the remaining plan grouped into a few subgoal chunks, each named
@@ -130,6 +134,19 @@ def _next_action(hints: Mapping[str, Any]) -> str:
     return valid[0] if valid else FALLBACK_ACTION
 
 
+def _finish(hints: Mapping[str, Any]) -> str | None:
+    """The word that ends an executor run (``hints["finish_action"]``, the released ADaPT's
+    executors), once the run has taken every action its task names (``hints["run_actions"]``):
+    a chunk's actions, or the one action a one-action chunk is named by. None otherwise."""
+    finish = hints.get("finish_action")
+    if not finish:
+        return None
+    task = str(hints.get("task", ""))
+    wanted = chunk_actions(task) or [task]
+    done = list(hints.get("run_actions") or [])
+    return str(finish) if done == wanted else None
+
+
 def reply_fields_of(hints: Mapping[str, Any]) -> tuple[str, ...]:
     """The reply's fields the agent asked for (``hints["reply_fields"]``, declared by each agent
     class); a request that names none gets a decomposition, as requests always did."""
@@ -156,7 +173,7 @@ def expert_reply(hints: Mapping[str, Any], knobs: Knobs, call_key: str) -> dict[
                 subtasks = [INVALID_ACTION] + subtasks[1:]
             reply[name] = subtasks
         elif name == "action":
-            reply[name] = INVALID_ACTION if inject else _next_action(hints)
+            reply[name] = INVALID_ACTION if inject else (_finish(hints) or _next_action(hints))
         elif name == "actions":
             actions = plan[:] if plan else [_next_action(hints)]
             if inject:

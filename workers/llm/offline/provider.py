@@ -12,6 +12,7 @@ import json
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from recap.baselines.textreply import render as render_text
 from workers.llm.offline.expert import expert_reply
 from workers.llm.offline.knobs import MALFORMED_JSON, Knobs, OfflineOptionsError, draw
 from workers.llm.offline.random_model import random_reply
@@ -44,7 +45,11 @@ def offline_text(name: str, messages: list[dict[str, str]], metadata: Mapping[st
     knobs = Knobs.from_options(meta.get("options"))
     if knobs.malformed_json_rate > 0 and draw(call_key, knobs.seed, "malformed") < knobs.malformed_json_rate:
         return MALFORMED_JSON
-    return json.dumps(maker(hints, knobs, call_key))
+    reply = maker(hints, knobs, call_key)
+    layout = hints.get("text_layout")
+    if layout:  # an agent reading plain text (reply_format: text) names its layout
+        return render_text(str(layout), reply)
+    return json.dumps(reply)
 
 
 def _make_provider_class() -> type:

@@ -1,0 +1,45 @@
+"""The authors' released prompt for one episode (``prompts: release``), as plain strings.
+
+workers/ reads the release files at run time (:mod:`workers.release.texts`) and hands the agent
+this object; recap/ reads no file. ``messages`` are what the released code sends before the
+episode's first observation, each with its role, in order (for the Robotouille baselines: the
+prompt file's system text, its instructions as a user message, then each in-context example as
+separate user/assistant messages: ``robotouille-baselines/agents/prompt_builder/serializer.py:53-57``,
+``agents/in_context_examples/retrieve_example.py:27-37``). The agent pins them in place of our
+demonstration and then sends its first turn *without* our system text and rules (the release's
+text carries those); the turn framing is the agent's, built in the released structure.
+
+Where the released method talks in several contexts of its own (ADaPT on Robotouille: a planner
+and one executor per subtask, ``robotouille-baselines/agents/ADaPT_agent.py:37-61, 237-243``),
+``messages`` is empty (nothing goes in the episode's main context) and ``planner``/``executor``
+carry each context's pinned messages.
+
+Where the released code puts the template's text into the first *turn* instead of messages of
+its own (ReCAP: ``robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261`` builds the first prompt
+from the YAML's system text and rules), ``system`` and ``rules`` carry that text and the agent
+frames it (and re-sends ``rules`` in its reminders).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ReleasePrompt:
+    """``messages``: (role, content) pairs pinned first, in order (roles ``system``, ``user``,
+    ``assistant``); ``system``/``rules``: the released text the agent's first turn carries in
+    place of ours (None: the method's release has none of its own, as for the baselines);
+    ``planner``/``executor``: the messages pinned first in those contexts of a method that opens
+    its own (ADaPT; empty otherwise)."""
+
+    messages: tuple[tuple[str, str], ...]
+    system: str | None = None
+    rules: str | None = None
+    planner: tuple[tuple[str, str], ...] = ()
+    executor: tuple[tuple[str, str], ...] = ()
+
+    def __post_init__(self) -> None:
+        for role, content in (*self.messages, *self.planner, *self.executor):
+            if role not in ("system", "user", "assistant") or not isinstance(content, str):
+                raise ValueError(f"a release message needs a role system/user/assistant and text, got {role!r}")
