@@ -38,7 +38,7 @@ lint=0
 .venv/bin/ruff check . || { echo "ruff check: findings above (ruff check --fix fixes the marked ones)" >&2; lint=1; }
 .venv/bin/ruff format --check . >/dev/null || { .venv/bin/ruff format --check . >&2; echo "ruff format: run '.venv/bin/ruff format .'" >&2; lint=1; }
 .venv/bin/mypy || { echo "mypy: type errors above" >&2; lint=1; }
-.venv/bin/python -m pytest -m "$marker" -q "$@"
+.venv/bin/python -m pytest -m "$marker" -q --durations=15 "$@"
 rc=$?
 if [ $rc -eq 5 ]; then echo "no tests were collected: failing" >&2; exit 1; fi
 if [ $rc -eq 0 ] && [ $lint -ne 0 ]; then echo "tests passed, but lint/format/type checks failed (above)" >&2; exit 1; fi

@@ -254,11 +254,13 @@ def explained_invalid_prompt(action: str, observation: str, valid_actions: Seque
     return "\n".join(lines)
 
 
-def planner_transcript(prompt: str, reply: str) -> str:
-    """The planner's demonstration: one example prompt and its decomposition."""
+def planner_transcript(
+    prompt: str, reply: str, header: str = "Here is an example of a task being broken down into subtasks."
+) -> str:
+    """The planner's demonstration: one example prompt and its decomposition (``header`` opens it)."""
     return "\n\n".join(
         [
-            "Here is an example of a task being broken down into subtasks.",
+            header,
             f"[Example prompt]\n{prompt}",
             f"[Example reply]\n{reply}",
             "[End of example.]",

@@ -9,6 +9,8 @@ out the system text and the rules, as the JSON prompts do.
 
 from __future__ import annotations
 
+from recap.baselines.prompts import planner_transcript
+
 
 def _feedback_note() -> str:
     return (
@@ -145,12 +147,5 @@ def planner_turn(observation: str, goal: str | None) -> str:
 
 
 def planner_example(prompt: str, reply: str) -> str:
-    """The planner's demonstration: one example message and its plan."""
-    return "\n\n".join(
-        [
-            "Here is an example of a goal split into subtasks.",
-            f"[Example prompt]\n{prompt}",
-            f"[Example reply]\n{reply}",
-            "[End of example.]",
-        ]
-    )
+    """The planner's demonstration: one example message and its plan (the JSON planner's layout)."""
+    return planner_transcript(prompt, reply, header="Here is an example of a goal split into subtasks.")
