@@ -105,6 +105,7 @@ from pydantic import (
 from pydantic_core import core_schema
 
 from pipeline.errors import SpecError
+from schemas.ranges import number_text
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 #: labels (models, methods): what is printed in tables and unit keys
@@ -209,13 +210,6 @@ NUMBER_BOUNDS: dict[str, Bound] = {
     "workers": Bound(1, WORKERS_MAX),
     "max_attempts": Bound(1, ATTEMPTS_MAX),
 }
-
-
-def number_text(v: float) -> str:
-    """A number as a refusal shows it: integers in full, floats in their shortest form (1e-300)."""
-    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
-        return str(int(v))
-    return repr(float(v))
 
 
 @dataclass(frozen=True)

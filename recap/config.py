@@ -31,6 +31,8 @@ import re
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from schemas.ranges import range_problem
+
 PROFILES: dict[str, dict[str, Any]] = {
     # the paper: K = 64 back-and-forth rounds (Sec. "Sliding Window"), i.e. 128 messages in our
     # unit (``window`` counts messages, recap/history.py), the released main value (ctx_len 128,
@@ -284,12 +286,6 @@ SETTING_BOUNDS: dict[str, tuple[float, float]] = {
 }
 
 
-def _number_text(v: float) -> str:
-    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
-        return str(int(v))
-    return repr(float(v))
-
-
 def check_setting_ranges(cfg: AgentConfig) -> None:
     """Every number setting of ``cfg`` that :data:`SETTING_BOUNDS` names is a number (an integer
     where the default is one; never true/false) within its range; raises ConfigError with the
@@ -300,13 +296,9 @@ def check_setting_ranges(cfg: AgentConfig) -> None:
             continue
         if isinstance(value, str) and "Literal" in str(f.type):
             continue  # a named choice beside the number (ADaPT's planner_temperature: same): validate() checks it
-        low, high = SETTING_BOUNDS[f.name]
-        integer = "int" in str(f.type)
-        kind = "an integer" if integer else "a number"
-        if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
-            raise ConfigError(f"{f.name} must be {kind} in [{_number_text(low)}, {_number_text(high)}], got {value!r}")
-        if not low <= value <= high:
-            raise ConfigError(f"{f.name} {_number_text(value)} is out of range [{_number_text(low)}, {_number_text(high)}]")
+        problem = range_problem(value, "int" in str(f.type), *SETTING_BOUNDS[f.name])
+        if problem is not None:
+            raise ConfigError(f"{f.name} {problem}")
 
 
 def release_settings(cls: type[AgentConfig], benchmark: str | None, overrides: dict[str, Any]) -> dict[str, Any]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -46,3 +47,21 @@ def _reset_our_loggers():
         logger.setLevel(logging.NOTSET)
         for h in [h for h in logger.handlers if getattr(h, "_recap", False)]:
             logger.removeHandler(h)
+
+
+@pytest.fixture
+def fake_server() -> Iterator:
+    """``fake_server(**config)`` starts a loopback fake server (stopped after the test)."""
+    from tests.doubles.fake_server import FakeServer, FakeServerConfig
+
+    servers: list[FakeServer] = []
+
+    def start(**config) -> FakeServer:
+        server = FakeServer(FakeServerConfig(**config))
+        server.start_in_thread()
+        servers.append(server)
+        return server
+
+    yield start
+    for s in servers:
+        s.stop_thread()

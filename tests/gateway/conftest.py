@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from recap.llm import ChatMessage, LLMRequest
-from tests.doubles.fake_server import FakeServer, FakeServerConfig
 from workers.llm.litellm_setup import get_litellm
 
 #: a fake API key; tests check it never reaches a written file
@@ -20,22 +18,6 @@ FAKE_KEY_ENV = "RECAP_TEST_FAKE_KEY"
 @pytest.fixture(scope="session", autouse=True)
 def _litellm_imported() -> None:
     get_litellm()
-
-
-@pytest.fixture
-def fake_server() -> Iterator:
-    """``fake_server(**config)`` starts a loopback fake server (stopped after the test)."""
-    servers: list[FakeServer] = []
-
-    def start(**config) -> FakeServer:
-        server = FakeServer(FakeServerConfig(**config))
-        server.start_in_thread()
-        servers.append(server)
-        return server
-
-    yield start
-    for s in servers:
-        s.stop_thread()
 
 
 @pytest.fixture

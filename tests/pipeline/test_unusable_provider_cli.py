@@ -27,7 +27,7 @@ from pipeline.cli import main
 from pipeline.driver import EXIT_INFRA, EXIT_WORK_REMAINS
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
-from tests.doubles.fake_server import FakeServer, FakeServerConfig
+from tests.doubles.fake_server import FakeServer
 from workers.gateway.entries import journal_spend
 from workers.gateway.ledger import JOURNAL_NAME
 from workers.llm.pricing import default_prices, usd_to_pico
@@ -70,27 +70,12 @@ def bill_pico(server: FakeServer) -> int:
     return sum(PRICE.cost_pico(c.prompt_tokens, c.cached_tokens, c.completion_tokens) for c in server.log if c.status == 200)
 
 
-@pytest.fixture
-def server_factory():
-    servers: list[FakeServer] = []
-
-    def start(**config) -> FakeServer:
-        s = FakeServer(FakeServerConfig(**config))
-        s.start_in_thread()
-        servers.append(s)
-        return s
-
-    yield start
-    for s in servers:
-        s.stop_thread()
-
-
 def test_unreadable_200s_are_charged_so_run_and_resumes_never_pass_the_cap(
-    ray_address, tmp_path, capsys, monkeypatch, server_factory
+    ray_address, tmp_path, capsys, monkeypatch, fake_server
 ):
     monkeypatch.setenv(KEY_ENV, "not-a-secret")
     # every reply is a 200 nobody can read: not JSON (1/3), else an HTML page (1/2), else no choices
-    server = server_factory(fault_rates={"notjson": 1 / 3, "html": 0.5, "nochoices": 1.0}, seed=3)
+    server = fake_server(fault_rates={"notjson": 1 / 3, "html": 0.5, "nochoices": 1.0}, seed=3)
     cap = 0.005
     out, spec_file = _sweep(
         tmp_path, "unreadable", MODEL.format(label="flaky", url=server.base_url, max_tokens=32), 4, cap=f"run_cap_usd: {cap}\n"
@@ -142,11 +127,11 @@ def test_unreadable_200s_are_charged_so_run_and_resumes_never_pass_the_cap(
 
 
 def test_a_lying_provider_is_stopped_after_bounded_replies_and_the_honest_model_finishes(
-    ray_address, tmp_path, capsys, monkeypatch, server_factory
+    ray_address, tmp_path, capsys, monkeypatch, fake_server
 ):
     monkeypatch.setenv(KEY_ENV, "not-a-secret")
-    liar = server_factory(fault_rates={"negusage": 1.0})
-    honest = server_factory()
+    liar = fake_server(fault_rates={"negusage": 1.0})
+    honest = fake_server()
     # (output bounds that differ, so that the two models' units are not identical)
     models = MODEL.format(label="liar", url=liar.base_url, max_tokens=31) + MODEL.format(
         label="honest", url=honest.base_url, max_tokens=32
@@ -172,10 +157,10 @@ def test_a_lying_provider_is_stopped_after_bounded_replies_and_the_honest_model_
 
 
 def test_a_200_without_a_usable_choice_ends_the_unit_infra_error_and_resume_retries_it(
-    ray_address, tmp_path, capsys, monkeypatch, server_factory
+    ray_address, tmp_path, capsys, monkeypatch, fake_server
 ):
     monkeypatch.setenv(KEY_ENV, "not-a-secret")
-    server = server_factory(fault_rates={"nullcontent": 0.5, "nochoices": 1.0})
+    server = fake_server(fault_rates={"nullcontent": 0.5, "nochoices": 1.0})
     out, spec_file = _sweep(tmp_path, "nochoices", MODEL.format(label="empty", url=server.base_url, max_tokens=32), 1)
     assert main(["run", str(spec_file), "--progress", "off"]) == EXIT_INFRA
     assert "1 units ended in an infrastructure failure (server_error 1)" in capsys.readouterr().out

@@ -17,6 +17,7 @@ from urllib.parse import parse_qsl, unquote, urlencode, urlsplit, urlunsplit
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from schemas.ranges import range_problem
 from workers.llm.pricing import Price, PriceTable, default_prices, resolve_price
 
 #: generation settings passed through to litellm (anything else is refused: typos surface)
@@ -63,22 +64,6 @@ NUMERIC_PARAMS: dict[str, tuple[bool, float, float]] = {
 }
 
 
-def _num(v: float) -> str:
-    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
-        return str(int(v))
-    return repr(float(v))
-
-
-def _range_problem(value: Any, integer: bool, low: float, high: float) -> str | None:
-    """Why ``value`` is not a number (an integer) within ``[low, high]``; None when it is."""
-    kind = "an integer" if integer else "a number"
-    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
-        return f"must be {kind} in [{_num(low)}, {_num(high)}], got {value!r}"
-    if not (low <= value <= high):  # also refuses nan
-        return f"{_num(value)} is out of range [{_num(low)}, {_num(high)}]"
-    return None
-
-
 def _param_problem(name: str, value: Any) -> str | None:
     """What is wrong with one generation param's value (None when nothing is)."""
     if name in SINGLE_CHOICE_PARAMS and (isinstance(value, bool) or value != 1):
@@ -87,12 +72,12 @@ def _param_problem(name: str, value: Any) -> str | None:
             "reserves the worst case of one); leave it out"
         )
     if name in NUMERIC_PARAMS:
-        return _range_problem(value, *NUMERIC_PARAMS[name])
+        return range_problem(value, *NUMERIC_PARAMS[name])
     if name == "logit_bias":
         if not isinstance(value, Mapping) or len(value) > LOGIT_BIAS_ENTRIES_MAX:
             return f"must be a mapping of token id -> bias with at most {LOGIT_BIAS_ENTRIES_MAX} entries"
         for token, bias in value.items():
-            problem = _range_problem(bias, False, -LOGIT_BIAS_MAX, LOGIT_BIAS_MAX)
+            problem = range_problem(bias, False, -LOGIT_BIAS_MAX, LOGIT_BIAS_MAX)
             if problem:
                 return f"entry {token!r}: {problem}"
     if name == "stop" and not (isinstance(value, str) or (isinstance(value, list) and all(isinstance(x, str) for x in value))):

@@ -14,6 +14,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from schemas.ranges import range_problem
+
 #: an action no benchmark has; injected to make the agent meet an invalid action
 INVALID_ACTION = "xyzzy the unknown object (injected invalid action)"
 #: a reply cut in the middle of its JSON object; injected to exercise the repair path
@@ -28,12 +30,6 @@ KNOB_BOUNDS: dict[str, tuple[float, float]] = {
     "malformed_json_rate": (0.0, 1.0),
     "chunk_size": (1, 1000),
 }
-
-
-def _text(v: float) -> str:
-    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
-        return str(int(v))
-    return repr(float(v))
 
 
 class OfflineOptionsError(ValueError):
@@ -61,20 +57,15 @@ class Knobs:
             integer = name in ("seed", "chunk_size")
             if value is None and name == "chunk_size":
                 continue
-            if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
-                low, high = KNOB_BOUNDS[name]
-                kind = "an integer" if integer else "a number"
-                raise OfflineOptionsError(f"{name} must be {kind} in [{_text(low)}, {_text(high)}], got {value!r}")
+            problem = range_problem(value, integer, *KNOB_BOUNDS[name])
+            if problem is not None:
+                raise OfflineOptionsError(f"{name} {problem}")
         knobs = cls(
             seed=options.get("seed", 0),
             invalid_action_rate=float(options.get("invalid_action_rate", 0.0)),
             malformed_json_rate=float(options.get("malformed_json_rate", 0.0)),
             chunk_size=options.get("chunk_size"),
         )
-        for name, (low, high) in KNOB_BOUNDS.items():
-            value = getattr(knobs, name)
-            if value is not None and not low <= value <= high:
-                raise OfflineOptionsError(f"{name} {_text(value)} is out of range [{_text(low)}, {_text(high)}]")
         return knobs
 
 
