@@ -41,8 +41,9 @@ class CapPolicy:
         self._event = event
         #: why the whole run stopped (None while it runs)
         self.run_stopped: str | None = None
-        #: model labels whose cap was reached (or whose provider was stopped), with the line why
-        self.stopped_models: dict[str, str] = {}
+        #: model labels whose cap was reached (or whose provider was stopped): the event kind
+        #: that stopped each, and the line why
+        self.stopped_models: dict[str, tuple[EventKind, str]] = {}
 
     def allows(self, model_label: str) -> bool:
         """May an episode of this model start now?"""
@@ -53,9 +54,9 @@ class CapPolicy:
         """One line on what stopped (the run's reason, else the capped models), or None."""
         if self.run_stopped:
             return self.run_stopped
-        capped = sorted(m for m, why in self.stopped_models.items() if why.startswith("model cap "))
+        capped = sorted(m for m, (kind, _) in self.stopped_models.items() if kind == "model_cap_reached")
         lines = [", ".join(capped) + " capped"] if capped else []
-        lines += [why for m, why in sorted(self.stopped_models.items()) if m not in capped]
+        lines += [why for m, (_, why) in sorted(self.stopped_models.items()) if m not in capped]
         return "; ".join(lines) if lines else None
 
     def check(self, spend: Spend) -> None:
@@ -94,5 +95,5 @@ class CapPolicy:
         """Stop starting units of model ``name`` (recorded once as a ``kind`` event: ``model_cap_reached``,
         or ``model_stopped`` for a provider stopped for its usage); other models go on."""
         if name not in self.stopped_models:
-            self.stopped_models[name] = why
+            self.stopped_models[name] = (kind, why)
             self._event(kind, severity="warning", model=name, reason=why)
