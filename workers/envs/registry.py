@@ -232,5 +232,6 @@ def data_env_vars() -> tuple[str, ...]:
 register_benchmark("blocksworld", "workers.envs.blocksworld")
 register_benchmark("robotouille", "workers.envs.robotouille")
 register_benchmark("alfworld", "workers.envs.alfworld")
+register_benchmark("fever", "workers.envs.fever")
 #: the authors' released prompt and demonstration files (``prompts: release``): read by no benchmark
 register_data_folder("recap-release", "workers.release.folder:FOLDER")

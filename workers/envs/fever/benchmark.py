@@ -1,0 +1,113 @@
+"""The FEVER benchmark for the registry: list the paper's 200 claims (or all), make one environment.
+
+Options of :meth:`FeverBenchmark.make`:
+- ``data_dir``: the folder holding ``paper_dev.jsonl``; default by the shared rule (``$FEVER_DATA``...).
+- ``wikipedia_url``: the base URL searched as ``<base>/w/index.php?search=...``; default the real site.
+- ``wikipedia``: ``live`` (default) reads that server; ``snapshot:DIR`` answers only from the
+  ``wiki_pages`` table(s) in DIR (a run folder) and never reaches a server.
+- ``max_steps``: actions per episode (default 10, the paper's cap).
+- ``step_multiplier`` and ``seed`` are accepted and have no effect (a fixed cap; no randomness).
+- ``page_store`` / ``limiter``: objects the pipeline passes in (where answers read live are kept;
+  the shared per-host rate limit); defaults: keep nothing, the process's shared limiter.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from recap.env import Environment
+from workers.envs.data_sources import DataFolder
+from workers.envs.registry import Benchmark
+
+from .claims import BENCHMARK_NAME, find_claim, load_claims, resolve_data_dir, select
+from .data_folders import FOLDER
+from .env import DEFAULT_MAX_STEPS, FeverEnvironment
+from .pages import PageStore, Snapshot
+from .ratelimit import RateLimiter
+from .wiki import DEFAULT_WIKIPEDIA_URL, LiveSource, SnapshotSource, WikiSource
+
+LIVE = "live"
+SNAPSHOT_PREFIX = "snapshot:"
+
+
+def check_wikipedia_url(url: Any) -> str:
+    """``url`` when it is an http(s) base URL, else ValueError naming the option."""
+    if not isinstance(url, str) or not url.startswith(("http://", "https://")) or len(url.rstrip("/")) <= len("https://"):
+        raise ValueError(f"wikipedia_url must be an http(s) base URL such as {DEFAULT_WIKIPEDIA_URL}, got {url!r}")
+    return url.rstrip("/")
+
+
+def snapshot_dir(wikipedia: Any) -> Path | None:
+    """The folder of ``snapshot:DIR``; None for ``live``; ValueError for anything else."""
+    if wikipedia == LIVE:
+        return None
+    if isinstance(wikipedia, str) and wikipedia.startswith(SNAPSHOT_PREFIX) and wikipedia[len(SNAPSHOT_PREFIX) :].strip():
+        return Path(wikipedia[len(SNAPSHOT_PREFIX) :].strip()).expanduser()
+    raise ValueError(f"wikipedia must be {LIVE!r} or 'snapshot:DIR' (a folder holding wiki_pages tables), got {wikipedia!r}")
+
+
+@lru_cache(maxsize=8)
+def _snapshot(folder: Path, mtime_ns: int) -> Snapshot:
+    return Snapshot(folder)
+
+
+def wiki_source(wikipedia: str = LIVE, *, page_store: PageStore | None = None, limiter: RateLimiter | None = None) -> WikiSource:
+    """The source of search answers for a ``wikipedia`` setting (a snapshot is loaded once per process)."""
+    folder = snapshot_dir(wikipedia)
+    if folder is None:
+        return LiveSource(page_store, limiter=limiter)
+    resolved = folder.resolve()
+    return SnapshotSource(_snapshot(resolved, resolved.stat().st_mtime_ns if resolved.exists() else 0))
+
+
+class FeverBenchmark(Benchmark):
+    """FEVER's registry entry: claims from ``paper_dev.jsonl``, observations from Wikipedia or a snapshot."""
+
+    name = BENCHMARK_NAME
+
+    def __init__(self, data_dir: str | os.PathLike[str] | None = None) -> None:
+        self.data_dir = data_dir
+
+    def data_folders(self) -> Mapping[str, DataFolder]:
+        """The claims folder (:mod:`.data_folders`)."""
+        return {FOLDER.name: FOLDER}
+
+    def list_instances(self, selector: str | None = None) -> list[str]:
+        """``None``/``paper``: the paper's 200 in the release's order; ``all``: every claim in file order."""
+        return [c.instance_id for c in select(load_claims(resolve_data_dir(self.data_dir)), selector)]
+
+    def make(
+        self,
+        instance_id: str,
+        *,
+        data_dir: str | os.PathLike[str] | None = None,
+        wikipedia_url: str = DEFAULT_WIKIPEDIA_URL,
+        wikipedia: str = LIVE,
+        max_steps: int = DEFAULT_MAX_STEPS,
+        step_multiplier: float | None = None,
+        seed: int = 0,
+        page_store: PageStore | None = None,
+        limiter: RateLimiter | None = None,
+        **unknown: Any,
+    ) -> Environment:
+        """A fresh environment for ``fever/<claim id>``; ValueError for an unknown or bad option."""
+        if unknown:
+            raise ValueError(
+                f"unknown FEVER option(s) {', '.join(sorted(unknown))}; accepted: data_dir, wikipedia_url, "
+                "wikipedia, max_steps, step_multiplier, seed"
+            )
+        base = check_wikipedia_url(wikipedia_url)
+        if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+            raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+        source = wiki_source(wikipedia, page_store=page_store, limiter=limiter)
+        claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
+        env = FeverEnvironment(find_claim(claims, instance_id), source, wikipedia_url=base, max_steps=max_steps)
+        env.seed = seed
+        return env
+
+
+BENCHMARK = FeverBenchmark()
