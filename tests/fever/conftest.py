@@ -50,7 +50,8 @@ def make(claims_dir: Path, standin: StandIn, store: MemoryPageStore):
     """``make(claim_id, **options)``: an environment on the stand-in, recording into ``store``, no rate-limit waits."""
 
     def build(claim_id: int, **options) -> FeverEnvironment:
-        options.setdefault("wikipedia_url", standin.base_url)
+        if "wikipedia_url" not in options:
+            options["wikipedia_url"] = standin.base_url
         options.setdefault("limiter", TokenBucket(1000.0, 1000))
         options.setdefault("page_store", store)
         env = BENCHMARK.make(f"fever/{claim_id}", data_dir=str(claims_dir), **options)
