@@ -219,7 +219,7 @@ def test_registration_is_lazy_named_once_and_undone(corridor):
         bench.name = "tunnel"
         return bench
 
-    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", NAME]
+    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever", NAME]
     register_benchmark("tunnel", factory)
     try:
         assert built == []
@@ -229,7 +229,7 @@ def test_registration_is_lazy_named_once_and_undone(corridor):
     finally:
         unregister_benchmark("tunnel")
     with pytest.raises(
-        UnknownInstanceError, match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, corridor$"
+        UnknownInstanceError, match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, fever, corridor$"
     ):
         registry.get_benchmark("tunnel")
     # the declared hooks' defaults: no per-method options, no data folder, nothing to forward
@@ -244,8 +244,8 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
         with pytest.raises(ModuleNotFoundError):
             registry.get_benchmark("ghost")
         # the authors' released prompts (registered on their own, not a benchmark's) come last
-        assert registry.data_env_vars() == ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "ALFWORLD_DATA_2_1_2", "RECAP_RELEASE_DATA")
-        assert list(registry.data_folders()) == ["robotouille", "alfworld", "alfworld-2.1.2", "recap-release"]
+        assert registry.data_env_vars() == ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "ALFWORLD_DATA_2_1_2", "FEVER_DATA", "RECAP_RELEASE_DATA")
+        assert list(registry.data_folders()) == ["robotouille", "alfworld", "alfworld-2.1.2", "fever", "recap-release"]
         assert registry.data_folder("alfworld-2.1.2").location.env_var == "ALFWORLD_DATA_2_1_2"
         assert registry.make_env("blocksworld/3@1").instance_id == "blocksworld/3@1"
     finally:
@@ -260,4 +260,4 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
             registry.get_benchmark("plain")
     finally:
         unregister_benchmark("plain")
-    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld"]
+    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever"]
