@@ -244,7 +244,13 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
         with pytest.raises(ModuleNotFoundError):
             registry.get_benchmark("ghost")
         # the authors' released prompts (registered on their own, not a benchmark's) come last
-        assert registry.data_env_vars() == ("ROBOTOUILLE_DATA", "ALFWORLD_DATA", "ALFWORLD_DATA_2_1_2", "FEVER_DATA", "RECAP_RELEASE_DATA")
+        assert registry.data_env_vars() == (
+            "ROBOTOUILLE_DATA",
+            "ALFWORLD_DATA",
+            "ALFWORLD_DATA_2_1_2",
+            "FEVER_DATA",
+            "RECAP_RELEASE_DATA",
+        )
         assert list(registry.data_folders()) == ["robotouille", "alfworld", "alfworld-2.1.2", "fever", "recap-release"]
         assert registry.data_folder("alfworld-2.1.2").location.env_var == "ALFWORLD_DATA_2_1_2"
         assert registry.make_env("blocksworld/3@1").instance_id == "blocksworld/3@1"
