@@ -31,6 +31,7 @@ from recap.baselines import (
 )
 from recap.config import AgentConfig, ConfigError, ReCAPConfig, build_config
 from recap.demo_script import register_deriver, unregister_deriver
+from recap.protocol import BenchmarkProtocol
 from recap.recap_agent import ReCAPAgent
 
 METHODS: dict[str, tuple[type[Agent], type[AgentConfig]]] = {
@@ -89,9 +90,13 @@ def method_classes(method: str) -> tuple[type[Agent], type[AgentConfig]]:
 
 
 def make_agent(
-    method: str, profile: str | None = None, ablation: str | None = None, benchmark: str | None = None, **settings: Any
+    method: str,
+    profile: str | None = None,
+    ablation: str | None = None,
+    benchmark: BenchmarkProtocol | None = None,
+    **settings: Any,
 ) -> Agent:
-    """Profile defaults (for ``benchmark`` when given), then the ablation, then explicit
-    settings (see ``build_config``)."""
+    """Profile defaults (as ``benchmark``, a benchmark's protocol object, declares them when
+    given), then the ablation, then explicit settings (see ``build_config``)."""
     agent_cls, config_cls = method_classes(method)
     return agent_cls(build_config(config_cls, profile, ablation, benchmark, **settings))

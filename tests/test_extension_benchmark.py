@@ -151,7 +151,7 @@ def test_a_benchmark_defined_in_a_test_plays_an_episode_through_the_worker(corri
     from workers.episode_worker import EpisodeRunner
 
     before = _git_status()
-    config = make_agent("react", benchmark=NAME).config.to_json()
+    config = make_agent("react", benchmark=registry.get_benchmark(NAME)).config.to_json()
     unit = UnitWork("u1", f"{NAME}/3", "react", config, "expert", "offline/expert", seed=0, step_multiplier=2.0)
     batches: list[dict[str, list[dict]]] = []
     runner = EpisodeRunner("w1", "run1", ExpertFactory(), send=batches.append, wait=lambda ref: None)

@@ -25,6 +25,7 @@ from typing import Any
 
 from recap.config import AgentConfig
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
+from recap.protocol import BenchmarkProtocol
 from workers.envs.data_sources import DataFolder
 
 __all__ = [
@@ -44,8 +45,10 @@ __all__ = [
 ]
 
 
-class Benchmark(ABC):
-    """What the pipeline needs from a benchmark: two duties and hooks with defaults.
+class Benchmark(BenchmarkProtocol, ABC):
+    """What the pipeline needs from a benchmark: two duties and hooks with defaults (those it
+    inherits from :class:`recap.protocol.BenchmarkProtocol` say what the methods' profiles mean
+    on it).
 
     Subclasses set ``name`` and implement :meth:`list_instances` and :meth:`make`; the hooks
     below return "nothing special" unless overridden, so a new benchmark only writes the ones
