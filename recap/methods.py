@@ -7,8 +7,9 @@ those names to code, so an unknown name fails the same way everywhere.
 Everything else about a method is declared by its agent class (reply fields for the offline
 test doubles, demonstration replies derived from a benchmark's script, call-cap and estimate
 assumptions), so a new method is its module, its prompts, its tests and one
-:func:`register_method` call (for a built-in: one line in :data:`METHODS` and its name in
-``schemas.labels.METHODS``, which a test keeps in step).
+:func:`register_method` call (for a built-in: one line in :data:`METHODS`). This table is the
+one list of method names: nothing else lists them (``schemas.labels.VERSION_1_METHODS`` is the
+frozen vocabulary of old rows, not a copy).
 """
 
 from __future__ import annotations
