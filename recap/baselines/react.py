@@ -209,7 +209,7 @@ class ReActAgent(Agent):
         # prompts: release on ALFWorld (Act: the JSON loop): the released first prompt with its
         # JSON request (act_alfworld/act.py:158-172, 304), and each observation as the release
         # sends it, without our heading (act.py:211)
-        released = "release" in ep.extra and ep.env.benchmark == "alfworld"
+        released = getattr(ep.extra.get("release"), "first_turn", None) == "framed"
         if released:
             goal = "" if reset.goal in reset.observation else f"\n\nGoal: {reset.goal}"
             ep.conv.pin("task", T.release_alfworld_task(f"{reset.observation}{goal}", json_example=T.RELEASE_JSON_EXAMPLE))
