@@ -29,9 +29,11 @@ No method, config, schema or pipeline module changes: recap learns what a benchm
 from what it declares, and a row's split/task are what its environment reports. Outside its
 folder only knowledge about *other* things stays per benchmark: the authors' released prompt
 files (``workers/release/texts.py``, for a benchmark they released prompts for), the paper's
-published numbers (``reports/paper.py``), the frozen reading of schema version 1 rows
-(``schemas/labels.py`` ``place_of``, ``schemas/versions.py``), and Blocksworld's leading-zero
-ids (``pipeline/units.py`` ``canonical_instance_id``).
+published numbers (``reports/paper.py``) and the reading of schema version 1 rows
+(``schemas/versions.py``). Not yet declarations (a benchmark needs them only to differ from the
+default): ``schemas/labels.py`` ``place_of`` derives ALFWorld's and Robotouille's split/task from
+the id for a row whose environment never reported them, and ``pipeline/units.py``
+``canonical_instance_id`` drops Blocksworld's leading zeros.
 """
 
 from __future__ import annotations
