@@ -9,7 +9,7 @@ A profile can depend on the ablation (the released code runs its ablation varian
 shortcut) and on the benchmark (the paper runs Robotouille's own ReAct protocol on Robotouille
 and Yao et al.'s on ALFWorld). Each config class says what a profile means for it anywhere in
 :meth:`AgentConfig.profile_defaults`; each benchmark declares where its own protocol differs
-(:class:`recap.protocol.BenchmarkProtocol`, e.g. ``workers/envs/robotouille/protocol.py``), so
+(:class:`BenchmarkProtocol`, e.g. ``workers/envs/robotouille/protocol.py``), so
 recap never switches on a benchmark's name; the README's protocol table lists every item.
 
 Two settings are *derived* when left at None, from facts known only when an episode starts:
@@ -32,7 +32,6 @@ import re
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from recap.protocol import BenchmarkProtocol
 from schemas.ranges import range_problem
 
 PROFILES: dict[str, dict[str, Any]] = {
@@ -64,6 +63,33 @@ OMITTED_OBSERVATION = "(observation left out of this example)"
 
 class ConfigError(ValueError):
     """An unknown or out-of-range agent setting."""
+
+
+class BenchmarkProtocol:
+    """What a benchmark declares about how the methods run on it, so recap never compares a
+    benchmark's name: a method's profile can mean other settings on another benchmark (the paper
+    runs Robotouille's own ReAct protocol on Robotouille and Yao et al.'s on ALFWorld; the
+    authors' released prompts exist for two benchmarks). ``workers.envs.registry.Benchmark``
+    subclasses this, each built-in benchmark's folder holds its protocol
+    (``workers/envs/<name>/protocol.py``), and :func:`build_config` asks it. Each hook's
+    default says "nothing special here", so a new benchmark overrides only what it has to say."""
+
+    name: str = ""
+
+    def profile_settings(
+        self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
+    ) -> dict[str, Any]:
+        """What ``profile`` sets for a method (its config class ``config_cls``) on this benchmark,
+        given what it sets anywhere (``generic``: the method's own
+        :meth:`recap.config.AgentConfig.profile_defaults`). The result replaces ``generic``, so a
+        benchmark may add, change or drop settings. Default: ``generic`` unchanged."""
+        return generic
+
+    def release_prompt_settings(self, config_cls: type[AgentConfig]) -> dict[str, Any]:
+        """Settings the authors' released prompt for a method implies on this benchmark (the reply
+        format it asks for); ``prompts: release`` applies them. Default: none (no released
+        prompts, or ones that imply nothing)."""
+        return {}
 
 
 @dataclass(frozen=True)
@@ -103,7 +129,7 @@ class AgentConfig:
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
         """What ``profile`` sets for this method beyond PROFILES on any benchmark (the method's own
         protocol); a benchmark adjusts it where its protocol differs
-        (:meth:`recap.protocol.BenchmarkProtocol.profile_settings`). Subclasses extend it."""
+        (:meth:`BenchmarkProtocol.profile_settings`). Subclasses extend it."""
         return {}
 
     def validate(self) -> None:
@@ -276,7 +302,7 @@ def check_setting_ranges(cfg: AgentConfig) -> None:
 
 def release_settings(cls: type[AgentConfig], benchmark: BenchmarkProtocol | None, overrides: dict[str, Any]) -> dict[str, Any]:
     """What ``prompts: release`` implies for ``cls`` on ``benchmark`` (the reply format the
-    released prompt asks for, :meth:`recap.protocol.BenchmarkProtocol.release_prompt_settings`);
+    released prompt asks for, :meth:`BenchmarkProtocol.release_prompt_settings`);
     ConfigError, one line, when an explicit setting contradicts it."""
     implied = benchmark.release_prompt_settings(cls) if benchmark is not None else {}
     clash = sorted(k for k, v in implied.items() if k in overrides and overrides[k] != v)

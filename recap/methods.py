@@ -30,9 +30,8 @@ from recap.baselines import (
     ReActConfig,
     StandardAgent,
 )
-from recap.config import AgentConfig, ConfigError, ReCAPConfig, build_config
+from recap.config import AgentConfig, BenchmarkProtocol, ConfigError, ReCAPConfig, build_config
 from recap.demo_script import register_deriver, unregister_deriver
-from recap.protocol import BenchmarkProtocol
 from recap.recap_agent import ReCAPAgent
 
 METHODS: dict[str, tuple[type[Agent], type[AgentConfig]]] = {

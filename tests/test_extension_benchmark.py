@@ -16,7 +16,7 @@ temporary folder and registered by one line):
   ``make``, and only the hooks it needs: ``options_for_agent`` for per-method ``make()``
   options; ``data_folders`` when it reads a data folder, so ``recap data list/check/fetch`` and
   the Ray workers' environment follow; ``profile_settings`` / ``release_prompt_settings``
-  (:class:`recap.protocol.BenchmarkProtocol`) when a method's ``paper``/``released`` profile
+  (:class:`recap.config.BenchmarkProtocol`) when a method's ``paper``/``released`` profile
   means something else there - a ``protocol.py`` as Robotouille's and ALFWorld's), and its
   demonstration and rules texts;
 * ``workers/envs/registry.py`` - one ``register_benchmark("<name>", "workers.envs.<name>")``

@@ -54,7 +54,7 @@ def build_agent(
     """The agent for a method name + profile + ablation + settings (``recap.methods.make_agent``).
 
     ``benchmark`` is a registered benchmark's name: what its profiles mean there is what that
-    benchmark declares (:class:`recap.protocol.BenchmarkProtocol`). Unknown methods, benchmarks
+    benchmark declares (:class:`recap.config.BenchmarkProtocol`). Unknown methods, benchmarks
     or settings raise :class:`recap.config.ConfigError` (a bad setting's KeyError/TypeError/
     ValueError is translated, so callers report one error type).
     """

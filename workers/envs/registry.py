@@ -23,9 +23,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from recap.config import AgentConfig
+from recap.config import AgentConfig, BenchmarkProtocol
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
-from recap.protocol import BenchmarkProtocol
 from workers.envs.data_sources import DataFolder
 
 __all__ = [
@@ -47,7 +46,7 @@ __all__ = [
 
 class Benchmark(BenchmarkProtocol, ABC):
     """What the pipeline needs from a benchmark: two duties and hooks with defaults (those it
-    inherits from :class:`recap.protocol.BenchmarkProtocol` say what the methods' profiles mean
+    inherits from :class:`recap.config.BenchmarkProtocol` say what the methods' profiles mean
     on it).
 
     Subclasses set ``name`` and implement :meth:`list_instances` and :meth:`make`; the hooks

@@ -1,5 +1,5 @@
 """How the methods run on ALFWorld: what the ``paper`` and ``released`` profiles and the
-authors' released prompts mean here, declared by the benchmark (recap.protocol).
+authors' released prompts mean here, declared by the benchmark (recap.config.BenchmarkProtocol).
 
 Read from GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f (``alfworld-recap``): ReAct and Act follow
 Yao et al.'s released scripts (react_alfworld/react.py, act_alfworld/act.py), ReCAP's released
@@ -43,7 +43,7 @@ def _without(settings: dict[str, Any], dropped: dict[str, Any]) -> dict[str, Any
 
 def profile_settings(config_cls: type[AgentConfig], profile: str, generic: dict[str, Any]) -> dict[str, Any]:
     """The profile's settings on ALFWorld for a method with config class ``config_cls``
-    (:meth:`recap.protocol.BenchmarkProtocol.profile_settings`)."""
+    (:meth:`recap.config.BenchmarkProtocol.profile_settings`)."""
     released = profile == "released"
     out = dict(generic)
     if issubclass(config_cls, ReCAPConfig) and released:

@@ -1,5 +1,5 @@
 """How the methods run on Robotouille: what the ``paper`` and ``released`` profiles and the
-authors' released prompts mean here, declared by the benchmark (recap.protocol).
+authors' released prompts mean here, declared by the benchmark (recap.config.BenchmarkProtocol).
 
 Read from GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f (``robotouille-baselines``): every released
 Robotouille baseline is run with the benchmark's own ReAct protocol and samples at 0.7, and the
@@ -41,7 +41,7 @@ REACT: dict[str, Any] = {
 
 def profile_settings(config_cls: type[AgentConfig], profile: str, generic: dict[str, Any]) -> dict[str, Any]:
     """The profile's settings on Robotouille for a method with config class ``config_cls``
-    (:meth:`recap.protocol.BenchmarkProtocol.profile_settings`)."""
+    (:meth:`recap.config.BenchmarkProtocol.profile_settings`)."""
     out: dict[str, Any] = {}
     if profile == "paper":
         # Robotouille observations are the whole kitchen plus its valid actions (~3.5K
