@@ -107,8 +107,8 @@ def main() -> None:
             f"{len(longest_plan[2])} actions ({longest_plan[0]}); largest step cap {max_steps}"
         )
         for method in METHODS:
-            paper = make_agent(method, profile="paper", benchmark=benchmark)
-            every = make_agent(method, profile="paper", benchmark=benchmark, demo_observations="all")
+            paper = make_agent(method, profile="paper", benchmark=get_benchmark(benchmark))
+            every = make_agent(method, profile="paper", benchmark=get_benchmark(benchmark), demo_observations="all")
             try:
                 demo_all = tokens(every.demonstration_text(env) or "")
                 demo_paper = tokens(paper.demonstration_text(env) or "")

@@ -5,11 +5,12 @@ Ablations are configuration of one agent, never copies of it. ``paper`` follows 
 the authors' released code (K = 128 messages counting the pins, ReCAP's temperature not sent,
 0.7 for the Robotouille baselines). One unit of ``window`` is one message.
 
-A profile can depend on the benchmark (the paper runs Robotouille's own ReAct protocol on
-Robotouille and Yao et al.'s on ALFWorld) and on the ablation (the released code runs its
-ablation variants without the shortcut). Each config class says what a profile means for it
-in :meth:`AgentConfig.profile_defaults`, so the protocol of a method lives with the method; the
-README's protocol table lists every item.
+A profile can depend on the ablation (the released code runs its ablation variants without the
+shortcut) and on the benchmark (the paper runs Robotouille's own ReAct protocol on Robotouille
+and Yao et al.'s on ALFWorld). Each config class says what a profile means for it anywhere in
+:meth:`AgentConfig.profile_defaults`; each benchmark declares where its own protocol differs
+(:class:`BenchmarkProtocol`, e.g. ``workers/envs/robotouille/protocol.py``), so
+recap never switches on a benchmark's name; the README's protocol table lists every item.
 
 Two settings are *derived* when left at None, from facts known only when an episode starts:
 
@@ -48,10 +49,6 @@ PROFILES: dict[str, dict[str, Any]] = {
     "released": {"window": 128, "temperature": None, "window_counts_pins": True, "window_mode": "pair", "max_tokens": None},
 }
 
-#: what the released Robotouille baselines sample at (robotouille-baselines/conf/llm/base_llm.yaml:2,
-#: sent by agents/prompt_builder/prompt_llm.py:140-144)
-RELEASED_BASELINE_TEMPERATURE = 0.7
-
 #: whether observations list the currently valid actions, where a benchmark makes that optional
 #: (ALFWorld): ``shown`` in the episode and in the one-shot demonstration, ``episode`` in the
 #: episode only (the demonstration stays as written), ``hidden`` nowhere; None: the benchmark's
@@ -66,6 +63,33 @@ OMITTED_OBSERVATION = "(observation left out of this example)"
 
 class ConfigError(ValueError):
     """An unknown or out-of-range agent setting."""
+
+
+class BenchmarkProtocol:
+    """What a benchmark declares about how the methods run on it, so recap never compares a
+    benchmark's name: a method's profile can mean other settings on another benchmark (the paper
+    runs Robotouille's own ReAct protocol on Robotouille and Yao et al.'s on ALFWorld; the
+    authors' released prompts exist for two benchmarks). ``workers.envs.registry.Benchmark``
+    subclasses this, each built-in benchmark's folder holds its protocol
+    (``workers/envs/<name>/protocol.py``), and :func:`build_config` asks it. Each hook's
+    default says "nothing special here", so a new benchmark overrides only what it has to say."""
+
+    name: str = ""
+
+    def profile_settings(
+        self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
+    ) -> dict[str, Any]:
+        """What ``profile`` sets for a method (its config class ``config_cls``) on this benchmark,
+        given what it sets anywhere (``generic``: the method's own
+        :meth:`recap.config.AgentConfig.profile_defaults`). The result replaces ``generic``, so a
+        benchmark may add, change or drop settings. Default: ``generic`` unchanged."""
+        return generic
+
+    def release_prompt_settings(self, config_cls: type[AgentConfig]) -> dict[str, Any]:
+        """Settings the authors' released prompt for a method implies on this benchmark (the reply
+        format it asks for); ``prompts: release`` applies them. Default: none (no released
+        prompts, or ones that imply nothing)."""
+        return {}
 
 
 @dataclass(frozen=True)
@@ -102,27 +126,10 @@ class AgentConfig:
     prompts: str = "ours"
 
     @classmethod
-    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
-        """What ``profile`` sets for this method on ``benchmark`` beyond PROFILES (the method's
-        own protocol). Subclasses extend it; unknown benchmarks get the generic values."""
-        out: dict[str, Any] = {}
-        if profile == "paper" and benchmark == "robotouille":
-            # Robotouille observations are the whole kitchen plus its valid actions (~3.5K
-            # characters); repeating them after each of the example's 22 actions pins ~20K tokens
-            # into every call. The paper's one-shot example follows the benchmark's demonstration
-            # with the observations left out; we keep the first one so the example's reasoning
-            # can be checked against the state it starts from.
-            out["demo_observations"] = "first"
-        if profile == "released" and benchmark == "robotouille":
-            # every released Robotouille baseline (ReAct, Act, ADaPT, I/O, I/O-CoT) samples at the
-            # base config's temperature; ReCAPConfig overrides it (its calls send none)
-            out["temperature"] = RELEASED_BASELINE_TEMPERATURE
-        return out
-
-    @classmethod
-    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
-        """Settings the authors' released prompt implies on ``benchmark`` (its reply format);
-        ``prompts: release`` applies them (:func:`release_settings`). None for most methods."""
+    def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
+        """What ``profile`` sets for this method beyond PROFILES on any benchmark (the method's own
+        protocol); a benchmark adjusts it where its protocol differs
+        (:meth:`BenchmarkProtocol.profile_settings`). Subclasses extend it."""
         return {}
 
     def validate(self) -> None:
@@ -215,20 +222,12 @@ class ReCAPConfig(AgentConfig):
     shortcut_trace: bool = False
 
     @classmethod
-    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
-        """The released ALFWorld prompts carry no rules reminder (alfworld-recap/MATRIX/MATRIX/
-        chatbot.py sends none), so ``prompts: release`` there sends none either."""
-        return {"reminder_period": None} if benchmark == "alfworld" else {}
-
-    @classmethod
-    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
-        out = super().profile_defaults(profile, benchmark, ablation)
+    def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
+        out = super().profile_defaults(profile, ablation)
         if profile == "released":
             # no temperature in ReCAP's released calls (robotouille-recap/MATRIX/MATRIX/chatbot.py:88
             # has it commented out; alfworld-recap/MATRIX/MATRIX/chatbot.py:79-83 sends none)
             out.update(reminder_on="iterations", shortcut_trace=True, temperature=None)
-            if benchmark == "alfworld":
-                out["reminder_period"] = None  # the released ALFWorld code has no reminder
             if ablation not in (None, "original"):
                 out["shortcut"] = False  # the released ablation variants have no shortcut
         return out
@@ -301,11 +300,11 @@ def check_setting_ranges(cfg: AgentConfig) -> None:
             raise ConfigError(f"{f.name} {problem}")
 
 
-def release_settings(cls: type[AgentConfig], benchmark: str | None, overrides: dict[str, Any]) -> dict[str, Any]:
+def release_settings(cls: type[AgentConfig], benchmark: BenchmarkProtocol | None, overrides: dict[str, Any]) -> dict[str, Any]:
     """What ``prompts: release`` implies for ``cls`` on ``benchmark`` (the reply format the
-    released prompt asks for, :meth:`AgentConfig.release_prompt_settings`); ConfigError, one line,
-    when an explicit setting contradicts it."""
-    implied = cls.release_prompt_settings(benchmark)
+    released prompt asks for, :meth:`BenchmarkProtocol.release_prompt_settings`);
+    ConfigError, one line, when an explicit setting contradicts it."""
+    implied = benchmark.release_prompt_settings(cls) if benchmark is not None else {}
     clash = sorted(k for k, v in implied.items() if k in overrides and overrides[k] != v)
     if clash:
         wants = ", ".join(f"{k}: {json.dumps(implied[k])}" for k in clash)
@@ -318,17 +317,22 @@ def build_config(
     cls: type[AgentConfig],
     profile: str | None = None,
     ablation: str | None = None,
-    benchmark: str | None = None,
+    benchmark: BenchmarkProtocol | None = None,
     **overrides: Any,
 ) -> AgentConfig:
-    """Profile defaults (generic, then the method's own for ``benchmark``), then an ablation,
-    then explicit overrides; unknown names are errors."""
+    """Profile defaults (generic, then the method's own, as ``benchmark`` declares them for
+    itself), then an ablation, then explicit overrides; unknown names are errors. ``benchmark``
+    is the benchmark's protocol object (``workers.envs.registry.get_benchmark(name)``), not
+    its name: recap learns what a benchmark means only from what it declares."""
+    if isinstance(benchmark, str):
+        raise TypeError(f"build_config takes a benchmark's protocol (get_benchmark({benchmark!r})), not its name")
     values: dict[str, Any] = {}
     if profile is not None:
         if profile not in PROFILES:
             raise ConfigError(f"unknown profile {profile!r}; known: {', '.join(PROFILES)}")
         values.update(PROFILES[profile])
-        values.update(cls.profile_defaults(profile, benchmark, ablation))
+        own = cls.profile_defaults(profile, ablation)
+        values.update(benchmark.profile_settings(cls, profile, ablation, own) if benchmark is not None else own)
     if ablation is not None:
         if ablation not in ABLATIONS:
             raise ConfigError(f"unknown ablation {ablation!r}; known: {', '.join(ABLATIONS)}")

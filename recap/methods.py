@@ -7,8 +7,9 @@ those names to code, so an unknown name fails the same way everywhere.
 Everything else about a method is declared by its agent class (reply fields for the offline
 test doubles, demonstration replies derived from a benchmark's script, call-cap and estimate
 assumptions), so a new method is its module, its prompts, its tests and one
-:func:`register_method` call (for a built-in: one line in :data:`METHODS` and its name in
-``schemas.labels.METHODS``, which a test keeps in step).
+:func:`register_method` call (for a built-in: one line in :data:`METHODS`). This table is the
+one list of method names: nothing else lists them (``schemas.labels.VERSION_1_METHODS`` is the
+frozen vocabulary of old rows, not a copy).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from recap.baselines import (
     ReActConfig,
     StandardAgent,
 )
-from recap.config import AgentConfig, ConfigError, ReCAPConfig, build_config
+from recap.config import AgentConfig, BenchmarkProtocol, ConfigError, ReCAPConfig, build_config
 from recap.demo_script import register_deriver, unregister_deriver
 from recap.recap_agent import ReCAPAgent
 
@@ -89,9 +90,13 @@ def method_classes(method: str) -> tuple[type[Agent], type[AgentConfig]]:
 
 
 def make_agent(
-    method: str, profile: str | None = None, ablation: str | None = None, benchmark: str | None = None, **settings: Any
+    method: str,
+    profile: str | None = None,
+    ablation: str | None = None,
+    benchmark: BenchmarkProtocol | None = None,
+    **settings: Any,
 ) -> Agent:
-    """Profile defaults (for ``benchmark`` when given), then the ablation, then explicit
-    settings (see ``build_config``)."""
+    """Profile defaults (as ``benchmark``, a benchmark's protocol object, declares them when
+    given), then the ablation, then explicit settings (see ``build_config``)."""
     agent_cls, config_cls = method_classes(method)
     return agent_cls(build_config(config_cls, profile, ablation, benchmark, **settings))

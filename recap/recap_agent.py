@@ -91,7 +91,7 @@ class ReCAPAgent(Agent):
             # prompts: release: the released template's system text and rules frame the first
             # prompt (robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261) and its reminders
             st["rules"] = release.rules
-            if ep.env.benchmark == "alfworld":  # alfworld-recap/MATRIX/MATRIX/chatbot.py:242-253
+            if release.first_turn == "framed":  # alfworld-recap/MATRIX/MATRIX/chatbot.py:242-253
                 task = P.release_alfworld_task_prompt(
                     system=release.system, rules=release.rules, observation=reset.observation, goal=reset.goal
                 )

@@ -18,11 +18,18 @@ Where the released code puts the template's text into the first *turn* instead o
 its own (ReCAP: ``robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261`` builds the first prompt
 from the YAML's system text and rules), ``system`` and ``rules`` carry that text and the agent
 frames it (and re-sends ``rules`` in its reminders).
+
+``first_turn`` says whose released code the agent's first turn follows, so an agent never asks
+which benchmark it plays: ``labelled`` (Robotouille's releases: the observation, or ReCAP's
+template-framed task) or ``framed`` (the ALFWorld release: the environment's rule and the task
+framed as react.py / act.py / chatbot.py:242-253 send it). Only the release files decide it
+(:mod:`workers.release.texts`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass(frozen=True)
@@ -38,6 +45,7 @@ class ReleasePrompt:
     rules: str | None = None
     planner: tuple[tuple[str, str], ...] = ()
     executor: tuple[tuple[str, str], ...] = ()
+    first_turn: Literal["labelled", "framed"] = "labelled"
 
     def __post_init__(self) -> None:
         for role, content in (*self.messages, *self.planner, *self.executor):

@@ -15,10 +15,13 @@ from typing import Final
 ALFWORLD_SPLIT = "valid_unseen"
 #: ALFWorld's task types by the short names instance ids and the paper's tables use
 ALFWORLD_TASK_TYPES = ("put", "clean", "heat", "cool", "examine", "puttwo")
-#: the methods a sweep can name (recap/ and recap/baselines/)
-METHODS = ("recap", "react", "act", "cot", "standard", "adapt")
-#: the settings profiles (recap.config.PROFILES)
-PROFILES = ("paper", "released")
+#: the method names a schema version 1 row's label can start with (:func:`parse_default_label`,
+#: used only to read those rows): the methods of that time, frozen with the version. It is not
+#: the list of today's methods (that is ``recap.methods.METHODS``, where each method is
+#: registered): a method added later never wrote a version 1 row, so nothing here changes.
+VERSION_1_METHODS = ("recap", "react", "act", "cot", "standard", "adapt")
+#: the settings profiles a version 1 label can carry, frozen likewise
+VERSION_1_PROFILES = ("paper", "released")
 #: the end reason of a row whose unit failed on infrastructure (the model service, a worker)
 INFRA_ERROR: Final = "infra_error"
 #: LLM error kinds (the first word of a row's error) that say the model service failed
@@ -113,16 +116,16 @@ _DEFAULT_LABEL = re.compile(r"^([a-z_]+)(?:\[([^\]]*)\])?$")
 
 
 def parse_default_label(label: str) -> tuple[str, str | None, str | None] | None:
-    """(method, profile, ablation) of a label in the form a sweep gives an arm without a label
-    of its own (``recap``, ``recap[paper]``, ``recap[paper,no_think]``, ``recap[level_3]``), or
-    None for any other label (a custom one says nothing reliable)."""
+    """(method, profile, ablation) of a schema version 1 label in the form a sweep gave an arm
+    without a label of its own (``recap``, ``recap[paper]``, ``recap[paper,no_think]``,
+    ``recap[level_3]``), or None for any other label (a custom one says nothing reliable)."""
     m = _DEFAULT_LABEL.match(label or "")
-    if not m or m.group(1) not in METHODS:
+    if not m or m.group(1) not in VERSION_1_METHODS:
         return None
     profile = ablation = None
     for part in (m.group(2) or "").split(",") if m.group(2) is not None else []:
         part = part.strip()
-        if part in PROFILES and profile is None and ablation is None:
+        if part in VERSION_1_PROFILES and profile is None and ablation is None:
             profile = part
         elif part and ablation is None:
             ablation = part

@@ -7,22 +7,33 @@ room) is defined in this file only. It is registered with
 the offline expert model, which follows the environment's ``expert_plan()``. Nothing in the
 repository names it, and running it writes nothing into the repository.
 
-A real new benchmark ``<name>`` touches:
+A real new benchmark ``<name>`` touches (the last test proves it with a package written into a
+temporary folder and registered by one line):
 
 * ``workers/envs/<name>/`` - its own package: the :class:`recap.env.Environment` (reset, step,
   rules, demonstration, expert_plan for the offline expert), a ``benchmark.py`` with a
   :class:`workers.envs.registry.Benchmark` subclass exposed as ``BENCHMARK`` (``list_instances``,
   ``make``, and only the hooks it needs: ``options_for_agent`` for per-method ``make()``
-  options, ``data_folders`` when it reads a data folder: how it is found, its file groups and
-  download sources, so ``recap data list/check/fetch`` and the Ray workers' environment
-  follow), and its demonstration and rules texts;
+  options; ``data_folders`` when it reads a data folder, so ``recap data list/check/fetch`` and
+  the Ray workers' environment follow; ``profile_settings`` / ``release_prompt_settings``
+  (:class:`recap.config.BenchmarkProtocol`) when a method's ``paper``/``released`` profile
+  means something else there - a ``protocol.py`` as Robotouille's and ALFWorld's), and its
+  demonstration and rules texts;
 * ``workers/envs/registry.py`` - one ``register_benchmark("<name>", "workers.envs.<name>")``
   line among the built-ins (Ray workers import the registry, not the test's registration);
 * ``tests/<name>/`` - its tests;
 * only if it has downloadable data: its sha256 manifest ``pipeline/manifests/<folder>.sha256``
-  (``recap data check``/``fetch`` verify against it);
-* only if reports should split its results by something other than what the environment
-  reports as ``split``/``task``: ``schemas/labels.py`` ``place_of``.
+  (``recap data check``/``fetch`` verify against it).
+
+No method, config, schema or pipeline module changes: recap learns what a benchmark means only
+from what it declares, and a row's split/task are what its environment reports. Outside its
+folder only knowledge about *other* things stays per benchmark: the authors' released prompt
+files (``workers/release/texts.py``, for a benchmark they released prompts for), the paper's
+published numbers (``reports/paper.py``) and the reading of schema version 1 rows
+(``schemas/versions.py``). Not yet declarations (a benchmark needs them only to differ from the
+default): ``schemas/labels.py`` ``place_of`` derives ALFWorld's and Robotouille's split/task from
+the id for a row whose environment never reported them, and ``pipeline/units.py``
+``canonical_instance_id`` drops Blocksworld's leading zeros.
 """
 
 from __future__ import annotations
@@ -151,7 +162,7 @@ def test_a_benchmark_defined_in_a_test_plays_an_episode_through_the_worker(corri
     from workers.episode_worker import EpisodeRunner
 
     before = _git_status()
-    config = make_agent("react", benchmark=NAME).config.to_json()
+    config = make_agent("react", benchmark=registry.get_benchmark(NAME)).config.to_json()
     unit = UnitWork("u1", f"{NAME}/3", "react", config, "expert", "offline/expert", seed=0, step_multiplier=2.0)
     batches: list[dict[str, list[dict]]] = []
     runner = EpisodeRunner("w1", "run1", ExpertFactory(), send=batches.append, wait=lambda ref: None)
@@ -267,3 +278,114 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
     finally:
         unregister_benchmark("plain")
     assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever"]
+
+
+#: a benchmark package of its own, written into a temporary folder: its environment, its
+#: Benchmark, and its protocol (what ``paper`` means for ReAct there: a 16-message window)
+TOY_PACKAGE = """
+from recap.baselines.react import ReActConfig
+from recap.env import Environment, InvalidActionError, Reset, Step
+from workers.envs.registry import Benchmark
+
+
+class Ladder(Environment):
+    benchmark = "ladder"
+    split = "rungs"
+
+    def __init__(self, n, step_multiplier=4.0):
+        self.instance_id, self.task, self.optimal_steps = f"ladder/{n}", f"{n} rungs", n
+        self.max_steps, self.n, self.at = int(n * step_multiplier), n, 0
+
+    def reset(self):
+        self.at = 0
+        return Reset("You stand at rung 0.", ("climb",), f"reach rung {self.n}")
+
+    def step(self, action):
+        if action != "climb":
+            raise InvalidActionError(action)
+        self.at += 1
+        done = self.at == self.n
+        return Step(f"You stand at rung {self.at}.", ("climb",), done, done)
+
+    def rules(self):
+        return "'climb' goes up one rung."
+
+    def demonstration(self):
+        return None
+
+    def expert_plan(self):
+        return ["climb"] * (self.n - self.at)
+
+
+class LadderBenchmark(Benchmark):
+    name = "ladder"
+
+    def list_instances(self, selector=None):
+        return ["ladder/2", "ladder/4"]
+
+    def make(self, instance_id, step_multiplier=4.0, **options):
+        return Ladder(int(instance_id.split("/")[1]), step_multiplier)
+
+    def profile_settings(self, config_cls, profile, ablation, generic):
+        if profile == "paper" and issubclass(config_cls, ReActConfig):
+            return {**generic, "window": 16}
+        return generic
+
+
+BENCHMARK = LadderBenchmark()
+"""
+
+
+@pytest.fixture
+def ladder(tmp_path, monkeypatch):
+    (tmp_path / "ladder_bench").mkdir()
+    (tmp_path / "ladder_bench" / "__init__.py").write_text(TOY_PACKAGE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    register_benchmark("ladder", "ladder_bench")  # the one registration line, as the built-ins'
+    try:
+        yield
+    finally:
+        unregister_benchmark("ladder")
+
+
+def test_a_benchmark_package_with_one_registration_line_runs_a_unit_under_its_own_protocol(ladder):
+    """List, make, resolve a method's profile as the benchmark declares it, play a unit with
+    the offline expert through the worker, and get the outcome row's facts: nothing in recap/,
+    workers/, pipeline/ or schemas/ changed for it."""
+    from workers.episode_worker import EpisodeRunner, build_agent
+
+    assert registry.benchmark_names()[-1] == "ladder"
+    assert registry.get_benchmark("ladder").list_instances() == ["ladder/2", "ladder/4"]
+    assert registry.make_env("ladder/4", step_multiplier=1.5).max_steps == 6
+    # the benchmark's declaration reaches the config by its name; other benchmarks keep theirs
+    assert build_agent("react", profile="paper", benchmark="ladder").config.window == 16
+    assert build_agent("react", profile="paper", benchmark="blocksworld").config.window == 128
+    assert build_agent("react", profile="paper", benchmark="robotouille").config.window == 64
+    assert build_agent("cot", profile="paper", benchmark="ladder").config.window == 128
+
+    config = build_agent("react", profile="paper", benchmark="ladder").config.to_json()
+    unit = UnitWork("u1", "ladder/4", "react", config, "expert", "offline/expert", seed=0, step_multiplier=2.0)
+    batches: list[dict[str, list[dict]]] = []
+    out = EpisodeRunner("w1", "run1", ExpertFactory(), send=batches.append, wait=lambda ref: None).run_unit(unit, 1)
+
+    assert out.crash is None
+    assert out.env == EnvFacts(benchmark="ladder", split="rungs", task="4 rungs", optimal_steps=4, max_steps=8)
+    result = out.result
+    assert isinstance(result, EpisodeResult)
+    assert (result.end_reason, result.success, result.steps, result.llm_calls, result.invalid_actions) == (
+        "success",
+        True,
+        4,
+        4,
+        0,
+    )
+    steps = [s["action"] for batch in batches for s in batch.get("steps", [])]
+    assert steps == ["climb"] * 4
+
+
+def test_build_agent_refuses_an_unknown_benchmark_by_name():
+    from recap.config import ConfigError
+    from workers.episode_worker import build_agent
+
+    with pytest.raises(ConfigError, match=r"^unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld$"):
+        build_agent("react", profile="paper", benchmark="nowhere")

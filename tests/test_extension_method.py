@@ -17,7 +17,7 @@ A real new method would touch:
   ``estimate_calls_per_step`` (``recap estimate``);
 * its prompts module, if it has its own (``recap/baselines/prompts.py`` for the baselines);
 * ``recap/methods.py``: one line in ``METHODS`` (or a ``register_method`` call from a plug-in),
-  and for a built-in its name in ``schemas/labels.py`` ``METHODS`` (a test keeps them equal);
+  the one list of method names;
 * its tests (``tests/method/``).
 
 No benchmark's demonstration module, offline test double, estimate table or worker changes.

@@ -32,6 +32,7 @@ from recap.release_prompt import ReleasePrompt
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import check_vocabulary, record_to_row
+from workers.envs.registry import UnknownInstanceError, get_benchmark
 from workers.log_setup import configure_from_env
 
 log = logging.getLogger(__name__)
@@ -52,13 +53,19 @@ def build_agent(
 ) -> Agent:
     """The agent for a method name + profile + ablation + settings (``recap.methods.make_agent``).
 
-    Unknown methods or settings raise :class:`recap.config.ConfigError` (a bad setting's
-    KeyError/TypeError/ValueError is translated, so callers report one error type).
+    ``benchmark`` is a registered benchmark's name: what its profiles mean there is what that
+    benchmark declares (:class:`recap.config.BenchmarkProtocol`). Unknown methods, benchmarks
+    or settings raise :class:`recap.config.ConfigError` (a bad setting's KeyError/TypeError/
+    ValueError is translated, so callers report one error type).
     """
     if method not in methods.METHODS:  # read at call time: methods may be registered later
         raise ConfigError(f"unknown method {method!r}; known: {', '.join(sorted(methods.METHODS))}")
     try:
-        return methods.make_agent(method, profile=profile, ablation=ablation, benchmark=benchmark, **dict(settings or {}))
+        protocol = get_benchmark(benchmark) if benchmark is not None else None
+    except UnknownInstanceError as exc:
+        raise ConfigError(str(exc)) from None
+    try:
+        return methods.make_agent(method, profile=profile, ablation=ablation, benchmark=protocol, **dict(settings or {}))
     except ConfigError:
         raise
     except (KeyError, TypeError, ValueError) as exc:
@@ -69,8 +76,6 @@ def env_options_for(unit: UnitWork, agent: Agent) -> dict[str, Any]:
     """The make() options of a unit's environment: what its benchmark chooses for the agent's
     method (ALFWorld: whether observations list the valid actions), then the sweep's own
     options, which win."""
-    from workers.envs.registry import get_benchmark
-
     options = dict(get_benchmark(unit.benchmark).options_for_agent(agent.style, agent.config))
     options.update({k: v for k, v in unit.env_options if v is not None})
     return options

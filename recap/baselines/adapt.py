@@ -97,6 +97,17 @@ EXECUTOR_DEMO_KEY = "adapt_executor"
 PLANNER_DEMO_KEY = "adapt_planner"
 
 
+#: what ``released`` sets for ADaPT: the authors' released (Robotouille) algorithm; a benchmark
+#: whose release has no ADaPT drops it in its protocol (ALFWorld)
+RELEASED_PLAN_ONCE: dict[str, Any] = {
+    "algorithm": "plan_once",
+    "json_mode": False,
+    "planner_temperature": 0.0,
+    "executor_window": 64,
+    "executor_patience": 5,
+}
+
+
 @dataclass(frozen=True)
 class ADaPTConfig(AgentConfig):
     """ADaPT settings. ``max_depth``: deepest task level (root = 1; the paper uses 3);
@@ -120,20 +131,15 @@ class ADaPTConfig(AgentConfig):
     executor_window: int | None = None
 
     @classmethod
-    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
-        out = super().profile_defaults(profile, benchmark, ablation)
-        if profile == "released" and benchmark != "alfworld":
-            # the release's ADaPT (Robotouille only): plan once at temperature 0.0
+    def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
+        out = super().profile_defaults(profile, ablation)
+        if profile == "released":
+            # the release's ADaPT (Robotouille's; ALFWorld's protocol keeps the paper's
+            # algorithm, the release having no ADaPT there): plan once at temperature 0.0
             # (ADaPT_agent.py:21), executors trimmed past 64 messages (ReAct_agent.py:129) and
             # given up after 5 unusable replies in a row (ReAct_agent.py:62,231)
-            out.update(algorithm="plan_once", json_mode=False, planner_temperature=0.0, executor_window=64, executor_patience=5)
+            out.update(RELEASED_PLAN_ONCE)
         return out
-
-    @classmethod
-    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
-        """The released prompts are those of the released algorithm (a planner and ReAct executors
-        in plain text, ADaPT_agent.py): ``plan_once`` on Robotouille, the only benchmark they exist for."""
-        return {"algorithm": "plan_once", "json_mode": False} if benchmark == "robotouille" else {}
 
     def validate(self) -> None:
         super().validate()

@@ -28,7 +28,7 @@ from recap.agent import Agent
 from recap.baselines import prompts as P
 from recap.baselines.plan_text import demo_texts, play_text
 from recap.baselines.react import flat_context
-from recap.baselines.reply_format import check_reply_format, text_reply_defaults
+from recap.baselines.reply_format import RELEASED_TEXT, check_reply_format
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
@@ -48,12 +48,6 @@ class PlanConfig(AgentConfig):
     #: 1,286 tokens with a think (bench/protocol.py); 1024 cut it
     max_tokens: int | None = 3072
 
-    @classmethod
-    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
-        """The released I/O prompts ask for the plain-text plan (IO/1.0.0-io.yml, IO/1.1.0-io-cot.yml);
-        the release has them for Robotouille only."""
-        return text_reply_defaults(False, benchmark) if benchmark == "robotouille" else {}
-
     def validate(self) -> None:
         super().validate()
         if self.on_invalid not in ("stop", "skip"):
@@ -61,11 +55,12 @@ class PlanConfig(AgentConfig):
         check_reply_format(self)
 
     @classmethod
-    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
-        out = super().profile_defaults(profile, benchmark, ablation)
+    def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
+        out = super().profile_defaults(profile, ablation)
         if profile == "released":
-            # the released I/O agents exist for Robotouille only; ALFWorld keeps our JSON plan
-            out.update(text_reply_defaults(False, benchmark))
+            # the released I/O agents' plain-text plan (Robotouille's; ALFWorld's protocol keeps
+            # our JSON plan, the release having no I/O agent there)
+            out.update(RELEASED_TEXT)
         return out
 
 

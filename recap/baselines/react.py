@@ -18,7 +18,8 @@ One episode:
   action" ablation); ``all`` keeps everything (the released Act).
 
 The ``paper`` and ``released`` profiles follow the authors' released baselines (see
-:meth:`ReActConfig.profile_defaults` for the file and line of each item): on Robotouille the
+``workers/envs/robotouille/protocol.py`` and ``workers/envs/alfworld/protocol.py`` for the file
+and line of each item, each benchmark declaring its own): on Robotouille the
 benchmark's "original" ReAct (the whole history trimmed past 64 messages, first exchange kept;
 give up after 3 rounds of 5 consecutive invalid actions), Act with no window; on ALFWorld the
 released react.py / act.py (valid actions in every observation, "OK." for a thought, explained
@@ -43,7 +44,7 @@ from recap.baselines import prompts as P
 from recap.baselines import text_prompts as T
 from recap.baselines.act_json import MALFORMED_JSON, PARSE_ERROR_ACTION, read_reply
 from recap.baselines.react_text import demo_texts, play_text, raw_text
-from recap.baselines.reply_format import check_reply_format, text_reply_defaults
+from recap.baselines.reply_format import RELEASED_TEXT, check_reply_format
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
@@ -94,59 +95,14 @@ class ReActConfig(AgentConfig):
     malformed_json: Literal["repair", "game"] = "repair"
 
     @classmethod
-    def profile_defaults(cls, profile: str, benchmark: str | None, ablation: str | None) -> dict[str, Any]:
-        out = super().profile_defaults(profile, benchmark, ablation)
-        if benchmark == "robotouille":
-            # the benchmark's ReAct with the "original" prompt, as every released main config runs
-            # it (robotouille-baselines/conf/experiments/ReAct/{synchronous,asynchronous}/original_*.yaml:
-            # prompt_description original, every is_*_history flag false): the whole history,
-            # trimmed once it passes 64 messages by dropping the oldest pair after the first
-            # exchange (agents/ReAct_agent.py:129-130), 2 messages on a context-length error
-            # (:138); after 5 consecutive invalid actions a new round of feedback, the third round
-            # ends the episode (:62-64, :284-288)
-            out.update(
-                history="window",
-                window=64,
-                window_counts_pins=False,
-                window_keeps_first=True,
-                context_drop=2,
-                invalid_streak=5,
-                invalid_rounds=3,
-            )
-        elif benchmark == "alfworld":
-            # alfworld-recap/react_alfworld/react.py: the valid actions after the first observation
-            # (:209) and every valid action's observation (:172), "OK." for a thought (:159-160),
-            # the explained feedback after an invalid command (:161-170); 128 messages counted over
-            # the whole history, oldest pair dropped (:51-52), 32 on a context-length error (:69);
-            # Yao et al.'s example has no valid-action lists (:206-208)
-            out.update(
-                history="window",
-                window=128,
-                window_counts_pins=True,
-                context_drop=32,
-                invalid_streak=None,
-                think_actions=True,
-                invalid_feedback="explained",
-                valid_actions="episode",
-            )
+    def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
+        out = super().profile_defaults(profile, ablation)
         if profile == "released":
-            # the released agents' plain-text replies (recap.baselines.reply_format); the history,
-            # window and feedback above apply to the text loop unchanged
-            out.update(text_reply_defaults(cls.released_text, benchmark))
+            # the released agents' plain-text replies (recap.baselines.reply_format); each
+            # benchmark's protocol adds its own history, window and feedback (Robotouille's ReAct,
+            # Yao et al.'s on ALFWorld: workers/envs/<benchmark>/protocol.py)
+            out.update(RELEASED_TEXT)
         return out
-
-    #: whether the released code's agent replies in plain text on ALFWorld (ReAct: react.py;
-    #: Act's act.py asks for JSON)
-    released_text: ClassVar[bool] = True
-
-    @classmethod
-    def release_prompt_settings(cls, benchmark: str | None) -> dict[str, Any]:
-        """The released prompts ask for the released reply layout: Robotouille's "Reasoning:" /
-        "Action:" lines (ReAct/1.0.0-original.yml, Act/1.0.0-original.yml), ALFWorld ReAct's one
-        line (react_alfworld/react.py), ALFWorld Act's JSON (act_alfworld/act.py:165-168)."""
-        if benchmark not in ("robotouille", "alfworld"):
-            return {}
-        return text_reply_defaults(cls.released_text, benchmark) or {"reply_format": "json"}
 
     def history_window(self) -> int:
         if self.history == "last":
@@ -253,7 +209,7 @@ class ReActAgent(Agent):
         # prompts: release on ALFWorld (Act: the JSON loop): the released first prompt with its
         # JSON request (act_alfworld/act.py:158-172, 304), and each observation as the release
         # sends it, without our heading (act.py:211)
-        released = "release" in ep.extra and ep.env.benchmark == "alfworld"
+        released = getattr(ep.extra.get("release"), "first_turn", None) == "framed"
         if released:
             goal = "" if reset.goal in reset.observation else f"\n\nGoal: {reset.goal}"
             ep.conv.pin("task", T.release_alfworld_task(f"{reset.observation}{goal}", json_example=T.RELEASE_JSON_EXAMPLE))

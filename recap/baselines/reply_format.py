@@ -22,12 +22,7 @@ def check_reply_format(cfg: AgentConfig) -> None:
         raise ConfigError("reply_format: text needs json_mode: false (the replies are plain text)")
 
 
-def text_reply_defaults(text_on_alfworld: bool, benchmark: str | None) -> dict[str, Any]:
-    """What ``released`` sets: plain text as the release's agent writes it. On ALFWorld only
-    where its ALFWorld script reads plain text (``text_on_alfworld``: ReAct's one-line layout);
-    elsewhere Robotouille's labelled lines."""
-    if benchmark == "alfworld":
-        if not text_on_alfworld:
-            return {}
-        return {"reply_format": "text", "json_mode": False, "text_layout": "yao"}
-    return {"reply_format": "text", "json_mode": False}
+#: what ``released`` sets on any benchmark: plain text as the released agents write it (the
+#: labelled lines of Robotouille's release); a benchmark whose release reads something else says
+#: so in its protocol (ALFWorld: ReAct's one-line layout, JSON for Act and the plans)
+RELEASED_TEXT: dict[str, Any] = {"reply_format": "text", "json_mode": False}

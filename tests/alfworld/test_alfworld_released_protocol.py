@@ -21,6 +21,7 @@ from tests.alfworld.test_alfworld_valid_actions import ARRIVE_LIST, HEAT_ARRIVE,
 from workers.envs.alfworld import AlfworldBenchmark
 from workers.envs.alfworld.demos import demonstration_for
 from workers.envs.alfworld.rules import rules_text
+from workers.envs.registry import get_benchmark
 from workers.episode_worker import env_options_for
 
 #: ends a scripted episode after the prompts under test
@@ -66,7 +67,7 @@ def bench() -> AlfworldBenchmark:
 
 def _run(bench, method, profile, replies):
     """One episode of ``method`` under ``profile`` on the heat game, made the way a worker makes it."""
-    agent = make_agent(method, profile=profile, benchmark="alfworld")
+    agent = make_agent(method, profile=profile, benchmark=get_benchmark("alfworld"))
     work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
     options = env_options_for(work, agent)  # type: ignore[arg-type]
     env = bench.make(HEAT_ID, **options)
@@ -90,8 +91,8 @@ def test_paper_and_released_differ_only_in_temperature_and_reacts_reply_format(m
     """The paper states no baseline protocol beyond T = 0.5, so ``paper`` runs the released one,
     with our JSON replies; ``released`` has ReAct reply in Yao et al.'s one line as react.py does
     (Act's act.py asks for JSON too)."""
-    paper = make_agent(method, profile="paper", benchmark="alfworld").config
-    released = make_agent(method, profile="released", benchmark="alfworld").config
+    paper = make_agent(method, profile="paper", benchmark=get_benchmark("alfworld")).config
+    released = make_agent(method, profile="released", benchmark=get_benchmark("alfworld")).config
     assert (paper.temperature, released.temperature) == (0.5, None)
     text = {"reply_format": "text", "json_mode": False, "text_layout": "yao"} if method == "react" else {}
     if method == "act":  # the released Act sends a malformed reply to the game (act.py:181-199)
@@ -204,7 +205,7 @@ def test_without_a_profile_react_is_unchanged(bench):
 def test_explained_feedback_lists_the_valid_actions_when_the_observation_does_not(profile):
     """With the lists switched off by a setting, the feedback still carries them (as released);
     the demonstration's replay of the cool game stands in for a game here (same rules, fast)."""
-    agent = make_agent("react", profile=profile, benchmark="alfworld", valid_actions="hidden")
+    agent = make_agent("react", profile=profile, benchmark=get_benchmark("alfworld"), valid_actions="hidden")
     work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
     assert env_options_for(work, agent) == {"show_valid_actions": False}  # type: ignore[arg-type]
     env = demonstration_for("cool", show_valid_actions=False).make_env()
@@ -226,7 +227,7 @@ def test_valid_actions_setting_maps_to_the_game_options(bench):
         assert bench.options_for_agent("react", make_agent("react", valid_actions=choice).config) == want
     # no setting: the per-style choice (ReCAP sees them, the others do not)
     assert bench.options_for_agent("recap", make_agent("recap").config) == {"show_valid_actions": True}
-    assert bench.options_for_agent("cot", make_agent("cot", profile="released", benchmark="alfworld").config) == {
+    assert bench.options_for_agent("cot", make_agent("cot", profile="released", benchmark=get_benchmark("alfworld")).config) == {
         "show_valid_actions": False
     }
     with pytest.raises(ValueError, match=r"^demo_valid_actions must be true, false or null \(None\), got 'no'$"):
@@ -248,7 +249,7 @@ def test_react_release_prompts_send_the_released_first_messages(bench, tmp_path)
     release = release_prompt(tmp_path, "react", "alfworld", "valid_seen", "heat")
     assert release is not None
     assert release.messages == (("user", f"Complete a task by interacting with a household. One example follows.\n{transcript}"),)
-    agent = make_agent("react", profile="released", benchmark="alfworld", prompts="release")
+    agent = make_agent("react", profile="released", benchmark=get_benchmark("alfworld"), prompts="release")
     work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
     env = bench.make(HEAT_ID, **env_options_for(work, agent))  # type: ignore[arg-type]
     client = ScriptedClient(["think: the apple may be in the garbagecan", "go to garbagecan 1", STOP])
@@ -295,7 +296,7 @@ def test_act_release_prompts_send_the_released_first_messages(bench, tmp_path):
         'assistant: {"action": "warm fixture 1"}\nuser: Done.'
     )
     assert release.messages == (("user", ALFWORLD_ACT_HEADER + example),)
-    agent = make_agent("act", profile="released", benchmark="alfworld", prompts="release")
+    agent = make_agent("act", profile="released", benchmark=get_benchmark("alfworld"), prompts="release")
     assert (agent.config.reply_format, agent.config.json_mode) == ("json", True)
     work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
     env = bench.make(HEAT_ID, **env_options_for(work, agent))  # type: ignore[arg-type]
@@ -344,7 +345,7 @@ def test_recap_release_prompts_send_the_released_first_messages(bench, tmp_path)
         "user: Fixture room.\nYour task is to: warm a fixture.\nassistant: {}\n\nEXAMPLE OVER\n"
     )
     assert release.messages == (("user", fixed),)
-    agent = make_agent("recap", profile="paper", benchmark="alfworld", prompts="release")
+    agent = make_agent("recap", profile="paper", benchmark=get_benchmark("alfworld"), prompts="release")
     assert agent.config.reminder_period is None  # the released ALFWorld code sends no reminder
     work = type("W", (), {"benchmark": "alfworld", "env_options": ()})()
     env = bench.make(HEAT_ID, **env_options_for(work, agent))  # type: ignore[arg-type]

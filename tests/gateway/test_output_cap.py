@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from recap.baselines import CoTAgent, PlanConfig
 from recap.blocksworld import BENCHMARK
+from workers.envs.registry import get_benchmark
 from workers.llm.direct import LiteLLMClient
 from workers.llm.providers import DEFAULT_MAX_TOKENS, DeploymentConfig
 
@@ -29,7 +30,7 @@ def test_no_method_cap_sends_the_models_whole_output():
 
     for method in ("recap", "react", "act", "cot", "standard", "adapt"):
         for profile in ("paper", "released"):
-            assert make_agent(method, profile=profile, benchmark="robotouille").config.max_tokens is None
+            assert make_agent(method, profile=profile, benchmark=get_benchmark("robotouille")).config.max_tokens is None
     assert make_agent("recap").config.max_tokens == 3072  # no profile: the measured cap, unchanged
     gpt4o = DeploymentConfig(model="openai/gpt-4o-2024-08-06")
     assert gpt4o.generation_params(0.5, None, True)["max_tokens"] == model_max_output_tokens("openai/gpt-4o-2024-08-06") == 16384

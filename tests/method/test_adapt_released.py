@@ -14,6 +14,7 @@ from recap.methods import make_agent
 from schemas.records import MessageRecord, NodeRecord
 from tests.method.baseline_harness import DEMO_ACTIONS, GOAL, demo_env, obs_after, run_agent
 from tests.method.offline_expert_client import OfflineExpert
+from workers.envs.registry import get_benchmark
 
 RELEASED = {"algorithm": "plan_once", "json_mode": False, "planner_temperature": 0.0, "executor_window": 64}
 OBS = [obs_after(*DEMO_ACTIONS[:i]) for i in range(len(DEMO_ACTIONS) + 1)]
@@ -37,7 +38,7 @@ def agent(**kw) -> ADaPTAgent:
 
 
 def test_released_profile_is_the_released_adapt_except_on_alfworld():
-    c = make_agent("adapt", "released", benchmark="robotouille").config
+    c = make_agent("adapt", "released", benchmark=get_benchmark("robotouille")).config
     assert (c.algorithm, c.json_mode, c.planner_temperature, c.executor_window, c.executor_patience) == (
         "plan_once",
         False,
@@ -45,8 +46,8 @@ def test_released_profile_is_the_released_adapt_except_on_alfworld():
         64,
         5,
     )
-    assert make_agent("adapt", "released", benchmark="alfworld").config.algorithm == "as_needed"
-    assert make_agent("adapt", "paper", benchmark="robotouille").config.algorithm == "as_needed"
+    assert make_agent("adapt", "released", benchmark=get_benchmark("alfworld")).config.algorithm == "as_needed"
+    assert make_agent("adapt", "paper", benchmark=get_benchmark("robotouille")).config.algorithm == "as_needed"
     with pytest.raises(ConfigError, match=r"^algorithm: plan_once needs json_mode: false"):
         ADaPTConfig(algorithm="plan_once").validate()
     with pytest.raises(ConfigError, match=r'^planner_temperature must be in \[0, 2\], null or "same", got 3$'):
@@ -172,7 +173,9 @@ def test_robotouille_offline_expert_episode():
     env = make_env("robotouille/synchronous/0_cheese_sandwich@42")
     client = OfflineExpert(env)
     records: list = []
-    result = make_agent("adapt", "released", benchmark="robotouille").run(env, client, episode_id="ep", emit=records.append)
+    result = make_agent("adapt", "released", benchmark=get_benchmark("robotouille")).run(
+        env, client, episode_id="ep", emit=records.append
+    )
     assert result.end_reason == "success"
     purposes = [r.purpose for r in client.requests]
     assert purposes.count("planner_task") == 1 and purposes[0] == "planner_task"

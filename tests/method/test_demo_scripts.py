@@ -22,7 +22,7 @@ from recap.demo_script import DemoReplies, DemoScript
 from recap.env import Demonstration
 from recap.methods import METHODS, make_agent
 from workers.envs.alfworld.demos import demonstration_for
-from workers.envs.registry import make_env
+from workers.envs.registry import get_benchmark, make_env
 
 DEMOS = {
     "blocksworld": lambda: blocksworld.DEMONSTRATION,
@@ -108,7 +108,7 @@ RENDERED = {
 
 
 def _text(method: str, profile: str, ablation: str | None, demo_key: str) -> str:
-    agent = make_agent(method, profile, ablation, demo_key.split("-")[0])
+    agent = make_agent(method, profile, ablation, get_benchmark(demo_key.split("-")[0]))
     demo = DEMOS[demo_key]()
     text = agent.render_demonstration(demo)
     if method == "adapt":

@@ -19,6 +19,7 @@ from recap.recap_agent import ReCAPAgent
 from recap.scripted import ScriptedClient
 from schemas.records import MessageRecord
 from tests.method.recap_harness import demo_env, run_recap
+from workers.envs.registry import get_benchmark
 
 SCRIPT = DEMONSTRATION.replies["recap"]
 REMINDER = f"Reminder of the environment rules:\n{RULES}\n\n"
@@ -36,25 +37,25 @@ def reminded_calls(run) -> list[int]:
 # -- profiles per benchmark ------------------------------------------------------------------
 def test_paper_profile_per_method_and_benchmark():
     # K = 64 rounds = 128 messages (one unit of window is a message); no output cap of ours
-    recap_r = build_config(ReCAPConfig, "paper", None, "robotouille")
+    recap_r = build_config(ReCAPConfig, "paper", None, get_benchmark("robotouille"))
     assert (recap_r.window, recap_r.temperature, recap_r.window_counts_pins) == (128, 0.5, False)
     assert (recap_r.reminder_on, recap_r.reminder_period, recap_r.shortcut, recap_r.shortcut_trace) == ("calls", 10, True, False)
     assert recap_r.demo_observations == "first" and recap_r.max_tokens is None and recap_r.max_llm_calls is None
-    assert build_config(ReCAPConfig, "paper", None, "alfworld").demo_observations == "all"
+    assert build_config(ReCAPConfig, "paper", None, get_benchmark("alfworld")).demo_observations == "all"
     # the released baselines' protocol under both profiles; the paper's temperature
-    react_r = build_config(ReActConfig, "paper", None, "robotouille")
+    react_r = build_config(ReActConfig, "paper", None, get_benchmark("robotouille"))
     assert (react_r.history, react_r.window, react_r.window_keeps_first, react_r.context_drop) == ("window", 64, True, 2)
     assert (react_r.invalid_streak, react_r.invalid_rounds, react_r.temperature) == (5, 3, 0.5)
-    react_a = build_config(ReActConfig, "paper", None, "alfworld")
+    react_a = build_config(ReActConfig, "paper", None, get_benchmark("alfworld"))
     assert (react_a.history, react_a.window, react_a.window_counts_pins, react_a.invalid_streak) == ("window", 128, True, None)
     assert (react_a.think_actions, react_a.invalid_feedback, react_a.valid_actions) == (True, "explained", "episode")
-    assert build_config(ActConfig, "paper", None, "robotouille").history == "all"
-    assert build_config(ActConfig, "paper", None, "alfworld").history == "all"
-    assert build_config(PlanConfig, "paper", None, "robotouille").max_tokens is None
+    assert build_config(ActConfig, "paper", None, get_benchmark("robotouille")).history == "all"
+    assert build_config(ActConfig, "paper", None, get_benchmark("alfworld")).history == "all"
+    assert build_config(PlanConfig, "paper", None, get_benchmark("robotouille")).max_tokens is None
     generic = build_config(ReActConfig, "paper", None, None)  # no benchmark: generic
     assert (generic.history, generic.think_actions, generic.valid_actions) == ("window", False, None)
     # no profile: every protocol item at its default (today's behaviour)
-    plain = build_config(ReActConfig, None, None, "alfworld")
+    plain = build_config(ReActConfig, None, None, get_benchmark("alfworld"))
     assert (plain.history, plain.think_actions, plain.invalid_feedback, plain.valid_actions, plain.max_tokens) == (
         "window",
         False,
@@ -68,7 +69,7 @@ def test_released_temperatures_per_method_and_benchmark():
     """Robotouille baselines 0.7 (base_llm.yaml:2), ReCAP none (its calls send none), ALFWorld
     ReAct/Act none (react.py / act.py send none); the paper: 0.5 for every method."""
     got = {
-        (cls.__name__, bench): build_config(cls, "released", None, bench).temperature
+        (cls.__name__, bench): build_config(cls, "released", None, get_benchmark(bench)).temperature
         for cls in (ReCAPConfig, ReActConfig, ActConfig, PlanConfig, ADaPTConfig)
         for bench in ("robotouille", "alfworld")
     }
@@ -86,11 +87,11 @@ def test_released_temperatures_per_method_and_benchmark():
     }
     for cls in (ReCAPConfig, ReActConfig, ActConfig, PlanConfig, ADaPTConfig):
         for bench in ("robotouille", "alfworld", None):
-            assert build_config(cls, "paper", None, bench).temperature == 0.5
+            assert build_config(cls, "paper", None, get_benchmark(bench) if bench else None).temperature == 0.5
 
 
 def test_released_profile_per_benchmark_and_ablation():
-    r = build_config(ReCAPConfig, "released", None, "robotouille")
+    r = build_config(ReCAPConfig, "released", None, get_benchmark("robotouille"))
     assert (r.window, r.temperature, r.window_counts_pins) == (128, None, True)
     assert (r.reminder_on, r.reminder_period, r.shortcut, r.shortcut_trace, r.demo_observations) == (
         "iterations",
@@ -99,13 +100,13 @@ def test_released_profile_per_benchmark_and_ablation():
         True,
         "all",
     )
-    assert build_config(ReCAPConfig, "released", None, "alfworld").reminder_period is None
+    assert build_config(ReCAPConfig, "released", None, get_benchmark("alfworld")).reminder_period is None
     for ablation in ("no_think", "name_only", "think_many", "level_3"):
-        assert build_config(ReCAPConfig, "released", ablation, "robotouille").shortcut is False
-    assert build_config(ReCAPConfig, "released", "original", "robotouille").shortcut is True
-    assert build_config(ReCAPConfig, "paper", "no_think", "robotouille").shortcut is True
+        assert build_config(ReCAPConfig, "released", ablation, get_benchmark("robotouille")).shortcut is False
+    assert build_config(ReCAPConfig, "released", "original", get_benchmark("robotouille")).shortcut is True
+    assert build_config(ReCAPConfig, "paper", "no_think", get_benchmark("robotouille")).shortcut is True
     # explicit settings still win over the profile
-    assert build_config(ReCAPConfig, "released", "no_think", "robotouille", shortcut=True).shortcut is True
+    assert build_config(ReCAPConfig, "released", "no_think", get_benchmark("robotouille"), shortcut=True).shortcut is True
 
 
 @pytest.mark.parametrize(
@@ -242,14 +243,14 @@ def test_react_history_last_sees_only_the_last_reply_and_the_new_observation():
 
 
 def test_react_paper_profile_on_robotouille_gives_up_after_three_rounds_of_five():
-    agent = make_agent("react", profile="paper", benchmark="robotouille")
+    agent = make_agent("react", profile="paper", benchmark=get_benchmark("robotouille"))
     bad = {"think": "try", "action": "fly away"}
     result, client, msgs = run_flat(agent, [bad] * 20)
     assert result.end_reason == "agent_done" and result.llm_calls == 15 and result.invalid_actions == 15
     assert result.error == "3 rounds of 5 consecutive invalid actions"
     # the whole history (15 exchanges stay under 64 messages)
     assert [len(r.window_seqs) for r in client.requests] == [2 + 2 * i for i in range(15)]
-    act = make_agent("act", profile="paper", benchmark="robotouille")
+    act = make_agent("act", profile="paper", benchmark=get_benchmark("robotouille"))
     assert isinstance(act, ActAgent) and (act.config.history, act.config.invalid_streak) == ("all", 5)
 
 

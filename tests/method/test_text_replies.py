@@ -25,6 +25,7 @@ from recap.llm import LLMError
 from recap.methods import make_agent
 from tests.method.baseline_harness import DEMO_ACTIONS, GOAL, demo_env, obs_after, run_agent, stepping_env
 from tests.method.offline_expert_client import OfflineExpert
+from workers.envs.registry import get_benchmark
 
 TEXT = {"reply_format": "text", "json_mode": False}
 OBS = [obs_after(*DEMO_ACTIONS[:i]) for i in range(len(DEMO_ACTIONS) + 1)]
@@ -118,7 +119,7 @@ def test_renderers_are_read_back_by_the_parsers(layout):
 
 def test_released_profile_picks_the_release_format_per_method_and_benchmark():
     def fmt(method, bench):
-        c = make_agent(method, "released", benchmark=bench).config
+        c = make_agent(method, "released", benchmark=get_benchmark(bench) if bench else None).config
         return (c.reply_format, c.json_mode, getattr(c, "text_layout", None))
 
     assert fmt("react", "robotouille") == ("text", False, "labelled")
@@ -128,7 +129,7 @@ def test_released_profile_picks_the_release_format_per_method_and_benchmark():
     assert fmt("cot", "robotouille") == ("text", False, None)
     assert fmt("cot", "alfworld") == ("json", True, None)  # no released I/O agent on ALFWorld
     assert fmt("react", None) == ("text", False, "labelled")
-    assert make_agent("react", "paper", benchmark="robotouille").config.reply_format == "json"
+    assert make_agent("react", "paper", benchmark=get_benchmark("robotouille")).config.reply_format == "json"
 
 
 def test_text_in_json_mode_is_refused():
@@ -270,7 +271,7 @@ def test_robotouille_plan_copy_steps_past_the_goal():
             done.step(action)
         done.step(step.valid_actions[0])
     lines = "\n".join([*plan, "Fly to the moon"])
-    agent = make_agent("standard", "released", benchmark="robotouille")
+    agent = make_agent("standard", "released", benchmark=get_benchmark("robotouille"))
     env = make_env("robotouille/synchronous/0_cheese_sandwich@42")
     run = run_agent(agent, ["Plan:\n" + lines], env=env)
     assert run.result.error == (

@@ -21,6 +21,7 @@ from pipeline.worker_pool import InProcessWorkerPool
 from schemas.outcomes import BudgetRefusal, Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.parts import read_table
 from schemas.records import EpisodeRecord
+from workers.envs.registry import get_benchmark
 
 SPEC = """run: roles
 output: {out}
@@ -310,7 +311,7 @@ def test_every_resolved_config_round_trips_and_the_worker_builds_it_exactly():
             for ablation in (None, *ABLATIONS):
                 for bench in (None, "robotouille", "alfworld"):
                     try:
-                        cfg = build_config(cfg_cls, profile, ablation, bench)
+                        cfg = build_config(cfg_cls, profile, ablation, get_benchmark(bench) if bench else None)
                     except ConfigError:
                         continue  # an ablation that does not apply to the method
                     text = cfg.to_json()

@@ -26,6 +26,7 @@ from pipeline.units import expand
 from recap.baselines.textreply import parse_step_plan
 from recap.env import DataNotFoundError
 from workers.envs.data_sources import Source
+from workers.envs.registry import get_benchmark
 from workers.episode_worker import EpisodeRunner, release_demonstration
 from workers.release.texts import few_shot_literal, release_text
 
@@ -318,28 +319,28 @@ def test_release_prompts_select_the_released_reply_format_and_refuse_a_contradic
     from recap.baselines.react import ReActConfig
     from recap.config import ConfigError, build_config
 
-    robot = build_config(ReActConfig, benchmark="robotouille", prompts="release")
+    robot = build_config(ReActConfig, benchmark=get_benchmark("robotouille"), prompts="release")
     assert (robot.reply_format, robot.json_mode, robot.text_layout) == ("text", False, "labelled")
-    alf = build_config(ReActConfig, benchmark="alfworld", prompts="release")
+    alf = build_config(ReActConfig, benchmark=get_benchmark("alfworld"), prompts="release")
     assert (alf.reply_format, alf.json_mode, alf.text_layout) == ("text", False, "yao")
-    assert build_config(ActConfig, benchmark="alfworld", prompts="release").reply_format == "json"
-    assert build_config(ReActConfig, benchmark="robotouille").reply_format == "json"  # ours: unchanged
+    assert build_config(ActConfig, benchmark=get_benchmark("alfworld"), prompts="release").reply_format == "json"
+    assert build_config(ReActConfig, benchmark=get_benchmark("robotouille")).reply_format == "json"  # ours: unchanged
     from recap.baselines.cot import PlanConfig
 
-    plan = build_config(PlanConfig, benchmark="robotouille", prompts="release")
+    plan = build_config(PlanConfig, benchmark=get_benchmark("robotouille"), prompts="release")
     assert (plan.reply_format, plan.json_mode) == ("text", False)  # the I/O agents' plain-text plan
-    assert build_config(PlanConfig, benchmark="robotouille").reply_format == "json"
+    assert build_config(PlanConfig, benchmark=get_benchmark("robotouille")).reply_format == "json"
     from recap.baselines.adapt import ADaPTConfig
 
-    adapt = build_config(ADaPTConfig, benchmark="robotouille", prompts="release")
+    adapt = build_config(ADaPTConfig, benchmark=get_benchmark("robotouille"), prompts="release")
     assert (adapt.algorithm, adapt.json_mode) == ("plan_once", False)  # the released prompts' algorithm
     with pytest.raises(ConfigError) as info:
-        build_config(ADaPTConfig, benchmark="robotouille", prompts="release", algorithm="as_needed")
+        build_config(ADaPTConfig, benchmark=get_benchmark("robotouille"), prompts="release", algorithm="as_needed")
     assert str(info.value) == (
         'prompts: release asks for the released settings (algorithm: "plan_once"); drop the contradicting setting'
     )
     with pytest.raises(ConfigError) as info:
-        build_config(ReActConfig, benchmark="robotouille", prompts="release", reply_format="json")
+        build_config(ReActConfig, benchmark=get_benchmark("robotouille"), prompts="release", reply_format="json")
     assert str(info.value) == (
         'prompts: release asks for the released reply format (reply_format: "text"); drop the contradicting setting'
     )

@@ -12,9 +12,10 @@ import pytest
 
 from pipeline.store import RunStore
 from pipeline.summary import collect
+from recap.methods import METHODS
 from reports.build import build_report
 from reports.views import named_query, open_runs
-from schemas.labels import ALFWORLD_TASK_TYPES, METHODS
+from schemas.labels import ALFWORLD_TASK_TYPES
 from schemas.parts import read_table
 
 TD = "expert (test double)"

@@ -15,7 +15,7 @@ from recap.llm import LLMError
 from recap.methods import make_agent
 from recap.scripted import ScriptedClient
 from tests.robotouille.helpers import require_data
-from workers.envs.registry import make_env
+from workers.envs.registry import get_benchmark, make_env
 
 TASK6 = "robotouille/synchronous/6_lettuce_tomato_cheeseburger@42"
 THERE, BACK = "Move robot1 from table1 to table2", "Move robot1 from table2 to table1"
@@ -32,7 +32,7 @@ def _reply(method: str, profile: str, think: str, action: str) -> object:
 
 
 def _run(method: str, profile: str):
-    agent = make_agent(method, profile=profile, benchmark="robotouille")
+    agent = make_agent(method, profile=profile, benchmark=get_benchmark("robotouille"))
     env = make_env(TASK6, data_dir=str(require_data()), step_multiplier=3)
     replies: list = []
     for i in range(MOVES):
@@ -87,7 +87,7 @@ def test_act_keeps_its_whole_history(profile):
 
 @pytest.mark.parametrize("profile", ["paper", "released"])
 def test_invalid_actions_still_end_after_three_rounds_of_five(profile):
-    agent = make_agent("react", profile=profile, benchmark="robotouille")
+    agent = make_agent("react", profile=profile, benchmark=get_benchmark("robotouille"))
     env = make_env(TASK6, data_dir=str(require_data()), step_multiplier=3)
     client = ScriptedClient([_reply("react", profile, "t", "fly away")] * 15)
     result = agent.run(env, client, episode_id="ep", demonstration="DEMO")

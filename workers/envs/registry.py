@@ -23,7 +23,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from recap.config import AgentConfig
+from recap.config import AgentConfig, BenchmarkProtocol
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
 
@@ -44,8 +44,10 @@ __all__ = [
 ]
 
 
-class Benchmark(ABC):
-    """What the pipeline needs from a benchmark: two duties and hooks with defaults.
+class Benchmark(BenchmarkProtocol, ABC):
+    """What the pipeline needs from a benchmark: two duties and hooks with defaults (those it
+    inherits from :class:`recap.config.BenchmarkProtocol` say what the methods' profiles mean
+    on it).
 
     Subclasses set ``name`` and implement :meth:`list_instances` and :meth:`make`; the hooks
     below return "nothing special" unless overridden, so a new benchmark only writes the ones

@@ -343,13 +343,14 @@ def release_prompt(
     if method == "recap" and benchmark == "alfworld":
         # the framed example as the fixed message (chatbot.py:391-398); the first prompt has an
         # empty system text (SessionManager.py:83-84) and the rule main.py:70 hands it
-        return ReleasePrompt((("user", alfworld_recap_demo(_read(folder, parts[0]))),), system="", rules=RELEASE_ALFWORLD_RULE)
+        demo = (("user", alfworld_recap_demo(_read(folder, parts[0]))),)
+        return ReleasePrompt(demo, system="", rules=RELEASE_ALFWORLD_RULE, first_turn="framed")
     if method == "recap":
         return _recap_prompt(folder, parts)
     if benchmark == "alfworld" and method == "act":  # the re-read example after a sentence (act.py:297-303)
-        return ReleasePrompt((("user", ALFWORLD_ACT_HEADER + act_example(_read(folder, parts[0]))),))
+        return ReleasePrompt((("user", ALFWORLD_ACT_HEADER + act_example(_read(folder, parts[0]))),), first_turn="framed")
     if benchmark == "alfworld":  # ReAct: the framed transcript as one user message (react.py:208)
-        return ReleasePrompt((("user", ALFWORLD_REACT_HEADER + _read(folder, parts[0])),))
+        return ReleasePrompt((("user", ALFWORLD_REACT_HEADER + _read(folder, parts[0])),), first_turn="framed")
     if method == "adapt":  # two contexts of its own: the planner's, then each executor's
         planner = _adapt_planner(folder, parts[0], parts[1])
         return ReleasePrompt((), planner=planner, executor=_template_messages(folder, parts[2:], "react"))

@@ -31,6 +31,7 @@ from typing import Any
 
 from recap.config import AgentConfig
 from recap.env import Environment
+from workers.envs.alfworld import protocol
 from workers.envs.alfworld.data_folders import FOLDER, FOLDER_2_1_2
 from workers.envs.alfworld.game_env import AlfworldEnvironment
 from workers.envs.alfworld.games import (
@@ -95,6 +96,16 @@ class AlfworldBenchmark(Benchmark):
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The primary (2.1.1) folder and the optional 2.1.2 one (:mod:`.data_folders`)."""
         return {FOLDER.name: FOLDER, FOLDER_2_1_2.name: FOLDER_2_1_2}
+
+    def profile_settings(
+        self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
+    ) -> dict[str, Any]:
+        """The methods' profiles on ALFWorld (:mod:`.protocol`)."""
+        return protocol.profile_settings(config_cls, profile, generic)
+
+    def release_prompt_settings(self, config_cls: type[AgentConfig]) -> dict[str, Any]:
+        """What the authors' released ALFWorld prompts imply (:mod:`.protocol`)."""
+        return protocol.release_prompt_settings(config_cls)
 
     # -- listing --------------------------------------------------------------------------------
     def games(self, selector: str | None = None, *, data_dir: Any = None) -> list[Game]:

@@ -12,11 +12,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from recap.config import AgentConfig
 from recap.env import Demonstration, Environment
 from workers.envs.data_sources import DataFolder
 from workers.envs.registry import Benchmark
 
-from . import catalog
+from . import catalog, protocol
 from .data import DataFileError, instance_path, read_json, require, resolve_data_dir, train_instance_path
 from .data_folders import FOLDER
 from .demo import DEMO_SEED, DEMO_SPLIT, DEMO_TASK, make_demonstration
@@ -37,6 +38,16 @@ class RobotouilleBenchmark(Benchmark):
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The data folder (:mod:`.data_folders`): found by the shared rule, fetched from upstream."""
         return {FOLDER.name: FOLDER}
+
+    def profile_settings(
+        self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
+    ) -> dict[str, Any]:
+        """The methods' profiles on Robotouille (:mod:`.protocol`)."""
+        return protocol.profile_settings(config_cls, profile, generic)
+
+    def release_prompt_settings(self, config_cls: type[AgentConfig]) -> dict[str, Any]:
+        """What the authors' released Robotouille prompts imply (:mod:`.protocol`)."""
+        return protocol.release_prompt_settings(config_cls)
 
     def list_instances(self, selector: str | None = None) -> list[str]:
         return [ref.instance_id for ref in catalog.select(selector)]
