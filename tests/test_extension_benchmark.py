@@ -387,5 +387,5 @@ def test_build_agent_refuses_an_unknown_benchmark_by_name():
     from recap.config import ConfigError
     from workers.episode_worker import build_agent
 
-    with pytest.raises(ConfigError, match=r"^unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld$"):
+    with pytest.raises(ConfigError, match=r"^unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld, fever$"):
         build_agent("react", profile="paper", benchmark="nowhere")
