@@ -139,28 +139,7 @@ def return_prompt(
     taken) or ``nonleaf`` (a decomposed subtask finished). ``subtasks`` is the parent's list as
     shown: its remaining subtasks (the head removed) after success, the full list after a failure.
     """
-    lines: list[str] = []
-    if outcome == "fail":
-        kind = "leaf_fail"
-        lines.append(f"You could not complete the task: {child_task}")
-        shown = f" ('{failed_action}')" if failed_action and failed_action != child_task else ""
-        lines.append(f"The action{shown} is not one of the valid actions, so nothing was done.")
-        if observation is not None:
-            lines.append(f"Current observation:\n{observation}")
-        if hints:
-            lines.append(f"Common causes:\n{hints}")
-    else:
-        lines.append(f"You have completed the task: {child_task}")
-        if outcome == "leaf" and observation is not None:
-            lines.append(f"Result:\n{observation}")
-        elif outcome == "nonleaf":
-            lines.append("Its results are in the conversation above.")
-        has_rest = bool(subtasks)
-        if outcome == "leaf":
-            kind = "leaf_done" if has_rest else "leaf_judge"
-        else:
-            kind = "nonleaf_done" if has_rest else "nonleaf_judge"
-
+    kind, lines = _child_outcome(outcome, child_task, bool(subtasks), observation, failed_action, hints)
     lines.append(f"You are back at the task above it.\nYour current task: {parent_task}")
     if not name_only:
         thought = _thinks(thinks, think_mode)
@@ -168,21 +147,49 @@ def return_prompt(
             lines.append(thought)
         if outcome == "fail" or subtasks:
             lines.append("Your remaining subtasks:\n" + numbered(subtasks))
+    lines.append(_return_instruction(outcome, kind))
+    return kind, "\n\n".join(lines)
 
+
+def _child_outcome(
+    outcome: str, child_task: str, has_rest: bool, observation: str | None, failed_action: str | None, hints: str
+) -> tuple[str, list[str]]:
+    """(kind, opening lines): how the child ended - failed, or done with its result - and which
+    return prompt that makes (``leaf_fail``, ``leaf_done``/``leaf_judge``, ``nonleaf_done``/``nonleaf_judge``)."""
+    lines: list[str] = []
     if outcome == "fail":
-        lines.append("Change your list of subtasks so that the error is fixed.")
-    elif kind in ("leaf_judge", "nonleaf_judge"):
-        lines.append(
+        lines.append(f"You could not complete the task: {child_task}")
+        shown = f" ('{failed_action}')" if failed_action and failed_action != child_task else ""
+        lines.append(f"The action{shown} is not one of the valid actions, so nothing was done.")
+        if observation is not None:
+            lines.append(f"Current observation:\n{observation}")
+        if hints:
+            lines.append(f"Common causes:\n{hints}")
+        return "leaf_fail", lines
+    lines.append(f"You have completed the task: {child_task}")
+    if outcome == "leaf" and observation is not None:
+        lines.append(f"Result:\n{observation}")
+    elif outcome == "nonleaf":
+        lines.append("Its results are in the conversation above.")
+    if outcome == "leaf":
+        return ("leaf_done" if has_rest else "leaf_judge"), lines
+    return ("nonleaf_done" if has_rest else "nonleaf_judge"), lines
+
+
+def _return_instruction(outcome: str, kind: str) -> str:
+    """The closing instruction: fix the error, judge the finished task, or revise what remains."""
+    if outcome == "fail":
+        return "Change your list of subtasks so that the error is fixed."
+    if kind in ("leaf_judge", "nonleaf_judge"):
+        return (
             "No subtasks are left. Decide whether the current task is complete: if it is, reply "
             "with an empty list; if not, list the subtasks still needed."
         )
-    else:
-        lines.append(
-            "Revise the remaining subtasks in light of the latest observation so that the goal is "
-            "reached. If none are needed any more, check whether the current task is complete and "
-            "reply with an empty list if it is. Do not add subtasks outside the current task."
-        )
-    return kind, "\n\n".join(lines)
+    return (
+        "Revise the remaining subtasks in light of the latest observation so that the goal is "
+        "reached. If none are needed any more, check whether the current task is complete and "
+        "reply with an empty list if it is. Do not add subtasks outside the current task."
+    )
 
 
 def shortcut_reply(action: str, with_think: bool) -> str:

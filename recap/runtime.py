@@ -22,7 +22,7 @@ from recap.config import AgentConfig
 from recap.env import EnvError, Environment, InvalidActionError, Reset, Step
 from recap.history import History
 from recap.jsonreply import ReplyFormatError, parse_json_object
-from recap.llm import LLMClient, LLMError, LLMRequest
+from recap.llm import LLMClient, LLMError, LLMRequest, LLMResponse
 from schemas import kinds
 from schemas.kinds import EndReason, LLMErrorKind
 from schemas.outcomes import BudgetRefusal, EpisodeResult
@@ -186,64 +186,15 @@ class Conversation:
             self._check_caps()
             call_index = self.usage.calls
             self.usage.calls += 1
-            request = LLMRequest(
-                messages=self.history.messages(),
-                episode_id=self.episode_id,
-                call_index=call_index,
-                purpose=purpose,
-                window_seqs=self.history.seqs(),
-                node_id=node_id,
-                response_seq=self.history.next_seq,
-                temperature=self.config.temperature,
-                max_tokens=self.config.max_tokens,
-                json_mode=self.config.json_mode,
-                hints={"style": self.style, "purpose": purpose, "reply_fields": self.reply_fields, **context},
-            )
+            request = self._request(call_index, purpose, node_id, context)
             started = time.perf_counter()
             try:
                 response = self.client.complete(request)
             except LLMError as exc:
                 self._record_error(request, exc, time.perf_counter() - started)
-                if exc.kind == "context_length":
-                    if self.history.drop_oldest(self.config.context_drop) == 0:
-                        raise EpisodeEnd(
-                            "llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind
-                        ) from None
-                    continue
-                if exc.kind == "budget":
-                    raise EpisodeEnd("budget_exhausted", exc.message, error_kind=exc.kind, refusal=exc.refusal) from None
-                raise EpisodeEnd("llm_error", str(exc), error_kind=exc.kind) from None
-            seq = self.history.add("assistant", "reply", response.text, node_id)
-            u = self.usage
-            u.prompt_tokens += response.prompt_tokens
-            u.cached_prompt_tokens += response.cached_prompt_tokens
-            u.completion_tokens += response.completion_tokens
-            u.cost_usd += response.cost_usd
-            self.emit(
-                CallRecord(
-                    episode_id=self.episode_id,
-                    call_index=call_index,
-                    call_key=request.call_key,
-                    purpose=purpose,
-                    window_seqs=request.window_seqs,
-                    model=response.model,
-                    status="ok",
-                    node_id=node_id,
-                    response_seq=seq,
-                    prompt_tokens=response.prompt_tokens,
-                    cached_prompt_tokens=response.cached_prompt_tokens,
-                    completion_tokens=response.completion_tokens,
-                    cost_usd=response.cost_usd,
-                    latency_s=response.latency_s,
-                    retries=response.retries,
-                    token_count_source=response.token_count_source,
-                    served_from=response.served_from,
-                    deployment=response.deployment,
-                    test_double=response.test_double,
-                    finish_reason=response.finish_reason,
-                    provider_cost_usd=response.provider_cost_usd,
-                )
-            )
+                self._end_on_error(exc)
+                continue  # the oldest messages were dropped: ask again
+            seq = self._record_reply(request, response)
             if response.finish_reason == "length":
                 # the reply hit the output cap: whatever it holds is cut off, so it is neither
                 # parsed nor repaired (a repair would pay again for the same cut)
@@ -252,6 +203,68 @@ class Conversation:
                     f"reply cut at the output cap ({response.completion_tokens} tokens, max_tokens {self.config.max_tokens})",
                 )
             return response.text, seq
+
+    def _request(self, call_index: int, purpose: str, node_id: int | None, context: Mapping[str, Any]) -> LLMRequest:
+        """The request for the history as it stands, with the hints offline models read."""
+        return LLMRequest(
+            messages=self.history.messages(),
+            episode_id=self.episode_id,
+            call_index=call_index,
+            purpose=purpose,
+            window_seqs=self.history.seqs(),
+            node_id=node_id,
+            response_seq=self.history.next_seq,
+            temperature=self.config.temperature,
+            max_tokens=self.config.max_tokens,
+            json_mode=self.config.json_mode,
+            hints={"style": self.style, "purpose": purpose, "reply_fields": self.reply_fields, **context},
+        )
+
+    def _end_on_error(self, exc: LLMError) -> None:
+        """End the episode for a failed call; returns only for a context overflow after dropping the
+        oldest messages (the call is then made again)."""
+        if exc.kind == "context_length":
+            if self.history.drop_oldest(self.config.context_drop) == 0:
+                raise EpisodeEnd("llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind) from None
+            return
+        if exc.kind == "budget":
+            raise EpisodeEnd("budget_exhausted", exc.message, error_kind=exc.kind, refusal=exc.refusal) from None
+        raise EpisodeEnd("llm_error", str(exc), error_kind=exc.kind) from None
+
+    def _record_reply(self, request: LLMRequest, response: LLMResponse) -> int:
+        """Add the reply to the history, count its usage and emit its call row; the reply's seq."""
+        seq = self.history.add("assistant", "reply", response.text, request.node_id)
+        u = self.usage
+        u.prompt_tokens += response.prompt_tokens
+        u.cached_prompt_tokens += response.cached_prompt_tokens
+        u.completion_tokens += response.completion_tokens
+        u.cost_usd += response.cost_usd
+        self.emit(
+            CallRecord(
+                episode_id=self.episode_id,
+                call_index=request.call_index,
+                call_key=request.call_key,
+                purpose=request.purpose,
+                window_seqs=request.window_seqs,
+                model=response.model,
+                status="ok",
+                node_id=request.node_id,
+                response_seq=seq,
+                prompt_tokens=response.prompt_tokens,
+                cached_prompt_tokens=response.cached_prompt_tokens,
+                completion_tokens=response.completion_tokens,
+                cost_usd=response.cost_usd,
+                latency_s=response.latency_s,
+                retries=response.retries,
+                token_count_source=response.token_count_source,
+                served_from=response.served_from,
+                deployment=response.deployment,
+                test_double=response.test_double,
+                finish_reason=response.finish_reason,
+                provider_cost_usd=response.provider_cost_usd,
+            )
+        )
+        return seq
 
     def _check_caps(self) -> None:
         cfg, u = self.config, self.usage

@@ -27,13 +27,15 @@ import recap.methods as methods
 from recap.agent import Agent
 from recap.config import ConfigError
 from recap.env import Environment
-from recap.llm import LLMClient, LLMRequest, LLMResponse
+from recap.llm import LLMClient, LLMError, LLMRequest, LLMResponse
 from recap.release_prompt import ReleasePrompt
+from schemas.labels import place_of
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import check_vocabulary, record_to_row
-from workers.envs.registry import UnknownInstanceError, get_benchmark
+from workers.envs import registry  # called through the module: a test may swap make_env there
 from workers.log_setup import configure_from_env
+from workers.release.texts import release_folder, release_prompt, release_text
 
 log = logging.getLogger(__name__)
 
@@ -61,8 +63,8 @@ def build_agent(
     if method not in methods.METHODS:  # read at call time: methods may be registered later
         raise ConfigError(f"unknown method {method!r}; known: {', '.join(sorted(methods.METHODS))}")
     try:
-        protocol = get_benchmark(benchmark) if benchmark is not None else None
-    except UnknownInstanceError as exc:
+        protocol = registry.get_benchmark(benchmark) if benchmark is not None else None
+    except registry.UnknownInstanceError as exc:
         raise ConfigError(str(exc)) from None
     try:
         return methods.make_agent(method, profile=profile, ablation=ablation, benchmark=protocol, **dict(settings or {}))
@@ -76,7 +78,7 @@ def env_options_for(unit: UnitWork, agent: Agent) -> dict[str, Any]:
     """The make() options of a unit's environment: what its benchmark chooses for the agent's
     method (ALFWorld: whether observations list the valid actions), then the sweep's own
     options, which win."""
-    options = dict(get_benchmark(unit.benchmark).options_for_agent(agent.style, agent.config))
+    options = dict(registry.get_benchmark(unit.benchmark).options_for_agent(agent.style, agent.config))
     options.update({k: v for k, v in unit.env_options if v is not None})
     return options
 
@@ -121,8 +123,6 @@ class EpisodeClient:
         try:
             response = self.inner.complete(request)
         except Exception as exc:
-            from recap.llm import LLMError
-
             if isinstance(exc, LLMError):
                 raise
             raise ClientError(f"{type(exc).__name__}: {exc}") from exc
@@ -227,9 +227,6 @@ def release_demonstration(unit: UnitWork, agent: Agent) -> str | bool | ReleaseP
     prompts = getattr(agent.config, "prompts", "ours")
     if not prompts.startswith("release:"):
         return True
-    from schemas.labels import place_of
-    from workers.release.texts import release_folder, release_prompt, release_text
-
     bench, split, task = place_of(unit.instance_id)
     folder = release_folder()
     think, name_only = getattr(agent.config, "think", "latest"), bool(getattr(agent.config, "name_only", False))
@@ -282,8 +279,6 @@ class EpisodeRunner:
     def run_unit(self, unit: UnitWork, attempt: int) -> EpisodeOutcome:
         """Play one attempt of a unit: an outcome with a result (the episode ended) or a crash
         (the agent or the model client broke; the driver retries it)."""
-        from workers.envs.registry import make_env
-
         episode_id = f"{unit.unit_id}-{attempt}"
         t0 = time.perf_counter()
         offline = unit.model.startswith(OFFLINE_PREFIX)
@@ -305,10 +300,10 @@ class EpisodeRunner:
         try:
             agent = self._agent(unit)
             try:
-                env = make_env(unit.instance_id, step_multiplier=unit.step_multiplier, **env_options_for(unit, agent))
+                env = registry.make_env(unit.instance_id, step_multiplier=unit.step_multiplier, **env_options_for(unit, agent))
             except Exception as exc:  # missing data, broken game file: the attempt ends with env_error
                 log.warning("%s: no environment for %s: %s: %s", episode_id, unit.instance_id, type(exc).__name__, exc)
-                out.result = EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000])
+                out.result = _env_error(exc)
                 return out
             out.env = EnvFacts(
                 benchmark=env.benchmark, split=env.split, task=env.task, optimal_steps=env.optimal_steps, max_steps=env.max_steps
@@ -317,37 +312,60 @@ class EpisodeRunner:
                 demonstration = release_demonstration(unit, agent)
             except Exception as exc:  # the release folder went missing or changed since the plan
                 log.warning("%s: %s", episode_id, exc)
-                out.result = EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000])
+                out.result = _env_error(exc)
                 return out
-            client = EpisodeClient(self._client(unit.model_label), env, seed=int(unit.seed), offline=offline)
-            try:
-                result = agent.run(env, client, episode_id=episode_id, emit=forward, demonstration=demonstration)
-            except ClientError as exc:
-                log.warning("%s: the model client failed: %s", episode_id, exc)
-                out.crash = Crash("client", str(exc)[:2000])
-                return out
-            except Exception as exc:
-                log.exception("%s: the agent crashed", episode_id)
-                out.crash = Crash("agent", f"{type(exc).__name__}: {exc}"[:2000], traceback.format_exc()[-4000:])
-                return out
-            out.result = result
-            out.test_double = out.test_double or client.test_double
-            if client.models:
-                out.model = sorted(client.models)[0]
+            self._play(unit, agent, env, demonstration, out, forward, offline)
             return out
         finally:
-            if env is not None:
-                try:
-                    env.close()
-                except Exception:
-                    pass
-            out.rows_sent = forward.close()
-            out.ended_at = time.time()
-            out.wall_s = time.perf_counter() - t0
-            self.units_done += 1
-            log.debug(
-                "%s done in %.2fs: %s", episode_id, out.wall_s, out.result.end_reason if out.result is not None else "no result"
-            )
+            self._finish(out, env, forward, t0)
+
+    def _play(
+        self,
+        unit: UnitWork,
+        agent: Agent,
+        env: Environment,
+        demonstration: str | bool | ReleasePrompt,
+        out: EpisodeOutcome,
+        forward: RecordForwarder,
+        offline: bool,
+    ) -> None:
+        """Run the agent's episode into ``out``: its result, or the crash of the agent or the model client."""
+        episode_id = out.episode_id
+        client = EpisodeClient(self._client(unit.model_label), env, seed=int(unit.seed), offline=offline)
+        try:
+            result = agent.run(env, client, episode_id=episode_id, emit=forward, demonstration=demonstration)
+        except ClientError as exc:
+            log.warning("%s: the model client failed: %s", episode_id, exc)
+            out.crash = Crash("client", str(exc)[:2000])
+            return
+        except Exception as exc:
+            log.exception("%s: the agent crashed", episode_id)
+            out.crash = Crash("agent", f"{type(exc).__name__}: {exc}"[:2000], traceback.format_exc()[-4000:])
+            return
+        out.result = result
+        out.test_double = out.test_double or client.test_double
+        if client.models:
+            out.model = sorted(client.models)[0]
+
+    def _finish(self, out: EpisodeOutcome, env: Environment | None, forward: RecordForwarder, t0: float) -> None:
+        """However the attempt ended: close the environment, flush the records, stamp the times."""
+        if env is not None:
+            try:
+                env.close()
+            except Exception:
+                pass
+        out.rows_sent = forward.close()
+        out.ended_at = time.time()
+        out.wall_s = time.perf_counter() - t0
+        self.units_done += 1
+        log.debug(
+            "%s done in %.2fs: %s", out.episode_id, out.wall_s, out.result.end_reason if out.result is not None else "no result"
+        )
+
+
+def _env_error(exc: Exception) -> EpisodeResult:
+    """The result of an attempt whose environment (or released text) could not be had."""
+    return EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000])
 
 
 # --------------------------------------------------------------------------------------------
@@ -355,7 +373,7 @@ class EpisodeRunner:
 # --------------------------------------------------------------------------------------------
 class _EpisodeWorker:
     def __init__(self, worker_id: str, run_id: str, sink: Any, factory: ClientFactory, batch_rows: int = 500) -> None:
-        import ray
+        import ray  # Ray only inside the actor: the rest of the module runs without a cluster
 
         configure_from_env()
 
@@ -376,7 +394,7 @@ class _EpisodeWorker:
         return self.runner.worker_id
 
     def node(self) -> str:
-        import ray
+        import ray  # Ray only inside the actor (module docstring)
 
         return ray.get_runtime_context().get_node_id()
 
@@ -394,7 +412,7 @@ def worker_actor(num_cpus: float = 0.05, spread: bool = False, runtime_env: dict
     ``max_restarts=0``: the driver replaces dead workers itself, so that it can count attempts
     and record the loss. ``max_concurrency`` > 1 only so that ``pid``/``memory`` answer while a
     unit runs; the driver never sends a worker two units at once."""
-    import ray
+    import ray  # Ray only here and in the actor (module docstring)
 
     options: dict[str, Any] = {"num_cpus": num_cpus, "max_restarts": 0, "max_concurrency": 4}
     if spread:

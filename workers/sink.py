@@ -385,7 +385,7 @@ def sink_actor(runtime_env: dict | None = None, *, max_restarts: int | None = No
     Restartable, and its calls are retried on the new incarnation: a killed sink comes back
     (same arguments, same writer name, so it finds its log) and every sender - the episode
     workers waiting on an acknowledgement, the driver's terminal rows - goes on."""
-    import ray
+    import ray  # Ray only where the actor is made: the sink's writer runs without a cluster
 
     restarts = SINK_MAX_RESTARTS if max_restarts is None else max_restarts
     options: dict[str, Any] = {"num_cpus": 0, "max_restarts": restarts, "max_task_retries": -1 if restarts else 0}

@@ -206,6 +206,32 @@ class ReActAgent(Agent):
         if self.config.reply_format == "text":
             return play_text(self, ep, reset)
         cfg, d = self.config, ep.driver
+        released = self._pin_task(ep, reset)
+        prompt: str | None = None  # the first call answers the pinned task prompt
+        kind = "task"
+        streak = rounds = 0
+        while True:
+            reply, prompt, kind = self._next_reply(ep, reset, prompt, kind)
+            if reply is None:
+                continue
+            if cfg.think_actions and self.is_thought(reply):
+                # a thought: no environment step, no step used (react.py:159-160, act.py:218-219)
+                prompt, kind = P.THOUGHT_ACK, "thought"
+                continue
+            action = reply["action"]
+            valid = d.is_valid(action)
+            try:
+                d.execute(action)
+            except InvalidActionError:
+                prompt, kind = P.invalid_action_prompt(action, d.observation), "feedback"
+                streak, rounds = self._count_invalid(streak, rounds)
+                continue
+            streak = 0
+            prompt, kind = self._after_step(ep, reply, action, valid, released)
+
+    def _pin_task(self, ep: Episode, reset: Reset) -> bool:
+        """Pin the task prompt; True under ``prompts: release`` on ALFWorld (the released wording)."""
+        cfg = self.config
         # prompts: release on ALFWorld (Act: the JSON loop): the released first prompt with its
         # JSON request (act_alfworld/act.py:158-172, 304), and each observation as the release
         # sends it, without our heading (act.py:211)
@@ -225,57 +251,55 @@ class ReActAgent(Agent):
                     think_actions=cfg.think_actions,
                 ),
             )
-        prompt: str | None = None  # the first call answers the pinned task prompt
-        kind = "task"
-        streak = rounds = 0
-        while True:
-            if cfg.malformed_json == "game":
-                raw, _ = ep.conv.ask(prompt, kind, _keep, context=flat_context(ep, reset.goal), decode=raw_text)
-                read = read_reply(raw["text"])
-                if read.malformed:
-                    # the release sends its placeholder command to the game (a step) and shows
-                    # its own note instead of the game's answer (act_alfworld/act.py:183-199)
-                    try:
-                        d.execute(read.action or PARSE_ERROR_ACTION)
-                    except InvalidActionError:
-                        pass  # an environment that rejects invalid commands takes no step
-                    prompt, kind = MALFORMED_JSON, "feedback"
-                    continue
-                if read.action is None and read.think is None:
-                    # neither field: the release sends its last message again (act.py:221)
-                    prompt = prompt if prompt is not None else reset.observation
-                    continue
-                if read.action is None:  # a thought, whatever think_actions says (act.py:218-219)
-                    prompt, kind = P.THOUGHT_ACK, "thought"
-                    continue
-                reply = read.as_reply()
-            else:
-                reply, _ = ep.conv.ask(prompt, kind, self.parse_reply, context=flat_context(ep, reset.goal))
-            if cfg.think_actions and self.is_thought(reply):
-                # a thought: no environment step, no step used (react.py:159-160, act.py:218-219)
-                prompt, kind = P.THOUGHT_ACK, "thought"
-                continue
-            action = reply["action"]
-            valid = d.is_valid(action)
+        return released
+
+    def _next_reply(
+        self, ep: Episode, reset: Reset, prompt: str | None, kind: str
+    ) -> tuple[dict[str, Any] | None, str | None, str]:
+        """(reply, prompt, kind): the model's next reply to ``prompt``; with ``malformed_json: game``
+        a reply the release would not act on gives None and the next prompt to send instead."""
+        if self.config.malformed_json != "game":
+            reply, _ = ep.conv.ask(prompt, kind, self.parse_reply, context=flat_context(ep, reset.goal))
+            return reply, prompt, kind
+        raw, _ = ep.conv.ask(prompt, kind, _keep, context=flat_context(ep, reset.goal), decode=raw_text)
+        read = read_reply(raw["text"])
+        if read.malformed:
+            # the release sends its placeholder command to the game (a step) and shows
+            # its own note instead of the game's answer (act_alfworld/act.py:183-199)
             try:
-                d.execute(action)
+                ep.driver.execute(read.action or PARSE_ERROR_ACTION)
             except InvalidActionError:
-                prompt, kind = P.invalid_action_prompt(action, d.observation), "feedback"
-                streak += 1
-                if cfg.invalid_streak is not None and streak >= cfg.invalid_streak:
-                    streak, rounds = 0, rounds + 1
-                    if rounds >= cfg.invalid_rounds:
-                        raise EpisodeEnd(
-                            "agent_done",
-                            f"{rounds} rounds of {cfg.invalid_streak} consecutive invalid actions",
-                        ) from None
-                continue
-            streak = 0
-            if cfg.think_actions and reply.get("think") is not None and not self.with_think:
-                # the released Act answers "OK." to any reply with a think, even one that also
-                # acted: the action runs, its observation is not shown (act_alfworld/act.py:218-219)
-                prompt, kind = P.THOUGHT_ACK, "thought"
-            elif not valid and cfg.invalid_feedback == "explained":
-                prompt, kind = self.explained_feedback(ep, action), "feedback"
-            else:
-                prompt, kind = d.observation if released else P.observation_prompt(d.observation), "observation"
+                pass  # an environment that rejects invalid commands takes no step
+            return None, MALFORMED_JSON, "feedback"
+        if read.action is None and read.think is None:
+            # neither field: the release sends its last message again (act.py:221)
+            return None, prompt if prompt is not None else reset.observation, kind
+        if read.action is None:  # a thought, whatever think_actions says (act.py:218-219)
+            return None, P.THOUGHT_ACK, "thought"
+        return read.as_reply(), prompt, kind
+
+    def _count_invalid(self, streak: int, rounds: int) -> tuple[int, int]:
+        """(streak, rounds) after one more rejected action; ends the episode after ``invalid_rounds``
+        rounds of ``invalid_streak`` in a row (Robotouille's give-up rule)."""
+        cfg = self.config
+        streak += 1
+        if cfg.invalid_streak is not None and streak >= cfg.invalid_streak:
+            streak, rounds = 0, rounds + 1
+            if rounds >= cfg.invalid_rounds:
+                raise EpisodeEnd(
+                    "agent_done",
+                    f"{rounds} rounds of {cfg.invalid_streak} consecutive invalid actions",
+                ) from None
+        return streak, rounds
+
+    def _after_step(self, ep: Episode, reply: dict[str, Any], action: str, valid: bool, released: bool) -> tuple[str, str]:
+        """(prompt, kind) after an executed action: "OK." for the released Act's thought, explained
+        feedback for an invalid one, else the observation."""
+        cfg, d = self.config, ep.driver
+        if cfg.think_actions and reply.get("think") is not None and not self.with_think:
+            # the released Act answers "OK." to any reply with a think, even one that also
+            # acted: the action runs, its observation is not shown (act_alfworld/act.py:218-219)
+            return P.THOUGHT_ACK, "thought"
+        if not valid and cfg.invalid_feedback == "explained":
+            return self.explained_feedback(ep, action), "feedback"
+        return (d.observation if released else P.observation_prompt(d.observation)), "observation"

@@ -80,23 +80,7 @@ def play_text(agent: Any, ep: Episode, reset: Reset) -> None:
     cfg, d = agent.config, ep.driver
     layout = layout_of(agent)
     yao = layout == "think_or_action"
-    if yao:
-        system = T.yao_system()
-        # the goal only where the observation does not already state it (ALFWorld's "Your task
-        # is to: ..." does; the release sends the observation alone, react.py:209)
-        goal = "" if reset.goal in reset.observation else f"\n\nGoal: {reset.goal}"
-        first = f"{reset.observation}{goal}"
-    else:
-        system = T.react_system(agent.with_think)
-        first = T.turn(reset.observation, goal=reset.goal)
-    # prompts: release: the authors' system text and instructions are pinned already
-    # (recap.release_prompt); the first turn is the observation alone, as the release sends it
-    # (ReAct_agent.py:232-241 prompts with the environment's observation text)
-    preamble = not agent.demo_mode and "release" not in ep.extra
-    if yao and "release" in ep.extra:  # ALFWorld: the released first prompt (react.py:132-142, 209)
-        ep.conv.pin("task", T.release_alfworld_task(first))
-    else:
-        ep.conv.pin("task", T.task_prompt(system=system, rules=ep.env.rules(), body=first, preamble=preamble))
+    _pin_task(agent, ep, reset, yao)
     prompt: str | None = None
     kind = "task"
     streak = rounds = 0
@@ -118,24 +102,61 @@ def play_text(agent: Any, ep: Episode, reset: Reset) -> None:
             raise EpisodeEnd("agent_done", "the agent replied Finish")
         if feedback is None:
             assert reply.action is not None
-            action = reply.action
-            if not yao and valid is not None:
-                action = match_action(reply.action, valid) or reply.action
-            listed_valid = d.is_valid(action)
-            try:
-                d.execute(action)
-            except InvalidActionError:
-                feedback = T.invalid_action(reply.action)
-            else:
-                if yao and not listed_valid and cfg.invalid_feedback == "explained":
-                    prompt, kind = agent.explained_feedback(ep, action), "feedback"
-                    continue
-                streak = 0
-                prompt, kind = (d.observation if yao else T.turn(d.observation)), "observation"
+            after = _take_action(agent, ep, reply.action, valid, yao)
+            if after is not None:
+                prompt, kind = after
+                if kind == "observation":  # an action the game took; explained feedback keeps the run
+                    streak = 0
                 continue
+            feedback = T.invalid_action(reply.action)
         prompt, kind = T.turn(d.observation, feedback=feedback), "feedback"
-        streak += 1
-        if cfg.invalid_streak is not None and streak >= cfg.invalid_streak:
-            streak, rounds = 0, rounds + 1
-            if rounds >= cfg.invalid_rounds:
-                raise EpisodeEnd("agent_done", f"{rounds} rounds of {cfg.invalid_streak} consecutive unusable replies")
+        streak, rounds = _count_unusable(cfg, streak, rounds)
+
+
+def _pin_task(agent: Any, ep: Episode, reset: Reset, yao: bool) -> None:
+    """Pin the task prompt: the system text of the layout, the rules and the first observation."""
+    if yao:
+        system = T.yao_system()
+        # the goal only where the observation does not already state it (ALFWorld's "Your task
+        # is to: ..." does; the release sends the observation alone, react.py:209)
+        goal = "" if reset.goal in reset.observation else f"\n\nGoal: {reset.goal}"
+        first = f"{reset.observation}{goal}"
+    else:
+        system = T.react_system(agent.with_think)
+        first = T.turn(reset.observation, goal=reset.goal)
+    # prompts: release: the authors' system text and instructions are pinned already
+    # (recap.release_prompt); the first turn is the observation alone, as the release sends it
+    # (ReAct_agent.py:232-241 prompts with the environment's observation text)
+    preamble = not agent.demo_mode and "release" not in ep.extra
+    if yao and "release" in ep.extra:  # ALFWorld: the released first prompt (react.py:132-142, 209)
+        ep.conv.pin("task", T.release_alfworld_task(first))
+    else:
+        ep.conv.pin("task", T.task_prompt(system=system, rules=ep.env.rules(), body=first, preamble=preamble))
+
+
+def _take_action(agent: Any, ep: Episode, said: str, valid: tuple[str, ...] | None, yao: bool) -> tuple[str, str] | None:
+    """Send the reply's action to the game: (prompt, kind) to answer with, or None when the
+    environment rejected it (the caller answers with error feedback)."""
+    d = ep.driver
+    action = said
+    if not yao and valid is not None:
+        action = match_action(said, valid) or said
+    listed_valid = d.is_valid(action)
+    try:
+        d.execute(action)
+    except InvalidActionError:
+        return None
+    if yao and not listed_valid and agent.config.invalid_feedback == "explained":
+        return agent.explained_feedback(ep, action), "feedback"
+    return (d.observation if yao else T.turn(d.observation)), "observation"
+
+
+def _count_unusable(cfg: Any, streak: int, rounds: int) -> tuple[int, int]:
+    """(streak, rounds) after one more unusable reply; ends the episode after ``invalid_rounds``
+    rounds of ``invalid_streak`` in a row."""
+    streak += 1
+    if cfg.invalid_streak is not None and streak >= cfg.invalid_streak:
+        streak, rounds = 0, rounds + 1
+        if rounds >= cfg.invalid_rounds:
+            raise EpisodeEnd("agent_done", f"{rounds} rounds of {cfg.invalid_streak} consecutive unusable replies")
+    return streak, rounds

@@ -83,6 +83,7 @@ Guarantees
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
 from workers.gateway.blocking import BlockingGateway
@@ -114,7 +115,5 @@ _RAY_NAMES = {"BudgetActor": "actors", "GatewayActor": "actors", "RunGateways": 
 def __getattr__(name: str) -> Any:
     """Ray-backed names are imported on first use, so the core works without Ray."""
     if name in _RAY_NAMES:
-        import importlib
-
         return getattr(importlib.import_module(f"workers.gateway.{_RAY_NAMES[name]}"), name)
     raise AttributeError(f"module 'workers.gateway' has no attribute {name!r}")

@@ -17,7 +17,10 @@ an ``LLMError`` of the same kind (Ray's own exception wrapping would lose the ki
 from __future__ import annotations
 
 import asyncio
+import json
 import os
+import time
+import uuid
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -27,9 +30,15 @@ os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 import ray  # noqa: E402
 
 from recap.llm import LLMError, LLMRequest  # noqa: E402
+from schemas.parts import PartWriter  # noqa: E402
+from schemas.records import EventRecord  # noqa: E402
+from workers.gateway.call_log import run_id_of  # noqa: E402
+from workers.gateway.client import GatewayClient  # noqa: E402
+from workers.gateway.core import DeploymentGateway  # noqa: E402
 from workers.gateway.ledger import BudgetLedger, LocalBudget  # noqa: E402
 from workers.llm.errors import scrub  # noqa: E402
 from workers.llm.providers import DeploymentConfig  # noqa: E402
+from workers.log_setup import configure_from_env  # noqa: E402
 
 CONTROL = "control"
 
@@ -62,14 +71,6 @@ def _ledger_restored_event(run_dir: str, ledger: BudgetLedger) -> None:
     process in the journal (charged at worst case): the restart is visible in the tables."""
     if not ledger.restored_orphans:
         return
-    import json
-    import time
-    import uuid
-
-    from schemas.parts import PartWriter
-    from schemas.records import EventRecord
-    from workers.gateway.call_log import run_id_of
-
     try:
         run_id = run_id_of(run_dir)
     except Exception:  # a bare ledger folder (tests): nothing to attach the row to
@@ -182,9 +183,6 @@ class GatewayActor:
         secret_env: SecretEnv | None = None,
         group_commit: bool = True,
     ):
-        from workers.gateway.core import DeploymentGateway
-        from workers.log_setup import configure_from_env
-
         configure_from_env()
         if secret_env is not None:  # the API keys, for this actor process only
             secret_env.apply()
@@ -301,8 +299,6 @@ class RunGateways:
         self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget) for c in self.configs}
 
     def client(self, name: str) -> Any:
-        from workers.gateway.client import GatewayClient
-
         if name in self.actors:
             return GatewayClient(self.actors[name], deployment=name)
         matches = [c.deployment_name for c in self.configs if c.model == name]

@@ -40,13 +40,10 @@ One call (:meth:`DeploymentGateway.complete`):
 from __future__ import annotations
 
 import asyncio
-import dataclasses
-import logging
 import time
 import uuid
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -60,18 +57,14 @@ from tenacity import (
 )
 
 from recap.llm import LLMError, LLMRequest, LLMResponse
-from schemas.kinds import EventKind, Severity
 from schemas.outcomes import BudgetRefusal
-from schemas.records import CallRecord
 from workers.gateway.call_log import CallLog, run_id_of, writer_name
+from workers.gateway.call_records import CallRecorder
+from workers.gateway.call_state import AttemptFailed, CallState, FinalFailure, Retryable, Served, response_as_result
 from workers.gateway.ledger import BudgetLedger, LocalBudget
 from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
 from workers.llm.accounting import (
     USAGE_REJECTED_EVENT,
-    Settlement,
-    Sizing,
-    error_record,
-    ok_record,
     served_from,
     settle,
     size_request,
@@ -79,7 +72,7 @@ from workers.llm.accounting import (
 )
 from workers.llm.cache_markers import BreakpointPlanner, mark
 from workers.llm.calling import Attempt, attempt_async, litellm_kwargs
-from workers.llm.errors import Classified, classify, redact_known, refused_retry_after, scrub
+from workers.llm.errors import Classified, classify, redact_known, refused_retry_after
 from workers.llm.fingerprint import request_fingerprint
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.pricing import PriceTable, pico_to_usd
@@ -88,53 +81,8 @@ from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provi
 #: extra seconds granted to litellm's own timeout before asyncio cuts the attempt
 _TIMEOUT_BACKSTOP_S = 2.0
 
-log = logging.getLogger(__name__)
 
-
-class _AttemptFailed(Exception):
-    def __init__(self, classified: Classified):
-        super().__init__(classified.message)
-        self.classified = classified
-
-
-class _Retryable(_AttemptFailed):
-    pass
-
-
-class _Final(_AttemptFailed):
-    pass
-
-
-class _Served(Exception):
-    """The call was answered from the ledger (idempotency) or the response cache."""
-
-    def __init__(self, result: dict[str, Any], source: str):
-        super().__init__(source)
-        self.result = result
-        self.source = source
-
-
-@dataclass
-class _Call:
-    """What one call needs across its attempts."""
-
-    request: LLMRequest
-    messages: list[dict[str, str]]
-    params: dict[str, Any]
-    window_tokens: int
-    sizing: Sizing
-    worst: int | None
-    cache_key: str | None
-    deadline: float
-    rid: int | None = None  # the live reservation
-    begun: bool = False
-    attempts: int = 0
-    charged: int = 0  # pico charged at worst case for attempts that may have been billed
-    settlement: Settlement | None = None  # the checked usage and cost of the answer
-    send: list[dict[str, Any]] | None = None  # the messages as sent (cache markers); None: messages
-
-
-class DeploymentGateway:
+class DeploymentGateway(CallRecorder):
     """Admission, retries, budget, idempotency, cache and records for one deployment."""
 
     def __init__(
@@ -246,13 +194,33 @@ class DeploymentGateway:
 
     async def _complete(self, request: LLMRequest) -> LLMResponse:
         t0 = self._clock()
-        cfg = self.config
         self.counts["calls"] += 1
+        call = self._new_call(request, t0)
+        try:
+            attempt = await self._attempts(call)
+        except Served as served:
+            return self._served(request, served.result, served.source, t0)
+        except AttemptFailed as exc:
+            if call.rid is not None:
+                await self.budget.settle(call.rid, 0, "error", None, None, None)
+            if exc.classified.kind != "budget":  # a refusal is the cap at work, not a fault
+                self._attempt_event("call_failed", "error", call, exc.classified, call.attempts)
+            raise self._fail(request, exc.classified, t0, call.attempts, call.charged, call.sizing.counted.source) from None
+        except BaseException:
+            # cancelled mid-call: the provider may bill it; keep the cap safe
+            if call.rid is not None:
+                await self.budget.charge_worst(call.rid)
+            raise
+        return await self._answered(call, attempt, t0)
+
+    def _new_call(self, request: LLMRequest, t0: float) -> CallState:
+        """The call's state before its first attempt: the messages to send, the sizing, the worst case, the cache key."""
+        cfg = self.config
         messages = provider_messages(request.messages)
         params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
         sizing = size_request(cfg.model, messages, params)
         counted = sizing.counted
-        call = _Call(
+        call = CallState(
             request=request,
             messages=messages,
             params=params,
@@ -264,22 +232,12 @@ class DeploymentGateway:
         )
         if self.markers is not None:
             call.send = mark(self.markers, request.episode_id, messages)
-        try:
-            attempt = await self._attempts(call)
-        except _Served as served:
-            return self._served(request, served.result, served.source, t0)
-        except _AttemptFailed as exc:
-            if call.rid is not None:
-                await self.budget.settle(call.rid, 0, "error", None, None, None)
-            if exc.classified.kind != "budget":  # a refusal is the cap at work, not a fault
-                self._attempt_event("call_failed", "error", call, exc.classified, call.attempts)
-            raise self._fail(request, exc.classified, t0, call.attempts, call.charged, counted.source) from None
-        except BaseException:
-            # cancelled mid-call: the provider may bill it; keep the cap safe
-            if call.rid is not None:
-                await self.budget.charge_worst(call.rid)
-            raise
+        return call
 
+    async def _answered(self, call: CallState, attempt: Attempt, t0: float) -> LLMResponse:
+        """Settle a successful call: its checked usage and cost, its redacted reply, its reservation and its row."""
+        cfg = self.config
+        request = call.request
         settled = call.settlement or settle(cfg.model, self.price, attempt, call.sizing)
         usage, cost = settled.usage, settled.cost_pico
         if settled.rejected:  # impossible usage: charged at the worst case, visible as an event
@@ -320,25 +278,25 @@ class DeploymentGateway:
         self._record(request, resp, usage.cache_write_tokens)
         return resp
 
-    async def _attempts(self, call: _Call) -> Attempt:
+    async def _attempts(self, call: CallState) -> Attempt:
         cfg = self.config
         backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
 
         def wait(rs: RetryCallState) -> float:
             exc = rs.outcome.exception() if rs.outcome else None
-            if isinstance(exc, _AttemptFailed) and exc.classified.kind == "rate_limit":
+            if isinstance(exc, AttemptFailed) and exc.classified.kind == "rate_limit":
                 return 0.0  # admission holds every attempt until the Retry-After pause ends
             return min(backoff(rs), max(0.0, call.deadline - self._clock()))
 
         def before_sleep(rs: RetryCallState) -> None:
             exc = rs.outcome.exception() if rs.outcome else None
-            if isinstance(exc, _AttemptFailed):
+            if isinstance(exc, AttemptFailed):
                 self._attempt_event("retry", "warning", call, exc.classified, rs.attempt_number)
 
         retrying = AsyncRetrying(
             stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
             wait=wait,
-            retry=retry_if_exception_type(_Retryable),
+            retry=retry_if_exception_type(Retryable),
             reraise=True,
             before_sleep=before_sleep,
         )
@@ -347,7 +305,7 @@ class DeploymentGateway:
                 return await self._one_attempt(call)
         raise AssertionError("unreachable: tenacity reraises the last failure")
 
-    async def _admit_and_reserve(self, call: _Call) -> Ticket:
+    async def _admit_and_reserve(self, call: CallState) -> Ticket:
         """Wait for admission, then make sure the attempt is covered by a reservation.
 
         The budget is asked only once the attempt may be sent, so calls queued behind the
@@ -356,16 +314,16 @@ class DeploymentGateway:
         cfg = self.config
         untrusted = self._untrusted()
         if untrusted is not None:
-            raise _Final(Classified("budget", untrusted.message, refusal=untrusted))
+            raise FinalFailure(Classified("budget", untrusted.message, refusal=untrusted))
         remaining = call.deadline - self._clock()
         if remaining <= 0:
-            raise _Final(Classified("timeout", f"total timeout {cfg.total_timeout_s}s reached"))
+            raise FinalFailure(Classified("timeout", f"total timeout {cfg.total_timeout_s}s reached"))
         try:
             ticket = await asyncio.wait_for(self.admission.acquire(call.window_tokens), remaining)
         except AdmissionError as exc:
-            raise _Final(Classified("bad_request", str(exc))) from None
+            raise FinalFailure(Classified("bad_request", str(exc))) from None
         except TimeoutError:
-            raise _Final(Classified("timeout", f"no capacity within the total timeout {cfg.total_timeout_s}s")) from None
+            raise FinalFailure(Classified("timeout", f"no capacity within the total timeout {cfg.total_timeout_s}s")) from None
         key = call.request.call_key
         try:
             if not call.begun:
@@ -383,13 +341,13 @@ class DeploymentGateway:
             return ticket
         self.admission.cancel(ticket)  # nothing is sent
         if answer["status"] == "recorded":
-            raise _Served(answer["result"], answer["served_from"])
+            raise Served(answer["result"], answer["served_from"])
         refusal = answer.get("refusal")
-        raise _Final(
+        raise FinalFailure(
             Classified("budget", answer["message"], refusal=BudgetRefusal.from_dict(refusal) if refusal is not None else None)
         )
 
-    async def _one_attempt(self, call: _Call) -> Attempt:
+    async def _one_attempt(self, call: CallState) -> Attempt:
         cfg = self.config
         call.attempts += 1
         if call.attempts > 1:
@@ -411,7 +369,7 @@ class DeploymentGateway:
             attempt = await asyncio.wait_for(attempt_async(kwargs), timeout_s + _TIMEOUT_BACKSTOP_S)
         except DeploymentConfigError as exc:
             self.admission.cancel(ticket)
-            raise _Final(Classified("auth", str(exc))) from None
+            raise FinalFailure(Classified("auth", str(exc))) from None
         except asyncio.CancelledError:
             self.admission.release(ticket, "cancelled")
             raise
@@ -426,8 +384,8 @@ class DeploymentGateway:
                 call.rid = None
             if refused is not None:
                 self.counts["retry_after_refused"] += 1
-                raise _Final(refused) from None
-            raise (_Retryable if c.retryable else _Final)(c) from None
+                raise FinalFailure(refused) from None
+            raise (Retryable if c.retryable else FinalFailure)(c) from None
         actual = None  # the token window learns the reported usage only when it is plausible
         try:
             call.settlement = settled = settle(cfg.model, self.price, attempt, call.sizing)
@@ -456,83 +414,6 @@ class DeploymentGateway:
         """The deployment's secret values (API key, base-URL credentials), read now."""
         return self.config.secrets()
 
-    # ---- results and records ----
-    def _served(self, request: LLMRequest, result: dict[str, Any], source: str, t0: float) -> LLMResponse:
-        """A response recorded earlier (ledger / cache), at no cost."""
-        self.counts[f"served_{source}"] += 1
-        resp = LLMResponse(
-            text=result["text"],
-            model=self.config.model,
-            prompt_tokens=int(result["prompt_tokens"]),
-            cached_prompt_tokens=int(result["cached_prompt_tokens"]),
-            completion_tokens=int(result["completion_tokens"]),
-            cost_usd=0.0,
-            latency_s=self._clock() - t0,
-            retries=0,
-            token_count_source=str(result["token_count_source"]),
-            served_from=source,
-            deployment=self.deployment,
-            test_double=self.test_double,
-        )
-        self._record(request, resp)
-        return resp
-
-    def _attempt_event(self, kind: EventKind, severity: Severity, call: _Call, c: Classified, attempt: int) -> None:
-        """An ``events`` row per failed attempt: ``retry`` when another follows, ``call_failed``
-        when the call gives up - so provider trouble that retries absorbed stays visible."""
-        detail: dict[str, Any] = {
-            "deployment": self.deployment,
-            "call_key": call.request.call_key,
-            "call_attempt": attempt,
-            "kind": c.kind,
-            "status": c.status_code,
-            "message": scrub(c.message)[:300],
-        }
-        if c.retry_after_s is not None:
-            detail["retry_after_s"] = c.retry_after_s
-        log.info(
-            "%s: %s %s of call %s (attempt %d): %s",
-            self.deployment,
-            kind,
-            c.kind,
-            call.request.call_key,
-            attempt,
-            detail["message"],
-        )
-        self.call_log.add_event(kind, severity, detail, episode_id=call.request.episode_id)
-
-    def _fail(self, request: LLMRequest, c: Classified, t0: float, attempts: int, charged: int, source: str) -> LLMError:
-        self.counts["failed"] += 1
-        self.counts[f"failed_{c.kind}"] += 1
-        self.spent_pico += charged
-        message = scrub(c.message)
-        retries = max(0, attempts - 1)
-        self._add(
-            error_record(
-                request,
-                model=self.config.model,
-                kind=c.kind,
-                message=message,
-                cost_usd=pico_to_usd(charged),
-                latency_s=self._clock() - t0,
-                retries=retries,
-                token_count_source=source,
-                deployment=self.deployment,
-                test_double=self.test_double,
-            )
-        )
-        return LLMError(c.kind, message, retries=retries, cost_usd=pico_to_usd(charged), refusal=c.refusal)
-
-    def _record(self, request: LLMRequest, resp: LLMResponse, cache_write_tokens: int = 0) -> None:
-        self._add(ok_record(request, resp, cache_write_tokens))
-
-    def _add(self, record: CallRecord) -> None:
-        """One ``llm_calls`` row, with the model's name in the sweep beside its model string
-        (``model_name``: what ``episodes.model`` holds; null for a deployment without a name)."""
-        if self.config.name is not None:
-            record = dataclasses.replace(record, model_name=self.config.name)
-        self.call_log.add(record)
-
     # ---- control ----
     def pause(self) -> None:
         self.admission.pause()
@@ -555,13 +436,3 @@ class DeploymentGateway:
             "inflight": len(self._inflight),
             **self.admission.stats(),
         }
-
-
-def response_as_result(resp: LLMResponse) -> dict[str, Any]:
-    """The fields of a response that a recorded result keeps (text, token counts and their source):
-    what a duplicate of a call already in flight is served from, at no cost."""
-    return {
-        k: v
-        for k, v in dataclasses.asdict(resp).items()
-        if k in ("text", "prompt_tokens", "cached_prompt_tokens", "completion_tokens", "token_count_source")
-    }

@@ -43,6 +43,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final
 
+from recap.llm import LLMRequest, LLMResponse
 from schemas.kinds import LLMErrorKind
 from schemas.records import CallRecord
 from workers.llm.calling import Attempt
@@ -242,9 +243,9 @@ def served_from(model: str) -> str:
     return "replay" if model == REPLAY_MODEL else "provider"
 
 
-def ok_record(request: Any, resp: Any, cache_write_tokens: int = 0) -> CallRecord:
-    """The ``llm_calls`` row of a successful call (``request``: LLMRequest, ``resp``: LLMResponse;
-    the response carries no cache writes, so the caller passes them from the settlement)."""
+def ok_record(request: LLMRequest, resp: LLMResponse, cache_write_tokens: int = 0) -> CallRecord:
+    """The ``llm_calls`` row of a successful call (the response carries no cache writes, so the
+    caller passes them from the settlement)."""
     return CallRecord(
         episode_id=request.episode_id,
         call_index=request.call_index,
@@ -272,7 +273,7 @@ def ok_record(request: Any, resp: Any, cache_write_tokens: int = 0) -> CallRecor
 
 
 def error_record(
-    request: Any,
+    request: LLMRequest,
     *,
     model: str,
     kind: LLMErrorKind,

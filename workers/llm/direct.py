@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from tenacity import (
@@ -25,7 +26,7 @@ from tenacity import (
 
 from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.records import CallRecord
-from workers.llm.accounting import error_record, ok_record, served_from, settle, size_request, worst_case_pico
+from workers.llm.accounting import Sizing, error_record, ok_record, served_from, settle, size_request, worst_case_pico
 from workers.llm.cache_markers import BreakpointPlanner, mark
 from workers.llm.calling import Attempt, attempt_sync, litellm_kwargs
 from workers.llm.errors import Classified, classify, redact_known, refused_retry_after
@@ -44,6 +45,23 @@ class _Failed(Exception):
 
 class _Retry(_Failed):
     pass
+
+
+@dataclass
+class _DirectCall:
+    """What one call carries across its attempts."""
+
+    request: LLMRequest
+    send: list[dict[str, Any]]  # the messages as sent (cache markers where the provider wants them)
+    params: dict[str, Any]
+    sizing: Sizing
+    t0: float
+    deadline: float
+    #: what an attempt that may have been billed (a timeout, an unreadable 200) is charged, as the
+    #: gateway charges it: the recorded cost never reads $0 for a reply the provider billed
+    worst: int
+    attempts: int = 0
+    charged: int = 0
 
 
 class LiteLLMClient:
@@ -66,19 +84,36 @@ class LiteLLMClient:
         get_litellm()  # import now (seconds), not inside the first call
 
     def complete(self, request: LLMRequest) -> LLMResponse:
+        """One call: attempts under tenacity, then the settled response (or an :class:`LLMError`), its row to ``record_sink``."""
+        call = self._new_call(request)
+        try:
+            attempt = self._attempts(call)
+        except _Failed as exc:
+            raise self._failed(call, exc.classified) from None
+        return self._answered(call, attempt)
+
+    def _new_call(self, request: LLMRequest) -> _DirectCall:
+        """The call's state before its first attempt: the messages to send, the sizing, the deadline."""
         cfg = self.config
         t0 = time.monotonic()
-        deadline = t0 + cfg.total_timeout_s
         messages = provider_messages(request.messages)
         params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
         sizing = size_request(cfg.model, messages, params)
-        counted = sizing.counted
         send = mark(self.markers, request.episode_id, messages) if self.markers is not None else messages
-        attempts = 0
-        # attempts that may have been billed (a timeout, an unreadable 200) count at worst case,
-        # as the gateway charges them: the recorded cost never reads $0 for a reply the provider billed
-        charged = 0
-        worst = worst_case_pico(self.price, sizing) or 0
+        return _DirectCall(
+            request=request,
+            send=send,
+            params=params,
+            sizing=sizing,
+            t0=t0,
+            deadline=t0 + cfg.total_timeout_s,
+            worst=worst_case_pico(self.price, sizing) or 0,
+        )
+
+    def _attempts(self, call: _DirectCall) -> Attempt:
+        """The attempts under tenacity: Retry-After honoured by sleeping, else exponential backoff, until the deadline."""
+        cfg = self.config
+        request = call.request
         backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
 
         def wait(rs: RetryCallState) -> float:
@@ -89,18 +124,23 @@ class LiteLLMClient:
                 pause = cfg.rate_limit_default_wait_s
             else:
                 pause = backoff(rs)
-            return min(pause, max(0.0, deadline - time.monotonic()))
+            return min(pause, max(0.0, call.deadline - time.monotonic()))
 
         def one() -> Attempt:
-            nonlocal attempts, charged
-            attempts += 1
+            call.attempts += 1
             api_key = None
             try:
                 api_key = cfg.api_key()
-                timeout_s = max(0.001, min(cfg.attempt_timeout_s, deadline - time.monotonic()))
+                timeout_s = max(0.001, min(cfg.attempt_timeout_s, call.deadline - time.monotonic()))
                 return attempt_sync(
                     litellm_kwargs(
-                        cfg, send, params, timeout_s=timeout_s, call_key=request.call_key, hints=request.hints, api_key=api_key
+                        cfg,
+                        call.send,
+                        call.params,
+                        timeout_s=timeout_s,
+                        call_key=request.call_key,
+                        hints=request.hints,
+                        api_key=api_key,
                     )
                 )
             except DeploymentConfigError as exc:
@@ -108,38 +148,43 @@ class LiteLLMClient:
             except Exception as exc:
                 c = classify(exc, secrets=[api_key, *url_secrets(cfg.api_base)])
                 if c.maybe_billed:
-                    charged += worst
+                    call.charged += call.worst
                 refused = refused_retry_after(c, cfg.max_retry_after_s)
                 if refused is not None:
                     raise _Failed(refused) from None
                 raise (_Retry if c.retryable else _Failed)(c) from None
 
-        try:
-            attempt = Retrying(
-                stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
-                wait=wait,
-                retry=retry_if_exception_type(_Retry),
-                reraise=True,
-            )(one)
-        except _Failed as exc:
-            c = exc.classified
-            if self.record_sink is not None:
-                self.record_sink(
-                    error_record(
-                        request,
-                        model=cfg.model,
-                        kind=c.kind,
-                        message=c.message,
-                        cost_usd=pico_to_usd(charged),
-                        latency_s=time.monotonic() - t0,
-                        retries=attempts - 1,
-                        token_count_source=counted.source,
-                        deployment=cfg.deployment_name,
-                        test_double=self.test_double,
-                    )
+        return Retrying(
+            stop=stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s),
+            wait=wait,
+            retry=retry_if_exception_type(_Retry),
+            reraise=True,
+        )(one)
+
+    def _failed(self, call: _DirectCall, c: Classified) -> LLMError:
+        """The error a failed call raises, its row written first (cost: the attempts that may have been billed)."""
+        cfg = self.config
+        if self.record_sink is not None:
+            self.record_sink(
+                error_record(
+                    call.request,
+                    model=cfg.model,
+                    kind=c.kind,
+                    message=c.message,
+                    cost_usd=pico_to_usd(call.charged),
+                    latency_s=time.monotonic() - call.t0,
+                    retries=call.attempts - 1,
+                    token_count_source=call.sizing.counted.source,
+                    deployment=cfg.deployment_name,
+                    test_double=self.test_double,
                 )
-            raise LLMError(c.kind, c.message, retries=attempts - 1, cost_usd=pico_to_usd(charged)) from None
-        settled = settle(cfg.model, self.price, attempt, sizing)
+            )
+        return LLMError(c.kind, c.message, retries=call.attempts - 1, cost_usd=pico_to_usd(call.charged))
+
+    def _answered(self, call: _DirectCall, attempt: Attempt) -> LLMResponse:
+        """The response of a successful call: checked usage and cost, the reply redacted, its row written."""
+        cfg = self.config
+        settled = settle(cfg.model, self.price, attempt, call.sizing)
         usage = settled.usage
         if settled.rejected:
             log.warning(
@@ -154,9 +199,9 @@ class LiteLLMClient:
             prompt_tokens=usage.prompt_tokens,
             cached_prompt_tokens=usage.cached_prompt_tokens,
             completion_tokens=usage.completion_tokens,
-            cost_usd=pico_to_usd(settled.cost_pico + charged),
-            latency_s=time.monotonic() - t0,
-            retries=attempts - 1,
+            cost_usd=pico_to_usd(settled.cost_pico + call.charged),
+            latency_s=time.monotonic() - call.t0,
+            retries=call.attempts - 1,
             token_count_source=usage.token_count_source,
             served_from=served_from(cfg.model),
             deployment=cfg.deployment_name,
@@ -165,5 +210,5 @@ class LiteLLMClient:
             provider_cost_usd=settled.provider_cost_usd,
         )
         if self.record_sink is not None:
-            self.record_sink(ok_record(request, resp, usage.cache_write_tokens))
+            self.record_sink(ok_record(call.request, resp, usage.cache_write_tokens))
         return resp

@@ -10,14 +10,18 @@ reach any record, log line or exception, because providers echo keys back in aut
 from __future__ import annotations
 
 import asyncio
+import email.utils
 import json
+import logging
 import re
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from typing import Any
 
 from schemas.kinds import LLMErrorKind
 from schemas.outcomes import BudgetRefusal
+from workers.llm.litellm_import import import_litellm
 
 #: kinds worth another attempt; the others are returned to the caller at once
 RETRYABLE_KINDS = frozenset({"rate_limit", "timeout", "server_error"})
@@ -131,9 +135,6 @@ def retry_after_seconds(exc: BaseException) -> float | None:
 
 def _http_date(value: str) -> float | None:
     """Seconds from now until an HTTP-date Retry-After (0 when past), None when unparseable."""
-    import email.utils
-    import time
-
     try:
         when = email.utils.parsedate_to_datetime(value.strip())
     except (TypeError, ValueError, IndexError):
@@ -232,8 +233,6 @@ def unreadable_reply(exc: BaseException) -> bool:
 
 def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classified:
     """The error class of an exception raised by one litellm call."""
-    from workers.llm.litellm_import import import_litellm
-
     litellm = import_litellm()
     unreadable = reply_200 = False
     message = scrub(f"{type(exc).__name__}: {exc}", secrets)[:MAX_MESSAGE_CHARS]
@@ -293,8 +292,6 @@ class ScrubFilter:
 
 def install_log_scrubber() -> None:
     """Scrub what the HTTP client loggers print (idempotent)."""
-    import logging
-
     for name in URL_LOGGERS:
         logger = logging.getLogger(name)
         if not any(isinstance(f, ScrubFilter) for f in logger.filters):

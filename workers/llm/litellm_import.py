@@ -30,7 +30,7 @@ def import_litellm() -> Any:
         return _litellm
     with _lock:
         if _litellm is None:
-            import litellm
+            import litellm  # the one place litellm is imported: offline, quiet, once
 
             # importing this module points TIKTOKEN_CACHE_DIR at litellm's bundled encodings
             import litellm.litellm_core_utils.default_encoding  # noqa: F401

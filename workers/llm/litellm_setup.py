@@ -26,6 +26,7 @@ def get_litellm() -> Any:
     with _lock:
         if _ready is None:
             litellm = import_litellm()
+            # the offline test doubles load with litellm, not with every module that may call a model
             from workers.llm.offline.provider import register_offline_provider
 
             register_offline_provider(litellm)

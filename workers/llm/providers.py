@@ -353,7 +353,7 @@ class DeploymentConfig(BaseModel):
 def model_max_output_tokens(model: str) -> int | None:
     """The most output tokens ``model`` can produce, from litellm's model map (the provider
     prefix is tried with and without: ``openai/gpt-4o-2024-08-06`` -> 16384); None when unknown."""
-    import litellm
+    import litellm  # heavy (seconds): only when a model's output limit is asked
 
     names = [model] + ([model.split("/", 1)[1]] if "/" in model else [])
     for name in names:

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
+from workers.llm.litellm_import import import_litellm
+
 #: chars per token of the estimate (English text with GPT-style BPE is about 4)
 CHARS_PER_TOKEN = 4
 #: tokens the OpenAI chat format adds per message (role + separators) and to prime the reply
@@ -76,8 +78,6 @@ def _bundled_encoding_available(name: str) -> bool:
 @lru_cache(maxsize=64)
 def _encoding_for(model: str) -> Any:
     """The tiktoken encoding of an OpenAI model name, or None (not OpenAI / not bundled)."""
-    from workers.llm.litellm_import import import_litellm
-
     import_litellm()  # sets TIKTOKEN_CACHE_DIR to the bundled encodings
     base = model
     for prefix in _OPENAI_PREFIXES:
@@ -87,6 +87,7 @@ def _encoding_for(model: str) -> Any:
     else:
         if "/" in base:  # another provider's model: no bundled tokenizer
             return None
+    # tiktoken only here: it comes with litellm, which must be imported (offline) first
     import tiktoken
     import tiktoken.model
 

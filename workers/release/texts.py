@@ -37,6 +37,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from recap.baselines.text_prompts import RELEASE_ALFWORLD_RULE
 from recap.env import DataNotFoundError
 from recap.release_prompt import ReleasePrompt
@@ -226,8 +228,6 @@ def _demo_value(value: Any) -> str:
 
 
 def _yaml_fields(text: str, fields: list[str]) -> str:
-    import yaml
-
     data = yaml.safe_load(text)
     if not isinstance(data, dict):
         raise ValueError("not a mapping")
@@ -422,8 +422,6 @@ def _recap_prompt(folder: Path, parts: Sequence[Part]) -> ReleasePrompt:
 
 
 def _yaml_mapping(text: str) -> dict[str, Any]:
-    import yaml
-
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -13,6 +13,7 @@ from pathlib import Path
 from workers.envs.data_sources import DataFolder, Group, Source
 
 from .data import LOCATION
+from .generator import write_instances
 
 #: upstream repository and the commit the data folder was taken from
 REPO_ARCHIVES = "https://github.com/portal-cornell/robotouille/archive"
@@ -33,8 +34,6 @@ def strip_top_folder(member: str) -> str | None:
 
 def generate_instances(folder: Path) -> list[str]:
     """instances/ and instances_train/ from the fetched problem files and domain."""
-    from .generator import write_instances
-
     return write_instances(folder, folder)
 
 

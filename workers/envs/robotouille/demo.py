@@ -91,125 +91,121 @@ def _action_list_node(descend_think: str, actions: list[str], thinks: list[str],
 
 
 def decomposition() -> list[Step]:
-    """The goal's decomposition as (think, subtasks), in ReCAP's call order."""
+    """The goal's decomposition as (think, subtasks), in ReCAP's call order: the root's reply, the
+    onion's preparation subtree, then the sandwich built back at the root."""
     root_plan = [PREPARE, STACK_ONION_TASK, CHEESE_TASK, BREAD_TASK]
-    r: list[Step] = []
-    # call 0: root decomposition
-    r.append(
+    return [
         _reply(
             "The sandwich needs a bottom slice of bread directly on a table, a cut onion and cheese1 on it, "
             "and a second slice on top. bread1 already lies alone on table1, so it can stay there as the "
             "bottom slice. The onion is the only ingredient that needs work: it must be cut on a board. "
             "After that I stack onion, cheese and bread2 on bread1, in that order.",
             root_plan,
-        )
-    )
-    # descend into PREPARE (composite, three children)
-    r.append(
+        ),
+        *_prepare_onion(),
+        *_build_sandwich(root_plan),
+    ]
+
+
+def _prepare_onion() -> list[Step]:
+    """Descending into PREPARE: free board1, fetch onion1, cut it; a refine reply after each child."""
+    return [
         _reply(
             "To cut an onion I need an empty cutting board. board1 holds lettuce1 and board2 holds bottombun1; "
             "neither is part of this sandwich, so I free board1 by moving the lettuce to an empty table. "
             "Then I fetch onion1 from fryer1, put it on board1 and cut it three times.",
             [CLEAR_TASK, FETCH_TASK, CUT_TASK],
-        )
-    )
-    r += _action_list_node(
-        "I stand at stove1. I go to board1, pick up lettuce1 and leave it on table2, which is empty.",
-        CLEAR_BOARD,
-        [
-            "I am at board1 and lettuce1 is the only thing on it, so I can pick it up.",
-            "I hold lettuce1. table2 has nothing on it, so I carry the lettuce there.",
-            "I am at the empty table2 holding lettuce1; I put it down here.",
-        ],
-        "lettuce1 is on table2 and board1 is empty now. This subtask is done.",
-    )
-    r.append(
+        ),
+        *_action_list_node(
+            "I stand at stove1. I go to board1, pick up lettuce1 and leave it on table2, which is empty.",
+            CLEAR_BOARD,
+            [
+                "I am at board1 and lettuce1 is the only thing on it, so I can pick it up.",
+                "I hold lettuce1. table2 has nothing on it, so I carry the lettuce there.",
+                "I am at the empty table2 holding lettuce1; I put it down here.",
+            ],
+            "lettuce1 is on table2 and board1 is empty now. This subtask is done.",
+        ),
         _reply(
             "board1 is free. Next I bring onion1 over from fryer1, then cut it.",
             [FETCH_TASK, CUT_TASK],
-        )
-    )
-    r += _action_list_node(
-        "onion1 lies alone on fryer1. I walk there, pick it up, return to board1 and place it on the board.",
-        FETCH_ONION,
-        [
-            "I reached fryer1; onion1 has nothing on top, so I pick it up.",
-            "I hold onion1 and head back to the empty board1.",
-            "I am at board1 with the onion; placing it puts it directly on the board.",
-        ],
-        "onion1 is on board1 with nothing above it. This subtask is done.",
-    )
-    r.append(
+        ),
+        *_action_list_node(
+            "onion1 lies alone on fryer1. I walk there, pick it up, return to board1 and place it on the board.",
+            FETCH_ONION,
+            [
+                "I reached fryer1; onion1 has nothing on top, so I pick it up.",
+                "I hold onion1 and head back to the empty board1.",
+                "I am at board1 with the onion; placing it puts it directly on the board.",
+            ],
+            "onion1 is on board1 with nothing above it. This subtask is done.",
+        ),
         _reply(
             "The onion is on the cutting board and I am standing there. All that is left is to cut it.",
             [CUT_TASK],
-        )
-    )
-    r += _action_list_node(
-        "A cut only counts after three cuts in a row, so I cut onion1 three times.",
-        CUT_ONION,
-        [
-            "One cut done; the onion is not cut yet. Two more.",
-            "Two cuts done. One more cut finishes it.",
-        ],
-        "The observation now says onion1 is cut. This subtask is done.",
-    )
-    r.append(
+        ),
+        *_action_list_node(
+            "A cut only counts after three cuts in a row, so I cut onion1 three times.",
+            CUT_ONION,
+            [
+                "One cut done; the onion is not cut yet. Two more.",
+                "Two cuts done. One more cut finishes it.",
+            ],
+            "The observation now says onion1 is cut. This subtask is done.",
+        ),
         _reply(
             "onion1 is cut, so preparing the onion is finished.",
             [],
-        )
-    )
-    # back at the root
-    r.append(
+        ),
+    ]
+
+
+def _build_sandwich(root_plan: list[str]) -> list[Step]:
+    """Back at the root: stack the onion, the cheese and the top slice on bread1, one refine reply after each."""
+    return [
         _reply(
             "The cut onion is waiting on board1. Now I build the sandwich on bread1 at table1: onion first, "
             "then cheese1, then bread2 on top.",
             root_plan[1:],
-        )
-    )
-    r += _action_list_node(
-        "I am at board1 next to the cut onion. I pick it up, go to table1 and stack it on bread1.",
-        STACK_ONION,
-        [
-            "I hold the cut onion; table1 with bread1 is where the sandwich goes.",
-            "At table1; bread1 has nothing above it, so the onion goes right on top of it.",
-        ],
-        "onion1 sits directly on bread1. This subtask is done.",
-    )
-    r.append(
+        ),
+        *_action_list_node(
+            "I am at board1 next to the cut onion. I pick it up, go to table1 and stack it on bread1.",
+            STACK_ONION,
+            [
+                "I hold the cut onion; table1 with bread1 is where the sandwich goes.",
+                "At table1; bread1 has nothing above it, so the onion goes right on top of it.",
+            ],
+            "onion1 sits directly on bread1. This subtask is done.",
+        ),
         _reply(
             "The onion is on the bottom slice. Next the cheese, then the top slice.",
             root_plan[2:],
-        )
-    )
-    r += _action_list_node(
-        "cheese1 lies alone on sink3. I fetch it and stack it on the onion at table1.",
-        STACK_CHEESE,
-        [
-            "At sink3; cheese1 is free to pick up.",
-            "I hold cheese1 and carry it back to the sandwich at table1.",
-            "At table1; the onion is the top of the stack, so the cheese goes on it.",
-        ],
-        "cheese1 is on top of the onion. This subtask is done.",
-    )
-    r.append(
+        ),
+        *_action_list_node(
+            "cheese1 lies alone on sink3. I fetch it and stack it on the onion at table1.",
+            STACK_CHEESE,
+            [
+                "At sink3; cheese1 is free to pick up.",
+                "I hold cheese1 and carry it back to the sandwich at table1.",
+                "At table1; the onion is the top of the stack, so the cheese goes on it.",
+            ],
+            "cheese1 is on top of the onion. This subtask is done.",
+        ),
         _reply(
             "Bread, onion and cheese are stacked. Only the top slice is missing: bread2 on stove1.",
             root_plan[3:],
-        )
-    )
-    r += _action_list_node(
-        "bread2 lies alone on stove1. I fetch it and put it on top of the cheese to close the sandwich.",
-        TOP_BREAD,
-        [
-            "At stove1; bread2 can be picked up.",
-            "I hold bread2 and walk back to table1.",
-            "At table1; stacking bread2 on the cheese completes the sandwich.",
-        ],
-        None,
-    )
-    return r
+        ),
+        *_action_list_node(
+            "bread2 lies alone on stove1. I fetch it and put it on top of the cheese to close the sandwich.",
+            TOP_BREAD,
+            [
+                "At stove1; bread2 can be picked up.",
+                "I hold bread2 and walk back to table1.",
+                "At table1; stacking bread2 on the cheese completes the sandwich.",
+            ],
+            None,
+        ),
+    ]
 
 
 # --------------------------------------------------------------- the thought before each action, the plan

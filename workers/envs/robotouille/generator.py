@@ -49,6 +49,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from . import catalog
+from .data import read_json
+from .domain import load_domain
+from .problem import build_problem
+
 #: kinds an extra station can be, in the order the real engine draws from (its ``Station`` enum)
 STATION_KINDS = ("board", "stove", "table", "fryer", "sink")
 #: kinds an extra item can be, in the order the real engine draws from (its ``Item`` enum)
@@ -392,10 +397,6 @@ def instance_record(root: Path, environment_name: str, seed: int, optimal_steps:
     """One instance file's content, in the recorded files' field order. The real engine's own
     measurements (build times, its internal predicate count) are left out: they cannot be
     reproduced; everything else is computed (first observation and goal-set count by our engine)."""
-    from .data import read_json
-    from .domain import load_domain
-    from .problem import build_problem
-
     problem_file = root / EXAMPLES_DIR / f"{environment_name}.json"
     made = generate(read_json(problem_file), seed)
     built = build_problem(load_domain(root), made.problem, str(problem_file))
@@ -419,8 +420,6 @@ def write_instances(root: Path, dest: Path) -> list[str]:
     ``summary.json`` and a ``README.md``, under ``dest`` (usually ``root``); returns the relative
     paths written. The bytes depend only on the problem files, the domain and this code, so
     ``recap data`` pins their sha256 (``pipeline/manifests/robotouille-generated.sha256``)."""
-    from . import catalog
-
     written: list[str] = []
     benchmark = [
         (f"{split}/{task}", seed, catalog.OPTIMAL_STEPS[split][task])

@@ -42,99 +42,138 @@ def build_problem(domain: Domain, raw: Any, source: str = "problem") -> Problem:
 
 def _build(domain: Domain, raw: dict, source: str) -> Problem:
     state = State(domain, raw.get("config") or {})
-    placed: dict[str, list[tuple[str, dict]]] = {}
-    for obj_type in domain.object_types:
-        entries = list(raw.get(KIND_KEYS.get(obj_type, obj_type + "s"), None) or [])
-        entries.sort(key=lambda o: (o["x"], o["y"]))  # stable: file order breaks ties
-        counters: dict[str, int] = defaultdict(int)
-        named = []
-        for entry in entries:
-            counters[entry["name"]] += 1
-            name = f"{entry['name']}{counters[entry['name']]}"
-            state.add_object(name, obj_type)
-            named.append((name, entry))
-        placed[obj_type] = named
-
-    facts = state.facts
-
-    def add(pred: str, *args: str) -> None:
-        if pred not in facts:
-            raise DataFileError(f"{source}: predicate {pred!r} is not in the domain")
-        facts[pred].add(args)
-
-    for _obj_type, named in placed.items():
-        for name, entry in named:
-            add("is" + entry["name"], name)
-            for pred in entry.get("predicates", ()) or ():
-                add(pred, name)
-
-    station_at = {(e["x"], e["y"]): n for n, e in placed.get("station", [])}
-    player_at = {(e["x"], e["y"]): n for n, e in placed.get("player", [])}
-    occupied: set[str] = set()
-    busy_players: set[str] = set()
-    for name, entry in placed.get("player", []):
-        dx, dy = entry["direction"]
-        cell = (entry["x"] + dx, entry["y"] + dy)
-        if cell not in station_at:
-            raise DataFileError(f"{source}: player {name} faces no station at {cell}")
-        add("loc", name, station_at[cell])
-        occupied.add(station_at[cell])
-
-    stacks: dict[str, list[tuple[int, str]]] = defaultdict(list)
-    for name, entry in placed.get("item", []):
-        cell = (entry["x"], entry["y"])
-        if cell in station_at:
-            stacks[station_at[cell]].append((int(entry.get("stack-level", 0)), name))
-        elif cell in player_at:
-            add("has_item", player_at[cell], name)
-            busy_players.add(player_at[cell])
-        else:
-            raise DataFileError(f"{source}: item {name} is neither on a station nor held")
-    filled: set[str] = set()
-    container_at_cell: dict[tuple[int, int], str] = {}
-    for name, entry in placed.get("container", []):
-        cell = (entry["x"], entry["y"])
-        container_at_cell[cell] = name
-        if cell in station_at:
-            add("container_at", name, station_at[cell])
-            stacks.setdefault(station_at[cell], [])
-            filled.add(station_at[cell])
-        elif cell in player_at:
-            add("has_container", player_at[cell], name)
-            busy_players.add(player_at[cell])
-        else:
-            raise DataFileError(f"{source}: container {name} is neither on a station nor held")
-    full_containers: set[str] = set()
-    for name, entry in placed.get("meal", []):
-        cell = (entry["x"], entry["y"])
-        if cell not in container_at_cell:
-            raise DataFileError(f"{source}: meal {name} is not in a container")
-        add("in", name, container_at_cell[cell])
-        full_containers.add(container_at_cell[cell])
-
-    for station, items in stacks.items():
-        items.sort(key=lambda r: r[0])
-        names = [n for _, n in items]
-        for k, item in enumerate(names):
-            add("item_at", item, station)
-            if k == 0:
-                add("item_on", item, station)
-            else:
-                add("atop", item, names[k - 1])
-        if names:
-            add("clear", names[-1])
-            filled.add(station)
-    for station in state.objects["station"]:
-        if station not in occupied:
-            add("vacant", station)
-        if station not in filled:
-            add("station_empty", station)
-    for player in state.objects["player"]:
-        if player not in busy_players:
-            add("nothing", player)
-    for container in state.objects["container"]:
-        if container not in full_containers:
-            add("container_empty", container)
-
+    grid = _Grid(state, source)
+    grid.name_objects(domain, raw)
+    grid.add_kinds()
+    grid.place_players()
+    grid.place_items()
+    grid.place_containers()
+    grid.place_meals()
+    grid.add_stacks()
+    grid.add_free()
     goal = parse_goal(raw["goal"], state, source)
     return Problem(state, goal, str(raw.get("goal_description", "")))
+
+
+class _Grid:
+    """A problem's grid read into the state's objects and facts, one kind of object at a time."""
+
+    def __init__(self, state: State, source: str) -> None:
+        self.state = state
+        self.source = source
+        self.placed: dict[str, list[tuple[str, dict]]] = {}
+        self.station_at: dict[tuple[int, int], str] = {}
+        self.player_at: dict[tuple[int, int], str] = {}
+        self.occupied: set[str] = set()
+        self.busy_players: set[str] = set()
+        self.stacks: dict[str, list[tuple[int, str]]] = defaultdict(list)
+        self.filled: set[str] = set()
+        self.container_at_cell: dict[tuple[int, int], str] = {}
+        self.full_containers: set[str] = set()
+
+    def add(self, pred: str, *args: str) -> None:
+        """One fact; a predicate the domain does not know is a data error."""
+        facts = self.state.facts
+        if pred not in facts:
+            raise DataFileError(f"{self.source}: predicate {pred!r} is not in the domain")
+        facts[pred].add(args)
+
+    def name_objects(self, domain: Domain, raw: dict) -> None:
+        """Every object, kind by kind, sorted by (x, y) and named ``<name><n>``."""
+        for obj_type in domain.object_types:
+            entries = list(raw.get(KIND_KEYS.get(obj_type, obj_type + "s"), None) or [])
+            entries.sort(key=lambda o: (o["x"], o["y"]))  # stable: file order breaks ties
+            counters: dict[str, int] = defaultdict(int)
+            named = []
+            for entry in entries:
+                counters[entry["name"]] += 1
+                name = f"{entry['name']}{counters[entry['name']]}"
+                self.state.add_object(name, obj_type)
+                named.append((name, entry))
+            self.placed[obj_type] = named
+        self.station_at = {(e["x"], e["y"]): n for n, e in self.placed.get("station", [])}
+        self.player_at = {(e["x"], e["y"]): n for n, e in self.placed.get("player", [])}
+
+    def add_kinds(self) -> None:
+        """``is<name>`` for every object, and the predicates its entry lists."""
+        for _obj_type, named in self.placed.items():
+            for name, entry in named:
+                self.add("is" + entry["name"], name)
+                for pred in entry.get("predicates", ()) or ():
+                    self.add(pred, name)
+
+    def place_players(self) -> None:
+        """Each player at the station it faces."""
+        for name, entry in self.placed.get("player", []):
+            dx, dy = entry["direction"]
+            cell = (entry["x"] + dx, entry["y"] + dy)
+            if cell not in self.station_at:
+                raise DataFileError(f"{self.source}: player {name} faces no station at {cell}")
+            self.add("loc", name, self.station_at[cell])
+            self.occupied.add(self.station_at[cell])
+
+    def place_items(self) -> None:
+        """Items on a station join its stack (by ``stack-level``); items in a player's cell are held."""
+        for name, entry in self.placed.get("item", []):
+            cell = (entry["x"], entry["y"])
+            if cell in self.station_at:
+                self.stacks[self.station_at[cell]].append((int(entry.get("stack-level", 0)), name))
+            elif cell in self.player_at:
+                self.add("has_item", self.player_at[cell], name)
+                self.busy_players.add(self.player_at[cell])
+            else:
+                raise DataFileError(f"{self.source}: item {name} is neither on a station nor held")
+
+    def place_containers(self) -> None:
+        """Containers on a station fill it; containers in a player's cell are held."""
+        for name, entry in self.placed.get("container", []):
+            cell = (entry["x"], entry["y"])
+            self.container_at_cell[cell] = name
+            if cell in self.station_at:
+                self.add("container_at", name, self.station_at[cell])
+                self.stacks.setdefault(self.station_at[cell], [])
+                self.filled.add(self.station_at[cell])
+            elif cell in self.player_at:
+                self.add("has_container", self.player_at[cell], name)
+                self.busy_players.add(self.player_at[cell])
+            else:
+                raise DataFileError(f"{self.source}: container {name} is neither on a station nor held")
+
+    def place_meals(self) -> None:
+        """Each meal in the container that shares its cell."""
+        for name, entry in self.placed.get("meal", []):
+            cell = (entry["x"], entry["y"])
+            if cell not in self.container_at_cell:
+                raise DataFileError(f"{self.source}: meal {name} is not in a container")
+            self.add("in", name, self.container_at_cell[cell])
+            self.full_containers.add(self.container_at_cell[cell])
+
+    def add_stacks(self) -> None:
+        """Each station's stack, bottom up: ``item_at``, ``item_on`` / ``atop``, ``clear`` on its top."""
+        for station, items in self.stacks.items():
+            items.sort(key=lambda r: r[0])
+            names = [n for _, n in items]
+            for k, item in enumerate(names):
+                self.add("item_at", item, station)
+                if k == 0:
+                    self.add("item_on", item, station)
+                else:
+                    self.add("atop", item, names[k - 1])
+            if names:
+                self.add("clear", names[-1])
+                self.filled.add(station)
+
+    def add_free(self) -> None:
+        """What is free: ``vacant`` and ``station_empty`` stations, idle players (``nothing``), empty containers."""
+        state = self.state
+        for station in state.objects["station"]:
+            if station not in self.occupied:
+                self.add("vacant", station)
+            if station not in self.filled:
+                self.add("station_empty", station)
+        for player in state.objects["player"]:
+            if player not in self.busy_players:
+                self.add("nothing", player)
+        for container in state.objects["container"]:
+            if container not in self.full_containers:
+                self.add("container_empty", container)

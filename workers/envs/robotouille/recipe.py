@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .goal import Goal
+from .goal import Goal, GoalLiteral
 
 PREP_PREDICATES = ("iscut", "iscooked", "isfried")
 #: preparation the order it must happen in (cut before frying: onions become fryable once cut)
@@ -77,18 +77,45 @@ class Recipe:
 def analyze(goal: Goal, item_names: set[str], station_names: set[str]) -> Recipe:
     """Group ``goal``'s literals into dishes and soups (UnsupportedGoal if they do not fit)."""
     names = goal.var_names
-    needs: dict[int, list[str]] = {}
-    dishes: dict[int, StackDish] = {}
-    soups: dict[int, Soup] = {}
     handled: set[int] = set()
     lits = list(enumerate(goal.literals))
+    needs = _preparations(lits, handled)
+    dishes = _dishes(lits, names, station_names, handled)
+    soups = _soups(lits, handled)
+    missing = [goal.literals[k].predicate for k, _ in lits if k not in handled]
+    if missing:
+        raise UnsupportedGoal(f"goal literals the planner cannot place: {', '.join(missing)}")
+    item_vars = [v for v, n in names.items() if n in item_names]
+    table_vars = [d.table for d in dishes.values()] + [s.table for s in soups.values() if s.table is not None]
+    return Recipe(
+        dishes=list(dishes.values()),
+        soups=list(soups.values()),
+        needs={v: tuple(ps) for v, ps in needs.items()},
+        item_vars=item_vars,
+        table_vars=table_vars,
+    )
 
+
+#: the goal's literals with their positions (``handled`` collects the positions each reader places)
+_Literals = list[tuple[int, GoalLiteral]]
+
+
+def _preparations(lits: _Literals, handled: set[int]) -> dict[int, list[str]]:
+    """The preparations each item variable needs (cut, cooked, fried); a negative literal is unsupported."""
+    needs: dict[int, list[str]] = {}
     for k, lit in lits:
         if not lit.is_true:
             raise UnsupportedGoal(f"negative goal literal {lit.predicate}")
         if lit.predicate in PREP_PREDICATES:
             needs.setdefault(lit.vars[0], []).append(lit.predicate)
             handled.add(k)
+    return needs
+
+
+def _dishes(lits: _Literals, names: dict[int, str], station_names: set[str], handled: set[int]) -> dict[int, StackDish]:
+    """The stacked dishes by table variable: the base on its table, the members at it, the ``atop``
+    chains, the ``clear`` top."""
+    dishes: dict[int, StackDish] = {}
     for k, lit in lits:
         if lit.predicate == "item_on" and names[lit.vars[1]] in station_names:
             item, table = lit.vars
@@ -99,12 +126,24 @@ def analyze(goal: Goal, item_names: set[str], station_names: set[str]) -> Recipe
     for k, lit in lits:
         if lit.predicate == "item_at" and lit.vars[1] in dishes:
             item, table = lit.vars
-            dish: StackDish | None = dishes[table]
-            assert dish is not None
+            dish = dishes[table]
             if item != dish.base and item not in dish.members:
                 dish.members.append(item)
             handled.add(k)
-    # atop chains hang off a base or a member of a dish
+    _hang_atop_chains(lits, dishes, handled)
+    for k, lit in lits:
+        if lit.predicate == "clear":
+            v = lit.vars[0]
+            top_of = next((d for d in dishes.values() if v in d.members or v == d.base), None)
+            if top_of is None:
+                raise UnsupportedGoal("clear() of an item in no dish")
+            top_of.top = v
+            handled.add(k)
+    return dishes
+
+
+def _hang_atop_chains(lits: _Literals, dishes: dict[int, StackDish], handled: set[int]) -> None:
+    """Attach ``atop`` literals to the dish whose base or member they touch, until none is left to attach."""
     changed = True
     while changed:
         changed = False
@@ -121,14 +160,11 @@ def analyze(goal: Goal, item_names: set[str], station_names: set[str]) -> Recipe
             dish.below[upper] = lower
             handled.add(k)
             changed = True
-    for k, lit in lits:
-        if lit.predicate == "clear":
-            v = lit.vars[0]
-            dish = next((d for d in dishes.values() if v in d.members or v == d.base), None)
-            if dish is None:
-                raise UnsupportedGoal("clear() of an item in no dish")
-            dish.top = v
-            handled.add(k)
+
+
+def _soups(lits: _Literals, handled: set[int]) -> dict[int, Soup]:
+    """The soups by water variable: the bowl it goes in, boiling, its ingredients, the bowl's table."""
+    soups: dict[int, Soup] = {}
     for k, lit in lits:
         if lit.predicate == "in":
             water, bowl = lit.vars
@@ -146,15 +182,4 @@ def analyze(goal: Goal, item_names: set[str], station_names: set[str]) -> Recipe
             if soup is not None:
                 soup.table = lit.vars[1]
                 handled.add(k)
-    missing = [goal.literals[k].predicate for k, _ in lits if k not in handled]
-    if missing:
-        raise UnsupportedGoal(f"goal literals the planner cannot place: {', '.join(missing)}")
-    item_vars = [v for v, n in names.items() if n in item_names]
-    table_vars = [d.table for d in dishes.values()] + [s.table for s in soups.values() if s.table is not None]
-    return Recipe(
-        dishes=list(dishes.values()),
-        soups=list(soups.values()),
-        needs={v: tuple(ps) for v, ps in needs.items()},
-        item_vars=item_vars,
-        table_vars=table_vars,
-    )
+    return soups

@@ -12,6 +12,7 @@ boiled) makes the goal unreachable.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterable
 
 from .effects import base_name
 from .goal import Goal
@@ -133,10 +134,22 @@ class RoleChooser:
 
     def choose(self, view: View) -> dict[int, str] | None:
         """Goal variable -> object for every variable; None when some role has no usable object."""
-        goal, recipe = self.goal, self.recipe
+        fixed, water = self._soup_roles(view)
+        if not self._choose_tables(view, fixed):
+            return None
+        if not self._choose_items(view, fixed, water):
+            return None
+        if not self._soups_still_possible(view, fixed, water):
+            return None
+        return fixed
+
+    def _soup_roles(self, view: View) -> tuple[dict[int, str], dict[int, str]]:
+        """(roles fixed so far, each soup's water): the water that exists already (else the first of its
+        domain) and the bowl that holds it (else the first bowl)."""
+        goal = self.goal
         fixed: dict[int, str] = {}
         water: dict[int, str] = {}
-        for soup in recipe.soups:
+        for soup in self.recipe.soups:
             dom = goal.domains[soup.water]
             existing = [w for w in dom if w in view.st.types]
             water[soup.water] = existing[0] if existing else next(w for w in dom)
@@ -144,7 +157,12 @@ class RoleChooser:
             bowls = list(goal.domains[soup.bowl])
             holder = view.meal_in.get(water[soup.water])
             fixed[soup.bowl] = holder if holder in bowls else bowls[0]
-        # tables: every dish/soup table variable, injective, cheapest in total
+        return fixed, water
+
+    def _choose_tables(self, view: View, fixed: dict[int, str]) -> bool:
+        """Every dish/soup table variable, injective, cheapest in total (with the item roles each dish
+        table's cost assumed) into ``fixed``; False when no assignment exists."""
+        goal, recipe = self.goal, self.recipe
         table_vars = recipe.table_vars
         costs: dict[tuple[int, str], tuple[float, dict[int, str]]] = {}
         for dish in recipe.dishes:
@@ -163,15 +181,20 @@ class RoleChooser:
                 chosen = dict(zip(table_vars, combo))
                 best = (total, chosen)
         if table_vars and best is None:
-            return None
+            return False
         if best is not None:
             fixed.update(best[1])
             for v, t in best[1].items():
                 fixed.update(costs[(v, t)][1])
-        # items: per object name, the cheapest injective choice
+        return True
+
+    def _choose_items(self, view: View, fixed: dict[int, str], water: dict[int, str]) -> bool:
+        """The remaining item variables, per object name the cheapest injective choice, into ``fixed``;
+        False when some name has no usable choice."""
+        goal = self.goal
         taken = set(fixed.values())
         by_name: dict[str, list[int]] = {}
-        for v in recipe.item_vars:
+        for v in self.recipe.item_vars:
             if v not in fixed:
                 by_name.setdefault(goal.var_names[v], []).append(v)
         for _name, vars_ in by_name.items():
@@ -182,22 +205,27 @@ class RoleChooser:
                 if options is None or total < options[0]:
                     options = (total, combo)
             if options is None or options[0] == INF:
-                return None
+                return False
             fixed.update(zip(vars_, options[1]))
             taken.update(options[1])
-        for soup in recipe.soups:
+        return True
+
+    def _soups_still_possible(self, view: View, fixed: dict[int, str], water: dict[int, str]) -> bool:
+        """False when a soup was poured out before it was boiled or had every ingredient."""
+        for soup in self.recipe.soups:
             w = water[soup.water]
             holder = view.meal_in.get(w)
             if holder is not None and not view.true("ispot", holder):
                 # poured out: nothing can be boiled or added any more
                 if soup.boil and not view.true("isboiling", w):
-                    return None
+                    return False
                 if any(view.added.get(fixed[v]) != w for v in soup.ingredients):
-                    return None
-        return fixed
+                    return False
+        return True
 
 
-def _union(groups) -> list[str]:
+def _union(groups: Iterable[Iterable[str]]) -> list[str]:
+    """The objects of every group, each once, in first-seen order."""
     out: list[str] = []
     for g in groups:
         for x in g:

@@ -53,6 +53,7 @@ def offline_text(name: str, messages: list[dict[str, str]], metadata: Mapping[st
 
 
 def _make_provider_class() -> type:
+    # litellm only once it is imported offline and quiet (workers.llm.litellm_import)
     from litellm import CustomLLM
     from litellm.llms.custom_llm import CustomLLMError
     from litellm.types.utils import Usage
@@ -110,6 +111,6 @@ def register_offline_provider(litellm: Any) -> None:
     litellm.custom_provider_map = list(litellm.custom_provider_map) + [
         {"provider": PROVIDER, "custom_handler": _make_provider_class()()}
     ]
-    from litellm.utils import custom_llm_setup
+    from litellm.utils import custom_llm_setup  # litellm is imported by now (see above)
 
     custom_llm_setup()
