@@ -145,7 +145,7 @@ def cmd_check(benches: list[DataFolder], data_dir: str | None, out: TextIO) -> l
 def cmd_fetch(benches: list[DataFolder], dest: str | None, mirror: str | None, out: TextIO) -> list[str]:
     """``recap data fetch``: fetch, verify and move each benchmark's folder into place. Returns one
     failure line per benchmark that failed (nothing of it is written); a bad mirror raises
-    UsageError before any fetch."""
+    MirrorError (exit 2) before any fetch."""
     check_mirror(mirror)
     failures = []
     for bench in benches:
