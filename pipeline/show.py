@@ -10,6 +10,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import pyarrow.compute as pc
+from rich.console import Console
+from rich.markup import escape
+from rich.tree import Tree
+
 from pipeline.errors import PipelineError
 from pipeline.store import RunStore
 from reports.observations import first_line as _first_line
@@ -39,12 +44,9 @@ def resolve_episode(store: RunStore, ref: str) -> dict[str, Any]:
     raise PipelineError(f"no episode {ref!r} in {store.location} (use an episode id or unit id from the episodes table)")
 
 
-def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list[dict[str, Any]]) -> Any:
+def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list[dict[str, Any]]) -> Tree:
     """A rich Tree of one episode: a title line, then the ReCAP nodes with their versions and leaf actions, or
     for a flat method its steps in order; observations shown as changes since the step before."""
-    from rich.markup import escape
-    from rich.tree import Tree
-
     status = "[green]success[/green]" if episode["success"] else f"[red]{episode['end_reason']}[/red]"
     title = (
         f"[bold]{escape(episode['episode_id'])}[/bold]  {escape(episode['instance_id'])}  {escape(episode['method'])} / "
@@ -69,7 +71,7 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
     for lst in children.values():
         lst.sort(key=lambda n: n["child_index"])
 
-    def add(tree: Any, node: dict[str, Any]) -> None:
+    def add(tree: Tree, node: dict[str, Any]) -> None:
         colour = {"done": "green", "failed": "red", "open": "yellow"}.get(node["status"], "white")
         label = f"[bold]{escape(node['task'])}[/bold]  [dim]{node['kind']}[/dim] [{colour}]{node['status']}[/{colour}]"
         branch = tree.add(label)
@@ -92,10 +94,8 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
     return root_tree
 
 
-def show_main(run_dir: str, ref: str, console: Any) -> int:
+def show_main(run_dir: str, ref: str, console: Console) -> int:
     """``recap show``: print the tree of one episode (and its end reason when it ended in an error); exit status 0."""
-    import pyarrow.compute as pc
-
     store = RunStore(run_dir)
     store.require_identity()
     ep = resolve_episode(store, ref)
@@ -106,7 +106,5 @@ def show_main(run_dir: str, ref: str, console: Any) -> int:
     steps = steps_t.filter(pc.equal(steps_t["episode_id"], eid)).to_pylist() if steps_t.num_rows else []
     console.print(build_tree(ep, nodes, steps))
     if ep.get("error"):
-        from rich.markup import escape
-
         console.print(f"[dim]end: {escape(str(ep['end_reason']))}: {escape(_first_line(ep['error'], 300))}[/dim]")
     return 0

@@ -1,6 +1,6 @@
 """A run's tables as an in-memory, read-only DuckDB connection (the tests query runs with it).
 
-``recap sql`` is the reports package's (``reports.commands.sql_main``). Here every table is read
+``recap sql`` is :mod:`pipeline.cli.sql`. Here every table is read
 into memory as Arrow and registered as a view, then DuckDB's file access is switched off and
 its configuration locked, so no query can read or write any file (``COPY ... TO``, ``ATTACH``,
 ``read_csv`` all fail).
@@ -8,17 +8,16 @@ its configuration locked, so no query can read or write any file (``COPY ... TO`
 
 from __future__ import annotations
 
-from typing import Any
+import duckdb
 
 from pipeline.store import RunStore
+from schemas.parts import BadPart
 
 
-def open_tables(store: RunStore) -> tuple[Any, list[Any]]:
+def open_tables(store: RunStore) -> tuple[duckdb.DuckDBPyConnection, list[BadPart]]:
     """An in-memory DuckDB connection with one view per table, and the unreadable parts."""
-    import duckdb
-
     con = duckdb.connect(":memory:")
-    bad = []
+    bad: list[BadPart] = []
     for table in store.tables():
         data, b = store.read_table(table)
         bad += b

@@ -11,8 +11,8 @@ from __future__ import annotations
 from html import escape
 
 from reports.model import Report, Table, format_value
+from reports.ports import VIEWER_PORT
 from reports.viewer import anchor
-from reports.webview import DEFAULT_PORT as VIEWER_PORT
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#222;background:#fafafa}

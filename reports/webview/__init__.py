@@ -10,9 +10,7 @@ framework (Flask, FastAPI, aiohttp's web server) would add a dependency and its 
 for routing we do in a dictionary; a JavaScript front end would need a bundler or a CDN.
 
 Modules: :mod:`~reports.webview.data` (snapshots of the run folders, the queries),
-:mod:`~reports.webview.pages` (the HTML), :mod:`~reports.webview.server` (HTTP, safety rules
-and the ``recap view`` command line).
+:mod:`~reports.webview.pages` (the HTML), :mod:`~reports.webview.server` (HTTP, safety
+rules); the ``recap view`` command line is :mod:`pipeline.cli.view`, its default port
+:data:`reports.ports.VIEWER_PORT`.
 """
-
-#: the port ``recap view`` listens on by default; the HTML report looks for a viewer there
-DEFAULT_PORT = 8765

@@ -1,4 +1,4 @@
-"""The HTTP side of ``recap view``: routes, safety rules and the command line.
+"""The HTTP side of ``recap view``: routes and safety rules (the command line is :mod:`pipeline.cli.view`).
 
 Safety rules, all enforced here:
 
@@ -22,12 +22,13 @@ import threading
 from collections.abc import Sequence
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
+from reports.ports import VIEWER_PORT
 from reports.views import ReportError
-from reports.webview import DEFAULT_PORT, pages
 from reports.webview import data as D
+from reports.webview import pages
 
 log = logging.getLogger(__name__)
 HOST = "127.0.0.1"
@@ -266,9 +267,7 @@ ROUTES: dict[str, Any] = {
 # -- running it ---------------------------------------------------------------------------------------
 
 
-def serve(
-    run_dirs: Sequence[str | Path], port: int = DEFAULT_PORT, *, poll_s: float = 2.0
-) -> tuple[ViewServer, threading.Thread]:
+def serve(run_dirs: Sequence[str | Path], port: int = VIEWER_PORT, *, poll_s: float = 2.0) -> tuple[ViewServer, threading.Thread]:
     """Start a viewer in a background thread (tests, the bench); ``server.shutdown()`` ends it."""
     catalog = D.Catalog(run_dirs, poll_s=poll_s)
     try:
@@ -287,87 +286,3 @@ def stop(server: ViewServer, thread: threading.Thread) -> None:
     thread.join(timeout=5)
     server.server_close()
     server.catalog.close()
-
-
-_EPILOG = f"""\
-examples:
-  recap view runs/demo                        http://127.0.0.1:{DEFAULT_PORT}/ over one run folder
-  recap view runs/a runs/b --port 9000        two runs (compare them on the Compare page)
-  recap view --port 0 runs/demo               any free port (the URL is printed)
-
-Pages: runs, episodes (filters, sort, paging, search over messages), one episode (tree, steps,
-every call's exact window), compare two runs or two arms. Loopback only; the run folders are
-read, never written; part files a running sweep adds appear within a few seconds. Episode ids in
-an HTML report (recap report) link here while the viewer runs on the default port.
-exit status: 0 stopped with Ctrl-C; 2 bad usage, a missing run folder, or the port in use
-"""
-
-
-def view_parser(out: TextIO | None = None) -> Any:
-    """The ``recap view`` argument parser (``out``: where ``--help`` goes)."""
-    from reports.commands import _Parser
-
-    p = _Parser(
-        prog="recap view",
-        out=out,
-        epilog=_EPILOG,
-        description="Browse every episode of one or more run folders in a local web viewer (read-only).",
-    )
-    p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run folder(s); several are browsed together")
-    p.add_argument(
-        "--port",
-        type=int,
-        default=DEFAULT_PORT,
-        metavar="N",
-        help=f"port on 127.0.0.1 (default {DEFAULT_PORT}; 0 = any free port)",
-    )
-    p.add_argument(
-        "--poll",
-        type=float,
-        default=2.0,
-        metavar="SECONDS",
-        help="how often to look for new part files (default 2; 0 = never, a fixed snapshot)",
-    )
-    return p
-
-
-def view_main(argv: Sequence[str], *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
-    """``recap view``: serve the run folders until Ctrl-C; exit 0, or 2 with one line for bad usage, unreadable
-    runs or a port it cannot listen on."""
-    from reports.commands import _Exit, _one_line, _UsageError
-
-    out, err = stdout or sys.stdout, stderr or sys.stderr
-    try:
-        args = view_parser(out).parse_intermixed_args(list(argv))
-        if not 0 <= args.port <= 65535:
-            raise _UsageError("recap view: --port must be between 0 and 65535")
-        if not args.poll >= 0 or args.poll > 3600:
-            raise _UsageError("recap view: --poll must be between 0 and 3600 seconds")
-        catalog = D.Catalog(args.run_dirs, poll_s=args.poll)
-        try:
-            server = ViewServer(catalog, args.port)
-        except BaseException:
-            catalog.close()
-            raise
-    except _Exit as exc:
-        return exc.status
-    except _UsageError as exc:
-        print(_one_line(str(exc)), file=err)
-        return 2
-    except ReportError as exc:
-        print(f"recap: error: view: {exc}", file=err)
-        return 2
-    except OSError as exc:
-        print(f"recap: error: view: cannot listen on {HOST}:{args.port}: {exc.strerror or exc}", file=err)
-        return 2
-    for s in server.catalog.snap.skipped:
-        print(f"warning: {s.line()}", file=err)
-    print(f"recap view: {server.url}  ({len(server.catalog.run_dirs)} run folder(s); Ctrl-C to stop)", file=out, flush=True)
-    try:
-        server.serve_forever()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        server.server_close()
-        server.catalog.close()
-    return 0

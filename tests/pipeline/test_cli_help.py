@@ -11,7 +11,7 @@ import pytest
 from pipeline.cli import COMMANDS, command_parsers, main
 from tests.reports.known_run import write_run_a, write_run_b
 
-#: every command path whose --help this file checks (data is pipeline.data's own parser)
+#: every command path whose --help this file checks (data is pipeline.cli.data's own parser)
 PATHS = [
     (),
     ("run",),

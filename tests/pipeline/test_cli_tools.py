@@ -5,8 +5,8 @@ from __future__ import annotations
 import io
 import re
 import sys
-import types
 
+import pipeline.cli.env as env_command
 from pipeline.cli import main
 from recap.blocksworld import BENCHMARK
 
@@ -46,9 +46,7 @@ def test_env_replay_delegates_and_sets_the_exit_status(tmp_path, capsys, monkeyp
         calls.append(path)
         return (path.endswith("good.json"), f"replayed {path}")
 
-    fake = types.ModuleType("workers.envs.robotouille.replay")
-    fake.replay_file = replay_file
-    monkeypatch.setitem(sys.modules, "workers.envs.robotouille.replay", fake)
+    monkeypatch.setattr(env_command, "replay_file", replay_file)
     assert main(["env", "replay", "good.json"]) == 0
     assert main(["env", "replay", "bad.json"]) == 1
     assert calls == ["good.json", "bad.json"]

@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from pipeline import data as datacmd
-from pipeline.data import data_main
+from pipeline.cli.data import data_main
 from recap.env import DataNotFoundError
 from workers.envs import data_paths
 from workers.envs.alfworld import data_folders as alf_folders

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from pipeline.cli import main
-from pipeline.envcmd import match_action
+from pipeline.cli.env import match_action
 from recap.blocksworld import BENCHMARK
 
 REPO = Path(__file__).resolve().parents[2]
@@ -54,7 +54,7 @@ class _ClosedPipe(io.StringIO):
 
 
 def test_list_into_a_closed_pipe_ends_quietly(capsys):
-    from pipeline.envcmd import list_main
+    from pipeline.cli.env import list_main
 
     out = _ClosedPipe()
     assert list_main("blocksworld", None, out) == 0

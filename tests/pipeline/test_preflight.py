@@ -173,11 +173,12 @@ def test_all_alfworld_games_open_a_handful(count_opens, monkeypatch):
 )
 def test_cli_refuses_a_unit_that_cannot_start(no_data, monkeypatch, capsys, argv):
     import pipeline.cli as cli
+    import pipeline.cli.run as run_command
 
     def never(*_a, **_k):
         raise AssertionError("the run started: the preflight did not stop it")
 
-    monkeypatch.setattr(cli, "_execute", never)  # no Ray, no episodes, whatever happens
+    monkeypatch.setattr(run_command, "_execute", never)  # no Ray, no episodes, whatever happens
     out = no_data / "out"
     spec = no_data / "sweep.yaml"
     spec.write_text(SPEC.format(out=out, methods=methods("recap"), envs=ROBOTOUILLE))

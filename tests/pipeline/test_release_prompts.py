@@ -20,6 +20,7 @@ import pytest
 
 import pipeline.data as data
 import workers.release.folder as release_folder_mod
+from pipeline.cli.data import data_main
 from pipeline.errors import SpecError
 from pipeline.spec import parse_spec
 from pipeline.units import expand
@@ -119,7 +120,7 @@ def fixture_source(tmp_path, monkeypatch):
 
 def run_data(*argv: str) -> tuple[int, str, str]:
     out, err = io.StringIO(), io.StringIO()
-    rc = data.data_main(list(argv), out, err)
+    rc = data_main(list(argv), out, err)
     return rc, out.getvalue(), err.getvalue()
 
 

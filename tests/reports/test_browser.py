@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
+from pipeline.cli.report import report_main
 from reports import svg
-from reports.commands import report_main
 from reports.model import Plot, Report, Section
 from reports.render_html import render_html
 from tests.reports.png import count_color, read_png

@@ -6,7 +6,7 @@ import io
 import re
 from pathlib import Path
 
-from reports.commands import sql_main
+from pipeline.cli.sql import sql_main
 
 DOC = Path(__file__).resolve().parents[2] / "README.md"
 

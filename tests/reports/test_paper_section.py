@@ -443,7 +443,7 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
     check_tree(tree_row, original, _read(paper_runs["ablations"], "tree_nodes"))
 
     # every format renders the section (recap report --paper)
-    from reports.commands import report_main
+    from pipeline.cli.report import report_main
 
     out = tmp_path / "report"
     assert report_main([*map(str, main_dirs), "--paper", "--out", str(out), "--viewer-max", "0"]) == 0

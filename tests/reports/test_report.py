@@ -10,7 +10,9 @@ import shutil
 
 import pytest
 
-from reports.commands import format_table, report_main, sql_main
+from pipeline.cli.report import report_main
+from pipeline.cli.sql import sql_main
+from reports.render_text import format_table
 from reports.viewer import MAX_MESSAGE_CHARS, _cut, ranges
 from reports.views import Result
 from schemas.parts import part_files

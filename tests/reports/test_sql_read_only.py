@@ -23,7 +23,7 @@ import duckdb
 import pytest
 
 from pipeline.cli import main as recap_main
-from reports.commands import main as reports_main
+from pipeline.cli.sql import sql_main
 from reports.views import ReadOnlyError, check_read_only, open_runs, run_query
 from schemas.parts import part_files
 
@@ -145,7 +145,7 @@ def test_attack_from_a_query_file_changes_nothing(name, run, tmp_path, capsys):
     q = tmp_path / "attack.sql"
     q.write_text(_fill(ATTACKS[name], run))
     before = _snapshot(run)
-    rc = reports_main(["sql", str(run), "--file", str(q)])
+    rc = sql_main([str(run), "--file", str(q)])
     out, err = capsys.readouterr()
     assert _snapshot(run) == before, name
     assert (rc, out) == (2, ""), (name, rc, out, err)
@@ -243,14 +243,14 @@ def test_refusal_messages(run, sql, refused):
 
 
 def test_attack_in_a_real_process(run):
-    """`python -m reports.commands sql` as a process: exit 2, exactly one stderr line."""
+    """`python -m pipeline.cli sql` as a process: exit 2, exactly one stderr line."""
     part = part_files(run, "episodes")[0]
     before = _snapshot(run)
     proc = subprocess.run(
         [
             sys.executable,
             "-m",
-            "reports.commands",
+            "pipeline.cli",
             "sql",
             str(run),
             f"EXPLAIN ANALYZE COPY (SELECT 'x' AS a) TO '{part}' (FORMAT parquet, USE_TMP_FILE false)",
@@ -338,7 +338,7 @@ def test_missing_or_invalid_run_folder_is_exit_2(tmp_path, capsys):
         (tmp_path / "missing", "does not exist or is not a folder"),
         (tmp_path / "empty", "is not a run folder"),
     ):
-        rc = reports_main(["sql", str(folder), "SELECT 1"])
+        rc = sql_main([str(folder), "SELECT 1"])
         out, err = capsys.readouterr()
         assert (rc, out) == (2, "") and len(err.splitlines()) == 1 and line in err, err
 

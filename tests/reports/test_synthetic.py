@@ -6,7 +6,7 @@ import io
 
 import pytest
 
-from reports.commands import report_main
+from pipeline.cli.report import report_main
 from reports.synthetic import SyntheticSpec, write_synthetic_run
 from reports.views import named_query, open_runs, run_query
 

@@ -199,7 +199,7 @@ def test_compare_two_runs(viewer, browser, real_runs, tmp_path):
 def test_report_episode_ids_link_to_the_viewer(viewer, browser, real_runs, tmp_path):
     import io
 
-    from reports.commands import report_main
+    from pipeline.cli.report import report_main
 
     a_dir = real_runs[0]
     assert report_main([str(a_dir), "--format", "html", "--viewer-max", "2"], stdout=io.StringIO(), stderr=io.StringIO()) == 0

@@ -14,9 +14,10 @@ import duckdb
 import pyarrow.parquet as pq
 import pytest
 
+from pipeline.cli.view import view_main
 from reports.webview import data as D
 from reports.webview.pages import observation_diff
-from reports.webview.server import serve, stop, view_main
+from reports.webview.server import serve, stop
 from schemas.tables import arrow_schema
 from tests.reports.known_run import write_run_a
 

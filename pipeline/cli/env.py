@@ -9,11 +9,105 @@
 
 from __future__ import annotations
 
+import argparse
+import os
 import sys
-from typing import Any, TextIO
+from collections.abc import Sequence
+from typing import TextIO
 
+from pipeline.cli.common import OneLineParser, finite_positive
 from pipeline.errors import PipelineError
-from recap.env import EnvError
+from recap.env import DataNotFoundError, EnvError, InvalidActionError, UnknownInstanceError
+from workers.envs.registry import get_benchmark, make_env
+from workers.envs.robotouille.replay import replay_file
+
+_EPILOG = """\
+examples:
+  recap env list blocksworld 4
+  recap env play blocksworld/3@1
+  recap env replay trajectory.json
+
+No model is involved. Each action's options and examples: recap env ACTION --help.
+"""
+
+_LIST_EPILOG = """\
+examples:
+  recap env list blocksworld                  every instance id
+  recap env list blocksworld 4                the ids of 4-block problems
+  recap env list robotouille asynchronous
+  recap env list alfworld heat
+
+The ids go to stdout, one a line, and their count to stderr. exit status: 0 ok; 2 unknown
+benchmark or selector, or its data is missing (recap data --help)
+"""
+
+_PLAY_EPILOG = """\
+examples:
+  recap env play blocksworld/3@1
+  recap env play robotouille/synchronous/0_cheese_sandwich@42 --step-multiplier 2
+
+Type an action (any letter case) or its number in the list; quit, exit or q to stop.
+exit status: 0 played; 2 unknown instance or missing data
+"""
+
+_REPLAY_EPILOG = """\
+examples:
+  recap env replay trajectory.json
+
+exit status: 0 every observation identical; 1 a difference (printed); 2 unreadable trajectory
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction[OneLineParser], name: str, help: str) -> None:  # noqa: A002
+    """Add ``recap env`` and its actions (list, play, replay) to the ``recap`` parser."""
+    env = sub.add_parser(name, help=help, epilog=_EPILOG, description="Look at the benchmarks without any model.")
+    esub = env.add_subparsers(
+        dest="env_cmd",
+        required=True,
+        metavar="ACTION",
+        title="actions",
+        help="one of the actions below; recap env ACTION --help for its options and examples",
+    )
+    el = esub.add_parser(
+        "list",
+        help="instance ids of a benchmark",
+        epilog=_LIST_EPILOG,
+        description="The instance ids of a benchmark that a sweep file can name.",
+    )
+    el.add_argument("bench", help="blocksworld, robotouille or alfworld")
+    el.add_argument(
+        "selector", nargs="?", help="only the ids it selects: a size (blocksworld), a split or task (robotouille, alfworld)"
+    )
+    ep = esub.add_parser(
+        "play",
+        help="play an instance by hand",
+        epilog=_PLAY_EPILOG,
+        description="Play an instance by hand: see the observation, type actions, watch the step count.",
+    )
+    ep.add_argument("instance_id", help="an instance id as recap env list prints it (e.g. blocksworld/3@1)")
+    ep.add_argument(
+        "--step-multiplier",
+        type=finite_positive,
+        default=4.0,
+        metavar="X",
+        help="step cap = X times the optimal plan's length (default 4; ALFWorld's cap is fixed)",
+    )
+    er = esub.add_parser(
+        "replay",
+        help="replay a recorded Robotouille trajectory",
+        epilog=_REPLAY_EPILOG,
+        description="Re-run a recorded Robotouille trajectory on our engine and compare every observation.",
+    )
+    er.add_argument("trajectory", help="the recorded trajectory (JSON)")
+
+
+def execute(args: argparse.Namespace, command: str) -> int:
+    """Run the parsed ``recap env`` action on the process's stdin and stdout."""
+    if args.env_cmd == "list":
+        return list_main(args.bench, args.selector, sys.stdout)
+    if args.env_cmd == "play":
+        return play_main(args.instance_id, sys.stdin, sys.stdout, args.step_multiplier)
+    return replay_main(args.trajectory, sys.stdout)
 
 
 def _registry_error(exc: Exception) -> PipelineError:
@@ -23,9 +117,6 @@ def _registry_error(exc: Exception) -> PipelineError:
 def list_main(bench: str, selector: str | None, out: TextIO) -> int:
     """``recap env list BENCH [SELECTOR]``: instance ids one a line on stdout, the count on stderr; quiet when
     the reader closes the pipe early."""
-    from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
-    from workers.envs.registry import get_benchmark
-
     try:
         ids = get_benchmark(bench).list_instances(selector)
     except (UnknownInstanceError, DataNotFoundError, EnvError, ValueError) as exc:
@@ -46,8 +137,6 @@ def list_main(bench: str, selector: str | None, out: TextIO) -> int:
 
 def _silence_stdout() -> None:
     """After a broken pipe, point stdout at /dev/null so the interpreter's final flush is quiet."""
-    import os
-
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
@@ -55,7 +144,7 @@ def _silence_stdout() -> None:
         pass
 
 
-def match_action(text: str, valid: Any) -> str:
+def match_action(text: str, valid: Sequence[str] | None) -> str:
     """The valid action ``text`` names: its number in the list, or the action in any letter case
     and spacing. Anything else is returned unchanged (the environment rejects it)."""
     if not valid:
@@ -69,7 +158,7 @@ def match_action(text: str, valid: Any) -> str:
     return text
 
 
-def _show(obs: str, valid: Any, out: TextIO) -> None:
+def _show(obs: str, valid: Sequence[str] | None, out: TextIO) -> None:
     print(obs, file=out)
     if valid:
         print("Actions:", file=out)
@@ -80,9 +169,6 @@ def _show(obs: str, valid: Any, out: TextIO) -> None:
 def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float = 4.0) -> int:
     """``recap env play ID``: play one instance by hand from ``inp`` (action text or its number; quit/exit/q or
     end of input stops); 0 whatever the outcome."""
-    from recap.env import DataNotFoundError, EnvError, InvalidActionError, UnknownInstanceError
-    from workers.envs.registry import make_env
-
     try:
         env = make_env(instance_id, step_multiplier=step_multiplier)
     except (UnknownInstanceError, DataNotFoundError, EnvError, ValueError) as exc:
@@ -107,9 +193,8 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
                 return 0
             if not action:
                 continue
-            action = match_action(action, valid)
             try:
-                step = env.step(action)
+                step = env.step(match_action(action, valid))
             except InvalidActionError as exc:
                 print(f"Invalid action: {exc}", file=out)
                 hints = env.failure_hints()
@@ -129,8 +214,6 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
 def replay_main(path: str, out: TextIO) -> int:
     """``recap env replay FILE``: replay a saved Robotouille trajectory; exit 0 when it replays as recorded, 1
     when it does not."""
-    from workers.envs.robotouille.replay import replay_file
-
     try:
         ok, message = replay_file(path)
     except (EnvError, OSError, ValueError) as exc:  # unreadable or malformed trajectory, missing data
