@@ -12,8 +12,8 @@ from pathlib import Path
 
 from workers.envs.data_sources import DataFolder, Group, Source
 
+from . import generator  # called through the module: a test swaps generator.write_instances
 from .data import LOCATION
-from .generator import write_instances
 
 #: upstream repository and the commit the data folder was taken from
 REPO_ARCHIVES = "https://github.com/portal-cornell/robotouille/archive"
@@ -34,7 +34,7 @@ def strip_top_folder(member: str) -> str | None:
 
 def generate_instances(folder: Path) -> list[str]:
     """instances/ and instances_train/ from the fetched problem files and domain."""
-    return write_instances(folder, folder)
+    return generator.write_instances(folder, folder)
 
 
 FOLDER = DataFolder(
