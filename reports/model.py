@@ -1,6 +1,6 @@
 """What a report is, independent of its output format: sections of tables and plots.
 
-Builders (``reports/sections.py``) fill these from SQL results; renderers (Markdown, HTML,
+Builders (``reports/sections/``) fill these from SQL results; renderers (Markdown, HTML,
 LaTeX, CSV) only lay them out, so every format shows the same numbers.
 """
 

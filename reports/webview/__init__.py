@@ -9,8 +9,11 @@ serves well, and everything it shows comes from the report's own read-only DuckD
 framework (Flask, FastAPI, aiohttp's web server) would add a dependency and its release cycle
 for routing we do in a dictionary; a JavaScript front end would need a bundler or a CDN.
 
-Modules: :mod:`~reports.webview.data` (snapshots of the run folders, the queries),
-:mod:`~reports.webview.pages` (the HTML), :mod:`~reports.webview.server` (HTTP, safety
-rules); the ``recap view`` command line is :mod:`pipeline.cli.view`, its default port
-:data:`reports.ports.VIEWER_PORT`.
+Modules: :mod:`~reports.webview.snapshot`, :mod:`~reports.webview.search` and
+:mod:`~reports.webview.catalog` (snapshots of the run folders, refreshed in the background),
+:mod:`~reports.webview.listquery` (the list's URL parameters), :mod:`~reports.webview.runs`,
+:mod:`~reports.webview.episodes` and :mod:`~reports.webview.compare` (the pages' queries), all
+re-exported by :mod:`~reports.webview.data`; :mod:`~reports.webview.pages` (the HTML),
+:mod:`~reports.webview.server` (HTTP, safety rules); the ``recap view`` command line is
+:mod:`pipeline.cli.view`, its default port :data:`reports.ports.VIEWER_PORT`.
 """

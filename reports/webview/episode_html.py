@@ -1,0 +1,226 @@
+"""One episode's page: its metadata, context tree, actions with observation changes, calls, messages and windows."""
+
+from __future__ import annotations
+
+import difflib
+from collections import defaultdict
+from typing import Any
+
+from reports.observations import observation_change
+from reports.viewer import ranges
+from reports.webview.episodes import Episode
+from reports.webview.layout import episode_url, esc, layout, num, url, usd
+from reports.webview.snapshot import Snapshot
+
+
+def episode_page(snap: Snapshot, ep: Episode, hit: int | None = None) -> str:
+    """One episode: its metadata, context tree, actions with observation changes, LLM calls and messages (opened
+    at message ``hit`` when given)."""
+    m = ep.meta
+    rid, eid = m["run_id"], m["episode_id"]
+    meta = [
+        ("run", rid),
+        ("model", m.get("model_label")),
+        ("method", m.get("arm")),
+        ("label", m.get("label")),
+        ("profile", m.get("profile")),
+        ("ablation", m.get("ablation")),
+        ("split", m.get("env_split")),
+        ("task", m.get("task")),
+        ("instance", m.get("instance_id")),
+        ("seed", m.get("seed")),
+        ("unit", m.get("unit_id")),
+        ("attempt", f"{m['attempt']}{'' if m.get('is_latest') else ' (superseded)'}"),
+        ("end", m.get("end_reason")),
+        ("mode", m.get("mode") or "–"),
+        ("steps", m.get("steps")),
+        ("step cap", m.get("step_cap")),
+        ("LLM calls", m.get("llm_calls")),
+        ("prompt tokens", m.get("prompt_tokens")),
+        ("cached", m.get("cached_prompt_tokens")),
+        ("completion tokens", m.get("completion_tokens")),
+        ("cost", usd(m.get("cost_usd"))),
+        ("wall", f"{m.get('wall_s') or 0:.1f} s"),
+        ("max depth", m.get("max_depth")),
+    ]
+    dl = "".join(
+        f"<dt>{esc(k)}</dt><dd>{num(v) if isinstance(v, int) and not isinstance(v, bool) else esc(v)}</dd>"
+        for k, v in meta
+        if v is not None
+    )
+    badge = "success" if m["success"] else (m.get("mode") or m["end_reason"])
+    parts = [
+        f'<h1 id="episode" data-episode="{esc(eid)}" data-run="{esc(rid)}" data-ms="{ep.elapsed_ms:.1f}">{esc(eid)} '
+        f'<span class="badge {"ok" if m["success"] else "fail"}">{esc(badge)}</span></h1>',
+        f'<dl class="meta">{dl}</dl>',
+    ]
+    if m.get("error"):
+        parts.append(f'<p class="error">{esc(m["error"])}</p>')
+    parts.append(
+        f'<section id="tree"><h2>Context tree ({len(ep.nodes)} nodes) '
+        '<button type="button" id="expand-all">expand all</button> <button type="button" id="collapse-all">collapse all</button></h2>'
+        + (tree_html(ep.nodes, ep.steps) if ep.nodes else "<p>No task tree (this method keeps none).</p>")
+        + "</section>"
+    )
+    parts.append(f'<section id="steps"><h2>Actions and observations ({len(ep.steps)})</h2>{steps_html(ep.steps)}</section>')
+    parts.append(
+        f'<section id="calls"><h2>LLM calls ({len(ep.calls)})</h2>{calls_html(rid, eid, ep.calls)}'
+        '<div id="window-panel" class="window-panel" hidden></div></section>'
+    )
+    parts.append(
+        f'<section id="messages"><details{" open" if hit is not None else ""}><summary>Messages ({len(ep.messages)})</summary>'
+        f"{messages_html(ep.messages, hit)}</details></section>"
+    )
+    return layout(f"Episode {eid}", "".join(parts), page="/episode", snap=snap)
+
+
+def tree_html(nodes: list[dict[str, Any]], steps: list[dict[str, Any]]) -> str:
+    """The context tree as nested ``<details>``: each node's versions (think and subtasks, and the call that made
+    them) and, for a leaf, the action it ran."""
+    ids = {n["node_id"] for n in nodes}
+    children: dict[int | None, list[dict[str, Any]]] = defaultdict(list)
+    for n in nodes:
+        children[n["parent_id"] if n["parent_id"] in ids else None].append(n)
+    for v in children.values():
+        v.sort(key=lambda n: (n["child_index"], n["node_id"]))
+    step_at = {s["index"]: s for s in steps}
+
+    def render(n: dict[str, Any]) -> str:
+        versions = []
+        for v in n["versions"] or []:
+            src = f"call {v['call_index']}" if v["call_index"] is not None else "shortcut"
+            think = f'<div class="think">{esc(v["think"])}</div>' if v["think"] else ""
+            subs = "".join(f"<li>{esc(s)}</li>" for s in v["subtasks"])
+            versions.append(
+                f'<li class="version" data-version="{v["version"]}"><span class="tag">v{v["version"]} · {src}</span>'
+                f'{think}<ol class="subtasks">{subs}</ol></li>'
+            )
+        action = ""
+        if n["step_index"] is not None and n["step_index"] in step_at:
+            s = step_at[n["step_index"]]
+            action = (
+                f'<p class="action">action <code>{esc(s["action"])}</code> '
+                f"{'ok' if s['valid'] else '<span class=invalid>invalid</span>'} (step {s['index']})</p>"
+            )
+        kids = "".join(render(c) for c in children.get(n["node_id"], []))
+        return (
+            f'<li><details class="node {esc(n["status"])}" data-node="{n["node_id"]}"{" open" if n["depth"] == 0 else ""}>'
+            f'<summary><span class="ntitle">#{n["node_id"]} {esc(n["task"])}</span> <span class="tag">{esc(n["kind"])} · '
+            f"{esc(n['status'])} · depth {n['depth']} · {len(n['versions'] or [])} version(s)</span></summary>"
+            f'<ol class="versions">{"".join(versions)}</ol>{action}'
+            + (f'<ul class="tree">{kids}</ul>' if kids else "")
+            + "</details></li>"
+        )
+
+    return '<ul class="tree root">' + "".join(render(r) for r in children.get(None, [])) + "</ul>"
+
+
+def observation_diff(prev: str | None, cur: str) -> str:
+    """``cur`` line by line against ``prev``: new lines marked ``<ins>``, dropped ones ``<del>``,
+    unchanged ones plain (the first observation is all plain)."""
+    if prev is None:
+        return esc(cur)
+    a, b = prev.splitlines(), cur.splitlines()
+    out: list[str] = []
+    for op, i1, i2, j1, j2 in difflib.SequenceMatcher(a=a, b=b, autojunk=False).get_opcodes():
+        if op == "equal":
+            out.extend(f'<span class="same">{esc(x)}</span>' for x in b[j1:j2])
+            continue
+        out.extend(f"<del>{esc(x)}</del>" for x in a[i1:i2])
+        out.extend(f"<ins>{esc(x)}</ins>" for x in b[j1:j2])
+    return "\n".join(out)
+
+
+def steps_html(steps: list[dict[str, Any]]) -> str:
+    """The step table: each action, whether it was valid, and what its observation changed (a full diff on request)."""
+    if not steps:
+        return "<p>No steps.</p>"
+    rows, prev = [], None
+    for s in steps:
+        change = observation_change(prev, s["observation"])
+        rows.append(
+            f'<tr class="{"" if s["valid"] else "invalid"}" data-step="{s["index"]}"><td>{s["index"]}</td><td>{s["env_step"]}</td>'
+            f"<td>{'' if s['node_id'] is None else s['node_id']}</td><td><code>{esc(s['action'])}</code></td>"
+            f'<td>{"yes" if s["valid"] else "no"}</td><td class="change">{esc(change)}'
+            f'<details><summary>diff</summary><pre class="diff">{observation_diff(prev, s["observation"])}</pre></details></td></tr>'
+        )
+        prev = s["observation"]
+    return (
+        '<table class="data"><thead><tr><th>#</th><th>env step</th><th>node</th><th>action</th><th>valid</th>'
+        f"<th>observation: what changed since the step before</th></tr></thead><tbody>{''.join(rows)}</tbody></table>"
+    )
+
+
+def calls_html(run_id: str, episode_id: str, calls: list[dict[str, Any]]) -> str:
+    """The call table: purpose, status, tokens, cost and the message seqs of each call's window, linked to the window page."""
+    if not calls:
+        return "<p>No LLM calls.</p>"
+    rows = []
+    for c in calls:
+        status = c["status"] if c["status"] == "ok" else f"{c['status']}: {c['error_kind']}"
+        win = ranges(list(c["window_seqs"]))
+        href = url("/window", run=run_id, id=episode_id, call=c["call_index"])
+        rows.append(
+            f'<tr class="{"" if c["status"] == "ok" else "invalid"}" data-call="{c["call_index"]}"><td>{c["call_index"]}</td>'
+            f"<td>{esc(c['purpose'])}</td><td>{'' if c['node_id'] is None else c['node_id']}</td><td>{esc(status)}</td>"
+            f'<td>{esc(c["model_label"])}</td><td class="num">{c["prompt_tokens"]:,}</td><td class="num">{c["cached_prompt_tokens"]:,}</td>'
+            f'<td class="num">{c["completion_tokens"]:,}</td><td class="num">{usd(c["cost_usd"])}</td>'
+            f'<td class="num">{c["latency_s"]:.2f} s</td><td class="num">{c["retries"]}</td><td>{esc(c["error_message"] or "")}</td>'
+            f'<td><a class="window" href="{esc(href)}" data-call="{c["call_index"]}">{len(c["window_seqs"])} msgs: {esc(win)}</a></td></tr>'
+        )
+    return (
+        '<table class="data"><thead><tr><th>#</th><th>purpose</th><th>node</th><th>status</th><th>model</th><th>prompt</th>'
+        "<th>cached</th><th>completion</th><th>cost</th><th>latency</th><th>retries</th><th>error</th><th>window (message seqs)</th>"
+        f"</tr></thead><tbody>{''.join(rows)}</tbody></table>"
+    )
+
+
+def _message_li(m: dict[str, Any], *, hit: bool = False) -> str:
+    tag = (
+        f"#{m['seq']} {esc(m['role'])} · {esc(m['kind'])}{' · pinned' if m.get('pinned') else ''}"
+        f"{'' if m.get('node_id') is None else ' · node ' + str(m['node_id'])}"
+    )
+    return (
+        f'<li class="msg {esc(m["role"])}{" hit" if hit else ""}" id="msg-{m["seq"]}" data-seq="{m["seq"]}">'
+        f'<span class="tag">{tag}</span><pre>{esc(m["content"])}</pre></li>'
+    )
+
+
+def messages_html(messages: list[dict[str, Any]], hit: int | None = None) -> str:
+    """The messages as a list, the one with seq ``hit`` marked (the search hit the page was opened at)."""
+    if not messages:
+        return "<p>No messages.</p>"
+    return '<ol class="messages">' + "".join(_message_li(m, hit=m["seq"] == hit) for m in messages) + "</ol>"
+
+
+def window_fragment(run_id: str, episode_id: str, call: dict[str, Any], msgs: list[dict[str, Any]]) -> str:
+    """A call's window as an HTML fragment: a summary line, then the messages it was sent in order (seqs missing
+    from the messages table shown as such). The episode page loads it in place."""
+    seqs = list(call["window_seqs"])
+    head = (
+        f'<p class="window-head">Window of call {call["call_index"]} ({esc(call["purpose"])}): {len(seqs)} messages '
+        f"({esc(ranges(seqs))})"
+        + (f"; reply stored as message {call['response_seq']}" if call["response_seq"] is not None else "")
+        + f" · {call['prompt_tokens']:,} prompt + {call['completion_tokens']:,} completion tokens, {usd(call['cost_usd'])}, "
+        f"{call['latency_s']:.2f} s, {call['retries']} retries"
+        + (f" · error {esc(call['error_kind'])}: {esc(call['error_message'] or '')}" if call["status"] != "ok" else "")
+        + "</p>"
+    )
+    items = []
+    for m in msgs:
+        if m["role"] is None:
+            items.append(f'<li class="msg missing" data-seq="{m["seq"]}">#{m["seq"]} (not in the messages table)</li>')
+        else:
+            items.append(_message_li(m))
+    return (
+        f'<div class="window" data-run="{esc(run_id)}" data-episode="{esc(episode_id)}" data-call="{call["call_index"]}">'
+        f'{head}<ol class="messages">{"".join(items)}</ol></div>'
+    )
+
+
+def window_page(snap: Snapshot, run_id: str, episode_id: str, call: dict[str, Any], msgs: list[dict[str, Any]]) -> str:
+    """The stand-alone page of a call's window (the fragment with a link back to its episode)."""
+    body = f'<p><a href="{esc(episode_url(run_id, episode_id))}">← episode {esc(episode_id)}</a></p>' + window_fragment(
+        run_id, episode_id, call, msgs
+    )
+    return layout(f"Call {call['call_index']} of {episode_id}", body, page="/window", snap=snap)
