@@ -52,15 +52,12 @@ does (:mod:`pipeline.local_cluster`).
 
 from __future__ import annotations
 
-import json
+import shutil
 import socket
-import subprocess
-import sys
 import time
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from importlib import metadata
+from dataclasses import dataclass
 from typing import Any, Literal
 
 from pipeline.backend import ModelBackend, Spend
@@ -68,9 +65,14 @@ from pipeline.cap_policy import CapPolicy
 from pipeline.episode_rows import episode_record
 from pipeline.errors import PipelineError, RunFolderError
 from pipeline.events import EventBuffer
-from pipeline.preflight import preflight
+from pipeline.mirror import PUSH_EVERY_S, mirror_dir, pull, push
+from pipeline.prepare import Prepared
+
+# prepare, RunSummary and the exit codes: the CLI, tests and benches import them from here
+from pipeline.prepare import prepare as prepare
 from pipeline.progress import ProgressView, Snapshot
-from pipeline.raysetup import PROJECT_ROOT, init_ray, shutdown_ray
+from pipeline.provenance import git_revision, package_versions
+from pipeline.raysetup import init_ray, shutdown_ray
 from pipeline.resume import (
     INFRA_ERROR,
     RETRY_MODES,
@@ -79,144 +81,26 @@ from pipeline.resume import (
     RunState,
     UnitQueue,
     attempt_spend,
-    check_journal,
     infra_failure,
     is_final,
     load_state,
 )
+from pipeline.run_summary import EXIT_INFRA as EXIT_INFRA
+from pipeline.run_summary import EXIT_INTERRUPTED as EXIT_INTERRUPTED
+from pipeline.run_summary import EXIT_WORK_REMAINS as EXIT_WORK_REMAINS
+from pipeline.run_summary import RunSummary
 from pipeline.sink_channel import SinkChannel, SinkLost
-from pipeline.spec import SweepSpec, text_hash
+from pipeline.spec import text_hash
 from pipeline.stopping import DEFAULT_GRACE_S, StopRequests
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
 from pipeline.summary import TEST_DOUBLE_LABEL
-from pipeline.units import Plan, PlanDiff, Unit, diff_plans, expand, order_units
+from pipeline.units import Unit, order_units
 from pipeline.worker_pool import Finished, InProcessWorkerPool, RayWorkerPool, WorkerPool
 from schemas.kinds import EventKind, RowEndReason, Severity
 from schemas.outcomes import EpisodeOutcome
 from schemas.records import EpisodeRecord, RunRecord
-
-#: exit status of a session in which a unit ended in an infrastructure failure
-EXIT_INFRA = 4
-#: exit status of a session that left work undone (a cap stopped it)
-EXIT_WORK_REMAINS = 3
-EXIT_INTERRUPTED = 130
-
-
-# --------------------------------------------------------------------------------------------
-# preparation: everything that can fail does so here, before any write
-# --------------------------------------------------------------------------------------------
-@dataclass
-class Prepared:
-    """A sweep checked and ready to start: its expanded plan and output store. ``identity`` and ``diff`` are None
-    for a fresh folder; for an existing run they are its run.json and how the new plan differs from the stored
-    one."""
-
-    spec: SweepSpec
-    spec_text: str
-    plan: Plan
-    store: RunStore
-    identity: RunIdentity | None
-    diff: PlanDiff | None
-
-
-def prepare(spec: SweepSpec, spec_text: str, *, check_keys: bool = True) -> Prepared:
-    """Expand and check a sweep: units, keys, prices, the output folder. Writes nothing."""
-    plan = expand(spec)
-    if check_keys:
-        preflight(spec)
-    store = RunStore(spec.output)
-    store.check_unlocked()  # first: a driver starting in a fresh folder has only its lock there
-    ident = store.check_can_hold(spec.run)
-    if ident is not None:
-        # a corrupt ledger journal, or an old one whose spend this sweep cannot split: one line now
-        check_journal(store, {m.name: m.model for m in spec.models})
-    diff = diff_plans(store.read_json(PLAN_FILE), plan) if ident is not None else None
-    return Prepared(spec, spec_text, plan, store, ident, diff)
-
-
-def _versions() -> str:
-    out = {"python": sys.version.split()[0]}
-    for pkg in ("recap-eval", "ray", "litellm", "pyarrow", "duckdb", "pydantic", "alfworld", "textworld"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            pass
-    return json.dumps(out, sort_keys=True)
-
-
-def _git_revision() -> str | None:
-    try:
-        r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=5)
-    except (OSError, subprocess.TimeoutExpired):
-        return None
-    rev = r.stdout.strip()
-    if r.returncode != 0 or not rev:
-        return None
-    # tracked changes only: a run folder (or any output) inside the checkout is not a code change
-    dirty = subprocess.run(
-        ["git", "status", "--porcelain", "--untracked-files=no"], cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=10
-    )
-    return rev + ("+dirty" if dirty.stdout.strip() else "")
-
-
-# --------------------------------------------------------------------------------------------
-# the outcome of one driver session
-# --------------------------------------------------------------------------------------------
-@dataclass
-class RunSummary:
-    """What one driver session did (counts are for this session unless named ``*_before``); the CLI prints it and
-    turns it into the exit status."""
-
-    location: str
-    run: str
-    run_id: str
-    total: int
-    completed_before: int
-    finished_now: int = 0
-    success_now: int = 0
-    budget_stopped: int = 0
-    abandoned: int = 0
-    not_started: int = 0
-    worker_restarts: int = 0
-    spend_usd: float = 0.0
-    stopped: str | None = None
-    interrupted: bool = False
-    wall_s: float = 0.0
-    #: units that ended this session in an infrastructure failure (retryable), by failure kind
-    infra_failed: int = 0
-    infra_kinds: dict[str, int] = field(default_factory=dict)
-    #: rows the sink had logged but not written when a session began (a crash), now written
-    recovered_rows: int = 0
-    #: units queued again because their latest completing row ended env_error / llm_error
-    #: (``retry="errors"``, ``recap resume RUN --retry errors``)
-    retried_errors: int = 0
-    #: attempts in flight when the session was stopped (cut by a second Ctrl-C or the end of
-    #: the grace period; 0 after a graceful stop that let them finish)
-    cut: int = 0
-
-    @property
-    def all_done(self) -> bool:
-        """True when every unit of the plan has a finished row, this session or an earlier one."""
-        return self.completed_before + self.finished_now >= self.total
-
-    def retry_hint(self) -> str | None:
-        """One line on the units to retry, or None."""
-        if not self.infra_failed:
-            return None
-        kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.infra_kinds.items()))
-        return (
-            f"{self.infra_failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
-            f"then retry them with: recap resume {self.location}"
-        )
-
-    def exit_code(self) -> int:
-        """The process exit status: interrupted beats an infrastructure failure, which beats work left (a cap
-        stopped it); 0 only when all is done."""
-        if self.interrupted:
-            return EXIT_INTERRUPTED
-        if self.infra_failed:
-            return EXIT_INFRA
-        return 0 if self.all_done else EXIT_WORK_REMAINS
+from workers.episode_worker import EpisodeRunner, worker_actor
+from workers.sink import recover_wal
 
 
 @dataclass
@@ -495,10 +379,6 @@ class Driver:
         """The run folder itself, or for an object-store URI its local mirror (pulled first)."""
         if not self.p.store.remote:
             return self.p.store
-        import shutil
-
-        from pipeline.mirror import mirror_dir, pull
-
         local = mirror_dir(self.p.store.location)
         if self.p.identity is None and local.exists():
             shutil.rmtree(local)  # a stale mirror of an earlier run at the same URI
@@ -510,8 +390,6 @@ class Driver:
     def _push(self, force: bool = True) -> None:
         if not self.p.store.remote:
             return
-        from pipeline.mirror import PUSH_EVERY_S, push
-
         now = time.monotonic()
         if force or now - self._last_push >= PUSH_EVERY_S:
             self._last_push = now
@@ -541,12 +419,10 @@ class Driver:
             )
 
     def _make_pool(self, factory: Any) -> WorkerPool:
-        import ray
+        import ray  # lazy: importing this module (prepare, the CLI's checks) must not load Ray
 
         assert self.channel is not None
         if self.executor == "in-process":
-            from workers.episode_worker import EpisodeRunner
-
             sink = self.channel.actor
             return InProcessWorkerPool(
                 lambda wid: EpisodeRunner(
@@ -554,16 +430,12 @@ class Driver:
                 ),
                 session=self.session,
             )
-        from workers.episode_worker import worker_actor
-
         multi_node = len([n for n in ray.nodes() if n.get("Alive")]) > 1
         worker_cls = worker_actor(num_cpus=self.spec.ray.worker_cpus, spread=multi_node)
         return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session)
 
     def _run_locked(self) -> RunSummary:
-        import ray
-
-        from workers.sink import recover_wal
+        import ray  # lazy: importing this module (prepare, the CLI's checks) must not load Ray
 
         spec = self.spec
         t_start = time.monotonic()
@@ -617,16 +489,23 @@ class Driver:
                 pass
 
     def _session(self, state: RunState, ident: RunIdentity, t_start: float) -> RunSummary:
-        assert self.pool is not None and self.channel is not None
+        """Start what is left, run it to the end (or to a stop), then write what is known."""
+        plan_ids = self._begin(state, ident)
+        self._announce(state, plan_ids)
+        self._start_workers()
+        self._drive()
+        return self._close_session(t_start)
+
+    def _begin(self, state: RunState, ident: RunIdentity) -> set[str]:
+        """This session's summary, queue and counters from the run's state; the plan's unit ids."""
         spec, plan = self.spec, self.p.plan
         plan_ids = {u.unit_id for u in plan.units}
-        completed_before = len(state.completed & plan_ids)
         self.summary = RunSummary(
             location=self.p.store.location,
             run=spec.run,
             run_id=ident.run_id,
             total=len(plan.units),
-            completed_before=completed_before,
+            completed_before=len(state.completed & plan_ids),
         )
         self.success_before = self._success_before(plan_ids)
         # the start order (spec.order): interleaved over arms by default, so a cap that binds
@@ -636,6 +515,13 @@ class Driver:
         self.records_out = []
         self.done_times: list[float] = []
         self.t0 = time.monotonic()
+        #: the backend's spend as last seen (what the session reports, also after a Ctrl-C)
+        self.spend_seen = Spend()
+        return plan_ids
+
+    def _announce(self, state: RunState, plan_ids: set[str]) -> None:
+        """The run row (spec, versions, revision, host, command) and the started/resumed event."""
+        spec, plan = self.spec, self.p.plan
         resumed = self.p.identity is not None
         self._send(
             [
@@ -643,8 +529,8 @@ class Driver:
                     started_at=time.time(),
                     spec_yaml=self.p.spec_text,
                     spec_hash=text_hash(self.p.spec_text),
-                    package_versions=_versions(),
-                    git_revision=_git_revision(),
+                    package_versions=package_versions(),
+                    git_revision=git_revision(),
                     host=socket.gethostname(),
                     command=self.command,
                 )
@@ -664,57 +550,33 @@ class Driver:
         self._event(
             "run_resumed" if resumed else "run_started",
             units=len(plan.units),
-            completed=completed_before,
+            completed=self.summary.completed_before,
             pending=len(self.queue),
             run_cap_usd=spec.run_cap_usd,
             workers=spec.workers,
             order=spec.order,
             **extra,
         )
+
+    def _start_workers(self) -> None:
+        """As many episode workers as the sweep asks for and the queue can use."""
+        assert self.pool is not None
         self.caps.check(self.backend.spend())
-        self.n_workers = max(1, min(spec.workers, len(self.queue))) if len(self.queue) else 0
+        self.n_workers = max(1, min(self.spec.workers, len(self.queue))) if len(self.queue) else 0
         nodes = self.pool.start(self.n_workers)
         self._event("workers_started", workers=nodes, nodes=len(set(nodes.values())))
-        stop = self.stop
-        title = f"recap run {spec.run} -> {self.p.store.location}"
-        last_tick = 0.0
-        spend = Spend()
-        stop_since: float | None = None
-        cut_reason: str | None = None
+
+    def _drive(self) -> None:
+        """The session's loop under its progress view, and what a stop, a lost sink or a third
+        signal leaves to do."""
+        assert self.pool is not None and self.channel is not None
+        title = f"recap run {self.spec.run} -> {self.p.store.location}"
         try:
             with ProgressView(self.progress_mode, title=title) as view:
-                stop.arm()  # from here a signal stops the session gracefully (pipeline.stopping)
+                self.stop.arm()  # from here a signal stops the session gracefully (pipeline.stopping)
+                cut_reason: str | None = None
                 try:
-                    while True:
-                        if stop.graceful and stop_since is None:
-                            stop_since = time.monotonic()
-                            self._stop_requested(view)
-                        if stop_since is None:
-                            self._dispatch()
-                        elif self.pool.in_flight() and (stop.now or time.monotonic() - stop_since >= self.stop_grace_s):
-                            cut_reason = "signal" if stop.now else "grace_expired"
-                            break
-                        if not self.pool.in_flight():
-                            break
-                        ready = self.pool.wait(0.5)
-                        for key in ready:
-                            self._finish(key)
-                        if self.records_out:
-                            recs, self.records_out = self.records_out, []
-                            # terminal rows are written at once: a unit whose episode finished must not
-                            # be re-run (and paid again) because its row was still buffered at a crash
-                            terminal = any(isinstance(r, EpisodeRecord) for r in recs)
-                            self._send(recs, flush=terminal)
-                        self.channel.check_acks()
-                        now = time.monotonic()
-                        if ready or now - last_tick >= 0.5:
-                            last_tick = now
-                            spend = self.backend.spend()
-                            self.caps.check(spend)
-                            self._ship_events()
-                            self.channel.maybe_flush()
-                            view.update(self._snapshot(spend))
-                            self._push(force=False)
+                    cut_reason = self._loop(view)
                 except SinkLost as exc:
                     # stop at once: what finished is written (by the driver itself), the rest waits
                     # for a resume; the attempts in flight were cut, not failed
@@ -722,14 +584,66 @@ class Driver:
                     self.channel.on_lost(str(exc))
                 if cut_reason is not None:
                     self._cut_now(cut_reason, view)
-                spend = self.backend.spend()
-                self.caps.check(spend)
-                view.update(self._snapshot(spend), force=True)
+                self.spend_seen = self.backend.spend()
+                self.caps.check(self.spend_seen)
+                view.update(self._snapshot(self.spend_seen), force=True)
         except KeyboardInterrupt:
             # a third signal: stop where we are (what is written stays; the finishing below still runs)
-            stop.count = max(stop.count, 2)
+            self.stop.count = max(self.stop.count, 2)
             self._event("interrupted", severity="warning", mode="raised", running=self.pool.in_flight(), pending=len(self.queue))
             self.pool.shutdown()
+
+    def _loop(self, view: ProgressView) -> str | None:
+        """Start units while workers are idle and collect what returns, until nothing is in
+        flight; after a stop, wait for the episodes in flight. The reason they were cut, if so."""
+        assert self.pool is not None
+        stop = self.stop
+        last_tick = 0.0
+        stop_since: float | None = None
+        while True:
+            if stop.graceful and stop_since is None:
+                stop_since = time.monotonic()
+                self._stop_requested(view)
+            if stop_since is None:
+                self._dispatch()
+            elif self.pool.in_flight() and (stop.now or time.monotonic() - stop_since >= self.stop_grace_s):
+                return "signal" if stop.now else "grace_expired"
+            if not self.pool.in_flight():
+                return None
+            ready = self.pool.wait(0.5)
+            self._collect(ready)
+            now = time.monotonic()
+            if ready or now - last_tick >= 0.5:
+                last_tick = now
+                self._tick(view)
+
+    def _collect(self, ready: list[Any]) -> None:
+        """The attempts that returned: their rows go to the sink (terminal rows flushed at once)."""
+        assert self.channel is not None
+        for key in ready:
+            self._finish(key)
+        if self.records_out:
+            recs, self.records_out = self.records_out, []
+            # terminal rows are written at once: a unit whose episode finished must not
+            # be re-run (and paid again) because its row was still buffered at a crash
+            terminal = any(isinstance(r, EpisodeRecord) for r in recs)
+            self._send(recs, flush=terminal)
+        self.channel.check_acks()
+
+    def _tick(self, view: ProgressView) -> None:
+        """Twice a second: spend against the caps, events to the sink, the view, the mirror."""
+        assert self.channel is not None
+        self.spend_seen = self.backend.spend()
+        self.caps.check(self.spend_seen)
+        self._ship_events()
+        self.channel.maybe_flush()
+        view.update(self._snapshot(self.spend_seen))
+        self._push(force=False)
+
+    def _close_session(self, t_start: float) -> RunSummary:
+        """The session's counts, its last rows and events, the gateway's flush; a lost sink is an error."""
+        assert self.pool is not None and self.channel is not None
+        stop, spend = self.stop, self.spend_seen
         lost = self.channel.lost
         cut = self.pool.in_flight() if (stop.graceful or lost is not None) else 0
         # a stop asked for while the last episodes finished left nothing to resume
