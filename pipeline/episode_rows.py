@@ -44,19 +44,7 @@ def episode_record(
     res: EpisodeResult | None = outcome.result if outcome is not None else None
     env = outcome.env if outcome is not None else EnvFacts(unit.benchmark)
     now = time.time() if now is None else now
-    if end_reason is None:
-        if res is None:
-            raise ValueError(f"attempt {unit.unit_id}-{attempt}: no result and no end reason")
-        end_reason = res.end_reason
-    if error is None and res is not None:
-        error = res.error
-        kind = res.error_kind
-        # the row's error names the LLM error kind first: what makes an infrastructure
-        # failure recognisable (and retryable) from the table alone
-        if end_reason == "llm_error" and kind in INFRA_ERROR_KINDS and not (error or "").startswith(f"{kind}:"):
-            error = f"{kind}: {error or ''}".rstrip()
-    if infra_failure(end_reason, error) is not None:
-        end_reason = INFRA_ERROR
+    end_reason, error = _ending(unit, attempt, res, end_reason, error)
     if res is not None:
         calls, prompt, cached, completion, cost = (
             res.llm_calls,
@@ -66,12 +54,7 @@ def episode_record(
             res.cost_usd,
         )
     else:
-        s = _safe(journal_spend, f"{unit.unit_id}-{attempt}")
-        calls, prompt, cached, completion, cost = (
-            (s.calls, s.prompt_tokens, s.cached_prompt_tokens, s.completion_tokens, s.cost_usd)
-            if s is not None
-            else (0, 0, 0, 0, 0.0)
-        )
+        calls, prompt, cached, completion, cost = _journal_usage(journal_spend, f"{unit.unit_id}-{attempt}")
     bench, split, task = place_of(unit.instance_id, env.split or None, env.task or None)
     return check_vocabulary(
         EpisodeRecord(
@@ -110,6 +93,36 @@ def episode_record(
             provider_model=unit.model,
         )
     )
+
+
+def _ending(
+    unit: Unit, attempt: int, res: EpisodeResult | None, end_reason: RowEndReason | None, error: str | None
+) -> tuple[RowEndReason, str | None]:
+    """The row's end reason and error: the given ones, else the result's; an LLM error names its
+    kind first, and an infrastructure failure ends ``infra_error``."""
+    if end_reason is None:
+        if res is None:
+            raise ValueError(f"attempt {unit.unit_id}-{attempt}: no result and no end reason")
+        end_reason = res.end_reason
+    if error is None and res is not None:
+        error = res.error
+        kind = res.error_kind
+        # the row's error names the LLM error kind first: what makes an infrastructure
+        # failure recognisable (and retryable) from the table alone
+        if end_reason == "llm_error" and kind in INFRA_ERROR_KINDS and not (error or "").startswith(f"{kind}:"):
+            error = f"{kind}: {error or ''}".rstrip()
+    if infra_failure(end_reason, error) is not None:
+        end_reason = INFRA_ERROR
+    return end_reason, error
+
+
+def _journal_usage(journal_spend: JournalSpend | None, episode_id: str) -> tuple[int, int, int, int, float]:
+    """(calls, prompt, cached prompt, completion tokens, cost) of an attempt without a result, by
+    the ledger journal (zeros when it has none)."""
+    s = _safe(journal_spend, episode_id)
+    if s is None:
+        return 0, 0, 0, 0, 0.0
+    return s.calls, s.prompt_tokens, s.cached_prompt_tokens, s.completion_tokens, s.cost_usd
 
 
 def _safe(journal_spend: JournalSpend | None, episode_id: str) -> AttemptSpend | None:
