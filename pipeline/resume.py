@@ -28,6 +28,7 @@ are retried.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -327,8 +328,6 @@ def repair_run(store: RunStore) -> str:
         store.write_bytes(JOURNAL_FILE, data[: issue.good_end])
         backup = f"{store.location.rstrip('/')}/{backup_name}"
     else:
-        import fcntl
-
         path = store.path / JOURNAL_FILE
         with open(path, "r+b") as fh:
             try:  # no live ledger may hold it (the gateway's own lock)

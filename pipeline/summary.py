@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import pyarrow as pa
+from rich.markup import escape
+from rich.table import Table
 
 from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue, run_spend
 from pipeline.store import PLAN_FILE, RunStore
@@ -254,9 +256,6 @@ def collect(store: RunStore) -> StatusReport:
 
 def render(report: StatusReport, console: Any) -> None:
     """The summary table plus totals (rich)."""
-    from rich.markup import escape
-    from rich.table import Table
-
     t = Table(title=escape(f"run {report.run} ({report.run_id}) - {report.location}"))
     columns: tuple[tuple[str, Literal["left", "right"]], ...] = (
         ("arm", "left"),
