@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import TypedDict
 
 from pipeline.resume import INFRA_ERROR, INFRA_ERROR_KINDS, AttemptSpend, infra_failure
 from pipeline.units import Unit
@@ -58,17 +59,10 @@ def episode_record(
     bench, split, task = place_of(unit.instance_id, env.split or None, env.task or None)
     return check_vocabulary(
         EpisodeRecord(
-            episode_id=f"{unit.unit_id}-{attempt}",
-            unit_id=unit.unit_id,
-            attempt=attempt,
+            **_unit_fields(unit, attempt),
             benchmark=env.benchmark or bench,
             split=split,
             task=task,
-            instance_id=unit.instance_id,
-            seed=unit.seed,
-            method=unit.method,
-            method_config=unit.method_config,
-            model=unit.model_label,
             end_reason=end_reason,
             success=bool(res.success) if res is not None else False,
             steps=res.steps if res is not None else 0,
@@ -79,7 +73,6 @@ def episode_record(
             cost_usd=float(cost),
             wall_s=float(outcome.wall_s if outcome is not None else (now - started if started else 0.0)),
             step_cap=int(env.max_steps or 0),
-            step_multiplier=unit.step_multiplier,
             optimal_steps=env.optimal_steps,
             max_depth=res.max_depth if res is not None else 0,
             error=error,
@@ -87,11 +80,42 @@ def episode_record(
             started_at=float(outcome.started_at if outcome is not None else started),
             ended_at=float(outcome.ended_at if outcome is not None else now),
             test_double=outcome.test_double if outcome is not None else unit.model.startswith("offline/"),
-            label=unit.method_label,
-            profile=unit.profile,
-            ablation=unit.ablation_name,
-            provider_model=unit.model,
         )
+    )
+
+
+class _UnitColumns(TypedDict):
+    episode_id: str
+    unit_id: str
+    attempt: int
+    instance_id: str
+    seed: int
+    method: str
+    method_config: str
+    model: str
+    step_multiplier: float
+    label: str
+    profile: str | None
+    ablation: str | None
+    provider_model: str | None
+
+
+def _unit_fields(unit: Unit, attempt: int) -> _UnitColumns:
+    """The row's columns that come from the unit and attempt alone (its identity and arm)."""
+    return _UnitColumns(
+        episode_id=f"{unit.unit_id}-{attempt}",
+        unit_id=unit.unit_id,
+        attempt=attempt,
+        instance_id=unit.instance_id,
+        seed=unit.seed,
+        method=unit.method,
+        method_config=unit.method_config,
+        model=unit.model_label,
+        step_multiplier=unit.step_multiplier,
+        label=unit.method_label,
+        profile=unit.profile,
+        ablation=unit.ablation_name,
+        provider_model=unit.model,
     )
 
 
