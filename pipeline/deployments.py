@@ -9,16 +9,16 @@ from __future__ import annotations
 
 from typing import Any
 
+from pydantic import ValidationError
+
 from pipeline.errors import SpecError
 from pipeline.spec import ModelSpec
+from workers.llm.offline.knobs import Knobs, OfflineOptionsError
+from workers.llm.providers import DeploymentConfig
 
 
 def deployment_config(m: ModelSpec, where: str) -> Any:
     """The gateway's config for one sweep model entry; errors name the entry."""
-    from pydantic import ValidationError
-
-    from workers.llm.offline.knobs import Knobs, OfflineOptionsError
-    from workers.llm.providers import DeploymentConfig
 
     if m.options and not m.test_double:
         raise SpecError(f"{where} ({m.name}): 'options' are for offline/ test doubles only")

@@ -52,188 +52,47 @@ does (:mod:`pipeline.local_cluster`).
 
 from __future__ import annotations
 
-import json
-import socket
-import subprocess
-import sys
+import shutil
 import time
 import uuid
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from importlib import metadata
 from typing import Any, Literal
 
-from pipeline.backend import ModelBackend, Spend
+from pipeline.attempts import Hooks
+from pipeline.backend import ModelBackend
 from pipeline.cap_policy import CapPolicy
-from pipeline.episode_rows import episode_record
 from pipeline.errors import PipelineError, RunFolderError
 from pipeline.events import EventBuffer
-from pipeline.preflight import preflight
-from pipeline.progress import ProgressView, Snapshot
-from pipeline.raysetup import PROJECT_ROOT, init_ray, shutdown_ray
+from pipeline.mirror import mirror_dir, pull
+from pipeline.prepare import Prepared
+
+# prepare, RunSummary and the exit codes: the CLI, tests and benches import them from here
+from pipeline.prepare import prepare as prepare
+from pipeline.raysetup import init_ray, shutdown_ray
 from pipeline.resume import (
-    INFRA_ERROR,
     RETRY_MODES,
-    AttemptSpend,
     Retry,
     RunState,
-    UnitQueue,
-    attempt_spend,
-    check_journal,
-    infra_failure,
-    is_final,
     load_state,
 )
-from pipeline.sink_channel import SinkChannel, SinkLost
-from pipeline.spec import SweepSpec, text_hash
+from pipeline.run_summary import EXIT_INFRA as EXIT_INFRA
+from pipeline.run_summary import EXIT_INTERRUPTED as EXIT_INTERRUPTED
+from pipeline.run_summary import EXIT_WORK_REMAINS as EXIT_WORK_REMAINS
+from pipeline.run_summary import RunSummary
+from pipeline.session import SessionLoop
+from pipeline.sink_channel import SinkChannel
 from pipeline.stopping import DEFAULT_GRACE_S, StopRequests
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
-from pipeline.summary import TEST_DOUBLE_LABEL
-from pipeline.units import Plan, PlanDiff, Unit, diff_plans, expand, order_units
-from pipeline.worker_pool import Finished, InProcessWorkerPool, RayWorkerPool, WorkerPool
-from schemas.kinds import EventKind, RowEndReason, Severity
-from schemas.outcomes import EpisodeOutcome
-from schemas.records import EpisodeRecord, RunRecord
-
-#: exit status of a session in which a unit ended in an infrastructure failure
-EXIT_INFRA = 4
-#: exit status of a session that left work undone (a cap stopped it)
-EXIT_WORK_REMAINS = 3
-EXIT_INTERRUPTED = 130
-
-
-# --------------------------------------------------------------------------------------------
-# preparation: everything that can fail does so here, before any write
-# --------------------------------------------------------------------------------------------
-@dataclass
-class Prepared:
-    """A sweep checked and ready to start: its expanded plan and output store. ``identity`` and ``diff`` are None
-    for a fresh folder; for an existing run they are its run.json and how the new plan differs from the stored
-    one."""
-
-    spec: SweepSpec
-    spec_text: str
-    plan: Plan
-    store: RunStore
-    identity: RunIdentity | None
-    diff: PlanDiff | None
-
-
-def prepare(spec: SweepSpec, spec_text: str, *, check_keys: bool = True) -> Prepared:
-    """Expand and check a sweep: units, keys, prices, the output folder. Writes nothing."""
-    plan = expand(spec)
-    if check_keys:
-        preflight(spec)
-    store = RunStore(spec.output)
-    store.check_unlocked()  # first: a driver starting in a fresh folder has only its lock there
-    ident = store.check_can_hold(spec.run)
-    if ident is not None:
-        # a corrupt ledger journal, or an old one whose spend this sweep cannot split: one line now
-        check_journal(store, {m.name: m.model for m in spec.models})
-    diff = diff_plans(store.read_json(PLAN_FILE), plan) if ident is not None else None
-    return Prepared(spec, spec_text, plan, store, ident, diff)
-
-
-def _versions() -> str:
-    out = {"python": sys.version.split()[0]}
-    for pkg in ("recap-eval", "ray", "litellm", "pyarrow", "duckdb", "pydantic", "alfworld", "textworld"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            pass
-    return json.dumps(out, sort_keys=True)
-
-
-def _git_revision() -> str | None:
-    try:
-        r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=5)
-    except (OSError, subprocess.TimeoutExpired):
-        return None
-    rev = r.stdout.strip()
-    if r.returncode != 0 or not rev:
-        return None
-    # tracked changes only: a run folder (or any output) inside the checkout is not a code change
-    dirty = subprocess.run(
-        ["git", "status", "--porcelain", "--untracked-files=no"], cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=10
-    )
-    return rev + ("+dirty" if dirty.stdout.strip() else "")
-
-
-# --------------------------------------------------------------------------------------------
-# the outcome of one driver session
-# --------------------------------------------------------------------------------------------
-@dataclass
-class RunSummary:
-    """What one driver session did (counts are for this session unless named ``*_before``); the CLI prints it and
-    turns it into the exit status."""
-
-    location: str
-    run: str
-    run_id: str
-    total: int
-    completed_before: int
-    finished_now: int = 0
-    success_now: int = 0
-    budget_stopped: int = 0
-    abandoned: int = 0
-    not_started: int = 0
-    worker_restarts: int = 0
-    spend_usd: float = 0.0
-    stopped: str | None = None
-    interrupted: bool = False
-    wall_s: float = 0.0
-    #: units that ended this session in an infrastructure failure (retryable), by failure kind
-    infra_failed: int = 0
-    infra_kinds: dict[str, int] = field(default_factory=dict)
-    #: rows the sink had logged but not written when a session began (a crash), now written
-    recovered_rows: int = 0
-    #: units queued again because their latest completing row ended env_error / llm_error
-    #: (``retry="errors"``, ``recap resume RUN --retry errors``)
-    retried_errors: int = 0
-    #: attempts in flight when the session was stopped (cut by a second Ctrl-C or the end of
-    #: the grace period; 0 after a graceful stop that let them finish)
-    cut: int = 0
-
-    @property
-    def all_done(self) -> bool:
-        """True when every unit of the plan has a finished row, this session or an earlier one."""
-        return self.completed_before + self.finished_now >= self.total
-
-    def retry_hint(self) -> str | None:
-        """One line on the units to retry, or None."""
-        if not self.infra_failed:
-            return None
-        kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.infra_kinds.items()))
-        return (
-            f"{self.infra_failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
-            f"then retry them with: recap resume {self.location}"
-        )
-
-    def exit_code(self) -> int:
-        """The process exit status: interrupted beats an infrastructure failure, which beats work left (a cap
-        stopped it); 0 only when all is done."""
-        if self.interrupted:
-            return EXIT_INTERRUPTED
-        if self.infra_failed:
-            return EXIT_INFRA
-        return 0 if self.all_done else EXIT_WORK_REMAINS
-
-
-@dataclass
-class Hooks:
-    """Test and tooling hooks (all optional): ``on_dispatch(unit, attempt, worker handle)`` and
-    ``on_result(unit, attempt, outcome)``."""
-
-    on_dispatch: Callable[[Unit, int, Any], None] | None = None
-    on_result: Callable[[Unit, int, EpisodeOutcome], None] | None = None
-
+from pipeline.worker_pool import InProcessWorkerPool, RayWorkerPool, WorkerPool
+from schemas.records import EpisodeRecord
+from workers.episode_worker import EpisodeRunner, worker_actor
+from workers.sink import recover_wal
 
 #: where attempts run: Ray actors (the default), or threads of the driver (``recap run --executor in-process``)
 Executor = Literal["ray", "in-process"]
 EXECUTORS: tuple[Executor, ...] = ("ray", "in-process")
 
 
-class Driver:
+class Driver(SessionLoop):
     """One session of a run: lock the folder, start what is left, turn each returned attempt
     into its terminal row or a retry, stop on caps, signals and a lost sink.
 
@@ -294,195 +153,6 @@ class Driver:
         """The sink actor (None before the session starts it)."""
         return self.channel.actor if self.channel is not None else None
 
-    # -- helpers --------------------------------------------------------------------------------
-    def _event(
-        self,
-        kind: EventKind,
-        *,
-        severity: Severity = "info",
-        unit: Unit | None = None,
-        episode_id: str | None = None,
-        **detail: Any,
-    ) -> None:
-        self.events.add(kind, severity=severity, unit_id=unit.unit_id if unit else None, episode_id=episode_id, **detail)
-
-    def _send(self, records: list[Any], *, flush: bool = False) -> None:
-        assert self.channel is not None
-        self.channel.send(records, flush=flush)
-
-    def _ship_events(self) -> None:
-        if self.events:
-            self._send(list(self.events.drain()))
-
-    def _is_test_double(self, label: str) -> bool:
-        try:
-            return self.spec.model(label).test_double
-        except KeyError:
-            return False
-
-    # -- attempts -------------------------------------------------------------------------------
-    def _journal_spend(self, episode_id: str) -> AttemptSpend:
-        """An attempt's calls, tokens and cost by the ledger journal (its worker is gone)."""
-        return attempt_spend(self.work, episode_id)
-
-    def _infra_failed(self, unit: Unit, attempt: int, kind: str) -> None:
-        """A unit ended in an infrastructure failure: not done, retried by the next resume."""
-        self.summary.infra_failed += 1
-        self.summary.infra_kinds[kind] = self.summary.infra_kinds.get(kind, 0) + 1
-        self._event(
-            "unit_failed",
-            severity="error",
-            unit=unit,
-            episode_id=f"{unit.unit_id}-{attempt}",
-            attempt=attempt,
-            failure=kind,
-            retry="recap resume",
-        )
-
-    def _failed_attempt(
-        self,
-        fin: Finished,
-        kind: Literal["attempt_failed", "worker_lost"],
-        error: str,
-        out: EpisodeOutcome | None = None,
-        source: str = "worker",
-    ) -> None:
-        """An attempt without an ending: retried under the next attempt number, or, its
-        attempts used up, given up on with a terminal row saying why."""
-        unit, attempt = fin.pending.unit, fin.pending.attempt
-        self.failures[unit.unit_id] = self.failures.get(unit.unit_id, 0) + 1
-        self.last_failure[unit.unit_id] = "worker_lost" if kind == "worker_lost" else source
-        n = self.failures[unit.unit_id]
-        self._event(
-            kind,
-            severity="warning",
-            unit=unit,
-            episode_id=f"{unit.unit_id}-{attempt}",
-            attempt=attempt,
-            worker_id=fin.slot.worker_id,
-            error=error[:1000],
-            failures=n,
-            max_attempts=self.spec.max_attempts,
-        )
-        if n < self.spec.max_attempts:
-            self.queue.retry(unit)
-            return
-        lost_to = self.last_failure[unit.unit_id]
-        infra = lost_to if lost_to in ("worker_lost", "client") else None
-        # an agent that crashed on every attempt is an outcome (env_error); a lost worker or a
-        # failing model client is infrastructure (infra_error, retried by recap resume)
-        reason: RowEndReason = INFRA_ERROR if infra else ("llm_error" if source == "client" else "env_error")
-        marker = f" (infrastructure: {infra})" if infra else ""
-        msg = f"gave up after {n} failed attempts{marker}; last: {error}"[:2000]
-        rec = episode_record(
-            unit,
-            attempt,
-            out,
-            end_reason=reason,
-            error=msg,
-            worker_id=fin.slot.worker_id,
-            started=fin.started,
-            journal_spend=self._journal_spend,
-        )
-        self.records_out.append(rec)
-        self._event("unit_abandoned", severity="error", unit=unit, attempt=attempt, failures=n)
-        self.summary.abandoned += 1
-        # the rule resume and status apply to the row (a last error naming a dead actor is
-        # worker_lost too): what they will retry, this session counts as failed (exit 4)
-        failed = infra or infra_failure(rec.end_reason, rec.error)
-        if failed:
-            self._infra_failed(unit, attempt, failed)
-        else:
-            self.summary.finished_now += 1
-
-    def _finish(self, key: Any) -> None:
-        """One attempt came back: its terminal row, a retry, or a worker replaced."""
-        assert self.pool is not None and self.channel is not None
-        fin = self.pool.collect(key)
-        unit, attempt = fin.pending.unit, fin.pending.attempt
-        if fin.failure == "elsewhere":
-            # the worker lives; its task failed on another actor: the sink, when it is gone
-            why = self.channel.gone()
-            if why is not None:
-                self.pool.restore(fin)  # not finished: a resume runs it again
-                raise SinkLost(why)
-            self._failed_attempt(fin, "attempt_failed", fin.error)
-            self.pool.release(fin)
-            return
-        if fin.failure == "worker_lost":
-            # the worker process is gone: replace it, retry the unit under a new attempt number
-            self.summary.worker_restarts += 1
-            self._event("worker_restarted", severity="warning", old_worker=fin.slot.worker_id)
-            self._failed_attempt(fin, "worker_lost", fin.error)
-            if self.summary.worker_restarts > max(10, 3 * self.n_workers):
-                raise PipelineError(f"episode workers keep dying ({self.summary.worker_restarts} restarts); last: {fin.error}")
-            self.pool.add_worker()
-            return
-        if fin.failure == "task_raised":
-            self._failed_attempt(fin, "attempt_failed", fin.error)
-            return
-        out = fin.outcome
-        assert out is not None
-        if self.hooks.on_result:
-            self.hooks.on_result(unit, attempt, out)
-        if out.crash is not None:
-            self._failed_attempt(fin, "attempt_failed", f"{out.crash.source}: {out.crash.error}", out, source=out.crash.source)
-            return
-        rec = episode_record(unit, attempt, out, journal_spend=self._journal_spend)
-        self.records_out.append(rec)
-        if rec.end_reason == "budget_exhausted":
-            self.summary.budget_stopped += 1
-            refusal = out.result.refusal if out.result is not None else None
-            self.caps.on_refusal(unit.model_label, refusal, rec.error, self.backend.spend())
-            return
-        kind = infra_failure(rec.end_reason, rec.error)
-        if kind is not None:
-            self._infra_failed(unit, attempt, kind)
-            return
-        self.summary.finished_now += 1
-        self.summary.success_now += int(rec.success)
-        self.done_times.append(time.monotonic())
-
-    # -- dispatch ---------------------------------------------------------------------------------
-    def _dispatch(self) -> None:
-        assert self.pool is not None and self.channel is not None
-        while self.pool.has_idle() and self.channel.lost is None:
-            p = self.queue.take(lambda u: self.caps.allows(u.model_label))
-            if p is None:
-                return
-            slot = self.pool.submit(p)
-            if self.hooks.on_dispatch:
-                self.hooks.on_dispatch(p.unit, p.attempt, slot.handle)
-
-    def _snapshot(self, spend: Spend) -> Snapshot:
-        done = self.summary.completed_before + self.summary.finished_now
-        running = self.pool.in_flight() if self.pool is not None else 0
-        eta = None
-        if self.done_times:
-            elapsed = time.monotonic() - self.t0
-            rate = len(self.done_times) / max(elapsed, 1e-6)
-            remaining = len(self.queue) + running
-            eta = remaining / rate if rate > 0 else None
-        try:
-            rates = {
-                label + (TEST_DOUBLE_LABEL if self._is_test_double(label) else ""): r
-                for label, r in self.backend.rate_stats().items()
-            }
-        except Exception:
-            rates = {}
-        return Snapshot(
-            total=self.summary.total,
-            done=done,
-            success=self.success_before + self.summary.success_now,
-            running=running,
-            spend_usd=spend.total_usd,
-            run_cap_usd=self.spec.run_cap_usd,
-            eta_s=eta,
-            rates=rates,
-            restarts=self.summary.worker_restarts,
-            stopped=self.caps.stopped,
-        )
-
     # -- the run folder ---------------------------------------------------------------------------
     def _write_identity(self) -> RunIdentity:
         store = self.work
@@ -495,10 +165,6 @@ class Driver:
         """The run folder itself, or for an object-store URI its local mirror (pulled first)."""
         if not self.p.store.remote:
             return self.p.store
-        import shutil
-
-        from pipeline.mirror import mirror_dir, pull
-
         local = mirror_dir(self.p.store.location)
         if self.p.identity is None and local.exists():
             shutil.rmtree(local)  # a stale mirror of an earlier run at the same URI
@@ -506,16 +172,6 @@ class Driver:
         if self.p.identity is not None:
             pull(self.p.store.location, local)
         return RunStore(local)
-
-    def _push(self, force: bool = True) -> None:
-        if not self.p.store.remote:
-            return
-        from pipeline.mirror import PUSH_EVERY_S, push
-
-        now = time.monotonic()
-        if force or now - self._last_push >= PUSH_EVERY_S:
-            self._last_push = now
-            push(self.work.path, self.p.store.location)
 
     # -- the session ------------------------------------------------------------------------------
     def run(self) -> RunSummary:
@@ -541,12 +197,10 @@ class Driver:
             )
 
     def _make_pool(self, factory: Any) -> WorkerPool:
-        import ray
+        import ray  # lazy: importing this module (prepare, the CLI's checks) must not load Ray
 
         assert self.channel is not None
         if self.executor == "in-process":
-            from workers.episode_worker import EpisodeRunner
-
             sink = self.channel.actor
             return InProcessWorkerPool(
                 lambda wid: EpisodeRunner(
@@ -554,16 +208,12 @@ class Driver:
                 ),
                 session=self.session,
             )
-        from workers.episode_worker import worker_actor
-
         multi_node = len([n for n in ray.nodes() if n.get("Alive")]) > 1
         worker_cls = worker_actor(num_cpus=self.spec.ray.worker_cpus, spread=multi_node)
         return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session)
 
     def _run_locked(self) -> RunSummary:
-        import ray
-
-        from workers.sink import recover_wal
+        import ray  # lazy: importing this module (prepare, the CLI's checks) must not load Ray
 
         spec = self.spec
         t_start = time.monotonic()
@@ -615,208 +265,3 @@ class Driver:
                 self._push()  # whatever reached the mirror, also after a failure
             except Exception:
                 pass
-
-    def _session(self, state: RunState, ident: RunIdentity, t_start: float) -> RunSummary:
-        assert self.pool is not None and self.channel is not None
-        spec, plan = self.spec, self.p.plan
-        plan_ids = {u.unit_id for u in plan.units}
-        completed_before = len(state.completed & plan_ids)
-        self.summary = RunSummary(
-            location=self.p.store.location,
-            run=spec.run,
-            run_id=ident.run_id,
-            total=len(plan.units),
-            completed_before=completed_before,
-        )
-        self.success_before = self._success_before(plan_ids)
-        # the start order (spec.order): interleaved over arms by default, so a cap that binds
-        # early leaves a balanced subsample; the same spec gives the same order on every resume
-        self.queue = UnitQueue(order_units(plan.units, spec), state)
-        self.failures = {k: v for k, v in state.failures.items() if k in plan_ids}
-        self.records_out = []
-        self.done_times: list[float] = []
-        self.t0 = time.monotonic()
-        resumed = self.p.identity is not None
-        self._send(
-            [
-                RunRecord(
-                    started_at=time.time(),
-                    spec_yaml=self.p.spec_text,
-                    spec_hash=text_hash(self.p.spec_text),
-                    package_versions=_versions(),
-                    git_revision=_git_revision(),
-                    host=socket.gethostname(),
-                    command=self.command,
-                )
-            ]
-        )
-        retrying = {u: k for u, k in state.infra_failed.items() if u in plan_ids}
-        # --retry errors: units whose latest completing row ended env_error / llm_error run again
-        self.retrying_errors = {
-            u: r for u, r in state.errored.items() if u in plan_ids and u not in state.completed and u not in retrying
-        }
-        self.summary.retried_errors = len(self.retrying_errors)
-        extra: dict[str, Any] = {}
-        if retrying:
-            extra["retrying_failed"] = len(retrying)
-        if self.retrying_errors:
-            extra["retrying_errors"] = len(self.retrying_errors)
-        self._event(
-            "run_resumed" if resumed else "run_started",
-            units=len(plan.units),
-            completed=completed_before,
-            pending=len(self.queue),
-            run_cap_usd=spec.run_cap_usd,
-            workers=spec.workers,
-            order=spec.order,
-            **extra,
-        )
-        self.caps.check(self.backend.spend())
-        self.n_workers = max(1, min(spec.workers, len(self.queue))) if len(self.queue) else 0
-        nodes = self.pool.start(self.n_workers)
-        self._event("workers_started", workers=nodes, nodes=len(set(nodes.values())))
-        stop = self.stop
-        title = f"recap run {spec.run} -> {self.p.store.location}"
-        last_tick = 0.0
-        spend = Spend()
-        stop_since: float | None = None
-        cut_reason: str | None = None
-        try:
-            with ProgressView(self.progress_mode, title=title) as view:
-                stop.arm()  # from here a signal stops the session gracefully (pipeline.stopping)
-                try:
-                    while True:
-                        if stop.graceful and stop_since is None:
-                            stop_since = time.monotonic()
-                            self._stop_requested(view)
-                        if stop_since is None:
-                            self._dispatch()
-                        elif self.pool.in_flight() and (stop.now or time.monotonic() - stop_since >= self.stop_grace_s):
-                            cut_reason = "signal" if stop.now else "grace_expired"
-                            break
-                        if not self.pool.in_flight():
-                            break
-                        ready = self.pool.wait(0.5)
-                        for key in ready:
-                            self._finish(key)
-                        if self.records_out:
-                            recs, self.records_out = self.records_out, []
-                            # terminal rows are written at once: a unit whose episode finished must not
-                            # be re-run (and paid again) because its row was still buffered at a crash
-                            terminal = any(isinstance(r, EpisodeRecord) for r in recs)
-                            self._send(recs, flush=terminal)
-                        self.channel.check_acks()
-                        now = time.monotonic()
-                        if ready or now - last_tick >= 0.5:
-                            last_tick = now
-                            spend = self.backend.spend()
-                            self.caps.check(spend)
-                            self._ship_events()
-                            self.channel.maybe_flush()
-                            view.update(self._snapshot(spend))
-                            self._push(force=False)
-                except SinkLost as exc:
-                    # stop at once: what finished is written (by the driver itself), the rest waits
-                    # for a resume; the attempts in flight were cut, not failed
-                    self._finish_ready_before_stop()
-                    self.channel.on_lost(str(exc))
-                if cut_reason is not None:
-                    self._cut_now(cut_reason, view)
-                spend = self.backend.spend()
-                self.caps.check(spend)
-                view.update(self._snapshot(spend), force=True)
-        except KeyboardInterrupt:
-            # a third signal: stop where we are (what is written stays; the finishing below still runs)
-            stop.count = max(stop.count, 2)
-            self._event("interrupted", severity="warning", mode="raised", running=self.pool.in_flight(), pending=len(self.queue))
-            self.pool.shutdown()
-        lost = self.channel.lost
-        cut = self.pool.in_flight() if (stop.graceful or lost is not None) else 0
-        # a stop asked for while the last episodes finished left nothing to resume
-        interrupted = stop.graceful and (len(self.queue) + cut > 0)
-        self.summary.interrupted = interrupted
-        self.summary.cut = cut if stop.graceful else 0
-        self.summary.not_started = len(self.queue) + cut
-        self.summary.stopped = self.caps.stopped
-        if self.records_out:
-            self._send(self.records_out, flush=True)
-            self.records_out = []
-        self.summary.spend_usd = spend.total_usd
-        self.summary.wall_s = time.monotonic() - t_start
-        infra: dict[str, Any] = {"infra_failed": self.summary.infra_failed} if self.summary.infra_failed else {}
-        self._event(
-            "run_finished" if not (interrupted or lost) else "run_stopped",
-            finished=self.summary.finished_now,
-            not_started=self.summary.not_started,
-            spend_usd=spend.total_usd,
-            stopped=self.summary.stopped or lost,
-            **infra,
-        )
-        self._ship_events()
-        try:
-            self.backend.flush()
-        finally:
-            self.channel.close()
-        self._push()
-        if self.channel.lost is not None:
-            self.channel.write_direct([])  # the last events
-            raise PipelineError(
-                f"the sink actor was lost ({self.channel.lost}); the session stopped: "
-                f"{self.summary.finished_now} episodes finished this session are written, "
-                f"{self.summary.not_started} units were not finished; continue with: recap resume {self.p.store.location}"
-            )
-        return self.summary
-
-    def _stop_requested(self, view: ProgressView) -> None:
-        """The first SIGINT/SIGTERM: nothing new starts; say how long the episodes in flight get."""
-        assert self.pool is not None
-        running = self.pool.in_flight()
-        self._event(
-            "interrupted",
-            severity="warning",
-            mode="graceful",
-            running=running,
-            pending=len(self.queue),
-            grace_s=self.stop_grace_s,
-        )
-        if running:
-            view.note(
-                f"recap: stopping: no new units; waiting up to {self.stop_grace_s:g}s for the {running} episodes in flight "
-                "to finish (Ctrl-C again to stop now)"
-            )
-
-    def _cut_now(self, reason: str, view: ProgressView) -> None:
-        """A second signal, or the grace period over: the episodes in flight are cut. Their workers
-        are stopped first, so no new call starts; the calls they completed are in the ledger
-        journal (and reach ``llm_calls`` with the gateway's flush), one still at the provider
-        stays charged at its worst case, and the resume runs those units again."""
-        assert self.pool is not None
-        running = self.pool.in_flight()
-        self._event("interrupted", severity="warning", mode=reason, running=running, pending=len(self.queue))
-        view.note(
-            f"recap: stopping now: {running} episodes in flight are cut"
-            + (" (the grace period is over)" if reason == "grace_expired" else "")
-            + "; the calls they made stay recorded and the resume runs them again"
-        )
-        self.pool.shutdown()
-
-    def _finish_ready_before_stop(self) -> None:
-        """Results already returned when the sink was lost: their rows were acknowledged by
-        the sink (logged), so their terminal rows are written too."""
-        assert self.pool is not None
-        if not self.pool.in_flight():
-            return
-        for key in self.pool.wait(0):
-            try:
-                self._finish(key)
-            except SinkLost:
-                pass
-
-    def _success_before(self, plan_ids: set[str]) -> int:
-        cols = ("unit_id", "attempt", "success", "end_reason", "error")
-        eps, _ = self.work.read_table("episodes", list(cols))
-        latest: dict[str, tuple[int, bool]] = {}
-        for uid, att, ok, reason, error in zip(*(eps.column(c).to_pylist() for c in cols)):
-            if uid in plan_ids and is_final(reason, error) and att >= latest.get(uid, (0, False))[0]:
-                latest[uid] = (att, ok)
-        return sum(1 for _, ok in latest.values() if ok)

@@ -21,10 +21,16 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from rich.markup import escape
+from rich.table import Table
+
 from pipeline.spec import SweepSpec
+from pipeline.summary import model_label
 from pipeline.units import Plan
 from recap.agent import Agent
 from recap.methods import METHODS
+from workers.envs.registry import make_env
+from workers.llm.pricing import PriceError, resolve_price
 
 COMPLETION_TOKENS = (60, 250)
 DEFAULT_OPTIMAL = 20
@@ -51,8 +57,6 @@ def measure_instance(instance_id: str, step_multiplier: float, options: dict[str
     """Build ``instance_id`` once and measure its :class:`InstanceShape` (4 characters per token).
     Any failure (data missing, an optional package absent) gives default figures with
     ``measured=False``, so one instance never fails the estimate."""
-    from workers.envs.registry import make_env
-
     try:
         env = make_env(instance_id, step_multiplier=step_multiplier, **options)
         try:
@@ -105,8 +109,6 @@ def call_shape(method: str) -> tuple[bool, tuple[float, float]]:
 
 
 def _price(spec: SweepSpec, model_label: str) -> Any:
-    from workers.llm.pricing import PriceError, resolve_price
-
     m = spec.model(model_label)
     try:
         return resolve_price(m.model, m.prices.model_dump() if m.prices else None)
@@ -174,10 +176,6 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
 def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
     """Print the estimate on ``console`` (a rich Console): one row per group, the run's totals, and
     whether the run cap fits the cost range."""
-    from rich.markup import escape
-    from rich.table import Table
-
-    from pipeline.summary import model_label
 
     t = Table(title=escape(f"estimate for run {plan.spec.run}: {len(plan.units)} units"))
     for col in ("method", "model", "units", "calls", "tokens", "cost $"):

@@ -15,12 +15,15 @@ two base URLs) never share a cap or a spend figure.
 
 from __future__ import annotations
 
+import os
 import uuid
 from dataclasses import dataclass
 from typing import Any
 
 from pipeline.backend import RateStats, Spend
 from pipeline.deployments import deployment_config
+from pipeline.preflight import key_variables
+from pipeline.raysetup import runtime_env
 from pipeline.spec import SweepSpec
 
 #: times a call in flight on a gateway (or budget) actor that died is re-sent to its restart;
@@ -66,13 +69,14 @@ class GatewayBackend:
         self._closed = False
 
     def start(self, *, run_dir: str, run_id: str, runtime_env: dict[str, Any] | None = None, node_id: str | None = None) -> None:
-        from workers.gateway import BudgetActor, GatewayActor, GatewayClient
+        from workers.gateway import BudgetActor, GatewayActor, GatewayClient  # lazy: the actors module loads Ray
 
         # a killed gateway or budget actor is restarted by Ray (same arguments: the ledger is
         # replayed from the run folder's journal) and the calls it had in flight are sent to
         # the new incarnation, so a crash of either costs a few seconds, not the episodes
         opts: dict[str, Any] = {"runtime_env": self._runtime_env(), "max_restarts": -1, "max_task_retries": TASK_RETRIES}
         if node_id is not None:
+            # lazy: Ray loads only where a session uses it
             from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
             opts["scheduling_strategy"] = NodeAffinitySchedulingStrategy(node_id=node_id, soft=False)
@@ -90,8 +94,6 @@ class GatewayBackend:
 
     def _runtime_env(self) -> dict[str, Any]:
         """The job's environment (data folders, offline litellm) for the gateway actors."""
-        from pipeline.raysetup import runtime_env
-
         return {"env_vars": dict(runtime_env()["env_vars"])}
 
     def _api_keys(self) -> Any:
@@ -101,10 +103,8 @@ class GatewayBackend:
         environment, so the keys travel with the gateway actors (and only with them: episode
         workers never see a key) - as a constructor argument, never in the ``runtime_env``,
         which Ray writes into its session logs."""
-        import os
 
-        from pipeline.preflight import key_variables
-        from workers.gateway.actors import SecretEnv
+        from workers.gateway.actors import SecretEnv  # lazy: the actors module loads Ray
 
         keys: dict[str, str] = {}
         for m in self.spec.models:
@@ -117,14 +117,14 @@ class GatewayBackend:
         return GatewayFactory(dict(self.clients))
 
     def spend(self) -> Spend:
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
 
         stats = ray.get(self.budget.stats.remote())
         by_model = stats.get("by_model_spent_usd", {})
         return Spend(float(stats.get("spent_usd", 0.0)), {label: float(by_model.get(label, 0.0)) for label in self.configs})
 
     def rate_stats(self) -> dict[str, RateStats]:
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
 
         out: dict[str, RateStats] = {}
         stats = ray.get([a.stats.remote() for a in self.actors.values()], timeout=5)
@@ -141,14 +141,14 @@ class GatewayBackend:
         return out
 
     def set_run_cap(self, usd: float | None) -> None:
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
 
         if usd is not None:
             ray.get(self.budget.set_caps.remote(usd, None))
 
     def flush(self) -> None:
         """Write every pending llm_calls row and close the ledger journal (end of session)."""
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
 
         if self._closed or self.budget is None:
             return
@@ -157,7 +157,7 @@ class GatewayBackend:
         ray.get(self.budget.close.remote())
 
     def close(self) -> None:
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
 
         try:
             self.flush()

@@ -15,6 +15,8 @@ import hashlib
 import os
 from pathlib import Path
 
+import pyarrow.fs as pafs
+
 PUSH_EVERY_S = 60.0
 #: files that change after they are written (re-uploaded on every push)
 MUTABLE = ("run.json", "plan.json", "spec.yaml", "gateway/ledger.jsonl")
@@ -28,15 +30,11 @@ def mirror_dir(uri: str) -> Path:
 
 
 def _remote(uri: str) -> tuple[object, str]:
-    import pyarrow.fs as pafs
-
     fs, root = pafs.FileSystem.from_uri(uri)
     return fs, root.rstrip("/")
 
 
 def _listing(fs: object, root: str) -> dict[str, int]:
-    import pyarrow.fs as pafs
-
     infos = fs.get_file_info(pafs.FileSelector(root, recursive=True, allow_not_found=True))  # type: ignore[attr-defined]
     return {i.path[len(root) + 1 :]: i.size for i in infos if i.type == pafs.FileType.File}
 

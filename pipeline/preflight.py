@@ -12,20 +12,31 @@ line, before any write.
 
 from __future__ import annotations
 
+import difflib
+import json
 import os
 import re
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+from unittest import mock
 
-from pipeline.errors import PreflightError
+from pipeline.deployments import deployment_config
+from pipeline.errors import PreflightError, SpecError
 from pipeline.spec import OFFLINE_PREFIX, ModelSpec, SweepSpec
-
-if TYPE_CHECKING:
-    from pipeline.units import Plan
+from pipeline.units import Plan, Unit, stratum
+from recap.agent import Agent, DemonstrationError
+from recap.env import DataNotFoundError, Environment
+from workers.envs import registry
+from workers.episode_worker import agent_from_config, env_options_for
+from workers.llm.litellm_import import import_litellm
+from workers.llm.litellm_setup import get_litellm
+from workers.llm.offline.provider import MODELS as OFFLINE_MODELS
+from workers.llm.pricing import PriceError, require_prices
+from workers.llm.providers import DEFAULT_MAX_TOKENS
 
 
 def _litellm_missing_keys(m: ModelSpec) -> list[str]:
-    from workers.llm.litellm_setup import get_litellm
-
     litellm = get_litellm()
     try:
         info = litellm.validate_environment(model=m.model, api_base=m.api_base)
@@ -43,8 +54,6 @@ def key_variables(m: ModelSpec) -> list[str]:
         return []
     if m.api_key_env:
         return [m.api_key_env]
-    from unittest import mock
-
     with mock.patch.dict(os.environ, {"LITELLM_LOCAL_MODEL_COST_MAP": "True"}, clear=True):
         return _litellm_missing_keys(m)
 
@@ -71,8 +80,6 @@ def check_keys(spec: SweepSpec) -> None:
 # --------------------------------------------------------------------------------------------
 def _providers() -> list[str]:
     """The provider prefixes litellm routes (``openai``, ``together_ai``, ...)."""
-    from workers.llm.litellm_import import import_litellm
-
     return sorted({str(getattr(p, "value", p)) for p in import_litellm().provider_list})
 
 
@@ -82,11 +89,6 @@ def provider_problem(m: ModelSpec) -> str | None:
     (``zzz``), or an ``offline/`` name that is not one of the test doubles. Asked of litellm the
     way a call asks it (``get_llm_provider``), so ``gpt-4o`` and ``openai/<anything>`` at an
     ``api_base`` (a self-hosted server) pass."""
-    import difflib
-
-    from workers.llm.litellm_import import import_litellm
-    from workers.llm.offline.provider import MODELS as OFFLINE_MODELS
-
     if m.test_double:
         name = m.model.removeprefix(OFFLINE_PREFIX)
         if name in OFFLINE_MODELS:
@@ -117,8 +119,6 @@ def provider_problem(m: ModelSpec) -> str | None:
 def model_output_limit(model: str) -> int | None:
     """The most output tokens ``model`` can produce per call by litellm's model map
     (``max_output_tokens``), None when the map does not say (self-hosted and unknown models)."""
-    from workers.llm.litellm_import import import_litellm
-
     litellm = import_litellm()
     try:
         info = litellm.get_model_info(model)
@@ -135,9 +135,6 @@ def check_models(spec: SweepSpec) -> None:
     options within their ranges: :func:`pipeline.deployments.deployment_config`) and its
     ``params.max_tokens`` is within the model's own output limit (:func:`model_output_limit`):
     above it the provider would refuse every call. Raises SpecError (one line)."""
-    from pipeline.deployments import deployment_config
-    from pipeline.errors import SpecError
-
     for i, m in enumerate(spec.models):
         where = f"models[{i}] ({m.name})"
         problem = provider_problem(m)
@@ -157,11 +154,6 @@ def check_output_caps(plan: Plan) -> None:
     """Every request of the plan asks for an output cap its model can give: a method's own
     ``max_tokens`` (ReCAP's 3072) above a model's output limit, with no ``params.max_tokens`` on
     the model to bound it, would be refused by the provider on every call. Raises SpecError."""
-    import json
-
-    from pipeline.errors import SpecError
-    from workers.llm.providers import DEFAULT_MAX_TOKENS
-
     spec = plan.spec
     seen: set[tuple[str, str]] = set()
     for u in plan.units:
@@ -183,8 +175,6 @@ def check_output_caps(plan: Plan) -> None:
 
 def check_prices(spec: SweepSpec) -> None:
     """Every model under a cap (the run cap covers all models) must have a price."""
-    from workers.llm.pricing import PriceError, require_prices
-
     for i, m in enumerate(spec.models):
         if spec.run_cap_usd is None and m.cap_usd is None:
             continue
@@ -222,8 +212,6 @@ def _fit(head: str, reason: str, tail: str = "") -> str:
 
 
 def _reason(exc: BaseException) -> str:
-    from recap.agent import DemonstrationError
-
     text = " ".join(str(exc).split())
     if isinstance(exc, DemonstrationError) and text:
         return text
@@ -231,9 +219,90 @@ def _reason(exc: BaseException) -> str:
 
 
 def _canonical(obj: Any) -> str:
-    import json
-
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def _env_index(spec: SweepSpec, benchmark: str, options: Mapping[str, Any] | None) -> int:
+    """The ``environments[]`` entry a unit's benchmark and options came from (for the message)."""
+    same = [i for i, e in enumerate(spec.environments) if e.benchmark == benchmark]
+    for i in same:
+        if dict(spec.environments[i].options) == dict(options or {}):
+            return i
+    return same[0] if same else 0
+
+
+def _data_error(spec: SweepSpec, u: Unit, exc: BaseException) -> SpecError:
+    """A unit's benchmark cannot find its data: the line names the entry and the fix."""
+    b = u.benchmark
+    head = f"environments[{_env_index(spec, b, u.env_options)}] ({b}): cannot find its data: "
+    reason = " ".join(str(exc).split())
+    tail = "; `recap data list` shows where it looks"
+    if "recap data fetch" not in reason:
+        tail += f", `recap data fetch {b}` gets it"
+    if len(head) + len(reason) + len(tail) > MESSAGE_MAX:  # the folders looked in: recap data list shows them
+        reason = re.sub(r"\s*\(looked in .*\)$", "", reason)
+    return SpecError(_fit(head, reason, tail))
+
+
+@dataclass
+class _EnvProbe:
+    """One environment to open (its first unit and make() options) and the agents to try on it."""
+
+    unit: Unit
+    options: dict[str, Any]
+    methods: list[tuple[Unit, Agent]] = field(default_factory=list)
+
+
+def _env_probes(plan: Plan) -> list[_EnvProbe]:
+    """The plan's units grouped: one environment per (task kind, options, step multiplier),
+    each with the (unit, agent) of every method configuration that runs on it."""
+    agents: dict[tuple[str, str, str], Agent] = {}
+    envs: dict[tuple[str, str, float], _EnvProbe] = {}
+    seen: set[tuple[str, str, str, str, float]] = set()
+    for u in plan.units:
+        kind = stratum(u.instance_id)
+        pre = (kind, u.method, u.method_config, _canonical(u.env_options), float(u.step_multiplier))
+        if pre in seen:
+            continue
+        seen.add(pre)
+        akey = (u.method, u.method_config, u.benchmark)
+        if akey not in agents:
+            # settled by expand() already (resolve_methods); built again as the worker builds it:
+            # from the unit's resolved settings
+            agents[akey] = agent_from_config(u.method, u.method_config)
+        agent = agents[akey]
+        options = env_options_for(u.work(), agent)
+        ekey = (kind, _canonical(options), float(u.step_multiplier))
+        envs.setdefault(ekey, _EnvProbe(u, options)).methods.append((u, agent))
+    return list(envs.values())
+
+
+def _open_env(spec: SweepSpec, probe: _EnvProbe) -> Environment:
+    """The probe's environment, opened as the worker opens it; a SpecError line when it cannot be."""
+    first = probe.unit
+    try:
+        return registry.make_env(first.instance_id, step_multiplier=first.step_multiplier, **probe.options)
+    except DataNotFoundError as exc:
+        raise _data_error(spec, first, exc) from None
+    except Exception as exc:
+        b = first.benchmark
+        head = f"environments[{_env_index(spec, b, first.env_options)}] ({b}): cannot open {first.instance_id}: "
+        raise SpecError(_fit(head, _reason(exc))) from None
+
+
+def _check_agents(spec: SweepSpec, env: Environment, probe: _EnvProbe) -> None:
+    """Each method configuration of the probe builds its episode and renders its demonstration on ``env``."""
+    method_index = {m.name: i for i, m in enumerate(spec.methods)}
+    for u, agent in probe.methods:
+        try:
+            agent.episode_config(env)
+            agent.demonstration_text(env)
+        except DataNotFoundError as exc:
+            raise _data_error(spec, u, exc) from None
+        except Exception as exc:
+            i = method_index.get(u.method_label)
+            head = f"methods[{i}] ({u.method_label}) cannot run on {stratum(u.instance_id)}: "
+            raise SpecError(_fit(head, _reason(exc))) from None
 
 
 def check_plan(plan: Plan) -> None:
@@ -253,76 +322,11 @@ def check_plan(plan: Plan) -> None:
     Why: a unit that cannot start would otherwise fail at run time on every attempt, be stored
     as ``env_error``, count as done and show up in the report as a 0 % method.
     """
-    from pipeline.errors import SpecError
-    from pipeline.units import stratum
-    from recap.env import DataNotFoundError
-    from workers.envs import registry
-    from workers.episode_worker import agent_from_config, env_options_for
-
     check_output_caps(plan)
-    spec = plan.spec
-    method_index = {m.name: i for i, m in enumerate(spec.methods)}
-
-    def env_index(benchmark: str, options: Any) -> int:
-        same = [i for i, e in enumerate(spec.environments) if e.benchmark == benchmark]
-        for i in same:
-            if dict(spec.environments[i].options) == dict(options or {}):
-                return i
-        return same[0] if same else 0
-
-    # group the units: environment key -> (first unit, its options) and method keys -> (unit, agent)
-    agents: dict[tuple[str, str, str], Any] = {}
-    envs: dict[tuple[str, str, float], dict[str, Any]] = {}
-    seen: set[tuple[str, str, str, str, float]] = set()
-    for u in plan.units:
-        kind = stratum(u.instance_id)
-        pre = (kind, u.method, u.method_config, _canonical(u.env_options), float(u.step_multiplier))
-        if pre in seen:
-            continue
-        seen.add(pre)
-        akey = (u.method, u.method_config, u.benchmark)
-        if akey not in agents:
-            # settled by expand() already (resolve_methods); built again as the worker builds it:
-            # from the unit's resolved settings
-            agents[akey] = agent_from_config(u.method, u.method_config)
-        agent = agents[akey]
-        options = env_options_for(u.work(), agent)
-        ekey = (kind, _canonical(options), float(u.step_multiplier))
-        entry = envs.setdefault(ekey, {"unit": u, "options": options, "methods": []})
-        entry["methods"].append((u, agent))
-
-    def data_error(u: Any, exc: BaseException) -> SpecError:
-        b = u.benchmark
-        head = f"environments[{env_index(b, u.env_options)}] ({b}): cannot find its data: "
-        reason = " ".join(str(exc).split())
-        tail = "; `recap data list` shows where it looks"
-        if "recap data fetch" not in reason:
-            tail += f", `recap data fetch {b}` gets it"
-        if len(head) + len(reason) + len(tail) > MESSAGE_MAX:  # the folders looked in: recap data list shows them
-            reason = re.sub(r"\s*\(looked in .*\)$", "", reason)
-        return SpecError(_fit(head, reason, tail))
-
-    for entry in envs.values():
-        first = entry["unit"]
+    for probe in _env_probes(plan):
+        env = _open_env(plan.spec, probe)
         try:
-            env = registry.make_env(first.instance_id, step_multiplier=first.step_multiplier, **entry["options"])
-        except DataNotFoundError as exc:
-            raise data_error(first, exc) from None
-        except Exception as exc:
-            b = first.benchmark
-            head = f"environments[{env_index(b, first.env_options)}] ({b}): cannot open {first.instance_id}: "
-            raise SpecError(_fit(head, _reason(exc))) from None
-        try:
-            for u, agent in entry["methods"]:
-                try:
-                    agent.episode_config(env)
-                    agent.demonstration_text(env)
-                except DataNotFoundError as exc:
-                    raise data_error(u, exc) from None
-                except Exception as exc:
-                    i = method_index.get(u.method_label)
-                    head = f"methods[{i}] ({u.method_label}) cannot run on {stratum(u.instance_id)}: "
-                    raise SpecError(_fit(head, _reason(exc))) from None
+            _check_agents(plan.spec, env, probe)
         finally:
             try:
                 env.close()

@@ -12,6 +12,14 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from rich.console import Console
+from rich.live import Live
+from rich.markup import escape
+from rich.panel import Panel
+from rich.progress_bar import ProgressBar
+from rich.table import Table
+from rich.text import Text
+
 from pipeline.backend import RateStats
 
 #: how the driver marks a test-double model's label in the rates (see pipeline.summary)
@@ -107,9 +115,6 @@ class ProgressView:
 
     def __enter__(self) -> ProgressView:
         if self.mode == "live":
-            from rich.console import Console
-            from rich.live import Live
-
             self._live = Live(self._render(None), console=Console(file=self.stream), refresh_per_second=4, transient=False)
             self._live.__enter__()
         return self
@@ -120,11 +125,6 @@ class ProgressView:
             self._live = None
 
     def _render(self, s: Snapshot | None) -> Any:
-        from rich.markup import escape
-        from rich.panel import Panel
-        from rich.progress_bar import ProgressBar
-        from rich.table import Table
-
         t = Table.grid(padding=(0, 2))
         t.add_column(style="bold")
         t.add_column()
@@ -155,8 +155,6 @@ class ProgressView:
         """One line the user must see whatever the mode (a stop under way): above the live
         panel, else on stderr."""
         if self._live is not None:
-            from rich.text import Text
-
             self._live.console.print(Text(text, style="yellow"))
         else:
             print(text, file=sys.stderr, flush=True)

@@ -12,13 +12,17 @@ driver leaves behind can be found - and only those - and stopped by the next ``r
 
 from __future__ import annotations
 
+import ipaddress
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from pipeline import local_cluster
 from pipeline.spec import RaySpec
+from workers.envs.data_paths import CACHE_ENV
+from workers.envs.registry import data_env_vars
 from workers.log_setup import LEVEL_VAR
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
@@ -28,9 +32,6 @@ def forwarded_vars() -> tuple[str, ...]:
     """Forwarded from the driver's environment to every Ray worker when set: each registered
     benchmark's data variables (its ``data_env_vars`` hook) and recap-eval's cache folder and the log level (:mod:`workers.log_setup`), so a
     worker finds the data by the same rule as the driver (workers/envs/data_paths.py)."""
-    from workers.envs.data_paths import CACHE_ENV
-    from workers.envs.registry import data_env_vars
-
     return (*data_env_vars(), CACHE_ENV, LEVEL_VAR)
 
 
@@ -56,9 +57,7 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
     is reused as is. A local cluster gets its own temp folder, recording this process as its
     owner and ``run`` (the run folder) for the message of whoever cleans up after a crash."""
     global _owned
-    import ray
-
-    from pipeline import local_cluster
+    import ray  # lazy: Ray loads only where a session uses it
 
     os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -102,9 +101,7 @@ def shutdown_ray() -> None:
     """``ray.shutdown()``; for a local cluster this process started, also stop any of its
     processes still there and mark its owner record ended (:func:`pipeline.local_cluster.release`)."""
     global _owned
-    import ray
-
-    from pipeline import local_cluster
+    import ray  # lazy: Ray loads only where a session uses it
 
     ray.shutdown()
     folder, _owned = _owned, None
@@ -116,11 +113,9 @@ def _is_loopback(address: str) -> bool:
     """Whether ``address`` (host:port, or ``auto`` = the latest local cluster) is on the loopback;
     a driver joining such a cluster must take the loopback as its own node address too, or
     Ray looks for a local node under the machine's outward address and waits for ever."""
-    import ipaddress
-
     if address == "auto":
         try:
-            from ray._private.services import canonicalize_bootstrap_address
+            from ray._private.services import canonicalize_bootstrap_address  # lazy: Ray loads only where a session uses it
 
             address = canonicalize_bootstrap_address("auto") or ""
         except Exception:
@@ -146,7 +141,7 @@ def _loopback_node() -> Iterator[None]:
     public switch for this; its node-address lookup returns the loopback when "clusters" are
     disabled (the setting it uses on macOS/Windows), which is what this sets for the start."""
     try:
-        from ray._private import ray_constants
+        from ray._private import ray_constants  # lazy: Ray loads only where a session uses it
     except ImportError:  # another Ray layout: leave the default
         yield
         return

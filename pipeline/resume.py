@@ -28,6 +28,7 @@ are retried.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -107,6 +108,15 @@ def load_state(store: RunStore, retry: Retry = "infra") -> RunState:
     if retry not in RETRY_MODES:
         raise ValueError(f"retry must be one of {', '.join(RETRY_MODES)}, got {retry!r}")
     state = RunState(retry=retry)
+    ended = _read_episodes(store, state)
+    _read_failure_events(store, state, ended)
+    _read_attempt_ids(store, state)
+    return state
+
+
+def _read_episodes(store: RunStore, state: RunState) -> dict[str, int]:
+    """The terminal rows into ``state`` (completed, errored, budget-stopped, infrastructure
+    failures); per unit the highest attempt of any terminal row (failures before it are spent)."""
     cols = ("unit_id", "attempt", "end_reason", "error")
     eps, bad = store.read_table("episodes", list(cols))
     state.bad_parts += bad
@@ -115,7 +125,6 @@ def load_state(store: RunStore, retry: Retry = "infra") -> RunState:
     infra: dict[str, tuple[int, str]] = {}
     #: unit -> (attempt, end reason) of its latest completing row
     final: dict[str, tuple[int, str]] = {}
-    #: unit -> the highest attempt of any terminal row (failures before it are spent)
     ended: dict[str, int] = {}
     for unit_id, attempt, reason, error in zip(*(eps.column(c).to_pylist() for c in cols)):
         state._seen(unit_id, attempt)
@@ -131,12 +140,17 @@ def load_state(store: RunStore, retry: Retry = "infra") -> RunState:
             if attempt >= final.get(unit_id, (0, ""))[0]:
                 final[unit_id] = (attempt, reason or "")
     state.errored = {u: r for u, (_, r) in final.items() if r in ERROR_END_REASONS}
-    if retry == "errors":
+    if state.retry == "errors":
         state.completed -= set(state.errored)
     # an infrastructure failure after the latest completing row (a --retry errors attempt) counts
     state.infra_failed = {u: k for u, (a, k) in infra.items() if u not in state.completed and a > final.get(u, (0, ""))[0]}
     state.budget_stopped -= state.completed
     state.budget_stopped -= set(state.infra_failed)
+    return ended
+
+
+def _read_failure_events(store: RunStore, state: RunState, ended: dict[str, int]) -> None:
+    """Failed attempts (events) after each unit's last terminal row count toward its attempts."""
     events, bad = store.read_table("events", ["kind", "unit_id", "detail"])
     state.bad_parts += bad
     for kind, unit_id, detail in zip(*(events.column(c).to_pylist() for c in ("kind", "unit_id", "detail"))):
@@ -150,6 +164,11 @@ def load_state(store: RunStore, retry: Retry = "infra") -> RunState:
         # a unit that ended (e.g. gave up after its workers died) starts a fresh count when retried
         if kind in FAILED_ATTEMPT_EVENTS and (unit_id not in ended or attempt > ended[unit_id]):
             state.failures[unit_id] = state.failures.get(unit_id, 0) + 1
+
+
+def _read_attempt_ids(store: RunStore, state: RunState) -> None:
+    """Every attempt number used so far (rows of the other tables, the ledger journal): a new
+    attempt never reuses one."""
     for table in _ID_TABLES:
         ids, bad = store.read_table(table, ["episode_id"])
         state.bad_parts += bad
@@ -161,7 +180,6 @@ def load_state(store: RunStore, retry: Retry = "infra") -> RunState:
         parsed = parse_episode_id(eid)
         if parsed:
             state._seen(*parsed)
-    return state
 
 
 def journal_episode_ids(store: RunStore) -> set[str]:
@@ -310,8 +328,6 @@ def repair_run(store: RunStore) -> str:
         store.write_bytes(JOURNAL_FILE, data[: issue.good_end])
         backup = f"{store.location.rstrip('/')}/{backup_name}"
     else:
-        import fcntl
-
         path = store.path / JOURNAL_FILE
         with open(path, "r+b") as fh:
             try:  # no live ledger may hold it (the gateway's own lock)

@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.events import EventBuffer
+from schemas.parts import PartWriter
+from workers.sink import batch_hash, records_by_table, recover_wal, sink_actor
 
 Rows = dict[str, list[dict[str, Any]]]
 
@@ -48,9 +50,7 @@ class SinkChannel:
 
     def start(self, node_id: str) -> Any:
         """The sink actor, pinned to this node (the run folder is local to it)."""
-        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
-
-        from workers.sink import sink_actor
+        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy  # lazy: Ray loads only where a session uses it
 
         here = NodeAffinitySchedulingStrategy(node_id=node_id, soft=False)
         self.actor = sink_actor().options(scheduling_strategy=here).remote(str(self.run_dir), self.run_id, writer=self.writer)
@@ -61,7 +61,6 @@ class SinkChannel:
         once the sink is lost."""
         if not records:
             return
-        from workers.sink import batch_hash, records_by_table
 
         rows = records_by_table(records, self.run_id)
         if self.lost is not None or self.actor is None:
@@ -78,7 +77,7 @@ class SinkChannel:
     def check_acks(self, timeout: float | None = 0.0) -> None:
         """Drop the batches the sink acknowledged; raise :class:`SinkLost` when one failed
         (or, with a timeout, when not all were acknowledged in time)."""
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
         from ray.exceptions import RayActorError
 
         if not self._unacked or self.lost is not None:
@@ -107,7 +106,7 @@ class SinkChannel:
 
     def gone(self) -> str | None:
         """Why the sink is gone for good, or None when it answers (after a restart if need be)."""
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
         from ray.exceptions import GetTimeoutError, RayActorError
 
         if self.lost is not None:
@@ -123,9 +122,7 @@ class SinkChannel:
     def on_lost(self, why: str) -> None:
         """The sink is gone: write what its log holds and every batch of the driver it never
         took (the terminal rows above all) straight into the run folder."""
-        import ray
-
-        from workers.sink import recover_wal
+        import ray  # lazy: Ray loads only where a session uses it
 
         if self.lost is not None:
             return
@@ -145,11 +142,7 @@ class SinkChannel:
     def write_direct(self, batches: list[Rows]) -> None:
         """Rows written by the driver itself (the sink is lost): pending events first,
         terminal rows last."""
-        from schemas.parts import PartWriter
-
         if self.events:
-            from workers.sink import records_by_table
-
             batches = [records_by_table(self.events.drain(), self.run_id)] + list(batches)
         merged: Rows = {}
         for rows in batches:
@@ -163,7 +156,7 @@ class SinkChannel:
 
     def close(self) -> None:
         """Every driver batch acknowledged, the buffers written, the sink's log removed."""
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
         from ray.exceptions import GetTimeoutError, RayActorError
 
         if self.actor is None or self.lost is not None:
@@ -179,7 +172,7 @@ class SinkChannel:
     def kill(self) -> None:
         """End the sink actor at the end of the session (after :meth:`close`); errors are ignored, the rows are already safe."""
         if self.actor is not None:
-            import ray
+            import ray  # lazy: Ray loads only where a session uses it
 
             try:
                 ray.kill(self.actor)

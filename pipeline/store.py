@@ -29,8 +29,10 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
+import pyarrow.fs as pafs
 
 from pipeline.errors import RunFolderError
+from pipeline.mirror import mirror_dir
 from schemas.parts import RUN_FILE, BadPart, inspect_parts, is_part_name, part_files, read_parts
 from schemas.records import SCHEMA_VERSION
 from schemas.tables import TABLES
@@ -63,8 +65,6 @@ class RunStore:
         self.location = str(location)
         self.remote = is_uri(self.location)
         if self.remote:
-            import pyarrow.fs as pafs
-
             self.fs, self.root = pafs.FileSystem.from_uri(self.location)
             self.root = self.root.rstrip("/")
         else:
@@ -82,8 +82,6 @@ class RunStore:
     def exists(self, name: str = "") -> bool:
         """Whether ``name`` (or, with no name, the folder itself) exists in the run folder."""
         if self.remote:
-            import pyarrow.fs as pafs
-
             info = self.fs.get_file_info(self._p(name) if name else self.root)
             return info.type != pafs.FileType.NotFound
         return (self.path / name).exists() if name else self.path.exists()
@@ -91,8 +89,6 @@ class RunStore:
     def is_empty(self) -> bool:
         """True when the folder is missing or holds nothing (a fresh run may start there)."""
         if self.remote:
-            import pyarrow.fs as pafs
-
             info = self.fs.get_file_info(self.root)
             if info.type == pafs.FileType.NotFound:
                 return True
@@ -202,8 +198,6 @@ class RunStore:
         before it wrote run.json) and temp files."""
         try:
             if self.remote:
-                import pyarrow.fs as pafs
-
                 names = [i.base_name for i in self.fs.get_file_info(pafs.FileSelector(self.root, recursive=False))]
             else:
                 names = [p.name for p in self.path.iterdir()]
@@ -243,7 +237,6 @@ class RunStore:
         object-store run, a file beside its local mirror (one driver per machine)."""
         if not self.remote:
             return self.path / LOCK_FILE
-        from pipeline.mirror import mirror_dir
 
         mirror = mirror_dir(self.location)
         return mirror.with_name(mirror.name + "." + LOCK_FILE)
@@ -423,8 +416,6 @@ class RunStore:
     def part_files(self, table: str) -> list[str]:
         """Paths of the table's part files (``part-*.parquet``), sorted; temp files and other names are not parts."""
         if self.remote:
-            import pyarrow.fs as pafs
-
             sel = pafs.FileSelector(f"{self.root}/{table}", allow_not_found=True)
             return sorted(
                 i.path for i in self.fs.get_file_info(sel) if i.type == pafs.FileType.File and is_part_name(i.base_name)

@@ -24,6 +24,10 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+import pyarrow as pa
+from rich.markup import escape
+from rich.table import Table
+
 from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue, run_spend
 from pipeline.store import PLAN_FILE, RunStore
 from schemas.parts import BadPart, inspect_parts, read_parts
@@ -124,23 +128,20 @@ def model_label(name: str, test_double: bool) -> str:
     return name + (TEST_DOUBLE_LABEL if test_double else "")
 
 
-def collect(store: RunStore) -> StatusReport:
-    """Read plan + tables and count; never raises for unreadable parts (they are listed)."""
-    ident = store.require_identity()
-    problems: list[str] = []
+def _read_plan_units(store: RunStore, problems: list[str]) -> list[dict[str, Any]]:
+    """The plan's units (none, and a problem named, when plan.json cannot be read)."""
     try:
         plan = store.read_json(PLAN_FILE) or {"units": []}
     except ValueError as exc:
         plan = {"units": []}
         problems.append(f"{PLAN_FILE} unreadable: {exc}")
-    units = plan.get("units", [])
-    bad: list[BadPart] = []
-    # one rule with recap sql / recap report: a part without the table's exact columns and
-    # types is skipped and named (schemas.parts.schema_problem), never cast and counted
-    opener = store.fs.open_input_file if store.remote else None
-    eps, b = read_parts(store.part_files("episodes"), "episodes", open_file=opener)
-    bad += b
-    rows = eps.to_pylist()
+    units: list[dict[str, Any]] = plan.get("units", [])
+    return units
+
+
+def _latest_rows(rows: list[dict[str, Any]]) -> tuple[dict[str, dict[str, Any]], dict[str, dict[str, Any]], int]:
+    """Per unit its latest terminal row and its latest row that completes it; and how many
+    terminal rows repeat a (unit, attempt) already written."""
     latest: dict[str, dict[str, Any]] = {}
     final: dict[str, dict[str, Any]] = {}  # the latest row that completes its unit
     seen: dict[tuple[str, int], int] = defaultdict(int)
@@ -154,11 +155,11 @@ def collect(store: RunStore) -> StatusReport:
             if prev is None or r["attempt"] > prev["attempt"]:
                 final[r["unit_id"]] = r
     duplicates = sum(n - 1 for n in seen.values() if n > 1)
-    calls, b = read_parts(store.part_files("llm_calls"), "llm_calls", ["cost_usd"], open_file=opener)
-    bad += b
-    for table in store.tables():  # the other tables: status names every unreadable part
-        if table not in ("episodes", "llm_calls"):
-            bad += inspect_parts(store.part_files(table), table, opener)[1]
+    return latest, final, duplicates
+
+
+def _journal_problems(store: RunStore, problems: list[str]) -> None:
+    """A damaged or unsplittable ledger journal, named among the problems (never raised)."""
     try:
         issue = journal_issue(store)
     except Exception as exc:  # status never dies on a damaged folder
@@ -166,17 +167,25 @@ def collect(store: RunStore) -> StatusReport:
     else:
         if issue is not None:
             problems.append(issue.describe().replace("<run>", store.location))
-    failed_kinds: dict[str, int] = defaultdict(int)
-    # one figure for spend: the ledger journal's (worst-case charges of calls that have no
-    # llm_calls row of their own - cut, orphaned - included); the rows only without a journal
+
+
+def _spend(store: RunStore, calls: pa.Table, rows: list[dict[str, Any]]) -> tuple[float, float]:
+    """(spent, reserved) USD. One figure for spend: the ledger journal's (worst-case charges of
+    calls that have no llm_calls row of their own - cut, orphaned - included); the rows only
+    without a journal."""
     ledger = run_spend(store)
-    reserved = 0.0
     if ledger is not None:
-        spend, reserved = ledger.spent_usd, ledger.reserved_usd
-    elif calls.num_rows:
-        spend = float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist()))
-    else:
-        spend = float(sum(r["cost_usd"] for r in rows))
+        return ledger.spent_usd, ledger.reserved_usd
+    if calls.num_rows:
+        return float(sum(c or 0.0 for c in calls.column("cost_usd").to_pylist())), 0.0
+    return float(sum(r["cost_usd"] for r in rows)), 0.0
+
+
+def _group_rows(
+    units: list[dict[str, Any]], latest: dict[str, dict[str, Any]], final: dict[str, dict[str, Any]]
+) -> tuple[dict[tuple[str, str], GroupRow], dict[str, int]]:
+    """One row per (method, model) from each unit's deciding terminal row; failures by kind."""
+    failed_kinds: dict[str, int] = defaultdict(int)
     groups: dict[tuple[str, str], GroupRow] = {}
     for u in units:
         key = (u["method"], u["model"])
@@ -200,13 +209,36 @@ def collect(store: RunStore) -> StatusReport:
         g.success += int(r["success"])
         g.steps += r["steps"]
         g.calls += r["llm_calls"]
-    completed = sum(g.done for g in groups.values())
+    return groups, dict(failed_kinds)
+
+
+def collect(store: RunStore) -> StatusReport:
+    """Read plan + tables and count; never raises for unreadable parts (they are listed)."""
+    ident = store.require_identity()
+    problems: list[str] = []
+    units = _read_plan_units(store, problems)
+    bad: list[BadPart] = []
+    # one rule with recap sql / recap report: a part without the table's exact columns and
+    # types is skipped and named (schemas.parts.schema_problem), never cast and counted
+    opener = store.fs.open_input_file if store.remote else None
+    eps, b = read_parts(store.part_files("episodes"), "episodes", open_file=opener)
+    bad += b
+    rows = eps.to_pylist()
+    latest, final, duplicates = _latest_rows(rows)
+    calls, b = read_parts(store.part_files("llm_calls"), "llm_calls", ["cost_usd"], open_file=opener)
+    bad += b
+    for table in store.tables():  # the other tables: status names every unreadable part
+        if table not in ("episodes", "llm_calls"):
+            bad += inspect_parts(store.part_files(table), table, opener)[1]
+    _journal_problems(store, problems)
+    spend, reserved = _spend(store, calls, rows)
+    groups, failed_kinds = _group_rows(units, latest, final)
     return StatusReport(
         location=store.location,
         run=ident.run,
         run_id=ident.run_id,
         total=len(units),
-        completed=completed,
+        completed=sum(g.done for g in groups.values()),
         success=sum(g.success for g in groups.values()),
         budget_stopped=sum(g.budget_stopped for g in groups.values()),
         spend_usd=spend,
@@ -216,7 +248,7 @@ def collect(store: RunStore) -> StatusReport:
         bad_parts=bad,
         problems=problems,
         failed=sum(g.failed for g in groups.values()),
-        failed_kinds=dict(failed_kinds),
+        failed_kinds=failed_kinds,
         errored=sum(g.errored for g in groups.values()),
         reserved_usd=reserved,
     )
@@ -224,9 +256,6 @@ def collect(store: RunStore) -> StatusReport:
 
 def render(report: StatusReport, console: Any) -> None:
     """The summary table plus totals (rich)."""
-    from rich.markup import escape
-    from rich.table import Table
-
     t = Table(title=escape(f"run {report.run} ({report.run_id}) - {report.location}"))
     columns: tuple[tuple[str, Literal["left", "right"]], ...] = (
         ("arm", "left"),

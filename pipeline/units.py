@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import random
 import re
+from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,7 +26,9 @@ from recap.config import ConfigError
 from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
 from schemas.labels import ablation_of_config, place_of
 from schemas.outcomes import UnitWork
+from workers.envs.registry import get_benchmark, split_id
 from workers.episode_worker import build_agent
+from workers.release.texts import ReleaseMissing, ReleaseUnavailable, release_folder, release_text
 
 HASH_VERSION = 1
 
@@ -163,8 +167,6 @@ def canonical_instance_id(instance_id: str, env: Any = None) -> str:
 # --------------------------------------------------------------------------------------------
 def resolve_instances(envs: Sequence[EnvSpec]) -> list[tuple[str, dict[str, Any]]]:
     """Instance ids (with their env options) in spec order, deduplicated; errors name the entry."""
-    from workers.envs.registry import get_benchmark, split_id
-
     out: list[tuple[str, dict[str, Any]]] = []
     seen: set[str] = set()
     for i, env in enumerate(envs):
@@ -308,8 +310,6 @@ def method_step_multipliers(spec: SweepSpec, index: int, benchmarks: set[str]) -
     benchmark must exist and its selector must be one the benchmark knows (a typo is refused, not
     silently run at the default cap). A key for a benchmark the sweep does not run is still
     checked when its instance list can be read without data, else left out."""
-    from workers.envs.registry import get_benchmark
-
     m = spec.methods[index]
     where = f"methods[{index}] ({m.name}): step_multipliers"
     out: list[TaskMultiplier] = []
@@ -357,8 +357,6 @@ def with_release_digest(spec: SweepSpec, m: Any, instance_id: str, method_config
     episode will show (``release:<sha256>``), so the unit's hash covers that text: an edited release
     file makes a different unit. SpecError (naming the fetch command) when the release folder is
     missing or has no prompts for the method here: before anything runs."""
-    from workers.release.texts import ReleaseMissing, ReleaseUnavailable, release_folder, release_text
-
     bench, split, task = place_of(instance_id)
     key = (method_config, f"{bench}/{split}/{task}")
     if key not in cache:
@@ -457,9 +455,6 @@ def order_units(units: Sequence[Unit], spec: SweepSpec) -> list[Unit]:
     Deterministic: the same units and spec give the same order; a resume keeps it (what is
     done is skipped, the rest keeps its relative order).
     """
-    import random
-    from collections import defaultdict
-
     if spec.order == "plan":
         return list(units)
     rng = random.Random(order_seed(spec))

@@ -22,6 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
+from pipeline.errors import PipelineError
 from pipeline.resume import Pending
 from schemas.outcomes import EpisodeOutcome
 
@@ -147,9 +148,7 @@ class RayWorkerPool(_SlotBook):
 
     def start(self, n: int) -> dict[str, str]:
         """Start ``n`` actors and wait (up to 300 s) until each reports its node; PipelineError when they cannot start."""
-        import ray
-
-        from pipeline.errors import PipelineError
+        import ray  # lazy: Ray loads only where a session uses it
 
         self.slots = [self._new_slot() for _ in range(n)]
         try:
@@ -169,7 +168,7 @@ class RayWorkerPool(_SlotBook):
     def wait(self, timeout: float) -> list[Any]:
         """Every attempt that is ready once the first one is (at most ``timeout`` seconds), so a burst is
         collected in one round."""
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
 
         if not self._inflight:
             return []
@@ -181,7 +180,7 @@ class RayWorkerPool(_SlotBook):
     @staticmethod
     def _worker_died(exc: BaseException, slot: Slot) -> bool:
         """The worker process itself is gone (not: its task failed on another actor)."""
-        from ray.exceptions import RayTaskError
+        from ray.exceptions import RayTaskError  # lazy: Ray loads only where a session uses it
 
         if isinstance(exc, RayTaskError):  # its task raised: the worker lived to report it
             return False
@@ -196,7 +195,7 @@ class RayWorkerPool(_SlotBook):
         """The attempt behind ``key``: an actor error is ``worker_lost`` only when that actor is dead (it is
         killed and dropped from the pool), else ``elsewhere``; a task that raised is ``task_raised`` and its
         worker stays."""
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
         from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError, RayTaskError, WorkerCrashedError
 
         slot, pending, started = self._inflight.pop(key)
@@ -231,7 +230,7 @@ class RayWorkerPool(_SlotBook):
 
     def shutdown(self) -> None:
         """Kill every actor (errors ignored: an actor may already be gone)."""
-        import ray
+        import ray  # lazy: Ray loads only where a session uses it
 
         for slot in self.slots:
             try:

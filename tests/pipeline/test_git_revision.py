@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import subprocess
 
-import pipeline.driver as driver
+import pipeline.provenance as provenance
 
 
 def test_untracked_outputs_do_not_mark_the_revision_dirty(tmp_path, monkeypatch):
@@ -16,9 +16,9 @@ def test_untracked_outputs_do_not_mark_the_revision_dirty(tmp_path, monkeypatch)
     git("add", "code.py")
     git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "c")
     head = git("rev-parse", "HEAD")
-    monkeypatch.setattr(driver, "PROJECT_ROOT", tmp_path)
+    monkeypatch.setattr(provenance, "PROJECT_ROOT", tmp_path)
     (tmp_path / "results" / "run1").mkdir(parents=True)
     (tmp_path / "results" / "run1" / "run.json").write_text("{}")
-    assert driver._git_revision() == head
+    assert provenance.git_revision() == head
     (tmp_path / "code.py").write_text("x = 2\n")
-    assert driver._git_revision() == head + "+dirty"
+    assert provenance.git_revision() == head + "+dirty"
