@@ -281,6 +281,11 @@ def check_plan(plan: Plan) -> None:
             continue
         seen.add(pre)
         akey = (u.method, u.method_config, u.benchmark)
+        refusal = registry.get_benchmark(u.benchmark).refuses_method(u.method)
+        if refusal is not None:
+            raise SpecError(
+                _fit(f"methods[{method_index.get(u.method_label)}] ({u.method_label}) cannot run on {u.benchmark}: ", refusal)
+            )
         if akey not in agents:
             # settled by expand() already (resolve_methods); built again as the worker builds it:
             # from the unit's resolved settings

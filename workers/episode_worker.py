@@ -337,6 +337,8 @@ class EpisodeRunner:
             return out
         finally:
             if env is not None:
+                for record in env.take_records(episode_id, self.run_id):  # FEVER: the pages it read
+                    forward(record)
                 try:
                     env.close()
                 except Exception:
