@@ -244,6 +244,14 @@ def _data_error(spec: SweepSpec, u: Unit, exc: BaseException) -> SpecError:
     return SpecError(_fit(head, reason, tail))
 
 
+def _check_refusal(spec: SweepSpec, u: Unit) -> None:
+    """A benchmark that refuses a method (FEVER: ADaPT, "--" in the paper) says why in one line."""
+    refusal = registry.get_benchmark(u.benchmark).refuses_method(u.method)
+    if refusal is not None:
+        i = next((k for k, m in enumerate(spec.methods) if m.name == u.method_label), None)
+        raise SpecError(_fit(f"methods[{i}] ({u.method_label}) cannot run on {u.benchmark}: ", refusal))
+
+
 @dataclass
 class _EnvProbe:
     """One environment to open (its first unit and make() options) and the agents to try on it."""
@@ -266,6 +274,7 @@ def _env_probes(plan: Plan) -> list[_EnvProbe]:
             continue
         seen.add(pre)
         akey = (u.method, u.method_config, u.benchmark)
+        _check_refusal(plan.spec, u)
         if akey not in agents:
             # settled by expand() already (resolve_methods); built again as the worker builds it:
             # from the unit's resolved settings

@@ -16,13 +16,18 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from recap.demo_script import DemoReplies, DemoScript
+from schemas.kinds import EndReason
 
 #: the step cap of a :meth:`Environment.plan_copy` (no plan is this long)
 PLAN_COPY_STEPS = 10**9
 
 
 class EnvError(RuntimeError):
-    """The environment failed (engine error, missing data, broken game file)."""
+    """The environment failed (engine error, missing data, broken game file). ``end_reason`` is
+    the episode's end reason the runtime records for it: ``env_error`` unless a subclass has its
+    own (FEVER's Wikipedia errors end ``wiki_error``)."""
+
+    end_reason: EndReason = "env_error"
 
 
 class InvalidActionError(ValueError):
@@ -158,6 +163,13 @@ class Environment(ABC):
     @property
     def steps_taken(self) -> int:
         return getattr(self, "_steps_taken", 0)
+
+    def take_records(self, episode_id: str, run_id: str) -> list[Any]:
+        """Table records the environment made since the last call (schemas.records: FEVER's
+        ``wiki_pages``/``wiki_requests`` rows of the pages it read), for the episode worker to
+        write into run ``run_id`` beside the episode's own; each record is handed over once.
+        Default: none."""
+        return []
 
     def close(self) -> None:
         """Release engine resources."""

@@ -315,6 +315,8 @@ class EnvDriver:
     def reset(self) -> Reset:
         try:
             r = self.env.reset()
+        except EnvError as exc:  # the environment's own reason when it has one (FEVER: wiki_error)
+            raise EpisodeEnd(exc.end_reason, f"reset failed: {exc}") from exc
         except Exception as exc:  # engine failure at reset
             raise EpisodeEnd("env_error", f"reset failed: {exc}") from exc
         self.observation, self.goal = r.observation, r.goal
@@ -348,7 +350,7 @@ class EnvDriver:
             self.reject(action, node_id)
             raise
         except EnvError as exc:
-            raise EpisodeEnd("env_error", str(exc)) from exc
+            raise EpisodeEnd(exc.end_reason, str(exc)) from exc
         except Exception as exc:
             raise EpisodeEnd("env_error", f"{type(exc).__name__}: {exc}") from exc
         self.steps += 1
@@ -358,6 +360,8 @@ class EnvDriver:
         self._record(action, valid, step.observation, step.done, node_id)
         if step.success:
             raise EpisodeEnd("success")
+        if step.done and step.info.get("end_reason") == "agent_done":  # e.g. FEVER's wrong verdict
+            raise EpisodeEnd("agent_done", f"the environment ended the episode after {self.steps} steps without success")
         if step.done or self.steps >= self.env.max_steps:
             raise EpisodeEnd("step_cap", f"{self.steps} steps (cap {self.env.max_steps})")
         return step

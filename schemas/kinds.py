@@ -11,7 +11,10 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
-#: why an episode ended (``episodes.end_reason``); ``infra_error`` is written by the driver only
+#: why an episode ended (``episodes.end_reason``); ``infra_error`` is written by the driver only.
+#: ``wiki_error``: a Wikipedia answer (FEVER) could not be had or read; it is an environment
+#: error with its own reason because one kind of it (``unavailable``: the site refused or timed
+#: out after the retries) is infrastructure that ``recap resume`` retries (schemas.labels)
 EndReason = Literal[
     "success",
     "step_cap",
@@ -23,6 +26,7 @@ EndReason = Literal[
     "episode_limit",
     "env_error",
     "truncated",
+    "wiki_error",
 ]
 END_REASONS: tuple[str, ...] = get_args(EndReason)
 

@@ -26,6 +26,12 @@ VERSION_1_PROFILES = ("paper", "released")
 INFRA_ERROR: Final = "infra_error"
 #: LLM error kinds (the first word of a row's error) that say the model service failed
 INFRA_ERROR_KINDS = ("rate_limit", "timeout", "server_error", "auth", "connection", "not_found")
+#: the end reason of an episode stopped because a Wikipedia answer could not be had or read (FEVER)
+WIKI_ERROR: Final = "wiki_error"
+#: the kind (first word of the error) of a ``wiki_error`` row that is infrastructure: the site
+#: refused or timed out after the retries. A snapshot miss, an unreadable answer or a
+#: disambiguation loop would fail the same way again, so they are outcomes like ``env_error``.
+WIKI_INFRA_KIND = "unavailable"
 #: how the driver's row for a unit it gave up on begins
 GAVE_UP_PREFIX = "gave up after"
 _GAVE_UP_INFRA = re.compile(r"\(infrastructure: (\w+)\)")
@@ -42,6 +48,8 @@ def infra_failure(end_reason: str | None, error: str | None) -> str | None:
       ``(infrastructure: KIND)``), not when the agent itself crashed;
     * ``infra_error`` rows (schema version 2): the kind is the first word of the error
       (``"auth: ..."``), a ``bad_request`` that is a 404 is ``not_found``, else ``infra``;
+    * ``wiki_error`` rows (FEVER): ``wiki_unavailable`` when the error's kind is ``unavailable``
+      (Wikipedia refused or timed out after the retries), else an outcome;
     * ``llm_error`` rows (version 1 wrote infrastructure failures so): the error starts with
       an infrastructure kind, or is a 404 ``bad_request`` (a wrong ``api_base`` path or model
       name); ``context_length`` and other bad requests are outcomes of the agent's requests.
@@ -58,6 +66,8 @@ def infra_failure(end_reason: str | None, error: str | None) -> str | None:
         if any(s in last for s in _WORKER_DEATHS):
             return "worker_lost"
         return "infra" if end_reason == INFRA_ERROR else None
+    if end_reason == WIKI_ERROR:  # "unavailable: ..." is the site failing, retried like infra_error
+        return "wiki_unavailable" if text.split(":", 1)[0].strip() == WIKI_INFRA_KIND else None
     if end_reason not in ("llm_error", INFRA_ERROR):
         return None
     kind = text.split(":", 1)[0].strip()

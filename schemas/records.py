@@ -224,7 +224,48 @@ class RunRecord:
     schema_version: int = SCHEMA_VERSION
 
 
-Record = MessageRecord | CallRecord | NodeRecord | StepRecord | EpisodeRecord | EventRecord | RunRecord
+@dataclass(frozen=True)
+class WikiPageRecord:
+    """One distinct Wikipedia answer body a FEVER run read, stored once by its content address.
+
+    Why content-addressed: the same page is read by many episodes (every method searches the
+    same claim's entities), so the body is kept once per ``sha256`` and each request points at
+    it (:class:`WikiRequestRecord`). A worker writes a body once; two workers that read the
+    same page may each write it, and such rows are the same bytes."""
+
+    table: ClassVar[str] = "wiki_pages"
+    sha256: str
+    body: bytes
+    size: int
+
+
+@dataclass(frozen=True)
+class WikiRequestRecord:
+    """One Wikipedia request an episode answered live: the request URL (the snapshot key), the
+    ``sha256`` of the body it got (``wiki_pages``), the HTTP status, when (ISO 8601 UTC), where
+    redirects led and the text encoding the body was decoded with."""
+
+    table: ClassVar[str] = "wiki_requests"
+    episode_id: str
+    url: str
+    sha256: str
+    status: int
+    fetched_at: str
+    final_url: str
+    encoding: str
+
+
+Record = (
+    MessageRecord
+    | CallRecord
+    | NodeRecord
+    | StepRecord
+    | EpisodeRecord
+    | EventRecord
+    | RunRecord
+    | WikiPageRecord
+    | WikiRequestRecord
+)
 
 ALL_RECORD_TYPES: tuple[type, ...] = (
     MessageRecord,
@@ -234,6 +275,8 @@ ALL_RECORD_TYPES: tuple[type, ...] = (
     EpisodeRecord,
     EventRecord,
     RunRecord,
+    WikiPageRecord,
+    WikiRequestRecord,
 )
 
 # keeps `field` importable for callers building records generically

@@ -350,6 +350,8 @@ class EpisodeRunner:
     def _finish(self, out: EpisodeOutcome, env: Environment | None, forward: RecordForwarder, t0: float) -> None:
         """However the attempt ended: close the environment, flush the records, stamp the times."""
         if env is not None:
+            for record in env.take_records(out.episode_id, self.run_id):  # FEVER: the pages it read
+                forward(record)
             try:
                 env.close()
             except Exception:

@@ -13,7 +13,17 @@ from schemas.records import ALL_RECORD_TYPES, CallRecord, MessageRecord, NodeRec
 
 
 def test_each_table_has_run_id_then_the_record_fields_and_a_version():
-    assert set(TABLES) == {"messages", "llm_calls", "tree_nodes", "steps", "episodes", "events", "run"}
+    assert set(TABLES) == {
+        "messages",
+        "llm_calls",
+        "tree_nodes",
+        "steps",
+        "episodes",
+        "events",
+        "run",
+        "wiki_pages",
+        "wiki_requests",
+    }
     for rt in ALL_RECORD_TYPES:
         schema = arrow_schema(rt.table)
         assert schema.names == ["run_id"] + [f.name for f in dataclasses.fields(rt)]

@@ -71,6 +71,12 @@ class Benchmark(BenchmarkProtocol, ABC):
         list the valid actions). Default: none."""
         return {}
 
+    def refuses_method(self, method: str) -> str | None:
+        """Why ``method`` (its name: ``adapt``...) cannot run on this benchmark, in one line, or
+        None; preflight refuses a sweep that pairs them before anything runs (FEVER: the paper
+        has no ADaPT result). Default: every method runs."""
+        return None
+
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The data folders this benchmark reads, by folder name: how each is found, what it
         holds and where its files come from (``recap data list/check/fetch`` work on these).

@@ -6,9 +6,13 @@ Options of :meth:`FeverBenchmark.make`:
 - ``wikipedia``: ``live`` (default) reads that server; ``snapshot:DIR`` answers only from the
   ``wiki_pages`` table(s) in DIR (a run folder) and never reaches a server.
 - ``max_steps``: actions per episode (default 10, the paper's cap).
+- ``verdict_only``: the method gives only a verdict (CoT, Standard; the pipeline sets it per
+  method, :meth:`FeverBenchmark.options_for_agent`): the rules ask for a one-action plan.
 - ``step_multiplier`` and ``seed`` are accepted and have no effect (a fixed cap; no randomness).
-- ``page_store`` / ``limiter``: objects the pipeline passes in (where answers read live are kept;
-  the shared per-host rate limit); defaults: keep nothing, the process's shared limiter.
+- ``page_store`` / ``limiter``: objects a caller passes in (where answers read live are kept;
+  the shared per-host rate limit); defaults: the environment keeps them and hands them to the
+  episode worker as ``wiki_pages``/``wiki_requests`` rows (``take_records``), the process's
+  shared limiter.
 """
 
 from __future__ import annotations
@@ -19,14 +23,17 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from recap.config import AgentConfig
 from recap.env import Environment
 from workers.envs.data_sources import DataFolder
 from workers.envs.registry import Benchmark
 
+from . import protocol
 from .claims import BENCHMARK_NAME, find_claim, load_claims, resolve_data_dir, select
 from .data_folders import FOLDER
+from .demo import demonstration_for
 from .env import DEFAULT_MAX_STEPS, FeverEnvironment
-from .pages import PageStore, Snapshot
+from .pages import PageStore, RunRecords, Snapshot
 from .ratelimit import RateLimiter
 from .wiki import DEFAULT_WIKIPEDIA_URL, LiveSource, SnapshotSource, WikiSource
 
@@ -76,6 +83,24 @@ class FeverBenchmark(Benchmark):
         """The claims folder (:mod:`.data_folders`)."""
         return {FOLDER.name: FOLDER}
 
+    def profile_settings(
+        self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
+    ) -> dict[str, Any]:
+        """The methods' profiles on FEVER (:mod:`.protocol`)."""
+        return protocol.profile_settings(config_cls, profile, generic)
+
+    def release_prompt_settings(self, config_cls: type[AgentConfig]) -> dict[str, Any]:
+        """What ``prompts: release`` implies on FEVER (:mod:`.protocol`)."""
+        return protocol.release_prompt_settings(config_cls)
+
+    def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
+        """CoT and Standard (a plan config) give only the verdict (:func:`.protocol.verdict_only`)."""
+        return {protocol.VERDICT_ONLY: True} if protocol.verdict_only(config) else {}
+
+    def refuses_method(self, method: str) -> str | None:
+        """ADaPT: the paper has no FEVER number (:func:`.protocol.refusal`)."""
+        return protocol.refusal(method)
+
     def list_instances(self, selector: str | None = None) -> list[str]:
         """``None``/``paper``: the paper's 200 in the release's order; ``all``: every claim in file order."""
         return [c.instance_id for c in select(load_claims(resolve_data_dir(self.data_dir)), selector)]
@@ -90,6 +115,7 @@ class FeverBenchmark(Benchmark):
         max_steps: int = DEFAULT_MAX_STEPS,
         step_multiplier: float | None = None,
         seed: int = 0,
+        verdict_only: bool = False,
         page_store: PageStore | None = None,
         limiter: RateLimiter | None = None,
         **unknown: Any,
@@ -98,14 +124,26 @@ class FeverBenchmark(Benchmark):
         if unknown:
             raise ValueError(
                 f"unknown FEVER option(s) {', '.join(sorted(unknown))}; accepted: data_dir, wikipedia_url, "
-                "wikipedia, max_steps, step_multiplier, seed"
+                "wikipedia, max_steps, verdict_only, step_multiplier, seed"
             )
         base = check_wikipedia_url(wikipedia_url)
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
-        source = wiki_source(wikipedia, page_store=page_store, limiter=limiter)
+        if not isinstance(verdict_only, bool):
+            raise ValueError(f"verdict_only must be true or false, got {verdict_only!r}")
+        records = RunRecords() if page_store is None else None
+        store = records.store if records is not None else page_store
+        source = wiki_source(wikipedia, page_store=store, limiter=limiter)
         claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
-        env = FeverEnvironment(find_claim(claims, instance_id), source, wikipedia_url=base, max_steps=max_steps)
+        env = FeverEnvironment(
+            find_claim(claims, instance_id),
+            source,
+            wikipedia_url=base,
+            max_steps=max_steps,
+            demonstration=lambda: demonstration_for(max_steps, verdict_only=verdict_only),
+            verdict_only=verdict_only,
+            records=records,
+        )
         env.seed = seed
         return env
 

@@ -35,14 +35,20 @@ class ClaimsFileError(EnvError):
     """``paper_dev.jsonl`` exists but a line is not a claim (bad JSON, a missing field, a repeated id)."""
 
 
+#: how FEVER's page ids spell brackets and colons (``Soul_Food_-LRB-film-RRB-``)
+_PAGE_ID_TOKENS = {"-LRB-": "(", "-RRB-": ")", "-LSB-": "[", "-RSB-": "]", "-LCB-": "{", "-RCB-": "}", "-COLON-": ":"}
+
+
 @dataclass(frozen=True)
 class Claim:
-    """One claim: its line number in the file (the release's index), id, text and label."""
+    """One claim: its line number in the file (the release's index), id, text and label, and the
+    titles of the Wikipedia pages its evidence cites, in order (none for NOT ENOUGH INFO)."""
 
     index: int
     id: int
     claim: str
     label: str
+    evidence_pages: tuple[str, ...] = ()
 
     @property
     def instance_id(self) -> str:
@@ -78,10 +84,36 @@ def resolve_data_dir(data_dir: str | os.PathLike[str] | None = None) -> Path:
     return path
 
 
+def page_title(page_id: str) -> str:
+    """A FEVER page id as a Wikipedia title: ``Soul_Food_-LRB-film-RRB-`` -> ``Soul Food (film)``."""
+    for token, char in _PAGE_ID_TOKENS.items():
+        page_id = page_id.replace(token, char)
+    return page_id.replace("_", " ")
+
+
+def evidence_pages(evidence: object) -> tuple[str, ...]:
+    """The distinct page titles an ``evidence`` field cites, first cited first (sets of
+    ``[annotation, evidence id, page id, sentence]``; null pages skipped)."""
+    titles: list[str] = []
+    for group in evidence if isinstance(evidence, list) else []:
+        for item in group if isinstance(group, list) else []:
+            if isinstance(item, list) and len(item) > 2 and isinstance(item[2], str):
+                title = page_title(item[2])
+                if title not in titles:
+                    titles.append(title)
+    return tuple(titles)
+
+
 def _parse_line(path: Path, index: int, line: str) -> Claim:
     try:
         row = json.loads(line)
-        return Claim(index=index, id=int(row["id"]), claim=str(row["claim"]), label=str(row["label"]))
+        return Claim(
+            index=index,
+            id=int(row["id"]),
+            claim=str(row["claim"]),
+            label=str(row["label"]),
+            evidence_pages=evidence_pages(row.get("evidence")),
+        )
     except (ValueError, KeyError, TypeError) as exc:
         raise ClaimsFileError(f"{str(path)!r} line {index + 1} is not a FEVER claim: {type(exc).__name__}: {exc}") from None
 

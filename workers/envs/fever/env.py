@@ -21,6 +21,8 @@ from typing import Any
 from recap.env import PLAN_COPY_STEPS, Demonstration, EnvError, Environment, InvalidActionError, Reset, Step
 from workers.envs.fever import text
 from workers.envs.fever.claims import Claim
+from workers.envs.fever.pages import RunRecords
+from workers.envs.fever.rules import rules_text
 from workers.envs.fever.wiki import WikiError, WikiSource, search_url
 
 #: the paper's action cap for FEVER
@@ -55,6 +57,8 @@ class FeverEnvironment(Environment):
         wikipedia_url: str,
         max_steps: int = DEFAULT_MAX_STEPS,
         demonstration: Callable[[], Demonstration | None] | None = None,
+        verdict_only: bool = False,
+        records: RunRecords | None = None,
     ) -> None:
         self.claim = claim
         self.instance_id = claim.instance_id
@@ -62,6 +66,10 @@ class FeverEnvironment(Environment):
         self.wikipedia_url = wikipedia_url
         self.max_steps = max_steps
         self._demonstration = demonstration
+        #: the method gives only a verdict (CoT, Standard): the rules ask for a one-action plan
+        self.verdict_only = verdict_only
+        #: the pages read live, handed to the episode worker as table rows (None: kept elsewhere)
+        self.records = records
         self._started = False
         self._past_end_ok = False
         self._clear()
@@ -122,6 +130,8 @@ class FeverEnvironment(Environment):
         }
         if finished:
             info["gt_answer"] = self.claim.label  # wrappers.py:192
+            if self.reward != 1:  # a verdict was given: the agent finished, wrongly (not a cap)
+                info["end_reason"] = "agent_done"
         elif self._done:
             info["end_reason"] = "step_cap"
         return info
@@ -174,22 +184,28 @@ class FeverEnvironment(Environment):
 
     # -- prompt material -------------------------------------------------------------------------
     def rules(self) -> str:
-        """The actions in our own words (the methods' FEVER prompts carry the paper's full rules)."""
-        return (
-            "Decide whether Wikipedia supports or refutes the claim, or gives not enough information. "
-            "Actions: search[entity] shows the start of the entity's Wikipedia page, or similar titles "
-            "when there is no such page; lookup[keyword] shows the next sentence of the current page "
-            "containing the keyword; finish[SUPPORTS], finish[REFUTES] or finish[NOT ENOUGH INFO] gives "
-            f"the verdict and ends the episode. At most {self.max_steps} actions."
-        )
+        """The paper's FEVER rules in our words (:mod:`.rules`), the verdict-only form for CoT/Standard."""
+        return rules_text(self.max_steps, verdict_only=self.verdict_only)
 
     def demonstration(self) -> Demonstration | None:
         """The one-shot demonstration, when the benchmark gave one (the methods' FEVER step adds it)."""
         return None if self._demonstration is None else self._demonstration()
 
     def expert_plan(self) -> list[str] | None:
-        """The verdict alone: the label is known, the evidence search is the offline expert's to script."""
-        return None if self._done else [f"finish[{self.claim.label}]"]
+        """The offline expert's play (a test double's script, not a solver): before any action, a
+        search for the first page the claim's evidence cites (else the claim's leading capitalised
+        words), then the label as the verdict; verdict-only methods give the verdict alone."""
+        if self._done:
+            return None
+        verdict = f"finish[{self.claim.label}]"
+        if self.verdict_only or self._steps_taken:
+            return [verdict]
+        entity = self.claim.evidence_pages[0] if self.claim.evidence_pages else text.leading_entity(self.claim.claim)
+        return [f"search[{entity}]", verdict] if entity else [verdict]
+
+    def take_records(self, episode_id: str, run_id: str) -> list[Any]:
+        """The ``wiki_pages``/``wiki_requests`` rows of the pages read since the last call."""
+        return [] if self.records is None else self.records.take(episode_id, run_id)
 
     def plan_copy(self) -> Environment:
         """A copy sharing this one's Wikipedia source (a deep copy cannot copy its connection and

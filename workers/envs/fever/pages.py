@@ -13,16 +13,22 @@ from __future__ import annotations
 
 import hashlib
 import threading
-from collections.abc import Iterable
+from collections import OrderedDict
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-#: the table name in a run folder, and the file name :func:`write_pages` uses
+from schemas.parts import read_table
+from schemas.records import WikiPageRecord, WikiRequestRecord
+
+#: the table name of the bodies in a run folder, and the file name :func:`write_pages` uses
 TABLE = "wiki_pages"
+#: the table of a run folder that maps each request URL to its body's sha256
+REQUESTS_TABLE = "wiki_requests"
 
 SCHEMA = pa.schema(
     [
@@ -116,6 +122,49 @@ class SnapshotError(ValueError):
     """A snapshot folder that holds no ``wiki_pages`` table, or a row whose body is not its sha256."""
 
 
+def _checked(record: PageRecord, where: object) -> PageRecord:
+    if sha256_hex(record.body) != record.sha256:
+        raise SnapshotError(f"{where}: the body of {record.url!r} does not match its sha256 {record.sha256}")
+    return record
+
+
+def _page_file_records(folder: Path) -> Iterator[PageRecord]:
+    """The records of :func:`write_pages` files (one table holding URLs and bodies)."""
+    files = _table_files(folder)
+    if not files:
+        raise SnapshotError(f"{str(folder)!r} holds no {TABLE}.parquet nor {TABLE}/*.parquet")
+    for file in files:
+        for row in pq.read_table(file, schema=SCHEMA).to_pylist():
+            yield _checked(PageRecord(**row), file)
+
+
+def _run_folder_records(run_dir: Path) -> Iterator[PageRecord]:
+    """A run folder's requests joined to their bodies (schemas.records.WikiRequestRecord /
+    WikiPageRecord); a request whose body is missing is an error, not a silent miss."""
+    pages, bad = read_table(run_dir, TABLE)
+    requests, bad_requests = read_table(run_dir, REQUESTS_TABLE)
+    if bad or bad_requests:
+        first = (bad + bad_requests)[0]
+        raise SnapshotError(f"{str(run_dir)!r}: a wiki table part cannot be read ({first})")
+    bodies = {row["sha256"]: row["body"] for row in pages.select(["sha256", "body"]).to_pylist()}
+    for row in requests.to_pylist():
+        body = bodies.get(row["sha256"])
+        if body is None:
+            raise SnapshotError(f"{str(run_dir)!r}: the body of {row['url']!r} (sha256 {row['sha256']}) is not in {TABLE}")
+        yield _checked(
+            PageRecord(
+                url=row["url"],
+                sha256=row["sha256"],
+                status=row["status"],
+                fetched_at=row["fetched_at"],
+                body=body,
+                encoding=row["encoding"],
+                final_url=row["final_url"],
+            ),
+            run_dir,
+        )
+
+
 def _table_files(folder: Path) -> list[Path]:
     if folder.is_file():
         return [folder]
@@ -125,22 +174,21 @@ def _table_files(folder: Path) -> list[Path]:
 
 
 class Snapshot:
-    """The answers of earlier runs by request URL: ``DIR/wiki_pages.parquet`` and/or
-    ``DIR/wiki_pages/*.parquet`` (or one Parquet file). When a URL was read more than once the
-    first answer read is kept. Every body is checked against its sha256 on loading."""
+    """The answers of earlier runs by request URL, from a run folder (its ``wiki_requests`` and
+    ``wiki_pages`` tables: each request joined to its body by sha256), or from
+    ``DIR/wiki_pages.parquet`` and/or ``DIR/wiki_pages/*.parquet`` written by :func:`write_pages`
+    (or one such Parquet file). When a URL was read more than once the first answer read is kept.
+    Every body is checked against its sha256 on loading."""
 
     def __init__(self, folder: str | Path) -> None:
         self.folder = Path(folder).expanduser()
-        files = _table_files(self.folder)
-        if not files:
-            raise SnapshotError(f"{str(self.folder)!r} holds no {TABLE}.parquet nor {TABLE}/*.parquet")
         self._by_url: dict[str, PageRecord] = {}
-        for file in files:
-            for row in pq.read_table(file, schema=SCHEMA).to_pylist():
-                record = PageRecord(**row)
-                if sha256_hex(record.body) != record.sha256:
-                    raise SnapshotError(f"{file}: the body of {record.url!r} does not match its sha256 {record.sha256}")
-                self._by_url.setdefault(record.url, record)
+        if (self.folder / REQUESTS_TABLE).is_dir():
+            records: Iterable[PageRecord] = _run_folder_records(self.folder)
+        else:
+            records = _page_file_records(self.folder)
+        for record in records:
+            self._by_url.setdefault(record.url, record)
 
     def get(self, url: str) -> PageRecord | None:
         """The recorded answer for ``url``, or None."""
@@ -148,3 +196,58 @@ class Snapshot:
 
     def __len__(self) -> int:
         return len(self._by_url)
+
+
+class RunRecords:
+    """The page records of one environment, handed to the episode worker as table rows.
+
+    Why here: the environment reads pages; the run folder keeps them as two tables - the bodies
+    content-addressed (``wiki_pages``, one row per sha256) and each request pointing at one
+    (``wiki_requests``). A body is handed over once per run by this process (:data:`_SENT`
+    remembers the sha256s a process has handed over for each run), so a worker that reads the
+    same page in many episodes writes it once."""
+
+    def __init__(self) -> None:
+        self.store = MemoryPageStore()
+        self._taken = 0
+
+    def take(self, episode_id: str, run_id: str) -> list[Any]:
+        """Records of the pages read since the last call: a ``wiki_pages`` row for each body not
+        yet handed over for ``run_id``, a ``wiki_requests`` row for each request."""
+        with self.store._lock:
+            fresh = self.store.records[self._taken :]
+            self._taken = len(self.store.records)
+        out: list[Any] = []
+        sent = _sent_for(run_id)
+        for r in fresh:
+            if r.sha256 not in sent:
+                sent.add(r.sha256)
+                out.append(WikiPageRecord(sha256=r.sha256, body=r.body, size=len(r.body)))
+            out.append(
+                WikiRequestRecord(
+                    episode_id=episode_id,
+                    url=r.url,
+                    sha256=r.sha256,
+                    status=r.status,
+                    fetched_at=r.fetched_at,
+                    final_url=r.final_url,
+                    encoding=r.encoding,
+                )
+            )
+        return out
+
+
+#: per run id, the sha256s this process has handed over (the last few runs: a worker serves one)
+_SENT: OrderedDict[str, set[str]] = OrderedDict()
+_SENT_RUNS = 4
+_SENT_LOCK = threading.Lock()
+
+
+def _sent_for(run_id: str) -> set[str]:
+    with _SENT_LOCK:
+        if run_id not in _SENT:
+            _SENT[run_id] = set()
+            while len(_SENT) > _SENT_RUNS:
+                _SENT.popitem(last=False)
+        _SENT.move_to_end(run_id)
+        return _SENT[run_id]

@@ -120,6 +120,19 @@ def claim_text(claim: str) -> str:
     return f"Claim: {claim}"
 
 
+def leading_entity(claim: str) -> str:
+    """The claim's leading run of capitalised words (``Nikolaj Coster-Waldau worked ...`` ->
+    ``Nikolaj Coster-Waldau``): what the offline expert searches when the claim cites no page."""
+    words: list[str] = []
+    for word in claim.split():
+        if not word[:1].isupper():
+            break
+        words.append(word.rstrip(".,;:!?"))
+        if word[-1:] in ".,;:!?":
+            break
+    return " ".join(words)
+
+
 def normalize_answer(text: str) -> str:
     """Lower-case, drop punctuation, the articles a/an/the and extra spaces (wrappers.py:42-56)."""
     lowered = text.lower()

@@ -26,27 +26,29 @@ import requests
 from requests.models import PreparedRequest
 
 from recap.env import EnvError
+from schemas.kinds import EndReason
 from workers.envs.fever.pages import PageRecord, PageStore, Snapshot, sha256_hex
 from workers.envs.fever.ratelimit import RateLimiter, shared_limiter
 
 DEFAULT_WIKIPEDIA_URL = "https://en.wikipedia.org"
 SEARCH_PATH = "/w/index.php?search="
-#: the end reason of an episode stopped because a Wikipedia answer could not be had (not in
-#: schemas.kinds.EndReason yet: the runtime maps WikiError.end_reason when FEVER joins the pipeline)
-WIKI_END_REASON = "wiki_error"
+#: the end reason of an episode stopped because a Wikipedia answer could not be had (the runtime
+#: records an EnvError's own ``end_reason``; schemas.labels retries the ``unavailable`` kind)
+WIKI_END_REASON: EndReason = "wiki_error"
 PROJECT_URL = "https://github.com/ReCAP-Stanford/ReCAP"
 
 WikiErrorKind = Literal["unavailable", "snapshot_miss", "unreadable", "disambiguation_loop", "bad_url"]
 
 
 class WikiError(EnvError):
-    """A Wikipedia answer that cannot be had or read; ``kind`` says which, ``end_reason`` is the
-    episode's end reason (:data:`WIKI_END_REASON`)."""
+    """A Wikipedia answer that cannot be had or read; ``kind`` says which and starts the message
+    (``unavailable: ...``: how a resume tells the site failing from an outcome,
+    schemas.labels.infra_failure), ``end_reason`` is the episode's end reason (:data:`WIKI_END_REASON`)."""
 
-    end_reason = WIKI_END_REASON
+    end_reason: EndReason = WIKI_END_REASON
 
     def __init__(self, kind: WikiErrorKind, message: str) -> None:
-        super().__init__(message)
+        super().__init__(f"{kind}: {message}")
         self.kind = kind
 
 
