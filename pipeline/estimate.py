@@ -24,7 +24,7 @@ from typing import Any
 from pipeline.spec import SweepSpec
 from pipeline.units import Plan
 from recap.agent import Agent
-from recap.methods import METHODS
+from recap.methods import METHODS, method_classes
 
 COMPLETION_TOKENS = (60, 250)
 DEFAULT_OPTIMAL = 20
@@ -100,7 +100,7 @@ class GroupEstimate:
 def call_shape(method: str) -> tuple[bool, tuple[float, float]]:
     """(one call per episode?, (low, high) calls per allowed step) as the method's agent class
     declares them; a name nothing registers gets the base class's assumption."""
-    agent_cls = METHODS[method][0] if method in METHODS else Agent
+    agent_cls = method_classes(method)[0] if method in METHODS else Agent
     return agent_cls.one_shot, agent_cls.estimate_calls_per_step
 
 

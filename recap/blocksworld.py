@@ -13,7 +13,6 @@ import random
 import re
 from dataclasses import dataclass
 
-import recap.methods  # noqa: F401  (registers the agents that derive this script's replies)
 from recap.demo_script import DemoScript
 from recap.env import Demonstration, Environment, InvalidActionError, Reset, Step, UnknownInstanceError
 

@@ -28,8 +28,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import recap.methods  # noqa: F401  (registers the agents that derive this script's replies)
-from recap.demo_script import DemoReplies, DemoScript
+from recap.demo_replies import DemoReplies
+from recap.demo_script import DemoScript
 from recap.env import Demonstration
 from workers.envs.alfworld.household import Place, Scene, record
 from workers.envs.alfworld.replay import Recording, ReplayEnvironment
