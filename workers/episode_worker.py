@@ -32,7 +32,7 @@ from recap.release_prompt import ReleasePrompt
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import check_vocabulary, record_to_row
-from workers.envs.registry import UnknownInstanceError, get_benchmark
+from workers.envs.registry import UnknownInstanceError, get_benchmark, place_of
 from workers.log_setup import configure_from_env
 
 log = logging.getLogger(__name__)
@@ -227,7 +227,6 @@ def release_demonstration(unit: UnitWork, agent: Agent) -> str | bool | ReleaseP
     prompts = getattr(agent.config, "prompts", "ours")
     if not prompts.startswith("release:"):
         return True
-    from schemas.labels import place_of
     from workers.release.texts import release_folder, release_prompt, release_text
 
     bench, split, task = place_of(unit.instance_id)

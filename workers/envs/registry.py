@@ -19,7 +19,8 @@ process exists only in that process: the in-process executor and tests).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 from recap.config import AgentConfig, BenchmarkProtocol
@@ -34,9 +35,11 @@ __all__ = [
     "Benchmark",
     "register_benchmark",
     "unregister_benchmark",
+    "registered_benchmark",
     "get_benchmark",
     "make_env",
     "split_id",
+    "place_of",
     "benchmark_names",
     "data_folder",
     "data_folders",
@@ -83,6 +86,19 @@ class Benchmark(BenchmarkProtocol, ABC):
         to Ray workers. Default: the variables of :meth:`data_folders`."""
         return tuple(folder.location.env_var for folder in self.data_folders().values())
 
+    def canonical_id(self, instance_id: str) -> str:
+        """The one spelling of ``instance_id`` before an environment is made, so two spellings
+        of one instance name one unit (Blocksworld: numbers without leading zeros); raises
+        UnknownInstanceError for an id this benchmark can never make. After the environment is
+        made, its own ``instance_id`` is the spelling. Default: as written."""
+        return instance_id
+
+    def place(self, instance_id: str, split: str | None = None, task: str | None = None) -> tuple[str, str]:
+        """``(split, task)`` of an episode row of ``instance_id``, given what its environment
+        reported (``None``: it reported nothing, e.g. a unit whose worker died before it made
+        one). Default: what the environment reported, empty when nothing."""
+        return split or "", task or ""
+
 
 #: what register_benchmark accepts: "package.module" (exposing BENCHMARK), a Benchmark, or a factory
 BenchmarkSource = str | Benchmark | Callable[[], Benchmark]
@@ -123,6 +139,17 @@ def unregister_benchmark(name: str) -> None:
     BENCHMARKS.unregister(name)
 
 
+@contextmanager
+def registered_benchmark(name: str, source: BenchmarkSource) -> Iterator[None]:
+    """:func:`register_benchmark` for the duration of a ``with`` block (as
+    :func:`recap.methods.registered_method` for methods)."""
+    register_benchmark(name, source)
+    try:
+        yield
+    finally:
+        unregister_benchmark(name)
+
+
 def benchmark_names() -> list[str]:
     """Registered names, in registration order (built-ins first)."""
     return BENCHMARKS.names()
@@ -143,6 +170,19 @@ def split_id(instance_id: str) -> tuple[str, str]:
             f"instance id {instance_id!r} must look like <benchmark>/<instance>, benchmarks: {', '.join(benchmark_names())}"
         )
     return bench, rest
+
+
+def place_of(instance_id: str, split: str | None = None, task: str | None = None) -> tuple[str, str, str]:
+    """``(benchmark, split, task)`` of an episode row, as its benchmark places it
+    (:meth:`Benchmark.place`); a benchmark not registered or not importable here places it by
+    the default: what the environment reported. (Rows of schema version 1 are read by
+    :func:`schemas.labels.place_of`, which cannot ask the benchmarks.)"""
+    bench = instance_id.split("/", 1)[0]
+    try:
+        found = get_benchmark(bench)
+    except (UnknownInstanceError, ImportError):
+        return bench, split or "", task or ""
+    return (bench, *found.place(instance_id, split, task))
 
 
 def make_env(instance_id: str, **options: Any) -> Environment:
