@@ -14,10 +14,10 @@ from typing import TypedDict
 from pipeline.resume import INFRA_ERROR, INFRA_ERROR_KINDS, AttemptSpend, infra_failure
 from pipeline.units import Unit
 from schemas.kinds import RowEndReason
-from schemas.labels import place_of
 from schemas.outcomes import EnvFacts, EpisodeOutcome, EpisodeResult
 from schemas.records import EpisodeRecord
 from schemas.tables import check_vocabulary
+from workers.envs.registry import place_of
 
 #: an attempt's spend by the ledger journal (None: not known), for attempts without a result
 JournalSpend = Callable[[str], AttemptSpend | None]
@@ -38,7 +38,7 @@ def episode_record(
     """The terminal row of an attempt (schema version 2).
 
     The arm's method, label, profile and ablation apart; the place from
-    :func:`schemas.labels.place_of` (ALFWorld one split; a row without an environment still has
+    :func:`workers.envs.registry.place_of`, as the benchmark places it (ALFWorld one split; a row without an environment still has
     its split and task); an infrastructure failure ends ``infra_error`` with its kind first in
     the error; an attempt without a result (a unit given up on) gets the spend the ledger
     journal recorded for it."""

@@ -28,7 +28,7 @@ from pipeline.spec import SweepSpec
 from pipeline.summary import model_label
 from pipeline.units import Plan
 from recap.agent import Agent
-from recap.methods import METHODS
+from recap.methods import METHODS, method_classes
 from workers.envs.registry import make_env
 from workers.llm.pricing import PriceError, resolve_price
 
@@ -104,7 +104,7 @@ class GroupEstimate:
 def call_shape(method: str) -> tuple[bool, tuple[float, float]]:
     """(one call per episode?, (low, high) calls per allowed step) as the method's agent class
     declares them; a name nothing registers gets the base class's assumption."""
-    agent_cls = METHODS[method][0] if method in METHODS else Agent
+    agent_cls = method_classes(method)[0] if method in METHODS else Agent
     return agent_cls.one_shot, agent_cls.estimate_calls_per_step
 
 

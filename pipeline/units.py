@@ -14,19 +14,18 @@ from __future__ import annotations
 import hashlib
 import json
 import random
-import re
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.errors import SpecError
-from pipeline.spec import SEED_MAX, EnvSpec, SweepSpec
+from pipeline.spec import EnvSpec, SweepSpec
 from recap.config import ConfigError
 from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
-from schemas.labels import ablation_of_config, place_of
+from schemas.labels import ablation_of_config
 from schemas.outcomes import UnitWork
-from workers.envs.registry import get_benchmark, split_id
+from workers.envs.registry import Benchmark, get_benchmark, place_of, split_id
 from workers.episode_worker import build_agent
 from workers.release.texts import ReleaseMissing, ReleaseUnavailable, release_folder, release_text
 
@@ -142,22 +141,23 @@ def unit_hash(
 #: most units one sweep may expand to (a typo in seeds or a selector must not exhaust memory);
 #: split larger sweeps into several runs
 MAX_UNITS = 200_000
+
+
 #: largest seed in a blocksworld instance id (``blocksworld/<n>@<seed>``), like the sweep's seeds
-_BLOCKSWORLD_ID = re.compile(r"^blocksworld/(\d+)@(\d+)$")
-
-
 def canonical_instance_id(instance_id: str, env: Any = None) -> str:
     """The one spelling of an instance id, so that two spellings of one instance
     (``blocksworld/3@01`` and ``blocksworld/3@1``, ``robotouille/...@042`` and ``...@42``) name
-    one unit: blocksworld numbers without leading zeros; otherwise the id the benchmark's
-    environment reports for itself (``env.instance_id``) when it is one of that benchmark's."""
-    m = _BLOCKSWORLD_ID.match(instance_id)
-    if m:
-        seed = int(m.group(2))
-        if seed > SEED_MAX:
-            raise UnknownInstanceError(f"blocksworld instance {instance_id!r}: the seed must be within 0..{SEED_MAX}")
-        return f"blocksworld/{int(m.group(1))}@{seed}"
+    one unit: the id the benchmark's environment reports for itself (``env.instance_id``) when it
+    is one of that benchmark's, else the benchmark's own spelling
+    (:meth:`workers.envs.registry.Benchmark.canonical_id`: Blocksworld drops leading zeros); an
+    id of a benchmark not registered here as written."""
     bench = instance_id.partition("/")[0]
+    try:
+        found: Benchmark | None = get_benchmark(bench)
+    except (UnknownInstanceError, ImportError):
+        found = None
+    if found is not None:
+        instance_id = found.canonical_id(instance_id)
     own = getattr(env, "instance_id", None)
     if isinstance(own, str) and own.startswith(bench + "/") and len(own) > len(bench) + 1:
         return own

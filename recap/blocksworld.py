@@ -13,7 +13,6 @@ import random
 import re
 from dataclasses import dataclass
 
-import recap.methods  # noqa: F401  (registers the agents that derive this script's replies)
 from recap.demo_script import DemoScript
 from recap.env import Demonstration, Environment, InvalidActionError, Reset, Step, UnknownInstanceError
 
@@ -33,6 +32,9 @@ HINTS = (
 )
 
 _ID = re.compile(r"^blocksworld/(\d+)@(\d+)$")
+#: the largest seed an instance id may carry: the sweep's seed bound (``pipeline.spec.SEED_MAX``,
+#: which recap cannot import; tests/pipeline/test_spec_units.py checks they agree)
+SEED_MAX = 2**31 - 1
 LETTERS = "ABCDEFGH"
 
 
@@ -284,6 +286,18 @@ class _Benchmark:
                 f"no blocksworld instance matches {selector!r}; sizes {list(self.SIZES)}, e.g. blocksworld/3@1"
             )
         return picked
+
+    def canonical_id(self, instance_id: str) -> str:
+        """``blocksworld/<n>@<seed>`` with both numbers written without leading zeros
+        (``blocksworld/03@001`` -> ``blocksworld/3@1``), the seed within ``0..SEED_MAX``; any
+        other id as written (:meth:`make` refuses it)."""
+        m = _ID.match(instance_id)
+        if not m:
+            return instance_id
+        seed = int(m.group(2))
+        if seed > SEED_MAX:
+            raise UnknownInstanceError(f"blocksworld instance {instance_id!r}: the seed must be within 0..{SEED_MAX}")
+        return f"blocksworld/{int(m.group(1))}@{seed}"
 
     def make(self, instance_id: str, *, step_multiplier: float = 4.0, **_options: object) -> BlocksworldEnv:
         m = _ID.match(instance_id)

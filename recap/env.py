@@ -15,7 +15,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from recap.demo_script import DemoReplies, DemoScript
+from recap.demo_replies import DemoReplies
+from recap.demo_script import DemoScript
 from schemas.kinds import EndReason
 
 #: the step cap of a :meth:`Environment.plan_copy` (no plan is this long)
@@ -74,7 +75,7 @@ class Demonstration:
     each agent class derives its own model replies from it. ``replies`` given here are
     hand-written replies for one method's key (``Agent.style``), in call order; they win over
     what the script would derive. Reading ``replies`` gives both (a
-    :class:`~recap.demo_script.DemoReplies`). Rendering with the agent keeps the demonstration in
+    :class:`~recap.demo_replies.DemoReplies`). Rendering with the agent keeps the demonstration in
     exactly the format of the agent's own prompts, for every ablation.
     """
 

@@ -79,7 +79,10 @@ def infra_failure(end_reason: str | None, error: str | None) -> str | None:
 
 
 def place_of(instance_id: str, split: str | None = None, task: str | None = None) -> tuple[str, str, str]:
-    """(benchmark, split, task) of an episode row.
+    """(benchmark, split, task) of an episode row, as rows of schema version 1 are read
+    (:mod:`schemas.versions`). New rows are placed by their benchmark's ``place`` hook
+    (``workers.envs.registry.place_of``; schemas cannot ask the benchmarks); this rule is frozen
+    with version 1 and agrees with the built-ins' hooks (tests/pipeline/test_spec_units.py).
 
     * ALFWorld: one split, ``valid_unseen``; the task is the task type, the second part of the
       instance id (``alfworld/heat/...`` -> ``heat``), whatever the environment calls it;

@@ -15,25 +15,27 @@ temporary folder and registered by one line):
   :class:`workers.envs.registry.Benchmark` subclass exposed as ``BENCHMARK`` (``list_instances``,
   ``make``, and only the hooks it needs: ``options_for_agent`` for per-method ``make()``
   options; ``data_folders`` when it reads a data folder, so ``recap data list/check/fetch`` and
-  the Ray workers' environment follow; ``profile_settings`` / ``release_prompt_settings``
+  the Ray workers' environment follow; ``canonical_id`` when two spellings of an id name one
+  instance; ``place`` when a row's split/task follow from the id where the environment did not
+  report them; ``profile_settings`` / ``release_prompt_settings``
   (:class:`recap.config.BenchmarkProtocol`) when a method's ``paper``/``released`` profile
   means something else there - a ``protocol.py`` as Robotouille's and ALFWorld's), and its
   demonstration and rules texts;
 * ``workers/envs/registry.py`` - one ``register_benchmark("<name>", "workers.envs.<name>")``
-  line among the built-ins (Ray workers import the registry, not the test's registration);
+  line in the table of built-ins (Ray workers import the registry, not the test's
+  registration);
 * ``tests/<name>/`` - its tests;
 * only if it has downloadable data: its sha256 manifest ``pipeline/manifests/<folder>.sha256``
   (``recap data check``/``fetch`` verify against it).
 
 No method, config, schema or pipeline module changes: recap learns what a benchmark means only
-from what it declares, and a row's split/task are what its environment reports. Outside its
-folder only knowledge about *other* things stays per benchmark: the authors' released prompt
-files (``workers/release/texts.py``, for a benchmark they released prompts for), the paper's
-published numbers (``reports/paper.py``) and the reading of schema version 1 rows
-(``schemas/versions.py``). Not yet declarations (a benchmark needs them only to differ from the
-default): ``schemas/labels.py`` ``place_of`` derives ALFWorld's and Robotouille's split/task from
-the id for a row whose environment never reported them, and ``pipeline/units.py``
-``canonical_instance_id`` drops Blocksworld's leading zeros.
+from what it declares, and a row's split/task are what its environment reports or its
+``place`` hook says. Outside its folder only knowledge about *other* things stays per
+benchmark: the authors' released prompt files (``workers/release/texts.py``, for a benchmark
+they released prompts for), the paper's published numbers (``reports/paper.py``) and the
+reading of schema version 1 rows (``schemas/versions.py`` and ``schemas.labels.place_of``,
+frozen with that version: schemas cannot ask the benchmarks, and a new benchmark never wrote a
+version 1 row; tests/pipeline/test_spec_units.py checks the built-ins' ``place`` hooks agree).
 """
 
 from __future__ import annotations

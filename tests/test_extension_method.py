@@ -16,8 +16,10 @@ A real new method would touch:
   ``DemoScript``), ``calls_per_step`` / ``call_overhead`` (call cap), ``one_shot`` /
   ``estimate_calls_per_step`` (``recap estimate``);
 * its prompts module, if it has its own (``recap/baselines/prompts.py`` for the baselines);
-* ``recap/methods.py``: one line in ``METHODS`` (or a ``register_method`` call from a plug-in),
-  the one list of method names;
+* ``recap/method_registry.py``: one line in the table of built-ins,
+  ``METHODS.register("<name>", ("recap.<module>:<Agent>", "recap.<module>:<Config>"))`` (a
+  plug-in calls ``recap.methods.register_method`` instead, or decorates its agent class with
+  ``@METHODS.register("<name>")``), the one list of method names;
 * its tests (``tests/method/``).
 
 No benchmark's demonstration module, offline test double, estimate table or worker changes.

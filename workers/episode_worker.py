@@ -29,11 +29,11 @@ from recap.config import ConfigError
 from recap.env import Environment
 from recap.llm import LLMClient, LLMError, LLMRequest, LLMResponse
 from recap.release_prompt import ReleasePrompt
-from schemas.labels import place_of
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import check_vocabulary, record_to_row
 from workers.envs import registry  # called through the module: a test may swap make_env there
+from workers.envs.registry import place_of
 from workers.log_setup import configure_from_env
 from workers.release.texts import release_folder, release_prompt, release_text
 

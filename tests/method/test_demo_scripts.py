@@ -18,7 +18,8 @@ import pytest
 
 from recap import blocksworld
 from recap.agent import DemonstrationError
-from recap.demo_script import DemoReplies, DemoScript
+from recap.demo_replies import DemoReplies
+from recap.demo_script import DemoScript
 from recap.env import Demonstration
 from recap.methods import METHODS, make_agent
 from workers.envs.alfworld.demos import demonstration_for

@@ -240,3 +240,69 @@ def test_profiles_resolve_per_benchmark_in_the_unit_config(monkeypatch):
     )
     # no cap of ours under the profiles: the request carries the model's whole output
     assert rob["max_llm_calls"] is None and rob["max_tokens"] is None
+
+
+# -- what a benchmark declares about its ids: their one spelling and a row's place ------------------
+
+
+def test_blocksworld_seed_bound_is_the_sweeps():
+    from pipeline.spec import SEED_MAX
+    from recap.blocksworld import SEED_MAX as BLOCKSWORLD_SEED_MAX
+
+    assert BLOCKSWORLD_SEED_MAX == SEED_MAX
+
+
+@pytest.mark.parametrize(
+    "instance_id,split,task",
+    [
+        ("alfworld/heat/pick_heat_then_place_in_recep-Egg-None-Fridge-13/trial_1", None, None),
+        ("alfworld/heat/x", "eval_out_of_distribution", "pick_heat_then_place_in_recep"),
+        ("alfworld", None, None),
+        ("robotouille/synchronous/6_lettuce_tomato_cheeseburger@42", None, None),
+        ("robotouille/asynchronous/5_potato_soup@1", "asynchronous", "potato soup"),
+        ("robotouille/x", None, "t"),
+        ("blocksworld/3@1", "s", "3 blocks"),
+        ("blocksworld/3@1", None, None),
+        ("nowhere/1", "s", None),
+    ],
+)
+def test_new_rows_are_placed_as_version_1_rows_are_read(instance_id, split, task):
+    """The live pipeline asks the benchmark (workers.envs.registry.place_of); the reader of
+    schema version 1 rows keeps its own frozen rule (schemas.labels.place_of, which cannot ask
+    the benchmarks): for every built-in they agree, so old and new runs group alike."""
+    from schemas.labels import place_of as version_1_place_of
+    from workers.envs.registry import place_of
+
+    assert place_of(instance_id, split, task) == version_1_place_of(instance_id, split, task)
+
+
+def test_a_benchmark_declares_its_place_and_its_ids_spelling():
+    from pipeline.units import canonical_instance_id
+    from recap.env import UnknownInstanceError
+    from workers.envs.registry import Benchmark, place_of, registered_benchmark
+
+    class Shelf(Benchmark):
+        name = "shelf"
+
+        def list_instances(self, selector=None):
+            return ["shelf/top/A"]
+
+        def make(self, instance_id, **options):
+            raise NotImplementedError
+
+        def canonical_id(self, instance_id):
+            if instance_id.endswith("!"):
+                raise UnknownInstanceError(f"shelf instance {instance_id!r} shouts")
+            return instance_id.lower()
+
+        def place(self, instance_id, split=None, task=None):
+            return instance_id.split("/")[1], task or "any"
+
+    assert place_of("shelf/top/A") == ("shelf", "", "")  # not registered: the default
+    assert canonical_instance_id("shelf/TOP/A") == "shelf/TOP/A"
+    with registered_benchmark("shelf", Shelf()):
+        assert place_of("shelf/top/A") == ("shelf", "top", "any")
+        assert place_of("shelf/low/A", "ignored", "t") == ("shelf", "low", "t")
+        assert canonical_instance_id("shelf/TOP/A") == "shelf/top/a"
+        with pytest.raises(UnknownInstanceError, match="shouts"):
+            canonical_instance_id("shelf/top/A!")

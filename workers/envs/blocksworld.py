@@ -2,8 +2,8 @@
 
 Why an adapter: :mod:`recap.blocksworld` may import nothing of ``workers`` (the layering), so
 its ``BENCHMARK`` cannot subclass :class:`workers.envs.registry.Benchmark`; this module gives
-it the declared hooks (all defaults: its instances are generated, it reads no data folder and
-has no per-method options).
+it the declared hooks (defaults but the spelling of its ids: its instances are generated, it
+reads no data folder and has no per-method options).
 """
 
 from __future__ import annotations
@@ -26,6 +26,10 @@ class BlocksworldBenchmark(Benchmark):
 
     def make(self, instance_id: str, **options: Any) -> Environment:
         return _PURE.make(instance_id, **options)
+
+    def canonical_id(self, instance_id: str) -> str:
+        """Numbers without leading zeros (the pure core's rule)."""
+        return _PURE.canonical_id(instance_id)
 
 
 BENCHMARK = BlocksworldBenchmark()

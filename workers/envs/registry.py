@@ -6,36 +6,40 @@ and makes its instances, and answers the few questions the pipeline has about it
 declared hooks with defaults (which options an agent style runs with, where its data lives),
 so no caller switches on a benchmark's name or probes for optional attributes.
 
-Benchmarks are registered by name with :func:`register_benchmark`, given a module path (the
-module exposes ``BENCHMARK``), a :class:`Benchmark` or a zero-argument factory returning one.
-Nothing is imported or built until the benchmark is first used, so a missing optional
-dependency (alfworld's ``textworld``) affects only that benchmark. The built-in benchmarks
-are registered at the end of this module, in one place; Ray workers import this module too,
-so a benchmark that runs on a cluster is registered there (a registration made at run time in
-the driver process exists only in that process: the in-process executor and tests).
+Benchmarks are kept in :data:`BENCHMARKS`, a :class:`recap.registry.Registry` (the mechanism
+the methods use too), by name: a module path (the module exposes ``BENCHMARK``), a
+:class:`Benchmark` or a zero-argument factory returning one. Nothing is imported or built until
+the benchmark is first used, so a missing optional dependency (alfworld's ``textworld``)
+affects only that benchmark. The built-in benchmarks are the table at the end of this module,
+one line each, the one list of their names; Ray workers import this module too, so a benchmark
+that runs on a cluster is registered there (a registration made at run time in the driver
+process exists only in that process: the in-process executor and tests).
 """
 
 from __future__ import annotations
 
-import importlib
-import threading
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 from recap.config import AgentConfig, BenchmarkProtocol
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
+from recap.registry import Registry
 from workers.envs.data_sources import DataFolder
 
 __all__ = [
+    "BENCHMARKS",
     "DataNotFoundError",
     "UnknownInstanceError",
     "Benchmark",
     "register_benchmark",
     "unregister_benchmark",
+    "registered_benchmark",
     "get_benchmark",
     "make_env",
     "split_id",
+    "place_of",
     "benchmark_names",
     "data_folder",
     "data_folders",
@@ -88,13 +92,39 @@ class Benchmark(BenchmarkProtocol, ABC):
         to Ray workers. Default: the variables of :meth:`data_folders`."""
         return tuple(folder.location.env_var for folder in self.data_folders().values())
 
+    def canonical_id(self, instance_id: str) -> str:
+        """The one spelling of ``instance_id`` before an environment is made, so two spellings
+        of one instance name one unit (Blocksworld: numbers without leading zeros); raises
+        UnknownInstanceError for an id this benchmark can never make. After the environment is
+        made, its own ``instance_id`` is the spelling. Default: as written."""
+        return instance_id
+
+    def place(self, instance_id: str, split: str | None = None, task: str | None = None) -> tuple[str, str]:
+        """``(split, task)`` of an episode row of ``instance_id``, given what its environment
+        reported (``None``: it reported nothing, e.g. a unit whose worker died before it made
+        one). Default: what the environment reported, empty when nothing."""
+        return split or "", task or ""
+
 
 #: what register_benchmark accepts: "package.module" (exposing BENCHMARK), a Benchmark, or a factory
 BenchmarkSource = str | Benchmark | Callable[[], Benchmark]
 
-_lock = threading.Lock()
-_SOURCES: dict[str, BenchmarkSource] = {}
-_RESOLVED: dict[str, Benchmark] = {}
+
+def _as_benchmark(name: str, source: object) -> Benchmark:
+    """The Benchmark a registration resolves to (a factory is called), checked to call itself
+    ``name``."""
+    bench = source if isinstance(source, Benchmark) or not callable(source) else source()
+    if not isinstance(bench, Benchmark):
+        raise TypeError(f"benchmark {name!r} resolved to {bench!r}, which is not a workers.envs.registry.Benchmark")
+    if bench.name != name:
+        raise ValueError(f"benchmark registered as {name!r} calls itself {bench.name!r}")
+    return bench
+
+
+#: every benchmark by name, resolved on first use; :func:`benchmark_names` lists them
+BENCHMARKS: Registry[Benchmark] = Registry(
+    "benchmark", coerce=_as_benchmark, error=ValueError, unknown_error=UnknownInstanceError, attribute="BENCHMARK"
+)
 
 
 def register_benchmark(name: str, source: BenchmarkSource) -> None:
@@ -104,54 +134,37 @@ def register_benchmark(name: str, source: BenchmarkSource) -> None:
         raise ValueError(f"benchmark name {name!r} must be non-empty and contain no '/'")
     if not isinstance(source, (str, Benchmark)) and not callable(source):
         raise TypeError(f"benchmark {name!r}: register a module path, a Benchmark or a factory, not {source!r}")
-    with _lock:
-        if name in _SOURCES:
-            raise ValueError(f"benchmark {name!r} is already registered")
-        _SOURCES[name] = source
+    BENCHMARKS.register(name, source)
 
 
 def unregister_benchmark(name: str) -> None:
-    """Forget ``name`` (tests register toy benchmarks and remove them again)."""
-    with _lock:
-        if name not in _SOURCES:
-            raise KeyError(name)
-        del _SOURCES[name]
-        _RESOLVED.pop(name, None)
+    """Forget ``name`` (tests register toy benchmarks and remove them again); KeyError if it is
+    not registered."""
+    if name not in BENCHMARKS:
+        raise KeyError(name)
+    BENCHMARKS.unregister(name)
+
+
+@contextmanager
+def registered_benchmark(name: str, source: BenchmarkSource) -> Iterator[None]:
+    """:func:`register_benchmark` for the duration of a ``with`` block (as
+    :func:`recap.methods.registered_method` for methods)."""
+    register_benchmark(name, source)
+    try:
+        yield
+    finally:
+        unregister_benchmark(name)
 
 
 def benchmark_names() -> list[str]:
     """Registered names, in registration order (built-ins first)."""
-    return list(_SOURCES)
-
-
-def _resolve(name: str, source: BenchmarkSource) -> Benchmark:
-    if isinstance(source, Benchmark):
-        bench = source
-    elif isinstance(source, str):
-        bench = importlib.import_module(source).BENCHMARK
-    else:
-        bench = source()
-    if not isinstance(bench, Benchmark):
-        raise TypeError(f"benchmark {name!r} resolved to {bench!r}, which is not a workers.envs.registry.Benchmark")
-    if bench.name != name:
-        raise ValueError(f"benchmark registered as {name!r} calls itself {bench.name!r}")
-    return bench
+    return BENCHMARKS.names()
 
 
 def get_benchmark(name: str) -> Benchmark:
-    """The benchmark registered as ``name`` (imported/built on first use)."""
-    found = _RESOLVED.get(name)
-    if found is not None:
-        return found
-    try:
-        source = _SOURCES[name]
-    except KeyError:
-        raise UnknownInstanceError(f"unknown benchmark {name!r}; known: {', '.join(_SOURCES)}") from None
-    bench = _resolve(name, source)
-    with _lock:
-        if _SOURCES.get(name) is source:  # not unregistered meanwhile
-            bench = _RESOLVED.setdefault(name, bench)
-    return bench
+    """The benchmark registered as ``name`` (imported/built on first use); UnknownInstanceError
+    naming the known ones otherwise."""
+    return BENCHMARKS.get(name)
 
 
 def split_id(instance_id: str) -> tuple[str, str]:
@@ -160,9 +173,22 @@ def split_id(instance_id: str) -> tuple[str, str]:
     bench, sep, rest = instance_id.partition("/")
     if not sep or not rest:
         raise UnknownInstanceError(
-            f"instance id {instance_id!r} must look like <benchmark>/<instance>, benchmarks: {', '.join(_SOURCES)}"
+            f"instance id {instance_id!r} must look like <benchmark>/<instance>, benchmarks: {', '.join(benchmark_names())}"
         )
     return bench, rest
+
+
+def place_of(instance_id: str, split: str | None = None, task: str | None = None) -> tuple[str, str, str]:
+    """``(benchmark, split, task)`` of an episode row, as its benchmark places it
+    (:meth:`Benchmark.place`); a benchmark not registered or not importable here places it by
+    the default: what the environment reported. (Rows of schema version 1 are read by
+    :func:`schemas.labels.place_of`, which cannot ask the benchmarks.)"""
+    bench = instance_id.split("/", 1)[0]
+    try:
+        found = get_benchmark(bench)
+    except (UnknownInstanceError, ImportError):
+        return bench, split or "", task or ""
+    return (bench, *found.place(instance_id, split, task))
 
 
 def make_env(instance_id: str, **options: Any) -> Environment:
@@ -172,29 +198,22 @@ def make_env(instance_id: str, **options: Any) -> Environment:
     return get_benchmark(bench).make(instance_id, **options)
 
 
-#: data folders no benchmark reads (the authors' released prompts), by name: "module:ATTRIBUTE"
-_EXTRA_FOLDERS: dict[str, str] = {}
+def _as_data_folder(name: str, obj: object) -> DataFolder:
+    """The DataFolder a registration names, checked to be called ``name``."""
+    if not isinstance(obj, DataFolder) or obj.name != name:
+        raise TypeError(f"data folder {name!r}: {obj!r} is not a DataFolder named {name!r}")
+    return obj
+
+
+#: data folders no benchmark reads (the authors' released prompts), by name, imported on first use
+EXTRA_FOLDERS: Registry[DataFolder] = Registry("data folder", coerce=_as_data_folder, error=ValueError)
 
 
 def register_data_folder(name: str, source: str) -> None:
     """Make a data folder that no benchmark declares known to ``recap data`` and to the workers'
     environment: ``source`` is ``"package.module:ATTRIBUTE"`` naming a DataFolder (imported on
     first use)."""
-    with _lock:
-        if name in _EXTRA_FOLDERS:
-            raise ValueError(f"data folder {name!r} is already registered")
-        _EXTRA_FOLDERS[name] = source
-
-
-def _extra_folders() -> dict[str, DataFolder]:
-    out: dict[str, DataFolder] = {}
-    for name, source in list(_EXTRA_FOLDERS.items()):
-        module, _, attr = source.partition(":")
-        folder = getattr(importlib.import_module(module), attr)
-        if not isinstance(folder, DataFolder) or folder.name != name:
-            raise TypeError(f"data folder {name!r}: {source} is not a DataFolder named {name!r}")
-        out[name] = folder
-    return out
+    EXTRA_FOLDERS.register(name, source)
 
 
 def data_folders() -> dict[str, DataFolder]:
@@ -209,7 +228,7 @@ def data_folders() -> dict[str, DataFolder]:
             continue
         for key, folder in folders.items():
             out.setdefault(key, folder)
-    for key, folder in _extra_folders().items():
+    for key, folder in EXTRA_FOLDERS.items():
         out.setdefault(key, folder)
     return out
 
@@ -232,7 +251,7 @@ def data_env_vars() -> tuple[str, ...]:
             out.extend(get_benchmark(name).data_env_vars())
         except ImportError:
             continue
-    out.extend(folder.location.env_var for folder in _extra_folders().values())
+    out.extend(folder.location.env_var for folder in EXTRA_FOLDERS.values())
     return tuple(dict.fromkeys(out))
 
 

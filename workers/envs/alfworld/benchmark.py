@@ -31,6 +31,7 @@ from typing import Any
 
 from recap.config import AgentConfig
 from recap.env import Environment
+from schemas.labels import ALFWORLD_SPLIT
 from workers.envs.alfworld import protocol
 from workers.envs.alfworld.data_folders import FOLDER, FOLDER_2_1_2
 from workers.envs.alfworld.game_env import AlfworldEnvironment
@@ -96,6 +97,13 @@ class AlfworldBenchmark(Benchmark):
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The primary (2.1.1) folder and the optional 2.1.2 one (:mod:`.data_folders`)."""
         return {FOLDER.name: FOLDER, FOLDER_2_1_2.name: FOLDER_2_1_2}
+
+    def place(self, instance_id: str, split: str | None = None, task: str | None = None) -> tuple[str, str]:
+        """One split, ``valid_unseen``; the task is the task type, the id's second part
+        (``alfworld/heat/...`` -> ``heat``), whatever the environment calls it (the paper's
+        tables group by the short type)."""
+        parts = instance_id.split("/")
+        return (ALFWORLD_SPLIT, parts[1]) if len(parts) > 1 else (split or "", task or "")
 
     def profile_settings(
         self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]

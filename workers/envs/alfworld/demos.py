@@ -23,8 +23,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import recap.methods  # noqa: F401  (registers the agents that derive this script's replies)
-from recap.demo_script import DemoReplies, DemoScript
+from recap.demo_replies import DemoReplies
+from recap.demo_script import DemoScript
 from recap.env import Demonstration
 from workers.envs.alfworld.demo_episodes import DEMOS, WrittenDemo
 from workers.envs.alfworld.household import record

@@ -39,6 +39,15 @@ class RobotouilleBenchmark(Benchmark):
         """The data folder (:mod:`.data_folders`): found by the shared rule, fetched from upstream."""
         return {FOLDER.name: FOLDER}
 
+    def place(self, instance_id: str, split: str | None = None, task: str | None = None) -> tuple[str, str]:
+        """``synchronous``/``asynchronous`` and the environment's name, from the id
+        (``robotouille/synchronous/6_lettuce_tomato_cheeseburger@42``) when the environment did
+        not say (a unit whose worker died before it made one)."""
+        parts = instance_id.split("/")
+        if len(parts) > 2:
+            return split or parts[1], task or parts[2].split("@", 1)[0]
+        return split or "", task or ""
+
     def profile_settings(
         self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
     ) -> dict[str, Any]:

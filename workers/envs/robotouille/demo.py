@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import recap.methods  # noqa: F401  (registers the agents that derive this script's replies)
 from recap.demo_script import DemoScript
 from recap.env import Demonstration, Environment
 
