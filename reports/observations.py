@@ -1,6 +1,7 @@
-"""Observation text for people: the first line of a text, and what an observation adds to the one
-before it. Shared by `recap show` (pipeline) and `recap view` (reports), so both print a step the
-same way."""
+"""Observation text for people: a text's first line, and what an observation adds to the one before.
+
+Shared by `recap show` (pipeline) and `recap view` (reports), so both print a step the same way.
+"""
 
 from __future__ import annotations
 

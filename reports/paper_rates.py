@@ -22,6 +22,11 @@ from reports.paper_cells import (
     test_notes,
 )
 
+#: a cell (or pair) of :class:`Cells`: column name to value
+Cell = dict[str, Any]
+#: a row of a table being filled: column name to value
+Row = dict[str, Any]
+
 
 def main_table(cells: Cells) -> Table | str:
     """Paper Table 1 (pass@1 per benchmark and method) from the arms without an ablation; or, when no arm fits,
@@ -42,8 +47,8 @@ def main_table(cells: Cells) -> Table | str:
     for _, label in arms:
         cols += rate_columns(label, label)
     notes = Footnotes()
-    used: list[dict[str, Any]] = []
-    rows: list[dict[str, Any]] = []
+    used: list[Cell] = []
+    rows: list[Row] = []
     row_keys = sorted(
         {(c["benchmark"], c["split"], c["model_label"]) for c in pool},
         key=lambda k: (
@@ -54,7 +59,7 @@ def main_table(cells: Cells) -> Table | str:
     )
     for bench, split, model in row_keys:
         title = next(t for b, s, t in BENCH_ROWS if b == bench and s in (None, split))
-        row: dict[str, Any] = {
+        row: Row = {
             "benchmark": title if bench != "alfworld" or split == "valid_unseen" else f"{title} ({split})",
             "model": model,
         }
@@ -95,11 +100,11 @@ def per_task_tables(cells: Cells, split: str) -> list[Table] | str:
         for _, label in arms:
             cols += rate_columns(label, label)
         notes = Footnotes()
-        used: list[dict[str, Any]] = []
+        used: list[Cell] = []
         rows = []
         tasks = sorted({c["task"] for c in mt}, key=lambda t: (paper.task_index(t) is None, paper.task_index(t) or 0, t))
         for task in tasks:
-            row: dict[str, Any] = {"task": task}
+            row: Row = {"task": task}
             idx = paper.task_index(task)
             for c in mt:
                 if c["task"] != task:
@@ -108,7 +113,7 @@ def per_task_tables(cells: Cells, split: str) -> list[Table] | str:
                 why = paper.mismatch(paper.PROTOCOLS["per_task"], arm_protocol(c), [f"{split}:{idx}"])
                 fill_rate(row, c["arm_label"], c, ref, why, notes, paired_p(cells, c, mt, used))
             rows.append(row)
-        avg: dict[str, Any] = {"task": "Average"}
+        avg: Row = {"task": "Average"}
         for c in ms:
             ref = paper.PER_TASK_AVERAGE[split].get(c["method"])
             why = paper.mismatch(paper.PROTOCOLS["per_task"], arm_protocol(c))
@@ -137,9 +142,9 @@ def per_task_tables(cells: Cells, split: str) -> list[Table] | str:
     return tables
 
 
-def cross_model_table(cells: Cells) -> Table | str:
-    """Paper Table 2 (ReAct and ReCAP across models on synchronous tasks 2, 4, 6, 64-message window); or the one
-    line that says why it is left out."""
+def _cross_model_pool(cells: Cells) -> list[Cell]:
+    """The synchronous 2-4-6 cells of ReAct and ReCAP arms without an ablation at a 64-message window, of the
+    models that ran both methods."""
     pool = [
         c
         for c in cells.select(scope="sync_2_4_6", level="split")
@@ -151,41 +156,51 @@ def cross_model_table(cells: Cells) -> Table | str:
     both = {
         m for m in {c["model_label"] for c in pool} if {c["method"] for c in pool if c["model_label"] == m} == {"react", "recap"}
     }
-    pool = [c for c in pool if c["model_label"] in both]
+    return [c for c in pool if c["model_label"] in both]
+
+
+def _cross_model_rank(pool: list[Cell], model: str) -> tuple[int, bool, str]:
+    """Where ``model``'s columns stand: the paper's column order; a model string the paper does not name is
+    placed by its label."""
+    order = list(paper.CROSS_MODEL)
+    pm = {paper.paper_model(m) for c in pool if c["model_label"] == model for m in c["provider_models"]}
+    pm.add(paper.paper_model(model.removesuffix(" (test double)")))
+    idx = min((order.index(p) for p in pm if p in order), default=len(order))
+    return (idx, *test_double_last(model))
+
+
+def _cross_model_row(cells: Cells, method: str, label: str, pool: list[Cell], notes: Footnotes, used: list[Cell]) -> Row:
+    """One arm's row: its rate per model, beside the paper's for that model and method."""
+    row: Row = {"method": label}
+    for c in pool:
+        if c["arm_label"] != label:
+            continue
+        proto = arm_protocol(c)
+        pm = paper.paper_model(proto.provider_model)
+        why = paper.mismatch(paper.PROTOCOLS["cross_model"], proto)
+        # a model the paper did not run still gets its footnote (why is then always set)
+        ref = paper.CROSS_MODEL.get(pm or "", paper.CROSS_MODEL["gpt-4o"] if why else {}).get(method)
+        fill_rate(row, c["model_label"], c, ref, why, notes, paired_p(cells, c, pool, used))
+    return row
+
+
+def cross_model_table(cells: Cells) -> Table | str:
+    """Paper Table 2 (ReAct and ReCAP across models on synchronous tasks 2, 4, 6, 64-message window); or the one
+    line that says why it is left out."""
+    pool = _cross_model_pool(cells)
     if not pool:
         return (
             "Cross-model table: no model has both a ReAct and a ReCAP arm without an ablation on Robotouille "
             "synchronous tasks 2, 4, 6 with a 64-message window."
         )
-    order = list(paper.CROSS_MODEL)
-
-    def model_rank(model: str) -> tuple[int, bool, str]:
-        # the paper's column order; a model string the paper does not name is placed by its label
-        pm = {paper.paper_model(m) for c in pool if c["model_label"] == model for m in c["provider_models"]}
-        pm.add(paper.paper_model(model.removesuffix(" (test double)")))
-        idx = min((order.index(p) for p in pm if p in order), default=len(order))
-        return (idx, *test_double_last(model))
-
-    models = sorted({c["model_label"] for c in pool}, key=model_rank)
+    models = sorted({c["model_label"] for c in pool}, key=lambda model: _cross_model_rank(pool, model))
     arms = sorted({(c["method"], c["arm_label"]) for c in pool}, key=lambda a: (a[0] != "react", a[1]))
     cols = [Column("method", "method")]
     for model in models:
         cols += rate_columns(model, model)
     notes = Footnotes()
-    used: list[dict[str, Any]] = []
-    rows = []
-    for method, label in arms:
-        row: dict[str, Any] = {"method": label}
-        for c in pool:
-            if c["arm_label"] != label:
-                continue
-            proto = arm_protocol(c)
-            pm = paper.paper_model(proto.provider_model)
-            why = paper.mismatch(paper.PROTOCOLS["cross_model"], proto)
-            # a model the paper did not run still gets its footnote (why is then always set)
-            ref = paper.CROSS_MODEL.get(pm or "", paper.CROSS_MODEL["gpt-4o"] if why else {}).get(method)
-            fill_rate(row, c["model_label"], c, ref, why, notes, paired_p(cells, c, pool, used))
-        rows.append(row)
+    used: list[Cell] = []
+    rows = [_cross_model_row(cells, method, label, pool, notes, used) for method, label in arms]
     m = add_holm(rows, models)
     note = join_notes(
         "Robotouille synchronous tasks 2, 4 and 6, 64-message window. p (on the ReAct rows): against ReCAP of the "
@@ -225,10 +240,10 @@ def ablation_table(cells: Cells) -> Table | str:
     for v in variants:
         cols += rate_columns(v, v)
     notes = Footnotes()
-    used: list[dict[str, Any]] = []
+    used: list[Cell] = []
     rows = []
     for model, profile in row_keys:
-        row: dict[str, Any] = {"model": model, "profile": profile}
+        row: Row = {"model": model, "profile": profile}
         mine = sorted(
             (c for c in pool if c["model_label"] == model and ",".join(p or "none" for p in c["profiles"]) == profile),
             key=lambda c: c["arm_label"],

@@ -1,5 +1,6 @@
-"""One self-contained HTML page: inline CSS, inline SVG plots, the episode viewer and a few lines
-of JavaScript (no network, no external files), so a report can be mailed or archived as is.
+"""The HTML report: one self-contained page with inline CSS, SVG plots, the episode viewer and a little JavaScript.
+
+Nothing is fetched (no network, no external files), so a report can be mailed or archived as is.
 
 The page records script errors in ``<body data-js-errors>`` and sets ``data-report-ready`` when
 its script has run, with what it measured of the laid-out plots (``data-plots-rendered``,

@@ -23,10 +23,12 @@ child died. Nothing is written anywhere: the child's connection is the locked-do
 
 from __future__ import annotations
 
+import codecs
 import json
 import math
 import os
 import re
+import resource
 import signal
 import subprocess
 import sys
@@ -36,6 +38,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
+
+from reports.render_text import print_result
+from reports.views import ReportError, open_runs_checked, run_query
 
 #: the repository root the child imports ``reports`` from (the same code as the parent)
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,8 +124,6 @@ _PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 def _pump(src: Any, dst: TextIO) -> None:
     """Copy the child's bytes to ``dst`` (a text stream) as they come, decoding UTF-8 across reads."""
-    import codecs
-
     dec = codecs.getincrementaldecoder("utf-8")("replace")
     open_ = True
     while True:
@@ -171,36 +174,9 @@ def run_limited(job: dict[str, Any], limits: Limits, out: TextIO, err: TextIO) -
     for t in threads:
         t.start()
     os.set_blocking(ready_r, False)
-    threshold = limits.memory_bytes * (1 - MARGIN_FRACTION)
-    started: float | None = None
-    limit_hit: str | None = None
-    peak = 0
-    status: int | None = None
+    watch = _Watch(proc, ready_r, limits)
     try:
-        while True:
-            pid, wstatus, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                status = os.waitstatus_to_exitcode(wstatus)
-                peak = max(peak, int(usage.ru_maxrss) * 1024)
-                proc.returncode = status
-                break
-            rss = _rss(proc.pid)
-            if rss is not None:
-                peak = max(peak, rss)
-            if started is None:
-                try:
-                    if os.read(ready_r, 1):
-                        started = time.monotonic()
-                except BlockingIOError:
-                    pass
-            if limit_hit is None:
-                if rss is not None and rss > threshold:
-                    limit_hit = "memory"
-                elif started is not None and time.monotonic() - started > limits.timeout_s:
-                    limit_hit = "time"
-                if limit_hit is not None:
-                    proc.send_signal(signal.SIGKILL)
-            time.sleep(POLL_S)
+        watch.until_exit()
     finally:
         os.close(ready_r)
         if proc.returncode is None:  # interrupted (Ctrl-C): the child goes with us
@@ -208,17 +184,76 @@ def run_limited(job: dict[str, Any], limits: Limits, out: TextIO, err: TextIO) -
             proc.wait()
     for t in threads[1:]:
         t.join()
-    if limit_hit == "memory":
+    _say_limit(watch, err)
+    status = watch.status
+    code = 2 if watch.limit_hit or status is None or status < 0 else status
+    return Outcome(code, watch.limit_hit, watch.peak)
+
+
+@dataclass
+class _Watch:
+    """The parent's watch over the child: polls its resident set every :data:`POLL_S` until it exits,
+    starts the clock when the child says its query starts (a byte on ``ready_r``), and kills it the
+    first time a limit is passed."""
+
+    proc: subprocess.Popen[bytes]
+    ready_r: int
+    limits: Limits
+    started: float | None = None
+    limit_hit: str | None = None
+    peak: int = 0
+    #: the child's exit status once it has ended
+    status: int | None = None
+
+    def until_exit(self) -> None:
+        """Poll until the child has ended (killed or not)."""
+        threshold = self.limits.memory_bytes * (1 - MARGIN_FRACTION)
+        while not self._ended():
+            rss = _rss(self.proc.pid)
+            if rss is not None:
+                self.peak = max(self.peak, rss)
+            if self.started is None:
+                self._note_start()
+            if self.limit_hit is None:
+                if rss is not None and rss > threshold:
+                    self.limit_hit = "memory"
+                elif self.started is not None and time.monotonic() - self.started > self.limits.timeout_s:
+                    self.limit_hit = "time"
+                if self.limit_hit is not None:
+                    self.proc.send_signal(signal.SIGKILL)
+            time.sleep(POLL_S)
+
+    def _ended(self) -> bool:
+        """Reap the child if it has ended, keeping its exit status and peak resident set."""
+        pid, wstatus, usage = os.wait4(self.proc.pid, os.WNOHANG)
+        if not pid:
+            return False
+        self.status = os.waitstatus_to_exitcode(wstatus)
+        self.peak = max(self.peak, int(usage.ru_maxrss) * 1024)
+        self.proc.returncode = self.status
+        return True
+
+    def _note_start(self) -> None:
+        """Start the time limit's clock once the child has said its query starts."""
+        try:
+            if os.read(self.ready_r, 1):
+                self.started = time.monotonic()
+        except BlockingIOError:
+            pass
+
+
+def _say_limit(watch: _Watch, err: TextIO) -> None:
+    """The one line on ``err`` for a child stopped at a limit or killed by a signal (nothing otherwise)."""
+    limits, status = watch.limits, watch.status
+    if watch.limit_hit == "memory":
         err.write(
-            f"error: memory limit {limits.memory_text} hit: the query was stopped at {_mb(peak)} of resident memory; "
+            f"error: memory limit {limits.memory_text} hit: the query was stopped at {_mb(watch.peak)} of resident memory; "
             "raise it with --memory-limit, or select fewer rows or smaller values\n"
         )
-    elif limit_hit == "time":
+    elif watch.limit_hit == "time":
         err.write(f"error: time limit {limits.timeout_s:g}s hit: the query was stopped; raise it with --timeout\n")
     elif status is not None and status < 0:
         err.write(f"error: the query process died ({signal.Signals(-status).name}); try a smaller query\n")
-    code = 2 if limit_hit or status is None or status < 0 else status
-    return Outcome(code, limit_hit, peak)
 
 
 def _feed(dst: Any, payload: bytes) -> None:
@@ -246,8 +281,6 @@ def _cap_address_space(memory_bytes: int) -> None:
     """No new mapping past what the process has now plus the room left under the limit: new memory
     needs new mappings, so one allocation bigger than that room fails at once (DuckDB's Out of Memory
     error, Python's MemoryError) instead of being filled page by page until the parent kills."""
-    import resource
-
     now = _statm()
     if now is None:
         return
@@ -263,9 +296,6 @@ def _cap_address_space(memory_bytes: int) -> None:
 def child_main(ready_fd: int, argv: Sequence[str] = ()) -> int:
     """The child: read the job (run_dirs, query, format, max_rows, memory_bytes) from stdin, open the runs,
     say ``ready`` on ``ready_fd``, run the query and print its result; 0, or 2 with one line on stderr."""
-    from reports.render_text import print_result
-    from reports.views import ReportError, open_runs_checked, run_query
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent too; it stops this process
     job = json.loads(sys.stdin.buffer.read())
     memory = int(job["memory_bytes"])

@@ -1,6 +1,7 @@
-"""Small SVG charts written by hand: grouped bars with error whiskers, stacked share bars and
-line charts. Inline SVG keeps the HTML report self-contained (no plotting library, no network)
-and every mark carries a ``<title>`` so hovering shows the exact value.
+"""The report's SVG charts, written by hand: grouped bars with error whiskers, stacked share bars, line charts.
+
+Inline SVG keeps the HTML report self-contained (no plotting library, no network) and every mark
+carries a ``<title>`` so hovering shows the exact value.
 
 The legend sits below the plot area in as many rows as it needs (the chart grows taller), so it
 never covers a bar however many arms a sweep has; a bar of 0 is drawn as a thin mark on the axis

@@ -1,5 +1,4 @@
-"""Synthetic run folders of any size, for the report benchmark and for trying ``recap report``
-without running a sweep.
+"""Writes synthetic run folders of any size (for the report benchmark, or ``recap report`` without a sweep).
 
 The rows follow the schemas (``schemas/tables.py``) and the run layout of ``schemas/parts.py``
 (atomic ``part-<writer>-<n>.parquet`` files per table); the numbers are random but consistent:
@@ -22,6 +21,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from recap.baselines.react import ReActConfig
+from recap.config import ReCAPConfig
 from schemas.labels import ALFWORLD_TASK_TYPES
 from schemas.records import SCHEMA_VERSION
 from schemas.tables import arrow_schema
@@ -38,6 +39,8 @@ WORDS = np.array(
     "the onion is on table1 cut lettuce stack patty on bottombun cook at stove3 wait pick put "
     "go to counter2 fridge open drawer take apple heat it with microwave clean sink place".split()
 )
+ACTIONS = np.array(["go to table1", "pick onion", "cut lettuce", "cook patty", "stack", "wait", "put bun"])
+TREE_TASKS = np.array(["make a burger", "cut lettuce", "cook patty", "assemble", "serve the dish"])
 
 
 @dataclass(frozen=True)
@@ -82,34 +85,66 @@ def _texts(rng: np.random.Generator, n: int, lo: int, hi: int) -> list[str]:
     return [f"{pool[i]} [{j}]" for j, i in enumerate(idx)]
 
 
-def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec(), run_id: str = "synthetic") -> dict[str, int]:
-    """Write a run folder with about ``spec.messages`` message rows; returns rows per table."""
-    rng = np.random.default_rng(spec.seed)
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "run.json").write_text(json.dumps({"run_id": run_id, "spec_hash": "synthetic"}))
+@dataclass(frozen=True)
+class _Episodes:
+    """The per-episode plan every table is drawn from: how many calls, messages and steps each
+    episode has, its method and place indices, and whether it succeeded."""
 
-    # -- episodes: calls per episode decide messages (2 pinned + prompt and reply per call) -------
+    n: int
+    ids: np.ndarray
+    calls: np.ndarray
+    messages: np.ndarray
+    steps: np.ndarray
+    method: np.ndarray
+    split_i: np.ndarray
+    task_i: np.ndarray
+    seed: np.ndarray
+    success: np.ndarray
+    end: np.ndarray
+
+
+@dataclass(frozen=True)
+class _CallSums:
+    """The calls' totals per episode (successful calls carry tokens), for the episode rows."""
+
+    cost: np.ndarray
+    prompt: np.ndarray
+    cached: np.ndarray
+    completion: np.ndarray
+
+
+def _starts(counts: np.ndarray) -> np.ndarray:
+    """Where each group of ``counts`` rows starts in the flat column."""
+    return np.concatenate([[0], np.cumsum(counts)[:-1]])
+
+
+def _plan_episodes(rng: np.random.Generator, spec: SyntheticSpec) -> _Episodes:
+    """Episodes: calls per episode decide messages (2 pinned + prompt and reply per call)."""
     n_ep = max(1, spec.messages // (2 * spec.mean_calls + 2))
     calls_per = np.clip(rng.poisson(spec.mean_calls, n_ep), 2, None).astype(np.int64)
-    msgs_per = 2 * calls_per + 2
     steps_per = np.maximum(1, (calls_per * rng.uniform(0.4, 0.8, n_ep)).astype(np.int64))
     method = np.array(METHODS)[np.arange(n_ep) % len(METHODS)]
-    split_i = (np.arange(n_ep) // len(METHODS)) % len(SPLITS)
-    task_i = (np.arange(n_ep) // (len(METHODS) * len(SPLITS))) % 10
-    seed = 42 * (1 + (np.arange(n_ep) // (len(METHODS) * len(SPLITS) * 10)))
     success = rng.uniform(size=n_ep) < np.vectorize(SUCCESS.get)(method)
-    end = np.where(success, "success", np.array(END_FAIL)[rng.integers(0, len(END_FAIL), n_ep)])
-    ep_ids = np.array([f"ep-{i:07d}" for i in range(n_ep)])
+    return _Episodes(
+        n=n_ep,
+        ids=np.array([f"ep-{i:07d}" for i in range(n_ep)]),
+        calls=calls_per,
+        messages=2 * calls_per + 2,
+        steps=steps_per,
+        method=method,
+        split_i=(np.arange(n_ep) // len(METHODS)) % len(SPLITS),
+        task_i=(np.arange(n_ep) // (len(METHODS) * len(SPLITS))) % 10,
+        seed=42 * (1 + (np.arange(n_ep) // (len(METHODS) * len(SPLITS) * 10))),
+        success=success,
+        end=np.where(success, "success", np.array(END_FAIL)[rng.integers(0, len(END_FAIL), n_ep)]),
+    )
 
-    # -- calls -------------------------------------------------------------------------------
-    n_calls = int(calls_per.sum())
-    call_ep = np.repeat(np.arange(n_ep), calls_per)
-    call_start = np.concatenate([[0], np.cumsum(calls_per)[:-1]])
-    call_idx = np.arange(n_calls) - np.repeat(call_start, calls_per)
-    # window of call k: seqs 0,1 (pinned) + the newest messages before its reply, at most `window`
+
+def _window_seqs(call_idx: np.ndarray, window: int) -> tuple[pa.ListArray, np.ndarray, np.ndarray]:
+    """Each call's window (seqs 0, 1 pinned + the newest messages before its reply, at most
+    ``window``), with the messages in history when it is made and its window's length."""
     before = 2 + 2 * call_idx + 1  # messages in history when call k is made (its prompt included)
-    tail = np.minimum(before - 2, spec.window - 2)
+    tail = np.minimum(before - 2, window - 2)
     win_len = 2 + tail
     offsets = np.concatenate([[0], np.cumsum(win_len)]).astype(np.int32)
     values = np.empty(int(win_len.sum()), dtype=np.int64)
@@ -120,36 +155,46 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     rel = np.arange(values.size) - np.repeat(pos, win_len)
     mask = rel >= 2
     values[mask] = (np.repeat(before - tail, win_len) + rel - 2)[mask]
-    window = pa.ListArray.from_arrays(pa.array(offsets), pa.array(values))
+    return pa.ListArray.from_arrays(pa.array(offsets), pa.array(values)), before, win_len
+
+
+def _calls_table(rng: np.random.Generator, ep: _Episodes, spec: SyntheticSpec, run_id: str) -> tuple[pa.Table, _CallSums]:
+    """The llm_calls rows (prompts grow with the window; ReAct's and Act's with the history too)
+    and their totals per episode."""
+    n_calls = int(ep.calls.sum())
+    call_ep = np.repeat(np.arange(ep.n), ep.calls)
+    call_idx = np.arange(n_calls) - np.repeat(_starts(ep.calls), ep.calls)
+    window, before, win_len = _window_seqs(call_idx, spec.window)
     prompt = (
         300
         + 55 * (win_len - 2)
         + rng.integers(0, 200, n_calls)
-        + np.where(np.repeat(method, calls_per) == "recap", 0, 20 * np.minimum(call_idx, 40))
+        + np.where(np.repeat(ep.method, ep.calls) == "recap", 0, 20 * np.minimum(call_idx, 40))
     ).astype(np.int64)
     cached = (prompt * rng.uniform(0, 0.6, n_calls)).astype(np.int64)
     completion = rng.integers(20, 200, n_calls).astype(np.int64)
     status = np.where(rng.uniform(size=n_calls) < 0.01, "error", "ok")
-    cost = np.where(status == "ok", (prompt - cached) * 2.5e-6 + cached * 1.25e-6 + completion * 1e-5, 0.0)
+    ok = status == "ok"
+    cost = np.where(ok, (prompt - cached) * 2.5e-6 + cached * 1.25e-6 + completion * 1e-5, 0.0)
     retries = np.where(status == "error", rng.integers(1, 4, n_calls), (rng.uniform(size=n_calls) < 0.02).astype(np.int64))
     purpose = np.where(call_idx == 0, "task", np.array(PURPOSES)[rng.integers(0, len(PURPOSES), n_calls)])
     calls = pa.table(
         {
             "run_id": pa.array([run_id] * n_calls),
-            "episode_id": ep_ids[call_ep],
+            "episode_id": ep.ids[call_ep],
             "call_index": call_idx,
-            "call_key": np.char.add(np.char.add(ep_ids[call_ep], "#"), call_idx.astype(str)),
+            "call_key": np.char.add(np.char.add(ep.ids[call_ep], "#"), call_idx.astype(str)),
             "purpose": purpose,
             "window_seqs": window,
-            "model": np.where(status == "ok", "gpt-4o", ""),
+            "model": np.where(ok, "gpt-4o", ""),
             "status": status,
             "node_id": pa.nulls(n_calls, pa.int64()),
             "response_seq": before,
             "error_kind": pa.array(["rate_limit" if s == "error" else None for s in status.tolist()], pa.string()),
             "error_message": pa.nulls(n_calls, pa.string()),
-            "prompt_tokens": np.where(status == "ok", prompt, 0),
-            "cached_prompt_tokens": np.where(status == "ok", cached, 0),
-            "completion_tokens": np.where(status == "ok", completion, 0),
+            "prompt_tokens": np.where(ok, prompt, 0),
+            "cached_prompt_tokens": np.where(ok, cached, 0),
+            "completion_tokens": np.where(ok, completion, 0),
             "cost_usd": cost,
             "latency_s": rng.uniform(0.3, 3.0, n_calls),
             "retries": retries,
@@ -160,18 +205,31 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
         }
     )
 
-    # -- messages ------------------------------------------------------------------------------
-    n_msg = int(msgs_per.sum())
-    msg_ep = np.repeat(np.arange(n_ep), msgs_per)
-    msg_seq = np.arange(n_msg) - np.repeat(np.concatenate([[0], np.cumsum(msgs_per)[:-1]]), msgs_per)
+    def per_episode(values: np.ndarray) -> np.ndarray:
+        return np.bincount(call_ep, weights=np.where(ok, values, 0), minlength=ep.n).astype(np.int64)
+
+    sums = _CallSums(
+        cost=np.bincount(call_ep, weights=cost, minlength=ep.n),
+        prompt=per_episode(prompt),
+        cached=per_episode(cached),
+        completion=per_episode(completion),
+    )
+    return calls, sums
+
+
+def _messages_table(rng: np.random.Generator, ep: _Episodes, run_id: str) -> pa.Table:
+    """The messages rows: two pinned ones (demonstration, task), then observation and reply in turn."""
+    n_msg = int(ep.messages.sum())
+    msg_ep = np.repeat(np.arange(ep.n), ep.messages)
+    msg_seq = np.arange(n_msg) - np.repeat(_starts(ep.messages), ep.messages)
     role = np.where((msg_seq >= 2) & (msg_seq % 2 == 1), "assistant", "user")
     kind = np.where(
         msg_seq == 0, "demonstration", np.where(msg_seq == 1, "task", np.where(role == "assistant", "reply", "observation"))
     )
-    messages = pa.table(
+    return pa.table(
         {
             "run_id": pa.array([run_id] * n_msg),
-            "episode_id": ep_ids[msg_ep],
+            "episode_id": ep.ids[msg_ep],
             "seq": msg_seq,
             "role": role,
             "kind": kind,
@@ -181,57 +239,46 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
         }
     )
 
-    # -- steps: a few invalid attempts, some episodes end in an a-b loop ----------------------------
-    n_steps = int(steps_per.sum())
-    st_ep = np.repeat(np.arange(n_ep), steps_per)
-    st_idx = np.arange(n_steps) - np.repeat(np.concatenate([[0], np.cumsum(steps_per)[:-1]]), steps_per)
+
+def _steps_table(rng: np.random.Generator, ep: _Episodes, run_id: str) -> pa.Table:
+    """The steps rows: a few invalid attempts, some episodes end in an a-b loop."""
+    n_steps = int(ep.steps.sum())
+    st_ep = np.repeat(np.arange(ep.n), ep.steps)
+    st_idx = np.arange(n_steps) - np.repeat(_starts(ep.steps), ep.steps)
     valid = rng.uniform(size=n_steps) > 0.08
-    actions = np.array(["go to table1", "pick onion", "cut lettuce", "cook patty", "stack", "wait", "put bun"])
-    act = actions[rng.integers(0, len(actions), n_steps)]
+    act = ACTIONS[rng.integers(0, len(ACTIONS), n_steps)]
     obs = np.char.add("state ", st_idx.astype(str))
-    looping = np.repeat(rng.uniform(size=n_ep) < 0.1, steps_per) & (st_idx >= np.repeat(steps_per, steps_per) - 8)
+    last = np.repeat(ep.steps, ep.steps) - 1  # each row's episode's last step index
+    looping = np.repeat(rng.uniform(size=ep.n) < 0.1, ep.steps) & (st_idx > last - 8)  # its last 8 steps
     act = np.where(looping, np.where(st_idx % 2 == 0, "go to table1", "go to table2"), act)
     obs = np.where(looping, np.where(st_idx % 2 == 0, "at table1", "at table2"), obs)
-    valid = valid | looping
-    steps = pa.table(
+    return pa.table(
         {
             "run_id": pa.array([run_id] * n_steps),
-            "episode_id": ep_ids[st_ep],
+            "episode_id": ep.ids[st_ep],
             "index": st_idx,
             "env_step": st_idx + 1,
             "action": act,
-            "valid": valid,
+            "valid": valid | looping,
             "observation": obs,
-            "done": st_idx == np.repeat(steps_per, steps_per) - 1,
-            "success": (st_idx == np.repeat(steps_per, steps_per) - 1) & np.repeat(success, steps_per),
+            "done": st_idx == last,
+            "success": (st_idx == last) & np.repeat(ep.success, ep.steps),
             "node_id": pa.nulls(n_steps, pa.int64()),
         }
     )
 
-    # -- task trees for recap episodes: root, ~8 composites, leaves under them -------------------
-    rec = np.flatnonzero(method == "recap")
-    nodes_per = np.maximum(3, steps_per[rec] + 1 + np.minimum(8, steps_per[rec] // 4))
-    n_nodes = int(nodes_per.sum())
-    nd_ep = np.repeat(rec, nodes_per)
-    nd_id = np.arange(n_nodes) - np.repeat(np.concatenate([[0], np.cumsum(nodes_per)[:-1]]), nodes_per)
-    n_comp = np.repeat(np.minimum(8, steps_per[rec] // 4) + 1, nodes_per)  # node 1..n_comp-1 composite
-    is_comp = (nd_id >= 1) & (nd_id < n_comp)
-    leaf_slot = nd_id - n_comp
-    parent = np.where(nd_id == 0, -1, np.where(is_comp, 0, np.where(n_comp > 1, leaf_slot % np.maximum(n_comp - 1, 1) + 1, 0)))
-    child_index = np.where(
-        nd_id == 0, 0, np.where(is_comp, nd_id - 1, np.where(n_comp > 1, leaf_slot // np.maximum(n_comp - 1, 1), leaf_slot))
-    )
-    depth = np.where(nd_id == 0, 0, np.where(is_comp | (parent == 0), 1, 2))
-    kind_n = np.where(nd_id == 0, "root", np.where(is_comp, "composite", "primitive"))
-    status_n = np.where(rng.uniform(size=n_nodes) < 0.05, "failed", "done")
-    n_ver = np.where(kind_n == "primitive", 1, rng.integers(1, 5, n_nodes))
+
+def _versions(rng: np.random.Generator, kind: np.ndarray) -> pa.ListArray:
+    """Each node's versions (primitives have one, the others 1 to 4), each with a think text and subtasks."""
+    n_nodes = len(kind)
+    n_ver = np.where(kind == "primitive", 1, rng.integers(1, 5, n_nodes))
     v_total = int(n_ver.sum())
     v_off = np.concatenate([[0], np.cumsum(n_ver)]).astype(np.int32)
     v_num = (np.arange(v_total) - np.repeat(v_off[:-1], n_ver)).astype(np.int32)
     sub_len = rng.integers(1, 6, v_total)
     s_off = np.concatenate([[0], np.cumsum(sub_len)]).astype(np.int32)
-    subtasks = pa.ListArray.from_arrays(pa.array(s_off), pa.array(actions[rng.integers(0, len(actions), int(sub_len.sum()))]))
-    versions = pa.ListArray.from_arrays(
+    subtasks = pa.ListArray.from_arrays(pa.array(s_off), pa.array(ACTIONS[rng.integers(0, len(ACTIONS), int(sub_len.sum()))]))
+    return pa.ListArray.from_arrays(
         pa.array(v_off),
         pa.StructArray.from_arrays(
             [
@@ -244,72 +291,96 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
             names=["version", "think", "subtasks", "call_index", "message_seq"],
         ),
     )
-    tasks = np.array(["make a burger", "cut lettuce", "cook patty", "assemble", "serve the dish"])
+
+
+def _tree_nodes_table(rng: np.random.Generator, ep: _Episodes, run_id: str) -> tuple[pa.Table, np.ndarray]:
+    """Task trees for the ReCAP episodes (root, up to 8 composites, leaves under them), and every
+    episode's tree depth (2 for ReCAP, 0 for the others)."""
+    rec = np.flatnonzero(ep.method == "recap")
+    nodes_per = np.maximum(3, ep.steps[rec] + 1 + np.minimum(8, ep.steps[rec] // 4))
+    n_nodes = int(nodes_per.sum())
+    nd_id = np.arange(n_nodes) - np.repeat(_starts(nodes_per), nodes_per)
+    n_comp = np.repeat(np.minimum(8, ep.steps[rec] // 4) + 1, nodes_per)  # node 1..n_comp-1 composite
+    is_comp = (nd_id >= 1) & (nd_id < n_comp)
+    leaf_slot = nd_id - n_comp
+    parent = np.where(nd_id == 0, -1, np.where(is_comp, 0, np.where(n_comp > 1, leaf_slot % np.maximum(n_comp - 1, 1) + 1, 0)))
+    child_index = np.where(
+        nd_id == 0, 0, np.where(is_comp, nd_id - 1, np.where(n_comp > 1, leaf_slot // np.maximum(n_comp - 1, 1), leaf_slot))
+    )
+    kind = np.where(nd_id == 0, "root", np.where(is_comp, "composite", "primitive"))
+    status = np.where(rng.uniform(size=n_nodes) < 0.05, "failed", "done")
     nodes = pa.table(
         {
             "run_id": pa.array([run_id] * n_nodes),
-            "episode_id": ep_ids[nd_ep],
+            "episode_id": ep.ids[np.repeat(rec, nodes_per)],
             "node_id": nd_id,
             "parent_id": pa.array(parent, mask=parent < 0),
-            "depth": depth,
+            "depth": np.where(nd_id == 0, 0, np.where(is_comp | (parent == 0), 1, 2)),
             "child_index": child_index,
-            "task": tasks[nd_id % len(tasks)],
-            "kind": kind_n,
-            "status": status_n,
-            "versions": versions,
+            "task": TREE_TASKS[nd_id % len(TREE_TASKS)],
+            "kind": kind,
+            "status": status,
+            "versions": _versions(rng, kind),
             "step_index": pa.nulls(n_nodes, pa.int64()),
         }
     )
-    max_depth = np.zeros(n_ep, dtype=np.int64)
+    max_depth = np.zeros(ep.n, dtype=np.int64)
     max_depth[rec] = 2
+    return nodes, max_depth
 
-    # -- episodes --------------------------------------------------------------------------------
-    per_ep_cost = np.bincount(call_ep, weights=cost, minlength=n_ep)
-    ok = status == "ok"
-    bench = np.array([b for b, _ in SPLITS])[split_i]
-    split = np.array([s for _, s in SPLITS])[split_i]
-    # the place as the pipeline writes it (schemas.labels.place_of): Robotouille's task is its
-    # environment's name and its instance id names split, task and seed; ALFWorld is one split
-    # whose tasks are the six task types, one game per instance id
-    robot_task = np.char.add(task_i.astype(str), "_recipe")
+
+def _places(ep: _Episodes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each episode's benchmark, split, task and instance id, as the pipeline writes them
+    (schemas.labels.place_of): Robotouille's task is its environment's name and its instance id
+    names split, task and seed; ALFWorld is one split whose tasks are the six task types, one game
+    per instance id."""
+    bench = np.array([b for b, _ in SPLITS])[ep.split_i]
+    split = np.array([s for _, s in SPLITS])[ep.split_i]
+    robot_task = np.char.add(ep.task_i.astype(str), "_recipe")
     alf = bench == "alfworld"
-    task = np.where(alf, np.array(ALFWORLD_TYPES)[task_i % len(ALFWORLD_TYPES)], robot_task)
+    task = np.where(alf, np.array(ALFWORLD_TYPES)[ep.task_i % len(ALFWORLD_TYPES)], robot_task)
     instance = np.where(
         alf,
-        np.char.add(np.char.add(np.char.add("alfworld/", task), "/game-"), task_i.astype(str)),
+        np.char.add(np.char.add(np.char.add("alfworld/", task), "/game-"), ep.task_i.astype(str)),
         np.char.add(
-            np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"), seed.astype(str)
+            np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"), ep.seed.astype(str)
         ),
     )
-    # canonical configs, as the driver stores them (recap.config / recap.baselines to_json)
-    from recap.baselines.react import ReActConfig
-    from recap.config import ReCAPConfig
+    return bench, split, task, instance
 
-    cfg = np.where(method == "recap", ReCAPConfig(window=spec.window).to_json(), ReActConfig(window=spec.window).to_json())
-    unit = np.char.add(np.char.add(np.char.add(method, "|"), instance), np.char.add("|", seed.astype(str)))
-    ended = 1.7e9 + np.arange(n_ep, dtype=np.float64)
-    episodes = pa.table(
+
+def _episodes_table(
+    rng: np.random.Generator, ep: _Episodes, sums: _CallSums, max_depth: np.ndarray, spec: SyntheticSpec, run_id: str
+) -> pa.Table:
+    """The episodes rows, their totals those of their calls."""
+    bench, split, task, instance = _places(ep)
+    # canonical configs, as the driver stores them (recap.config / recap.baselines to_json)
+    cfg = np.where(ep.method == "recap", ReCAPConfig(window=spec.window).to_json(), ReActConfig(window=spec.window).to_json())
+    unit = np.char.add(np.char.add(np.char.add(ep.method, "|"), instance), np.char.add("|", ep.seed.astype(str)))
+    ended = 1.7e9 + np.arange(ep.n, dtype=np.float64)
+    n_ep = ep.n
+    return pa.table(
         {
             "run_id": pa.array([run_id] * n_ep),
-            "episode_id": ep_ids,
+            "episode_id": ep.ids,
             "unit_id": unit,
             "attempt": np.ones(n_ep, dtype=np.int64),
             "benchmark": bench,
             "split": split,
             "task": task,
             "instance_id": instance,
-            "seed": seed,
-            "method": method,
+            "seed": ep.seed,
+            "method": ep.method,
             "method_config": cfg,
             "model": ["gpt-4o"] * n_ep,
-            "end_reason": end,
-            "success": success,
-            "steps": steps_per,
-            "llm_calls": calls_per,
-            "prompt_tokens": np.bincount(call_ep, weights=np.where(ok, prompt, 0), minlength=n_ep).astype(np.int64),
-            "cached_prompt_tokens": np.bincount(call_ep, weights=np.where(ok, cached, 0), minlength=n_ep).astype(np.int64),
-            "completion_tokens": np.bincount(call_ep, weights=np.where(ok, completion, 0), minlength=n_ep).astype(np.int64),
-            "cost_usd": per_ep_cost,
+            "end_reason": ep.end,
+            "success": ep.success,
+            "steps": ep.steps,
+            "llm_calls": ep.calls,
+            "prompt_tokens": sums.prompt,
+            "cached_prompt_tokens": sums.cached,
+            "completion_tokens": sums.completion,
+            "cost_usd": sums.cost,
             "wall_s": rng.uniform(30, 600, n_ep),
             "step_cap": np.full(n_ep, 120, dtype=np.int64),
             "step_multiplier": np.full(n_ep, 4.0),
@@ -320,13 +391,17 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
             "started_at": ended - 100.0,
             "ended_at": ended,
             "test_double": np.zeros(n_ep, dtype=bool),
-            "label": method,
+            "label": ep.method,
             "profile": pa.nulls(n_ep, pa.string()),
             "ablation": pa.nulls(n_ep, pa.string()),
             "provider_model": ["openai/gpt-4o-2024-08-06"] * n_ep,
         }
     )
-    run = pa.table(
+
+
+def _run_table(run_id: str) -> pa.Table:
+    """The one run row."""
+    return pa.table(
         {
             "run_id": [run_id],
             "started_at": [1.7e9],
@@ -339,6 +414,21 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
             "schema_version": [SCHEMA_VERSION],
         }
     )
+
+
+def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec(), run_id: str = "synthetic") -> dict[str, int]:
+    """Write a run folder with about ``spec.messages`` message rows; returns rows per table."""
+    rng = np.random.default_rng(spec.seed)
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "run.json").write_text(json.dumps({"run_id": run_id, "spec_hash": "synthetic"}))
+    # one generator for every table: the order of the draws below is part of the output
+    ep = _plan_episodes(rng, spec)
+    calls, sums = _calls_table(rng, ep, spec, run_id)
+    messages = _messages_table(rng, ep, run_id)
+    steps = _steps_table(rng, ep, run_id)
+    nodes, max_depth = _tree_nodes_table(rng, ep, run_id)
+    episodes = _episodes_table(rng, ep, sums, max_depth, spec, run_id)
     counts = {}
     for table, data in (
         ("episodes", episodes),
@@ -346,7 +436,7 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
         ("messages", messages),
         ("steps", steps),
         ("tree_nodes", nodes),
-        ("run", run),
+        ("run", _run_table(run_id)),
     ):
         _write(run_dir, table, data, "synth001", spec.part_rows, spec.row_group_rows)
         counts[table] = data.num_rows

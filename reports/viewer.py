@@ -1,5 +1,7 @@
-"""The episode viewer of the HTML report: the context tree (think and subtasks of every node
-version), the actions and observations along it, every LLM call and the exact window it saw.
+"""The HTML report's episode viewer: each episode's context tree, actions, observations, calls and windows.
+
+For every node version its think and subtasks; along the tree the actions and observations; every
+LLM call and the exact window it saw.
 
 Messages are written once per episode; a call's window is a list of message seqs
 (``llm_calls.window_seqs``) that a few lines of JavaScript show on request, so the page grows with
