@@ -97,7 +97,7 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     method = np.array(METHODS)[np.arange(n_ep) % len(METHODS)]
     split_i = (np.arange(n_ep) // len(METHODS)) % len(SPLITS)
     task_i = (np.arange(n_ep) // (len(METHODS) * len(SPLITS))) % 10
-    seed = 42 * (1 + (np.arange(n_ep) // (len(METHODS) * len(SPLITS) * 10)))
+    layout_seed = 42 * (1 + (np.arange(n_ep) // (len(METHODS) * len(SPLITS) * 10)))
     success = rng.uniform(size=n_ep) < np.vectorize(SUCCESS.get)(method)
     end = np.where(success, "success", np.array(END_FAIL)[rng.integers(0, len(END_FAIL), n_ep)])
     ep_ids = np.array([f"ep-{i:07d}" for i in range(n_ep)])
@@ -269,7 +269,7 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     bench = np.array([b for b, _ in SPLITS])[split_i]
     split = np.array([s for _, s in SPLITS])[split_i]
     # the place as the pipeline writes it (schemas.labels.place_of): Robotouille's task is its
-    # environment's name and its instance id names split, task and seed; ALFWorld is one split
+    # environment's name and its instance id names split, task and layout seed; ALFWorld is one split
     # whose tasks are the six task types, one game per instance id
     robot_task = np.char.add(task_i.astype(str), "_recipe")
     alf = bench == "alfworld"
@@ -278,7 +278,8 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
         alf,
         np.char.add(np.char.add(np.char.add("alfworld/", task), "/game-"), task_i.astype(str)),
         np.char.add(
-            np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"), seed.astype(str)
+            np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"),
+            layout_seed.astype(str),
         ),
     )
     # canonical configs, as the driver stores them (recap.config / recap.baselines to_json)
@@ -286,7 +287,7 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
     from recap.config import ReCAPConfig
 
     cfg = np.where(method == "recap", ReCAPConfig(window=spec.window).to_json(), ReActConfig(window=spec.window).to_json())
-    unit = np.char.add(np.char.add(np.char.add(method, "|"), instance), np.char.add("|", seed.astype(str)))
+    unit = np.char.add(np.char.add(np.char.add(method, "|"), instance), np.char.add("|", layout_seed.astype(str)))
     ended = 1.7e9 + np.arange(n_ep, dtype=np.float64)
     episodes = pa.table(
         {
@@ -298,7 +299,8 @@ def write_synthetic_run(run_dir: str | Path, spec: SyntheticSpec = SyntheticSpec
             "split": split,
             "task": task,
             "instance_id": instance,
-            "seed": seed,
+            # each unit one sampling seed, numbered like its instance's layout seed (as generated so far)
+            "sampling_seed": layout_seed,
             "method": method,
             "method_config": cfg,
             "model": ["gpt-4o"] * n_ep,

@@ -36,7 +36,7 @@ def test_defaults_and_unit_count():
     # 3 blocksworld instances of size 3 x 1 method x 1 model x 2 seeds
     assert len(plan.units) == 6
     assert [u.instance_id for u in plan.units[:2]] == ["blocksworld/3@1", "blocksworld/3@1"]
-    assert [u.seed for u in plan.units[:2]] == [0, 1]
+    assert [u.sampling_seed for u in plan.units[:2]] == [0, 1]
     assert len({u.unit_id for u in plan.units}) == 6
     assert plan.units[0].key == "blocksworld/3@1 | recap | offline/expert | seed 0"
 
@@ -113,7 +113,7 @@ def test_unit_hash_is_pinned():
         method_config='{"window": 64}',
         model="offline/expert",
         params={},
-        seed=0,
+        sampling_seed=0,
         step_multiplier=4.0,
     )
     assert uid == "58de48ed5ccdeed2"
