@@ -85,7 +85,9 @@ def test_interleaved_order_spreads_instances_over_benchmarks_and_splits_and_pair
     for arm, units in per_arm.items():
         # the first 4 units of an arm cover every stratum; its first 8 every instance, with seed 0
         assert {stratum(u.instance_id) for u in units[:4]} == strata, arm
-        assert {u.instance_id for u in units[:8]} == {u.instance_id for u in plan.units} and {u.sampling_seed for u in units[:8]} == {0}
+        assert {u.instance_id for u in units[:8]} == {u.instance_id for u in plan.units} and {
+            u.sampling_seed for u in units[:8]
+        } == {0}
     # every arm gets the same (instance, seed) pairs in the same order: a capped run's units pair up
     sequences = {tuple((u.instance_id, u.sampling_seed) for u in units) for units in per_arm.values()}
     assert len(sequences) == 1

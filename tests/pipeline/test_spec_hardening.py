@@ -420,7 +420,9 @@ def test_a_sweep_that_expands_to_too_many_units_is_refused(tmp_path, capsys):
     text = edit("seeds: [0]", f"seeds: [{seeds}]", edit(ENV, '    tasks: ["all"]\n'))
     text = edit("  - method: recap\n", "  - method: recap\n  - method: react\n  - method: act\n", text)
     assert 9 * 3 * 10_000 > MAX_UNITS
-    assert_refused(tmp_path, capsys, text, "units (9 instances x 3 methods x 1 models x 10000 sampling seeds); at most 200,000 per run")
+    assert_refused(
+        tmp_path, capsys, text, "units (9 instances x 3 methods x 1 models x 10000 sampling seeds); at most 200,000 per run"
+    )
 
 
 # --------------------------------------------------------------------------------------------
