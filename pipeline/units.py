@@ -28,6 +28,7 @@ from schemas.labels import ablation_of_config, place_of
 from schemas.outcomes import UnitWork
 from workers.envs.registry import get_benchmark, split_id
 from workers.episode_worker import build_agent
+from workers.llm.offline.knobs import hashed_options
 from workers.release.texts import ReleaseMissing, ReleaseUnavailable, release_folder, release_text
 
 HASH_VERSION = 1
@@ -282,7 +283,7 @@ def expand(spec: SweepSpec) -> Plan:
                         method=m.method,
                         method_config=cfg,
                         model=model.model,
-                        params={**model.params, **({"options": model.options} if model.options else {})},
+                        params={**model.params, **({"options": hashed_options(model.options)} if model.options else {})},
                         sampling_seed=sampling_seed,
                         step_multiplier=multiplier,
                     )

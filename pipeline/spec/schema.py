@@ -97,8 +97,8 @@ class ModelSpec(StrictModel):
     label: Label | None = None
     #: sent with every call (temperature override, top_p, provider options, test-double knobs)
     params: dict[str, Any] = Field(default_factory=dict)
-    #: knobs of the offline/ test doubles (seed, invalid_action_rate, malformed_json_rate,
-    #: chunk_size); part of the unit hash
+    #: knobs of the offline/ test doubles (noise_seed - old name seed -, invalid_action_rate,
+    #: malformed_json_rate, chunk_size); part of the unit hash (``noise_seed`` hashed as ``seed``)
     options: dict[str, Any] = Field(default_factory=dict)
     # --- transport: never part of a unit's identity ---
     rpm: Annotated[int, NOT_BOOL, Bounded("models[].rpm")] | None = None
