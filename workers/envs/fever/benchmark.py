@@ -106,7 +106,7 @@ class FeverBenchmark(Benchmark):
         source = wiki_source(wikipedia, page_store=page_store, limiter=limiter)
         claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
         env = FeverEnvironment(find_claim(claims, instance_id), source, wikipedia_url=base, max_steps=max_steps)
-        env.seed = seed
+        env.layout_seed = seed
         return env
 
 
