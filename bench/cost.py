@@ -92,7 +92,7 @@ def record(instance_id: str, arm: str, method: str, settings: dict[str, Any], pr
     env = make_env(instance_id, **get_benchmark(benchmark).options_for_agent(agent.style, agent.config))
     try:
         inner = Recorder(LiteLLMClient(DeploymentConfig(model="offline/expert")), traj)
-        result = agent.run(env, EpisodeClient(inner, env, seed=0, offline=True), episode_id=f"{arm}:{instance_id}")
+        result = agent.run(env, EpisodeClient(inner, env, sampling_seed=0, offline=True), episode_id=f"{arm}:{instance_id}")
         traj.success = bool(result.success)
     finally:
         env.close()

@@ -50,7 +50,7 @@ def bench_instance(instance_id: str, data_dir: str, repeats: int) -> dict:
         step = env.step(action)
         steps.append(time.perf_counter() - t0)
         success = step.success
-    record = json.loads(instance_path(Path(data_dir), env.split, env.task, env.seed).read_text())
+    record = json.loads(instance_path(Path(data_dir), env.split, env.task, env.layout_seed).read_text())
     return {
         "id": instance_id,
         "real_create_s": float(record["create_time_s"]),

@@ -89,7 +89,7 @@ class _UnitColumns(TypedDict):
     unit_id: str
     attempt: int
     instance_id: str
-    seed: int
+    sampling_seed: int
     method: str
     method_config: str
     model: str
@@ -107,7 +107,7 @@ def _unit_fields(unit: Unit, attempt: int) -> _UnitColumns:
         unit_id=unit.unit_id,
         attempt=attempt,
         instance_id=unit.instance_id,
-        seed=unit.seed,
+        sampling_seed=unit.sampling_seed,
         method=unit.method,
         method_config=unit.method_config,
         model=unit.model_label,

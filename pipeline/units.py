@@ -1,11 +1,11 @@
-"""Units of work: (environment instance, method + settings, model + params, seed).
+"""Units of work: (environment instance, method + settings, model + params, sampling seed).
 
 Each unit has a stable content hash, ``unit_id``: the hash of everything that can change what an
 episode *does* — the instance, the method name and its fully resolved settings (profile,
-ablation, per-episode limits included), the model string and its params, the seed and the step
+ablation, per-episode limits included), the model string and its params, the sampling seed and the step
 multiplier. Transport settings (retries, rpm/tpm, concurrency, worker counts, caps, prices,
 API base and key) are left out, so raising a rate limit or a cap never invalidates finished
-work. A unit's *key* (instance, method label, model label, seed) is its human identity: a key
+work. A unit's *key* (instance, method label, model label, sampling seed) is its human identity: a key
 whose hash changed between two versions of a sweep file is a *changed* unit.
 """
 
@@ -27,6 +27,7 @@ from schemas.labels import ablation_of_config
 from schemas.outcomes import UnitWork
 from workers.envs.registry import Benchmark, get_benchmark, place_of, split_id
 from workers.episode_worker import build_agent
+from workers.llm.offline.knobs import hashed_options
 from workers.release.texts import ReleaseMissing, ReleaseUnavailable, release_folder, release_text
 
 HASH_VERSION = 1
@@ -38,7 +39,7 @@ def _canonical(obj: Any) -> str:
 
 @dataclass(frozen=True, eq=False)
 class Unit:
-    """One unit of work: one episode to play (instance, method with resolved settings, model with params, seed).
+    """One unit of work: one episode to play (instance, method with resolved settings, model with params, sampling seed).
     ``unit_id`` is the content hash of :func:`unit_hash`; ``method_label``/``model_label`` are the spec's
     names for the arm, ``method``/``model`` what actually runs."""
 
@@ -53,7 +54,7 @@ class Unit:
     model_label: str
     model: str
     model_params: Mapping[str, Any]
-    seed: int
+    sampling_seed: int
     step_multiplier: float
     env_options: Mapping[str, Any] = field(default_factory=dict)
 
@@ -69,8 +70,10 @@ class Unit:
 
     @property
     def key(self) -> str:
-        """The unit's human identity (instance, method label, model label, seed); stable across spec edits, unlike ``unit_id``."""
-        return f"{self.instance_id} | {self.method_label} | {self.model_label} | seed {self.seed}"
+        """The unit's human identity (instance, method label, model label, sampling seed); stable across spec
+        edits, unlike ``unit_id``. Its text (``... | seed N``) is kept as plan.json has always stored it: a
+        resume matches the stored keys (:func:`diff_plans`)."""
+        return f"{self.instance_id} | {self.method_label} | {self.model_label} | seed {self.sampling_seed}"
 
     def work(self) -> UnitWork:
         """What a worker needs to play the unit: the resolved settings, not the raw ones."""
@@ -81,7 +84,7 @@ class Unit:
             method_config=self.method_config,
             model_label=self.model_label,
             model=self.model,
-            seed=self.seed,
+            sampling_seed=self.sampling_seed,
             step_multiplier=self.step_multiplier,
             env_options=tuple(sorted(self.env_options.items())),
         )
@@ -98,7 +101,7 @@ class Unit:
             "instance_id": self.instance_id,
             "method": self.method_label,
             "model": self.model_label,
-            "seed": self.seed,
+            "sampling_seed": self.sampling_seed,
             "method_name": self.method,
             "profile": self.profile,
             "ablation": self.ablation_name,
@@ -121,10 +124,18 @@ def resolve_ablation(ablation: str | None, method_config: str) -> str | None:
 
 
 def unit_hash(
-    *, instance_id: str, method: str, method_config: str, model: str, params: Mapping[str, Any], seed: int, step_multiplier: float
+    *,
+    instance_id: str,
+    method: str,
+    method_config: str,
+    model: str,
+    params: Mapping[str, Any],
+    sampling_seed: int,
+    step_multiplier: float,
 ) -> str:
     """The ``unit_id``: 16 hex digits of a sha256 over what changes what an episode does (see the module
-    docstring); ``HASH_VERSION`` is inside, so a new hashing never collides with an old one."""
+    docstring); ``HASH_VERSION`` is inside, so a new hashing never collides with an old one. The sampling
+    seed is hashed under its old name ``seed``: unit ids stay those of runs written before the rename."""
     content = {
         "v": HASH_VERSION,
         "instance": instance_id,
@@ -132,18 +143,17 @@ def unit_hash(
         "config": json.loads(method_config),
         "model": model,
         "params": dict(params),
-        "seed": seed,
+        "seed": sampling_seed,
         "step_multiplier": float(step_multiplier),
     }
     return hashlib.sha256(_canonical(content).encode()).hexdigest()[:16]
 
 
-#: most units one sweep may expand to (a typo in seeds or a selector must not exhaust memory);
+#: most units one sweep may expand to (a typo in sampling_seeds or a selector must not exhaust memory);
 #: split larger sweeps into several runs
 MAX_UNITS = 200_000
 
 
-#: largest seed in a blocksworld instance id (``blocksworld/<n>@<seed>``), like the sweep's seeds
 def canonical_instance_id(instance_id: str, env: Any = None) -> str:
     """The one spelling of an instance id, so that two spellings of one instance
     (``blocksworld/3@01`` and ``blocksworld/3@1``, ``robotouille/...@042`` and ``...@42``) name
@@ -244,13 +254,13 @@ class Plan:
 
 
 def expand(spec: SweepSpec) -> Plan:
-    """All units of a sweep, in a fixed order (instances, then methods, models, seeds)."""
+    """All units of a sweep, in a fixed order (instances, then methods, models, sampling seeds)."""
     instances = resolve_instances(spec.environments)
-    n = len(instances) * len(spec.methods) * len(spec.models) * len(spec.seeds)
+    n = len(instances) * len(spec.methods) * len(spec.models) * len(spec.sampling_seeds)
     if n > MAX_UNITS:
         raise SpecError(
             f"the sweep expands to {n:,} units ({len(instances)} instances x {len(spec.methods)} methods x "
-            f"{len(spec.models)} models x {len(spec.seeds)} seeds); at most {MAX_UNITS:,} per run: split it"
+            f"{len(spec.models)} models x {len(spec.sampling_seeds)} sampling seeds); at most {MAX_UNITS:,} per run: split it"
         )
     methods_by_benchmark: dict[str, list[tuple[Any, dict[str, Any], str]]] = {}
     units: list[Unit] = []
@@ -266,14 +276,14 @@ def expand(spec: SweepSpec) -> Plan:
             cfg = with_release_digest(spec, m, inst, resolved, release) if m.prompts == "release" else resolved
             multiplier = step_multiplier_for(spec, i, inst, multipliers[i])
             for model in spec.models:
-                for seed in spec.seeds:
+                for sampling_seed in spec.sampling_seeds:
                     uid = unit_hash(
                         instance_id=inst,
                         method=m.method,
                         method_config=cfg,
                         model=model.model,
-                        params={**model.params, **({"options": model.options} if model.options else {})},
-                        seed=seed,
+                        params={**model.params, **({"options": hashed_options(model.options)} if model.options else {})},
+                        sampling_seed=sampling_seed,
                         step_multiplier=multiplier,
                     )
                     u = Unit(
@@ -288,7 +298,7 @@ def expand(spec: SweepSpec) -> Plan:
                         model.name,
                         model.model,
                         dict(model.params),
-                        seed,
+                        sampling_seed,
                         multiplier,
                         options,
                     )
@@ -437,14 +447,14 @@ def stratum(instance_id: str) -> str:
 def order_units(units: Sequence[Unit], spec: SweepSpec) -> list[Unit]:
     """The order the driver starts ``units`` in (``spec.order``); unit ids are untouched.
 
-    ``plan``: the units as given (the plan's order: instances, then methods, models, seeds).
+    ``plan``: the units as given (the plan's order: instances, then methods, models, sampling seeds).
 
     ``interleaved`` (default), so that a cap that binds early leaves a balanced subsample:
 
-    1. one sequence of (instance, seed) pairs, shared by every arm: seeds in spec order, the
-       slowest; for each seed every instance once, taking the strata (:func:`stratum`) in turn
+    1. one sequence of (instance, sampling seed) pairs, shared by every arm: sampling seeds in spec
+       order, the slowest; for each sampling seed every instance once, taking the strata (:func:`stratum`) in turn
        and, within a stratum, its instances in a shuffle seeded by :func:`order_seed`. Any
-       prefix thus covers as many instances as it can before it repeats one with another seed,
+       prefix thus covers as many instances as it can before it repeats one with another sampling seed,
        spread over benchmarks and splits;
     2. arms (method label x model label, in spec order) take turns: round ``r`` gives each arm
        its next pair of the sequence, starting at arm ``r mod A`` (a cap never favours the same
@@ -468,14 +478,14 @@ def order_units(units: Sequence[Unit], spec: SweepSpec) -> list[Unit]:
     instances: list[str] = []
     for i in range(max((len(v) for v in by_stratum.values()), default=0)):
         instances += [by_stratum[s][i] for s in strata if i < len(by_stratum[s])]
-    seed_rank = {s: i for i, s in enumerate(spec.seeds)}
+    seed_rank = {s: i for i, s in enumerate(spec.sampling_seeds)}
     inst_rank = {inst: i for i, inst in enumerate(instances)}
     arm_rank = {(m.name, o.name): i * len(spec.models) + j for i, m in enumerate(spec.methods) for j, o in enumerate(spec.models)}
     arms: dict[tuple[str, str], list[Unit]] = defaultdict(list)
     for u in units:
         arms[(u.method_label, u.model_label)].append(u)
     queues = [
-        sorted(arms[a], key=lambda u: (seed_rank.get(u.seed, len(seed_rank)), u.seed, inst_rank[u.instance_id]))
+        sorted(arms[a], key=lambda u: (seed_rank.get(u.sampling_seed, len(seed_rank)), u.sampling_seed, inst_rank[u.instance_id]))
         for a in sorted(arms, key=lambda a: (arm_rank.get(a, len(arm_rank)), a))
     ]
     out: list[Unit] = []

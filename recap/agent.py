@@ -57,7 +57,7 @@ class ElidedObservations(Environment):
             "benchmark",
             "split",
             "task",
-            "seed",
+            "layout_seed",
             "invalid_action_mode",
             "optimal_steps",
             "max_steps",

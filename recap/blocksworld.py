@@ -3,7 +3,7 @@
 It needs no data files and no optional packages, so the method's tests, the demo and the
 pipeline's own tests can run anywhere. It is a real environment (state, valid actions, goal
 check, an expert planner from any state), just a small one: a few lettered blocks in towers on a
-table and one gripper. Instances are ``blocksworld/<n>@<seed>`` (n blocks, seeded start and goal).
+table and one gripper. Instances are ``blocksworld/<n>@<layout seed>`` (n blocks, start and goal drawn from the layout seed).
 """
 
 from __future__ import annotations
@@ -157,7 +157,7 @@ class BlocksworldEnv(Environment):
         goal: list[str],
         *,
         instance_id: str,
-        seed: int = 0,
+        layout_seed: int = 0,
         step_multiplier: float = 4.0,
         demo: bool = True,
     ):
@@ -166,7 +166,7 @@ class BlocksworldEnv(Environment):
         self.instance_id = instance_id
         self.split = f"{sum(len(t) for t in towers)}_blocks"
         self.task = f"tower_{''.join(goal)}"
-        self.seed = seed
+        self.layout_seed = layout_seed
         self._with_demo = demo
         self.optimal_steps = len(expert_plan_for(_State([list(t) for t in towers], None), goal))
         self.step_multiplier = step_multiplier
@@ -211,8 +211,8 @@ class BlocksworldEnv(Environment):
         return DEMONSTRATION if self._with_demo else None
 
 
-def _random_instance(n: int, seed: int) -> tuple[list[list[str]], list[str]]:
-    rng = random.Random(seed * 1000 + n)
+def _random_instance(n: int, layout_seed: int) -> tuple[list[list[str]], list[str]]:
+    rng = random.Random(layout_seed * 1000 + n)
     blocks = list(LETTERS[:n])
     while True:
         order = blocks[:]
@@ -273,10 +273,10 @@ DEMONSTRATION = Demonstration(name="blocksworld/demo", make_env=_demo_env, scrip
 class _Benchmark:
     name = "blocksworld"
     SIZES = (3, 4, 5)
-    SEEDS = (1, 2, 3)
+    LAYOUT_SEEDS = (1, 2, 3)
 
     def list_instances(self, selector: str | None = None) -> list[str]:
-        ids = [f"blocksworld/{n}@{s}" for n in self.SIZES for s in self.SEEDS]
+        ids = [f"blocksworld/{n}@{s}" for n in self.SIZES for s in self.LAYOUT_SEEDS]
         if selector in (None, "", "all"):
             return ids
         sel = selector.removeprefix("blocksworld/")
@@ -305,9 +305,9 @@ class _Benchmark:
             raise UnknownInstanceError(
                 f"unknown blocksworld instance {instance_id!r}; use blocksworld/<n>@<seed> with 2 <= n <= {len(LETTERS)}"
             )
-        n, seed = int(m.group(1)), int(m.group(2))
-        towers, goal = _random_instance(n, seed)
-        return BlocksworldEnv(towers, goal, instance_id=instance_id, seed=seed, step_multiplier=step_multiplier)
+        n, layout_seed = int(m.group(1)), int(m.group(2))
+        towers, goal = _random_instance(n, layout_seed)
+        return BlocksworldEnv(towers, goal, instance_id=instance_id, layout_seed=layout_seed, step_multiplier=step_multiplier)
 
 
 BENCHMARK = _Benchmark()

@@ -1,6 +1,6 @@
 """The environment interface every agent uses, and the errors environments raise.
 
-An environment instance is one task instance (a Robotouille kitchen at a seed, an ALFWorld game).
+An environment instance is one task instance (a Robotouille kitchen at a layout seed, an ALFWorld game).
 ``reset`` gives the first observation, the valid actions (None when the action space is open)
 and the goal; ``step`` takes an action string that must *exactly* equal one of the valid
 actions (looked up by index, never by substring). Environments whose benchmark lets any command
@@ -108,7 +108,9 @@ class Environment(ABC):
     split: str = ""
     #: task name within the benchmark (``5_potato_soup``, ``pick_heat_then_place_in_recep``...)
     task: str = ""
-    seed: int = 0
+    #: the instance's layout seed: the ``@N`` of its id (the kitchen's layout seed, a blocksworld
+    #: start and goal); 0 where the benchmark has none. Not the unit's sampling seed.
+    layout_seed: int = 0
     #: ``reject``: an action not in valid_actions never reaches the engine (no step is taken);
     #: ``step``: it is sent to the game, which answers and counts a step.
     invalid_action_mode: Literal["reject", "step"] = "reject"

@@ -98,7 +98,7 @@ class _Episodes:
     method: np.ndarray
     split_i: np.ndarray
     task_i: np.ndarray
-    seed: np.ndarray
+    layout_seed: np.ndarray
     success: np.ndarray
     end: np.ndarray
 
@@ -134,7 +134,7 @@ def _plan_episodes(rng: np.random.Generator, spec: SyntheticSpec) -> _Episodes:
         method=method,
         split_i=(np.arange(n_ep) // len(METHODS)) % len(SPLITS),
         task_i=(np.arange(n_ep) // (len(METHODS) * len(SPLITS))) % 10,
-        seed=42 * (1 + (np.arange(n_ep) // (len(METHODS) * len(SPLITS) * 10))),
+        layout_seed=42 * (1 + (np.arange(n_ep) // (len(METHODS) * len(SPLITS) * 10))),
         success=success,
         end=np.where(success, "success", np.array(END_FAIL)[rng.integers(0, len(END_FAIL), n_ep)]),
     )
@@ -332,7 +332,7 @@ def _tree_nodes_table(rng: np.random.Generator, ep: _Episodes, run_id: str) -> t
 def _places(ep: _Episodes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each episode's benchmark, split, task and instance id, as the pipeline writes them
     (schemas.labels.place_of): Robotouille's task is its environment's name and its instance id
-    names split, task and seed; ALFWorld is one split whose tasks are the six task types, one game
+    names split, task and layout seed; ALFWorld is one split whose tasks are the six task types, one game
     per instance id."""
     bench = np.array([b for b, _ in SPLITS])[ep.split_i]
     split = np.array([s for _, s in SPLITS])[ep.split_i]
@@ -343,7 +343,8 @@ def _places(ep: _Episodes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
         alf,
         np.char.add(np.char.add(np.char.add("alfworld/", task), "/game-"), ep.task_i.astype(str)),
         np.char.add(
-            np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"), ep.seed.astype(str)
+            np.char.add(np.char.add(np.char.add(np.char.add("robotouille/", split), "/"), robot_task), "@"),
+            ep.layout_seed.astype(str),
         ),
     )
     return bench, split, task, instance
@@ -356,7 +357,7 @@ def _episodes_table(
     bench, split, task, instance = _places(ep)
     # canonical configs, as the driver stores them (recap.config / recap.baselines to_json)
     cfg = np.where(ep.method == "recap", ReCAPConfig(window=spec.window).to_json(), ReActConfig(window=spec.window).to_json())
-    unit = np.char.add(np.char.add(np.char.add(ep.method, "|"), instance), np.char.add("|", ep.seed.astype(str)))
+    unit = np.char.add(np.char.add(np.char.add(ep.method, "|"), instance), np.char.add("|", ep.layout_seed.astype(str)))
     ended = 1.7e9 + np.arange(ep.n, dtype=np.float64)
     n_ep = ep.n
     return pa.table(
@@ -369,7 +370,8 @@ def _episodes_table(
             "split": split,
             "task": task,
             "instance_id": instance,
-            "seed": ep.seed,
+            # each unit one sampling seed, numbered like its instance's layout seed
+            "sampling_seed": ep.layout_seed,
             "method": ep.method,
             "method_config": cfg,
             "model": ["gpt-4o"] * n_ep,

@@ -120,7 +120,7 @@ def _episode_html(ep: dict[str, Any], nodes: list[dict], steps: list[dict], call
         ("split", ep["env_split"]),
         ("task", ep["task"]),
         ("instance", ep["instance_id"]),
-        ("seed", ep["seed"]),
+        ("sampling seed", ep["sampling_seed"]),
         ("run", ep["run_id"]),
         ("attempt", f"{ep['attempt']}{'' if ep['is_latest'] else ' (superseded)'}"),
         ("end", ep["end_reason"]),

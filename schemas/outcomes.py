@@ -170,7 +170,7 @@ class UnitWork:
     """What the driver hands a worker for one unit: the instance, the method with its
     *resolved* settings (``method_config``, the canonical JSON the unit's hash covers: the
     worker builds the agent from it, never from the sweep's raw profile/ablation/settings),
-    the model, the seed and the environment's options."""
+    the model, the sampling seed and the environment's options."""
 
     unit_id: str
     instance_id: str
@@ -178,7 +178,7 @@ class UnitWork:
     method_config: str
     model_label: str
     model: str
-    seed: int
+    sampling_seed: int
     step_multiplier: float
     env_options: tuple[tuple[str, Any], ...] = ()
 

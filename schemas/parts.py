@@ -26,7 +26,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from schemas.tables import TABLES, arrow_schema, record_to_row
-from schemas.versions import missing_fillable, part_version, upgrade
+from schemas.versions import missing_fillable, part_version, stored_names, upgrade
 
 #: the run folder's identity file: written once by the pipeline when the run starts
 RUN_FILE = "run.json"
@@ -113,8 +113,10 @@ def schema_problem(table: str, found: pa.Schema) -> str | None:
     reader and refused by another.
     """
     expected = arrow_schema(table)
-    missing = [f.name for f in expected if f.name not in found.names]
-    if missing and missing_fillable(table, missing, part_version(found)):
+    version = part_version(found)
+    stored = stored_names(table, found.names, version)  # a column renamed since: its old name
+    missing = [f.name for f in expected if f.name not in stored]
+    if missing and missing_fillable(table, missing, version):
         expected = pa.schema([f for f in expected if f.name not in missing])  # mapped on read
         missing = []
     if missing:
@@ -122,7 +124,7 @@ def schema_problem(table: str, found: pa.Schema) -> str | None:
         return f"not a {table} part: missing column(s) {', '.join(sorted(missing)[:5])}{more}"
     wrong: list[str] = []
     for f in expected:
-        i = found.get_field_index(f.name)
+        i = found.get_field_index(stored[f.name])
         if i < 0:
             wrong.append(f"{f.name} appears more than once")
         elif not found.field(i).type.equals(f.type):
@@ -201,14 +203,14 @@ def read_part(source: Any, table: str) -> pa.Table:
     schema version is mapped (:func:`schemas.versions.upgrade`)."""
     full = arrow_schema(table)
     found = pq.read_schema(source)
-    missing = [f.name for f in full if f.name not in found.names]
-    if not missing:
+    if all(name in found.names for name in full.names):
         return pq.read_table(source, columns=list(full.names)).select(full.names).cast(full)
-    present = [f.name for f in full if f.name in found.names]
     version = part_version(found)
-    if version is None or not missing_fillable(table, missing, version):
+    stored = stored_names(table, found.names, version)
+    missing = [f.name for f in full if f.name not in stored]
+    if version is None or (missing and not missing_fillable(table, missing, version)):
         raise ValueError(f"not a {table} part: missing column(s) {', '.join(sorted(missing)[:5])}")
-    return upgrade(table, pq.read_table(source, columns=present), version)
+    return upgrade(table, pq.read_table(source, columns=list(stored.values())), version)
 
 
 def check_parts(run_dir: Path, table: str) -> tuple[list[Path], list[BadPart]]:

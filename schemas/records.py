@@ -18,8 +18,11 @@ from schemas.kinds import CallStatus, EventKind, EventSource, LLMErrorKind, Node
 #: written under version 1 are mapped on read (:mod:`schemas.versions`).
 #: 3: ``llm_calls`` gained ``model_name``, the model's name in the sweep (what ``episodes.model``
 #: holds) beside ``model``, the provider model string; parts written under version 2 get it
-#: derived from their ``deployment`` on read
-SCHEMA_VERSION = 3
+#: derived from their ``deployment`` on read.
+#: 4: ``episodes.seed`` renamed ``sampling_seed`` (the unit's sampling seed, apart from an
+#: instance's layout seed and a test double's noise seed); parts written under version 3 or
+#: earlier have their ``seed`` column read as ``sampling_seed``
+SCHEMA_VERSION = 4
 
 
 @dataclass(frozen=True)
@@ -152,7 +155,9 @@ class EpisodeRecord:
 
     Where: ``benchmark``/``split``/``task`` - Robotouille ``synchronous``/``asynchronous`` and
     the environment's name; ALFWorld one split ``valid_unseen`` (its 134 unseen games) and the
-    task type (``put``, ``clean``, ``heat``, ``cool``, ``examine``, ``puttwo``).
+    task type (``put``, ``clean``, ``heat``, ``cool``, ``examine``, ``puttwo``). The instance
+    id's ``@N`` is the instance's layout seed; ``sampling_seed`` is the unit's own (the sweep's
+    ``sampling_seeds``: repetitions of one instance).
 
     ``end_reason`` ``infra_error``: the model service or the worker failed (not an outcome of
     the agent); ``error`` then starts with the failure's kind (``auth: ...``) or says that the
@@ -167,7 +172,7 @@ class EpisodeRecord:
     split: str
     task: str
     instance_id: str
-    seed: int
+    sampling_seed: int
     method: str
     method_config: str  # canonical JSON of the agent settings
     model: str

@@ -2,7 +2,8 @@
 
 Every part file carries its schema version in its Arrow metadata (``recap_eval_schema_version``,
 :func:`part_version`). A reader takes a part of an *earlier* version when it lacks only columns
-added since that version (:func:`missing_fillable`) and maps its rows with :func:`upgrade`, so
+added since that version (:func:`missing_fillable`) or renamed since (:func:`stored_names`: the
+stored column is read under its new name) and maps its rows with :func:`upgrade`, so
 ``recap status``, ``recap sql``, ``recap report`` and ``recap show`` read runs written by an
 older recap exactly as they would have read them then, plus what can be derived.
 
@@ -35,9 +36,15 @@ Version 2 -> 3, ``llm_calls``:
   with its model string and ``@`` or ``#`` reads as the model string: the one case version 2 did
   not keep apart.
 
-A run folder of version 2 may be continued by this version (:func:`continues`): its parts
-differ from the current ones only by ``model_name``, filled on read, so parts of both versions
-side by side read as one table. A version 1 run is read, never continued.
+Version 3 -> 4, ``episodes``: ``seed`` renamed ``sampling_seed`` (the unit's sampling seed, the
+sweep's ``sampling_seeds``; named apart from an instance's layout seed, the ``@N`` of its id, and
+a test double's ``noise_seed``). The values are copied as stored.
+
+A run folder of version 2 or 3 may be continued by this version (:func:`continues`): its parts
+differ from the current ones only by ``model_name`` (filled on read) and the name of the
+sampling seed's column (renamed on read), so parts of several versions side by side read as one
+table: the new parts carry ``sampling_seed``, the old ones ``seed``, and every reader sees
+``sampling_seed``. A version 1 run is read, never continued.
 
 Any table, any earlier version: a missing column that has a default in its record dataclass (or
 is nullable) is filled with that default (null); a part missing any other column is not readable
@@ -63,9 +70,15 @@ ADDED: dict[int, dict[str, tuple[str, ...]]] = {
     3: {"llm_calls": ("model_name",)},
 }
 
+#: columns each version renamed, by table: new name -> the name parts of earlier versions have
+RENAMED: dict[int, dict[str, dict[str, str]]] = {
+    4: {"episodes": {"sampling_seed": "seed"}},
+}
+
 #: earlier versions whose run folders this version continues (their parts only lack columns
-#: that are filled on read, row by row, the same way whichever session wrote them)
-CONTINUED: frozenset[int] = frozenset({2})
+#: that are filled on read, or have them under an old name, the same way whichever session
+#: wrote them)
+CONTINUED: frozenset[int] = frozenset({2, 3})
 
 
 def continues(version: int) -> bool:
@@ -93,6 +106,27 @@ def column_defaults(table: str) -> dict[str, Any]:
     return out
 
 
+def renamed_since(table: str, version: int | None) -> dict[str, str]:
+    """New column name -> the name a part of ``version`` stores it under, for the columns of
+    ``table`` renamed since that version ({} for a current part or one that does not say)."""
+    if version is None or version >= SCHEMA_VERSION:
+        return {}
+    return {new: old for v, tables in sorted(RENAMED.items()) if v > version for new, old in tables.get(table, {}).items()}
+
+
+def stored_names(table: str, found: list[str], version: int | None) -> dict[str, str]:
+    """Current column name -> the name it has in a part whose columns are ``found`` (written
+    under ``version``), for every current column the part holds, under either name."""
+    renamed = renamed_since(table, version)
+    out: dict[str, str] = {}
+    for name in arrow_schema(table).names:
+        if name in found:
+            out[name] = name
+        elif renamed.get(name) in found:
+            out[name] = renamed[name]
+    return out
+
+
 def missing_fillable(table: str, missing: list[str], version: int | None) -> bool:
     """A part of ``version`` that lacks ``missing`` columns can be read: it is of an earlier
     version and every missing column was added since, or has a default (or is nullable)."""
@@ -107,6 +141,9 @@ def missing_fillable(table: str, missing: list[str], version: int | None) -> boo
 def upgrade(table: str, data: pa.Table, version: int) -> pa.Table:
     """The rows of a part of ``version`` as the current schema has them (see the module doc)."""
     schema = arrow_schema(table)
+    renamed = {old: new for new, old in renamed_since(table, version).items() if old in data.column_names}
+    if renamed:
+        data = data.rename_columns([renamed.get(c, c) for c in data.column_names])
     if version < 2 and table == "episodes":
         rows = [_episode_v1(r) for r in data.to_pylist()]
         return pa.Table.from_pylist(rows, schema=schema) if rows else schema.empty_table()

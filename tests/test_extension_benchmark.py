@@ -165,7 +165,7 @@ def test_a_benchmark_defined_in_a_test_plays_an_episode_through_the_worker(corri
 
     before = _git_status()
     config = make_agent("react", benchmark=registry.get_benchmark(NAME)).config.to_json()
-    unit = UnitWork("u1", f"{NAME}/3", "react", config, "expert", "offline/expert", seed=0, step_multiplier=2.0)
+    unit = UnitWork("u1", f"{NAME}/3", "react", config, "expert", "offline/expert", sampling_seed=0, step_multiplier=2.0)
     batches: list[dict[str, list[dict]]] = []
     runner = EpisodeRunner("w1", "run1", ExpertFactory(), send=batches.append, wait=lambda ref: None)
 
@@ -366,7 +366,7 @@ def test_a_benchmark_package_with_one_registration_line_runs_a_unit_under_its_ow
     assert build_agent("cot", profile="paper", benchmark="ladder").config.window == 128
 
     config = build_agent("react", profile="paper", benchmark="ladder").config.to_json()
-    unit = UnitWork("u1", "ladder/4", "react", config, "expert", "offline/expert", seed=0, step_multiplier=2.0)
+    unit = UnitWork("u1", "ladder/4", "react", config, "expert", "offline/expert", sampling_seed=0, step_multiplier=2.0)
     batches: list[dict[str, list[dict]]] = []
     out = EpisodeRunner("w1", "run1", ExpertFactory(), send=batches.append, wait=lambda ref: None).run_unit(unit, 1)
 

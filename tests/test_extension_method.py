@@ -135,7 +135,7 @@ def _run(config: ReplanConfig) -> tuple[Any, dict[str, list[dict]]]:
         method_config=config.to_json(),
         model_label="expert",
         model="offline/expert",
-        seed=1,
+        sampling_seed=1,
         step_multiplier=4.0,
     )
     return runner.run_unit(work, 1), rows

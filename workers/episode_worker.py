@@ -103,20 +103,20 @@ class ClientError(RuntimeError):
 
 
 class EpisodeClient:
-    """Wraps a model client for one episode: adds the unit's seed and, for offline test-double
+    """Wraps a model client for one episode: adds the unit's sampling seed and, for offline test-double
     models, the expert plan from the *current* environment state to each request's hints."""
 
-    def __init__(self, inner: LLMClient, env: Environment, *, seed: int, offline: bool) -> None:
+    def __init__(self, inner: LLMClient, env: Environment, *, sampling_seed: int, offline: bool) -> None:
         self.inner = inner
         self.env = env
-        self.seed = seed
+        self.sampling_seed = sampling_seed
         self.offline = offline
         self.test_double = False
         self.models: set[str] = set()
 
     def complete(self, request: LLMRequest) -> LLMResponse:
         hints = dict(request.hints)
-        hints["seed"] = self.seed
+        hints["sampling_seed"] = self.sampling_seed
         if self.offline:
             hints["expert_plan"] = self.env.expert_plan()
         request = dataclasses.replace(request, hints=hints)
@@ -331,7 +331,7 @@ class EpisodeRunner:
     ) -> None:
         """Run the agent's episode into ``out``: its result, or the crash of the agent or the model client."""
         episode_id = out.episode_id
-        client = EpisodeClient(self._client(unit.model_label), env, seed=int(unit.seed), offline=offline)
+        client = EpisodeClient(self._client(unit.model_label), env, sampling_seed=int(unit.sampling_seed), offline=offline)
         try:
             result = agent.run(env, client, episode_id=episode_id, emit=forward, demonstration=demonstration)
         except ClientError as exc:

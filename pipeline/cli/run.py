@@ -121,7 +121,7 @@ def add_parser(sub: argparse._SubParsersAction[OneLineParser], name: str, help: 
             "run",
             help=help,
             epilog=_RUN_EPILOG,
-            description="Run a sweep file: every (instance, method, model, seed) unit without a result.",
+            description="Run a sweep file: every (instance, method, model, sampling seed) unit without a result.",
         )
         r.add_argument("spec", help="the sweep file (YAML)")
         _run_flags(r)

@@ -32,7 +32,7 @@ Example::
         limit: 2                              # first N instances per selector
       - benchmark: blocksworld
         instances: [blocksworld/3@1]
-    seeds: [0]
+    sampling_seeds: [0]               # each sampling seed is its own unit (old name: seeds)
     step_multiplier: 4
     limits: {llm_calls: 200, tokens: 2000000, usd: 1.0}     # per episode
     run_cap_usd: 5.0
@@ -51,7 +51,7 @@ Hardening (every rule fails as one line before any model call or write):
   floats must be finite (``.nan``/``.inf`` refused), integers must fit a signed 64-bit column.
   Every number field refuses ``true``/``false`` and has a sane range, declared in one table
   (:data:`NUMBER_BOUNDS`) and said in the refusal (``models[0].window_s: 1e-300 is out of range
-  [0.1, 86400]``): seeds 0..2**31-1, workers 1..1024, max_attempts 1..100, rpm 1..10**7,
+  [0.1, 86400]``): sampling_seeds 0..2**31-1, workers 1..1024, max_attempts 1..100, rpm 1..10**7,
   tpm 1..10**11, concurrency 1..10000, retries 0..100, window_s 0.1 s..a day, timeout_s 0.1..900 s
   (the gateway's total time per call), max_usage_rejections 1..1000, limits.llm_calls 1..10**6, limits.tokens 1..10**10,
   limits.usd 10**-6..10**6, environment limit 1..10**5, ray.num_cpus 1..4096,
@@ -69,7 +69,7 @@ Hardening (every rule fails as one line before any model call or write):
   model strings are at most 2000 printable ASCII characters without spaces, brackets or
   backslashes; api_base at most 2000 characters; every other name at most 200 and selectors or
   instance ids at most 1000 printable characters.
-* Sizes: at most 100 models, methods and environments, 10000 seeds, 1000 task selectors and
+* Sizes: at most 100 models, methods and environments, 10000 sampling seeds, 1000 task selectors and
   10000 instance ids per environment (20000 in all).
 * Paths: ``output`` is resolved once, here (``~`` expanded, made absolute), so every component
   sees the same folder; so are ``environments[].options`` paths (``data_dir`` and every
@@ -104,10 +104,10 @@ from pipeline.spec.bounds import (
     PRICE_MAX,
     RETRIES_MAX,
     RPM_MAX,
+    SAMPLING_SEEDS_MAX,
     SECONDS_MAX,
     SECONDS_MIN,
     SEED_MAX,
-    SEEDS_MAX,
     SELECTOR_MAX,
     SELECTORS_MAX,
     STEP_MULTIPLIER_MAX,
@@ -186,7 +186,7 @@ __all__ = [
     "RaySpec",
     "SECONDS_MAX",
     "SECONDS_MIN",
-    "SEEDS_MAX",
+    "SAMPLING_SEEDS_MAX",
     "SEED_MAX",
     "SELECTORS_MAX",
     "SELECTOR_MAX",

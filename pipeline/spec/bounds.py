@@ -52,7 +52,7 @@ OBJECT_STORE_MB_MAX = 1 << 20
 WORKER_CPUS_MIN = 0.001
 WORKER_CPUS_MAX = 1024.0
 LIST_MAX = 100
-SEEDS_MAX = 10_000
+SAMPLING_SEEDS_MAX = 10_000
 SELECTORS_MAX = 1000
 INSTANCES_MAX = 10_000
 INSTANCES_TOTAL_MAX = 20_000
@@ -96,7 +96,7 @@ NUMBER_BOUNDS: dict[str, Bound] = {
     "ray.num_cpus": Bound(1, NUM_CPUS_MAX),
     "ray.object_store_mb": Bound(OBJECT_STORE_MB_MIN, OBJECT_STORE_MB_MAX),
     "ray.worker_cpus": Bound(WORKER_CPUS_MIN, WORKER_CPUS_MAX),
-    "seeds[]": Bound(0, SEED_MAX),
+    "sampling_seeds[]": Bound(0, SEED_MAX),
     "step_multiplier": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),
     "methods[].step_multiplier": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),
     "methods[].step_multipliers{}": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),

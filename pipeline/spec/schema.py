@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 from urllib.parse import parse_qsl, urlparse
 
-from pydantic import AfterValidator, Field, ValidationInfo, field_validator, model_validator
+from pydantic import AfterValidator, AliasChoices, Field, ValidationInfo, field_validator, model_validator
 
 from pipeline.spec.bounds import (
     INSTANCES_MAX,
@@ -20,7 +20,7 @@ from pipeline.spec.bounds import (
     LONG_MAX,
     NAME_MAX,
     PATH_MAX,
-    SEEDS_MAX,
+    SAMPLING_SEEDS_MAX,
     SELECTORS_MAX,
     Bounded,
 )
@@ -44,6 +44,9 @@ from pipeline.spec.fields import (
     path_option,
     printable,
 )
+
+#: the sweep file's old name of ``sampling_seeds`` (still read; see :class:`SweepSpec`)
+OLD_SEEDS_KEY = "seeds"
 
 
 class PriceSpec(StrictModel):
@@ -94,8 +97,8 @@ class ModelSpec(StrictModel):
     label: Label | None = None
     #: sent with every call (temperature override, top_p, provider options, test-double knobs)
     params: dict[str, Any] = Field(default_factory=dict)
-    #: knobs of the offline/ test doubles (seed, invalid_action_rate, malformed_json_rate,
-    #: chunk_size); part of the unit hash
+    #: knobs of the offline/ test doubles (noise_seed - old name seed -, invalid_action_rate,
+    #: malformed_json_rate, chunk_size); part of the unit hash (``noise_seed`` hashed as ``seed``)
     options: dict[str, Any] = Field(default_factory=dict)
     # --- transport: never part of a unit's identity ---
     rpm: Annotated[int, NOT_BOOL, Bounded("models[].rpm")] | None = None
@@ -310,16 +313,24 @@ class RaySpec(StrictModel):
 
 
 class SweepSpec(StrictModel):
-    """A validated sweep file: models x methods x environments x seeds make the units; limits, caps,
-    attempts, start order and Ray settings say how they run. Unknown keys are errors."""
+    """A validated sweep file: models x methods x environments x sampling seeds make the units;
+    limits, caps, attempts, start order and Ray settings say how they run. Unknown keys are errors.
+
+    ``sampling_seeds`` was called ``seeds`` before: the old key still reads (sweep files and the
+    ``spec.yaml`` of run folders written then), both at once is refused."""
 
     run: Annotated[str, Field(max_length=NAME_MAX)]
     output: Annotated[str, Field(min_length=1, max_length=PATH_MAX)]
     models: list[ModelSpec] = Field(min_length=1, max_length=LIST_MAX)
     methods: list[MethodSpec] = Field(min_length=1, max_length=LIST_MAX)
     environments: list[EnvSpec] = Field(min_length=1, max_length=LIST_MAX)
-    seeds: list[Annotated[int, NOT_BOOL, Bounded("seeds[]")]] = Field(
-        default_factory=lambda: [0], min_length=1, max_length=SEEDS_MAX
+    #: the units' sampling seeds: each one is its own unit (repetitions of one instance); an
+    #: error names the key the file used (``seeds[0]: ...`` under the old name)
+    sampling_seeds: list[Annotated[int, NOT_BOOL, Bounded("sampling_seeds[]")]] = Field(
+        default_factory=lambda: [0],
+        min_length=1,
+        max_length=SAMPLING_SEEDS_MAX,
+        validation_alias=AliasChoices("sampling_seeds", OLD_SEEDS_KEY),
     )
     step_multiplier: Annotated[float, NOT_BOOL, Bounded("step_multiplier")] = 4.0
     limits: LimitsSpec = Field(default_factory=LimitsSpec)
@@ -329,9 +340,25 @@ class SweepSpec(StrictModel):
     #: the order units start in (not part of any unit hash): ``interleaved`` (default) takes the
     #: arms (method x model) in turn and, within an arm, instances in a shuffle seeded by the run
     #: name, so a cap that binds early leaves a balanced subsample; ``plan`` is the plan's own
-    #: order (instances, then methods, models, seeds). See :func:`pipeline.units.order_units`.
+    #: order (instances, then methods, models, sampling seeds). See :func:`pipeline.units.order_units`.
     order: Literal["interleaved", "plan"] = "interleaved"
     ray: RaySpec = Field(default_factory=RaySpec)
+
+    @field_validator("sampling_seeds")
+    @classmethod
+    def _distinct_seeds(cls, v: list[int]) -> list[int]:
+        """Named by the key the file used (``seeds: repeated seed`` under the old name)."""
+        if len(set(v)) != len(v):
+            raise ValueError("repeated seed")
+        return v
+
+    @model_validator(mode="before")
+    @classmethod
+    def _one_seeds_key(cls, data: Any) -> Any:
+        """The old key and the new one together would leave one of them silently unused."""
+        if isinstance(data, dict) and OLD_SEEDS_KEY in data and "sampling_seeds" in data:
+            raise ValueError(f"give sampling_seeds or its old name {OLD_SEEDS_KEY}, not both")
+        return data
 
     @field_validator("run")
     @classmethod
@@ -367,8 +394,6 @@ class SweepSpec(StrictModel):
                 if n in seen:
                     raise ValueError(f"{what}: two entries are both named {n!r}; give them distinct 'label's")
                 seen.add(n)
-        if len(set(self.seeds)) != len(self.seeds):
-            raise ValueError("seeds: repeated seed")
         for i, e in enumerate(self.environments):
             if not e.tasks and not e.instances:
                 raise ValueError(f"environments[{i}]: give 'tasks' (selectors) or 'instances' (ids)")

@@ -31,12 +31,13 @@ def _test_double_models(run_dir: Path) -> dict[str, bool]:
 
 
 #: the columns of ``planned_units`` (reports/sql/views.sql), in order
-_PLAN_COLUMNS = ("run_dir", "run_id", "unit_id", "label", "method", "model", "instance_id", "seed", "test_double")
+_PLAN_COLUMNS = ("run_dir", "run_id", "unit_id", "label", "method", "model", "instance_id", "sampling_seed", "test_double")
 
 
 def _read_plan(path: Path) -> list[tuple[str, str, Any, str, str, Any]]:
-    """(unit, arm label, method, model, instance, seed) of each unit of a plan.json; OSError, ValueError, KeyError
-    or TypeError when it cannot be read as one."""
+    """(unit, arm label, method, model, instance, sampling seed) of each unit of a plan.json; OSError, ValueError,
+    KeyError or TypeError when it cannot be read as one. A plan written before schema version 4 names the
+    sampling seed ``seed``."""
     units = json.loads(path.read_text(encoding="utf-8"))["units"]
     # plan.json's "method" is the arm's label; "method_name" the method (schema version 2)
     return [
@@ -46,7 +47,7 @@ def _read_plan(path: Path) -> list[tuple[str, str, Any, str, str, Any]]:
             u.get("method_name"),
             str(u["model"]),
             str(u.get("instance_id") or ""),
-            u.get("seed"),
+            u.get("sampling_seed", u.get("seed")),
         )
         for u in units
     ]
@@ -54,7 +55,7 @@ def _read_plan(path: Path) -> list[tuple[str, str, Any, str, str, Any]]:
 
 def _insert(con: duckdb.DuckDBPyConnection, cols: dict[str, list[Any]]) -> None:
     """Insert the plan rows into ``planned_units`` through a registered Arrow table."""
-    types = {"seed": pa.int64(), "test_double": pa.bool_()}
+    types = {"sampling_seed": pa.int64(), "test_double": pa.bool_()}
     table = pa.table({k: pa.array(v, type=types.get(k, pa.string())) for k, v in cols.items()})  # noqa: F841
     con.register("_planned_units", table)
     try:
@@ -83,7 +84,7 @@ def load_plans(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
             continue
         doubles = _test_double_models(Path(run_dir))
         how[run_dir] = PLAN_FILE
-        for uid, label, method, model, inst, seed in rows:
+        for uid, label, method, model, inst, sampling_seed in rows:
             for k, v in zip(
                 cols,
                 (
@@ -94,7 +95,7 @@ def load_plans(con: duckdb.DuckDBPyConnection) -> dict[str, str]:
                     method if isinstance(method, str) else None,
                     model,
                     inst,
-                    seed if isinstance(seed, int) and not isinstance(seed, bool) else None,
+                    sampling_seed if isinstance(sampling_seed, int) and not isinstance(sampling_seed, bool) else None,
                     doubles.get(model),
                 ),
             ):

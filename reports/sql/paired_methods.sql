@@ -6,7 +6,7 @@
 -- pair's instance, same order) feed the paired permutation test of the mean cost difference, which
 -- flips the signs of whole instances (reports.stats.clustered_permutation_test).
 WITH per_unit AS (
-  SELECT model_label, env_split, arm, benchmark, split, task, instance_id, seed,
+  SELECT model_label, env_split, arm, benchmark, split, task, instance_id, sampling_seed,
     arg_max(success, ended_at) AS success,
     arg_max(cost_usd, ended_at) AS cost_usd
   FROM outcomes
@@ -21,13 +21,13 @@ WITH per_unit AS (
     count(DISTINCT instance_key(a.benchmark, a.split, a.task, a.instance_id)) AS instances,
     clustered_mcnemar_p(list(pair_obs(a.benchmark, a.split, a.task, a.instance_id, a.success, b.success))) AS p_value,
     avg(a.cost_usd - b.cost_usd) AS mean_cost_diff,
-    list(a.cost_usd - b.cost_usd ORDER BY a.task, a.instance_id, a.seed) AS cost_diffs,
-    list(instance_key(a.benchmark, a.split, a.task, a.instance_id) ORDER BY a.task, a.instance_id, a.seed) AS cost_instances
+    list(a.cost_usd - b.cost_usd ORDER BY a.task, a.instance_id, a.sampling_seed) AS cost_diffs,
+    list(instance_key(a.benchmark, a.split, a.task, a.instance_id) ORDER BY a.task, a.instance_id, a.sampling_seed) AS cost_instances
   FROM per_unit a
   JOIN per_unit b
     ON a.model_label = b.model_label AND a.env_split = b.env_split AND a.arm < b.arm
    AND a.benchmark = b.benchmark AND a.split = b.split
-   AND a.task = b.task AND a.instance_id = b.instance_id AND a.seed = b.seed
+   AND a.task = b.task AND a.instance_id = b.instance_id AND a.sampling_seed = b.sampling_seed
   GROUP BY a.model_label, a.env_split, a.arm, b.arm
 )
 SELECT model_label, env_split, arm_a, arm_b, pairs, a_successes, b_successes,

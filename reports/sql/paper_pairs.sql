@@ -9,12 +9,12 @@
 -- (reports.stats.clustered_permutation_test); arm_cost / ref_cost are the two arms' totals over the paired units.
 WITH scoped AS (SELECT * FROM paper_scoped), joined AS (
   SELECT a.scope, a.model_label, a.arm_label, r.arm_label AS ref_label, a.benchmark, a.split, a.task,
-    a.instance_id, a.seed, a.success AS a_success, r.success AS r_success, a.cost_usd AS a_cost, r.cost_usd AS r_cost
+    a.instance_id, a.sampling_seed, a.success AS a_success, r.success AS r_success, a.cost_usd AS a_cost, r.cost_usd AS r_cost
   FROM scoped a
   JOIN scoped r
     ON r.scope = a.scope AND r.method = 'recap' AND r.variant = 'original' AND r.arm_label <> a.arm_label
    AND r.model_label = a.model_label AND r.benchmark = a.benchmark AND r.split = a.split
-   AND r.task = a.task AND r.instance_id = a.instance_id AND r.seed = a.seed
+   AND r.task = a.task AND r.instance_id = a.instance_id AND r.sampling_seed = a.sampling_seed
 )
 SELECT scope, model_label, arm_label, ref_label, benchmark, split,
   CASE WHEN GROUPING(task) = 1 THEN 'split' ELSE 'task' END AS level, task,
@@ -24,8 +24,8 @@ SELECT scope, model_label, arm_label, ref_label, benchmark, split,
   count(DISTINCT instance_key(benchmark, split, task, instance_id)) AS instances,
   clustered_mcnemar_p(list(pair_obs(benchmark, split, task, instance_id, a_success, r_success))) AS p_value,
   sum(a_cost) AS arm_cost, sum(r_cost) AS ref_cost,
-  list(a_cost - r_cost ORDER BY task, instance_id, seed) AS cost_diffs,
-  list(instance_key(benchmark, split, task, instance_id) ORDER BY task, instance_id, seed) AS cost_instances
+  list(a_cost - r_cost ORDER BY task, instance_id, sampling_seed) AS cost_diffs,
+  list(instance_key(benchmark, split, task, instance_id) ORDER BY task, instance_id, sampling_seed) AS cost_instances
 FROM joined
 GROUP BY GROUPING SETS ((scope, model_label, arm_label, ref_label, benchmark, split, task), (scope, model_label, arm_label, ref_label, benchmark, split))
 HAVING scope = 'all' OR GROUPING(task) = 1

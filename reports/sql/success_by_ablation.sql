@@ -8,7 +8,7 @@
 -- seeds per instance, instance_deff) say how the 95% interval was widened.
 WITH per_unit AS (
   SELECT model_label, method, coalesce(profile, '') AS pr, env_split, coalesce(window_size, -1) AS w, ablation,
-    benchmark, split, task, instance_id, seed,
+    benchmark, split, task, instance_id, sampling_seed,
     arg_max(success, ended_at) AS success
   FROM outcomes
   GROUP BY ALL
@@ -32,7 +32,7 @@ WITH per_unit AS (
     ON o.ablation = 'original' AND v.ablation <> 'original'
    AND o.model_label = v.model_label AND o.method = v.method AND o.pr = v.pr AND o.env_split = v.env_split AND o.w = v.w
    AND o.benchmark = v.benchmark AND o.split = v.split
-   AND o.task = v.task AND o.instance_id = v.instance_id AND o.seed = v.seed
+   AND o.task = v.task AND o.instance_id = v.instance_id AND o.sampling_seed = v.sampling_seed
   GROUP BY v.model_label, v.method, v.pr, v.env_split, v.w, v.ablation
 )
 SELECT r.model_label, r.method, r.profile, r.env_split, r.window_size, r.ablation,

@@ -194,7 +194,7 @@ WITH last_error AS (
   GROUP BY run_id, episode_id
 )
 SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.label, t.ablation, t.env_split,
-  t.task, t.instance_id, t.seed, t.end_reason, t.success, t.steps, t.llm_calls, t.cost_usd, t.error, t.state,
+  t.task, t.instance_id, t.sampling_seed, t.end_reason, t.success, t.steps, t.llm_calls, t.cost_usd, t.error, t.state,
   coalesce(p.invalid_loop, false) AS invalid_loop,
   coalesce(p.repeated_loop, false) AS repeated_loop,
   coalesce(p.longest_invalid_run, 0) AS longest_invalid_run,
@@ -239,4 +239,4 @@ WHERE benchmark = 'robotouille' AND split = 'synchronous' AND split_part(task, '
 -- label is the arm's label (plan.json's "method"), method the method's name ("method_name";
 -- NULL in a plan written before schema version 2).
 CREATE TABLE planned_units (run_dir VARCHAR, run_id VARCHAR, unit_id VARCHAR, label VARCHAR, method VARCHAR,
-  model VARCHAR, instance_id VARCHAR, seed BIGINT, test_double BOOLEAN);
+  model VARCHAR, instance_id VARCHAR, sampling_seed BIGINT, test_double BOOLEAN);

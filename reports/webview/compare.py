@@ -44,7 +44,7 @@ def _side_sql(kind: str, columns: set[str]) -> str:
     report's paired table counts (terminal, finished), paired like reports/sql/paired_methods.sql
     on model, split, task, instance and seed."""
     cols = (
-        "SELECT {side} AS side, {grp} AS grp, env_split, task, instance_id, seed, run_id, episode_id, success, "
+        "SELECT {side} AS side, {grp} AS grp, env_split, task, instance_id, sampling_seed, run_id, episode_id, success, "
         "cost_usd, end_reason, mode FROM _episode_list "
     )
     finished_first = "finished DESC, " if "finished" in columns else ""
@@ -60,7 +60,7 @@ def _side_sql(kind: str, columns: set[str]) -> str:
         cols.format(side="arm", grp="model_label")
         + f"WHERE {counted}"
         + (" AND finished" if "finished" in columns else "")
-        + " QUALIFY row_number() OVER (PARTITION BY arm, model_label, env_split, task, instance_id, seed "
+        + " QUALIFY row_number() OVER (PARTITION BY arm, model_label, env_split, task, instance_id, sampling_seed "
         "ORDER BY ended_at DESC, run_id DESC, episode_id DESC) = 1"
     )
 
@@ -68,11 +68,11 @@ def _side_sql(kind: str, columns: set[str]) -> str:
 #: one row per pair: the two sides' episodes of one unit (grp, split, task, instance, seed)
 _PAIRS_SQL = """
     WITH s AS ({sides}), x AS (SELECT * FROM s WHERE side = $a), y AS (SELECT * FROM s WHERE side = $b)
-    SELECT x.grp, x.env_split, x.task, x.instance_id, x.seed,
+    SELECT x.grp, x.env_split, x.task, x.instance_id, x.sampling_seed,
       x.run_id AS a_run, x.episode_id AS a_episode, x.success AS a_success, x.cost_usd AS a_cost, coalesce(x.mode, x.end_reason) AS a_mode,
       y.run_id AS b_run, y.episode_id AS b_episode, y.success AS b_success, y.cost_usd AS b_cost, coalesce(y.mode, y.end_reason) AS b_mode
-    FROM x JOIN y ON x.grp = y.grp AND x.env_split = y.env_split AND x.task = y.task AND x.instance_id = y.instance_id AND x.seed = y.seed
-    ORDER BY x.grp, x.env_split, x.task, x.instance_id, x.seed"""
+    FROM x JOIN y ON x.grp = y.grp AND x.env_split = y.env_split AND x.task = y.task AND x.instance_id = y.instance_id AND x.sampling_seed = y.sampling_seed
+    ORDER BY x.grp, x.env_split, x.task, x.instance_id, x.sampling_seed"""
 
 
 def _check_sides(snap: Snapshot, kind: str, a: str, b: str) -> None:

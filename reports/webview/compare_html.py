@@ -74,7 +74,7 @@ def _result(cmp: Comparison) -> str:
         f"<tbody>{rows or '<tr><td colspan=10>no pairs</td></tr>'}</tbody></table>"
     )
     disc = "".join(
-        f"<tr><td>{esc(p['grp'])}</td><td>{esc(p['task'])}</td><td>{esc(p['instance_id'])}</td><td>{esc(p['seed'])}</td>"
+        f"<tr><td>{esc(p['grp'])}</td><td>{esc(p['task'])}</td><td>{esc(p['instance_id'])}</td><td>{esc(p['sampling_seed'])}</td>"
         f'<td><a class="ep" href="{esc(episode_url(p["a_run"], p["a_episode"]))}">{esc(p["a_episode"])}</a> '
         f'<span class="badge {"ok" if p["a_success"] else "fail"}">{esc(p["a_mode"])}</span></td>'
         f'<td><a class="ep" href="{esc(episode_url(p["b_run"], p["b_episode"]))}">{esc(p["b_episode"])}</a> '

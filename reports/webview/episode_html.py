@@ -28,7 +28,7 @@ def episode_page(snap: Snapshot, ep: Episode, hit: int | None = None) -> str:
         ("split", m.get("env_split")),
         ("task", m.get("task")),
         ("instance", m.get("instance_id")),
-        ("seed", m.get("seed")),
+        ("sampling seed", m.get("sampling_seed")),
         ("unit", m.get("unit_id")),
         ("attempt", f"{m['attempt']}{'' if m.get('is_latest') else ' (superseded)'}"),
         ("end", m.get("end_reason")),

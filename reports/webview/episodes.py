@@ -36,7 +36,7 @@ _LIST_COLUMNS = (
     "env_split",
     "task",
     "instance_id",
-    "seed",
+    "sampling_seed",
     "end_reason",
     "success",
     "mode",

@@ -19,7 +19,7 @@ _HEADERS = (
     ("env_split", "split"),
     ("task", "task"),
     ("instance_id", "instance"),
-    ("seed", "seed"),
+    ("sampling_seed", "sampling seed"),
     ("attempt", "attempt"),
     ("end_reason", "end"),
     ("mode", "mode"),

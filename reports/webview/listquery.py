@@ -17,7 +17,7 @@ SORTABLE = (
     "env_split",
     "task",
     "instance_id",
-    "seed",
+    "sampling_seed",
     "attempt",
     "end_reason",
     "mode",

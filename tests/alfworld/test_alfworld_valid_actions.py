@@ -223,7 +223,7 @@ def _work(instance_id, **env_options):
         method_config="{}",
         model_label="m",
         model="offline/expert",
-        seed=1,
+        sampling_seed=1,
         step_multiplier=1.0,
         env_options=tuple(sorted(env_options.items())),
     )

@@ -20,7 +20,7 @@ def play(
 
     env = make_env(instance_id)
     try:
-        client = EpisodeClient(inner, env, seed=0, offline=offline)
+        client = EpisodeClient(inner, env, sampling_seed=0, offline=offline)
         return build_agent(method, settings=settings).run(env, client, episode_id=episode_id)
     finally:
         env.close()

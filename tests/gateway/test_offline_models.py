@@ -14,7 +14,7 @@ from schemas.parts import PartWriter, read_table
 from schemas.records import CallRecord, MessageRecord
 from workers.gateway.core import DeploymentGateway
 from workers.llm.offline.expert import chunk_actions, expert_reply, group_plan
-from workers.llm.offline.knobs import INVALID_ACTION, MALFORMED_JSON, Knobs
+from workers.llm.offline.knobs import INVALID_ACTION, MALFORMED_JSON, Knobs, OfflineOptionsError
 from workers.llm.offline.provider import offline_text
 from workers.llm.offline.random_model import random_reply
 from workers.llm.providers import DeploymentConfig
@@ -125,7 +125,7 @@ def test_expert_drives_recap_through_the_protocol_call_order():
 
 def test_expert_recovers_from_injected_invalid_actions():
     env = ToyEnv()
-    knobs = Knobs(seed=3, invalid_action_rate=0.3)
+    knobs = Knobs(noise_seed=3, invalid_action_rate=0.3)
     calls = drive_recap(env, knobs)
     assert env.done
     assert any(INVALID_ACTION in s for _p, _t, s in calls)
@@ -161,14 +161,14 @@ def test_expert_gives_the_whole_plan_for_open_loop_styles(style, keys):
     assert set(reply) == keys and reply["actions"] == PLAN
 
 
-def test_injection_is_deterministic_per_call_key_and_seed():
-    def malformed(seed: int, rate: float) -> set[str]:
+def test_injection_is_deterministic_per_call_key_and_noise_seed():
+    def malformed(seed: int, rate: float, key: str = "noise_seed") -> set[str]:
         out = set()
         for i in range(200):
             meta = {
                 "recap_offline": {
                     "call_key": f"ep#{i}",
-                    "options": {"seed": seed, "malformed_json_rate": rate},
+                    "options": {key: seed, "malformed_json_rate": rate},
                     "hints": {"style": "act", "reply_fields": FIELDS["act"], "expert_plan": PLAN},
                 }
             }
@@ -184,19 +184,28 @@ def test_injection_is_deterministic_per_call_key_and_seed():
     assert a != malformed(8, 0.5)
     assert 60 <= len(a) <= 140
     assert malformed(7, 0.0) == set() and len(malformed(7, 1.0)) == 200
+    # the option's old name draws the same: run folders written before the rename replay alike
+    assert malformed(7, 0.5, key="seed") == a
+
+
+def test_the_old_seed_option_reads_as_noise_seed_and_both_are_refused():
+    assert Knobs.from_options({"seed": 4, "invalid_action_rate": 0.5}) == Knobs(noise_seed=4, invalid_action_rate=0.5)
+    assert Knobs.from_options({"noise_seed": 4}) == Knobs(noise_seed=4)
+    with pytest.raises(OfflineOptionsError, match=r"^give noise_seed or its old name seed, not both$"):
+        Knobs.from_options({"seed": 4, "noise_seed": 4})
 
 
 def test_random_model_picks_a_valid_action_deterministically():
     valid = ["north", "south", "east", "west"]
     picks = {
-        random_reply({"style": "react", "reply_fields": FIELDS["react"], "valid_actions": valid}, Knobs(seed=1), f"k{i}")[
+        random_reply({"style": "react", "reply_fields": FIELDS["react"], "valid_actions": valid}, Knobs(noise_seed=1), f"k{i}")[
             "action"
         ]
         for i in range(40)
     }
     assert picks == set(valid)
-    one = random_reply({"style": "recap", "valid_actions": valid}, Knobs(seed=1), "k0")
-    assert one == random_reply({"style": "recap", "valid_actions": valid}, Knobs(seed=1), "k0")
+    one = random_reply({"style": "recap", "valid_actions": valid}, Knobs(noise_seed=1), "k0")
+    assert one == random_reply({"style": "recap", "valid_actions": valid}, Knobs(noise_seed=1), "k0")
     assert len(one["subtasks"]) == 1 and one["subtasks"][0] in valid
 
 

@@ -123,7 +123,7 @@ def test_the_method_name_does_not_change_the_reply():
     hints = {"purpose": "task", "expert_plan": PLAN, "valid_actions": PLAN}
     for style in (*METHODS, "anything"):
         assert expert_reply({**hints, "style": style, "reply_fields": ["action"]}, Knobs(), "k") == {"action": "pick up B"}
-        assert random_reply({**hints, "style": style, "reply_fields": ["actions"]}, Knobs(seed=2), "k") == {
+        assert random_reply({**hints, "style": style, "reply_fields": ["actions"]}, Knobs(noise_seed=2), "k") == {
             "actions": ["stack B on A"]
         }
     # no fields named: a decomposition, as a request without hints always got
@@ -131,7 +131,7 @@ def test_the_method_name_does_not_change_the_reply():
 
 
 def test_injection_and_unknown_fields():
-    knobs = Knobs(seed=1, invalid_action_rate=1.0)
+    knobs = Knobs(noise_seed=1, invalid_action_rate=1.0)
     hints = {"purpose": "task", "expert_plan": PLAN}
     assert expert_reply({**hints, "reply_fields": ("action",)}, knobs, "k") == {"action": INVALID_ACTION}
     assert expert_reply({**hints, "reply_fields": ("actions",)}, knobs, "k") == {"actions": [INVALID_ACTION, "stack B on A"]}

@@ -83,6 +83,16 @@ CASES = [
         "recap: error: sweep.yaml: models[0] (offline/expert): unknown offline model option(s) ['error_rate']",
     ),
     (
+        "both sampling seed keys",
+        ('    tasks: ["3"]', '    tasks: ["3"]\nseeds: [0]\nsampling_seeds: [0]'),
+        "recap: error: sweep.yaml: give sampling_seeds or its old name seeds, not both",
+    ),
+    (
+        "both noise seed options",
+        ("- model: offline/expert", "- model: offline/expert\n    options: {seed: 1, noise_seed: 1}"),
+        "recap: error: sweep.yaml: models[0] (offline/expert): give noise_seed or its old name seed, not both",
+    ),
+    (
         "unknown generation param",
         ("- model: offline/expert", "- model: offline/expert\n    params: {temprature: 0.1}"),
         "recap: error: sweep.yaml: models[0] (offline/expert): params: unknown generation param(s) ['temprature']; allowed: "

@@ -244,7 +244,7 @@ class _Runner:
 
     def run_unit(self, work: UnitWork, attempt: int) -> EpisodeOutcome:
         self.gate.wait(10)
-        if work.seed < 0:
+        if work.sampling_seed < 0:
             raise RuntimeError("runner broke")
         return EpisodeOutcome(
             unit_id=work.unit_id,
@@ -266,7 +266,7 @@ def test_the_in_process_pool_runs_attempts_on_its_own_workers(unit):
     gate = threading.Event()
     pool = InProcessWorkerPool(lambda wid: _Runner(wid, gate), session="ab")
     assert pool.start(2) == {"ab-t001": "local", "ab-t002": "local"}
-    bad = dataclasses.replace(unit, seed=-1)
+    bad = dataclasses.replace(unit, sampling_seed=-1)
     s1 = pool.submit(Pending(unit, 1))
     s2 = pool.submit(Pending(bad, 3))
     assert {s1.worker_id, s2.worker_id} == {"ab-t001", "ab-t002"} and not pool.has_idle()

@@ -85,9 +85,11 @@ def test_interleaved_order_spreads_instances_over_benchmarks_and_splits_and_pair
     for arm, units in per_arm.items():
         # the first 4 units of an arm cover every stratum; its first 8 every instance, with seed 0
         assert {stratum(u.instance_id) for u in units[:4]} == strata, arm
-        assert {u.instance_id for u in units[:8]} == {u.instance_id for u in plan.units} and {u.seed for u in units[:8]} == {0}
+        assert {u.instance_id for u in units[:8]} == {u.instance_id for u in plan.units} and {
+            u.sampling_seed for u in units[:8]
+        } == {0}
     # every arm gets the same (instance, seed) pairs in the same order: a capped run's units pair up
-    sequences = {tuple((u.instance_id, u.seed) for u in units) for units in per_arm.values()}
+    sequences = {tuple((u.instance_id, u.sampling_seed) for u in units) for units in per_arm.values()}
     assert len(sequences) == 1
     # the first round gives each arm one unit, all on the same instance
     assert len({_arm(u) for u in order[:6]}) == 6 and len({u.instance_id for u in order[:6]}) == 1
@@ -120,7 +122,7 @@ def test_plan_order_keeps_the_old_order_and_unit_ids_do_not_depend_on_the_order(
     # instances, then methods, models, seeds
     first = pplan.units[:12]
     assert len({u.instance_id for u in first}) == 1
-    assert [(u.method_label, u.model_label, u.seed) for u in first[:4]] == [
+    assert [(u.method_label, u.model_label, u.sampling_seed) for u in first[:4]] == [
         ("recap", "offline/expert", 0),
         ("recap", "offline/expert", 1),
         ("recap", "offline/random", 0),

@@ -108,7 +108,7 @@ def test_sink_writes_readable_parts(tmp_path):
     assert pq.read_table(files[0]).column("seq").to_pylist() == [0, 1, 2]
 
 
-def test_episode_client_adds_seed_and_expert_plan_for_offline_models():
+def test_episode_client_adds_sampling_seed_and_expert_plan_for_offline_models():
     env = make_env("blocksworld/3@1")
     env.reset()
     seen: list[LLMRequest] = []
@@ -121,13 +121,13 @@ def test_episode_client_adds_seed_and_expert_plan_for_offline_models():
     req = LLMRequest(
         messages=(ChatMessage("user", "hi"),), episode_id="e-1", call_index=0, purpose="task", hints={"style": "recap"}
     )
-    client = EpisodeClient(Inner(), env, seed=5, offline=True)
+    client = EpisodeClient(Inner(), env, sampling_seed=5, offline=True)
     client.complete(req)
-    assert seen[0].hints == {"style": "recap", "seed": 5, "expert_plan": env.expert_plan()}
+    assert seen[0].hints == {"style": "recap", "sampling_seed": 5, "expert_plan": env.expert_plan()}
     assert req.hints == {"style": "recap"}  # the agent's request is untouched
     assert client.test_double and client.models == {"offline/expert"}
-    EpisodeClient(Inner(), env, seed=1, offline=False).complete(req)
-    assert seen[1].hints == {"style": "recap", "seed": 1}
+    EpisodeClient(Inner(), env, sampling_seed=1, offline=False).complete(req)
+    assert seen[1].hints == {"style": "recap", "sampling_seed": 1}
 
 
 def test_resume_state_and_queue(tmp_path):

@@ -185,7 +185,9 @@ def test_generation_params_out_of_range_name_the_range(params, message):
 @pytest.mark.parametrize(
     "options, message",
     [
-        ({"seed": -1}, "seed -1 is out of range [0, 9223372036854775807]"),
+        ({"noise_seed": -1}, "noise_seed -1 is out of range [0, 9223372036854775807]"),
+        ({"seed": -1}, "seed -1 is out of range [0, 9223372036854775807]"),  # the old name, as the file gives it
+        ({"seed": 1, "noise_seed": 1}, "give noise_seed or its old name seed, not both"),
         ({"chunk_size": 0}, "chunk_size 0 is out of range [1, 1000]"),
         ({"invalid_action_rate": 1.5}, "invalid_action_rate 1.5 is out of range [0, 1]"),
     ],

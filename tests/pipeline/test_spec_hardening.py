@@ -192,7 +192,7 @@ def test_the_documented_upper_bounds_are_accepted(tmp_path):
         + "limits: {llm_calls: 1000000, tokens: 10000000000, usd: 1000000}\n"
     )
     spec = parse_spec(edit("seeds: [0]", "seeds: [0, 2147483647]", text).replace("{out}", str(tmp_path / "o")), "sweep.yaml")
-    assert spec.seeds == [0, 2147483647] and spec.models[0].tpm == 10**11
+    assert spec.sampling_seeds == [0, 2147483647] and spec.models[0].tpm == 10**11
 
 
 @pytest.mark.parametrize(
@@ -420,7 +420,9 @@ def test_a_sweep_that_expands_to_too_many_units_is_refused(tmp_path, capsys):
     text = edit("seeds: [0]", f"seeds: [{seeds}]", edit(ENV, '    tasks: ["all"]\n'))
     text = edit("  - method: recap\n", "  - method: recap\n  - method: react\n  - method: act\n", text)
     assert 9 * 3 * 10_000 > MAX_UNITS
-    assert_refused(tmp_path, capsys, text, "units (9 instances x 3 methods x 1 models x 10000 seeds); at most 200,000 per run")
+    assert_refused(
+        tmp_path, capsys, text, "units (9 instances x 3 methods x 1 models x 10000 sampling seeds); at most 200,000 per run"
+    )
 
 
 # --------------------------------------------------------------------------------------------

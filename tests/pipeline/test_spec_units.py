@@ -36,9 +36,39 @@ def test_defaults_and_unit_count():
     # 3 blocksworld instances of size 3 x 1 method x 1 model x 2 seeds
     assert len(plan.units) == 6
     assert [u.instance_id for u in plan.units[:2]] == ["blocksworld/3@1", "blocksworld/3@1"]
-    assert [u.seed for u in plan.units[:2]] == [0, 1]
+    assert [u.sampling_seed for u in plan.units[:2]] == [0, 1]
     assert len({u.unit_id for u in plan.units}) == 6
     assert plan.units[0].key == "blocksworld/3@1 | recap | offline/expert | seed 0"
+
+
+def test_sampling_seeds_and_their_old_name_seeds_make_the_same_units():
+    old = expand(spec_of(BASE))
+    new_spec = spec_of(BASE.replace("seeds: [0, 1]", "sampling_seeds: [0, 1]"))
+    assert new_spec.sampling_seeds == [0, 1]
+    new = expand(new_spec)
+    assert [(u.unit_id, u.key) for u in new.units] == [(u.unit_id, u.key) for u in old.units]
+    # the unit ids of runs written before the rename (the hash keeps the name "seed")
+    assert old.units[0].unit_id == unit_hash(
+        instance_id="blocksworld/3@1",
+        method="recap",
+        method_config=old.units[0].method_config,
+        model="offline/expert",
+        params={},
+        sampling_seed=0,
+        step_multiplier=4.0,
+    )
+    # an error names the key the file used
+    with pytest.raises(SpecError, match=r"^sweep.yaml: sampling_seeds: repeated seed$"):
+        spec_of(BASE.replace("seeds: [0, 1]", "sampling_seeds: [1, 1]"))
+
+
+def test_the_noise_seed_option_and_its_old_name_seed_make_the_same_units():
+    def units(options: str):
+        text = BASE.replace("- model: offline/expert", f"- model: offline/expert\n    options: {options}")
+        return [u.unit_id for u in expand(spec_of(text)).units]
+
+    assert units("{noise_seed: 3, invalid_action_rate: 0.1}") == units("{seed: 3, invalid_action_rate: 0.1}")
+    assert units("{noise_seed: 3}") != units("{noise_seed: 4}")
 
 
 @pytest.mark.parametrize(
@@ -62,6 +92,14 @@ def test_defaults_and_unit_count():
             "sweep.yaml: run: must be letters, digits, '.', '_' or '-' (starting with a letter or digit)",
         ),
         (BASE.replace("seeds: [0, 1]", "seeds: [0, 0]"), "sweep.yaml: seeds: repeated seed"),
+        (
+            BASE.replace("seeds: [0, 1]", "seeds: [0, 1]\nsampling_seeds: [0, 1]"),
+            "sweep.yaml: give sampling_seeds or its old name seeds, not both",
+        ),
+        (
+            BASE.replace("seeds: [0, 1]", "sampling_seeds: [-1]"),
+            "sweep.yaml: sampling_seeds[0]: -1 is out of range [0, 2147483647]",
+        ),
         (BASE.replace("run: unit-test\n", ""), "sweep.yaml: run: required field is missing"),
         (
             BASE.replace("  - method: recap\n", "  - method: recap\n  - method: recap\n"),
@@ -113,7 +151,7 @@ def test_unit_hash_is_pinned():
         method_config='{"window": 64}',
         model="offline/expert",
         params={},
-        seed=0,
+        sampling_seed=0,
         step_multiplier=4.0,
     )
     assert uid == "58de48ed5ccdeed2"

@@ -72,7 +72,7 @@ def test_each_unit_gets_its_methods_multiplier_per_task():
             method_config=u.method_config,
             model=u.model,
             params=u.model_params,
-            seed=u.seed,
+            sampling_seed=u.sampling_seed,
             step_multiplier=u.step_multiplier,
         )
         assert u.work().step_multiplier == u.step_multiplier  # what the worker makes and records

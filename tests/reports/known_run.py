@@ -73,7 +73,7 @@ def episode(
         split=bench[1],
         task=task,
         instance_id=inst,
-        seed=seed,
+        sampling_seed=seed,
         method=method,
         method_config=cfg,
         model=model,

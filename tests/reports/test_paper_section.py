@@ -183,7 +183,7 @@ def rate(rows: list[dict[str, Any]]) -> tuple[int, int, float, float]:
 
 
 def mcnemar(arm: list[dict[str, Any]], ref: list[dict[str, Any]]) -> float | None:
-    key = lambda r: (r["split"], r["task"], r["instance_id"], r["seed"])  # noqa: E731
+    key = lambda r: (r["split"], r["task"], r["instance_id"], r["sampling_seed"])  # noqa: E731
     refs = {key(r): r["success"] for r in ref}
     paired = [r for r in arm if key(r) in refs]
     if not paired:
@@ -330,7 +330,7 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
     assert sorted({r["task"] for r in alf}) == list(paper.ALFWORLD_TYPES)
     t = tables["paper_costs_alfworld"]
     assert [r["method"] for r in t.rows] == ["recap", "adapt", "react", "act"]
-    key = lambda r: (r["task"], r["instance_id"], r["seed"])  # noqa: E731
+    key = lambda r: (r["task"], r["instance_id"], r["sampling_seed"])  # noqa: E731
     recap_cost = {key(r): r["cost_usd"] for r in alf if r["label"] == "recap"}
     for row in t.rows:
         mine = [r for r in alf if r["label"] == row["method"]]
@@ -429,7 +429,7 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
     (row,) = t.rows
     assert (row["model"], row["profile"]) == (model, "paper")
     original = [r for r in abl if r["ablation"] is None]
-    assert len(original) == 2 and {r["seed"] for r in original} == {0, 1}
+    assert len(original) == 2 and {r["sampling_seed"] for r in original} == {0, 1}
     for v in variants:
         cell = _cells(row, v)
         mine = original if v == "original" else [r for r in abl if r["ablation"] == v]

@@ -102,10 +102,10 @@ def damaged(tmp_path: Path) -> tuple[Path, dict[str, Path], list[str]]:
     out = tmp_path / "run"
     ids = _finished(out)
     bad: dict[str, Path] = {}
-    # episodes: two more finished units, `steps` and `seed` (int64) stored as numeric text
+    # episodes: two more finished units, `steps` and `sampling_seed` (int64) stored as numeric text
     rows = [record_to_row(_episode(uid, steps=3), "r1") for uid in ids[2:4]]
     bad["episodes"] = out / "episodes" / "part-zztext-000001.parquet"
-    pq.write_table(_retyped("episodes", rows, {"steps": pa.string(), "seed": pa.string()}), bad["episodes"])
+    pq.write_table(_retyped("episodes", rows, {"steps": pa.string(), "sampling_seed": pa.string()}), bad["episodes"])
     # llm_calls: prompt_tokens as int32 (castable without loss) and cost as text
     row = record_to_row(
         CallRecord(f"{ids[2]}-1", 0, "k", "act", (0,), "offline/expert", "ok", prompt_tokens=5, cost_usd=9.0), "r1"
@@ -129,8 +129,8 @@ def test_schema_problem_rule():
     extra = schema.append(pa.field("later_column", pa.string()))
     assert schema_problem("episodes", extra) is None  # extra columns are ignored
     assert (
-        schema_problem("episodes", pa.schema([f for f in schema if f.name != "seed"]))
-        == "not a episodes part: missing column(s) seed"
+        schema_problem("episodes", pa.schema([f for f in schema if f.name != "sampling_seed"]))
+        == "not a episodes part: missing column(s) sampling_seed"
     )
     retyped = pa.schema([pa.field(f.name, pa.string() if f.name == "steps" else f.type) for f in schema])
     assert schema_problem("episodes", retyped) == "not a episodes part: wrong column type(s): steps is string, expected int64"

@@ -160,10 +160,14 @@ def test_the_ablation_is_paired_with_the_original(run):
     con = open_runs([run["out"]])
     rows = named_query(con, "success_by_ablation").dicts()
     con.close()
-    by_key = {(r["instance_id"], r["seed"]): r for r in fin if r["label"] == "recap"}
+    by_key = {(r["instance_id"], r["sampling_seed"]): r for r in fin if r["label"] == "recap"}
     for split in {f"{r['benchmark']}/{r['split']}" for r in fin if r["label"] == "recap-no-think"}:
         variant = [r for r in fin if r["label"] == "recap-no-think" and f"{r['benchmark']}/{r['split']}" == split]
-        pairs = [(by_key[(r["instance_id"], r["seed"])], r) for r in variant if (r["instance_id"], r["seed"]) in by_key]
+        pairs = [
+            (by_key[(r["instance_id"], r["sampling_seed"])], r)
+            for r in variant
+            if (r["instance_id"], r["sampling_seed"]) in by_key
+        ]
         row = next(r for r in rows if r["ablation"] == "no_think" and r["env_split"] == split)
         assert (row["method"], row["episodes"], row["successes"]) == ("recap", len(variant), sum(r["success"] for r in variant))
         assert row["pairs"] == (len(pairs) or None)

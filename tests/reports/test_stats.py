@@ -386,7 +386,7 @@ def test_paired_methods_query_tests_per_instance():
             rows.append(("m", "robotouille/synchronous", arm, "robotouille", "synchronous", "t6", inst, seed, ok, cost, 1.0))
     c.execute(
         "CREATE TABLE outcomes (model_label VARCHAR, env_split VARCHAR, arm VARCHAR, benchmark VARCHAR, split VARCHAR, "
-        "task VARCHAR, instance_id VARCHAR, seed BIGINT, success BOOLEAN, cost_usd DOUBLE, ended_at DOUBLE)"
+        "task VARCHAR, instance_id VARCHAR, sampling_seed BIGINT, success BOOLEAN, cost_usd DOUBLE, ended_at DOUBLE)"
     )
     c.executemany("INSERT INTO outcomes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
     cur = c.execute(load_sql("paired_methods"))

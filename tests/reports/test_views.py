@@ -108,7 +108,7 @@ def test_part_missing_a_column_is_skipped_and_named(tmp_path):
         split="synchronous",
         task="t1",
         instance_id="i1",
-        seed=42,
+        sampling_seed=42,
         method="react",
         method_config="{}",
         model="gpt-4o",

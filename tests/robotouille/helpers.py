@@ -29,5 +29,5 @@ def all_refs() -> list[catalog.InstanceRef]:
 
 
 def one_seed_per_task(seed_index: int = 0) -> list[catalog.InstanceRef]:
-    seed = catalog.SEEDS[seed_index]
-    return [r for r in catalog.all_refs() if r.seed == seed]
+    seed = catalog.LAYOUT_SEEDS[seed_index]
+    return [r for r in catalog.all_refs() if r.layout_seed == seed]

@@ -27,7 +27,7 @@ def test_demo_is_the_sync_training_kitchen_for_sync_and_async(demo):
     env = demo.make_env()
     reset = env.reset()
     assert reset.goal == "Prepare a onion cheese sandwich on a table"
-    assert env.split == "synchronous" and env.seed == 26
+    assert env.split == "synchronous" and env.layout_seed == 26
     assert sorted(demo.replies) == ["act", "cot", "react", "recap", "standard"]
 
 

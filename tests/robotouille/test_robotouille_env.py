@@ -20,7 +20,7 @@ POTATO = "robotouille/asynchronous/5_potato_soup@42"
 def test_registry_finds_the_benchmark():
     assert get_benchmark("robotouille") is BENCHMARK
     env = make_env(POTATO, data_dir=str(require_data()))
-    assert (env.instance_id, env.benchmark, env.split, env.task, env.seed) == (
+    assert (env.instance_id, env.benchmark, env.split, env.task, env.layout_seed) == (
         POTATO,
         "robotouille",
         "asynchronous",
@@ -41,7 +41,7 @@ def test_list_instances_order_and_selectors():
     assert ids == BENCHMARK.list_instances("all")
     assert BENCHMARK.list_instances("synchronous") == ids[:100]
     assert BENCHMARK.list_instances("asynchronous") == ids[100:]
-    potato = [f"robotouille/asynchronous/5_potato_soup@{s}" for s in catalog.SEEDS]
+    potato = [f"robotouille/asynchronous/5_potato_soup@{s}" for s in catalog.LAYOUT_SEEDS]
     assert BENCHMARK.list_instances("asynchronous/5") == potato
     assert BENCHMARK.list_instances("asynchronous/5_potato_soup") == potato
     assert BENCHMARK.list_instances("robotouille/asynchronous/5_potato_soup") == potato
@@ -55,7 +55,7 @@ def test_list_instances_order_and_selectors():
         ("asynchronous/3.1_lettuce_cheeseburger", "tasks: 0_cheese_chicken_sandwich"),
         ("asynchronous/11", "unknown Robotouille task asynchronous/'11'"),
         ("breakfast", "splits are synchronous, asynchronous"),
-        ("robotouille/synchronous/0_cheese_sandwich@43", "seeds: 42, 84, 126"),
+        ("robotouille/synchronous/0_cheese_sandwich@43", "layout seeds: 42, 84, 126"),
         ("robotouille/synchronous/no_such_task@42", "tasks: 0_cheese_sandwich, 1_lettuce_sandwich"),
     ],
 )
@@ -66,7 +66,7 @@ def test_unknown_selectors_say_what_exists(selector, fragment):
 
 
 def test_unknown_instance_id_in_make():
-    with pytest.raises(UnknownInstanceError, match="unknown seed 7 .* seeds: 42, 84"):
+    with pytest.raises(UnknownInstanceError, match="unknown layout seed 7 .* layout seeds: 42, 84"):
         BENCHMARK.make("robotouille/asynchronous/5_potato_soup@7", data_dir=str(DATA))
     with pytest.raises(UnknownInstanceError, match="ids look like robotouille/<synchronous|asynchronous>"):
         BENCHMARK.make("robotouille/potato_soup", data_dir=str(DATA))

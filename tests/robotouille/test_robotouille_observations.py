@@ -19,7 +19,7 @@ def test_all_200_first_observations_match_byte_for_byte():
     for ref in all_refs():
         env = BENCHMARK.make(ref.instance_id, data_dir=str(DATA))
         reset = env.reset()
-        record = instance_record(ref.split, ref.task, ref.seed)
+        record = instance_record(ref.split, ref.task, ref.layout_seed)
         if reset.observation != record["initial_observation"]:
             mismatches.append(ref.instance_id)
         # the valid actions of the Reset are the ones listed in the observation, in order
@@ -45,7 +45,7 @@ def test_goal_set_counts_match_the_real_engine():
     domain = load_domain(require_data())
     counts = {}
     for ref in all_refs():
-        record = instance_record(ref.split, ref.task, ref.seed)
+        record = instance_record(ref.split, ref.task, ref.layout_seed)
         problem = build_problem(domain, record["generated_environment_json"])
         assert problem.goal.count_assignments() == record["num_goal_sets"], ref.instance_id
         counts[ref.instance_id] = record["num_goal_sets"]

@@ -53,7 +53,7 @@ def test_every_trajectory_replays_through_the_environment_api():
             instance_id=name,
             split="test",
             task=name,
-            seed=record["seed"],
+            layout_seed=record["seed"],
             optimal_steps=None,
             max_steps=len(record["steps"]) + 1,
         )

@@ -154,7 +154,7 @@ def test_compare_two_runs(viewer, browser, real_runs, tmp_path):
     eps = table(real_runs, "episodes")
     latest: dict[tuple, dict] = {}
     for e in sorted(eps, key=lambda e: e["attempt"]):
-        latest[(e["run_id"], e["method"], e["instance_id"], e["seed"])] = e
+        latest[(e["run_id"], e["method"], e["instance_id"], e["sampling_seed"])] = e
     pairs = [(latest[k], latest[(b, *k[1:])]) for k in sorted(latest) if k[0] == a and (b, *k[1:]) in latest]
     a_only = sum(1 for x, y in pairs if x["success"] and not y["success"])
     b_only = sum(1 for x, y in pairs if y["success"] and not x["success"])

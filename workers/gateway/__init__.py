@@ -11,7 +11,7 @@ Configuration (built by the pipeline from the sweep spec)::
                      params={"temperature": 0.5, "max_tokens": 1024},
                      price=None,            # or {"input": 2.5, "cached_input": 1.25, "output": 10}
                      cache=False,           # serve identical requests from the ledger
-                     offline_options={})    # offline/ test doubles: seed, invalid_action_rate, ...
+                     offline_options={})    # offline/ test doubles: noise_seed, invalid_action_rate, ...
     require_prices(models, overrides)      # PriceError naming every model without a price
 
 On Ray (one GatewayActor per deployment; one BudgetActor per run, or - budget="local", the

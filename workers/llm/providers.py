@@ -173,7 +173,7 @@ class DeploymentConfig(BaseModel):
     ``params`` are generation settings (``temperature``, ``max_tokens``, ...); a request's own
     temperature / max_tokens take precedence, capped at ``params['max_tokens']``.
     ``price`` overrides the repo price table for this model.
-    ``offline_options`` configures the ``offline/`` test doubles (seed, invalid_action_rate,
+    ``offline_options`` configures the ``offline/`` test doubles (noise_seed, invalid_action_rate,
     malformed_json_rate, chunk_size); ignored for real providers.
     ``cache_markers``: mark prompt-cache breakpoints (:mod:`workers.llm.cache_markers`) on the
     messages sent; None: when the model's price says its provider caches only at explicit

@@ -189,7 +189,7 @@ class AlfworldBenchmark(Benchmark):
             show_valid_actions=show,
             demo_valid_actions=demo,
         )
-        env.seed = seed
+        env.layout_seed = seed  # no layout: the games are fixed (recorded as given)
         return env
 
     def _one_game(self, instance_id: str, primary: Any) -> Game:

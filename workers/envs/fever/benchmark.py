@@ -144,7 +144,7 @@ class FeverBenchmark(Benchmark):
             verdict_only=verdict_only,
             records=records,
         )
-        env.seed = seed
+        env.layout_seed = seed
         return env
 
 

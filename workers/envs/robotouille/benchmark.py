@@ -82,7 +82,7 @@ def make_instance_env(root: Path, ref: catalog.InstanceRef, step_multiplier: flo
     """Our engine on one catalog instance of the data folder ``root`` (its
     ``generated_environment_json``), with the training kitchen as its demonstration; raises
     DataFileError for a malformed instance file."""
-    path = instance_path(root, ref.split, ref.task, ref.seed)
+    path = instance_path(root, ref.split, ref.task, ref.layout_seed)
     raw = read_json(path)
     problem = require(raw, "generated_environment_json", path)
     if not isinstance(problem, dict):
@@ -94,7 +94,7 @@ def make_instance_env(root: Path, ref: catalog.InstanceRef, step_multiplier: flo
         instance_id=ref.instance_id,
         split=ref.split,
         task=ref.task,
-        seed=ref.seed,
+        layout_seed=ref.layout_seed,
         optimal_steps=ref.optimal_steps,
         step_multiplier=step_multiplier,
         demonstration=lambda: demonstration(root),
@@ -113,7 +113,7 @@ def make_demo_env(root: Path) -> RobotouilleEnv:
         instance_id=f"robotouille/{DEMO_SPLIT}_train/{DEMO_TASK}@{DEMO_SEED}",
         split=DEMO_SPLIT,
         task=DEMO_TASK,
-        seed=DEMO_SEED,
+        layout_seed=DEMO_SEED,
         optimal_steps=None,
         max_steps=DEMO_MAX_STEPS,
     )

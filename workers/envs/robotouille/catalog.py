@@ -1,7 +1,7 @@
 """The 200 benchmark instances: ids, selectors and optimal step counts.
 
-An instance id is ``robotouille/<split>/<task>@<seed>``. The list is fixed by the benchmark (10
-synchronous + 10 asynchronous tasks x seeds 42, 84, ..., 420) and needs no data folder, so
+An instance id is ``robotouille/<split>/<task>@<layout seed>`` (the kitchen's layout seed). The list is fixed by the benchmark (10
+synchronous + 10 asynchronous tasks x layout seeds 42, 84, ..., 420) and needs no data folder, so
 selections can be made before any data is mounted. ``asynchronous/3.1_lettuce_cheeseburger`` ships
 with the problems but is in no benchmark list, so it is not an instance.
 """
@@ -15,7 +15,8 @@ from workers.envs.registry import UnknownInstanceError
 
 BENCHMARK_NAME = "robotouille"
 SPLITS = ("synchronous", "asynchronous")
-SEEDS = tuple(42 * k for k in range(1, 11))
+#: the kitchens' layout seeds (the ``@N`` of an instance id)
+LAYOUT_SEEDS = tuple(42 * k for k in range(1, 11))
 
 #: optimal step counts per task (the benchmark's experiment configs)
 OPTIMAL_STEPS: dict[str, dict[str, int]] = {
@@ -50,16 +51,16 @@ _ID = re.compile(r"^(?P<split>[a-z]+)/(?P<task>[0-9A-Za-z_.]+)@(?P<seed>-?\d+)$"
 
 @dataclass(frozen=True)
 class InstanceRef:
-    """One benchmark instance (split, task, seed), the parsed form of an instance id."""
+    """One benchmark instance (split, task, the kitchen's layout seed), the parsed form of an instance id."""
 
     split: str
     task: str
-    seed: int
+    layout_seed: int
 
     @property
     def instance_id(self) -> str:
-        """The instance's id, ``robotouille/<split>/<task>@<seed>``."""
-        return f"{BENCHMARK_NAME}/{self.split}/{self.task}@{self.seed}"
+        """The instance's id, ``robotouille/<split>/<task>@<layout seed>``."""
+        return f"{BENCHMARK_NAME}/{self.split}/{self.task}@{self.layout_seed}"
 
     @property
     def optimal_steps(self) -> int:
@@ -77,8 +78,8 @@ def tasks(split: str) -> list[str]:
 
 
 def all_refs() -> list[InstanceRef]:
-    """Every instance of the benchmark (both splits, every task, every seed), in the catalog's fixed order."""
-    return [InstanceRef(split, task, seed) for split in SPLITS for task in tasks(split) for seed in SEEDS]
+    """Every instance of the benchmark (both splits, every task, every layout seed), in the catalog's fixed order."""
+    return [InstanceRef(split, task, seed) for split in SPLITS for task in tasks(split) for seed in LAYOUT_SEEDS]
 
 
 def _strip_prefix(text: str) -> str:
@@ -101,13 +102,15 @@ def parse_id(instance_id: str) -> InstanceRef:
         raise UnknownInstanceError(
             f"unknown Robotouille task {split}/{task!r} in {instance_id!r}; tasks: {', '.join(tasks(split))}"
         )
-    if seed not in SEEDS:
-        raise UnknownInstanceError(f"unknown seed {seed} in {instance_id!r}; seeds: {', '.join(map(str, SEEDS))}")
+    if seed not in LAYOUT_SEEDS:
+        raise UnknownInstanceError(
+            f"unknown layout seed {seed} in {instance_id!r}; layout seeds: {', '.join(map(str, LAYOUT_SEEDS))}"
+        )
     return InstanceRef(split, task, seed)
 
 
 def select(selector: str | None = None) -> list[InstanceRef]:
-    """Instances a selector names, in benchmark order (split, task number, seed).
+    """Instances a selector names, in benchmark order (split, task number, layout seed).
 
     ``None``/``""``/``all``/``robotouille``: all 200; ``<split>``; ``<split>/<task number>`` or
     ``<split>/<task name>`` (10 seeds); a full id (one instance).

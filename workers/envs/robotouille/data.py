@@ -114,12 +114,12 @@ def domain_json(data_dir: Path) -> Any:
     return _domain_json_cached(str(path), mtime)
 
 
-def instance_path(data_dir: Path, split: str, task: str, seed: int) -> Path:
-    """The generated instance file of an evaluation task and seed, ``instances/<split>/<task>_<seed>.json``."""
-    return data_dir / INSTANCES_DIR / split / f"{task}_{seed}.json"
+def instance_path(data_dir: Path, split: str, task: str, layout_seed: int) -> Path:
+    """The generated instance file of an evaluation task and layout seed, ``instances/<split>/<task>_<layout_seed>.json``."""
+    return data_dir / INSTANCES_DIR / split / f"{task}_{layout_seed}.json"
 
 
-def train_instance_path(data_dir: Path, split: str, task: str, seed: int) -> Path:
-    """The generated instance file of a training task, ``instances_train/<split>_train/<task>_<seed>.json`` (the
+def train_instance_path(data_dir: Path, split: str, task: str, layout_seed: int) -> Path:
+    """The generated instance file of a training task, ``instances_train/<split>_train/<task>_<layout_seed>.json`` (the
     demonstration's kitchen)."""
-    return data_dir / TRAIN_INSTANCES_DIR / f"{split}_train" / f"{task}_{seed}.json"
+    return data_dir / TRAIN_INSTANCES_DIR / f"{split}_train" / f"{task}_{layout_seed}.json"

@@ -40,7 +40,7 @@ class RobotouilleEnv(Environment):
         instance_id: str,
         split: str,
         task: str,
-        seed: int,
+        layout_seed: int,
         optimal_steps: int | None,
         step_multiplier: float = 4.0,
         max_steps: int | None = None,
@@ -54,7 +54,7 @@ class RobotouilleEnv(Environment):
         self.instance_id = instance_id
         self.split = split
         self.task = task
-        self.seed = seed
+        self.layout_seed = layout_seed
         self.optimal_steps = optimal_steps
         self.step_multiplier = float(step_multiplier)
         if max_steps is None:

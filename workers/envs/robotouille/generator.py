@@ -84,22 +84,23 @@ class GenerationFailed(Exception):
 
 @dataclass(frozen=True)
 class Generated:
-    """The randomised problem and the seed that produced it (``seed`` or a later one)."""
+    """The randomised problem and the layout seed that produced it (the one asked for or a later one;
+    ``used_seed`` as the recorded instance files name it)."""
 
     problem: dict[str, Any]
     used_seed: int
 
 
-def generate(problem: dict[str, Any], seed: int, max_attempts: int = MAX_ATTEMPTS) -> Generated:
-    """Randomise a problem file's content as the real engine does for ``seed`` (after its loader's
-    sort, :func:`as_loaded`), retrying seed+1, ... on failure."""
+def generate(problem: dict[str, Any], layout_seed: int, max_attempts: int = MAX_ATTEMPTS) -> Generated:
+    """Randomise a problem file's content as the real engine does for the kitchen's ``layout_seed``
+    (after its loader's sort, :func:`as_loaded`), retrying layout_seed+1, ... on failure."""
     problem = as_loaded(problem)
-    for used in range(seed, seed + max_attempts):
+    for used in range(layout_seed, layout_seed + max_attempts):
         try:
             return Generated(randomize(problem, used), used)
         except GenerationFailed:
             continue
-    raise GenerationFailed(f"no kitchen could be generated for seeds {seed}..{seed + max_attempts - 1}")
+    raise GenerationFailed(f"no kitchen could be generated for seeds {layout_seed}..{layout_seed + max_attempts - 1}")
 
 
 def as_loaded(problem: dict[str, Any]) -> dict[str, Any]:
@@ -117,10 +118,10 @@ def as_loaded(problem: dict[str, Any]) -> dict[str, Any]:
     return loaded
 
 
-def randomize(problem: dict[str, Any], seed: int) -> dict[str, Any]:
-    """One attempt at ``seed`` on an already loaded problem (:func:`as_loaded`): the randomised
-    problem, or GenerationFailed."""
-    rng = random.Random(seed)
+def randomize(problem: dict[str, Any], layout_seed: int) -> dict[str, Any]:
+    """One attempt at ``layout_seed`` on an already loaded problem (:func:`as_loaded`): the
+    randomised problem, or GenerationFailed."""
+    rng = random.Random(layout_seed)
     width, height = int(problem["width"]), int(problem["height"])
     grid = _Grid(width, height)
 
@@ -385,7 +386,7 @@ def _force_container(
 
 #: where the problem files are in a data folder (upstream's layout)
 EXAMPLES_DIR = "environments/env_generator/examples"
-#: the two demonstration kitchens and the seed the paper's one-shot examples use
+#: the two demonstration kitchens and the layout seed the paper's one-shot examples use
 TRAIN_KITCHENS = (("synchronous_train", "0_cheese_onion_sandwich"), ("asynchronous_train", "0_chicken_onion_sandwich"))
 TRAIN_SEED = 26
 #: step cap multiplier of Robotouille's own configs (the recorded files' ``max_steps``)
@@ -393,16 +394,17 @@ UPSTREAM_STEP_MULTIPLIER = 1.5
 GENERATED_BY = "recap-eval workers/envs/robotouille/generator.py (re-implementation of the real engine's seeded generator)"
 
 
-def instance_record(root: Path, environment_name: str, seed: int, optimal_steps: int | None) -> dict[str, Any]:
-    """One instance file's content, in the recorded files' field order. The real engine's own
+def instance_record(root: Path, environment_name: str, layout_seed: int, optimal_steps: int | None) -> dict[str, Any]:
+    """One instance file's content, in the recorded files' field order (its ``seed`` is the layout
+    seed, as upstream's files name it). The real engine's own
     measurements (build times, its internal predicate count) are left out: they cannot be
     reproduced; everything else is computed (first observation and goal-set count by our engine)."""
     problem_file = root / EXAMPLES_DIR / f"{environment_name}.json"
-    made = generate(read_json(problem_file), seed)
+    made = generate(read_json(problem_file), layout_seed)
     built = build_problem(load_domain(root), made.problem, str(problem_file))
     return {
         "environment_name": environment_name,
-        "seed": seed,
+        "seed": layout_seed,
         "used_seed": made.used_seed,
         "noisy_randomization": False,
         "optimal_steps": optimal_steps,
@@ -425,7 +427,7 @@ def write_instances(root: Path, dest: Path) -> list[str]:
         (f"{split}/{task}", seed, catalog.OPTIMAL_STEPS[split][task])
         for split in catalog.SPLITS
         for task in catalog.tasks(split)
-        for seed in catalog.SEEDS
+        for seed in catalog.LAYOUT_SEEDS
     ]
     train = [(f"{split}/{task}", TRAIN_SEED, None) for split, task in TRAIN_KITCHENS]
     for folder, wanted in (("instances", benchmark), ("instances_train", train)):

@@ -44,7 +44,7 @@ class RealRobotouilleEnv(Environment):
 
     def __init__(self, ref: catalog.InstanceRef, step_multiplier: float, factory: Any) -> None:
         self.instance_id = ref.instance_id
-        self.split, self.task, self.seed = ref.split, ref.task, ref.seed
+        self.split, self.task, self.layout_seed = ref.split, ref.task, ref.layout_seed
         self.optimal_steps = ref.optimal_steps
         self.max_steps = math.ceil(ref.optimal_steps * step_multiplier)
         self._factory = factory
@@ -65,7 +65,7 @@ class RealRobotouilleEnv(Environment):
     def reset(self) -> Reset:
         """Create the real environment afresh (no noisy randomization) and return its first observation, valid
         actions and goal."""
-        created = self._factory(f"{self.split}/{self.task}", self.seed, noisy_randomization=False)
+        created = self._factory(f"{self.split}/{self.task}", self.layout_seed, noisy_randomization=False)
         self._env = created[0] if isinstance(created, tuple) else created
         obs, _info = self._env.reset()
         self._steps_taken = 0

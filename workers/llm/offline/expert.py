@@ -162,7 +162,7 @@ def expert_reply(hints: Mapping[str, Any], knobs: Knobs, call_key: str) -> dict[
     next expert action, ``actions`` the whole remaining plan. Injection replaces the first
     subtask, the action, or the plan's first action."""
     plan = list(hints.get("expert_plan") or [])
-    inject = knobs.invalid_action_rate > 0 and draw(call_key, knobs.seed, "invalid") < knobs.invalid_action_rate
+    inject = knobs.invalid_action_rate > 0 and draw(call_key, knobs.noise_seed, "invalid") < knobs.invalid_action_rate
     reply: dict[str, Any] = {}
     for name in reply_fields_of(hints):
         if name == "think":

@@ -43,7 +43,7 @@ def offline_text(name: str, messages: list[dict[str, str]], metadata: Mapping[st
     if maker is None:
         raise OfflineOptionsError(f"unknown offline model offline/{name}; known: {', '.join('offline/' + m for m in MODELS)}")
     knobs = Knobs.from_options(meta.get("options"))
-    if knobs.malformed_json_rate > 0 and draw(call_key, knobs.seed, "malformed") < knobs.malformed_json_rate:
+    if knobs.malformed_json_rate > 0 and draw(call_key, knobs.noise_seed, "malformed") < knobs.malformed_json_rate:
         return MALFORMED_JSON
     reply = maker(hints, knobs, call_key)
     layout = hints.get("text_layout")

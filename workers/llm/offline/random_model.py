@@ -2,7 +2,7 @@
 (``hints["reply_fields"]``, see :mod:`workers.llm.offline.expert`).
 
 Why: a lower bound for success rates and a stress test of long episodes (step caps, context
-trimming) at no cost. The choice depends only on (seed, call_key), like every offline model.
+trimming) at no cost. The choice depends only on (noise_seed, call_key), like every offline model.
 When the action space is open (``valid_actions`` is None) it answers ``look``.
 """
 
@@ -20,7 +20,7 @@ OPEN_SPACE_ACTION = "look"
 def random_reply(hints: Mapping[str, Any], knobs: Knobs, call_key: str) -> dict[str, Any]:
     """Every field the agent asked for holds the one random action (``think`` a fixed text)."""
     valid = list(hints.get("valid_actions") or [])
-    action = call_rng(call_key, knobs.seed, "random").choice(valid) if valid else OPEN_SPACE_ACTION
+    action = call_rng(call_key, knobs.noise_seed, "random").choice(valid) if valid else OPEN_SPACE_ACTION
     reply: dict[str, Any] = {}
     for name in reply_fields_of(hints):
         if name == "think":
