@@ -38,7 +38,14 @@ lint=0
 .venv/bin/ruff check . || { echo "ruff check: findings above (ruff check --fix fixes the marked ones)" >&2; lint=1; }
 .venv/bin/ruff format --check . >/dev/null || { .venv/bin/ruff format --check . >&2; echo "ruff format: run '.venv/bin/ruff format .'" >&2; lint=1; }
 .venv/bin/mypy || { echo "mypy: type errors above" >&2; lint=1; }
-.venv/bin/python -m pytest -m "$marker" -q --durations=15 "$@"
+# pytest-xdist: the default suite runs in RECAP_TEST_WORKERS processes (default: one per core, at
+# least 2: much of a Ray test is waiting on actors and processes). Each worker has its own Ray
+# cluster (tests/conftest.py, ray_address); --dist loadgroup keeps the tests that read one shared
+# run (xdist_group) on one worker, so that run is made once. The slow suites (chaos timings, two
+# Ray nodes) stay in one process unless RECAP_TEST_WORKERS says otherwise.
+cores=$(nproc 2>/dev/null || echo 2)
+if [ "$marker" = slow ]; then workers="${RECAP_TEST_WORKERS:-0}"; else workers="${RECAP_TEST_WORKERS:-$((cores < 2 ? 2 : cores))}"; fi
+.venv/bin/python -m pytest -m "$marker" -q --durations=15 -n "$workers" --dist loadgroup "$@"
 rc=$?
 if [ $rc -eq 5 ]; then echo "no tests were collected: failing" >&2; exit 1; fi
 if [ $rc -eq 0 ] && [ $lint -ne 0 ]; then echo "tests passed, but lint/format/type checks failed (above)" >&2; exit 1; fi

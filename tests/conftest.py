@@ -17,10 +17,13 @@ os.environ.setdefault("ROBOTOUILLE_DATA", str(SHARED_DATA / "robotouille"))
 os.environ.setdefault("ALFWORLD_DATA", str(SHARED_DATA / "alfworld"))
 
 
-@pytest.fixture(scope="module")
-def ray_address():
-    """A local Ray cluster (2 CPUs) for a module's end-to-end runs; drivers join it with
-    ``--address``. Shut down after the module only if this fixture started it."""
+@pytest.fixture(scope="session")
+def ray_address() -> Iterator[str]:
+    """The local Ray cluster (2 CPUs) of this test process, started once and shared by every test
+    that runs a sweep in-process or joins it with ``--address``: a Ray start costs seconds, so one
+    per session instead of one per module. Under pytest-xdist each worker process has its own
+    cluster (its own temp folder and ports, :func:`pipeline.raysetup.init_ray`). Shut down at the
+    end only if this fixture started it."""
     import ray
 
     from pipeline.raysetup import init_ray, shutdown_ray
@@ -30,6 +33,23 @@ def ray_address():
     yield ray.get_runtime_context().gcs_address
     if started:
         shutdown_ray()
+
+
+#: fixtures whose one expensive run (a sweep through the pipeline) is shared by the tests that only
+#: read it: under pytest-xdist (``--dist loadgroup``) the tests using one of them go to one worker,
+#: so the run is made once, not once per worker
+SHARED_RUNS = ("pipeline_run", "real_runs", "paper_runs")
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups into the test ids
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Put each test that reads a shared run into that run's xdist group (no effect without xdist)."""
+    for item in items:
+        names = getattr(item, "fixturenames", ())
+        for name in SHARED_RUNS:
+            if name in names:
+                item.add_marker(pytest.mark.xdist_group(name))
+                break
 
 
 @pytest.fixture(autouse=True)

@@ -3,7 +3,6 @@ with ray.kill and recreated from the run folder."""
 
 from __future__ import annotations
 
-import os
 import pickle
 import time
 from pathlib import Path
@@ -23,16 +22,9 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
-def ray_session():
-    old = os.environ.get("PYTHONPATH")
-    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), old) if p)
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
+def ray_session(ray_address):
+    """The session's shared local Ray (tests/conftest.py); its workers import this checkout."""
     yield
-    ray.shutdown()
-    if old is None:
-        os.environ.pop("PYTHONPATH", None)
-    else:
-        os.environ["PYTHONPATH"] = old
 
 
 def _config(server, **kw) -> DeploymentConfig:

@@ -24,8 +24,8 @@ def run_b(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def pipeline_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, dict[str, Any]]:
-    """``recap run`` of a small sweep on a local Ray (test double, a binding cap, a killed
+def pipeline_run(ray_address: str, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, dict[str, Any]]:
+    """``recap run`` of a small sweep on the session's local Ray (test double, a binding cap, a killed
     worker): (run folder, exit status, the killed unit)."""
     return run_sweep(tmp_path_factory.mktemp("pipeline"))
 

@@ -207,20 +207,7 @@ def assert_p(got: Any, want: float | None) -> None:
 
 
 @pytest.fixture(scope="module")
-def ray_local():
-    import ray
-
-    from pipeline.raysetup import init_ray
-    from pipeline.spec import RaySpec
-
-    started = init_ray(RaySpec(num_cpus=2))
-    yield
-    if started:
-        ray.shutdown()
-
-
-@pytest.fixture(scope="module")
-def paper_runs(ray_local, tmp_path_factory) -> dict[str, Path]:
+def paper_runs(ray_address, tmp_path_factory) -> dict[str, Path]:
     from pipeline.cli import main
 
     base = tmp_path_factory.mktemp("paper")

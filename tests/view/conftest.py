@@ -32,28 +32,20 @@ workers: 2
 
 
 @pytest.fixture(scope="session")
-def real_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    import ray
-
+def real_runs(ray_address: str, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     from pipeline.driver import Driver, prepare
     from pipeline.gateway_backend import make_backend
-    from pipeline.raysetup import init_ray
-    from pipeline.spec import RaySpec, parse_spec
+    from pipeline.spec import parse_spec
 
     base = tmp_path_factory.mktemp("view_runs")
-    started = init_ray(RaySpec(num_cpus=2))
     out = []
-    try:
-        for name, model in (("a", "offline/expert"), ("b", "offline/random")):
-            folder = base / name
-            text = SWEEP.format(name=name, out=folder, model=model)
-            spec = parse_spec(text, "sweep.yaml")
-            summary = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
-            assert summary.exit_code() == 0
-            out.append(folder)
-    finally:
-        if started:
-            ray.shutdown()
+    for name, model in (("a", "offline/expert"), ("b", "offline/random")):  # on the session's Ray
+        folder = base / name
+        text = SWEEP.format(name=name, out=folder, model=model)
+        spec = parse_spec(text, "sweep.yaml")
+        summary = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+        assert summary.exit_code() == 0
+        out.append(folder)
     return out[0], out[1]
 
 
