@@ -4,7 +4,7 @@
     .venv/bin/python bench/gateway.py --no-ray   # skip the Ray-actor overhead figure
     .venv/bin/python bench/gateway.py --skip-quota --calls 400   # overhead only (about 75 s)
 
-Part 1 - utilisation. A fake provider (``python -m tests.doubles.fake_server``, own process)
+Part 1 - utilisation. A fake provider (``python -m workers.llm.offline.fake_server``, own process)
 enforces RPM or TPM over a scaled window (``--window-s``, default 5 s for 60 s); 32 callers
 loop through one gateway configured with the same limits. Utilisation is the provider-side
 accepted rate divided by the limit's rate, measured from the first arrival to the first
@@ -55,7 +55,7 @@ class ServerProcess:
 
     def __init__(self, *args: str):
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "tests.doubles.fake_server", "--port", "0", *args],
+            [sys.executable, "-m", "workers.llm.offline.fake_server", "--port", "0", *args],
             cwd=REPO,
             stdout=subprocess.PIPE,
             text=True,

@@ -1,7 +1,7 @@
 """Pipeline throughput: episodes per minute vs workers, sink rows per second, worker memory.
 
 Every episode is ReAct on a blocksworld instance against the fake OpenAI server
-(``tests.doubles.fake_server``) answering after 200 ms, through the real driver, episode workers,
+(``workers.llm.offline.fake_server``) answering after 200 ms, through the real driver, episode workers,
 gateway and sink; the per-episode call limit fixes each episode at CALLS model calls, so the
 ideal is ``workers x 60 / (CALLS x 0.2 s)`` episodes per minute. The series runs without a
 quota; a last run repeats the largest worker count under a gateway quota, where the rate must
@@ -163,7 +163,7 @@ def main() -> None:
 
     from pipeline.raysetup import init_ray
     from pipeline.spec import RaySpec
-    from tests.doubles.fake_server import FakeServer, FakeServerConfig
+    from workers.llm.offline.fake_server import FakeServer, FakeServerConfig
 
     os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
     server = FakeServer(FakeServerConfig(latency_s=LATENCY))

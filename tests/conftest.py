@@ -72,7 +72,7 @@ def _reset_our_loggers():
 @pytest.fixture
 def fake_server() -> Iterator:
     """``fake_server(**config)`` starts a loopback fake server (stopped after the test)."""
-    from tests.doubles.fake_server import FakeServer, FakeServerConfig
+    from workers.llm.offline.fake_server import FakeServer, FakeServerConfig
 
     servers: list[FakeServer] = []
 

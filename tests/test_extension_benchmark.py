@@ -35,7 +35,7 @@ benchmark: the authors' released prompt files (``workers/release/texts.py``, for
 they released prompts for), the paper's published numbers (``reports/paper.py``) and the
 reading of schema version 1 rows (``schemas/versions.py`` and ``schemas.labels.place_of``,
 frozen with that version: schemas cannot ask the benchmarks, and a new benchmark never wrote a
-version 1 row; tests/pipeline/test_spec_units.py checks the built-ins' ``place`` hooks agree).
+version 1 row; tests/pipeline/spec/test_spec_units.py checks the built-ins' ``place`` hooks agree).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ A real new method would touch:
   ``METHODS.register("<name>", ("recap.<module>:<Agent>", "recap.<module>:<Config>"))`` (a
   plug-in calls ``recap.methods.register_method`` instead, or decorates its agent class with
   ``@METHODS.register("<name>")``), the one list of method names;
-* its tests (``tests/method/``).
+* its tests (``tests/recap/``).
 
 No benchmark's demonstration module, offline test double, estimate table or worker changes.
 """

@@ -69,3 +69,34 @@ def test_the_check_sees_a_violation(tmp_path):
     bad = tmp_path / "m.py"
     bad.write_text("def f():\n    from workers.gateway import core\n    import ray.util\n")
     assert imported_modules(bad) == {"workers.gateway", "ray.util"}
+
+
+def test_bench_imports_nothing_from_tests():
+    """bench/ measures the product: it imports nothing of tests/ (nor runs ``-m tests.``)."""
+    wrong = {
+        f"{p.relative_to(REPO)}: {module}"
+        for p in sorted((REPO / "bench").rglob("*.py"))
+        for module in imported_modules(p)
+        if module.split(".")[0] == "tests"
+    }
+    wrong |= {str(p.relative_to(REPO)) for p in (REPO / "bench").rglob("*.py") if '"tests.' in p.read_text()}
+    assert wrong == set()
+
+
+#: test folders that are not a package's mirror: shared doubles, the real-model check, the
+#: whole-pipeline chaos lab, and folders of golden files
+NOT_MIRRORS = {"tests/doubles", "tests/realmodel", "tests/pipeline/chaos"}
+
+
+def test_test_folders_mirror_the_packages():
+    """``tests/workers/envs/fever`` holds the tests of ``workers/envs/fever``: every folder of test
+    modules names a folder of the code (so a module's tests are found without grep)."""
+    folders = {p.parent for p in (REPO / "tests").rglob("test_*.py")}
+    wrong = sorted(
+        str(rel)
+        for d in folders
+        if d != REPO / "tests"
+        and not (REPO / (rel := d.relative_to(REPO)).relative_to("tests")).is_dir()
+        and str(rel) not in NOT_MIRRORS
+    )
+    assert wrong == []

@@ -1,4 +1,6 @@
-"""Test doubles that are not part of the product: the loopback OpenAI-compatible server with
-quotas and injected faults (:mod:`tests.doubles.fake_server`), used by the gateway, chaos and
-pipeline tests and by ``bench/``. (The offline models a sweep can name, ``offline/expert`` and
-friends, are product code in :mod:`workers.llm.offline`: users run them.)"""
+"""Test doubles shared by the test packages (not part of the product): the offline expert as an
+LLM client (:mod:`.offline_expert_client`), model requests and a fake key (:mod:`.llm_requests`),
+agent episodes through the gateway (:mod:`.agent_episodes`) and a known run folder
+(:mod:`.known_run`). The loopback OpenAI-compatible server with quotas and injected faults is a
+labelled test double of the product, :mod:`workers.llm.offline.fake_server`, so ``bench/`` can
+use it without importing anything from ``tests/``."""

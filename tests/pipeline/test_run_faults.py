@@ -190,7 +190,7 @@ workers: 2
 
 
 def test_infrastructure_failures_exit_4_and_a_corrected_rerun_retries_them(ray_address, tmp_path, capsys, monkeypatch):
-    from tests.doubles.fake_server import FakeServer, FakeServerConfig
+    from workers.llm.offline.fake_server import FakeServer, FakeServerConfig
 
     monkeypatch.setenv("RECAP_FAKE_KEY", "not-a-secret")
     out = tmp_path / "infra"

@@ -1,6 +1,6 @@
 """SIGINT/SIGTERM during a session (pipeline.stopping): flags once the loop runs, an interrupt
 before it and on the third signal. The whole path through the CLI is in
-tests/chaos/test_chaos_slow.py (signals.sigint: once, twice; signals.orphans)."""
+tests/pipeline/chaos/test_chaos_slow.py (signals.sigint: once, twice; signals.orphans)."""
 
 from __future__ import annotations
 

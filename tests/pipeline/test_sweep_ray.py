@@ -220,7 +220,7 @@ workers: 2
 @pytest.fixture(scope="module")
 def slow_server():
     """The gateway engineer's fake OpenAI server, answering after 300 ms (a slow provider)."""
-    from tests.doubles.fake_server import FakeServer, FakeServerConfig
+    from workers.llm.offline.fake_server import FakeServer, FakeServerConfig
 
     server = FakeServer(FakeServerConfig(latency_s=0.3))
     url = server.start_in_thread()

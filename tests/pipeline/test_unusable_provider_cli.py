@@ -27,9 +27,9 @@ from pipeline.cli import main
 from pipeline.driver import EXIT_INFRA, EXIT_WORK_REMAINS
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
-from tests.doubles.fake_server import FakeServer
 from workers.gateway.entries import journal_spend
 from workers.gateway.ledger import JOURNAL_NAME
+from workers.llm.offline.fake_server import FakeServer
 from workers.llm.pricing import default_prices, usd_to_pico
 
 PRICE = default_prices().get("openai/fake-gpt")  # TEST DOUBLE price: $1/M input, $0.5/M cached, $2/M output

@@ -24,7 +24,7 @@ import pytest
 
 from recap.llm import ChatMessage, LLMError, LLMRequest
 from schemas.parts import read_table
-from tests.gateway.agent_episodes import assert_every_call_recorded, episode_rows, play
+from tests.doubles.agent_episodes import assert_every_call_recorded, episode_rows, play
 from workers.gateway.blocking import BlockingGateway
 from workers.gateway.core import DeploymentGateway
 from workers.gateway.ledger import JOURNAL_NAME

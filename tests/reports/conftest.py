@@ -1,4 +1,4 @@
-"""Run folders with known rows (tests/reports/known_run.py), written once per test session, and
+"""Run folders with known rows (tests/doubles/known_run.py), written once per test session, and
 one run folder the pipeline itself wrote (tests/reports/pipeline_run.py)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from tests.reports.known_run import write_run_a, write_run_b
+from tests.doubles.known_run import write_run_a, write_run_b
 from tests.reports.pipeline_run import run_sweep
 
 

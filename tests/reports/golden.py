@@ -1,6 +1,6 @@
 """The report's and the viewer's outputs over fixed inputs, for the golden test (tests/reports/test_golden.py).
 
-The inputs are deterministic: the known runs of tests/reports/known_run.py and a small synthetic run
+The inputs are deterministic: the known runs of tests/doubles/known_run.py and a small synthetic run
 (reports/synthetic.py, seed 0). The outputs: every file ``write_report`` writes (md, plots, html, tex,
 csv) for each input, ``recap sql``'s text, CSV and JSON of a few queries, and the viewer's pages
 (runs, spec, episode list with filters, search and sort, one episode, a call's window, compare), and the
@@ -29,7 +29,7 @@ from reports.render_text import print_result
 from reports.synthetic import SyntheticSpec, write_synthetic_run
 from reports.views import open_runs_checked, run_query
 from reports.webview.server import serve, stop
-from tests.reports.known_run import write_run_a, write_run_b
+from tests.doubles.known_run import write_run_a, write_run_b
 
 GOLDEN_DIR = Path(__file__).resolve().parent / "golden"
 SYNTHETIC = SyntheticSpec(messages=6000, mean_calls=12, window=16, seed=0, part_rows=2000, row_group_rows=500)

@@ -703,9 +703,9 @@ def test_a_window_that_differs_only_between_benchmarks_keeps_one_arm(tmp_path):
 
     from recap.config import AgentConfig, build_config
     from schemas.parts import PartWriter
-    from tests.reports.known_run import ALF as ALF_BENCH
-    from tests.reports.known_run import REACT, episode
-    from tests.reports.known_run import SYNC as SYNC_BENCH
+    from tests.doubles.known_run import ALF as ALF_BENCH
+    from tests.doubles.known_run import REACT, episode
+    from tests.doubles.known_run import SYNC as SYNC_BENCH
 
     kw = {"cost": 0.1, "prompt": 10, "cached": 0, "completion": 1, "calls": 1, "steps": 1}
 

@@ -78,7 +78,7 @@ Guarantees
   reach the actors as a ``SecretEnv`` constructor argument, never through ``runtime_env``
   (which Ray logs).
 - Test doubles: ``offline/expert``, ``offline/random``, ``offline/replay`` (litellm custom
-  provider) and ``tests.doubles.fake_server``; their records carry ``test_double=True``.
+  provider) and ``workers.llm.offline.fake_server``; their records carry ``test_double=True``.
 """
 
 from __future__ import annotations

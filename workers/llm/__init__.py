@@ -19,5 +19,5 @@
 - :mod:`workers.llm.direct`         :class:`LiteLLMClient`, a Ray-free ``LLMClient``.
 
 The loopback OpenAI-compatible test server with quotas and faults is a test utility:
-:mod:`tests.doubles.fake_server`. The gateway (:mod:`workers.gateway`) builds admission control, budgets and the ledger on top.
+:mod:`workers.llm.offline.fake_server`. The gateway (:mod:`workers.gateway`) builds admission control, budgets and the ledger on top.
 """

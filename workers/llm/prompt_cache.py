@@ -1,7 +1,7 @@
 """TEST DOUBLE: the prompt-caching rules of three providers, as a deterministic simulation.
 
 Why: ReCAP re-sends a long pinned prefix on every call, so what a run costs depends on how the
-provider caches prompts. The fake server (:mod:`tests.doubles.fake_server`) reports usage by
+provider caches prompts. The fake server (:mod:`workers.llm.offline.fake_server`) reports usage by
 these rules, in each provider's own usage fields, so litellm parses it as it would the real
 answer; ``bench/cost.py`` prices whole trajectories with the same code.
 
