@@ -38,7 +38,7 @@ def ray_address() -> Iterator[str]:
 #: fixtures whose one expensive run (a sweep through the pipeline) is shared by the tests that only
 #: read it: under pytest-xdist (``--dist loadgroup``) the tests using one of them go to one worker,
 #: so the run is made once, not once per worker
-SHARED_RUNS = ("pipeline_run", "real_runs", "paper_runs")
+SHARED_RUNS = ("pipeline_run", "real_runs")
 
 
 @pytest.hookimpl(tryfirst=True)  # before xdist reads the groups into the test ids

@@ -206,19 +206,33 @@ def assert_p(got: Any, want: float | None) -> None:
         assert got == pytest.approx(want, abs=1e-9)
 
 
-@pytest.fixture(scope="module")
-def paper_runs(ray_address, tmp_path_factory) -> dict[str, Path]:
+def _paper_run(base: Path, name: str) -> Path:
+    """One example protocol of examples/paper/, derived small, run through ``recap run``."""
     from pipeline.cli import main
 
+    out = base / "runs" / name
+    out.parent.mkdir(parents=True, exist_ok=True)
+    _, path = derived_spec(name, out)
+    assert main(["run", str(path), "--progress", "off"]) == 0, name
+    return out
+
+
+# one fixture per example protocol, each read by one test, so pytest-xdist spreads the sweeps
+# over its workers instead of making all four on one
+@pytest.fixture(scope="module")
+def main_runs(ray_address, tmp_path_factory) -> list[Path]:
     base = tmp_path_factory.mktemp("paper")
-    runs = {}
-    for name in ("main-robotouille", "main-alfworld", "cross-model", "ablations"):
-        out = base / "runs" / name
-        out.parent.mkdir(parents=True, exist_ok=True)
-        _, path = derived_spec(name, out)
-        assert main(["run", str(path), "--progress", "off"]) == 0, name
-        runs[name] = out
-    return runs
+    return [_paper_run(base, "main-robotouille"), _paper_run(base, "main-alfworld")]
+
+
+@pytest.fixture(scope="module")
+def cross_run(ray_address, tmp_path_factory) -> Path:
+    return _paper_run(tmp_path_factory.mktemp("paper"), "cross-model")
+
+
+@pytest.fixture(scope="module")
+def ablation_run(ray_address, tmp_path_factory) -> Path:
+    return _paper_run(tmp_path_factory.mktemp("paper"), "ablations")
 
 
 def _cells(row: dict[str, Any], key: str) -> dict[str, Any]:
@@ -241,8 +255,8 @@ def _check_holm(t, keys: list[str]) -> None:
     assert f"; {len(slots)} comparisons (Holm over the table)." in t.note
 
 
-def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
-    main_dirs = [paper_runs["main-robotouille"], paper_runs["main-alfworld"]]
+def test_paper_section_from_the_main_protocols(main_runs, tmp_path):
+    main_dirs = main_runs
     report = build_report(main_dirs, ReportOptions(formats=("md",), paper_only=True))
     assert [s.key for s in report.sections] == ["paper"]
     tables = {t.name: t for t in report.sections[0].tables}
@@ -359,7 +373,7 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
         assert row.get("paper_calls") == ("[1]" if row["method"] == "recap" else None)
     (tree_row,) = tables["paper_trees"].rows
     (recap6,) = [r for r in t6 if r["label"] == "recap"]
-    check_tree(tree_row, [recap6], _read(paper_runs["main-robotouille"], "tree_nodes"))
+    check_tree(tree_row, [recap6], _read(main_runs[0], "tree_nodes"))
 
     # what these runs do not hold: one line each
     assert tables["paper_omitted"].rows == [
@@ -370,64 +384,6 @@ def test_paper_section_from_each_example_protocol(paper_runs, tmp_path):
         },
         {"table": "Ablation table", "missing": "no ReCAP ablation ran Robotouille synchronous task 6 with a 128-message window."},
     ]
-
-    # the cross-model example
-    report = build_report([paper_runs["cross-model"]], ReportOptions(formats=("md",), paper_only=True))
-    tables = {t.name: t for t in report.sections[0].tables}
-    assert [r["table"] for r in tables["paper_omitted"].rows] == [
-        "Per-task table (asynchronous)",
-        "Ablation table",
-        "ALFWorld costs",
-    ]
-    cross = unit_rows(paper_runs["cross-model"])
-    t = tables["paper_cross_model"]
-    models = [
-        "gpt-4o (test double)",
-        "qwen2.5-32b (test double)",
-        "qwen2.5-72b (test double)",
-        "llama-4-maverick (test double)",
-        "deepseek-v3 (test double)",
-    ]
-    assert [c.key for c in t.columns] == ["method"] + _rate_keys(models)  # the paper's model order
-    assert [r["method"] for r in t.rows] == ["react", "recap"]
-    for row in t.rows:
-        for m in models:
-            cell = _cells(row, m)
-            mine = [r for r in cross if label_of(r) == m and r["label"] == row["method"]]
-            assert len(mine) == 3 and {paper.task_index(r["task"]) for r in mine} == {2, 4, 6}
-            assert_rate(cell["ours"], rate(mine))
-            assert cell["paper"] == "[1]" and cell["diff"] is None
-            ref = [r for r in cross if label_of(r) == m and r["label"] == "recap"]
-            assert_p(cell["p"], None if row["method"] == "recap" else mcnemar(mine, ref))
-    _check_holm(t, models)
-
-    # the ablation example
-    report = build_report([paper_runs["ablations"]], ReportOptions(formats=("md",), paper_only=True))
-    tables = {t.name: t for t in report.sections[0].tables}
-    assert [r["table"] for r in tables["paper_omitted"].rows] == [
-        "Per-task table (asynchronous)",
-        "Cross-model table",
-        "ALFWorld costs",
-    ]
-    abl = unit_rows(paper_runs["ablations"])
-    t = tables["paper_ablations"]
-    variants = list(paper.ABLATIONS)
-    assert [c.key for c in t.columns] == ["model", "profile"] + _rate_keys(variants)
-    (row,) = t.rows
-    assert (row["model"], row["profile"]) == (model, "paper")
-    original = [r for r in abl if r["ablation"] is None]
-    assert len(original) == 2 and {r["sampling_seed"] for r in original} == {0, 1}
-    for v in variants:
-        cell = _cells(row, v)
-        mine = original if v == "original" else [r for r in abl if r["ablation"] == v]
-        assert len(mine) == 2 and all(r["label"] == ("recap" if v == "original" else f"recap-{v}") for r in mine)
-        assert_rate(cell["ours"], rate(mine))
-        assert cell["paper"] == "[1]" and cell["diff"] is None
-        assert_p(cell["p"], None if v == "original" else mcnemar(mine, original))
-    _check_holm(t, variants)
-    (tree_row,) = tables["paper_trees"].rows
-    assert (tree_row["window"], tree_row["paper_depth"], tree_row["paper_branching"]) == ("128", "[1]", "[1]")
-    check_tree(tree_row, original, _read(paper_runs["ablations"], "tree_nodes"))
 
     # every format renders the section (recap report --paper)
     from pipeline.cli.report import report_main
@@ -457,3 +413,66 @@ def check_tree(row: dict[str, Any], episodes: list[dict[str, Any]], nodes: list[
     if len(levels) > 1:
         mean = sum(levels) / len(levels)
         assert row["levels_sd"] == pytest.approx(math.sqrt(sum((x - mean) ** 2 for x in levels) / (len(levels) - 1)))
+
+
+def test_paper_section_from_the_cross_model_protocol(cross_run):
+    # the cross-model example
+    report = build_report([cross_run], ReportOptions(formats=("md",), paper_only=True))
+    tables = {t.name: t for t in report.sections[0].tables}
+    assert [r["table"] for r in tables["paper_omitted"].rows] == [
+        "Per-task table (asynchronous)",
+        "Ablation table",
+        "ALFWorld costs",
+    ]
+    cross = unit_rows(cross_run)
+    t = tables["paper_cross_model"]
+    models = [
+        "gpt-4o (test double)",
+        "qwen2.5-32b (test double)",
+        "qwen2.5-72b (test double)",
+        "llama-4-maverick (test double)",
+        "deepseek-v3 (test double)",
+    ]
+    assert [c.key for c in t.columns] == ["method"] + _rate_keys(models)  # the paper's model order
+    assert [r["method"] for r in t.rows] == ["react", "recap"]
+    for row in t.rows:
+        for m in models:
+            cell = _cells(row, m)
+            mine = [r for r in cross if label_of(r) == m and r["label"] == row["method"]]
+            assert len(mine) == 3 and {paper.task_index(r["task"]) for r in mine} == {2, 4, 6}
+            assert_rate(cell["ours"], rate(mine))
+            assert cell["paper"] == "[1]" and cell["diff"] is None
+            ref = [r for r in cross if label_of(r) == m and r["label"] == "recap"]
+            assert_p(cell["p"], None if row["method"] == "recap" else mcnemar(mine, ref))
+    _check_holm(t, models)
+
+
+def test_paper_section_from_the_ablation_protocol(ablation_run):
+    model = "gpt-4o (test double)"
+    # the ablation example
+    report = build_report([ablation_run], ReportOptions(formats=("md",), paper_only=True))
+    tables = {t.name: t for t in report.sections[0].tables}
+    assert [r["table"] for r in tables["paper_omitted"].rows] == [
+        "Per-task table (asynchronous)",
+        "Cross-model table",
+        "ALFWorld costs",
+    ]
+    abl = unit_rows(ablation_run)
+    t = tables["paper_ablations"]
+    variants = list(paper.ABLATIONS)
+    assert [c.key for c in t.columns] == ["model", "profile"] + _rate_keys(variants)
+    (row,) = t.rows
+    assert (row["model"], row["profile"]) == (model, "paper")
+    original = [r for r in abl if r["ablation"] is None]
+    assert len(original) == 2 and {r["sampling_seed"] for r in original} == {0, 1}
+    for v in variants:
+        cell = _cells(row, v)
+        mine = original if v == "original" else [r for r in abl if r["ablation"] == v]
+        assert len(mine) == 2 and all(r["label"] == ("recap" if v == "original" else f"recap-{v}") for r in mine)
+        assert_rate(cell["ours"], rate(mine))
+        assert cell["paper"] == "[1]" and cell["diff"] is None
+        assert_p(cell["p"], None if v == "original" else mcnemar(mine, original))
+    _check_holm(t, variants)
+    (tree_row,) = tables["paper_trees"].rows
+    assert (tree_row["window"], tree_row["paper_depth"], tree_row["paper_branching"]) == ("128", "[1]", "[1]")
+    check_tree(tree_row, original, _read(ablation_run, "tree_nodes"))
