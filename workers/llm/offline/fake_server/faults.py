@@ -1,0 +1,75 @@
+"""The fake server's fault modes: their names, the bodies and usage blocks they answer with, and the
+in-message directive (``FAKE:<mode>[*N]``) that asks for one."""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+DEFAULT_REPLY = '{"think": "fake server reply", "action": "wait"}'
+FAULT_MODES = (
+    "429",
+    "500",
+    "502",
+    "503",
+    "hang",
+    "empty",
+    "malformed",
+    "ctx",
+    "400",
+    "401",
+    "retrylong",
+    "echokey",
+    "negusage",
+    "zerousage",
+    "hugeusage",
+    "fracusage",
+    "nousage",
+    "negcached",
+    "notjson",
+    "html",
+    "textplain",
+    "nochoices",
+    "nullchoices",
+    "nomessage",
+    "nullcontent",
+)
+#: modes answering HTTP 200 with a reply no client can use: a body that is not JSON (``notjson``,
+#: ``html``; ``malformed`` cut mid-JSON, ``empty``), or a chat completion without a usable choice
+#: (``nochoices``: ``choices: []``, ``nullchoices``: ``choices: null``, ``nomessage``: a choice
+#: without ``message``, ``nullcontent``: content null and no tool calls). The provider generated the
+#: reply: it bills prompt + completion (the log records the tokens it generated, so tests can
+#: compute the bill). ``textplain`` (a good reply under a ``text/plain`` content type) is readable.
+UNREADABLE_MODES = ("empty", "malformed", "notjson", "html", "nochoices", "nullchoices", "nomessage", "nullcontent")
+#: usage blocks of the lying-provider modes (None: the field is left out)
+USAGE_FAULTS: dict[str, dict[str, Any]] = {
+    "negusage": {"prompt_tokens": -1_000_000, "completion_tokens": -1_000_000},
+    "zerousage": {"prompt_tokens": 0, "completion_tokens": 0},
+    "hugeusage": {"prompt_tokens": 50_000_000, "completion_tokens": 50_000_000},
+    "fracusage": {"prompt_tokens": 10.5, "completion_tokens": 2.25},
+    "nousage": {"prompt_tokens": None, "completion_tokens": None, "cached_tokens": None, "cache_write_tokens": None},
+    "negcached": {"cached_tokens": -1_000_000},
+}
+#: the bodies of the unreadable modes that are not JSON: (bytes, content type)
+NOT_JSON_BODIES: dict[str, tuple[bytes, str]] = {
+    "empty": (b"", "application/json"),
+    "malformed": (b'{"id": "chatcmpl-fake", "choices": [{"mess', "application/json"),
+    "notjson": (b"upstream answered: OK", "application/json"),
+    "html": (b"<html><head><title>502 Bad Gateway</title></head><body><h1>502 Bad Gateway</h1></body></html>", "text/html"),
+}
+#: the choices of the unreadable modes whose body is a chat completion
+CHOICE_FAULTS: dict[str, Any] = {
+    "nochoices": lambda choices: [],
+    "nullchoices": lambda choices: None,
+    "nomessage": lambda choices: [{"index": c["index"], "finish_reason": c["finish_reason"]} for c in choices],
+    "nullcontent": lambda choices: [
+        {"index": c["index"], "message": {"role": "assistant", "content": None}, "finish_reason": c["finish_reason"]}
+        for c in choices
+    ],
+}
+DIRECTIVE = re.compile(r"FAKE:([a-z0-9]+)(?:\*(\d+))?")
+
+
+def error_body(message: str, etype: str, code: str | None, param: str | None = None) -> dict[str, Any]:
+    """An error reply in the OpenAI shape."""
+    return {"error": {"message": message, "type": etype, "param": param, "code": code}}
