@@ -18,8 +18,8 @@ from pipeline.gateway_backend import make_backend
 from pipeline.spec import parse_spec
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
-from tests.fever.standin import StandIn
 from workers.envs.fever.claims import LABELS, PAPER_INDEX_RANGE, paper_indices
+from workers.envs.fever.standin import StandIn
 
 ENTITIES = ("Nikolaj Coster-Waldau", "Mercury", "Xyzzy qwerty")
 #: the paper's first three claims of the file the fixture writes (ids 10000 + line number)
