@@ -147,9 +147,10 @@ class StandIn:
 
     @property
     def base_url(self) -> str:
+        """``http://127.0.0.1:<port>`` of the running server."""
         assert self._server is not None
         host, port = self._server.server_address[:2]
-        return f"http://{host}:{port}"
+        return f"http://{host if isinstance(host, str) else host.decode()}:{port}"
 
     def _answer(self, path: str) -> Answer:
         parts = urlsplit(path)
