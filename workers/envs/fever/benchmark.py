@@ -105,7 +105,13 @@ class FeverBenchmark(Benchmark):
 
     def list_instances(self, selector: str | None = None) -> list[str]:
         """``None``/``paper``: the paper's 200 in the release's order; ``all``: every claim in file order."""
-        return [c.instance_id for c in select(load_claims(resolve_data_dir(self.data_dir)), selector)]
+        return self.list_instances_for(selector, {})
+
+    def list_instances_for(self, selector: str | None, options: Mapping[str, Any]) -> list[str]:
+        """:meth:`list_instances` of the claims in ``options['data_dir']`` when a sweep names one."""
+        data_dir = options.get("data_dir")
+        claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
+        return [c.instance_id for c in select(claims, selector)]
 
     def make(
         self,
