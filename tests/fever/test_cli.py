@@ -117,3 +117,18 @@ def test_option_applies_to_fever_trajectories_only(tmp_path, capsys):
     assert capsys.readouterr().err == (
         f"recap: error: cannot replay {path}: --option applies to FEVER trajectories only, got wikipedia\n"
     )
+
+
+@pytest.mark.skipif(not (REAL / "paper_dev.jsonl").is_file(), reason="../shared/data/fever/paper_dev.jsonl is absent")
+def test_the_paper_fever_sweep_estimates_the_five_methods_on_the_200_claims(capsys, monkeypatch):
+    monkeypatch.setenv("FEVER_DATA", str(REAL))
+    monkeypatch.setenv("COLUMNS", "100")
+    example = Path(__file__).resolve().parents[2] / "examples" / "paper" / "main-fever.yaml"
+    assert main(["estimate", str(example)]) == 0
+    out = capsys.readouterr().out
+    assert "estimate for run paper-main-fever: 1000 units" in out
+    rows = [line.split("│")[1:4] for line in out.splitlines() if line.startswith("│")]
+    assert [[cell.strip() for cell in row] for row in rows] == [
+        [m, "gpt-4o", "200"] for m in ("recap", "react", "cot", "act", "standard")
+    ]
+    assert out.rstrip().endswith("run cap $250.00: fits")

@@ -131,3 +131,11 @@ def test_other_environments_get_actions_as_written():
     env = make_env("blocksworld/3@1")
     assert env.action_spelling == "as_written"
     assert agent_action(env, "Pick up the red block") == "Pick up the red block"
+
+
+def test_the_claims_label_is_the_episodes_task_and_not_in_the_prompt_material(make):
+    supports, refutes = make(1001), make(1002)
+    assert (supports.task, refutes.task, supports.split) == ("SUPPORTS", "REFUTES", "dev")
+    assert supports.rules() == refutes.rules()
+    assert repr(supports.demonstration()) == repr(refutes.demonstration()) == "Demonstration(name='fever-156709-cap10')"
+    assert refutes.reset().observation == "Claim: Mercury is a city."

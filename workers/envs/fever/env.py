@@ -46,7 +46,6 @@ class FeverEnvironment(Environment):
 
     benchmark = "fever"
     split = "dev"
-    task = "fever"
     invalid_action_mode = "step"
     #: the agent-facing layer lower-cases an action's first letter (hotpotqa_simulator.py:41)
     action_spelling: ActionSpelling = "lower_first"
@@ -65,6 +64,9 @@ class FeverEnvironment(Environment):
     ) -> None:
         self.claim = claim
         self.instance_id = claim.instance_id
+        #: the claim's gold label, recorded with the episode (EnvFacts.task) so the report can break
+        #: success down by label; no prompt reads it (the agents see rules, observations, the goal)
+        self.task = claim.label
         self.source = source
         self.wikipedia_url = wikipedia_url
         self.max_steps = max_steps
