@@ -190,7 +190,7 @@ def resolve_instances(envs: Sequence[EnvSpec]) -> list[tuple[str, dict[str, Any]
         ids: list[str] = []
         for sel in env.tasks:
             try:
-                found = list(bench.list_instances(sel))
+                found = list(bench.list_instances_for(sel, env.options))
             except (UnknownInstanceError, DataNotFoundError, EnvError, ValueError) as exc:
                 raise SpecError(f"{where}: {env.benchmark} task {sel!r}: {exc}") from None
             if not found:

@@ -98,6 +98,18 @@ class Demonstration:
         return f"Demonstration(name={self.name!r})"
 
 
+#: the spellings an environment may ask the agent-facing layer to apply (Environment.action_spelling)
+ActionSpelling = Literal["as_written", "lower_first"]
+
+
+def agent_action(env: Environment, action: str) -> str:
+    """``action`` as the agent-facing layer hands it to ``env``: unchanged, or with its first
+    character lower-cased when the environment declares ``lower_first``."""
+    if env.action_spelling == "lower_first" and action:
+        return action[0].lower() + action[1:]
+    return action
+
+
 class Environment(ABC):
     """One benchmark task instance behind a uniform interface."""
 
@@ -122,6 +134,11 @@ class Environment(ABC):
     #: ``show_valid_actions``), so feedback that names them need not repeat the list
     lists_valid_actions: bool = False
     optimal_steps: int | None = None
+    #: how the agent-facing layer spells a model's action before the engine sees it
+    #: (:func:`agent_action`): ``as_written``, or ``lower_first`` (FEVER: the release's runner
+    #: lower-cases the first character, fever-recap/hotpotqa/hotpotqa_simulator.py:41, so
+    #: ``Search[X]`` reaches the engine as ``search[X]``; the engine itself takes actions as written)
+    action_spelling: ActionSpelling = "as_written"
     #: environment steps allowed (ceil(optimal x multiplier), or a benchmark's fixed cap)
     max_steps: int = 50
     #: when True, the episode is re-checked against max_steps by the agent; envs may also end it

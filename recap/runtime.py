@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from recap.config import AgentConfig
-from recap.env import EnvError, Environment, InvalidActionError, Reset, Step
+from recap.env import EnvError, Environment, InvalidActionError, Reset, Step, agent_action
 from recap.history import History
 from recap.jsonreply import ReplyFormatError, parse_json_object
 from recap.llm import LLMClient, LLMError, LLMRequest, LLMResponse
@@ -337,7 +337,10 @@ class EnvDriver:
         self._record(action, False, self.observation, False, node_id)
 
     def execute(self, action: str, node_id: int | None = None) -> Step:
-        """Run ``action``. Invalid actions reach the environment only in ``step`` mode."""
+        """Run ``action`` as the agent-facing layer spells it for this environment
+        (:func:`recap.env.agent_action`; that spelling is what is recorded). Invalid actions
+        reach the environment only in ``step`` mode."""
+        action = agent_action(self.env, action)
         valid = self.is_valid(action)
         if not valid and self.env.invalid_action_mode == "reject":
             self.reject(action, node_id)

@@ -200,6 +200,10 @@ PROTOCOLS = {
 }
 
 ROBOTOUILLE_TASKS = 10
+#: the paper's FEVER set: 200 claims (the release's shuffle of indices 0..7404 with seed 42)
+FEVER_CLAIMS = 200
+#: FEVER's labels, the per-label breakdown's rows (the environment reports a claim's label as its task)
+FEVER_LABELS = ("SUPPORTS", "REFUTES", "NOT ENOUGH INFO")
 
 
 @dataclass(frozen=True)
@@ -215,6 +219,8 @@ class ArmProtocol:
     #: (task, step multipliers seen on it)
     tasks: tuple[tuple[str, tuple[float, ...]], ...]
     method: str = "recap"
+    #: episodes the cell counts (FEVER's number needs the paper's 200 claims)
+    episodes: int | None = None
 
 
 def _task_key(split: str, task: str) -> str:
@@ -240,6 +246,8 @@ def mismatch(protocol: Protocol, arm: ArmProtocol, expected_tasks: Iterable[str]
     want_w = expected_window(protocol, arm.benchmark, arm.method)
     if want_w is not None and windows != [want_w]:
         return f"window {', '.join(map(str, windows)) or '?'} messages, the paper used {want_w}"
+    if arm.benchmark == "fever" and arm.episodes is not None and arm.episodes != FEVER_CLAIMS:
+        return f"{arm.episodes} claims, the paper ran {FEVER_CLAIMS}"
     got = {_task_key(arm.split, t) for t, _ in arm.tasks}
     if expected_tasks is not None:
         want = set(expected_tasks)

@@ -17,6 +17,7 @@ BENCH_ROWS = (
     ("alfworld", None, "ALFWorld"),
     ("robotouille", "synchronous", "Robotouille (Sync)"),
     ("robotouille", "asynchronous", "Robotouille (Async)"),
+    ("fever", None, "FEVER"),
 )
 
 INTRO = (
@@ -70,6 +71,7 @@ def arm_protocol(cell: dict[str, Any]) -> paper.ArmProtocol:
         split=cell["split"],
         tasks=tasks,
         method=cell.get("method") or "recap",
+        episodes=cell.get("episodes"),
     )
 
 

@@ -36,12 +36,12 @@ def main_table(cells: Cells) -> Table | str:
         for c in cells.select(level="split")
         if c["ablation"] == "original"
         and (
-            c["benchmark"] == "alfworld"
+            c["benchmark"] in ("alfworld", "fever")
             or (c["benchmark"], c["split"]) in (("robotouille", "synchronous"), ("robotouille", "asynchronous"))
         )
     ]
     if not pool:
-        return "Main results: no arm without an ablation ran Robotouille (synchronous or asynchronous) or ALFWorld."
+        return "Main results: no arm without an ablation ran Robotouille (synchronous or asynchronous), ALFWorld or FEVER."
     arms = sorted({(c["method"], c["arm_label"]) for c in pool}, key=lambda a: (method_rank(paper.MAIN_ORDER, a[0]), a[1]))
     cols = [Column("benchmark", "benchmark"), Column("model", "model")]
     for _, label in arms:

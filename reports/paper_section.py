@@ -25,6 +25,7 @@ from reports import paper
 from reports.model import Column, Section, Table, format_value
 from reports.paper_cells import INTRO, Cells, Footnotes, Query, arm_protocol, join_notes, test_double_last
 from reports.paper_costs import alfworld_cost_tables, task6_cost_table
+from reports.paper_fever import fever_label_tables
 from reports.paper_rates import ablation_table, cross_model_table, main_table, per_task_tables
 from reports.views import Result
 
@@ -94,6 +95,7 @@ def paper_section(q: Query, results: dict[str, Result] | None = None) -> Section
         main_table(cells),
         per_task_tables(cells, "synchronous"),
         per_task_tables(cells, "asynchronous"),
+        fever_label_tables(cells),
         cross_model_table(cells),
         ablation_table(cells),
         alfworld_cost_tables(cells),

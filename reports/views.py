@@ -45,7 +45,7 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
 from schemas.parts import RUN_FILE, check_parts, read_part, read_run_file
-from schemas.tables import TABLES
+from schemas.tables import TABLES, UNIQUE_BY
 
 log = logging.getLogger(__name__)
 
@@ -180,7 +180,15 @@ def _create_table_view(con: duckdb.DuckDBPyConnection, table: str, files: list[P
         # into memory here, since their rows need more than a projection
         con.register(f"_older_{table}", pa.concat_tables([read_part(str(f), table) for f in older]))
         body += f' UNION ALL SELECT {cols} FROM "_older_{table}"'
-    con.execute(f'CREATE VIEW "{table}" AS {body}')
+    key = UNIQUE_BY.get(table)
+    if key is None:
+        con.execute(f'CREATE VIEW "{table}" AS {body}')
+        return
+    # a content-addressed table (wiki_pages): the rows as written stay queryable as <table>_raw,
+    # the table's own name keeps one row per key (rows with one key hold the same bytes)
+    con.execute(f'CREATE VIEW "{table}_raw" AS {body}')
+    on = ", ".join(f'"{c}"' for c in key)
+    con.execute(f'CREATE VIEW "{table}" AS SELECT DISTINCT ON ({on}) {cols} FROM "{table}_raw"')
 
 
 def open_runs(run_dirs: Sequence[str | Path], *, read_only: bool = True) -> duckdb.DuckDBPyConnection:

@@ -236,9 +236,13 @@ class WikiPageRecord:
     Why content-addressed: the same page is read by many episodes (every method searches the
     same claim's entities), so the body is kept once per ``sha256`` and each request points at
     it (:class:`WikiRequestRecord`). A worker writes a body once; two workers that read the
-    same page may each write it, and such rows are the same bytes."""
+    same page may each write it, and such rows are the same bytes: the ``wiki_pages`` view of a
+    run folder holds one row per ``(run_id, sha256)`` (``unique_by``), the rows as written stay
+    readable as ``wiki_pages_raw`` (reports/views.py)."""
 
     table: ClassVar[str] = "wiki_pages"
+    #: the columns that name one row: the query view keeps one row for each
+    unique_by: ClassVar[tuple[str, ...]] = ("run_id", "sha256")
     sha256: str
     body: bytes
     size: int

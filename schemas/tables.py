@@ -70,6 +70,12 @@ def _schema_for(record_type: type) -> pa.Schema:
 
 
 TABLES: dict[str, pa.Schema] = {_table_name(rt): _schema_for(rt) for rt in ALL_RECORD_TYPES}
+#: tables whose rows are content-addressed and may be written more than once (two workers reading
+#: the same page), by the columns naming one row (a record type's ``unique_by``): readers that
+#: count rows see one per key
+UNIQUE_BY: dict[str, tuple[str, ...]] = {
+    _table_name(rt): tuple(rt.__dict__["unique_by"]) for rt in ALL_RECORD_TYPES if "unique_by" in rt.__dict__
+}
 _TYPE_OF_TABLE: dict[str, type] = {_table_name(rt): rt for rt in ALL_RECORD_TYPES}
 
 

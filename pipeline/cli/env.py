@@ -1,15 +1,19 @@
 """``recap env ...``: look at the benchmarks without any model.
 
-* ``env list BENCH [SELECTOR]`` - the instance ids a sweep file can name;
-* ``env play ID`` - play an instance by hand: type an action (any letter case) or its number, see
-  the observation and the step count against the step cap;
-* ``env replay TRAJECTORY.json`` - re-run a recorded Robotouille trajectory on our engine and say
-  whether every observation is identical (exit 0 only then).
+* ``env list BENCH [SELECTOR] [--all]`` - the instance ids a sweep file can name (``--all``: every
+  instance, not only the default set: FEVER's claims beyond the paper's 200);
+* ``env play ID [--option KEY=VALUE ...]`` - play an instance by hand: type an action (any letter
+  case) or its number, see the observation and the step count against the step cap; the options
+  are the environment's (FEVER: ``wikipedia_url``, ``wikipedia``, ``data_dir``);
+* ``env replay TRAJECTORY.json`` - re-run a recorded Robotouille trajectory on our engine, or a
+  FEVER trajectory (``"benchmark": "fever"``, :mod:`workers.envs.fever.replay`) on our FEVER
+  environment, and say whether every observation is identical (exit 0 only then).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from collections.abc import Sequence
@@ -17,7 +21,8 @@ from typing import TextIO
 
 from pipeline.cli.common import OneLineParser, finite_positive
 from pipeline.errors import PipelineError
-from recap.env import DataNotFoundError, EnvError, InvalidActionError, UnknownInstanceError
+from recap.env import DataNotFoundError, EnvError, InvalidActionError, UnknownInstanceError, agent_action
+from workers.envs.fever.replay import is_fever_trajectory, replay_fever_file
 from workers.envs.registry import get_benchmark, make_env
 from workers.envs.robotouille.replay import replay_file
 
@@ -36,6 +41,8 @@ examples:
   recap env list blocksworld 4                the ids of 4-block problems
   recap env list robotouille asynchronous
   recap env list alfworld heat
+  recap env list fever                        the paper's 200 claims, in the release's order
+  recap env list fever --all                  every claim of paper_dev.jsonl
 
 The ids go to stdout, one a line, and their count to stderr. exit status: 0 ok; 2 unknown
 benchmark or selector, or its data is missing (recap data --help)
@@ -45,6 +52,7 @@ _PLAY_EPILOG = """\
 examples:
   recap env play blocksworld/3@1
   recap env play robotouille/synchronous/0_cheese_sandwich@42 --step-multiplier 2
+  recap env play fever/168966 --option wikipedia_url=http://localhost:8080
 
 Type an action (any letter case) or its number in the list; quit, exit or q to stop.
 exit status: 0 played; 2 unknown instance or missing data
@@ -53,8 +61,14 @@ exit status: 0 played; 2 unknown instance or missing data
 _REPLAY_EPILOG = """\
 examples:
   recap env replay trajectory.json
+  recap env replay fever-trajectory.json --option wikipedia=snapshot:runs/fever-main
 
-exit status: 0 every observation identical; 1 a difference (printed); 2 unreadable trajectory
+A FEVER trajectory is {"benchmark": "fever", "instance": "fever/<claim id>", "options": {...},
+"reset": "<first observation>", "steps": [{"action", "observation", "reward", "done"}, ...]}
+(README: FEVER trajectories); --option overrides its options. Anything else is read as a Robotouille
+trajectory.
+exit status: 0 every observation identical; 1 a difference (printed); 2 unreadable trajectory,
+missing data or a page that cannot be had
 """
 
 
@@ -74,9 +88,12 @@ def add_parser(sub: argparse._SubParsersAction[OneLineParser], name: str, help: 
         epilog=_LIST_EPILOG,
         description="The instance ids of a benchmark that a sweep file can name.",
     )
-    el.add_argument("bench", help="blocksworld, robotouille or alfworld")
+    el.add_argument("bench", help="blocksworld, robotouille, alfworld or fever")
     el.add_argument(
         "selector", nargs="?", help="only the ids it selects: a size (blocksworld), a split or task (robotouille, alfworld)"
+    )
+    el.add_argument(
+        "--all", action="store_true", help="every instance, not only the default set (fever: every claim, not the paper's 200)"
     )
     ep = esub.add_parser(
         "play",
@@ -90,24 +107,51 @@ def add_parser(sub: argparse._SubParsersAction[OneLineParser], name: str, help: 
         type=finite_positive,
         default=4.0,
         metavar="X",
-        help="step cap = X times the optimal plan's length (default 4; ALFWorld's cap is fixed)",
+        help="step cap = X times the optimal plan's length (default 4; ALFWorld's and FEVER's caps are fixed)",
     )
+    _add_option_argument(ep)
     er = esub.add_parser(
         "replay",
-        help="replay a recorded Robotouille trajectory",
+        help="replay a recorded Robotouille or FEVER trajectory",
         epilog=_REPLAY_EPILOG,
-        description="Re-run a recorded Robotouille trajectory on our engine and compare every observation.",
+        description="Re-run a recorded Robotouille or FEVER trajectory on our engine and compare every observation.",
     )
     er.add_argument("trajectory", help="the recorded trajectory (JSON)")
+    _add_option_argument(er)
+
+
+def _add_option_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        type=option_pair,
+        help="an environment option, repeatable (fever: wikipedia_url=URL, wikipedia=snapshot:DIR, data_dir=DIR); "
+        "VALUE is read as JSON when it parses (5, true), else as text",
+    )
+
+
+def option_pair(text: str) -> tuple[str, object]:
+    """``KEY=VALUE`` as (key, value): the value as JSON when it parses as JSON, else the text."""
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    try:
+        return key.strip(), json.loads(value)
+    except ValueError:
+        return key.strip(), value
 
 
 def execute(args: argparse.Namespace, command: str) -> int:
     """Run the parsed ``recap env`` action on the process's stdin and stdout."""
     if args.env_cmd == "list":
-        return list_main(args.bench, args.selector, sys.stdout)
+        if args.all and args.selector is not None:
+            raise PipelineError(f"give a selector or --all, not both (got {args.selector!r} and --all)")
+        return list_main(args.bench, "all" if args.all else args.selector, sys.stdout)
     if args.env_cmd == "play":
-        return play_main(args.instance_id, sys.stdin, sys.stdout, args.step_multiplier)
-    return replay_main(args.trajectory, sys.stdout)
+        return play_main(args.instance_id, sys.stdin, sys.stdout, args.step_multiplier, dict(args.option))
+    return replay_main(args.trajectory, sys.stdout, dict(args.option))
 
 
 def _registry_error(exc: Exception) -> PipelineError:
@@ -166,11 +210,14 @@ def _show(obs: str, valid: Sequence[str] | None, out: TextIO) -> None:
             print(f"  {i:>2}. {a}", file=out)
 
 
-def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float = 4.0) -> int:
+def play_main(
+    instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float = 4.0, options: dict[str, object] | None = None
+) -> int:
     """``recap env play ID``: play one instance by hand from ``inp`` (action text or its number; quit/exit/q or
-    end of input stops); 0 whatever the outcome."""
+    end of input stops), the typed action spelled as the agent-facing layer spells it
+    (:func:`recap.env.agent_action`); 0 whatever the outcome. ``options`` go to the environment."""
     try:
-        env = make_env(instance_id, step_multiplier=step_multiplier)
+        env = make_env(instance_id, **{"step_multiplier": step_multiplier, **(options or {})})
     except (UnknownInstanceError, DataNotFoundError, EnvError, ValueError) as exc:
         raise _registry_error(exc) from None
     except (ImportError, AttributeError) as exc:
@@ -194,7 +241,7 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
             if not action:
                 continue
             try:
-                step = env.step(match_action(action, valid))
+                step = env.step(agent_action(env, match_action(action, valid)))
             except InvalidActionError as exc:
                 print(f"Invalid action: {exc}", file=out)
                 hints = env.failure_hints()
@@ -211,11 +258,16 @@ def play_main(instance_id: str, inp: TextIO, out: TextIO, step_multiplier: float
         env.close()
 
 
-def replay_main(path: str, out: TextIO) -> int:
-    """``recap env replay FILE``: replay a saved Robotouille trajectory; exit 0 when it replays as recorded, 1
-    when it does not."""
+def replay_main(path: str, out: TextIO, options: dict[str, object] | None = None) -> int:
+    """``recap env replay FILE``: replay a saved FEVER trajectory (``options`` override its own) or
+    Robotouille trajectory; exit 0 when it replays as recorded, 1 when it does not."""
     try:
-        ok, message = replay_file(path)
+        if is_fever_trajectory(path):
+            ok, message = replay_fever_file(path, options or {})
+        elif options:
+            raise ValueError(f"--option applies to FEVER trajectories only, got {', '.join(sorted(options))}")
+        else:
+            ok, message = replay_file(path)
     except (EnvError, OSError, ValueError) as exc:  # unreadable or malformed trajectory, missing data
         raise PipelineError(f"cannot replay {path}: {exc}") from None
     print(message, file=out)

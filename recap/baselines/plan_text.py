@@ -25,7 +25,7 @@ from typing import Any
 from recap.baselines import text_prompts as T
 from recap.baselines.react_text import raw_text
 from recap.baselines.textreply import parse_action_lines, parse_plan, render, unique_match
-from recap.env import EnvError, Environment, InvalidActionError, Reset
+from recap.env import EnvError, Environment, InvalidActionError, Reset, agent_action
 from recap.runtime import Episode, EpisodeEnd
 
 
@@ -52,7 +52,7 @@ def check_plan(env: Environment, valid: tuple[str, ...] | None, actions: list[st
         raise EpisodeEnd("env_error", f"the plan cannot be checked on a copy of the environment: {exc}") from exc
     matched: list[str] = []
     for i, action in enumerate(actions, 1):
-        hit = unique_match(action, valid) if valid is not None else action
+        hit = unique_match(action, valid) if valid is not None else agent_action(sim, action)
         if hit is None:
             return matched, f"planned action {i} of {len(actions)} ({action!r}) does not match exactly one valid action"
         matched.append(hit)

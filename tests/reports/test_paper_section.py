@@ -116,6 +116,11 @@ def test_mismatch_names_the_first_protocol_difference():
         paper.mismatch(cross, _arm(tasks=t246 + (("7_t", (4.0,)),), **cross_arm))
         == "ran tasks the paper's number leaves out (synchronous:7)"
     )
+    labels = tuple((label, (4.0,)) for label in paper.FEVER_LABELS)
+    fever = _arm(benchmark="fever", split="dev", tasks=labels, episodes=200)
+    assert paper.mismatch(main, fever) is None
+    assert paper.mismatch(main, _arm(benchmark="fever", split="dev", tasks=labels, episodes=3)) == ("3 claims, the paper ran 200")
+    assert paper.main_reference("fever/dev", "recap") == 63.5 and paper.main_reference("fever/dev", "adapt") is None
     alf = _arm(benchmark="alfworld", split="valid_unseen", tasks=tuple((t, (4.0,)) for t in paper.ALFWORLD_TYPES))
     assert paper.mismatch(main, alf) is None
     assert paper.mismatch(main, alf, ["heat"]) == "ran tasks the paper's number leaves out (clean, cool, examine, put, puttwo)"
@@ -377,6 +382,7 @@ def test_paper_section_from_the_main_protocols(main_runs, tmp_path):
 
     # what these runs do not hold: one line each
     assert tables["paper_omitted"].rows == [
+        {"table": "FEVER by label", "missing": "no arm without an ablation ran FEVER claims."},
         {
             "table": "Cross-model table",
             "missing": "no model has both a ReAct and a ReCAP arm without an ablation on Robotouille synchronous tasks 2, "
@@ -421,6 +427,7 @@ def test_paper_section_from_the_cross_model_protocol(cross_run):
     tables = {t.name: t for t in report.sections[0].tables}
     assert [r["table"] for r in tables["paper_omitted"].rows] == [
         "Per-task table (asynchronous)",
+        "FEVER by label",
         "Ablation table",
         "ALFWorld costs",
     ]
@@ -454,6 +461,7 @@ def test_paper_section_from_the_ablation_protocol(ablation_run):
     tables = {t.name: t for t in report.sections[0].tables}
     assert [r["table"] for r in tables["paper_omitted"].rows] == [
         "Per-task table (asynchronous)",
+        "FEVER by label",
         "Cross-model table",
         "ALFWorld costs",
     ]

@@ -69,6 +69,12 @@ class Benchmark(BenchmarkProtocol, ABC):
         """A fresh environment for ``instance_id`` (options: step_multiplier, data_dir...)."""
 
     # -- hooks ----------------------------------------------------------------------------------
+    def list_instances_for(self, selector: str | None, options: Mapping[str, Any]) -> list[str]:
+        """:meth:`list_instances` for an environment entry whose ``make()`` options are
+        ``options`` (a sweep's ``options: {data_dir: ...}`` lists that folder's instances).
+        Default: the options do not change the list."""
+        return self.list_instances(selector)
+
     def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
         """``make()`` options an agent ``style`` (``recap``, ``react``...) with its resolved
         settings ``config`` runs with unless the sweep sets them (ALFWorld: whether observations

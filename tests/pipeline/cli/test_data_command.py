@@ -27,6 +27,7 @@ from recap.env import DataNotFoundError
 from workers.envs import data_paths
 from workers.envs.alfworld import data_folders as alf_folders
 from workers.envs.alfworld import games as alf_games
+from workers.envs.fever import claims as fever_claims
 from workers.envs.robotouille import data as rob_data
 from workers.envs.robotouille.data_folders import COMMIT as ROBOTOUILLE_COMMIT
 from workers.envs.robotouille.data_folders import FOLDER as ROB_FOLDER
@@ -34,6 +35,7 @@ from workers.envs.robotouille.data_folders import FOLDER as ROB_FOLDER
 REPO = Path(__file__).resolve().parents[3]
 SHARED = REPO.parent / "shared" / "data"
 ROB, ALF, ALF212 = SHARED / "robotouille", SHARED / "alfworld", SHARED / "alfworld-2.1.2"
+FEVER = SHARED / "fever"
 
 
 def needs_data(test):
@@ -42,7 +44,9 @@ def needs_data(test):
 
     @functools.wraps(test)
     def checked(*args, **kwargs):
-        assert ROB.is_dir() and ALF.is_dir() and ALF212.is_dir(), f"the tests need the benchmark data in {SHARED}"
+        assert ROB.is_dir() and ALF.is_dir() and ALF212.is_dir() and FEVER.is_dir(), (
+            f"the tests need the benchmark data in {SHARED}"
+        )
         return test(*args, **kwargs)
 
     return checked
@@ -60,7 +64,7 @@ def isolated(tmp_path, monkeypatch):
     home = tmp_path / "home"
     home.mkdir()
     monkeypatch.setenv("HOME", str(home))
-    for var in ("RECAP_EVAL_CACHE", "ROBOTOUILLE_DATA", "ALFWORLD_DATA", "ALFWORLD_DATA_2_1_2"):
+    for var in ("RECAP_EVAL_CACHE", "ROBOTOUILLE_DATA", "ALFWORLD_DATA", "ALFWORLD_DATA_2_1_2", "FEVER_DATA"):
         monkeypatch.delenv(var, raising=False)
     checkout = tmp_path / "shared" / "data"
     monkeypatch.setattr(data_paths, "CHECKOUT_DATA_ROOT", checkout)
@@ -173,11 +177,14 @@ def test_nothing_found_says_where_it_looked_and_how_to_fetch(isolated):
 def test_list_without_any_data(isolated):
     code, out, err = run("list")
     assert code == 1
-    assert "robotouille: not found" in out and "alfworld: not found" in out
+    assert "robotouille: not found" in out and "alfworld: not found" in out and "fever: not found" in out
     assert "  3. upstream cache     none (Robotouille keeps its data inside its repository checkout)" in out
     lines = err.splitlines()
-    assert len(lines) == 3 and all(line.startswith("recap: error: data list: ") for line in lines)
+    assert len(lines) == 4 and all(line.startswith("recap: error: data list: ") for line in lines)
     assert "run `recap data fetch robotouille`" in lines[0]
+    assert (
+        lines[3] == "recap: error: data list: fever: no folder found; run `recap data fetch fever` (see `recap data list fever`)"
+    )
 
 
 @needs_data
@@ -185,12 +192,14 @@ def test_check_the_shared_data(monkeypatch):
     monkeypatch.setenv("ROBOTOUILLE_DATA", str(ROB))
     monkeypatch.setenv("ALFWORLD_DATA", str(ALF))
     monkeypatch.delenv("ALFWORLD_DATA_2_1_2", raising=False)
+    monkeypatch.setenv("FEVER_DATA", str(FEVER))
     code, out, err = run("check")
     assert (code, err) == (0, "")
     assert out.splitlines() == [
         f"robotouille: {ROB.resolve()} ($ROBOTOUILLE_DATA): 300 files checked: OK",
         f"alfworld: {ALF.resolve()} ($ALFWORLD_DATA): 404 files checked: OK",
         f"alfworld-2.1.2: {ALF212.resolve()} (next to ALFWorld): 134 files checked: OK",
+        f"fever: {FEVER.resolve()} ($FEVER_DATA): 1 files checked: OK",
     ]
 
 
@@ -265,8 +274,9 @@ def _alfworld_zip(path: Path, root: Path, pattern: str) -> None:
 
 @pytest.fixture(scope="module")
 def mirror(tmp_path_factory):
-    assert ROB.is_dir() and ALF.is_dir() and ALF212.is_dir(), f"the tests need the benchmark data in {SHARED}"
+    assert ROB.is_dir() and ALF.is_dir() and ALF212.is_dir() and FEVER.is_dir(), f"the tests need the benchmark data in {SHARED}"
     folder = tmp_path_factory.mktemp("mirror")
+    shutil.copy(FEVER / "paper_dev.jsonl", folder / "paper_dev.jsonl")
     _robotouille_archive(folder / f"{ROBOTOUILLE_COMMIT}.tar.gz")
     _alfworld_zip(folder / "json_2.1.1_json.zip", ALF, "traj_data.json")
     _alfworld_zip(folder / "json_2.1.1_pddl.zip", ALF, "initial_state.pddl")
@@ -287,7 +297,8 @@ def test_fetch_everything_from_a_mirror_folder_then_check(isolated, mirror, tmp_
     dest = tmp_path / "data"
     code, out, err = run("fetch", "--mirror", str(mirror), "--dest", str(dest))
     assert (code, err) == (0, ""), err
-    assert sorted(p.name for p in dest.iterdir()) == ["alfworld", "alfworld-2.1.2", "robotouille"]
+    assert sorted(p.name for p in dest.iterdir()) == ["alfworld", "alfworld-2.1.2", "fever", "robotouille"]
+    assert f"fever: {dest / 'fever'}: 1 files fetched and verified" in out
     # 88 downloaded + 206 generated (202 instances, a summary.json and a README.md per folder)
     assert f"robotouille: {dest / 'robotouille'}: 294 files fetched and verified" in out
     assert f"alfworld: {dest / 'alfworld'}: 404 files fetched and verified" in out
@@ -493,3 +504,18 @@ def test_generated_instances_that_do_not_match_their_digest_fail_the_fetch(isola
         "generated for seeds 42..141; nothing was written\n"
     )
     assert not (tmp_path / "out").exists()
+
+
+def test_fetch_fever_verifies_the_claims_digest(isolated, tmp_path):
+    good, bad = tmp_path / "good", tmp_path / "bad"
+    good.mkdir()
+    bad.mkdir()
+    shutil.copy(FEVER / "paper_dev.jsonl", good / "paper_dev.jsonl")
+    (bad / "paper_dev.jsonl").write_bytes((FEVER / "paper_dev.jsonl").read_bytes().replace(b"SUPPORTS", b"REFUTES", 1))
+    code, out, err = run("fetch", "fever", "--mirror", str(bad), "--dest", str(tmp_path / "d1"))
+    assert code == 1 and len(err.splitlines()) == 1 and err.startswith("recap: error: data fetch: fever: ")
+    assert not (tmp_path / "d1" / "fever").exists()
+    code, out, err = run("fetch", "fever", "--mirror", good.as_uri())
+    assert (code, err) == (0, ""), err
+    assert f"fever: {isolated['cache'] / 'fever'}: 1 files fetched and verified" in out
+    assert fever_claims.resolve_data_dir() == (isolated["cache"] / "fever").resolve()

@@ -139,7 +139,12 @@ class AlfworldBenchmark(Benchmark):
         )
 
     def list_instances(self, selector: str | None = None) -> list[str]:
+        """The games ``selector`` names in the default data folder."""
         return [g.instance_id for g in self.games(selector)]
+
+    def list_instances_for(self, selector: str | None, options: Mapping[str, Any]) -> list[str]:
+        """The games ``selector`` names in ``options['data_dir']`` when a sweep names one."""
+        return [g.instance_id for g in self.games(selector, data_dir=options.get("data_dir"))]
 
     # -- making ---------------------------------------------------------------------------------
     def make(

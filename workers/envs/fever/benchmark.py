@@ -33,7 +33,7 @@ from .claims import BENCHMARK_NAME, find_claim, load_claims, resolve_data_dir, s
 from .data_folders import FOLDER
 from .demo import demonstration_for
 from .env import DEFAULT_MAX_STEPS, FeverEnvironment
-from .pages import PageStore, RunRecords, Snapshot
+from .pages import PageStore, RunRecords, Snapshot, snapshot_key
 from .ratelimit import RateLimiter
 from .wiki import DEFAULT_WIKIPEDIA_URL, LiveSource, SnapshotSource, WikiSource
 
@@ -58,17 +58,19 @@ def snapshot_dir(wikipedia: Any) -> Path | None:
 
 
 @lru_cache(maxsize=8)
-def _snapshot(folder: Path, mtime_ns: int) -> Snapshot:
+def _snapshot(folder: Path, files: tuple[tuple[str, int, int], ...]) -> Snapshot:
+    """The snapshot of ``folder`` as its table files (``files``: :func:`.pages.snapshot_key`) are now."""
     return Snapshot(folder)
 
 
 def wiki_source(wikipedia: str = LIVE, *, page_store: PageStore | None = None, limiter: RateLimiter | None = None) -> WikiSource:
-    """The source of search answers for a ``wikipedia`` setting (a snapshot is loaded once per process)."""
+    """The source of search answers for a ``wikipedia`` setting (a snapshot is loaded once per
+    process for as long as its table files are unchanged: names, sizes, mtimes)."""
     folder = snapshot_dir(wikipedia)
     if folder is None:
         return LiveSource(page_store, limiter=limiter)
     resolved = folder.resolve()
-    return SnapshotSource(_snapshot(resolved, resolved.stat().st_mtime_ns if resolved.exists() else 0))
+    return SnapshotSource(_snapshot(resolved, snapshot_key(resolved)))
 
 
 class FeverBenchmark(Benchmark):
@@ -103,7 +105,13 @@ class FeverBenchmark(Benchmark):
 
     def list_instances(self, selector: str | None = None) -> list[str]:
         """``None``/``paper``: the paper's 200 in the release's order; ``all``: every claim in file order."""
-        return [c.instance_id for c in select(load_claims(resolve_data_dir(self.data_dir)), selector)]
+        return self.list_instances_for(selector, {})
+
+    def list_instances_for(self, selector: str | None, options: Mapping[str, Any]) -> list[str]:
+        """:meth:`list_instances` of the claims in ``options['data_dir']`` when a sweep names one."""
+        data_dir = options.get("data_dir")
+        claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
+        return [c.instance_id for c in select(claims, selector)]
 
     def make(
         self,

@@ -35,6 +35,4 @@ FOLDER = DataFolder(
     sources=(Source(CLAIMS_FILE, CLAIMS_URL, "file", CLAIMS_FILE),),
     member_path=_no_members,
     after_fetch="the claims only: observations come from Wikipedia itself (option wikipedia_url) or a snapshot",
-    # asked for by name until `recap data` and its tests take FEVER into "all" (the CLI step of issue 27)
-    in_all=False,
 )

@@ -9,7 +9,8 @@ normalised answer equals the normalised label; ``think[...]`` is acknowledged; a
 "Invalid action: ..." - every one of them uses a step. On top of the release the episode ends after
 ``max_steps`` actions (the paper's 10). The action reaches the environment as written (only
 stripped, wikienv.py:127); the release's runner lower-cases its first letter before stepping
-(hotpotqa_simulator.py:41), which is the agent-facing layer's job, not this one's.
+(hotpotqa_simulator.py:41), which is the agent-facing layer's job: the class declares it
+(``action_spelling = "lower_first"``) and :func:`recap.env.agent_action` applies it.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import copy
 from collections.abc import Callable
 from typing import Any
 
-from recap.env import PLAN_COPY_STEPS, Demonstration, EnvError, Environment, InvalidActionError, Reset, Step
+from recap.env import PLAN_COPY_STEPS, ActionSpelling, Demonstration, EnvError, Environment, InvalidActionError, Reset, Step
 from workers.envs.fever import text
 from workers.envs.fever.claims import Claim
 from workers.envs.fever.pages import RunRecords
@@ -45,8 +46,9 @@ class FeverEnvironment(Environment):
 
     benchmark = "fever"
     split = "dev"
-    task = "fever"
     invalid_action_mode = "step"
+    #: the agent-facing layer lower-cases an action's first letter (hotpotqa_simulator.py:41)
+    action_spelling: ActionSpelling = "lower_first"
     partially_observed = True
 
     def __init__(
@@ -62,6 +64,9 @@ class FeverEnvironment(Environment):
     ) -> None:
         self.claim = claim
         self.instance_id = claim.instance_id
+        #: the claim's gold label, recorded with the episode (EnvFacts.task) so the report can break
+        #: success down by label; no prompt reads it (the agents see rules, observations, the goal)
+        self.task = claim.label
         self.source = source
         self.wikipedia_url = wikipedia_url
         self.max_steps = max_steps

@@ -173,6 +173,28 @@ def _table_files(folder: Path) -> list[Path]:
     return ([direct] if direct.is_file() else []) + nested
 
 
+def snapshot_key(folder: Path) -> tuple[tuple[str, int, int], ...]:
+    """What a snapshot of ``folder`` was read from: each table file's path, size and mtime.
+
+    Why not the folder's mtime: a run still writing adds part files inside ``wiki_pages/`` and
+    ``wiki_requests/``, which leaves the run folder's own mtime as it was; a cache keyed on it
+    would keep answering from the parts it first saw."""
+    files: list[Path] = [folder] if folder.is_file() else []
+    for table in (TABLE, REQUESTS_TABLE):
+        if (folder / f"{table}.parquet").is_file():
+            files.append(folder / f"{table}.parquet")
+        if (folder / table).is_dir():
+            files += sorted(p for p in (folder / table).glob("*.parquet") if not p.name.startswith("."))
+    key = []
+    for f in files:
+        try:
+            st = f.stat()
+        except FileNotFoundError:  # removed between listing and stat: not part of what is read
+            continue
+        key.append((str(f), st.st_size, st.st_mtime_ns))
+    return tuple(key)
+
+
 class Snapshot:
     """The answers of earlier runs by request URL, from a run folder (its ``wiki_requests`` and
     ``wiki_pages`` tables: each request joined to its body by sha256), or from

@@ -4,9 +4,10 @@ A trajectory is a JSON object: ``{"benchmark": "fever", "instance": "fever/<clai
 {"wikipedia_url": ...}, "reset": "<first observation>", "steps": [{"action", "observation",
 "reward", "done"}, ...]}``. The actions are sent as recorded, at the level of the release's
 ``WikiEnv`` + ``FeverWrapper`` (no lower-casing: that is the agent-facing layer's). ``options`` may
-also hold ``wikipedia`` (``snapshot:DIR``) and ``max_steps``; the caller's ``wikipedia`` wins (a
-recorded live trajectory checked against a snapshot). :func:`replay_trajectory` gives the first
-difference or "N steps identical"; a malformed trajectory raises :class:`TrajectoryError`.
+also hold ``wikipedia`` (``snapshot:DIR``), ``max_steps`` and ``data_dir``; the caller's options
+win (a recorded live trajectory checked against a snapshot). :func:`replay_trajectory` gives the
+first difference or "N steps identical"; a malformed trajectory raises :class:`TrajectoryError`.
+``recap env replay`` tells a FEVER trajectory from a Robotouille one by :func:`is_fever_trajectory`.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from .claims import BENCHMARK_NAME
 from .env import FeverEnvironment
 
 #: the options a trajectory may carry for make()
-TRAJECTORY_OPTIONS = ("wikipedia_url", "wikipedia", "max_steps")
+TRAJECTORY_OPTIONS = ("wikipedia_url", "wikipedia", "max_steps", "data_dir")
 
 
 class TrajectoryError(ValueError):
@@ -46,6 +47,22 @@ def read_trajectory(path: str | Path) -> dict[str, Any]:
     if not isinstance(raw, dict):
         raise TrajectoryError(f"FEVER trajectory {str(path)!r} is not a JSON object")
     return raw
+
+
+def is_fever_trajectory(path: str | Path) -> bool:
+    """Whether ``path`` holds a JSON object whose ``benchmark`` is ``fever`` (False for anything
+    unreadable: the Robotouille reader then says what is wrong with it)."""
+    try:
+        raw = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(raw, dict) and raw.get("benchmark") == BENCHMARK_NAME
+
+
+def replay_fever_file(path: str | Path, options: Mapping[str, Any]) -> tuple[bool, str]:
+    """(identical?, message) for the trajectory in ``path``, ``options`` overriding its own."""
+    result = replay_trajectory(read_trajectory(path), **options)
+    return result.identical, result.message
 
 
 def _checked(traj: Mapping[str, Any]) -> tuple[str, dict[str, Any], list[Mapping[str, Any]]]:
@@ -79,7 +96,10 @@ def replay_trajectory(
     instance, options, steps = _checked(traj)
     if wikipedia is not None:
         options["wikipedia"] = wikipedia
-    env = BENCHMARK.make(instance, data_dir=data_dir, **options, **make_options)
+    if data_dir is not None:
+        options["data_dir"] = data_dir
+    options.update(make_options)
+    env = BENCHMARK.make(instance, **options)
     assert isinstance(env, FeverEnvironment)
     first = env.reset().observation
     if "reset" in traj and first != traj["reset"]:

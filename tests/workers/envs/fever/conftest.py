@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from tests.workers.envs.fever.standin import StandIn
 from workers.envs.fever import BENCHMARK, FeverEnvironment
 from workers.envs.fever.pages import MemoryPageStore
 from workers.envs.fever.ratelimit import TokenBucket
+from workers.envs.fever.standin import StandIn
 
 CLAIMS = [
     {

@@ -8,6 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from pipeline.errors import SpecError
+from pipeline.spec import parse_spec
+from pipeline.units import resolve_instances
 from tests.conftest import SHARED_DATA
 from tests.workers.envs.fever.test_observations import ARTICLE_OBS, SIMILAR
 from workers.envs.fever import BENCHMARK
@@ -132,3 +135,24 @@ def test_replay_reports_the_first_difference(claims_dir, standin, change, messag
 def test_malformed_trajectories_are_refused(traj, message):
     with pytest.raises(TrajectoryError, match=message.replace("(", "\\(").replace("'", "'")):
         replay_trajectory(traj)
+
+
+def test_a_sweeps_data_dir_option_picks_the_claims_the_planner_lists(claims_dir, tmp_path, monkeypatch):
+    monkeypatch.delenv(ENV_VAR, raising=False)
+    text = f"""run: dd
+output: {tmp_path / "out"}
+models: [{{model: offline/expert}}]
+methods: [{{method: react}}]
+environments:
+  - benchmark: fever
+    tasks: [all]
+    limit: 2
+    options: {{data_dir: "{claims_dir}", wikipedia_url: "http://127.0.0.1:9"}}
+"""
+    spec = parse_spec(text, "sweep.yaml")
+    assert [i for i, _ in resolve_instances(spec.environments)] == ["fever/1001", "fever/1002"]
+    bad = text.replace(str(claims_dir), str(tmp_path / "nowhere"))
+    with pytest.raises(
+        SpecError, match=r"^environments\[0\]: fever task 'all': FEVER data folder .*nowhere' \(from data_dir\) does not exist"
+    ):
+        resolve_instances(parse_spec(bad, "sweep.yaml").environments)

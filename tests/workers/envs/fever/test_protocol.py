@@ -6,13 +6,15 @@ from __future__ import annotations
 import pytest
 
 import recap.methods as methods
+from recap.env import agent_action
 from recap.runtime import EnvDriver, EpisodeEnd
 from schemas.kinds import END_REASONS
 from schemas.labels import infra_failure
-from tests.workers.envs.fever.standin import StandIn
 from workers.envs.fever import BENCHMARK, FeverEnvironment
 from workers.envs.fever.demo import SCRIPT, demonstration_for
 from workers.envs.fever.rules import rules_text
+from workers.envs.fever.standin import StandIn
+from workers.envs.registry import make_env
 
 
 def agent(method: str, profile: str = "paper"):
@@ -105,3 +107,35 @@ def test_a_wrong_verdict_ends_agent_done_and_a_wiki_failure_ends_wiki_error(make
     # a site that failed is retried by resume like infra_error; a snapshot miss is an outcome
     assert infra_failure("wiki_error", info.value.detail) == "wiki_unavailable"
     assert infra_failure("wiki_error", "snapshot_miss: the snapshot holds no answer") is None
+
+
+def test_the_agent_facing_layer_lower_cases_the_first_letter_and_the_environment_does_not(make):
+    # hotpotqa_simulator.py:41 lower-cases action[0] before stepping; the env takes actions as written
+    env = make(1001)
+    env.reset()
+    assert env.step("Search[Nikolaj Coster-Waldau]").observation == "Invalid action: Search[Nikolaj Coster-Waldau]"
+    assert agent_action(env, "Search[Nikolaj Coster-Waldau]") == "search[Nikolaj Coster-Waldau]"
+    assert agent_action(env, "") == ""
+    records: list = []
+    driver = EnvDriver(make(1001), "e", records.append)
+    driver.reset()
+    step = driver.execute("Search[Nikolaj Coster-Waldau]")
+    assert step.observation.startswith("Nikolaj William Coster-Waldau")
+    assert [r.action for r in records] == ["search[Nikolaj Coster-Waldau]"]
+    with pytest.raises(EpisodeEnd) as info:
+        driver.execute("Finish[SUPPORTS]")
+    assert info.value.reason == "success"
+
+
+def test_other_environments_get_actions_as_written():
+    env = make_env("blocksworld/3@1")
+    assert env.action_spelling == "as_written"
+    assert agent_action(env, "Pick up the red block") == "Pick up the red block"
+
+
+def test_the_claims_label_is_the_episodes_task_and_not_in_the_prompt_material(make):
+    supports, refutes = make(1001), make(1002)
+    assert (supports.task, refutes.task, supports.split) == ("SUPPORTS", "REFUTES", "dev")
+    assert supports.rules() == refutes.rules()
+    assert repr(supports.demonstration()) == repr(refutes.demonstration()) == "Demonstration(name='fever-156709-cap10')"
+    assert refutes.reset().observation == "Claim: Mercury is a city."

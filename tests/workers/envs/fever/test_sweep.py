@@ -18,8 +18,10 @@ from pipeline.gateway_backend import make_backend
 from pipeline.spec import parse_spec
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
-from tests.workers.envs.fever.standin import StandIn
+from reports.build import ReportOptions, build_report
+from reports.views import open_runs
 from workers.envs.fever.claims import LABELS, PAPER_INDEX_RANGE, paper_indices
+from workers.envs.fever.standin import StandIn
 
 ENTITIES = ("Nikolaj Coster-Waldau", "Mercury", "Xyzzy qwerty")
 #: the paper's first three claims of the file the fixture writes (ids 10000 + line number)
@@ -153,6 +155,8 @@ def test_live_sweep_records_pages_and_snapshot_replays_them(paper_claims, ray_ad
         "select count(*) from wiki_requests r join episodes e using (episode_id) where e.method = 'cot'"
     ).fetchall() == [(0,)]
 
+    check_report(live)
+
     replay = tmp_path / "replay"
     run_sweep(replay, sweep(replay, f'wikipedia_url: {base}, wikipedia: "snapshot:{live}"'))
     assert len(server.requests) == 8  # the stopped server got nothing more (a request would fail the episodes)
@@ -175,3 +179,20 @@ def test_adapt_on_fever_is_refused_before_anything_is_written(tmp_path, capsys, 
         "(Table 1: --) and the release has no FEVER ADaPT"
     ]
     assert not out.exists()
+
+
+def check_report(run: Path) -> None:
+    """FEVER's row in the paper's main table (the paper's number withheld: a test double) and the
+    per-label table, each claim's label being its episode's task; wiki_pages one row per body."""
+    report = build_report([run], ReportOptions(formats=("md",), paper_only=True))
+    tables = {t.name: t for t in report.sections[0].tables}
+    main_row = tables["paper_main"].rows
+    assert [(r["benchmark"], r["model"]) for r in main_row] == [("FEVER", "offline/expert (test double)")]
+    for arm in ("recap", "react", "cot"):
+        assert main_row[0][arm][:2] == (3, 3) and main_row[0][f"{arm}:paper"] == "[1]"
+    labels = tables["paper_fever_labels_offline_expert_test_double"]
+    assert [r["label"] for r in labels.rows] == ["SUPPORTS", "REFUTES", "NOT ENOUGH INFO", "All claims"]
+    assert [r["recap"][:2] for r in labels.rows] == [(1, 1), (1, 1), (1, 1), (3, 3)]
+    assert [r.get("recap:paper") for r in labels.rows] == [None, None, None, "[1]"]
+    con = open_runs(run)
+    assert con.execute("select count(*), count(distinct sha256) from wiki_pages").fetchall() == [(4, 4)]

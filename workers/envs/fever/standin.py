@@ -1,6 +1,7 @@
-"""A loopback stand-in for Wikipedia's ``/w/index.php?search=`` answering HTML shaped like the real site's.
+"""A test double: a loopback stand-in for Wikipedia's ``/w/index.php?search=`` answering HTML shaped like the real site's.
 
-No machine here reaches Wikipedia, so the tests serve pages in its layout: an article (found
+Not used by any run: it lives here (not under tests/) so that bench/fever.py can serve pages without
+importing the tests. No machine here reaches Wikipedia, so the tests serve pages in its layout: an article (found
 directly or through a redirect to ``/wiki/Title``), a list of search results, a disambiguation
 page whose ``[entity]`` search gives results, the "no such page" search answer, 429 with
 Retry-After, 500 and a slow answer. Every request is counted, so snapshot tests can show zero.
@@ -146,9 +147,10 @@ class StandIn:
 
     @property
     def base_url(self) -> str:
+        """``http://127.0.0.1:<port>`` of the running server."""
         assert self._server is not None
         host, port = self._server.server_address[:2]
-        return f"http://{host}:{port}"
+        return f"http://{host if isinstance(host, str) else host.decode()}:{port}"
 
     def _answer(self, path: str) -> Answer:
         parts = urlsplit(path)
