@@ -40,7 +40,10 @@ class Registry(Generic[T]):
     * ``error`` is the exception type of every refusal (a name registered twice, unregistering
       a name that is not there) and, unless ``unknown_error`` is given, of a lookup of a name
       nothing registers, so callers catch their own kind's error;
-    * ``attribute`` is the attribute a reference without ``:ATTRIBUTE`` names in its module.
+    * ``attribute`` is the attribute a reference without ``:ATTRIBUTE`` names in its module;
+    * ``keep`` (default true) keeps what a name resolved to; false reads a reference string's
+      attribute again at every lookup (the module is imported once either way), for values that
+      are plain module attributes a test or a plug-in may replace (data folders).
     """
 
     def __init__(
@@ -51,8 +54,10 @@ class Registry(Generic[T]):
         error: type[Exception] = KeyError,
         unknown_error: type[Exception] | None = None,
         attribute: str | None = None,
+        keep: bool = True,
     ) -> None:
         self.kind = kind
+        self._keep = keep
         self._coerce = coerce
         self._error = error
         self._unknown_error = unknown_error or error
@@ -113,6 +118,8 @@ class Registry(Generic[T]):
                 raise self._unknown_error(self.unknown(name))
             source = self._sources[name]
         value = self._resolve(name, source)  # outside the lock: resolving may import modules
+        if not self._keep:
+            return value
         with self._lock:
             if self._sources.get(name) is source:  # not unregistered meanwhile
                 value = self._resolved.setdefault(name, value)

@@ -212,7 +212,8 @@ def _as_data_folder(name: str, obj: object) -> DataFolder:
 
 
 #: data folders no benchmark reads (the authors' released prompts), by name, imported on first use
-EXTRA_FOLDERS: Registry[DataFolder] = Registry("data folder", coerce=_as_data_folder, error=ValueError)
+#: read again at every use (``keep=False``): a folder is a module attribute that tests replace
+EXTRA_FOLDERS: Registry[DataFolder] = Registry("data folder", coerce=_as_data_folder, error=ValueError, keep=False)
 
 
 def register_data_folder(name: str, source: str) -> None:
