@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 
 from pipeline.cli import main
+from pipeline.politeness import RunPoliteness
 from pipeline.raysetup import runtime_env
+from pipeline.spec import SweepSpec, parse_spec
 from workers.envs.fever import BENCHMARK
 from workers.envs.fever.benchmark import run_limiter, wiki_source
 from workers.envs.fever.ratelimit import DEFAULT_BURST, POLITENESS_VAR, TokenBucket, shared_limiter
@@ -67,6 +69,24 @@ def test_two_ray_workers_share_one_limit_per_host(ray_address):
     assert str(info.value) == (
         "unavailable: the run's Wikipedia rate limiter 'no-such-politeness-actor' cannot be reached (ValueError)"
     )
+
+
+def test_the_driver_starts_the_actor_only_for_a_fever_sweep(ray_address):
+    import ray
+
+    def spec(benchmark: str) -> SweepSpec:
+        text = f"run: r\noutput: out\nmodels:\n  - model: offline/expert\nmethods:\n  - method: react\nenvironments:\n  - benchmark: {benchmark}\n    tasks: [all]\n"
+        return parse_spec(text, "sweep.yaml")
+
+    assert RunPoliteness.start(spec("blocksworld"), "run1", None) is None
+    started = RunPoliteness.start(spec("fever"), "run1", ray.get_runtime_context().get_node_id())
+    assert started is not None and started.name.startswith("recap-wiki-politeness-run1-")
+    assert ray.get(ray.get_actor(started.name).stats.remote()) == {}
+    env_vars = started.worker_runtime_env()["env_vars"]
+    assert env_vars[POLITENESS_VAR] == started.name and env_vars["PYTHONPATH"] == runtime_env()["env_vars"]["PYTHONPATH"]
+    started.close()
+    with pytest.raises(ray.exceptions.RayActorError):
+        ray.get(started.actor.stats.remote(), timeout=60)
 
 
 def test_outside_ray_the_process_bucket_is_shared(claims_dir, monkeypatch):
