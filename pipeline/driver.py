@@ -63,6 +63,7 @@ from pipeline.cap_policy import CapPolicy
 from pipeline.errors import PipelineError, RunFolderError
 from pipeline.events import EventBuffer
 from pipeline.mirror import mirror_dir, pull
+from pipeline.politeness import RunPoliteness
 from pipeline.prepare import Prepared
 
 # prepare, RunSummary and the exit codes: the CLI, tests and benches import them from here
@@ -135,6 +136,7 @@ class Driver(SessionLoop):
         self.caps = CapPolicy(self.spec, self.events.add)
         self.pool: WorkerPool | None = None
         self.channel: SinkChannel | None = None
+        self.politeness: RunPoliteness | None = None
         self._last_push = time.monotonic()
         self.work: RunStore = prepared.store
         self.records_out: list[EpisodeRecord] = []
@@ -209,7 +211,11 @@ class Driver(SessionLoop):
                 session=self.session,
             )
         multi_node = len([n for n in ray.nodes() if n.get("Alive")]) > 1
-        worker_cls = worker_actor(num_cpus=self.spec.ray.worker_cpus, spread=multi_node)
+        # a FEVER run's workers share one Wikipedia limit (the in-process threads share their process's):
+        # the driver's node holds its actor, whose name travels in the workers' environment
+        self.politeness = RunPoliteness.start(self.spec, self.run_id, ray.get_runtime_context().get_node_id())
+        politeness_env = self.politeness.worker_runtime_env() if self.politeness is not None else None
+        worker_cls = worker_actor(num_cpus=self.spec.ray.worker_cpus, spread=multi_node, runtime_env=politeness_env)
         return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session)
 
     def _run_locked(self) -> RunSummary:
@@ -258,6 +264,8 @@ class Driver(SessionLoop):
                 pass
             if self.pool is not None:
                 self.pool.shutdown()
+            if self.politeness is not None:
+                self.politeness.close()
             self.channel.kill()
             if started_ray:
                 shutdown_ray()

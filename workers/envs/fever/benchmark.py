@@ -5,14 +5,17 @@ Options of :meth:`FeverBenchmark.make`:
 - ``wikipedia_url``: the base URL searched as ``<base>/w/index.php?search=...``; default the real site.
 - ``wikipedia``: ``live`` (default) reads that server; ``snapshot:DIR`` answers only from the
   ``wiki_pages`` table(s) in DIR (a run folder) and never reaches a server.
+- ``wikipedia_rate``: requests per second per host for the whole run (default 2.0, at most
+  :data:`.ratelimit.MAX_RATE`), shared by every worker of a Ray run through the run's
+  :class:`.politeness.WikiPoliteness` actor, by the process's environments elsewhere.
 - ``max_steps``: actions per episode (default 10, the paper's cap).
 - ``verdict_only``: the method gives only a verdict (CoT, Standard; the pipeline sets it per
   method, :meth:`FeverBenchmark.options_for_agent`): the rules ask for a one-action plan.
 - ``step_multiplier`` and ``seed`` are accepted and have no effect (a fixed cap; no randomness).
 - ``page_store`` / ``limiter``: objects a caller passes in (where answers read live are kept;
   the shared per-host rate limit); defaults: the environment keeps them and hands them to the
-  episode worker as ``wiki_pages``/``wiki_requests`` rows (``take_records``), the process's
-  shared limiter.
+  episode worker as ``wiki_pages``/``wiki_requests`` rows (``take_records``), the run's
+  shared limiter (:func:`run_limiter`).
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from .data_folders import FOLDER
 from .demo import demonstration_for
 from .env import DEFAULT_MAX_STEPS, FeverEnvironment
 from .pages import PageStore, RunRecords, Snapshot, snapshot_key
-from .ratelimit import RateLimiter
+from .ratelimit import DEFAULT_BURST, DEFAULT_RATE, POLITENESS_VAR, RateLimiter, check_rate, shared_limiter
 from .wiki import DEFAULT_WIKIPEDIA_URL, LiveSource, SnapshotSource, WikiSource
 
 LIVE = "live"
@@ -57,18 +60,34 @@ def snapshot_dir(wikipedia: Any) -> Path | None:
     raise ValueError(f"wikipedia must be {LIVE!r} or 'snapshot:DIR' (a folder holding wiki_pages tables), got {wikipedia!r}")
 
 
+def run_limiter(rate: float = DEFAULT_RATE, burst: int = DEFAULT_BURST) -> RateLimiter:
+    """The run's shared limiter: the WikiPoliteness actor :data:`.ratelimit.POLITENESS_VAR` names
+    (set only on a Ray run's episode workers), else this process's bucket (:func:`.ratelimit.shared_limiter`)."""
+    name = os.environ.get(POLITENESS_VAR)
+    if not name:
+        return shared_limiter(rate, burst)
+    # here, not at the top: the actor's module loads Ray, which only a Ray run's workers need
+    # (recap env play and the tests without Ray stay Ray-free)
+    from .politeness import RemoteLimiter
+
+    return RemoteLimiter(name, rate, burst)
+
+
 @lru_cache(maxsize=8)
 def _snapshot(folder: Path, files: tuple[tuple[str, int, int], ...]) -> Snapshot:
     """The snapshot of ``folder`` as its table files (``files``: :func:`.pages.snapshot_key`) are now."""
     return Snapshot(folder)
 
 
-def wiki_source(wikipedia: str = LIVE, *, page_store: PageStore | None = None, limiter: RateLimiter | None = None) -> WikiSource:
+def wiki_source(
+    wikipedia: str = LIVE, *, page_store: PageStore | None = None, limiter: RateLimiter | None = None, rate: float = DEFAULT_RATE
+) -> WikiSource:
     """The source of search answers for a ``wikipedia`` setting (a snapshot is loaded once per
-    process for as long as its table files are unchanged: names, sizes, mtimes)."""
+    process for as long as its table files are unchanged: names, sizes, mtimes); live answers wait
+    for ``limiter``, by default the run's shared one at ``rate`` (:func:`run_limiter`)."""
     folder = snapshot_dir(wikipedia)
     if folder is None:
-        return LiveSource(page_store, limiter=limiter)
+        return LiveSource(page_store, limiter=limiter if limiter is not None else run_limiter(rate))
     resolved = folder.resolve()
     return SnapshotSource(_snapshot(resolved, snapshot_key(resolved)))
 
@@ -120,6 +139,7 @@ class FeverBenchmark(Benchmark):
         data_dir: str | os.PathLike[str] | None = None,
         wikipedia_url: str = DEFAULT_WIKIPEDIA_URL,
         wikipedia: str = LIVE,
+        wikipedia_rate: float = DEFAULT_RATE,
         max_steps: int = DEFAULT_MAX_STEPS,
         step_multiplier: float | None = None,
         seed: int = 0,
@@ -132,16 +152,17 @@ class FeverBenchmark(Benchmark):
         if unknown:
             raise ValueError(
                 f"unknown FEVER option(s) {', '.join(sorted(unknown))}; accepted: data_dir, wikipedia_url, "
-                "wikipedia, max_steps, verdict_only, step_multiplier, seed"
+                "wikipedia, wikipedia_rate, max_steps, verdict_only, step_multiplier, seed"
             )
         base = check_wikipedia_url(wikipedia_url)
+        rate = check_rate(wikipedia_rate)
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
         if not isinstance(verdict_only, bool):
             raise ValueError(f"verdict_only must be true or false, got {verdict_only!r}")
         records = RunRecords() if page_store is None else None
         store = records.store if records is not None else page_store
-        source = wiki_source(wikipedia, page_store=store, limiter=limiter)
+        source = wiki_source(wikipedia, page_store=store, limiter=limiter, rate=rate)
         claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
         env = FeverEnvironment(
             find_claim(claims, instance_id),

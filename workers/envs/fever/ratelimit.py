@@ -1,23 +1,40 @@
-"""Per-host politeness for Wikipedia requests: a rate limit every FEVER environment of a process shares.
+"""Per-host politeness for Wikipedia requests: the rate limit every FEVER environment of a run shares.
 
 Why an interface: the limit must hold across all workers of a run (Wikipedia asks clients to stay
-gentle), which on a cluster means one limiter that every worker asks, e.g. a Ray actor. The
-environments only call :meth:`RateLimiter.acquire`; :class:`TokenBucket` is the process-local
-implementation (and what such an actor would run inside itself), :func:`shared_limiter` gives every
-environment of the process the same bucket for the same settings.
+gentle), which on a cluster means one limiter that every worker asks: the run's
+:class:`~workers.envs.fever.politeness.WikiPoliteness` Ray actor. The environments only call
+:meth:`RateLimiter.acquire`; :class:`TokenBucket` is the process-local implementation (and what the
+actor runs inside itself); ``benchmark.run_limiter`` picks the run's actor when the episode worker
+names one (:data:`POLITENESS_VAR`), else the process's one bucket (:func:`shared_limiter`: ``recap
+env play``, tests, the in-process executor, where the process is the whole run).
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
-from typing import Protocol
+from typing import Any, Protocol
 
 #: requests per second per host when nothing else is said: well under Wikipedia's published
 #: guidance for unauthenticated clients, so a sweep of many workers stays polite
 DEFAULT_RATE = 2.0
 DEFAULT_BURST = 2
+#: the most the ``wikipedia_rate`` option accepts, requests per second per host for the whole run
+MAX_RATE = 10.0
+#: the environment variable naming the run's WikiPoliteness actor; the driver sets it on the
+#: episode workers of a run with a FEVER environment (pipeline/politeness.py)
+POLITENESS_VAR = "RECAP_WIKI_POLITENESS"
+
+
+def check_rate(value: Any) -> float:
+    """``value`` as a rate in requests per second per host, in (0, :data:`MAX_RATE`]; else ValueError naming the option."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or not 0 < value <= MAX_RATE:
+        raise ValueError(
+            f"wikipedia_rate must be a number of requests per second per host above 0 and at most {MAX_RATE:g}, got {value!r}"
+        )
+    return float(value)
 
 
 class RateLimiter(Protocol):
@@ -53,8 +70,8 @@ class TokenBucket:
         self._tokens: dict[str, float] = {}
         self._stamp: dict[str, float] = {}
 
-    def _reserve(self, host: str) -> float:
-        """Take a token for ``host`` now (the balance may go negative); the wait before using it."""
+    def reserve(self, host: str) -> float:
+        """Take a token for ``host`` now (the balance may go negative); the seconds to wait before using it."""
         with self._lock:
             now = self._clock()
             tokens = self._tokens.get(host, float(self.burst))
@@ -65,7 +82,7 @@ class TokenBucket:
 
     def acquire(self, host: str) -> None:
         """Wait until a request to ``host`` fits the rate (reservations keep callers in arrival order)."""
-        wait = self._reserve(host)
+        wait = self.reserve(host)
         if wait > 0:
             self._sleep(wait)
 

@@ -134,11 +134,13 @@ def default_routes() -> dict[str, list[Answer]]:
 
 
 class StandIn:
-    """The server: start with :meth:`start`, read ``base_url``, ``requests`` (paths in order), stop with :meth:`stop`."""
+    """The server: start with :meth:`start`, read ``base_url``, ``requests`` (paths in order) and
+    ``arrivals`` (their ``time.monotonic()`` on arrival, for rate tests), stop with :meth:`stop`."""
 
     def __init__(self, routes: dict[str, list[Answer]] | None = None) -> None:
         self.routes = routes if routes is not None else default_routes()
         self.requests: list[str] = []
+        self.arrivals: list[float] = []
         self.user_agents: list[str] = []
         self._served: dict[str, int] = {}
         self._lock = threading.Lock()
@@ -174,6 +176,7 @@ class StandIn:
         class Handler(BaseHTTPRequestHandler):
             def do_GET(self) -> None:  # noqa: N802 (http.server's name)
                 with outer._lock:
+                    outer.arrivals.append(time.monotonic())
                     outer.requests.append(self.path)
                     outer.user_agents.append(self.headers.get("User-Agent", ""))
                 answer = outer._answer(self.path)
