@@ -22,9 +22,7 @@ from typing import TextIO
 from pipeline.cli.common import OneLineParser, finite_positive
 from pipeline.errors import PipelineError
 from recap.env import DataNotFoundError, EnvError, InvalidActionError, UnknownInstanceError, agent_action
-from workers.envs.fever.replay import is_fever_trajectory, replay_fever_file
-from workers.envs.registry import get_benchmark, make_env
-from workers.envs.robotouille.replay import replay_file
+from workers.envs.registry import get_benchmark, make_env, replay_trajectory_file
 
 _EPILOG = """\
 examples:
@@ -262,12 +260,7 @@ def replay_main(path: str, out: TextIO, options: dict[str, object] | None = None
     """``recap env replay FILE``: replay a saved FEVER trajectory (``options`` override its own) or
     Robotouille trajectory; exit 0 when it replays as recorded, 1 when it does not."""
     try:
-        if is_fever_trajectory(path):
-            ok, message = replay_fever_file(path, options or {})
-        elif options:
-            raise ValueError(f"--option applies to FEVER trajectories only, got {', '.join(sorted(options))}")
-        else:
-            ok, message = replay_file(path)
+        ok, message = replay_trajectory_file(path, options or {})
     except (EnvError, OSError, ValueError) as exc:  # unreadable or malformed trajectory, missing data
         raise PipelineError(f"cannot replay {path}: {exc}") from None
     print(message, file=out)

@@ -18,9 +18,11 @@ process exists only in that process: the in-process executor and tests).
 
 from __future__ import annotations
 
+import json
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from recap.config import AgentConfig, BenchmarkProtocol
@@ -92,6 +94,12 @@ class Benchmark(BenchmarkProtocol, ABC):
         holds and where its files come from (``recap data list/check/fetch`` work on these).
         Default: none (generated instances, like blocksworld)."""
         return {}
+
+    def replay_file(self, path: str, options: Mapping[str, object]) -> tuple[bool, str]:
+        """``recap env replay``: (identical?, message) for a recorded trajectory file of this
+        benchmark, ``options`` overriding the file's own; raises ValueError for a file it cannot
+        read. Default: this benchmark records no trajectories."""
+        raise ValueError(f"{self.name} has no recorded-trajectory replay")
 
     def data_env_vars(self) -> tuple[str, ...]:
         """Environment variables that point at this benchmark's data; the driver forwards them
@@ -202,6 +210,23 @@ def make_env(instance_id: str, **options: Any) -> Environment:
     UnknownInstanceError for an unknown benchmark."""
     bench, _ = split_id(instance_id)
     return get_benchmark(bench).make(instance_id, **options)
+
+
+#: the benchmark of a trajectory file without a ``benchmark`` field: the real Robotouille engine's
+#: recorded trajectories (../shared/data/robotouille) carry none
+UNNAMED_TRAJECTORY_BENCHMARK = "robotouille"
+
+
+def replay_trajectory_file(path: str, options: Mapping[str, object]) -> tuple[bool, str]:
+    """(identical?, message) for a recorded trajectory, replayed by the benchmark its
+    ``"benchmark"`` field names (:meth:`Benchmark.replay_file`); raises ValueError/OSError for a
+    file that cannot be read, UnknownInstanceError for a benchmark nothing registers."""
+    try:
+        raw = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        raw = None  # unreadable or not JSON: the default benchmark's reader says what is wrong with it
+    name = raw.get("benchmark") if isinstance(raw, dict) else None
+    return get_benchmark(name if isinstance(name, str) else UNNAMED_TRAJECTORY_BENCHMARK).replay_file(path, options)
 
 
 def _as_data_folder(name: str, obj: object) -> DataFolder:

@@ -6,9 +6,9 @@ import io
 import re
 import sys
 
-import pipeline.cli.env as env_command
 from pipeline.cli import main
 from recap.blocksworld import BENCHMARK
+from workers.envs.robotouille import benchmark as robotouille_benchmark
 
 
 def test_env_list(capsys):
@@ -46,7 +46,8 @@ def test_env_replay_delegates_and_sets_the_exit_status(tmp_path, capsys, monkeyp
         calls.append(path)
         return (path.endswith("good.json"), f"replayed {path}")
 
-    monkeypatch.setattr(env_command, "replay_file", replay_file)
+    # a file without a "benchmark" field is the real Robotouille engine's: its benchmark replays it
+    monkeypatch.setattr(robotouille_benchmark, "replay_file", replay_file)
     assert main(["env", "replay", "good.json"]) == 0
     assert main(["env", "replay", "bad.json"]) == 1
     assert calls == ["good.json", "bad.json"]
@@ -74,3 +75,18 @@ run_cap_usd: 1000
     assert 0 < lo_calls <= hi_calls and 0 < lo_cost <= hi_cost
     assert "run cap $1000.00: fits" in out
     assert not (tmp_path / "never").exists()
+
+
+def test_env_replay_goes_to_the_benchmark_the_file_names(tmp_path, capsys):
+    """``recap env replay`` asks the benchmark a trajectory names (Benchmark.replay_file): one
+    without recorded trajectories, or a name nothing registers, is a one-line refusal, exit 2."""
+    none = tmp_path / "blocks.json"
+    none.write_text('{"benchmark": "blocksworld", "steps": []}')
+    unknown = tmp_path / "nowhere.json"
+    unknown.write_text('{"benchmark": "nowhere", "steps": []}')
+    assert main(["env", "replay", str(none)]) == 2
+    assert main(["env", "replay", str(unknown)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == f"recap: error: cannot replay {none}: blocksworld has no recorded-trajectory replay"
+    assert err[1].startswith(f"recap: error: cannot replay {unknown}: unknown benchmark 'nowhere'; known: blocksworld, ")
+    assert len(err) == 2

@@ -38,6 +38,7 @@ from .demo import demonstration_for
 from .env import DEFAULT_MAX_STEPS, FeverEnvironment
 from .pages import PageStore, RunRecords, Snapshot, snapshot_key
 from .ratelimit import DEFAULT_BURST, DEFAULT_RATE, POLITENESS_VAR, RateLimiter, check_rate, shared_limiter
+from .replay import replay_fever_file
 from .wiki import DEFAULT_WIKIPEDIA_URL, LiveSource, SnapshotSource, WikiSource
 
 LIVE = "live"
@@ -96,6 +97,10 @@ class FeverBenchmark(Benchmark):
     """FEVER's registry entry: claims from ``paper_dev.jsonl``, observations from Wikipedia or a snapshot."""
 
     name = BENCHMARK_NAME
+
+    def replay_file(self, path: str, options: Mapping[str, object]) -> tuple[bool, str]:
+        """A FEVER trajectory (:mod:`.replay`), ``options`` overriding its own."""
+        return replay_fever_file(path, options)
 
     def __init__(self, data_dir: str | os.PathLike[str] | None = None) -> None:
         self.data_dir = data_dir

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .benchmark import BENCHMARK
+from workers.envs.registry import get_benchmark
+
 from .claims import BENCHMARK_NAME
 from .env import FeverEnvironment
 
@@ -99,7 +100,7 @@ def replay_trajectory(
     if data_dir is not None:
         options["data_dir"] = data_dir
     options.update(make_options)
-    env = BENCHMARK.make(instance, **options)
+    env = get_benchmark(BENCHMARK_NAME).make(instance, **options)
     assert isinstance(env, FeverEnvironment)
     first = env.reset().observation
     if "reset" in traj and first != traj["reset"]:

@@ -23,6 +23,7 @@ from .data_folders import FOLDER
 from .demo import DEMO_SEED, DEMO_SPLIT, DEMO_TASK, make_demonstration
 from .domain import load_domain
 from .env import RobotouilleEnv
+from .replay import replay_file
 
 ENGINES = ("ours", "real")
 #: step cap of the demonstration kitchen (it is in no benchmark list, so has no optimal count)
@@ -34,6 +35,12 @@ class RobotouilleBenchmark(Benchmark):
     folder (``engine="real"``: on the upstream package, when installed)."""
 
     name = catalog.BENCHMARK_NAME
+
+    def replay_file(self, path: str, options: Mapping[str, object]) -> tuple[bool, str]:
+        """A trajectory the real engine recorded, replayed on ours (:mod:`.replay`); it takes no options."""
+        if options:
+            raise ValueError(f"--option applies to FEVER trajectories only, got {', '.join(sorted(options))}")
+        return replay_file(path)
 
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The data folder (:mod:`.data_folders`): found by the shared rule, fetched from upstream."""
