@@ -8,6 +8,7 @@ a direct litellm call or a scripted test model.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -43,14 +44,82 @@ class LLMError(RuntimeError):
 
 
 @dataclass(frozen=True)
+class ToolDef:
+    """A tool the model may call: its name, what it does and its arguments as a JSON schema.
+
+    The wire shape is OpenAI's function tool (litellm translates it for Anthropic and others)."""
+
+    name: str
+    description: str = ""
+    #: JSON schema of the arguments object
+    parameters: Mapping[str, Any] = field(default_factory=lambda: {"type": "object", "properties": {}})
+
+    def as_dict(self) -> dict[str, Any]:
+        """The tool as litellm/OpenAI receive it."""
+        return {
+            "type": "function",
+            "function": {"name": self.name, "description": self.description, "parameters": dict(self.parameters)},
+        }
+
+
+@dataclass(frozen=True)
+class ToolCall:
+    """One tool call of a model reply. ``arguments`` is the raw JSON string the model wrote;
+    ``args`` its parsed object, or None with ``parse_error`` saying why (a model may write broken
+    JSON: the agent must see that as an observation, not crash)."""
+
+    id: str
+    name: str
+    arguments: str
+    args: Mapping[str, Any] | None = None
+    parse_error: str | None = None
+
+    @classmethod
+    def parse(cls, id: str, name: str, arguments: str) -> ToolCall:
+        """A call with ``arguments`` parsed: an object, or a parse error."""
+        try:
+            value = json.loads(arguments) if arguments.strip() else {}
+        except ValueError as exc:
+            return cls(id, name, arguments, None, f"arguments are not valid JSON: {exc}")
+        if not isinstance(value, dict):
+            return cls(id, name, arguments, None, f"arguments are not a JSON object but {type(value).__name__}")
+        return cls(id, name, arguments, value, None)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The call as an assistant message carries it on the wire (OpenAI shape)."""
+        return {"id": self.id, "type": "function", "function": {"name": self.name, "arguments": self.arguments}}
+
+
+@dataclass(frozen=True)
 class ChatMessage:
-    """One chat message as the provider receives it (``role``: user, assistant or system)."""
+    """One chat message as the provider receives it (``role``: user, assistant, system or tool).
 
-    role: str  # "user" | "assistant" | "system"
+    An assistant message may carry ``tool_calls``; a ``tool`` message answers one of them and
+    names it in ``tool_call_id``."""
+
+    role: str  # "user" | "assistant" | "system" | "tool"
     content: str
+    tool_calls: tuple[ToolCall, ...] = ()
+    tool_call_id: str | None = None
 
-    def as_dict(self) -> dict[str, str]:
-        return {"role": self.role, "content": self.content}
+    def __post_init__(self) -> None:
+        if self.role == "tool" and not self.tool_call_id:
+            raise ValueError("a tool message needs the tool_call_id it answers")
+        if self.tool_calls and self.role != "assistant":
+            raise ValueError(f"only an assistant message carries tool calls, not {self.role!r}")
+
+    def as_dict(self) -> dict[str, Any]:
+        """The message in the OpenAI shape (role and content, plus the tool fields when set)."""
+        out: dict[str, Any] = {"role": self.role, "content": self.content}
+        if self.tool_calls:
+            out["tool_calls"] = [c.as_dict() for c in self.tool_calls]
+        if self.tool_call_id is not None:
+            out["tool_call_id"] = self.tool_call_id
+        return out
+
+
+#: tool-choice settings besides naming one tool
+TOOL_CHOICES = ("auto", "required", "none")
 
 
 @dataclass(frozen=True)
@@ -71,6 +140,30 @@ class LLMRequest:
     json_mode: bool = False
     #: hints for offline test models only (expert plan, agent style); never sent to a provider
     hints: Mapping[str, Any] = field(default_factory=dict)
+    #: tools the model may call (none: a plain chat request, nothing tool-related is sent)
+    tools: tuple[ToolDef, ...] = ()
+    #: "auto", "required", "none" or the name of one of ``tools``; None: the provider's default
+    tool_choice: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.tool_choice is None:
+            return
+        if not self.tools:
+            raise ValueError("tool_choice is set but the request has no tools")
+        names = {t.name for t in self.tools}
+        if self.tool_choice not in TOOL_CHOICES and self.tool_choice not in names:
+            raise ValueError(f"tool_choice {self.tool_choice!r} is none of {TOOL_CHOICES} and no tool's name")
+
+    def tool_params(self) -> dict[str, Any]:
+        """``tools`` and ``tool_choice`` in litellm's OpenAI format (empty without tools)."""
+        if not self.tools:
+            return {}
+        params: dict[str, Any] = {"tools": [t.as_dict() for t in self.tools]}
+        if self.tool_choice in TOOL_CHOICES:
+            params["tool_choice"] = self.tool_choice
+        elif self.tool_choice is not None:
+            params["tool_choice"] = {"type": "function", "function": {"name": self.tool_choice}}
+        return params
 
     @property
     def call_key(self) -> str:
@@ -99,6 +192,8 @@ class LLMResponse:
     finish_reason: str | None = None
     #: litellm's own cost estimate (a cross-check; ``cost_usd`` comes from our price table)
     provider_cost_usd: float | None = None
+    #: the tool calls of the reply, in the model's order (``text`` may then be empty)
+    tool_calls: tuple[ToolCall, ...] = ()
 
 
 class LLMClient(Protocol):

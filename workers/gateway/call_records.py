@@ -16,7 +16,7 @@ from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.kinds import EventKind, Severity
 from schemas.records import CallRecord
 from workers.gateway.call_log import CallLog
-from workers.gateway.call_state import CallState
+from workers.gateway.call_state import CallState, calls_of_result
 from workers.llm.accounting import error_record, ok_record
 from workers.llm.errors import Classified, scrub
 from workers.llm.pricing import pico_to_usd
@@ -53,6 +53,7 @@ class CallRecorder:
             served_from=source,
             deployment=self.deployment,
             test_double=self.test_double,
+            tool_calls=calls_of_result(result),
         )
         self._record(request, resp)
         return resp

@@ -6,11 +6,11 @@ and its outcomes (retry, give up, served from a record) read in one place.
 
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from recap.llm import LLMRequest, LLMResponse
+from recap.llm import LLMRequest, LLMResponse, ToolCall
 from workers.llm.accounting import Settlement, Sizing
 from workers.llm.errors import Classified
 
@@ -63,8 +63,16 @@ class CallState:
 def response_as_result(resp: LLMResponse) -> dict[str, Any]:
     """The fields of a response that a recorded result keeps (text, token counts and their source):
     what a duplicate of a call already in flight is served from, at no cost."""
-    return {
-        k: v
-        for k, v in dataclasses.asdict(resp).items()
-        if k in ("text", "prompt_tokens", "cached_prompt_tokens", "completion_tokens", "token_count_source")
-    }
+    kept = ("text", "prompt_tokens", "cached_prompt_tokens", "completion_tokens", "token_count_source")
+    return {**{k: getattr(resp, k) for k in kept}, **calls_as_result(resp.tool_calls)}
+
+
+def calls_as_result(calls: tuple[ToolCall, ...]) -> dict[str, Any]:
+    """A reply's tool calls as a recorded result keeps them (JSON-ready; nothing for a plain reply,
+    so results recorded before tools existed read the same)."""
+    return {"tool_calls": [{"id": c.id, "name": c.name, "arguments": c.arguments} for c in calls]} if calls else {}
+
+
+def calls_of_result(result: Mapping[str, Any]) -> tuple[ToolCall, ...]:
+    """The tool calls a recorded result holds, re-parsed (none for a plain reply)."""
+    return tuple(ToolCall.parse(str(c["id"]), str(c["name"]), str(c["arguments"])) for c in result.get("tool_calls") or ())

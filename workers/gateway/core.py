@@ -60,7 +60,15 @@ from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.outcomes import BudgetRefusal
 from workers.gateway.call_log import CallLog, run_id_of, writer_name
 from workers.gateway.call_records import CallRecorder
-from workers.gateway.call_state import AttemptFailed, CallState, FinalFailure, Retryable, Served, response_as_result
+from workers.gateway.call_state import (
+    AttemptFailed,
+    CallState,
+    FinalFailure,
+    Retryable,
+    Served,
+    calls_as_result,
+    response_as_result,
+)
 from workers.gateway.ledger import BudgetLedger, LocalBudget
 from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
 from workers.llm.accounting import (
@@ -71,7 +79,7 @@ from workers.llm.accounting import (
     worst_case_pico,
 )
 from workers.llm.cache_markers import BreakpointPlanner, mark
-from workers.llm.calling import Attempt, attempt_async, litellm_kwargs
+from workers.llm.calling import Attempt, attempt_async, litellm_kwargs, redacted_calls
 from workers.llm.errors import Classified, classify, redact_known, refused_retry_after
 from workers.llm.fingerprint import request_fingerprint
 from workers.llm.litellm_setup import get_litellm
@@ -217,7 +225,7 @@ class DeploymentGateway(CallRecorder):
         """The call's state before its first attempt: the messages to send, the sizing, the worst case, the cache key."""
         cfg = self.config
         messages = provider_messages(request.messages)
-        params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
+        params = {**cfg.generation_params(request.temperature, request.max_tokens, request.json_mode), **request.tool_params()}
         sizing = size_request(cfg.model, messages, params)
         counted = sizing.counted
         call = CallState(
@@ -253,7 +261,8 @@ class DeploymentGateway(CallRecorder):
         secrets = self._secrets()
         text = redact_known(attempt.text, secrets)
         finish = None if attempt.finish_reason is None else redact_known(str(attempt.finish_reason), secrets)[:64]
-        result = {"text": text, "finish_reason": finish, **usage.as_dict()}
+        tool_calls = redacted_calls(attempt.tool_calls, secrets)
+        result = {"text": text, "finish_reason": finish, **usage.as_dict(), **calls_as_result(tool_calls)}
         assert call.rid is not None  # admitted: it holds a reservation
         await self.budget.settle(call.rid, cost, "ok", result, call.cache_key, settled.provider_cost_usd)
         total = cost + call.charged
@@ -274,6 +283,7 @@ class DeploymentGateway(CallRecorder):
             test_double=self.test_double,
             finish_reason=finish,
             provider_cost_usd=settled.provider_cost_usd,
+            tool_calls=tool_calls,
         )
         self._record(request, resp, usage.cache_write_tokens)
         return resp

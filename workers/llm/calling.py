@@ -8,12 +8,14 @@ retry layer exists (tenacity, in the callers): litellm's ``num_retries`` and the
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from workers.llm.errors import UnusableReply, install_log_scrubber
+from recap.llm import ToolCall
+from workers.llm.errors import UnusableReply, install_log_scrubber, redact_known
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.offline.wire import OFFLINE_METADATA_KEY
 from workers.llm.providers import DeploymentConfig
@@ -51,11 +53,13 @@ class Attempt:
     choices: int = 1
     #: prompt tokens the provider wrote to its prompt cache (Anthropic's cache_creation_input_tokens)
     cache_write_tokens: int = 0
+    #: the first choice's tool calls, in order (their arguments parsed, or a parse error)
+    tool_calls: tuple[ToolCall, ...] = ()
 
 
 def litellm_kwargs(
     config: DeploymentConfig,
-    messages: list[dict[str, str]],
+    messages: list[dict[str, Any]],
     params: Mapping[str, Any],
     *,
     timeout_s: float,
@@ -74,6 +78,11 @@ def litellm_kwargs(
         "max_retries": 0,
         **params,
     }
+    if kwargs.get("tools"):
+        # our tools are plain function tools, never litellm's MCP-gateway tools: skip its MCP
+        # check, which imports the optional ``mcp`` package for any request with tools
+        # (litellm/main.py, ``completion``, litellm 1.106)
+        kwargs["_skip_mcp_handler"] = True
     if config.api_base:
         kwargs["api_base"] = config.api_base
     if api_key:
@@ -127,6 +136,7 @@ def parse_response(response: Any) -> Attempt:
     choices = getattr(response, "choices", None) or []
     choice = choices[0]
     text = getattr(choice.message, "content", None) or ""
+    tool_calls = read_tool_calls(getattr(choice.message, "tool_calls", None))
     finish = getattr(choice, "finish_reason", None)
     usage = getattr(response, "usage", None)
     details = getattr(usage, "prompt_tokens_details", None) if usage is not None else None
@@ -159,7 +169,42 @@ def parse_response(response: Any) -> Attempt:
         malformed=tuple(malformed),
         choices=max(1, len(choices)),
         cache_write_tokens=parsed["cache_write_tokens"] or 0,
+        tool_calls=tool_calls,
     )
+
+
+def read_tool_calls(raw: Any) -> tuple[ToolCall, ...]:
+    """A message's tool calls (litellm's OpenAI shape: objects or dicts with ``id`` and a
+    ``function`` holding ``name`` and ``arguments``) as :class:`ToolCall` items. Arguments that are
+    not a string (some providers send the object) are kept as their JSON text."""
+    calls = []
+    for i, item in enumerate(raw or ()):
+        function = _field(item, "function")
+        name = _field(function, "name")
+        arguments = _field(function, "arguments")
+        if arguments is None:
+            arguments = ""
+        elif not isinstance(arguments, str):
+            arguments = json.dumps(arguments)
+        call_id = _field(item, "id") or f"call_{i}"
+        calls.append(ToolCall.parse(str(call_id), "" if name is None else str(name), arguments))
+    return tuple(calls)
+
+
+def _field(item: Any, name: str) -> Any:
+    """``item[name]`` for a dict, else the attribute (None when absent)."""
+    if isinstance(item, Mapping):
+        return item.get(name)
+    return getattr(item, name, None)
+
+
+def redacted_calls(calls: tuple[ToolCall, ...], secrets: list[str]) -> tuple[ToolCall, ...]:
+    """The calls with known secrets cut from their arguments (as the reply text is), re-parsed."""
+    out = []
+    for c in calls:
+        arguments = redact_known(c.arguments, secrets)
+        out.append(c if arguments == c.arguments else ToolCall.parse(c.id, c.name, arguments))
+    return tuple(out)
 
 
 def _cache_writes(usage: Any, details: Any) -> Any:

@@ -28,7 +28,7 @@ from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.records import CallRecord
 from workers.llm.accounting import Sizing, error_record, ok_record, served_from, settle, size_request, worst_case_pico
 from workers.llm.cache_markers import BreakpointPlanner, mark
-from workers.llm.calling import Attempt, attempt_sync, litellm_kwargs
+from workers.llm.calling import Attempt, attempt_sync, litellm_kwargs, redacted_calls
 from workers.llm.errors import Classified, classify, redact_known, refused_retry_after
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.pricing import PriceTable, pico_to_usd
@@ -97,7 +97,7 @@ class LiteLLMClient:
         cfg = self.config
         t0 = time.monotonic()
         messages = provider_messages(request.messages)
-        params = cfg.generation_params(request.temperature, request.max_tokens, request.json_mode)
+        params = {**cfg.generation_params(request.temperature, request.max_tokens, request.json_mode), **request.tool_params()}
         sizing = size_request(cfg.model, messages, params)
         send = mark(self.markers, request.episode_id, messages) if self.markers is not None else messages
         return _DirectCall(
@@ -208,6 +208,7 @@ class LiteLLMClient:
             test_double=self.test_double,
             finish_reason=None if attempt.finish_reason is None else redact_known(str(attempt.finish_reason), cfg.secrets())[:64],
             provider_cost_usd=settled.provider_cost_usd,
+            tool_calls=redacted_calls(attempt.tool_calls, cfg.secrets()),
         )
         if self.record_sink is not None:
             self.record_sink(ok_record(call.request, resp, usage.cache_write_tokens))

@@ -363,12 +363,21 @@ def model_max_output_tokens(model: str) -> int | None:
     return None
 
 
-def provider_messages(messages: Sequence[Any]) -> list[dict[str, str]]:
-    """ChatMessage objects (or dicts) as the role/content dicts a provider receives."""
-    out = []
+def provider_messages(messages: Sequence[Any]) -> list[dict[str, Any]]:
+    """ChatMessage objects (or dicts) as the dicts a provider receives: role and content, plus an
+    assistant message's ``tool_calls`` and a tool message's ``tool_call_id`` when present."""
+    out: list[dict[str, Any]] = []
     for m in messages:
         if isinstance(m, Mapping):
-            out.append({"role": str(m["role"]), "content": str(m["content"])})
+            d: dict[str, Any] = {"role": str(m["role"]), "content": str(m["content"])}
+            for key in ("tool_calls", "tool_call_id"):
+                if m.get(key):
+                    d[key] = m[key]
         else:
-            out.append({"role": m.role, "content": m.content})
+            d = {"role": m.role, "content": m.content}
+            if getattr(m, "tool_calls", ()):
+                d["tool_calls"] = [c.as_dict() for c in m.tool_calls]
+            if getattr(m, "tool_call_id", None) is not None:
+                d["tool_call_id"] = m.tool_call_id
+        out.append(d)
     return out

@@ -7,6 +7,12 @@ import re
 from typing import Any
 
 DEFAULT_REPLY = '{"think": "fake server reply", "action": "wait"}'
+#: modes of a request that offers ``tools`` (a request without tools gets the plain reply):
+#: ``toolcall`` one call of the first tool (or of the one ``tool_choice`` names), ``paralleltools``
+#: one call per tool (two calls when there is one tool), ``badargs`` a call whose arguments are
+#: cut JSON, ``textinstead`` the plain text reply even when ``tool_choice`` requires a call.
+#: Without a directive, ``tool_choice`` "required" or a named tool gets ``toolcall``.
+TOOL_MODES = ("toolcall", "paralleltools", "badargs", "textinstead")
 FAULT_MODES = (
     "429",
     "500",
@@ -33,6 +39,7 @@ FAULT_MODES = (
     "nullchoices",
     "nomessage",
     "nullcontent",
+    *TOOL_MODES,
 )
 #: modes answering HTTP 200 with a reply no client can use: a body that is not JSON (``notjson``,
 #: ``html``; ``malformed`` cut mid-JSON, ``empty``), or a chat completion without a usable choice
@@ -68,6 +75,21 @@ CHOICE_FAULTS: dict[str, Any] = {
     ],
 }
 DIRECTIVE = re.compile(r"FAKE:([a-z0-9]+)(?:\*(\d+))?")
+
+
+def placeholder_args(parameters: Any) -> dict[str, Any]:
+    """Arguments that satisfy a tool's JSON schema's required properties by their type (a string
+    property gets "fake"), so a fake call is well formed for the tool that receives it."""
+    if not isinstance(parameters, dict):
+        return {}
+    properties = parameters.get("properties") or {}
+    by_type = {"string": "fake", "integer": 0, "number": 0, "boolean": False, "array": [], "object": {}}
+    out: dict[str, Any] = {}
+    for name in parameters.get("required") or []:
+        spec = properties.get(name) or {}
+        kind = spec.get("type") if isinstance(spec, dict) else None
+        out[str(name)] = by_type.get(str(kind), "fake")
+    return out
 
 
 def error_body(message: str, etype: str, code: str | None, param: str | None = None) -> dict[str, Any]:

@@ -9,7 +9,7 @@ import random
 import threading
 import time
 from collections import deque
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any, cast
 
 from aiohttp import web
@@ -19,9 +19,11 @@ from workers.llm.offline.fake_server.faults import (
     CHOICE_FAULTS,
     DIRECTIVE,
     NOT_JSON_BODIES,
+    TOOL_MODES,
     UNREADABLE_MODES,
     USAGE_FAULTS,
     error_body,
+    placeholder_args,
 )
 from workers.llm.prompt_cache import PromptCache, normalize, usage_fields
 from workers.llm.tokens import estimate_prompt_tokens, estimate_text_tokens
@@ -259,7 +261,40 @@ class FakeServer:
         if req.mode == "echokey":
             text = f"your key is {req.key} and {req.key}"
             completion_tokens = estimate_text_tokens(text) * n_choices
+        calls = self._tool_calls(req)
+        if calls:
+            completion_tokens = n_choices * sum(
+                estimate_text_tokens(c["function"]["name"] + c["function"]["arguments"]) for c in calls
+            )
+            return _Reply("", "tool_calls", completion_tokens, n_choices, calls)
         return _Reply(text, finish, completion_tokens, n_choices)
+
+    def _tool_calls(self, req: _Request) -> list[dict[str, Any]]:
+        """The tool calls a request with ``tools`` is answered with (see ``TOOL_MODES``); none for a
+        request without tools, with ``tool_choice`` "none", or in mode ``textinstead``."""
+        tools = [t.get("function") or {} for t in req.body.get("tools") or [] if isinstance(t, dict)]
+        choice = req.body.get("tool_choice")
+        if not tools or choice == "none" or req.mode == "textinstead":
+            return []
+        named = choice.get("function", {}).get("name") if isinstance(choice, dict) else None
+        mode = req.mode if req.mode in TOOL_MODES else ("toolcall" if choice == "required" or named else None)
+        if mode is None:
+            return []
+        first = next((t for t in tools if t.get("name") == named), tools[0])
+        chosen = (tools if len(tools) > 1 else tools * 2) if mode == "paralleltools" else [first]
+        calls = []
+        for i, tool in enumerate(chosen):
+            arguments = json.dumps(placeholder_args(tool.get("parameters")))
+            if mode == "badargs":
+                arguments = arguments[:-1]  # the closing brace lost: not JSON
+            calls.append(
+                {
+                    "id": f"call_fake_{len(self.log) + 1}_{i}",
+                    "type": "function",
+                    "function": {"name": str(tool.get("name")), "arguments": arguments},
+                }
+            )
+        return calls
 
     def _rate_limited(self, req: _Request, admitted: int) -> web.Response | None:
         """A 429 with Retry-After when the request does not fit the windows (or its mode asks for one)."""
@@ -331,9 +366,9 @@ class FakeServer:
         rule = self.config.rule_for(req.model)
         outcome = self.cache_for(req.model).serve(req.model, req.seen, req.now + self._clock_offset, reply=reply.text)
         cached, written = outcome.cached_tokens, outcome.cache_write_tokens
-        logged = (
-            req.mode if req.mode in USAGE_FAULTS or req.mode in UNREADABLE_MODES or req.mode in ("echokey", "textplain") else "ok"
-        )
+        named = (*USAGE_FAULTS, *UNREADABLE_MODES, *TOOL_MODES, "echokey", "textplain")
+        # a call forced by tool_choice (no directive) is logged as ``toolcall``
+        logged = req.mode if req.mode in named else ("toolcall" if reply.tool_calls else "ok")
         self._record(
             req.now, 200, logged, req.model, req.prompt_tokens, reply.completion_tokens, cached, req.max_tokens, admitted, written
         )
@@ -342,10 +377,7 @@ class FakeServer:
             "object": "chat.completion",
             "created": int(time.time()),
             "model": req.model,
-            "choices": [
-                {"index": i, "message": {"role": "assistant", "content": reply.text}, "finish_reason": reply.finish}
-                for i in range(reply.n_choices)
-            ],
+            "choices": [{"index": i, "message": reply.message(), "finish_reason": reply.finish} for i in range(reply.n_choices)],
         }
         usage = self._usage(req, reply, rule, cached, written)
         if usage:
@@ -405,3 +437,11 @@ class _Reply:
     finish: str
     completion_tokens: int
     n_choices: int
+    #: tool calls in the OpenAI shape (the content is then null)
+    tool_calls: list[dict[str, Any]] = field(default_factory=list)
+
+    def message(self) -> dict[str, Any]:
+        """The assistant message of one choice."""
+        if self.tool_calls:
+            return {"role": "assistant", "content": None, "tool_calls": self.tool_calls}
+        return {"role": "assistant", "content": self.text}
