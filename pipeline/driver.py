@@ -63,7 +63,6 @@ from pipeline.cap_policy import CapPolicy
 from pipeline.errors import PipelineError, RunFolderError
 from pipeline.events import EventBuffer
 from pipeline.mirror import mirror_dir, pull
-from pipeline.politeness import RunPoliteness
 from pipeline.prepare import Prepared
 
 # prepare, RunSummary and the exit codes: the CLI, tests and benches import them from here
@@ -75,6 +74,7 @@ from pipeline.resume import (
     RunState,
     load_state,
 )
+from pipeline.run_services import RunServices
 from pipeline.run_summary import EXIT_INFRA as EXIT_INFRA
 from pipeline.run_summary import EXIT_INTERRUPTED as EXIT_INTERRUPTED
 from pipeline.run_summary import EXIT_WORK_REMAINS as EXIT_WORK_REMAINS
@@ -136,7 +136,7 @@ class Driver(SessionLoop):
         self.caps = CapPolicy(self.spec, self.events.add)
         self.pool: WorkerPool | None = None
         self.channel: SinkChannel | None = None
-        self.politeness: RunPoliteness | None = None
+        self.services: RunServices | None = None
         self._last_push = time.monotonic()
         self.work: RunStore = prepared.store
         self.records_out: list[EpisodeRecord] = []
@@ -211,11 +211,12 @@ class Driver(SessionLoop):
                 session=self.session,
             )
         multi_node = len([n for n in ray.nodes() if n.get("Alive")]) > 1
-        # a FEVER run's workers share one Wikipedia limit (the in-process threads share their process's):
-        # the driver's node holds its actor, whose name travels in the workers' environment
-        self.politeness = RunPoliteness.start(self.spec, self.run_id, ray.get_runtime_context().get_node_id())
-        politeness_env = self.politeness.worker_runtime_env() if self.politeness is not None else None
-        worker_cls = worker_actor(num_cpus=self.spec.ray.worker_cpus, spread=multi_node, runtime_env=politeness_env)
+        # the run-wide actors the benchmarks declare (FEVER: one Wikipedia limit for every worker; the
+        # in-process threads share their process's): on the driver's node, named in the workers' environment
+        self.services = RunServices.start(self.spec, self.run_id, ray.get_runtime_context().get_node_id())
+        worker_cls = worker_actor(
+            num_cpus=self.spec.ray.worker_cpus, spread=multi_node, runtime_env=self.services.worker_runtime_env()
+        )
         return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session)
 
     def _run_locked(self) -> RunSummary:
@@ -264,8 +265,8 @@ class Driver(SessionLoop):
                 pass
             if self.pool is not None:
                 self.pool.shutdown()
-            if self.politeness is not None:
-                self.politeness.close()
+            if self.services is not None:
+                self.services.close()
             self.channel.kill()
             if started_ray:
                 shutdown_ray()

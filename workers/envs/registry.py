@@ -22,6 +22,7 @@ import json
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,7 @@ __all__ = [
     "DataNotFoundError",
     "UnknownInstanceError",
     "Benchmark",
+    "RunService",
     "register_benchmark",
     "unregister_benchmark",
     "registered_benchmark",
@@ -48,6 +50,18 @@ __all__ = [
     "data_env_vars",
     "register_data_folder",
 ]
+
+
+@dataclass(frozen=True)
+class RunService:
+    """A run-wide Ray actor that every episode worker's environments of one benchmark share (FEVER:
+    the per-host Wikipedia politeness limit). The driver starts one per run, named
+    ``recap-<name>-<run id>-<hex>``, and tells the workers its name in ``env_var``; ``actor`` is
+    ``"package.module:Class"`` of the Ray actor class, imported only when a run starts it."""
+
+    name: str
+    env_var: str
+    actor: str
 
 
 class Benchmark(BenchmarkProtocol, ABC):
@@ -94,6 +108,10 @@ class Benchmark(BenchmarkProtocol, ABC):
         holds and where its files come from (``recap data list/check/fetch`` work on these).
         Default: none (generated instances, like blocksworld)."""
         return {}
+
+    def run_services(self) -> tuple[RunService, ...]:
+        """The run-wide actors this benchmark's environments share across Ray workers. Default: none."""
+        return ()
 
     def replay_file(self, path: str, options: Mapping[str, object]) -> tuple[bool, str]:
         """``recap env replay``: (identical?, message) for a recorded trajectory file of this

@@ -29,7 +29,7 @@ from typing import Any
 from recap.config import AgentConfig
 from recap.env import Environment
 from workers.envs.data_sources import DataFolder
-from workers.envs.registry import Benchmark
+from workers.envs.registry import Benchmark, RunService
 
 from . import protocol
 from .claims import BENCHMARK_NAME, find_claim, load_claims, resolve_data_dir, select
@@ -97,6 +97,10 @@ class FeverBenchmark(Benchmark):
     """FEVER's registry entry: claims from ``paper_dev.jsonl``, observations from Wikipedia or a snapshot."""
 
     name = BENCHMARK_NAME
+
+    def run_services(self) -> tuple[RunService, ...]:
+        """One Wikipedia politeness actor per run, shared by every worker (:func:`run_limiter` finds it)."""
+        return (RunService("wiki-politeness", POLITENESS_VAR, "workers.envs.fever.politeness:WikiPoliteness"),)
 
     def replay_file(self, path: str, options: Mapping[str, object]) -> tuple[bool, str]:
         """A FEVER trajectory (:mod:`.replay`), ``options`` overriding its own."""

@@ -2,7 +2,7 @@
 
 Why an actor: each episode worker is its own process, so a bucket per process lets ``workers: 8``
 send eight times the rate. The driver starts one named :class:`WikiPoliteness` per run that has a
-FEVER environment (pipeline/politeness.py) and names it to the episode workers
+FEVER environment (pipeline/run_services.py, from FeverBenchmark.run_services) and names it to the episode workers
 (:data:`~workers.envs.fever.ratelimit.POLITENESS_VAR`); their environments reach it through
 :class:`RemoteLimiter`. Reservation semantics: the actor only books a slot and answers how long
 to wait, the caller sleeps in its own process, so the actor never blocks and answers in

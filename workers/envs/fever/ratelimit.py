@@ -24,7 +24,7 @@ DEFAULT_BURST = 2
 #: the most the ``wikipedia_rate`` option accepts, requests per second per host for the whole run
 MAX_RATE = 10.0
 #: the environment variable naming the run's WikiPoliteness actor; the driver sets it on the
-#: episode workers of a run with a FEVER environment (pipeline/politeness.py)
+#: episode workers of a run with a FEVER environment (pipeline/run_services.py)
 POLITENESS_VAR = "RECAP_WIKI_POLITENESS"
 
 

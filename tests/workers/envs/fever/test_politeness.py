@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from pipeline.cli import main
-from pipeline.politeness import RunPoliteness
 from pipeline.raysetup import runtime_env
+from pipeline.run_services import RunServices
 from pipeline.spec import SweepSpec, parse_spec
 from workers.envs.fever import BENCHMARK
 from workers.envs.fever.benchmark import run_limiter, wiki_source
@@ -78,15 +78,18 @@ def test_the_driver_starts_the_actor_only_for_a_fever_sweep(ray_address):
         text = f"run: r\noutput: out\nmodels:\n  - model: offline/expert\nmethods:\n  - method: react\nenvironments:\n  - benchmark: {benchmark}\n    tasks: [all]\n"
         return parse_spec(text, "sweep.yaml")
 
-    assert RunPoliteness.start(spec("blocksworld"), "run1", None) is None
-    started = RunPoliteness.start(spec("fever"), "run1", ray.get_runtime_context().get_node_id())
-    assert started is not None and started.name.startswith("recap-wiki-politeness-run1-")
-    assert ray.get(ray.get_actor(started.name).stats.remote()) == {}
-    env_vars = started.worker_runtime_env()["env_vars"]
-    assert env_vars[POLITENESS_VAR] == started.name and env_vars["PYTHONPATH"] == runtime_env()["env_vars"]["PYTHONPATH"]
+    none = RunServices.start(spec("blocksworld"), "run1", None)
+    assert none.started == [] and none.worker_runtime_env() is None
+    started = RunServices.start(spec("fever"), "run1", ray.get_runtime_context().get_node_id())
+    ((_, name, actor),) = started.started
+    assert name.startswith("recap-wiki-politeness-run1-")
+    assert ray.get(ray.get_actor(name).stats.remote()) == {}
+    env = started.worker_runtime_env()
+    assert env is not None
+    assert env["env_vars"][POLITENESS_VAR] == name and env["env_vars"]["PYTHONPATH"] == runtime_env()["env_vars"]["PYTHONPATH"]
     started.close()
     with pytest.raises(ray.exceptions.RayActorError):
-        ray.get(started.actor.stats.remote(), timeout=60)
+        ray.get(actor.stats.remote(), timeout=60)
 
 
 def test_outside_ray_the_process_bucket_is_shared(claims_dir, monkeypatch):
