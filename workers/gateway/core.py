@@ -408,12 +408,15 @@ class DeploymentGateway(CallRecorder):
     def _untrusted(self) -> BudgetRefusal | None:
         """A ``usage`` refusal once ``max_usage_rejections`` replies of this deployment had impossible
         usage: each was charged at its worst case, and a provider that keeps lying about what it
-        bills is not called again this session (the calls in flight finish)."""
-        rejected = self.counts["usage_rejected"]
-        if rejected < self.config.max_usage_rejections:
+        bills is not called again this session (the calls in flight finish). The refusal names the
+        limit that was reached, not the running count: calls already in flight when it is reached
+        may add a rejection or two (each its own ``usage_rejected`` event), and the stop reason a
+        run prints and records must not depend on that timing."""
+        limit = self.config.max_usage_rejections
+        if self.counts["usage_rejected"] < limit:
             return None
         self.counts["usage_refused"] += 1
-        return BudgetRefusal("usage", self.deployment, rejected=rejected)
+        return BudgetRefusal("usage", self.deployment, rejected=limit)
 
     # ---- secrets ----
     @property
