@@ -17,6 +17,7 @@ from typing import Any, Literal
 
 from recap.demo_replies import DemoReplies
 from recap.demo_script import DemoScript
+from recap.llm import ToolDef
 from schemas.kinds import EndReason
 
 #: the step cap of a :meth:`Environment.plan_copy` (no plan is this long)
@@ -168,6 +169,23 @@ class Environment(ABC):
         sim = copy.deepcopy(self)
         sim.max_steps = PLAN_COPY_STEPS
         return sim
+
+    # -- tool calls (coding environments) --------------------------------------------------------
+    def tool_defs(self) -> tuple[ToolDef, ...]:
+        """The tools a model calls as its actions (OpenAI function tools: ``bash``, a file viewer,
+        an editor, ``submit``); empty for an environment whose actions are text. An environment
+        with tools has an open action space: ``valid_actions`` is None and any call of one of its
+        tools with arguments it accepts is a valid action (the paper's SWE-bench protocol)."""
+        return ()
+
+    def call_tool(self, name: str, args: Mapping[str, Any]) -> Step:
+        """Run one tool call and return its observation as a :class:`Step`. ``info`` carries what
+        the ``tool_calls`` table records: ``exit_code`` (None: no process, or killed),
+        ``duration_s``, ``output_bytes`` (before any cap), ``timed_out``, and ``error`` (a call
+        the tool refused: unknown tool, missing argument, a path outside the repository; the
+        observation says why, the episode goes on). Raises :class:`EnvError` only when the
+        environment itself broke (the sandbox is gone)."""
+        raise InvalidActionError(f"{name}: this environment has no tools")
 
     def failure_hints(self) -> str:
         """Hints shown after an invalid action (e.g. occupied station, inexact name); may be ''."""

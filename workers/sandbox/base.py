@@ -1,0 +1,119 @@
+"""The sandbox interface: run a model's commands against one repository copy, under limits.
+
+A coding episode (``benchmark: swe``) owns one :class:`Sandbox` for its lifetime: the repository
+at its base commit in ``workdir``, commands run through ``bash`` there with a timeout and an output
+cap, files read and written by path. Two kinds implement it:
+
+* ``docker``: a container of a locally built image (no registry is needed), no network by default,
+  memory/pids/disk limits, no host environment variable inside (so no API key is visible);
+* ``local``: a process sandbox in a temporary folder for machines without Docker. It is *not*
+  isolation (the commands run on the host as the worker's user), so a sweep must ask for it by
+  name (``sandbox: local``).
+
+Everything a sandbox starts carries labels (:data:`LABEL_RUN`, :data:`LABEL_EPISODE`,
+:data:`LABEL_WORKER`) so a driver can remove what a killed worker left behind
+(:func:`workers.sandbox.remove_labelled`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Literal
+
+SandboxKind = Literal["docker", "local"]
+SANDBOX_KINDS: tuple[SandboxKind, ...] = ("docker", "local")
+
+#: labels on every container/process group a sandbox starts (the cleanup keys)
+LABEL_RUN = "recap-eval.run"
+LABEL_EPISODE = "recap-eval.episode"
+LABEL_WORKER = "recap-eval.worker"
+
+
+class SandboxError(RuntimeError):
+    """The sandbox itself failed (Docker unreachable, image missing, container gone): the episode
+    ends ``env_error``; a model's failing command is never a SandboxError."""
+
+
+@dataclass(frozen=True)
+class SandboxLimits:
+    """What one episode's sandbox may use. The output cap is stated to the model in the tool's
+    description, so a cut output is never a surprise."""
+
+    #: one command's wall time; a command that runs longer is killed (its process group)
+    command_timeout_s: float = 60.0
+    #: bytes of one command's output the model sees (the rest is cut, and the cut is said)
+    output_bytes: int = 10_000
+    #: commands per episode
+    max_commands: int = 250
+    #: the whole episode's command time
+    wall_time_s: float = 3600.0
+    #: bytes the repository folder may grow to
+    disk_bytes: int = 1 << 30
+    memory_bytes: int = 2 << 30
+    #: processes at once (a fork bomb stops here)
+    pids: int = 256
+    #: network inside the sandbox (off unless the sweep turns it on)
+    network: bool = False
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    """One command's outcome. ``exit_code`` is None when the command was killed (timeout, limit);
+    ``output`` is stdout and stderr interleaved, cut to the output cap; ``output_bytes`` is its
+    size before the cut."""
+
+    exit_code: int | None
+    output: str
+    output_bytes: int
+    duration_s: float
+    timed_out: bool = False
+    truncated: bool = False
+
+
+@dataclass(frozen=True)
+class SandboxSpec:
+    """What to open: the repository (a local git repository checked out at ``base_commit``),
+    the image (docker), the limits, extra environment variables (never the host's own), and the
+    labels to put on everything started."""
+
+    repo_path: str
+    base_commit: str
+    image: str = "recap-eval/sandbox:py311"
+    limits: SandboxLimits = field(default_factory=SandboxLimits)
+    env: Mapping[str, str] = field(default_factory=dict)
+    labels: Mapping[str, str] = field(default_factory=dict)
+    #: where the repository sits inside the sandbox (docker) or under its temporary root (local)
+    workdir: str = "/repo"
+
+
+class Sandbox(ABC):
+    """One repository copy where commands run under :class:`SandboxLimits`."""
+
+    kind: SandboxKind
+    #: the repository's folder as commands see it (their working directory)
+    workdir: str
+
+    @abstractmethod
+    def run(self, command: str, *, timeout_s: float | None = None) -> CommandResult:
+        """Run ``command`` with ``bash -c`` in ``workdir`` (timeout: the limit's unless given)."""
+
+    @abstractmethod
+    def read_file(self, path: str) -> bytes:
+        """A file's bytes; ``path`` relative to ``workdir`` or absolute inside the sandbox.
+        Raises FileNotFoundError / IsADirectoryError like the OS."""
+
+    @abstractmethod
+    def write_file(self, path: str, data: bytes) -> None:
+        """Create or replace a file (its folder is created)."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Stop and remove everything this sandbox started; safe to call twice."""
+
+    def __enter__(self) -> Sandbox:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
