@@ -17,6 +17,7 @@ from pipeline.cap_policy import CapPolicy
 from pipeline.episode_rows import episode_record
 from pipeline.errors import PipelineError
 from pipeline.events import EventBuffer
+from pipeline.leftovers import Leftovers
 from pipeline.resume import INFRA_ERROR, AttemptSpend, UnitQueue, attempt_spend, infra_failure
 from pipeline.run_summary import RunSummary
 from pipeline.sink_channel import SinkChannel, SinkLost
@@ -58,6 +59,8 @@ class AttemptHandling:
     summary: RunSummary
     queue: UnitQueue
     done_times: list[float]
+    #: removes what lost workers' environments left running (pipeline.leftovers)
+    leftovers: Leftovers
 
     # -- helpers --------------------------------------------------------------------------------
     def _event(
@@ -179,6 +182,7 @@ class AttemptHandling:
             self.summary.worker_restarts += 1
             self._event("worker_restarted", severity="warning", old_worker=fin.slot.worker_id)
             self._failed_attempt(fin, "worker_lost", fin.error)
+            self.leftovers.remove(fin.slot.worker_id)  # its sandboxes: the worker never closed them
             if self.summary.worker_restarts > max(10, 3 * self.n_workers):
                 raise PipelineError(f"episode workers keep dying ({self.summary.worker_restarts} restarts); last: {fin.error}")
             self.pool.add_worker()

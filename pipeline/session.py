@@ -13,6 +13,7 @@ from typing import Any
 from pipeline.attempts import AttemptHandling
 from pipeline.backend import Spend
 from pipeline.errors import PipelineError
+from pipeline.leftovers import Leftovers
 from pipeline.mirror import PUSH_EVERY_S, push
 from pipeline.prepare import Prepared
 from pipeline.progress import ProgressView, Snapshot
@@ -89,6 +90,9 @@ class SessionLoop(AttemptHandling):
         """Start what is left, run it to the end (or to a stop), then write what is known."""
         plan_ids = self._begin(state, ident)
         self._announce(state, plan_ids)
+        # what an earlier session of this run left running (a driver killed with SIGKILL)
+        self.leftovers = Leftovers(self.spec, ident.run_id, self._event)
+        self.leftovers.remove()
         self._start_workers()
         self._drive()
         return self._close_session(t_start)
@@ -242,6 +246,7 @@ class SessionLoop(AttemptHandling):
         assert self.pool is not None and self.channel is not None
         stop, spend = self.stop, self.spend_seen
         lost = self.channel.lost
+        self.leftovers.remove()  # what the episodes cut by a stop (their workers killed) left
         cut = self.pool.in_flight() if (stop.graceful or lost is not None) else 0
         # a stop asked for while the last episodes finished left nothing to resume
         interrupted = stop.graceful and (len(self.queue) + cut > 0)

@@ -79,6 +79,7 @@ EventKind = Literal[
     "model_stopped",
     "sink_lost",
     "sink_log_recovered",
+    "leftovers_removed",
     # the gateway and its budget ledger
     "retry",
     "call_failed",

@@ -300,7 +300,9 @@ class EpisodeRunner:
         try:
             agent = self._agent(unit)
             try:
-                env = registry.make_env(unit.instance_id, step_multiplier=unit.step_multiplier, **env_options_for(unit, agent))
+                owner = registry.get_benchmark(unit.benchmark).owner_options(self.run_id, self.worker_id, episode_id)
+                options = {**env_options_for(unit, agent), **owner}
+                env = registry.make_env(unit.instance_id, step_multiplier=unit.step_multiplier, **options)
             except Exception as exc:  # missing data, broken game file: the attempt ends with env_error
                 log.warning("%s: no environment for %s: %s: %s", episode_id, unit.instance_id, type(exc).__name__, exc)
                 out.result = _env_error(exc)

@@ -113,6 +113,20 @@ class Benchmark(BenchmarkProtocol, ABC):
         """The run-wide actors this benchmark's environments share across Ray workers. Default: none."""
         return ()
 
+    def owner_options(self, run_id: str, worker_id: str, episode_id: str) -> dict[str, Any]:
+        """``make()`` options that tell an episode's environment who owns what it starts (the
+        coding benchmark labels its sandboxes with them, so :meth:`remove_leftovers` finds what
+        a killed worker left). Not part of a unit's settings: the same unit may run in any
+        worker. Default: none."""
+        return {}
+
+    def remove_leftovers(self, run_id: str, worker_id: str | None = None) -> int:
+        """Remove what this benchmark's environments left running for run ``run_id``: one
+        worker's (its process died mid-episode) or, with ``worker_id`` None, every worker's (a
+        session ends; a resume starts after a driver killed with SIGKILL). Returns how many
+        things were removed. Default: environments start nothing that outlives them."""
+        return 0
+
     def replay_file(self, path: str, options: Mapping[str, object]) -> tuple[bool, str]:
         """``recap env replay``: (identical?, message) for a recorded trajectory file of this
         benchmark, ``options`` overriding the file's own; raises ValueError for a file it cannot
