@@ -208,10 +208,13 @@ class LocalSandbox(Sandbox):
 
             def read() -> None:
                 assert proc.stdout is not None
-                while chunk := os.read(proc.stdout.fileno(), 65536):
-                    seen[0] += len(chunk)
-                    if len(kept) < cap:
-                        kept.extend(chunk[: cap - len(kept)])
+                try:
+                    while chunk := os.read(proc.stdout.fileno(), 65536):
+                        seen[0] += len(chunk)
+                        if len(kept) < cap:
+                            kept.extend(chunk[: cap - len(kept)])
+                except (OSError, ValueError):  # the pipe was closed under us (a stray held it)
+                    pass
 
             reader = threading.Thread(target=read, daemon=True)
             reader.start()
