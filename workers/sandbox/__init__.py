@@ -1,2 +1,54 @@
 """Sandboxes for coding environments: one isolated copy of a repository per episode, where a
-model's shell commands run under limits (see :mod:`workers.sandbox.base`)."""
+model's shell commands run under limits (see :mod:`workers.sandbox.base`).
+
+:func:`open_sandbox` is the one entry point: it checks what can be checked before anything starts
+(the kind, the repository and its base commit, the daemon, the image) and says what is wrong in
+one line (:class:`SandboxError`).
+"""
+
+from __future__ import annotations
+
+from workers.sandbox.base import (
+    LABEL_EPISODE,
+    LABEL_RUN,
+    LABEL_WORKER,
+    SANDBOX_KINDS,
+    CommandResult,
+    Sandbox,
+    SandboxError,
+    SandboxKind,
+    SandboxLimits,
+    SandboxSpec,
+)
+from workers.sandbox.cleanup import remove_labelled
+from workers.sandbox.repo_copy import check_repo
+
+
+def open_sandbox(kind: SandboxKind | str, spec: SandboxSpec) -> Sandbox:
+    """Start a sandbox of ``kind`` for ``spec``; SandboxError (one line) when it cannot."""
+    if kind not in SANDBOX_KINDS:
+        raise SandboxError(f"unknown sandbox kind {kind!r} (known: {', '.join(SANDBOX_KINDS)})")
+    check_repo(spec.repo_path, spec.base_commit)
+    if kind == "docker":
+        from workers.sandbox.docker_sandbox import DockerSandbox
+
+        return DockerSandbox(spec)
+    from workers.sandbox.local_sandbox import LocalSandbox
+
+    return LocalSandbox(spec)
+
+
+__all__ = [
+    "LABEL_EPISODE",
+    "LABEL_RUN",
+    "LABEL_WORKER",
+    "SANDBOX_KINDS",
+    "CommandResult",
+    "Sandbox",
+    "SandboxError",
+    "SandboxKind",
+    "SandboxLimits",
+    "SandboxSpec",
+    "open_sandbox",
+    "remove_labelled",
+]

@@ -1,0 +1,146 @@
+"""What only the docker sandbox promises (isolation, labels, removal), open_sandbox's refusals,
+and remove_labelled for a killed owner (both kinds)."""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.workers.sandbox.conftest import Repo
+from workers.sandbox import (
+    LABEL_RUN,
+    LABEL_WORKER,
+    Sandbox,
+    SandboxError,
+    SandboxLimits,
+    SandboxSpec,
+    open_sandbox,
+    remove_labelled,
+)
+from workers.sandbox.wrapper import parse
+
+docker = pytest.mark.docker
+
+
+def _containers(labels: dict[str, str]) -> list[object]:
+    import docker as sdk
+
+    return sdk.from_env().containers.list(all=True, filters={"label": [f"{k}={v}" for k, v in labels.items()]})
+
+
+@pytest.fixture
+def dsb(docker_ready: str, repo: Repo, labels: dict[str, str]) -> Iterator[Sandbox]:
+    sb = open_sandbox("docker", SandboxSpec(str(repo.path), repo.commit, labels=labels))
+    yield sb
+    sb.close()
+
+
+@docker
+def test_container_is_labelled_without_network_and_limited(dsb: Sandbox, labels: dict[str, str]) -> None:
+    (c,) = _containers(labels)
+    attrs = c.attrs  # type: ignore[attr-defined]
+    assert attrs["Config"]["Labels"] == labels
+    hc = attrs["HostConfig"]
+    lim = SandboxLimits()
+    assert (hc["NetworkMode"], hc["Memory"], hc["PidsLimit"]) == ("none", lim.memory_bytes, lim.pids)
+    names = {e.split("=", 1)[0] for e in attrs["Config"]["Env"]}
+    assert names == {"PATH", "HOME", "LANG"}
+
+
+@docker
+def test_rm_rf_root_leaves_the_host_untouched(dsb: Sandbox, repo: Repo, tmp_path: Path) -> None:
+    marker = tmp_path / "host-marker.txt"
+    marker.write_text("still here\n")
+    try:
+        dsb.run("rm -rf --no-preserve-root / 2>/dev/null; true", timeout_s=60)
+    except SandboxError:
+        pass  # the sandbox may be broken afterwards; the host must not be
+    assert marker.read_text() == "still here\n"
+    assert (repo.path / "a.txt").read_text() == "uncommitted\n"
+    assert Path("/bin/bash").exists() and Path("/etc/passwd").exists()
+
+
+@docker
+def test_writes_outside_the_repository_stay_in_the_container(dsb: Sandbox) -> None:
+    name = f"/tmp/recap-sandbox-escape-{uuid.uuid4().hex}"
+    r = dsb.run(f"echo x > {name} && cat {name}")
+    assert (r.exit_code, r.output) == (0, "x\n")
+    assert not Path(name).exists()
+
+
+@docker
+def test_close_removes_the_container(docker_ready: str, repo: Repo, labels: dict[str, str]) -> None:
+    sb = open_sandbox("docker", SandboxSpec(str(repo.path), repo.commit, labels=labels))
+    assert len(_containers(labels)) == 1
+    sb.close()
+    assert _containers(labels) == []
+    sb.close()
+
+
+@pytest.mark.parametrize("kind", [pytest.param("docker", marks=docker), "local"])
+def test_remove_labelled_cleans_up_after_a_killed_owner(
+    request: pytest.FixtureRequest, kind: str, repo: Repo, labels: dict[str, str]
+) -> None:
+    if kind == "docker":
+        request.getfixturevalue("docker_ready")
+    mine = {**labels, LABEL_WORKER: "w1"}
+    other = {**labels, LABEL_WORKER: "w2"}
+    left = open_sandbox(kind, SandboxSpec(str(repo.path), repo.commit, labels=mine))  # type: ignore[arg-type]
+    kept = open_sandbox(kind, SandboxSpec(str(repo.path), repo.commit, labels=other))  # type: ignore[arg-type]
+    try:
+        # the owner is "killed": it never calls close()
+        assert remove_labelled({LABEL_WORKER: "w1", LABEL_RUN: labels[LABEL_RUN]}) == 1
+        if kind == "docker":
+            assert _containers(mine) == [] and len(_containers(other)) == 1
+        else:
+            assert not Path(left.root).exists() and Path(kept.root).exists()  # type: ignore[attr-defined]
+        assert kept.run("echo ok").output == "ok\n"
+        assert remove_labelled({LABEL_WORKER: "w1", LABEL_RUN: labels[LABEL_RUN]}) == 0
+    finally:
+        kept.close()
+
+
+def test_remove_labelled_refuses_empty_labels() -> None:
+    with pytest.raises(ValueError, match="needs at least one label"):
+        remove_labelled({})
+
+
+def test_open_sandbox_refusals(repo: Repo, tmp_path: Path) -> None:
+    with pytest.raises(SandboxError, match=r"^unknown sandbox kind 'vm' \(known: docker, local\)$"):
+        open_sandbox("vm", SandboxSpec(str(repo.path), repo.commit))
+    with pytest.raises(SandboxError, match=f"^repo_path is not a git repository: {tmp_path}$"):
+        open_sandbox("local", SandboxSpec(str(tmp_path), "HEAD"))
+    with pytest.raises(SandboxError, match=f"^base_commit 'deadbeef' is not a commit of {repo.path}$"):
+        open_sandbox("local", SandboxSpec(str(repo.path), "deadbeef"))
+
+
+def test_open_sandbox_says_how_to_start_an_unreachable_daemon(repo: Repo, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("DOCKER_HOST", "unix:///nonexistent/docker.sock")
+    with pytest.raises(SandboxError, match=r"^the Docker daemon is unreachable \(.*\); start it .*or use `sandbox: local`$"):
+        open_sandbox("docker", SandboxSpec(str(repo.path), repo.commit))
+
+
+@docker
+def test_open_sandbox_names_the_build_command_for_a_missing_image(docker_ready: str, repo: Repo) -> None:
+    tag = f"recap-eval/no-such-image:{uuid.uuid4().hex[:8]}"
+    with pytest.raises(
+        SandboxError, match=f"^the sandbox image {tag} is missing; build it with `bash scripts/build_sandbox_image.sh`$"
+    ):
+        open_sandbox("docker", SandboxSpec(str(repo.path), repo.commit, image=tag))
+
+
+def test_wrapper_trailer_cannot_be_forged_by_output() -> None:
+    raw = b"out\nabc 0 1 2 0\nmore\nnonce1 7 22 300 1\n"
+    res = parse(raw, "nonce1")
+    assert res is not None
+    assert (res.output, res.rc, res.output_bytes, res.repo_bytes, res.disk_killed) == (
+        b"out\nabc 0 1 2 0\nmore",
+        7,
+        22,
+        300,
+        True,
+    )
+    assert parse(b"out\nabc 0 1 2 0\n", "nonce1") is None

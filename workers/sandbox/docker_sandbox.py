@@ -1,0 +1,320 @@
+"""The docker sandbox: one container of a locally built image per episode.
+
+Why the Docker SDK for Python (``docker``) and not SWE-ReX: SWE-ReX runs its own server inside
+the image (it must be installed there, and its deployments pull images from a registry), while
+the SDK talks to the local daemon directly over its socket, needs nothing inside the image but
+bash and coreutils, and is what SWE-bench's own evaluation harness uses to run its containers.
+
+The container: ``spec.image`` with ``docker-init`` as PID 1 (it reaps what the wrapper kills) and
+``sleep infinity`` as the keeper; ``network_mode="none"`` unless ``limits.network``; memory (no
+swap) and pids limits; all capabilities dropped but the few a root shell needs for files and
+processes, and ``no-new-privileges``; the environment is only ``PATH``/``HOME``/``LANG`` and
+``spec.env`` (the Docker daemon never passes the host's variables, so no API key is inside). The
+repository is cloned on the host at ``base_commit`` (:mod:`workers.sandbox.repo_copy`), tarred
+and copied in with ``put_archive`` at ``spec.workdir``, ``.git`` included, and git gets a user.
+
+Disk: overlay2 on this host has no size quota, and a tmpfs work folder cannot receive
+``put_archive`` (Docker copies under the mount, moby#22020) and would hold the repository in
+memory. So the repository folder is measured with ``du`` every second while a command runs (it is
+killed when over ``limits.disk_bytes``) and after each command (reported in the result), and
+``ulimit -f`` caps single files; see :mod:`workers.sandbox.wrapper`.
+
+Commands: ``bash -c`` through the wrapper (``timeout -s KILL`` inside, output cut inside, strays
+killed after each command), plus a host-side guard: when the exec has not returned a few seconds
+after the timeout (the container is wedged, e.g. no pid left to run anything), every process in
+it is killed, and if even that cannot run, the container is restarted (its files survive).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import io
+import posixpath
+import secrets
+import tarfile
+import tempfile
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from workers.sandbox.base import CommandResult, Sandbox, SandboxError, SandboxKind, SandboxSpec
+from workers.sandbox.repo_copy import clone_at
+from workers.sandbox.wrapper import WRAPPER, parse
+
+BASE_ENV: Mapping[str, str] = {
+    "PATH": "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin",
+    "HOME": "/root",
+    "LANG": "C.UTF-8",
+}
+#: what a root shell needs for files and processes; everything else (net admin, mknod, ptrace,
+#: raw sockets, mount...) is dropped
+CAPS = ["CHOWN", "DAC_OVERRIDE", "FOWNER", "FSETID", "KILL", "SETGID", "SETUID"]
+#: seconds after a command's timeout before the host-side guard steps in
+GUARD_GRACE_S = 5.0
+GIT_USER = ("recap-eval sandbox", "sandbox@recap-eval.invalid")
+
+
+def docker_client(timeout_s: float = 120.0) -> Any:
+    """A client of the local daemon; SandboxError (one line, how to start it) when unreachable."""
+    import docker
+    import docker.errors
+
+    try:
+        client = docker.from_env(timeout=int(timeout_s))
+        client.ping()
+    except docker.errors.DockerException as e:
+        raise SandboxError(
+            f"the Docker daemon is unreachable ({str(e).splitlines()[0][:160]}); start it "
+            "(`sudo systemctl start docker` or `sudo dockerd &`) or use `sandbox: local`"
+        ) from None
+    return client
+
+
+def truncate(data: bytes, cap: int) -> str:
+    """The model's view of ``data`` cut to ``cap`` bytes (a multi-byte character cut in two is
+    replaced, never an error)."""
+    return data[:cap].decode("utf-8", errors="replace")
+
+
+class DockerSandbox(Sandbox):
+    """One container per episode; see the module docstring for what it limits and how."""
+
+    kind: SandboxKind = "docker"
+
+    def __init__(self, spec: SandboxSpec, *, client: Any = None) -> None:
+        import docker.errors
+
+        self.spec = spec
+        self.workdir = spec.workdir
+        self.limits = spec.limits
+        self._closed = False
+        self._container: Any = None
+        # reads must outlast the longest command (the SDK's default read timeout is 60 s)
+        self._client = client or docker_client(spec.limits.command_timeout_s + 2 * GUARD_GRACE_S + 60)
+        try:
+            self._client.images.get(spec.image)
+        except docker.errors.ImageNotFound:
+            raise SandboxError(
+                f"the sandbox image {spec.image} is missing; build it with `bash scripts/build_sandbox_image.sh`"
+            ) from None
+        lim = spec.limits
+        env = {**BASE_ENV, **spec.env}
+        with tempfile.TemporaryDirectory(prefix="recap-sandbox-clone-") as tmp:
+            clone = Path(tmp) / "repo"
+            self.base_commit = clone_at(spec.repo_path, spec.base_commit, clone)
+            tar_path = Path(tmp) / "repo.tar"
+            _tar_tree(clone, spec.workdir.strip("/"), tar_path)
+            try:
+                self._container = self._client.containers.run(
+                    spec.image,
+                    ["sleep", "infinity"],
+                    detach=True,
+                    init=True,
+                    labels=dict(spec.labels),
+                    environment=env,
+                    network_mode="bridge" if lim.network else "none",
+                    mem_limit=lim.memory_bytes,
+                    memswap_limit=lim.memory_bytes,
+                    pids_limit=lim.pids,
+                    cap_drop=["ALL"],
+                    cap_add=CAPS,
+                    security_opt=["no-new-privileges"],
+                    working_dir="/",
+                    hostname="sandbox",
+                )
+                with open(tar_path, "rb") as f:
+                    if not self._container.put_archive("/", f):
+                        raise SandboxError("copying the repository into the container failed")
+            except docker.errors.DockerException as e:
+                self.close()
+                raise SandboxError(f"starting the sandbox container failed: {str(e).splitlines()[0][:200]}") from None
+            except BaseException:
+                self.close()
+                raise
+        self._keeper = self._keeper_pid()
+        name, email = GIT_USER
+        setup = (
+            f"git config --global user.name '{name}' && git config --global user.email '{email}'"
+            " && git config --global --add safe.directory '*'"
+        )
+        res = self.run(setup)
+        if res.exit_code != 0:
+            self.close()
+            raise SandboxError(f"configuring git in the sandbox failed: {res.output.strip()[:200]}")
+
+    # -- commands -------------------------------------------------------------------------
+
+    @property
+    def container_id(self) -> str:
+        """The container's id (for logs and the bench)."""
+        return str(self._container.id) if self._container is not None else ""
+
+    def _keeper_pid(self) -> str:
+        """PID 1's child (``sleep infinity``): the wrapper never kills it."""
+        code, out = self._container.exec_run(["cat", "/proc/1/task/1/children"])
+        return out.decode().split()[0] if code == 0 and out.split() else "0"
+
+    def _live(self) -> None:
+        if self._closed or self._container is None:
+            raise SandboxError("the sandbox is closed")
+
+    def run(self, command: str, *, timeout_s: float | None = None) -> CommandResult:
+        """Run ``command`` with ``bash -c`` in ``workdir`` (see the module docstring)."""
+        import docker.errors
+
+        self._live()
+        lim = self.limits
+        tmo = float(timeout_s if timeout_s is not None else lim.command_timeout_s)
+        nonce = secrets.token_hex(8)
+        argv = ["bash", "-c", WRAPPER, "wrapper", nonce, f"{tmo:g}", str(lim.output_bytes), str(lim.disk_bytes)]
+        argv += [self.workdir, self._keeper, command]
+        api = self._client.api
+        t0 = time.monotonic()
+        try:
+            exec_id = api.exec_create(self._container.id, argv, stdout=True, stderr=False)["Id"]
+        except docker.errors.NotFound:
+            raise SandboxError("the sandbox container is gone") from None
+        except docker.errors.APIError as e:
+            raise SandboxError(f"the sandbox cannot run commands: {str(e)[:200]}") from None
+        pool = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+        fut = pool.submit(api.exec_start, exec_id, stream=False, demux=False)
+        guarded = False
+        try:
+            raw = fut.result(timeout=tmo + GUARD_GRACE_S)
+        except concurrent.futures.TimeoutError:
+            guarded = True
+            self._unwedge()
+            try:
+                raw = fut.result(timeout=GUARD_GRACE_S)
+            except concurrent.futures.TimeoutError:
+                raw = b""
+        except docker.errors.APIError as e:
+            raise SandboxError(f"the sandbox cannot run commands: {str(e)[:200]}") from None
+        finally:
+            pool.shutdown(wait=False)
+        duration = time.monotonic() - t0
+        parsed = parse(raw or b"", nonce)
+        if parsed is None:
+            if guarded:
+                return CommandResult(None, f"[killed: no answer {tmo:g} s after the timeout]", 0, duration, timed_out=True)
+            info = api.exec_inspect(exec_id)
+            raise SandboxError(
+                f"the sandbox could not run the command wrapper (exit {info.get('ExitCode')}): "
+                f"{raw[-200:].decode(errors='replace').strip()}"
+            )
+        timed_out = guarded or (parsed.rc == 137 and duration >= tmo)
+        output = truncate(parsed.output, lim.output_bytes)
+        exit_code: int | None = None if (timed_out or parsed.disk_killed) else parsed.rc
+        if parsed.repo_bytes > lim.disk_bytes:
+            exit_code = None
+            output += (
+                f"\n[sandbox: the repository folder is {parsed.repo_bytes} bytes, over the "
+                f"{lim.disk_bytes}-byte disk limit{'; the command was killed' if parsed.disk_killed else ''}]"
+            )
+        return CommandResult(
+            exit_code,
+            output,
+            parsed.output_bytes,
+            duration,
+            timed_out=timed_out,
+            truncated=parsed.output_bytes > lim.output_bytes,
+        )
+
+    def _unwedge(self) -> None:
+        """Kill every process but the init and its keeper; restart the container if even that
+        cannot run (no pid left)."""
+        script = (
+            'for p in /proc/[0-9]*; do p=${p#/proc/}; case " 1 $KEEP $$ " in *" $p "*) continue;; esac; '
+            "kill -KILL $p 2>/dev/null; done"
+        )
+        try:
+            code, _ = self._container.exec_run(["bash", "-c", script], environment={"KEEP": self._keeper})
+            if code == 0:
+                return
+        except Exception:
+            pass
+        try:
+            self._container.restart(timeout=0)
+            self._keeper = self._keeper_pid()
+        except Exception:
+            pass
+
+    # -- files --------------------------------------------------------------------------
+
+    def _abs(self, path: str) -> str:
+        return posixpath.normpath(posixpath.join(self.workdir, path))
+
+    def read_file(self, path: str) -> bytes:
+        """A file's bytes (symbolic links followed)."""
+        import docker.errors
+
+        self._live()
+        target = self._abs(path)
+        for _ in range(16):
+            try:
+                stream, _stat = self._container.get_archive(target)
+            except docker.errors.NotFound:
+                raise FileNotFoundError(2, "No such file or directory", path) from None
+            with tarfile.open(fileobj=io.BytesIO(b"".join(stream))) as tar:
+                member = tar.next()
+                if member is None:
+                    raise FileNotFoundError(2, "No such file or directory", path)
+                if member.isdir():
+                    raise IsADirectoryError(21, "Is a directory", path)
+                if member.issym():
+                    target = posixpath.normpath(posixpath.join(posixpath.dirname(target), member.linkname))
+                    continue
+                f = tar.extractfile(member)
+                if f is None:
+                    raise OSError(f"not a regular file: {path}")
+                return f.read()
+        raise OSError(40, "Too many levels of symbolic links", path)
+
+    def write_file(self, path: str, data: bytes) -> None:
+        """Create or replace a file (mode 0644, its folders created)."""
+        self._live()
+        target = self._abs(path)
+        buf = io.BytesIO()
+        with tarfile.open(fileobj=buf, mode="w") as tar:
+            info = tarfile.TarInfo(target.lstrip("/"))
+            info.size = len(data)
+            info.mode = 0o644
+            info.mtime = int(time.time())
+            tar.addfile(info, io.BytesIO(data))
+        try:
+            ok = self._container.put_archive("/", buf.getvalue())
+        except Exception as e:
+            raise OSError(f"cannot write {path}: {str(e)[:200]}") from None
+        if not ok:
+            raise OSError(f"cannot write {path}")
+
+    # -- end ----------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Remove the container (forced); safe to call twice."""
+        self._closed = True
+        c, self._container = self._container, None
+        if c is None:
+            return
+        import docker.errors
+
+        try:
+            c.remove(force=True)
+        except docker.errors.NotFound:
+            pass
+
+
+def _tar_tree(src: Path, arcname: str, dest: Path) -> None:
+    """Tar ``src`` as ``arcname`` (owned by root inside), symbolic links kept as links."""
+
+    def owner(ti: tarfile.TarInfo) -> tarfile.TarInfo:
+        ti.uid = ti.gid = 0
+        ti.uname = ti.gname = "root"
+        return ti
+
+    with tarfile.open(dest, "w") as tar:
+        tar.add(str(src), arcname=arcname, filter=owner)
+
+
+__all__ = ["DockerSandbox", "docker_client"]
