@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The test command (README, .ci/run): sets up .venv and runs the default suite.
-#   bash scripts/test.sh          default suite (everything not marked slow/realmodel)
+#   bash scripts/test.sh          default suite (everything not marked slow/realmodel/docker), then
+#                                 the Docker sandbox tests (marker docker; they start Docker if needed)
 #   bash scripts/test.sh slow     the slow suites (all 134 ALFWorld games x 2 versions, two-node Ray, ...)
 # pytest's exit code 5 (no tests collected) is a failure here.
 set -uo pipefail
@@ -31,8 +32,9 @@ elif ! has_chromium; then
 fi
 export LITELLM_LOCAL_MODEL_COST_MAP=True
 export RAY_USAGE_STATS_ENABLED=0
-marker="not slow and not realmodel"
-if [ "${1:-}" = "slow" ]; then marker="slow"; shift; fi
+marker="not slow and not realmodel and not docker"
+phase=default
+if [ "${1:-}" = "slow" ]; then marker="slow"; phase=slow; shift; fi
 # the habits (pyproject.toml [tool.ruff], [tool.mypy]): lint, format and types, before the tests
 lint=0
 .venv/bin/ruff check . || { echo "ruff check: findings above (ruff check --fix fixes the marked ones)" >&2; lint=1; }
@@ -48,5 +50,22 @@ if [ "$marker" = slow ]; then workers="${RECAP_TEST_WORKERS:-0}"; else workers="
 .venv/bin/python -m pytest -m "$marker" -q --durations=15 -n "$workers" --dist loadgroup "$@"
 rc=$?
 if [ $rc -eq 5 ]; then echo "no tests were collected: failing" >&2; exit 1; fi
+# the Docker sandbox tests (marker docker), after the default suite: they need a Docker engine
+# (scripts/docker_up.sh installs and starts one where we are root with apt-get) and the sandbox
+# image, built locally from the Debian mirror (scripts/build_sandbox_image.sh: ~2 min, once per
+# machine). RECAP_SKIP_DOCKER=1 is the explicit opt-out; without it, no Docker is a failure.
+if [ "$phase" = default ] && [ $# -eq 0 ]; then
+  if [ "${RECAP_SKIP_DOCKER:-}" = 1 ]; then
+    echo "RECAP_SKIP_DOCKER=1: the Docker sandbox tests are skipped" >&2
+  elif ! bash scripts/docker_up.sh || ! bash scripts/build_sandbox_image.sh; then
+    echo "error: the Docker sandbox tests need a Docker engine and the sandbox image (above); RECAP_SKIP_DOCKER=1 skips them" >&2
+    rc=1
+  else
+    .venv/bin/python -m pytest -m "docker and not slow and not realmodel" -q --durations=5 -n "$workers" --dist loadgroup
+    drc=$?
+    if [ $drc -eq 5 ]; then echo "no Docker sandbox tests were collected: failing" >&2; drc=1; fi
+    if [ $rc -eq 0 ]; then rc=$drc; fi
+  fi
+fi
 if [ $rc -eq 0 ] && [ $lint -ne 0 ]; then echo "tests passed, but lint/format/type checks failed (above)" >&2; exit 1; fi
 exit $rc
