@@ -267,7 +267,8 @@ class SweEnvironment(Environment):
         """The rest of the gold patch's play as JSON tool calls (``{"name", "arguments"}``): for each
         file not yet as the gold patch leaves it, view it (once), put it back at the base commit
         when it was changed otherwise, then one ``str_replace`` per hunk (``create`` for a new file);
-        then the FAIL_TO_PASS tests through bash (once) and ``submit`` twice (review, then final).
+        then the FAIL_TO_PASS tests' files through bash (once; the tests themselves arrive with the
+        evaluation's test patch) and ``submit`` twice (review, then final).
         None once the episode is over, or for a gold patch with binary files."""
         if self._done:
             return None
@@ -277,7 +278,8 @@ class SweEnvironment(Environment):
         calls: list[dict[str, Any]] = []
         for f in files:
             calls += self._expert_file(f)
-        test = f"{self.instance.test_cmd} " + " ".join(_quote(t) for t in self.instance.fail_to_pass)
+        test_files = dict.fromkeys(t.split("::", 1)[0] for t in self.instance.fail_to_pass)  # the new tests are not here yet
+        test = f"{self.instance.test_cmd} " + " ".join(_quote(f) for f in test_files)
         if self._submit_stage == 0 and test not in self._commands_run:
             calls.append({"name": T.BASH, "arguments": {"command": test}})
         calls += [{"name": T.SUBMIT, "arguments": {}}] * (2 - self._submit_stage)

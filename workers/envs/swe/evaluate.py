@@ -90,7 +90,7 @@ def _apply(sandbox: Sandbox, patch: str, file: str, log: list[str], what: str) -
     return False
 
 
-def test_command(instance: SweInstance) -> str:
+def eval_command(instance: SweInstance) -> str:
     """The command the evaluation runs: ``test_cmd -rA`` and every listed node id, quoted."""
     ids = " ".join(shlex.quote(t) for t in (*instance.fail_to_pass, *instance.pass_to_pass))
     return f"{instance.test_cmd} -rA {ids}"
@@ -112,7 +112,7 @@ def evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Callab
                 sandbox.run(f"git checkout -q {shlex.quote(instance.base_commit)} -- {f} 2>/dev/null || rm -f {f}")
         if instance.test_patch.strip() and not _apply(sandbox, instance.test_patch, TEST_PATCH_FILE, log, "the test patch"):
             return Evaluation(False, "patch_failed", {t: MISSING for t in wanted}, _tail("\n".join(log)))
-        cmd = test_command(instance)
+        cmd = eval_command(instance)
         res = sandbox.run(f"{cmd} > {TEST_LOG_FILE} 2>&1", timeout_s=instance.eval_timeout_s)
         try:
             output = sandbox.read_file(TEST_LOG_FILE).decode("utf-8", errors="replace")
