@@ -15,7 +15,8 @@ Two ways to act:
   ``str_replace``, ``create``, ``submit`` (:mod:`.tools`);
 * text (:meth:`SweEnvironment.step`, the mini-SWE-agent baseline): the action is one bash command;
   one whose output starts with the line ``COMPLETE_TASK_AND_SUBMIT_FINAL_OUTPUT`` submits at once
-  (mini-SWE-agent's sentinel, minisweagent/environments/... ``has_finished``; no review there).
+  (mini-SWE-agent's sentinel, checked by ``DefaultAgent.has_finished`` in minisweagent/agents/default.py;
+  no review there).
 
 Per-episode limits (:class:`~workers.sandbox.base.SandboxLimits` ``max_commands`` and
 ``wall_time_s``, and a total of output bytes) are enforced here: the call that reaches one is
