@@ -232,7 +232,7 @@ def test_registration_is_lazy_named_once_and_undone(corridor):
         bench.name = "tunnel"
         return bench
 
-    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever", NAME]
+    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever", "swe", NAME]
     register_benchmark("tunnel", factory)
     try:
         assert built == []
@@ -242,7 +242,8 @@ def test_registration_is_lazy_named_once_and_undone(corridor):
     finally:
         unregister_benchmark("tunnel")
     with pytest.raises(
-        UnknownInstanceError, match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, fever, corridor$"
+        UnknownInstanceError,
+        match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, fever, swe, corridor$",
     ):
         registry.get_benchmark("tunnel")
     # the declared hooks' defaults: no per-method options, no data folder, nothing to forward
@@ -279,7 +280,7 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
             registry.get_benchmark("plain")
     finally:
         unregister_benchmark("plain")
-    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever"]
+    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever", "swe"]
 
 
 #: a benchmark package of its own, written into a temporary folder: its environment, its
@@ -389,5 +390,7 @@ def test_build_agent_refuses_an_unknown_benchmark_by_name():
     from recap.config import ConfigError
     from workers.episode_worker import build_agent
 
-    with pytest.raises(ConfigError, match=r"^unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld, fever$"):
+    with pytest.raises(
+        ConfigError, match=r"^unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld, fever, swe$"
+    ):
         build_agent("react", profile="paper", benchmark="nowhere")

@@ -324,5 +324,6 @@ register_benchmark("blocksworld", "workers.envs.blocksworld")
 register_benchmark("robotouille", "workers.envs.robotouille")
 register_benchmark("alfworld", "workers.envs.alfworld")
 register_benchmark("fever", "workers.envs.fever")
+register_benchmark("swe", "workers.envs.swe")
 #: the authors' released prompt and demonstration files (``prompts: release``): read by no benchmark
 register_data_folder("recap-release", "workers.release.folder:FOLDER")

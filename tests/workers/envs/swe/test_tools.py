@@ -1,0 +1,140 @@
+"""Each tool's exact observation and ``info``, and every refused call (an observation, never a raise)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from workers.envs.swe.env import SweEnvironment
+
+
+@pytest.fixture
+def env(swe_env: Callable[..., SweEnvironment]) -> SweEnvironment:
+    e = swe_env("twofiles", command_timeout_s=3, output_bytes=200)
+    e.reset()
+    return e
+
+
+def _call(env: SweEnvironment, name: str, **args: Any) -> tuple[str, dict[str, Any]]:
+    step = env.call_tool(name, args)
+    assert (step.done, step.success, step.valid_actions) == (False, False, None)
+    return step.observation, dict(step.info)
+
+
+def test_tool_definitions(env: SweEnvironment) -> None:
+    defs = {t.name: t for t in env.tool_defs()}
+    assert list(defs) == ["bash", "view", "str_replace", "create", "submit"]
+    assert "stopped after 3 seconds" in defs["bash"].description
+    assert "at most 200 bytes" in defs["bash"].description
+    assert defs["view"].parameters["required"] == ["path"]
+    assert defs["str_replace"].parameters["required"] == ["path", "old_str"]
+    assert defs["submit"].parameters == {"type": "object", "properties": {}, "additionalProperties": False}
+
+
+def test_bash_output_exit_code_and_info(env: SweEnvironment) -> None:
+    obs, info = _call(env, "bash", command="echo hi; echo oops >&2; exit 3")
+    assert obs == "hi\noops\n[exit code 3]"
+    assert (info["exit_code"], info["output_bytes"], info["timed_out"], info["error"]) == (3, 8, False, None)
+    assert info["duration_s"] >= 0
+    obs, info = _call(env, "bash", command="true")
+    assert obs == "[no output]"
+    assert info["exit_code"] == 0
+
+
+def test_bash_output_cap_and_timeout(env: SweEnvironment) -> None:
+    obs, info = _call(env, "bash", command="printf 'x%.0s' $(seq 1 500)")
+    assert obs == "x" * 200 + "\n[output cut: the first 200 of 500 bytes are shown]"
+    assert info["output_bytes"] == 500
+    obs, info = _call(env, "bash", command="echo start; sleep 30")
+    assert obs == "start\n[the command was stopped after 3 seconds]"
+    assert (info["exit_code"], info["timed_out"]) == (None, True)
+
+
+def test_view_file_range_and_folder(swe_env: Callable[..., SweEnvironment]) -> None:
+    env = swe_env("twofiles")
+    env.reset()
+    root = env.workdir
+    obs, info = _call(env, "view", path="units.py")
+    assert obs == f"{root}/units.py:\n     1\tCM_PER_INCH = 2.45"
+    assert (info["exit_code"], info["error"]) == (0, None)
+    obs, _ = _call(env, "view", path=f"{root}/convert.py", view_range=[8, -1])
+    assert obs == f"{root}/convert.py (lines 8-9 of 9):\n     8\tdef cm_to_inches(x):\n     9\t    return x * CM_PER_INCH"
+    obs, _ = _call(env, "view", path=root)
+    assert obs == (
+        f"Files and directories in {root}, up to 2 levels deep (hidden ones left out):\n"
+        f"{root}\n{root}/convert.py\n{root}/tests\n{root}/tests/test_convert.py\n{root}/units.py"
+    )
+    small = swe_env("twofiles", output_bytes=40)
+    small.reset()
+    obs, info = _call(small, "view", path="convert.py")
+    lines = ["from units import CM_PER_INCH", "", "", "def inches_to_cm(x):", "    return x * CM_PER_INCH", "", ""]
+    lines += ["def cm_to_inches(x):", "    return x * CM_PER_INCH"]
+    full = f"{small.workdir}/convert.py:\n" + "\n".join(f"{n:6}\t{line}" for n, line in enumerate(lines, start=1))
+    assert obs == full[:40] + f"\n[output cut: the first 40 of {len(full)} bytes are shown]"
+    assert info["output_bytes"] == len(full)
+
+
+def test_str_replace_and_create(env: SweEnvironment) -> None:
+    root = env.workdir
+    obs, info = _call(env, "str_replace", path="units.py", old_str="2.45", new_str="2.54")
+    assert obs == f"Edited {root}/units.py. The region around the change now reads:\n     1\tCM_PER_INCH = 2.54"
+    assert info["error"] is None
+    assert env._box().read_file("units.py") == b"CM_PER_INCH = 2.54\n"
+    obs, _ = _call(env, "create", path="pkg/new.py", file_text="a = 1\nb = 2\n")
+    assert obs == f"Created {root}/pkg/new.py (2 lines)."
+    assert env._box().read_file("pkg/new.py") == b"a = 1\nb = 2\n"
+
+
+@pytest.mark.parametrize(
+    ("name", "args", "error"),
+    [
+        ("rm", {}, "unknown tool 'rm'; the tools are bash, view, str_replace, create, submit"),
+        ("bash", {}, "bash: missing argument 'command'"),
+        ("bash", {"command": 5}, "bash: argument 'command' must be a string, got integer"),
+        ("bash", {"command": "ls", "cwd": "/"}, "bash: unknown argument 'cwd' (accepted: command)"),
+        ("bash", {"command": "  "}, "bash: the command is empty"),
+        ("view", {"path": "/etc/passwd"}, "view: /etc/passwd is outside the repository {root}"),
+        ("view", {"path": "../x"}, "view: ../x is outside the repository {root}"),
+        ("view", {"path": "nope.py"}, "view: {root}/nope.py does not exist"),
+        ("view", {"path": "units.py", "view_range": [1]}, "view: argument 'view_range' must have 2 items, got 1"),
+        ("view", {"path": "units.py", "view_range": [1, "2"]}, "view: argument 'view_range' must be a list of integers"),
+        (
+            "view",
+            {"path": "units.py", "view_range": [3, 4]},
+            "view: view_range starts at line 3, but {root}/units.py has 1 lines",
+        ),
+        (
+            "view",
+            {"path": "convert.py", "view_range": [2, 99]},
+            "view: view_range ends at line 99; it must be -1 or between 2 and 9",
+        ),
+        ("view", {"path": ".", "view_range": [1, 2]}, "view: view_range is for files, and {root} is a directory"),
+        (
+            "str_replace",
+            {"path": "units.py", "old_str": "3.0", "new_str": ""},
+            "str_replace: old_str does not occur in {root}/units.py (it must match exactly, whitespace included)",
+        ),
+        (
+            "str_replace",
+            {"path": "convert.py", "old_str": "return x * CM_PER_INCH", "new_str": "pass"},
+            "str_replace: old_str occurs 2 times in {root}/convert.py (starting on lines 5, 9); include more surrounding lines so it occurs once",
+        ),
+        ("str_replace", {"path": "units.py", "old_str": "", "new_str": "x"}, "str_replace: old_str is empty"),
+        ("str_replace", {"path": "tests", "old_str": "a"}, "str_replace: {root}/tests is a directory"),
+        ("str_replace", {"path": "/tmp/x.py", "old_str": "a"}, "str_replace: /tmp/x.py is outside the repository {root}"),
+        ("create", {"path": "units.py", "file_text": ""}, "create: {root}/units.py already exists; use str_replace to change it"),
+        ("create", {"path": "a.py"}, "create: missing argument 'file_text'"),
+        ("submit", {"force": True}, "submit: unknown argument 'force' (accepted: none)"),
+    ],
+)
+def test_refused_calls(env: SweEnvironment, name: str, args: dict[str, Any], error: str) -> None:
+    before = env._box().read_file("convert.py")
+    step = env.call_tool(name, args)
+    expected = error.format(root=env.workdir)
+    assert step.observation == f"Error: {expected}"
+    assert step.info["error"] == expected
+    assert (step.done, step.success) == (False, False)
+    assert env._box().read_file("convert.py") == before
+    assert env.steps_taken == 1

@@ -1,0 +1,180 @@
+"""SWE-bench for the registry: list the records of a JSONL file, make one sandboxed environment.
+
+Options of :meth:`SweBenchmark.make` (and of a sweep's ``environments[].options``):
+
+- ``instances_file`` (required): the JSONL file of SWE-bench records (:mod:`.instances`); its stem
+  is the episodes' split;
+- ``sandbox``: ``docker`` (default: a container of a locally built image, no network) or ``local``
+  (commands run on this host as this user in a temporary folder: no isolation, so only when asked);
+- ``image``: the docker image (built locally; no registry is reached);
+- ``network``: network inside the sandbox (default false);
+- ``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``: the episode's limits
+  (:class:`~workers.sandbox.base.SandboxLimits`); ``max_commands`` is the step cap;
+- ``total_output_bytes``: all observations' bytes together; ``eval_timeout_s``: the evaluation's
+  test run (default: the record's, else 30 minutes);
+- ``step_multiplier`` and ``seed`` are accepted and have no effect (a fixed cap; no randomness);
+- ``open_sandbox``: a callable ``SandboxSpec -> Sandbox`` a caller passes in (tests), used instead
+  of ``sandbox``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable, Mapping
+from functools import lru_cache, partial
+from pathlib import Path
+from typing import Any
+
+from recap.env import Environment, UnknownInstanceError
+from workers.envs.registry import Benchmark
+from workers.sandbox.base import SANDBOX_KINDS, SandboxLimits, SandboxSpec
+
+from .env import DEFAULT_TOTAL_OUTPUT_BYTES, OpenSandbox, SweEnvironment
+from .instances import BENCHMARK_NAME, SweInstance, load_instances
+
+INSTANCES_FILE = "instances_file"
+#: methods that cannot act in a repository, with the one-line reason a sweep is refused with
+REFUSED_METHODS = {
+    "cot": "CoT writes one plan before any observation and cannot run commands in a repository (the paper has no SWE-bench CoT)",
+    "standard": "Standard writes one plan before any observation and cannot run commands in a repository (the paper has no SWE-bench Standard)",
+    "act": "the paper's SWE-bench baseline is ReAct (mini-SWE-agent); it reports no Act result (Table 1: --)",
+    "adapt": "the paper reports no ADaPT result on SWE-bench (Table 1: --)",
+}
+_LIMIT_OPTIONS = ("command_timeout_s", "output_bytes", "max_commands", "wall_time_s")
+ACCEPTED = (
+    INSTANCES_FILE,
+    "sandbox",
+    "image",
+    "network",
+    *_LIMIT_OPTIONS,
+    "total_output_bytes",
+    "eval_timeout_s",
+    "step_multiplier",
+    "seed",
+    "open_sandbox",
+)
+
+
+def _file_key(path: str | os.PathLike[str]) -> tuple[str, int, int]:
+    p = Path(path).expanduser().resolve()
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"SWE-bench instances file {p} does not exist") from None
+    return str(p), st.st_size, st.st_mtime_ns
+
+
+@lru_cache(maxsize=16)
+def _load(path: str, size: int, mtime_ns: int) -> tuple[SweInstance, ...]:
+    return tuple(load_instances(path))
+
+
+def instances_of(options: Mapping[str, Any]) -> tuple[Path, tuple[SweInstance, ...]]:
+    """The instances file ``options`` names and its records (read once while the file is unchanged)."""
+    path = options.get(INSTANCES_FILE)
+    if path is None:
+        raise ValueError(f"swe needs options.{INSTANCES_FILE}: a JSONL file of SWE-bench records, each with a repo_path")
+    if not isinstance(path, (str, os.PathLike)) or not str(path).strip():
+        raise ValueError(f"{INSTANCES_FILE} must be a file path, got {path!r}")
+    key = _file_key(path)
+    return Path(key[0]), _load(*key)
+
+
+def _positive(name: str, value: Any, kind: type) -> Any:
+    if isinstance(value, bool) or not isinstance(value, (int, float) if kind is float else int) or not value > 0:
+        noun = "number" if kind is float else "integer"
+        raise ValueError(f"{name} must be a positive {noun}, got {value!r}")
+    return kind(value)
+
+
+def default_open_sandbox(kind: str) -> OpenSandbox:
+    """``workers.sandbox.open_sandbox`` bound to ``kind`` (looked up when asked, so this module
+    loads where no sandbox kind is installed)."""
+    opener = getattr(importlib.import_module("workers.sandbox"), "open_sandbox", None)
+    if opener is None:
+        raise ValueError(f"sandbox {kind!r} is not available here: workers.sandbox has no open_sandbox")
+    return partial(opener, kind)
+
+
+class SweBenchmark(Benchmark):
+    """SWE-bench's registry entry: records from ``options.instances_file``, episodes in a sandbox."""
+
+    name = BENCHMARK_NAME
+
+    def refuses_method(self, method: str) -> str | None:
+        """CoT, Standard, Act, ADaPT: see :data:`REFUSED_METHODS`; ReCAP and ReAct run."""
+        return REFUSED_METHODS.get(method)
+
+    def list_instances(self, selector: str | None = None) -> list[str]:
+        """Always refused: the records come from ``options.instances_file``."""
+        return self.list_instances_for(selector, {})
+
+    def list_instances_for(self, selector: str | None, options: Mapping[str, Any]) -> list[str]:
+        """``None``/``all``: every record in file order; ``owner/name``: that repository's; an
+        instance id (with or without ``swe/``): that one; UnknownInstanceError otherwise."""
+        path, insts = instances_of(options)
+        if selector in (None, "", "all"):
+            return [i.id for i in insts]
+        wanted = selector.removeprefix(f"{BENCHMARK_NAME}/")
+        found = [i.id for i in insts if i.repo == selector or i.instance_id == wanted]
+        if not found:
+            raise UnknownInstanceError(
+                f"no SWE-bench record in {path} is {selector!r}; selectors: all, a repository (owner/name), an instance id"
+            )
+        return found
+
+    def canonical_id(self, instance_id: str) -> str:
+        """``swe/<instance_id>`` as written; UnknownInstanceError for an id without one."""
+        bench, _, rest = instance_id.partition("/")
+        if bench != BENCHMARK_NAME or not rest or any(c.isspace() for c in rest):
+            raise UnknownInstanceError(f"a SWE-bench instance id looks like swe/<instance_id>, got {instance_id!r}")
+        return instance_id
+
+    def make(self, instance_id: str, **options: Any) -> Environment:
+        """A fresh environment for ``swe/<instance_id>`` (no sandbox is opened before reset);
+        ValueError for an unknown or bad option, UnknownInstanceError for an id the file lacks."""
+        unknown = sorted(set(options) - set(ACCEPTED))
+        if unknown:
+            raise ValueError(f"unknown swe option(s) {', '.join(unknown)}; accepted: {', '.join(ACCEPTED[:-1])}")
+        self.canonical_id(instance_id)
+        path, insts = instances_of(options)
+        kind = options.get("sandbox", "docker")
+        if kind not in SANDBOX_KINDS:
+            raise ValueError(
+                f"sandbox must be 'docker' or 'local' ('local' runs the model's commands on this host as this user: "
+                f"it is not isolation), got {kind!r}"
+            )
+        image = options.get("image", SandboxSpec.image)
+        if not isinstance(image, str) or not image.strip():
+            raise ValueError(f"image must be a docker image name, got {image!r}")
+        network = options.get("network", False)
+        if not isinstance(network, bool):
+            raise ValueError(f"network must be true or false, got {network!r}")
+        limits = SandboxLimits(
+            network=network,
+            **{k: _positive(k, options[k], float if k.endswith("_s") else int) for k in _LIMIT_OPTIONS if k in options},
+        )
+        total = _positive("total_output_bytes", options.get("total_output_bytes", DEFAULT_TOTAL_OUTPUT_BYTES), int)
+        eval_timeout = options.get("eval_timeout_s")
+        if eval_timeout is not None:
+            eval_timeout = _positive("eval_timeout_s", eval_timeout, float)
+        opener: Callable[..., Any] | None = options.get("open_sandbox")
+        if opener is not None and not callable(opener):
+            raise ValueError(f"open_sandbox must be a callable SandboxSpec -> Sandbox, got {opener!r}")
+        wanted = instance_id.partition("/")[2]
+        inst = next((i for i in insts if i.instance_id == wanted), None)
+        if inst is None:
+            raise UnknownInstanceError(f"no SWE-bench record {wanted!r} in {path}")
+        return SweEnvironment(
+            inst,
+            opener if opener is not None else default_open_sandbox(kind),
+            split=path.stem or "custom",
+            limits=limits,
+            image=image,
+            total_output_bytes=total,
+            eval_timeout_s=eval_timeout,
+        )
+
+
+BENCHMARK = SweBenchmark()

@@ -1,0 +1,363 @@
+"""One SWE-bench task as an environment: a repository in a sandbox, tools to change it, a verdict.
+
+The paper's protocol (section "SWE-bench"; appendix "SWE-bench Verified Experiment Details"): the
+model acts through tool calls on a container holding the repository, with no list of valid actions
+(any call a tool accepts is valid: ``valid_actions`` is None, ``invalid_action_mode`` ``step``), no
+demonstration, and ends by submitting, which reviews first as the release's ``review_on_submit_m``
+does (swebench-recap/tools/review_on_submit_m/bin/submit:36-42: the first submit shows the review
+message with the diff, the next one submits). The submission is the repository's diff against the
+base commit, new files included (bin/submit:24: ``git add -A && git diff --cached``), judged by
+:func:`.evaluate.evaluate` on a clean copy.
+
+Two ways to act:
+
+* tool calls (:meth:`SweEnvironment.call_tool`, the paper's ReCAP): ``bash``, ``view``,
+  ``str_replace``, ``create``, ``submit`` (:mod:`.tools`);
+* text (:meth:`SweEnvironment.step`, the mini-SWE-agent baseline): the action is one bash command;
+  one whose output starts with the line ``COMPLETE_TASK_AND_SUBMIT_FINAL_OUTPUT`` submits at once
+  (mini-SWE-agent's sentinel, checked by ``DefaultAgent.has_finished`` in minisweagent/agents/default.py;
+  no review there).
+
+Per-episode limits (:class:`~workers.sandbox.base.SandboxLimits` ``max_commands`` and
+``wall_time_s``, and a total of output bytes) are enforced here: the call that reaches one is
+answered, then the episode ends with the current diff judged (SWE-agent's submission after an
+exhausted budget), ``end_reason`` ``step_cap`` (commands) or ``episode_limit``.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import subprocess
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import replace
+from typing import Any
+
+from recap.env import Demonstration, EnvError, Environment, InvalidActionError, Reset, Step
+from recap.llm import ToolDef
+from schemas.kinds import EndReason
+from workers.sandbox.base import Sandbox, SandboxError, SandboxLimits, SandboxSpec
+
+from . import tools as T
+from .evaluate import Evaluation, evaluate
+from .expert import parse_patch, replacements
+from .instances import SweInstance
+from .rules import goal_text, review_text, rules_text
+
+#: mini-SWE-agent's submit line: a command whose output's first line is this hands in the diff
+SUBMIT_SENTINEL = "COMPLETE_TASK_AND_SUBMIT_FINAL_OUTPUT"
+#: default total of output bytes one episode may produce (all its observations together)
+DEFAULT_TOTAL_OUTPUT_BYTES = 5_000_000
+#: where the submission diff is written inside the sandbox (never part of the diff itself)
+SUBMISSION_FILE = ".git/recap-eval-submission.patch"
+
+OpenSandbox = Callable[[SandboxSpec], Sandbox]
+
+
+class SweEnvironment(Environment):
+    """A SWE-bench instance in a sandbox opened at reset (``open_sandbox``), closed by :meth:`close`."""
+
+    benchmark = "swe"
+    invalid_action_mode = "step"
+    partially_observed = True
+
+    def __init__(
+        self,
+        instance: SweInstance,
+        open_sandbox: OpenSandbox,
+        *,
+        split: str = "custom",
+        limits: SandboxLimits | None = None,
+        image: str = SandboxSpec.image,
+        labels: Mapping[str, str] | None = None,
+        total_output_bytes: int = DEFAULT_TOTAL_OUTPUT_BYTES,
+        eval_timeout_s: float | None = None,
+    ) -> None:
+        self.instance = instance
+        self.instance_id = instance.id
+        self.split = split
+        self.task = instance.instance_id
+        self.limits = limits if limits is not None else SandboxLimits()
+        self.max_steps = self.limits.max_commands
+        self.total_output_bytes = total_output_bytes
+        self.eval_timeout_s = eval_timeout_s if eval_timeout_s is not None else instance.eval_timeout_s
+        self.spec = SandboxSpec(
+            repo_path=instance.repo_path,
+            base_commit=instance.base_commit,
+            image=image,
+            limits=self.limits,
+            labels=dict(labels or {}),
+        )
+        self._open = open_sandbox
+        self._sandbox: Sandbox | None = None
+        self.evaluation: Evaluation | None = None
+        self._clear()
+
+    def _clear(self) -> None:
+        self._steps_taken = 0
+        self._time_used = 0.0
+        self._output_used = 0
+        self._submit_stage = 0
+        self._done = False
+        self._viewed: set[str] = set()
+        self._commands_run: set[str] = set()
+        self._patch = ""
+        self.evaluation = None
+
+    # -- sandbox ---------------------------------------------------------------------------------
+    @property
+    def workdir(self) -> str:
+        """The repository folder as commands see it (the spec's until a sandbox is open)."""
+        return self._sandbox.workdir if self._sandbox is not None else self.spec.workdir
+
+    def _box(self) -> Sandbox:
+        if self._sandbox is None:
+            raise EnvError(f"{self.instance_id}: call reset() before acting")
+        return self._sandbox
+
+    def _open_clean(self) -> Sandbox:
+        """A fresh sandbox at the base commit for the evaluation, its commands allowed the test run's time."""
+        t = self.eval_timeout_s
+        limits = replace(self.limits, command_timeout_s=max(self.limits.command_timeout_s, t), wall_time_s=t + 600.0)
+        return self._open(replace(self.spec, limits=limits))
+
+    # -- episode ---------------------------------------------------------------------------------
+    def reset(self) -> Reset:
+        """A fresh sandbox at the base commit; the issue text as the first observation."""
+        self.close()
+        self._clear()
+        try:
+            self._sandbox = self._open(self.spec)
+        except SandboxError as exc:
+            raise EnvError(f"{self.instance_id}: the sandbox cannot be opened: {exc}") from exc
+        return Reset(observation=self.instance.problem_statement, valid_actions=None, goal=goal_text(self.workdir))
+
+    def tool_defs(self) -> tuple[ToolDef, ...]:
+        """bash, view, str_replace, create, submit (:mod:`.tools`), describing this episode's limits."""
+        return T.tool_defs(self.workdir, self.limits)
+
+    def call_tool(self, name: str, args: Mapping[str, Any]) -> Step:
+        """One tool call; a refused one is an ``Error:`` observation with ``info["error"]``."""
+        box = self._start_call()
+        defs = {t.name: t for t in self.tool_defs()}
+        started = time.monotonic()
+        try:
+            if name not in defs:
+                out = T.refused(f"unknown tool {name!r}; the tools are {', '.join(defs)}")
+            elif (problem := T.check_args(defs[name], args)) is not None:
+                out = T.refused(problem)
+            elif name == T.SUBMIT:
+                return self._submit(review=True, started=started)
+            else:
+                out = self._run_tool(box, name, args)
+        except SandboxError as exc:
+            raise EnvError(f"{self.instance_id}: the sandbox failed: {exc}") from exc
+        return self._after(out)
+
+    def _run_tool(self, box: Sandbox, name: str, args: Mapping[str, Any]) -> T.ToolOutcome:
+        if name == T.BASH:
+            self._commands_run.add(args["command"])
+            return T.run_bash(box, self.limits, args["command"])
+        if name == T.VIEW:
+            out = T.run_view(box, self.limits, args["path"], args.get("view_range"))
+            rel = T.repo_relative(box.workdir, args["path"])
+            if out.error is None and rel is not None:
+                self._viewed.add(rel)
+            return out
+        if name == T.STR_REPLACE:
+            return T.run_str_replace(box, self.limits, args["path"], args["old_str"], args.get("new_str", ""))
+        return T.run_create(box, self.limits, args["path"], args["file_text"])
+
+    def step(self, action: str) -> Step:
+        """The text action: one bash command (mini-SWE-agent); its sentinel output submits at once."""
+        if not isinstance(action, str):
+            raise InvalidActionError(f"a SWE-bench text action is a bash command string, got {type(action).__name__}")
+        box = self._start_call()
+        started = time.monotonic()
+        try:
+            self._commands_run.add(action)
+            out = T.run_bash(box, self.limits, action)
+            if out.error is None and _is_sentinel(out.observation):
+                return self._submit(review=False, started=started, spent=out)
+        except SandboxError as exc:
+            raise EnvError(f"{self.instance_id}: the sandbox failed: {exc}") from exc
+        return self._after(out)
+
+    def _start_call(self) -> Sandbox:
+        box = self._box()
+        if self._done:
+            raise EnvError(f"{self.instance_id}: the episode is over; call reset() to play again")
+        return box
+
+    def _after(self, out: T.ToolOutcome, extra_s: float = 0.0) -> Step:
+        """Count the call against the episode's limits; end the episode when one is reached."""
+        self._steps_taken += 1
+        self._time_used += out.duration_s + extra_s
+        self._output_used += out.output_bytes
+        limit = self._limit_reached()
+        if limit is None:
+            return Step(out.observation, None, False, False, out.info())
+        reason, note = limit
+        ev = self._judge()
+        info = {**out.info(), **self._verdict_info(ev), "limit": note}
+        if not ev.resolved:
+            info["end_reason"] = reason
+        obs = f"{out.observation}\n[{note}: the episode ends and your current changes are submitted]"
+        return Step(obs, None, True, ev.resolved, info)
+
+    def _limit_reached(self) -> tuple[EndReason, str] | None:
+        if self._steps_taken >= self.limits.max_commands:
+            return "step_cap", f"command limit reached ({self.limits.max_commands} commands)"
+        if self._time_used >= self.limits.wall_time_s:
+            return "episode_limit", f"time limit reached ({self.limits.wall_time_s:g} seconds of commands)"
+        if self._output_used >= self.total_output_bytes:
+            return "episode_limit", f"output limit reached ({self.total_output_bytes} bytes in all)"
+        return None
+
+    # -- submission ------------------------------------------------------------------------------
+    def current_diff(self) -> str:
+        """The repository's changes against the base commit, new files included (it stages everything)."""
+        box = self._box()
+        res = box.run(f"git add -A && git diff --cached {self.instance.base_commit} > {SUBMISSION_FILE}")
+        if res.exit_code != 0:
+            raise SandboxError(f"git diff failed in the sandbox: {res.output.strip()[:300]}")
+        return box.read_file(SUBMISSION_FILE).decode("utf-8", errors="replace")
+
+    def _submit(self, *, review: bool, started: float, spent: T.ToolOutcome | None = None) -> Step:
+        if review and self._submit_stage == 0:
+            self._submit_stage = 1
+            diff = self.current_diff()
+            out = T.ToolOutcome(observation=review_text(diff), exit_code=0)
+            out.output_bytes = len(out.observation.encode("utf-8"))
+            text, cut = T.cap_text(out.observation, self.limits.output_bytes)
+            out.observation = text + (f"\n[output cut: the first {self.limits.output_bytes} bytes are shown]" if cut else "")
+            out.duration_s = time.monotonic() - started
+            return self._after(out)
+        self._steps_taken += 1
+        ev = self._judge()
+        base = spent if spent is not None else T.ToolOutcome(observation="", exit_code=0)
+        base.duration_s = time.monotonic() - started
+        info = {**base.info(), **self._verdict_info(ev)}
+        if not ev.resolved:
+            info["end_reason"] = "agent_done"
+        return Step(submitted_text(ev), None, True, ev.resolved, info)
+
+    def _judge(self) -> Evaluation:
+        """Take the diff, end the episode, judge the diff on a clean copy."""
+        diff = self.current_diff()
+        self._done = True
+        self.evaluation = evaluate(self.instance, diff, self._open_clean)
+        self._patch = diff
+        return self.evaluation
+
+    def _verdict_info(self, ev: Evaluation) -> dict[str, Any]:
+        return {"patch": self._patch, "resolved": ev.resolved, "eval_reason": ev.reason, "tests": dict(ev.tests)}
+
+    # -- prompt material -------------------------------------------------------------------------
+    def rules(self) -> str:
+        """Where the repository is, the tools, the limits, no network, tests left alone (:mod:`.rules`)."""
+        return rules_text(self.workdir, self.limits, self.total_output_bytes, SUBMIT_SENTINEL)
+
+    def demonstration(self) -> Demonstration | None:
+        """None: the paper runs SWE-bench with no demonstration (appendix, SWE-bench details)."""
+        return None
+
+    # -- the offline expert ----------------------------------------------------------------------
+    def expert_plan(self) -> list[str] | None:
+        """The rest of the gold patch's play as JSON tool calls (``{"name", "arguments"}``): for each
+        file not yet as the gold patch leaves it, view it (once), put it back at the base commit
+        when it was changed otherwise, then one ``str_replace`` per hunk (``create`` for a new file);
+        then the FAIL_TO_PASS tests' files through bash (once; the tests themselves arrive with the
+        evaluation's test patch) and ``submit`` twice (review, then final).
+        None once the episode is over, or for a gold patch with binary files."""
+        if self._done:
+            return None
+        files = parse_patch(self.instance.patch)
+        if any(f.binary for f in files):
+            return None
+        calls: list[dict[str, Any]] = []
+        for f in files:
+            calls += self._expert_file(f)
+        test_files = dict.fromkeys(t.split("::", 1)[0] for t in self.instance.fail_to_pass)  # the new tests are not here yet
+        test = f"{self.instance.test_cmd} " + " ".join(_quote(f) for f in test_files)
+        if self._submit_stage == 0 and test not in self._commands_run:
+            calls.append({"name": T.BASH, "arguments": {"command": test}})
+        calls += [{"name": T.SUBMIT, "arguments": {}}] * (2 - self._submit_stage)
+        return [json.dumps(c) for c in calls]
+
+    def _expert_file(self, f: Any) -> list[dict[str, Any]]:
+        shown = T.shown_path(self.workdir, f.path)
+        base = self._base_text(f.old_path) if f.old_path is not None else None
+        current = self._current_text(f.path)
+        if f.new_path is None:  # deleted by the gold patch
+            return [] if current is None else [{"name": T.BASH, "arguments": {"command": f"rm {_quote(shown)}"}}]
+        pairs, gold = replacements(base or "", f.hunks)
+        if current == gold:
+            return []
+        calls: list[dict[str, Any]] = []
+        if base is None:  # created by the gold patch
+            if current is not None:
+                calls.append({"name": T.BASH, "arguments": {"command": f"rm {_quote(shown)}"}})
+            return [*calls, {"name": T.CREATE, "arguments": {"path": shown, "file_text": gold}}]
+        if f.path not in self._viewed:
+            calls.append({"name": T.VIEW, "arguments": {"path": shown}})
+        if current != base:
+            ref = _quote(self.instance.base_commit)
+            calls.append({"name": T.BASH, "arguments": {"command": f"git checkout {ref} -- {_quote(f.path)}"}})
+        calls += [{"name": T.STR_REPLACE, "arguments": {"path": shown, "old_str": o, "new_str": n}} for o, n in pairs]
+        return calls
+
+    def _base_text(self, path: str) -> str:
+        proc = subprocess.run(
+            ["git", "-C", self.instance.repo_path, "show", f"{self.instance.base_commit}:{path}"],
+            capture_output=True,
+            check=False,
+        )
+        if proc.returncode != 0:
+            raise EnvError(f"{self.instance_id}: the gold patch names {path}, which the base commit lacks")
+        return proc.stdout.decode("utf-8", errors="replace")
+
+    def _current_text(self, path: str) -> str | None:
+        if self._sandbox is None:
+            return self._base_text(path) if self._exists_at_base(path) else None
+        try:
+            return self._sandbox.read_file(path).decode("utf-8", errors="replace")
+        except (FileNotFoundError, IsADirectoryError):
+            return None
+
+    def _exists_at_base(self, path: str) -> bool:
+        proc = subprocess.run(
+            ["git", "-C", self.instance.repo_path, "cat-file", "-e", f"{self.instance.base_commit}:{path}"],
+            capture_output=True,
+            check=False,
+        )
+        return proc.returncode == 0
+
+    def close(self) -> None:
+        """Close the episode's sandbox (safe to call twice)."""
+        box, self._sandbox = self._sandbox, None
+        if box is not None:
+            box.close()
+
+
+def _is_sentinel(output: str) -> bool:
+    """Whether a command's output starts with the submit line (mini-SWE-agent: first line, stripped)."""
+    return output.lstrip().split("\n", 1)[0].strip() == SUBMIT_SENTINEL
+
+
+def _quote(text: str) -> str:
+    return shlex.quote(text)
+
+
+def submitted_text(ev: Evaluation) -> str:
+    """The final observation: the submission was taken, and (for the record) how it was judged."""
+    failing = [t for t, s in ev.tests.items() if s not in ("PASSED", "XFAIL")]
+    verdict = {
+        "resolved": "it resolves the issue (every listed test passes)",
+        "no_patch": "it changes nothing",
+        "patch_failed": "it does not apply to a clean copy of the repository",
+        "tests_failed": f"tests still fail: {', '.join(failing)}",
+        "timeout": "the tests ran past the time limit",
+    }[ev.reason]
+    return f"Your changes were submitted; {verdict}."

@@ -1,0 +1,382 @@
+"""The tools a coding model calls, and how each runs against a :class:`~workers.sandbox.base.Sandbox`.
+
+The set follows what SWE-agent gives the paper's ReCAP runs (swebench-recap/config/recap.yaml:116-139:
+the bash tool, ``tools/edit_anthropic`` and ``tools/review_on_submit_m``): one ``bash`` command
+per call; the editor split into ``view`` (a file as ``cat -n`` shows it, a folder two levels deep,
+tools/edit_anthropic/config.yaml:10), ``str_replace`` (``old_str`` must occur exactly once, :16-17)
+and ``create`` (never over an existing file, :11); and ``submit`` without arguments (the review
+step lives in the environment, :mod:`.env`). Descriptions are our own words and state the limits.
+
+A refused call (unknown tool, an argument missing, unknown or of the wrong type, a path outside the
+repository, ``old_str`` found zero or several times) is an observation that says why plus
+``info["error"]``; nothing here raises for what a model wrote. A broken sandbox raises
+:class:`~workers.sandbox.base.SandboxError`.
+"""
+
+from __future__ import annotations
+
+import posixpath
+import shlex
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from recap.llm import ToolDef
+from workers.sandbox.base import CommandResult, Sandbox, SandboxLimits
+
+BASH = "bash"
+VIEW = "view"
+STR_REPLACE = "str_replace"
+CREATE = "create"
+SUBMIT = "submit"
+TOOL_NAMES = (BASH, VIEW, STR_REPLACE, CREATE, SUBMIT)
+#: lines shown around an edit so the model sees its result
+SNIPPET_LINES = 4
+
+
+def tool_defs(workdir: str, limits: SandboxLimits) -> tuple[ToolDef, ...]:
+    """The five tools, their descriptions naming the repository folder and the limits."""
+    path_arg = {
+        "type": "string",
+        "description": f"A path inside the repository: absolute (under {workdir}) or relative to {workdir}.",
+    }
+    cap = limits.output_bytes
+    return (
+        ToolDef(
+            BASH,
+            f"Run one shell command with bash in {workdir} (each call starts there; no state but the files carries over). "
+            f"A command is stopped after {limits.command_timeout_s:g} seconds. The model sees at most {cap} bytes of its "
+            "combined stdout and stderr; longer output is cut and the cut is said. No network. Do not start "
+            "interactive programs (editors, pagers, a Python prompt).",
+            {
+                "type": "object",
+                "properties": {"command": {"type": "string", "description": "The command line to run."}},
+                "required": ["command"],
+                "additionalProperties": False,
+            },
+        ),
+        ToolDef(
+            VIEW,
+            "Show a file with numbered lines (as `cat -n` prints it), or, for a folder, the files and folders in it "
+            f"up to two levels down (hidden ones left out). Output past {cap} bytes is cut.",
+            {
+                "type": "object",
+                "properties": {
+                    "path": path_arg,
+                    "view_range": {
+                        "type": "array",
+                        "items": {"type": "integer"},
+                        "minItems": 2,
+                        "maxItems": 2,
+                        "description": "Files only: [first, last] line to show, counting from 1; last -1 means to the end.",
+                    },
+                },
+                "required": ["path"],
+                "additionalProperties": False,
+            },
+        ),
+        ToolDef(
+            STR_REPLACE,
+            "Replace text in a file: `old_str` must appear in the file exactly once, character for character "
+            "(whitespace and indentation included), and is replaced by `new_str`. When it appears several times, "
+            "add surrounding lines until it is unique. The edited region is shown afterwards.",
+            {
+                "type": "object",
+                "properties": {
+                    "path": path_arg,
+                    "old_str": {
+                        "type": "string",
+                        "description": "The exact text to replace (one or more whole lines is safest).",
+                    },
+                    "new_str": {
+                        "type": "string",
+                        "description": "The replacement text; leave it out or empty to delete old_str.",
+                    },
+                },
+                "required": ["path", "old_str"],
+                "additionalProperties": False,
+            },
+        ),
+        ToolDef(
+            CREATE,
+            "Create a new file with the given text (its folders are made). Refused when the path already exists; "
+            "use str_replace to change an existing file.",
+            {
+                "type": "object",
+                "properties": {
+                    "path": path_arg,
+                    "file_text": {"type": "string", "description": "The whole content of the new file."},
+                },
+                "required": ["path", "file_text"],
+                "additionalProperties": False,
+            },
+        ),
+        ToolDef(
+            SUBMIT,
+            "Hand in your changes (the repository's diff against the starting commit) when the issue is resolved. "
+            "The first call shows your diff and asks you to review it; calling submit again ends the task.",
+            {"type": "object", "properties": {}, "additionalProperties": False},
+        ),
+    )
+
+
+@dataclass
+class ToolOutcome:
+    """What a tool call produced: the observation and the ``tool_calls`` row's fields."""
+
+    observation: str
+    exit_code: int | None = None
+    duration_s: float = 0.0
+    output_bytes: int = 0
+    timed_out: bool = False
+    error: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def info(self) -> dict[str, Any]:
+        """``Step.info``: exit_code, duration_s, output_bytes, timed_out, error (and extras)."""
+        return {
+            "exit_code": self.exit_code,
+            "duration_s": self.duration_s,
+            "output_bytes": self.output_bytes,
+            "timed_out": self.timed_out,
+            "error": self.error,
+            **self.extra,
+        }
+
+
+def refused(message: str) -> ToolOutcome:
+    """A call the tool refused: the observation says why, ``error`` holds the same line."""
+    return ToolOutcome(observation=f"Error: {message}", error=message)
+
+
+_JSON_TYPES = {"string": str, "integer": int, "array": list, "object": dict}
+
+
+def check_args(tool: ToolDef, args: Mapping[str, Any] | None) -> str | None:
+    """Why ``args`` do not fit ``tool``'s schema (a missing, unknown or wrongly typed argument), or None."""
+    if not isinstance(args, Mapping):
+        return f"{tool.name}: the arguments must be a JSON object"
+    props: Mapping[str, Any] = tool.parameters.get("properties", {})
+    for name in tool.parameters.get("required", ()):
+        if name not in args:
+            return f"{tool.name}: missing argument {name!r}"
+    for name, value in args.items():
+        if name not in props:
+            accepted = ", ".join(props) or "none"
+            return f"{tool.name}: unknown argument {name!r} (accepted: {accepted})"
+        schema = props[name]
+        kind = schema["type"]
+        if isinstance(value, bool) or not isinstance(value, _JSON_TYPES[kind]):
+            return f"{tool.name}: argument {name!r} must be a{'n' if kind[0] in 'aeio' else ''} {kind}, got {_json_type(value)}"
+        if isinstance(value, list):
+            item = schema.get("items", {}).get("type")
+            if item and any(isinstance(v, bool) or not isinstance(v, _JSON_TYPES[item]) for v in value):
+                return f"{tool.name}: argument {name!r} must be a list of {item}s"
+            lo, hi = schema.get("minItems"), schema.get("maxItems")
+            if (lo is not None and len(value) < lo) or (hi is not None and len(value) > hi):
+                return f"{tool.name}: argument {name!r} must have {lo} items, got {len(value)}"
+    return None
+
+
+def _json_type(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "boolean"
+    for name, cls in _JSON_TYPES.items():
+        if isinstance(value, cls):
+            return name
+    return "number" if isinstance(value, float) else type(value).__name__
+
+
+def repo_relative(workdir: str, path: str) -> str | None:
+    """``path`` (absolute, or relative to ``workdir``) as a path relative to the repository root
+    (``.`` for the root itself), or None when it leads outside the repository."""
+    root = posixpath.normpath(workdir)
+    full = posixpath.normpath(path if posixpath.isabs(path) else posixpath.join(root, path))
+    if full == root:
+        return "."
+    if not full.startswith(root.rstrip("/") + "/"):
+        return None
+    rel = full[len(root.rstrip("/")) + 1 :]
+    return rel
+
+
+def shown_path(workdir: str, rel: str) -> str:
+    """The absolute path the model sees for a repository-relative ``rel``."""
+    root = posixpath.normpath(workdir)
+    return root if rel == "." else posixpath.join(root, rel)
+
+
+def cap_text(text: str, limit: int) -> tuple[str, bool]:
+    """``text`` cut to ``limit`` UTF-8 bytes (on a character boundary) and whether it was cut."""
+    data = text.encode("utf-8")
+    if len(data) <= limit:
+        return text, False
+    return data[:limit].decode("utf-8", errors="ignore"), True
+
+
+def numbered(lines: list[str], first: int) -> str:
+    """``lines`` numbered from ``first`` as ``cat -n`` prints them (six-wide number, a tab)."""
+    return "\n".join(f"{n:6}\t{line}" for n, line in enumerate(lines, start=first))
+
+
+def command_observation(res: CommandResult, limits: SandboxLimits, timeout_s: float) -> str:
+    """What the model sees of a command: its output, then a bracketed line for a cut, a timeout or
+    a non-zero exit; ``[no output]`` when there is nothing else."""
+    parts = [res.output.rstrip("\n")] if res.output.strip() else []
+    if res.truncated:
+        parts.append(f"[output cut: the first {limits.output_bytes} of {res.output_bytes} bytes are shown]")
+    if res.timed_out:
+        parts.append(f"[the command was stopped after {timeout_s:g} seconds]")
+    elif res.exit_code not in (0, None):
+        parts.append(f"[exit code {res.exit_code}]")
+    return "\n".join(parts) if parts else "[no output]"
+
+
+def run_bash(sandbox: Sandbox, limits: SandboxLimits, command: str) -> ToolOutcome:
+    """One shell command, its observation and the ``tool_calls`` fields."""
+    if not command.strip():
+        return refused("bash: the command is empty")
+    res = sandbox.run(command, timeout_s=limits.command_timeout_s)
+    return ToolOutcome(
+        observation=command_observation(res, limits, limits.command_timeout_s),
+        exit_code=res.exit_code,
+        duration_s=res.duration_s,
+        output_bytes=res.output_bytes,
+        timed_out=res.timed_out,
+    )
+
+
+def _read_text(sandbox: Sandbox, rel: str, shown: str) -> tuple[str | None, ToolOutcome | None]:
+    """A file's text, or the refusal saying why it cannot be had (missing, a folder, not UTF-8)."""
+    try:
+        data = sandbox.read_file(rel)
+    except FileNotFoundError:
+        return None, refused(f"{shown} does not exist")
+    except IsADirectoryError:
+        return None, refused(f"{shown} is a directory")
+    except PermissionError:
+        return None, refused(f"{shown} cannot be read (permission denied)")
+    try:
+        return data.decode("utf-8"), None
+    except UnicodeDecodeError:
+        return None, refused(f"{shown} is not a UTF-8 text file")
+
+
+def _finish(out: ToolOutcome, limits: SandboxLimits, started: float) -> ToolOutcome:
+    """``out`` with its output cut to the cap (and the cut said), timed, sized."""
+    size = len(out.observation.encode("utf-8"))
+    text, cut = cap_text(out.observation, limits.output_bytes)
+    if cut:
+        text += f"\n[output cut: the first {limits.output_bytes} of {size} bytes are shown]"
+    out.observation = text
+    out.output_bytes = size
+    out.duration_s = time.monotonic() - started
+    return out
+
+
+def run_view(sandbox: Sandbox, limits: SandboxLimits, path: str, view_range: list[int] | None) -> ToolOutcome:
+    """A file numbered (``view_range`` lines only) or a folder's listing two levels deep."""
+    started = time.monotonic()
+    rel = repo_relative(sandbox.workdir, path)
+    if rel is None:
+        return refused(f"view: {path} is outside the repository {sandbox.workdir}")
+    shown = shown_path(sandbox.workdir, rel)
+    try:
+        data = sandbox.read_file(rel)
+    except IsADirectoryError:
+        if view_range is not None:
+            return refused(f"view: view_range is for files, and {shown} is a directory")
+        res = sandbox.run(f"find {shlex.quote(shown)} -maxdepth 2 -not -path '*/.*' | LC_ALL=C sort")
+        if res.exit_code != 0:
+            return refused(f"view: cannot list {shown}: {res.output.strip()}")
+        head = f"Files and directories in {shown}, up to 2 levels deep (hidden ones left out):\n"
+        return _finish(ToolOutcome(observation=head + res.output.rstrip("\n"), exit_code=0), limits, started)
+    except FileNotFoundError:
+        return refused(f"view: {shown} does not exist")
+    except PermissionError:
+        return refused(f"view: {shown} cannot be read (permission denied)")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        return refused(f"view: {shown} is not a UTF-8 text file")
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    first, last = 1, len(lines)
+    if view_range is not None:
+        first, last = view_range
+        if not 1 <= first <= max(len(lines), 1):
+            return refused(f"view: view_range starts at line {first}, but {shown} has {len(lines)} lines")
+        if last == -1:
+            last = len(lines)
+        elif not first <= last <= len(lines):
+            return refused(f"view: view_range ends at line {last}; it must be -1 or between {first} and {len(lines)}")
+    body = numbered(lines[first - 1 : last], first)
+    head = f"{shown} (lines {first}-{last} of {len(lines)}):\n" if view_range is not None else f"{shown}:\n"
+    return _finish(ToolOutcome(observation=head + body, exit_code=0), limits, started)
+
+
+def _snippet(text: str, start_line: int, n_lines: int) -> str:
+    """The lines ``start_line`` (1-based) .. +``n_lines`` with :data:`SNIPPET_LINES` around, numbered."""
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    lo = max(start_line - SNIPPET_LINES, 1)
+    hi = min(start_line + max(n_lines, 1) - 1 + SNIPPET_LINES, len(lines))
+    return numbered(lines[lo - 1 : hi], lo)
+
+
+def run_str_replace(sandbox: Sandbox, limits: SandboxLimits, path: str, old_str: str, new_str: str) -> ToolOutcome:
+    """Replace the one occurrence of ``old_str``; refused when it occurs zero or several times."""
+    started = time.monotonic()
+    rel = repo_relative(sandbox.workdir, path)
+    if rel is None:
+        return refused(f"str_replace: {path} is outside the repository {sandbox.workdir}")
+    shown = shown_path(sandbox.workdir, rel)
+    if not old_str:
+        return refused("str_replace: old_str is empty")
+    text, problem = _read_text(sandbox, rel, shown)
+    if text is None:
+        assert problem is not None
+        problem.error = f"str_replace: {problem.error}"
+        problem.observation = f"Error: {problem.error}"
+        return problem
+    count = text.count(old_str)
+    if count == 0:
+        return refused(f"str_replace: old_str does not occur in {shown} (it must match exactly, whitespace included)")
+    first_at = text.find(old_str)
+    second_at = text.find(old_str, first_at + 1)
+    if second_at != -1:
+        starts, at = [], first_at
+        while at != -1:
+            starts.append(text.count("\n", 0, at) + 1)
+            at = text.find(old_str, at + 1)
+        where = ", ".join(str(n) for n in starts)
+        return refused(
+            f"str_replace: old_str occurs {len(starts)} times in {shown} (starting on lines {where}); "
+            "include more surrounding lines so it occurs once"
+        )
+    new_text = text[:first_at] + new_str + text[first_at + len(old_str) :]
+    sandbox.write_file(rel, new_text.encode("utf-8"))
+    line = text.count("\n", 0, first_at) + 1
+    snippet = _snippet(new_text, line, new_str.count("\n") + 1)
+    obs = f"Edited {shown}. The region around the change now reads:\n{snippet}"
+    return _finish(ToolOutcome(observation=obs, exit_code=0), limits, started)
+
+
+def run_create(sandbox: Sandbox, limits: SandboxLimits, path: str, file_text: str) -> ToolOutcome:
+    """Write a new file; refused when the path exists."""
+    started = time.monotonic()
+    rel = repo_relative(sandbox.workdir, path)
+    if rel is None or rel == ".":
+        return refused(f"create: {path} is outside the repository {sandbox.workdir}")
+    shown = shown_path(sandbox.workdir, rel)
+    exists = sandbox.run(f"test -e {shlex.quote(shown)} || test -L {shlex.quote(shown)}")
+    if exists.exit_code == 0:
+        return refused(f"create: {shown} already exists; use str_replace to change it")
+    sandbox.write_file(rel, file_text.encode("utf-8"))
+    n = len(file_text.split("\n")) - (1 if file_text.endswith("\n") else 0)
+    return _finish(ToolOutcome(observation=f"Created {shown} ({n} lines).", exit_code=0), limits, started)
