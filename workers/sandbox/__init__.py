@@ -24,6 +24,18 @@ from workers.sandbox.cleanup import remove_labelled
 from workers.sandbox.repo_copy import check_repo
 
 
+def check_ready(kind: SandboxKind | str, image: str) -> None:
+    """SandboxError (one line) unless a sandbox of ``kind`` can start here: for ``docker`` the
+    daemon answers and ``image`` exists (checked before a sweep runs: a missing image is refused
+    in preflight, not found by an episode); a ``local`` sandbox needs nothing."""
+    if kind not in SANDBOX_KINDS:
+        raise SandboxError(f"unknown sandbox kind {kind!r} (known: {', '.join(SANDBOX_KINDS)})")
+    if kind == "docker":
+        from workers.sandbox.docker_sandbox import check_image  # the Docker SDK only where docker is asked for
+
+        check_image(image)
+
+
 def open_sandbox(kind: SandboxKind | str, spec: SandboxSpec) -> Sandbox:
     """Start a sandbox of ``kind`` for ``spec``; SandboxError (one line) when it cannot."""
     if kind not in SANDBOX_KINDS:
@@ -49,6 +61,7 @@ __all__ = [
     "SandboxKind",
     "SandboxLimits",
     "SandboxSpec",
+    "check_ready",
     "open_sandbox",
     "remove_labelled",
 ]

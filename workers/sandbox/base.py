@@ -112,6 +112,11 @@ class Sandbox(ABC):
     def close(self) -> None:
         """Stop and remove everything this sandbox started; safe to call twice."""
 
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` ran (implementations set ``_closed``)."""
+        return bool(getattr(self, "_closed", False))
+
     def __enter__(self) -> Sandbox:
         return self
 

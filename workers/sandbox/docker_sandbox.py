@@ -71,6 +71,17 @@ def docker_client(timeout_s: float = 120.0) -> Any:
     return client
 
 
+def check_image(image: str, client: Any = None) -> None:
+    """SandboxError (one line, how to fix it) unless the daemon answers and ``image`` exists."""
+    import docker.errors
+
+    client = client or docker_client(10.0)
+    try:
+        client.images.get(image)
+    except docker.errors.ImageNotFound:
+        raise SandboxError(f"the sandbox image {image} is missing; build it with `bash scripts/build_sandbox_image.sh`") from None
+
+
 def truncate(data: bytes, cap: int) -> str:
     """The model's view of ``data`` cut to ``cap`` bytes (a multi-byte character cut in two is
     replaced, never an error)."""
@@ -92,12 +103,7 @@ class DockerSandbox(Sandbox):
         self._container: Any = None
         # reads must outlast the longest command (the SDK's default read timeout is 60 s)
         self._client = client or docker_client(spec.limits.command_timeout_s + 2 * GUARD_GRACE_S + 60)
-        try:
-            self._client.images.get(spec.image)
-        except docker.errors.ImageNotFound:
-            raise SandboxError(
-                f"the sandbox image {spec.image} is missing; build it with `bash scripts/build_sandbox_image.sh`"
-            ) from None
+        check_image(spec.image, self._client)
         lim = spec.limits
         env = {**BASE_ENV, **spec.env}
         with tempfile.TemporaryDirectory(prefix="recap-sandbox-clone-") as tmp:

@@ -14,12 +14,13 @@ Options of :meth:`SweBenchmark.make` (and of a sweep's ``environments[].options`
   test run (default: the record's, else 30 minutes);
 - ``step_multiplier`` and ``seed`` are accepted and have no effect (a fixed cap; no randomness);
 - ``open_sandbox``: a callable ``SandboxSpec -> Sandbox`` a caller passes in (tests), used instead
-  of ``sandbox``.
+  of ``sandbox``;
+- ``sandbox_labels``: the labels of the sandbox (the episode worker sets them from
+  :meth:`SweBenchmark.owner_options`: run, worker, episode), by which leftovers are removed.
 """
 
 from __future__ import annotations
 
-import importlib
 import os
 from collections.abc import Callable, Mapping
 from functools import lru_cache, partial
@@ -28,6 +29,7 @@ from typing import Any
 
 from recap.env import Environment, UnknownInstanceError
 from workers.envs.registry import Benchmark
+from workers.sandbox import LABEL_EPISODE, LABEL_RUN, LABEL_WORKER, check_ready, open_sandbox, remove_labelled
 from workers.sandbox.base import SANDBOX_KINDS, SandboxLimits, SandboxSpec
 
 from .env import DEFAULT_TOTAL_OUTPUT_BYTES, OpenSandbox, SweEnvironment
@@ -52,6 +54,7 @@ ACCEPTED = (
     "eval_timeout_s",
     "step_multiplier",
     "seed",
+    "sandbox_labels",
     "open_sandbox",
 )
 
@@ -89,18 +92,24 @@ def _positive(name: str, value: Any, kind: type) -> Any:
 
 
 def default_open_sandbox(kind: str) -> OpenSandbox:
-    """``workers.sandbox.open_sandbox`` bound to ``kind`` (looked up when asked, so this module
-    loads where no sandbox kind is installed)."""
-    opener = getattr(importlib.import_module("workers.sandbox"), "open_sandbox", None)
-    if opener is None:
-        raise ValueError(f"sandbox {kind!r} is not available here: workers.sandbox has no open_sandbox")
-    return partial(opener, kind)
+    """:func:`workers.sandbox.open_sandbox` bound to ``kind``."""
+    return partial(open_sandbox, kind)
 
 
 class SweBenchmark(Benchmark):
     """SWE-bench's registry entry: records from ``options.instances_file``, episodes in a sandbox."""
 
     name = BENCHMARK_NAME
+
+    def owner_options(self, run_id: str, worker_id: str, episode_id: str) -> dict[str, Any]:
+        """The sandbox's labels: the run, the worker and the episode that own it."""
+        return {"sandbox_labels": {LABEL_RUN: run_id, LABEL_WORKER: worker_id, LABEL_EPISODE: episode_id}}
+
+    def remove_leftovers(self, run_id: str, worker_id: str | None = None) -> int:
+        """Remove the sandboxes (containers, local process groups and folders) the run's workers,
+        or one of them, left: :func:`workers.sandbox.remove_labelled` by their labels."""
+        labels = {LABEL_RUN: run_id, **({LABEL_WORKER: worker_id} if worker_id is not None else {})}
+        return remove_labelled(labels)
 
     def refuses_method(self, method: str) -> str | None:
         """CoT, Standard, Act, ADaPT: see :data:`REFUSED_METHODS`; ReCAP and ReAct run."""
@@ -136,7 +145,7 @@ class SweBenchmark(Benchmark):
         ValueError for an unknown or bad option, UnknownInstanceError for an id the file lacks."""
         unknown = sorted(set(options) - set(ACCEPTED))
         if unknown:
-            raise ValueError(f"unknown swe option(s) {', '.join(unknown)}; accepted: {', '.join(ACCEPTED[:-1])}")
+            raise ValueError(f"unknown swe option(s) {', '.join(unknown)}; accepted: {', '.join(ACCEPTED[:-2])}")
         self.canonical_id(instance_id)
         path, insts = instances_of(options)
         kind = options.get("sandbox", "docker")
@@ -162,6 +171,13 @@ class SweBenchmark(Benchmark):
         opener: Callable[..., Any] | None = options.get("open_sandbox")
         if opener is not None and not callable(opener):
             raise ValueError(f"open_sandbox must be a callable SandboxSpec -> Sandbox, got {opener!r}")
+        labels = options.get("sandbox_labels") or {}
+        if not isinstance(labels, Mapping) or not all(isinstance(v, str) for v in labels.values()):
+            raise ValueError(f"sandbox_labels must map label names to strings, got {labels!r}")
+        if opener is None:
+            # the daemon and the image, checked when the environment is made: a sweep's preflight
+            # refuses a missing image before any episode (or any money) starts
+            check_ready(kind, image)
         wanted = instance_id.partition("/")[2]
         inst = next((i for i in insts if i.instance_id == wanted), None)
         if inst is None:
@@ -174,6 +190,7 @@ class SweBenchmark(Benchmark):
             image=image,
             total_output_bytes=total,
             eval_timeout_s=eval_timeout,
+            labels=labels,
         )
 
 

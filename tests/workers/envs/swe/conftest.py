@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from tests.workers.envs.swe.fixture_repos import Fixtures, make_fixtures
-from tests.workers.envs.swe.tmp_sandbox import SandboxLog
+from tests.workers.envs.swe.sandbox_log import SandboxLog
 from workers.envs.registry import make_env
 from workers.envs.swe.env import SweEnvironment
 

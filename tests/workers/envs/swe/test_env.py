@@ -10,7 +10,7 @@ import pytest
 
 from recap.env import EnvError, UnknownInstanceError
 from tests.workers.envs.swe.fixture_repos import Fixtures
-from tests.workers.envs.swe.tmp_sandbox import SandboxLog
+from tests.workers.envs.swe.sandbox_log import SandboxLog
 from workers.envs.registry import get_benchmark, make_env
 from workers.envs.swe.env import SweEnvironment
 from workers.envs.swe.rules import review_text
