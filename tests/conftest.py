@@ -85,3 +85,23 @@ def fake_server() -> Iterator:
     yield start
     for s in servers:
         s.stop_thread()
+
+
+@pytest.fixture(scope="session")
+def docker_ready() -> str:
+    """(Docker tests) The sandbox image's tag once the daemon answers and the image exists (built if missing)."""
+    if os.environ.get("RECAP_SKIP_DOCKER") == "1":
+        pytest.skip("RECAP_SKIP_DOCKER=1: docker sandbox tests skipped")
+    from workers.sandbox import SandboxError
+    from workers.sandbox.docker_sandbox import docker_client
+    from workers.sandbox.image import DEFAULT_IMAGE, build_image
+
+    try:
+        docker_client()
+    except SandboxError as e:
+        pytest.fail(f"docker sandbox tests need Docker: {e} (RECAP_SKIP_DOCKER=1 skips them)", pytrace=False)
+    try:
+        build_image(DEFAULT_IMAGE)
+    except Exception as e:
+        pytest.fail(f"building {DEFAULT_IMAGE} failed: {e} (RECAP_SKIP_DOCKER=1 skips docker tests)", pytrace=False)
+    return DEFAULT_IMAGE

@@ -30,7 +30,7 @@ from typing import Any
 DEFAULT_IMAGE = "recap-eval/sandbox:py311"
 DEFAULT_SUITE = "bookworm"  # Debian 12: python3 is 3.11, the tag's "py311"
 DEFAULT_MIRROR = "http://deb.debian.org/debian"
-DEFAULT_PACKAGES: tuple[str, ...] = ("python3", "python3-pytest", "git", "ca-certificates")
+DEFAULT_PACKAGES: tuple[str, ...] = ("python3", "python-is-python3", "python3-pytest", "git", "ca-certificates")
 BUILD_COMMAND = "bash scripts/build_sandbox_image.sh"
 
 #: what the import sets (an imported tree has no image configuration of its own)

@@ -7,7 +7,6 @@ they are skipped, saying so). The image is built once per session if missing (id
 
 from __future__ import annotations
 
-import os
 import subprocess
 import uuid
 from collections.abc import Callable, Iterator
@@ -16,8 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from workers.sandbox import LABEL_RUN, Sandbox, SandboxError, SandboxLimits, SandboxSpec, open_sandbox, remove_labelled
-from workers.sandbox.image import DEFAULT_IMAGE, build_image
+from workers.sandbox import LABEL_RUN, Sandbox, SandboxLimits, SandboxSpec, open_sandbox, remove_labelled
 
 KINDS = [pytest.param("docker", marks=pytest.mark.docker), "local"]
 
@@ -47,24 +45,6 @@ def repo(tmp_path: Path) -> Repo:
     commit = git("rev-parse", "HEAD", cwd=p)
     (p / "a.txt").write_text("uncommitted\n")  # the sandbox must show the commit, not the work tree
     return Repo(p, commit)
-
-
-@pytest.fixture(scope="session")
-def docker_ready() -> str:
-    """The image's tag once the daemon answers and the image exists (built if missing)."""
-    if os.environ.get("RECAP_SKIP_DOCKER") == "1":
-        pytest.skip("RECAP_SKIP_DOCKER=1: docker sandbox tests skipped")
-    from workers.sandbox.docker_sandbox import docker_client
-
-    try:
-        docker_client()
-    except SandboxError as e:
-        pytest.fail(f"docker sandbox tests need Docker: {e} (RECAP_SKIP_DOCKER=1 skips them)", pytrace=False)
-    try:
-        build_image(DEFAULT_IMAGE)
-    except Exception as e:
-        pytest.fail(f"building {DEFAULT_IMAGE} failed: {e} (RECAP_SKIP_DOCKER=1 skips docker tests)", pytrace=False)
-    return DEFAULT_IMAGE
 
 
 @pytest.fixture

@@ -8,10 +8,10 @@ from typing import Any
 
 import pytest
 
-from tests.workers.envs.swe.fixture_repos import Fixtures, make_fixtures
 from tests.workers.envs.swe.sandbox_log import SandboxLog
 from workers.envs.registry import make_env
 from workers.envs.swe.env import SweEnvironment
+from workers.envs.swe.examples import Fixtures, make_fixtures
 
 
 @pytest.fixture(scope="session")

@@ -9,10 +9,10 @@ from collections.abc import Callable
 import pytest
 
 from recap.env import EnvError, UnknownInstanceError
-from tests.workers.envs.swe.fixture_repos import Fixtures
 from tests.workers.envs.swe.sandbox_log import SandboxLog
 from workers.envs.registry import get_benchmark, make_env
 from workers.envs.swe.env import SweEnvironment
+from workers.envs.swe.examples import Fixtures
 from workers.envs.swe.rules import review_text
 
 NAMES = ("offbyone", "format", "twofiles", "newfunc", "hang", "p2p")

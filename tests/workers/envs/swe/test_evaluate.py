@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import subprocess
 
-from tests.workers.envs.swe.fixture_repos import Fixtures
 from tests.workers.envs.swe.sandbox_log import SandboxLog
 from workers.envs.swe.evaluate import Evaluation, eval_command, evaluate, parse_summary, patch_files
+from workers.envs.swe.examples import Fixtures
 from workers.envs.swe.instances import SweInstance, load_instances
 from workers.sandbox.base import SandboxSpec
 

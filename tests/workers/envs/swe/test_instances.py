@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from tests.workers.envs.swe.fixture_repos import Fixtures
+from workers.envs.swe.examples import Fixtures
 from workers.envs.swe.instances import DEFAULT_EVAL_TIMEOUT_S, DEFAULT_TEST_CMD, load_instances
 
 

@@ -1,7 +1,10 @@
-"""Six tiny SWE-bench-shaped tasks, built on demand: git repositories plus ``tasks.jsonl``.
+"""Six tiny SWE-bench-shaped example tasks, built on demand: git repositories plus ``tasks.jsonl``.
 
-:func:`make_fixtures` creates them in a given folder (the pipeline tests reuse it, so it imports
-nothing from the tests outside this folder). Each repository's ``main`` is its base commit, with
+Why in the package: the demo, the benches and the tests all run coding episodes on them, and a
+user can see the record format they need for their own tasks
+(``python -m workers.envs.swe.examples DIR`` writes them into ``DIR``; a sweep then names
+``DIR/tasks.jsonl`` as ``instances_file``). :func:`make_fixtures` creates them in a given folder.
+Each repository's ``main`` is its base commit, with
 the tests that already pass; the record's ``test_patch`` adds the failing ones and ``patch`` is the
 gold fix (both real ``git diff`` output). ``WRONG`` patches, per task, are for the evaluator's tests.
 
@@ -221,3 +224,32 @@ def make_fixtures(folder: Path, names: tuple[str, ...] | None = None) -> Fixture
     tasks_file = folder / "tasks.jsonl"
     tasks_file.write_text("".join(json.dumps(r) + "\n" for r in records))
     return Fixtures(tasks_file, wrong)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m workers.envs.swe.examples DIR [NAME ...]``: write the example tasks into an
+    empty or new ``DIR`` and print the instances file's path."""
+    import sys  # the command line only
+
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args:
+        print("usage: python -m workers.envs.swe.examples DIR [NAME ...]", file=sys.stderr)
+        return 2
+    folder, names = Path(args[0]), tuple(args[1:]) or None
+    known = {t.name for t in TASKS}
+    if names is not None and set(names) - known:
+        print(
+            f"error: unknown example task(s) {', '.join(sorted(set(names) - known))}; known: {', '.join(sorted(known))}",
+            file=sys.stderr,
+        )
+        return 2
+    if folder.exists() and any(folder.iterdir()):
+        print(f"error: {folder} is not empty; the examples are written into an empty or new folder", file=sys.stderr)
+        return 2
+    folder.mkdir(parents=True, exist_ok=True)
+    print(make_fixtures(folder, names).tasks_file)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,155 @@
+"""Coding sweeps on a real (local) Ray: ReCAP (tool calls) and ReAct (mini-SWE-agent's bash loop)
+with the offline expert resolve the fixture tasks in Docker and in local sandboxes; every tool
+call is in Parquet; a worker killed mid-episode leaves no sandbox behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from pipeline.driver import Driver, Hooks, prepare
+from pipeline.gateway_backend import make_backend
+from pipeline.spec import parse_spec
+from pipeline.sqlview import open_tables
+from pipeline.store import RunStore
+from workers.envs.swe.examples import make_fixtures
+from workers.sandbox import LABEL_EPISODE, LABEL_RUN
+
+SPEC = """run: {name}
+output: {out}
+models:
+  - model: offline/expert
+methods:
+  - method: recap
+    profile: paper
+  - method: react
+    profile: paper
+environments:
+  - benchmark: swe
+    tasks: [all]
+    options: {{instances_file: "{tasks}", sandbox: {kind}}}
+workers: 2
+"""
+
+NAMES = ("offbyone", "format", "twofiles", "newfunc", "p2p")
+
+
+def q(con, sql: str):
+    return con.execute(sql).fetchall()
+
+
+def _sweep(tmp_path: Path, kind: str, names: tuple[str, ...] = NAMES):
+    fixtures = make_fixtures(tmp_path / "fixtures", names)
+    out = tmp_path / f"run-{kind}"
+    text = SPEC.format(name=out.name, out=out, tasks=fixtures.tasks_file, kind=kind)
+    spec = parse_spec(text, "sweep.yaml")
+    return out, spec, text
+
+
+def _containers(**labels: str) -> list[str]:
+    filters = [f"--filter=label={k}={v}" for k, v in labels.items()]
+    done = subprocess.run(["docker", "ps", "-aq", *filters], capture_output=True, text=True, check=True)
+    return done.stdout.split()
+
+
+def _check_run(out: Path, n: int) -> None:
+    con, bad = open_tables(RunStore(out))
+    assert bad == []
+    # every unit resolved its task: 5 fixtures x (recap, react)
+    assert q(con, "select method, end_reason, count(*) from episodes group by 1, 2 order by 1") == [
+        ("react", "success", n),
+        ("recap", "success", n),
+    ]
+    # ReCAP acts through tool calls, each answered by a tool message (the last submit ends the
+    # episode before its answer), and its tree has the review-and-submit node above the task
+    recap_calls = q(
+        con,
+        """select count(*), count(distinct t.call_id), bool_and(t.valid), bool_and(t.message_seq is not null)
+           from tool_calls t join episodes e using (episode_id) where e.method = 'recap'""",
+    )
+    assert recap_calls[0][0] == recap_calls[0][1] and recap_calls[0][2:] == (True, True)
+    assert q(
+        con,
+        """select count(*) from messages m join episodes e using (episode_id)
+           where e.method = 'recap' and m.role = 'tool'
+             and m.tool_call_id not in (select call_id from tool_calls where call_id is not null)""",
+    ) == [(0,)]
+    assert q(
+        con,
+        """select count(*) from episodes e where e.method = 'recap' and
+             (select count(*) from tool_calls t where t.episode_id = e.episode_id and t.name = 'submit') <> 2""",
+    ) == [(0,)]
+    assert q(
+        con,
+        """select distinct n.task from tree_nodes n join episodes e using (episode_id)
+           where e.method = 'recap' and n.parent_id is null""",
+    ) == [("review and submit",)]
+    # ReAct writes shell commands as text: each is a bash row without a call id, the last the sentinel
+    assert q(
+        con,
+        """select distinct t.name, t.call_id is null from tool_calls t join episodes e using (episode_id)
+           where e.method = 'react'""",
+    ) == [("bash", True)]
+    # every tool call row is one steps row of its episode
+    assert q(
+        con,
+        """select count(*) from tool_calls t left join steps s
+             on s.episode_id = t.episode_id and s."index" = t.step_index where s.episode_id is null""",
+    ) == [(0,)]
+
+
+@pytest.mark.docker
+def test_a_docker_sweep_resolves_every_fixture_and_leaves_no_container(ray_address, docker_ready, tmp_path):
+    out, spec, text = _sweep(tmp_path, "docker")
+    prepared = prepare(spec, text)
+    summary = Driver(prepared, make_backend(spec), progress="off").run()
+    assert (summary.total, summary.finished_now, summary.exit_code()) == (10, 10, 0)
+    _check_run(out, len(NAMES))
+    run_id = RunStore(out).identity().run_id
+    assert _containers(**{LABEL_RUN: run_id}) == []
+
+
+def test_a_local_sandbox_sweep_resolves_every_fixture(ray_address, tmp_path):
+    out, spec, text = _sweep(tmp_path, "local")
+    summary = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert (summary.total, summary.finished_now, summary.exit_code()) == (10, 10, 0)
+    _check_run(out, len(NAMES))
+
+
+@pytest.mark.docker
+def test_a_killed_workers_container_is_removed_and_its_unit_resolves(ray_address, docker_ready, tmp_path):
+    import ray
+
+    out, spec, text = _sweep(tmp_path, "docker", ("offbyone", "format"))
+    killed: dict[str, object] = {}
+
+    def kill_when_its_container_runs(unit, attempt, actor):
+        if killed:
+            return
+        killed["episode"] = episode = f"{unit.unit_id}-{attempt}"
+
+        def kill() -> None:
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and not _containers(**{LABEL_EPISODE: episode}):
+                time.sleep(0.05)
+            killed["seen"] = _containers(**{LABEL_EPISODE: episode})
+            os.kill(ray.get(actor.pid.remote()), signal.SIGKILL)
+
+        threading.Thread(target=kill, daemon=True).start()
+
+    summary = Driver(
+        prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_dispatch=kill_when_its_container_runs)
+    ).run()
+    assert (summary.finished_now, summary.worker_restarts, summary.exit_code()) == (4, 1, 0)
+    assert len(killed["seen"]) == 1  # the killed attempt's container was running
+    assert _containers(**{LABEL_EPISODE: killed["episode"]}) == []
+    con, _ = open_tables(RunStore(out))
+    assert q(con, "select count(*) from episodes where end_reason = 'success'") == [(4,)]
+    removed = q(con, "select detail->>'removed', detail->>'worker' is not null from events where kind = 'leftovers_removed'")
+    assert ("1", True) in removed
