@@ -22,7 +22,10 @@ from schemas.kinds import CallStatus, EventKind, EventSource, LLMErrorKind, Node
 #: 4: ``episodes.seed`` renamed ``sampling_seed`` (the unit's sampling seed, apart from an
 #: instance's layout seed and a test double's noise seed); parts written under version 3 or
 #: earlier have their ``seed`` column read as ``sampling_seed``
-SCHEMA_VERSION = 4
+#: 5: tool calls (issue 28): ``messages`` gained ``tool_call_id`` and ``tool_calls`` (null in parts
+#: of version 4 or earlier: those runs had no tool calls), and the new ``tool_calls`` table holds
+#: one row per call a model made (a run without that table has none)
+SCHEMA_VERSION = 5
 
 
 @dataclass(frozen=True)
