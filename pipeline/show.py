@@ -105,7 +105,7 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
 def tool_call_lines(rows: list[dict[str, Any]], messages: list[dict[str, Any]]) -> list[Text]:
     """An episode's tool calls as lines: the summary, then in message order each assistant message's
     calls (``#seq assistant call NAME ARGUMENTS [id]``, its text first when it wrote any) and each tool
-    result (``#seq tool [id] OUTCOME: first line``), then calls no message made (commands written as
+    result (``#seq tool [id] (OUTCOME) first line``), then calls no message made (commands written as
     text: ``step N command NAME ARGUMENTS: OUTCOME``). [] when the episode made none. Every model-written
     string is plain text (never markup) on one line."""
     rows = sorted(rows, key=lambda r: r["index"])
@@ -138,9 +138,9 @@ def tool_call_lines(rows: list[dict[str, Any]], messages: list[dict[str, Any]]) 
         bad = row is None or not row["valid"] or row["timed_out"]
         out.append(
             Text.assemble(
-                f"  #{seq} {m['role']} [{one_line(cid)}] ",
+                f"  #{seq} {m['role']} [{one_line(cid)}] (",
                 (one_line(result), "red" if bad else "green"),
-                f": {one_line(_first_line(m.get('content')))}",
+                f") {one_line(_first_line(m.get('content')))}",
             )
         )
     for r in rows:
