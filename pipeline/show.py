@@ -176,7 +176,8 @@ def _tool_messages(store: RunStore, eid: str) -> list[dict[str, Any]]:
 
 
 def show_main(run_dir: str, ref: str, console: Console) -> int:
-    """``recap show``: print the tree of one episode (and its end reason when it ended in an error); exit status 0."""
+    """``recap show``: print the tree of one episode, its tool calls (:func:`tool_call_lines`), and its end reason
+    when it ended in an error; exit status 0."""
     store = RunStore(run_dir)
     store.require_identity()
     ep = resolve_episode(store, ref)
