@@ -50,7 +50,7 @@ from workers.gateway.ledger import JOURNAL_NAME
 
 #: event kinds that record a failed attempt of a unit
 FAILED_ATTEMPT_EVENTS = ("worker_lost", "attempt_failed")
-_ID_TABLES = ("messages", "steps", "tree_nodes", "llm_calls")
+_ID_TABLES = ("messages", "steps", "tree_nodes", "llm_calls", "tool_calls")
 #: the gateway's budget journal, relative to the run folder
 JOURNAL_FILE = JOURNAL_NAME
 

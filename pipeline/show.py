@@ -2,8 +2,11 @@
 
 Each node shows its task, kind and status, every (think, subtasks) version it went through, and
 for a leaf the action it ran with the outcome. Flat methods (ReAct, Act, ...) have no tree and
-are shown as their list of actions. EPISODE is an episode id, a unit id (its latest attempt), or
-an unambiguous prefix of either.
+are shown as their list of actions. An episode that called tools (schema version 5) then shows
+its tool calls as a transcript: each assistant message's calls (tool and arguments) and each tool
+result with what running the call gave (exit code, time, output size, or why it did not run),
+under a summary line; a run without a ``tool_calls`` table shows none. EPISODE is an episode id, a
+unit id (its latest attempt), or an unambiguous prefix of either.
 """
 
 from __future__ import annotations
@@ -13,12 +16,17 @@ from typing import Any
 import pyarrow.compute as pc
 from rich.console import Console
 from rich.markup import escape
+from rich.text import Text
 from rich.tree import Tree
 
 from pipeline.errors import PipelineError
 from pipeline.store import RunStore
 from reports.observations import first_line as _first_line
 from reports.observations import observation_change
+from reports.toolcalls import answered_call, message_calls, one_line, outcome, rows_by_call, totals
+
+#: the ``messages`` columns the tool-call transcript reads (content only for the messages it shows)
+_TOOL_MESSAGE_COLUMNS = ["episode_id", "seq", "role", "tool_call_id", "tool_calls"]
 
 
 def resolve_episode(store: RunStore, ref: str) -> dict[str, Any]:
@@ -94,8 +102,82 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
     return root_tree
 
 
+def tool_call_lines(rows: list[dict[str, Any]], messages: list[dict[str, Any]]) -> list[Text]:
+    """An episode's tool calls as lines: the summary, then in message order each assistant message's
+    calls (``#seq assistant call NAME ARGUMENTS [id]``, its text first when it wrote any) and each tool
+    result (``#seq tool [id] (OUTCOME) first line``), then calls no message made (commands written as
+    text: ``step N command NAME ARGUMENTS: OUTCOME``). [] when the episode made none. Every model-written
+    string is plain text (never markup) on one line."""
+    rows = sorted(rows, key=lambda r: r["index"])
+    msgs = sorted(
+        (m for m in messages if m.get("tool_calls") is not None or m.get("tool_call_id") is not None), key=lambda m: m["seq"]
+    )
+    if not rows and not msgs:
+        return []
+    by_call = rows_by_call(rows)
+    answers = answered_call(msgs)
+    out = [Text(totals(rows).line(), style="bold")]
+    for m in msgs:
+        seq = m["seq"]
+        calls = message_calls(m.get("tool_calls"))
+        if m.get("tool_call_id") is None:
+            if (m.get("content") or "").strip():
+                out.append(Text(f"  #{seq} {m['role']}: {one_line(_first_line(m['content']))}"))
+            if calls is None:
+                out.append(Text(f"  #{seq} {m['role']} calls (unreadable): {one_line(m['tool_calls'])}", style="red"))
+            for c in calls or []:
+                out.append(
+                    Text.assemble(
+                        f"  #{seq} {m['role']} call ", (one_line(c.name), "cyan"), f" {one_line(c.arguments)} [{one_line(c.id)}]"
+                    )
+                )
+            continue
+        cid = m["tool_call_id"]
+        row = by_call.get((answers.get(seq), cid))
+        result = outcome(row) if row is not None else "not recorded"
+        bad = row is None or not row["valid"] or row["timed_out"]
+        out.append(
+            Text.assemble(
+                f"  #{seq} {m['role']} [{one_line(cid)}] (",
+                (one_line(result), "red" if bad else "green"),
+                f") {one_line(_first_line(m.get('content')))}",
+            )
+        )
+    for r in rows:
+        if r["call_id"] is None:
+            out.append(
+                Text.assemble(
+                    f"  step {r['step_index']} command ",
+                    (one_line(r["name"]), "cyan"),
+                    f" {one_line(r['arguments'])}: ",
+                    (one_line(outcome(r)), "red" if not r["valid"] or r["timed_out"] else "green"),
+                )
+            )
+    return out
+
+
+def _episode_rows(store: RunStore, table: str, eid: str, columns: list[str] | None = None) -> list[dict[str, Any]]:
+    """The rows of one episode in ``table`` ([] when the run has none: a table it never wrote)."""
+    data, _ = store.read_table(table, columns)
+    return data.filter(pc.equal(data["episode_id"], eid)).to_pylist() if data.num_rows else []
+
+
+def _tool_messages(store: RunStore, eid: str) -> list[dict[str, Any]]:
+    """The episode's messages that make or answer tool calls, with their content (read only for them)."""
+    tool = [
+        m
+        for m in _episode_rows(store, "messages", eid, _TOOL_MESSAGE_COLUMNS)
+        if m["tool_calls"] is not None or m["tool_call_id"] is not None
+    ]
+    if not tool:
+        return []
+    seqs = {m["seq"] for m in tool}
+    return [m for m in _episode_rows(store, "messages", eid, [*_TOOL_MESSAGE_COLUMNS, "content"]) if m["seq"] in seqs]
+
+
 def show_main(run_dir: str, ref: str, console: Console) -> int:
-    """``recap show``: print the tree of one episode (and its end reason when it ended in an error); exit status 0."""
+    """``recap show``: print the tree of one episode, its tool calls (:func:`tool_call_lines`), and its end reason
+    when it ended in an error; exit status 0."""
     store = RunStore(run_dir)
     store.require_identity()
     ep = resolve_episode(store, ref)
@@ -105,6 +187,8 @@ def show_main(run_dir: str, ref: str, console: Console) -> int:
     nodes = nodes_t.filter(pc.equal(nodes_t["episode_id"], eid)).to_pylist() if nodes_t.num_rows else []
     steps = steps_t.filter(pc.equal(steps_t["episode_id"], eid)).to_pylist() if steps_t.num_rows else []
     console.print(build_tree(ep, nodes, steps))
+    for line in tool_call_lines(_episode_rows(store, "tool_calls", eid), _tool_messages(store, eid)):
+        console.print(line)
     if ep.get("error"):
         console.print(f"[dim]end: {escape(str(ep['end_reason']))}: {escape(_first_line(ep['error'], 300))}[/dim]")
     return 0

@@ -14,7 +14,9 @@ Two trimming modes keep the same bound:
   providers' prompt caching bill that prefix at the cached-input price.
 
 Messages are dropped in pairs so the window always continues the user/assistant alternation
-that starts after the pinned task prompt.
+that starts after the pinned task prompt. Tool messages (the results of a reply's tool calls)
+are dropped with the reply that called them: a window never starts with a tool result whose
+call it no longer holds.
 
 ``counts_pins`` makes K bound the whole history, pins included (the released code's reading:
 "more than ctx_len messages" counts the demonstration and the task prompt); otherwise K bounds
@@ -29,11 +31,12 @@ holds the first observation, so ``keep=1``).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
-from recap.llm import ChatMessage
+from recap.llm import ChatMessage, ToolCall
 from schemas.records import MessageRecord
 
 WindowMode = Literal["pair", "block"]
@@ -112,26 +115,43 @@ class History:
         """Add a message that is never trimmed (demonstration, initial task prompt)."""
         if self._live:
             raise RuntimeError("pins must be added before any windowed message")
-        return self._insert(role, kind, content, None, pinned=True)
+        return self._insert(ChatMessage(role, content), kind, None, pinned=True)
 
-    def add(self, role: str, kind: str, content: str, node_id: int | None = None) -> int:
-        seq = self._insert(role, kind, content, node_id, pinned=False)
-        self._enforce()
+    def add(
+        self,
+        role: str,
+        kind: str,
+        content: str,
+        node_id: int | None = None,
+        *,
+        tool_calls: tuple[ToolCall, ...] = (),
+        tool_call_id: str | None = None,
+    ) -> int:
+        """Add a windowed message (an assistant reply may carry ``tool_calls``; a ``tool``
+        message answers one of them by ``tool_call_id``) and enforce the window."""
+        message = ChatMessage(role, content, tool_calls=tool_calls, tool_call_id=tool_call_id)
+        seq = self._insert(message, kind, node_id, pinned=False)
+        # the results of a reply's tool calls follow it at once: the window is enforced once the
+        # last of them is in, never between a call and its result (see drop_oldest)
+        if role != "assistant" or not tool_calls:
+            self._enforce()
         return seq
 
-    def _insert(self, role: str, kind: str, content: str, node_id: int | None, pinned: bool) -> int:
+    def _insert(self, message: ChatMessage, kind: str, node_id: int | None, pinned: bool) -> int:
         seq = self._counter.take()
-        entry = Entry(seq, ChatMessage(role, content), kind, node_id, pinned)
-        (self._pins if pinned else self._live).append(entry)
+        (self._pins if pinned else self._live).append(Entry(seq, message, kind, node_id, pinned))
+        calls = message.tool_calls
         self._emit(
             MessageRecord(
                 episode_id=self.episode_id,
                 seq=seq,
-                role=role,
+                role=message.role,
                 kind=kind,
-                content=content,
+                content=message.content,
                 node_id=node_id,
                 pinned=pinned,
+                tool_call_id=message.tool_call_id,
+                tool_calls=json.dumps([{"id": c.id, "name": c.name, "arguments": c.arguments} for c in calls]) if calls else None,
             )
         )
         return seq
@@ -157,6 +177,10 @@ class History:
             n -= n % 2  # whole (prompt, reply) pairs after a kept reply keep the alternation
         if n <= 0:
             return 0
+        # a tool result never outlives the reply that called it: results left at the head of
+        # the window go with their call (a provider refuses a tool message without its call)
+        while self.keep + n < len(self._live) - 1 and self._live[self.keep + n].message.role == "tool":
+            n += 1
         del self._live[self.keep : self.keep + n]
         self.dropped += n
         return n

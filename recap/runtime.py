@@ -13,6 +13,7 @@ episode ends and results.
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -22,16 +23,27 @@ from recap.config import AgentConfig
 from recap.env import EnvError, Environment, InvalidActionError, Reset, Step, agent_action
 from recap.history import History
 from recap.jsonreply import ReplyFormatError, parse_json_object
-from recap.llm import LLMClient, LLMError, LLMRequest, LLMResponse
+from recap.llm import LLMClient, LLMError, LLMRequest, LLMResponse, ToolCall, ToolDef
 from schemas import kinds
 from schemas.kinds import EndReason, LLMErrorKind
 from schemas.outcomes import BudgetRefusal, EpisodeResult
-from schemas.records import CallRecord, Record, StepRecord
+from schemas.records import CallRecord, Record, StepRecord, ToolCallRecord
 
 #: why an episode can end (:data:`schemas.kinds.EndReason`)
 END_REASONS = kinds.END_REASONS
 
 Emit = Callable[[Record], None]
+
+#: the result given to a tool call of a reply that had to be repaired (the call was not run)
+NOT_RUN = "not run: the reply that made this call could not be used"
+
+
+@dataclass(frozen=True)
+class ToolUse:
+    """The tools one request offers and its tool-choice setting (none: a plain chat request)."""
+
+    tools: tuple[ToolDef, ...] = ()
+    choice: str | None = None
 
 
 class EpisodeEnd(Exception):
@@ -166,27 +178,71 @@ class Conversation:
         """
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
+        parsed, _calls, seq = self._ask_loop(kind, parse, node_id, context, decode, ToolUse())
+        return parsed, seq
+
+    def ask_tools(
+        self,
+        prompt: str | None,
+        kind: str,
+        parse: Callable[[dict[str, Any]], dict[str, Any]],
+        *,
+        tools: tuple[ToolDef, ...],
+        tool_choice: str | None = None,
+        node_id: int | None = None,
+        context: Mapping[str, Any] | None = None,
+        decode: Callable[[str], dict[str, Any]] = parse_json_object,
+    ) -> tuple[dict[str, Any], tuple[ToolCall, ...], int]:
+        """:meth:`ask` with ``tools`` the model may call: (parsed text, tool calls, reply seq).
+
+        A reply that calls tools and writes no text parses as ``{}`` (the caller's ``parse``
+        decides what an empty reply means). The caller must answer every returned call with
+        :meth:`add_tool_result` before it asks again. A reply whose text cannot be used is
+        repaired as in :meth:`ask`; its tool calls are answered first as not run, so the
+        history stays a valid tool conversation."""
+        if prompt is not None:
+            self.history.add("user", kind, prompt, node_id)
+        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice))
+
+    def add_tool_result(self, call: ToolCall, content: str, node_id: int | None = None) -> int:
+        """Answer one tool call of the last reply with its result (a ``tool`` message)."""
+        return self.history.add("tool", "tool_result", content, node_id, tool_call_id=call.id)
+
+    def _ask_loop(
+        self,
+        kind: str,
+        parse: Callable[[dict[str, Any]], dict[str, Any]],
+        node_id: int | None,
+        context: Mapping[str, Any] | None,
+        decode: Callable[[str], dict[str, Any]],
+        tools: ToolUse,
+    ) -> tuple[dict[str, Any], tuple[ToolCall, ...], int]:
+        """Call until a reply parses, repairing at most ``max_json_repairs`` times."""
         repairs = 0
         purpose = kind
         while True:
-            text, seq = self._call(purpose, node_id, context or {})
+            response, seq = self._call(purpose, node_id, context or {}, tools)
+            calls = response.tool_calls
             try:
-                return parse(decode(text)), seq
+                obj = {} if calls and not response.text.strip() else decode(response.text)
+                return parse(obj), calls, seq
             except ReplyFormatError as exc:
                 if repairs >= self.config.max_json_repairs:
                     raise EpisodeEnd("json_failures", str(exc)) from None
                 repairs += 1
                 self.usage.json_repairs += 1
+                for call in calls:
+                    self.add_tool_result(call, NOT_RUN, node_id)
                 self.history.add("user", "repair", repair_prompt(str(exc), self.expected_format), node_id)
                 purpose = "repair"
 
     # -- one model call, with context-length recovery -------------------------------------------
-    def _call(self, purpose: str, node_id: int | None, context: Mapping[str, Any]) -> tuple[str, int]:
+    def _call(self, purpose: str, node_id: int | None, context: Mapping[str, Any], tools: ToolUse) -> tuple[LLMResponse, int]:
         while True:
             self._check_caps()
             call_index = self.usage.calls
             self.usage.calls += 1
-            request = self._request(call_index, purpose, node_id, context)
+            request = self._request(call_index, purpose, node_id, context, tools)
             started = time.perf_counter()
             try:
                 response = self.client.complete(request)
@@ -202,9 +258,11 @@ class Conversation:
                     "truncated",
                     f"reply cut at the output cap ({response.completion_tokens} tokens, max_tokens {self.config.max_tokens})",
                 )
-            return response.text, seq
+            return response, seq
 
-    def _request(self, call_index: int, purpose: str, node_id: int | None, context: Mapping[str, Any]) -> LLMRequest:
+    def _request(
+        self, call_index: int, purpose: str, node_id: int | None, context: Mapping[str, Any], tools: ToolUse
+    ) -> LLMRequest:
         """The request for the history as it stands, with the hints offline models read."""
         return LLMRequest(
             messages=self.history.messages(),
@@ -216,8 +274,10 @@ class Conversation:
             response_seq=self.history.next_seq,
             temperature=self.config.temperature,
             max_tokens=self.config.max_tokens,
-            json_mode=self.config.json_mode,
+            json_mode=self.config.json_mode and not tools.tools,
             hints={"style": self.style, "purpose": purpose, "reply_fields": self.reply_fields, **context},
+            tools=tools.tools,
+            tool_choice=tools.choice,
         )
 
     def _end_on_error(self, exc: LLMError) -> None:
@@ -233,7 +293,7 @@ class Conversation:
 
     def _record_reply(self, request: LLMRequest, response: LLMResponse) -> int:
         """Add the reply to the history, count its usage and emit its call row; the reply's seq."""
-        seq = self.history.add("assistant", "reply", response.text, request.node_id)
+        seq = self.history.add("assistant", "reply", response.text, request.node_id, tool_calls=response.tool_calls)
         u = self.usage
         u.prompt_tokens += response.prompt_tokens
         u.cached_prompt_tokens += response.cached_prompt_tokens
@@ -306,6 +366,8 @@ class EnvDriver:
         self.steps = 0
         self.attempts = 0
         self.invalid = 0
+        #: tool calls recorded (the ``tool_calls`` rows' index)
+        self.tool_calls = 0
         self.observation = ""
         self.goal = ""
         self.valid_actions: tuple[str, ...] | None = None
@@ -356,6 +418,42 @@ class EnvDriver:
             raise EpisodeEnd(exc.end_reason, str(exc)) from exc
         except Exception as exc:
             raise EpisodeEnd("env_error", f"{type(exc).__name__}: {exc}") from exc
+        tool = step.info.get("tool")  # a coding environment's text action is a shell command
+        if isinstance(tool, str):
+            self._record_tool(tool, json.dumps({"command": action}), step, node_id)
+        return self._took(action, valid, step, node_id)
+
+    def execute_tool(self, call: ToolCall, node_id: int | None = None, message_seq: int | None = None) -> Step:
+        """Run one tool call of a model reply and return its observation. A call that cannot run
+        (arguments that are not a JSON object, a tool the environment does not have) or that the
+        tool refuses is recorded invalid and answered with an error observation; the episode goes
+        on (only the step cap, the environment or its end stop it)."""
+        names = [t.name for t in self.env.tool_defs()]
+        problem = call.parse_error
+        if problem is None and call.name not in names:
+            problem = f"there is no tool named {call.name!r}; the tools are: {', '.join(names)}"
+        action = f"{call.name} {call.arguments}"
+        if problem is not None or call.args is None:
+            self.invalid += 1
+            observation = f"error: {problem}"
+            self._record(action, False, observation, False, node_id)
+            step = Step(observation, None, False, False, {"error": problem})
+            self._record_tool(call.name, call.arguments, step, node_id, call, message_seq, step_index=self.attempts - 1)
+            return step
+        try:
+            step = self.env.call_tool(call.name, call.args)
+        except EnvError as exc:
+            raise EpisodeEnd(exc.end_reason, str(exc)) from exc
+        except Exception as exc:
+            raise EpisodeEnd("env_error", f"{type(exc).__name__}: {exc}") from exc
+        valid = step.info.get("error") is None
+        if not valid:
+            self.invalid += 1
+        self._record_tool(call.name, call.arguments, step, node_id, call, message_seq)
+        return self._took(action, valid, step, node_id)
+
+    def _took(self, action: str, valid: bool, step: Step, node_id: int | None) -> Step:
+        """Count a step the environment took, record it and end the episode where it ends."""
         self.steps += 1
         self.observation = step.observation
         self._set_valid(step.valid_actions)
@@ -368,6 +466,41 @@ class EnvDriver:
         if step.done or self.steps >= self.env.max_steps:
             raise EpisodeEnd("step_cap", f"{self.steps} steps (cap {self.env.max_steps})")
         return step
+
+    def _record_tool(
+        self,
+        name: str,
+        arguments: str,
+        step: Step,
+        node_id: int | None,
+        call: ToolCall | None = None,
+        message_seq: int | None = None,
+        *,
+        step_index: int | None = None,
+    ) -> None:
+        """The ``tool_calls`` row of one call, from what the environment reported in ``info``."""
+        info = step.info
+        error = info.get("error")
+        exit_code = info.get("exit_code")
+        self.emit(
+            ToolCallRecord(
+                episode_id=self.episode_id,
+                index=self.tool_calls,
+                step_index=self.attempts if step_index is None else step_index,
+                name=name,
+                arguments=arguments,
+                valid=error is None,
+                call_id=call.id if call is not None else None,
+                message_seq=message_seq,
+                node_id=node_id,
+                error=None if error is None else str(error),
+                exit_code=exit_code if isinstance(exit_code, int) else None,
+                duration_s=float(info.get("duration_s", 0.0)),
+                output_bytes=int(info.get("output_bytes", 0)),
+                timed_out=bool(info.get("timed_out", False)),
+            )
+        )
+        self.tool_calls += 1
 
     def _record(self, action: str, valid: bool, obs: str, done: bool, node_id: int | None) -> None:
         self.emit(

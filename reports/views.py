@@ -2,7 +2,7 @@
 
 Why this shape: every number in a report is a SQL query kept in ``reports/sql/``, and the same
 views answer ad-hoc questions (``recap sql``). The tables of all given runs are unioned into one
-view each (``episodes``, ``llm_calls``, ``messages``, ``tree_nodes``, ``steps``, ``events``,
+view each (``episodes``, ``llm_calls``, ``messages``, ``tree_nodes``, ``steps``, ``tool_calls``, ``events``,
 ``run``), and ``reports/sql/views.sql`` adds short named views on top (``attempts``,
 ``terminal``, ``calls``, ``nodes``, ``tree_stats``, ``failures``, ...).
 

@@ -16,6 +16,7 @@ from schemas.records import (
     Record,
     RunRecord,
     StepRecord,
+    ToolCallRecord,
 )
 from schemas.tables import TABLES, arrow_schema, record_to_row, table_of
 
@@ -30,6 +31,7 @@ __all__ = [
     "Record",
     "RunRecord",
     "StepRecord",
+    "ToolCallRecord",
     "TABLES",
     "arrow_schema",
     "record_to_row",

@@ -22,7 +22,10 @@ from schemas.kinds import CallStatus, EventKind, EventSource, LLMErrorKind, Node
 #: 4: ``episodes.seed`` renamed ``sampling_seed`` (the unit's sampling seed, apart from an
 #: instance's layout seed and a test double's noise seed); parts written under version 3 or
 #: earlier have their ``seed`` column read as ``sampling_seed``
-SCHEMA_VERSION = 4
+#: 5: tool calls (issue 28): ``messages`` gained ``tool_call_id`` and ``tool_calls`` (null in parts
+#: of version 4 or earlier: those runs had no tool calls), and the new ``tool_calls`` table holds
+#: one row per call a model made (a run without that table has none)
+SCHEMA_VERSION = 5
 
 
 @dataclass(frozen=True)
@@ -44,6 +47,11 @@ class MessageRecord:
     content: str
     node_id: int | None = None
     pinned: bool = False
+    #: a ``tool`` message: the id of the tool call it answers
+    tool_call_id: str | None = None
+    #: an assistant message that calls tools: the calls as JSON, ``[{"id", "name", "arguments"}]``
+    #: in the model's order (``arguments`` the raw string the model wrote)
+    tool_calls: str | None = None
 
 
 @dataclass(frozen=True)
@@ -139,6 +147,36 @@ class StepRecord:
     done: bool
     success: bool
     node_id: int | None = None
+
+
+@dataclass(frozen=True)
+class ToolCallRecord:
+    """One tool call a model made (or one shell command of a text-action coding agent), with what
+    running it cost: the ``tool_calls`` table.
+
+    ``index`` numbers an episode's calls from 0; ``step_index`` is the ``steps`` row of the same
+    attempt; ``message_seq`` the assistant message that carried the call (None for a command
+    written as text). ``valid`` False: the call never ran as asked (arguments that are not JSON,
+    an unknown tool, a call the tool refused), ``error`` says why. ``exit_code`` is None when no
+    process ran or it was killed (``timed_out``); ``output_bytes`` is the output's size before the
+    cap shown to the model.
+    """
+
+    table: ClassVar[str] = "tool_calls"
+    episode_id: str
+    index: int
+    step_index: int
+    name: str
+    arguments: str
+    valid: bool
+    call_id: str | None = None
+    message_seq: int | None = None
+    node_id: int | None = None
+    error: str | None = None
+    exit_code: int | None = None
+    duration_s: float = 0.0
+    output_bytes: int = 0
+    timed_out: bool = False
 
 
 @dataclass(frozen=True)
@@ -269,6 +307,7 @@ Record = (
     | CallRecord
     | NodeRecord
     | StepRecord
+    | ToolCallRecord
     | EpisodeRecord
     | EventRecord
     | RunRecord
@@ -286,6 +325,7 @@ ALL_RECORD_TYPES: tuple[type, ...] = (
     RunRecord,
     WikiPageRecord,
     WikiRequestRecord,
+    ToolCallRecord,
 )
 
 # keeps `field` importable for callers building records generically

@@ -40,11 +40,22 @@ Version 3 -> 4, ``episodes``: ``seed`` renamed ``sampling_seed`` (the unit's sam
 sweep's ``sampling_seeds``; named apart from an instance's layout seed, the ``@N`` of its id, and
 a test double's ``noise_seed``). The values are copied as stored.
 
-A run folder of version 2 or 3 may be continued by this version (:func:`continues`): its parts
-differ from the current ones only by ``model_name`` (filled on read) and the name of the
-sampling seed's column (renamed on read), so parts of several versions side by side read as one
-table: the new parts carry ``sampling_seed``, the old ones ``seed``, and every reader sees
-``sampling_seed``. A version 1 run is read, never continued.
+Version 4 -> 5 (tool calls, issue 28):
+
+* ``messages``: ``tool_call_id`` (the call a ``tool`` message answers) and ``tool_calls`` (an
+  assistant message's calls as JSON) are null in every row of an earlier part: no method of
+  version 4 or earlier called tools, so null is what those rows would have held;
+* ``tool_calls``: a new table. An earlier run folder has no ``tool_calls`` folder, which every
+  reader already takes as a table without rows (an empty view with the full schema), so such a
+  run reads as one whose episodes made no tool calls.
+
+A run folder of version 2, 3 or 4 may be continued by this version (:func:`continues`): its
+parts differ from the current ones only by ``model_name`` and the messages' tool columns (filled
+on read) and the name of the sampling seed's column (renamed on read), so parts of several
+versions side by side read as one table: the new parts carry ``sampling_seed``, the old ones
+``seed``, and every reader sees ``sampling_seed``; new ``messages`` parts carry the tool columns,
+the old ones read them as null; the continuation's ``tool_calls`` rows are its own. A version 1
+run is read, never continued.
 
 Any table, any earlier version: a missing column that has a default in its record dataclass (or
 is nullable) is filled with that default (null); a part missing any other column is not readable
@@ -68,6 +79,7 @@ VERSION_KEY = b"recap_eval_schema_version"
 ADDED: dict[int, dict[str, tuple[str, ...]]] = {
     2: {"episodes": ("label", "profile", "ablation", "provider_model")},
     3: {"llm_calls": ("model_name",)},
+    5: {"messages": ("tool_call_id", "tool_calls")},
 }
 
 #: columns each version renamed, by table: new name -> the name parts of earlier versions have
@@ -78,7 +90,7 @@ RENAMED: dict[int, dict[str, dict[str, str]]] = {
 #: earlier versions whose run folders this version continues (their parts only lack columns
 #: that are filled on read, or have them under an old name, the same way whichever session
 #: wrote them)
-CONTINUED: frozenset[int] = frozenset({2, 3})
+CONTINUED: frozenset[int] = frozenset({2, 3, 4})
 
 
 def continues(version: int) -> bool:

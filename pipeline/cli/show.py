@@ -25,13 +25,13 @@ def add_parser(sub: argparse._SubParsersAction[OneLineParser], name: str, help: 
         name,
         help=help,
         epilog=_EPILOG,
-        description="One episode's ReCAP context tree (or a flat method's actions) in the terminal.",
+        description="One episode's ReCAP context tree (or a flat method's actions), then its tool calls, in the terminal.",
     )
     sh.add_argument("run_dir", help="the run folder (a path or an s3:// URI)")
     sh.add_argument("episode", help="an episode id, a unit id (its latest attempt), or an unambiguous prefix")
 
 
 def execute(args: argparse.Namespace, command: str) -> int:
-    """Print the episode's tree; exit status 0."""
+    """Print the episode's tree and tool calls; exit status 0."""
     check_location(args.run_dir)
     return show_main(args.run_dir, args.episode, console())

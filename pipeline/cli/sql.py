@@ -65,9 +65,11 @@ examples:
   recap sql runs/demo "select * from messages" --csv --memory-limit 8GB --timeout 600
 
 {names}
-tables: episodes, llm_calls, messages, tree_nodes, steps, events, run, bad_parts, wiki_requests,
-  wiki_pages (FEVER: each page body once per run; wiki_pages_raw: the rows as written);
-views: attempts, terminal, calls, nodes, tree_stats, step_patterns, episode_modes, failures
+tables: episodes, llm_calls, messages, tree_nodes, steps, tool_calls, events, run, bad_parts,
+  wiki_requests, wiki_pages (FEVER: each page body once per run; wiki_pages_raw: the rows as
+  written);
+views: attempts, terminal, calls, nodes, tree_stats, step_patterns, tool_stats, episode_modes,
+  failures
 
 exit status: 0 ok; 2 any error (bad usage, a missing run folder, SQL that fails or is refused,
 the memory or the time limit hit: the line says which)

@@ -1,4 +1,4 @@
--- Named views over the raw tables (episodes, llm_calls, messages, tree_nodes, steps, events, run).
+-- Named views over the raw tables (episodes, llm_calls, messages, tree_nodes, steps, tool_calls, events, run).
 -- Every report query is written against these; they are also there for short ad-hoc queries
 -- (`recap sql RUN "SELECT mode, count(*) FROM failures GROUP BY ALL"`).
 -- Rows of different runs are told apart by run_id; episodes join their rows on (run_id, episode_id).
@@ -175,6 +175,29 @@ SELECT c.run_id, c.episode_id, c.attempts, c.invalid_steps,
 FROM per_episode c
 LEFT JOIN invalid_runs r ON r.run_id = c.run_id AND r.episode_id = c.episode_id
 LEFT JOIN invalid_same q ON q.run_id = c.run_id AND q.episode_id = c.episode_id;
+
+-- tool_stats: one row per episode with tool calls (tool_calls rows: a model's tool calls, or the
+-- shell commands of a text-action coding agent; schema version 5). A run written before version
+-- 5 has no tool_calls rows, so none of its episodes is here.
+--   tool_calls       calls recorded (valid or not)
+--   invalid_calls    calls that never ran as asked (arguments not JSON, an unknown tool, a call
+--                    the tool refused: valid = false)
+--   timed_out        calls killed at their time limit
+--   nonzero_exits    calls whose process exited with a code other than 0
+--   tools            distinct tool names called
+--   duration_s       time spent running the calls, summed
+--   output_bytes     output the calls produced (before the cap shown to the model), summed
+CREATE VIEW tool_stats AS
+SELECT run_id, episode_id,
+  count(*) AS tool_calls,
+  count(*) FILTER (WHERE NOT valid) AS invalid_calls,
+  count(*) FILTER (WHERE timed_out) AS timed_out,
+  count(*) FILTER (WHERE exit_code <> 0) AS nonzero_exits,
+  count(DISTINCT name) AS tools,
+  sum(duration_s) AS duration_s,
+  CAST(sum(output_bytes) AS BIGINT) AS output_bytes
+FROM tool_calls
+GROUP BY run_id, episode_id;
 
 -- episode_modes: every unit's row (terminal, any state) with one failure mode, first match wins:
 --   success                     end_reason success

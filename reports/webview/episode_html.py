@@ -7,6 +7,7 @@ from collections import defaultdict
 from typing import Any
 
 from reports.observations import observation_change
+from reports.toolcalls import message_calls, totals
 from reports.viewer import ranges
 from reports.webview.episodes import Episode
 from reports.webview.layout import episode_url, esc, layout, num, url, usd
@@ -63,6 +64,11 @@ def episode_page(snap: Snapshot, ep: Episode, hit: int | None = None) -> str:
         + "</section>"
     )
     parts.append(f'<section id="steps"><h2>Actions and observations ({len(ep.steps)})</h2>{steps_html(ep.steps)}</section>')
+    if ep.tool_calls:  # an episode without tool calls (every run before schema version 5) shows no such section
+        parts.append(
+            f'<section id="tool-calls"><h2>Tool calls ({len(ep.tool_calls)})</h2>'
+            f'<p class="tool-summary">{esc(totals(ep.tool_calls).line())}</p>{tool_calls_html(ep.tool_calls)}</section>'
+        )
     parts.append(
         f'<section id="calls"><h2>LLM calls ({len(ep.calls)})</h2>{calls_html(rid, eid, ep.calls)}'
         '<div id="window-panel" class="window-panel" hidden></div></section>'
@@ -175,14 +181,54 @@ def calls_html(run_id: str, episode_id: str, calls: list[dict[str, Any]]) -> str
     )
 
 
+def tool_calls_html(rows: list[dict[str, Any]]) -> str:
+    """The tool call table: each call in order with its tool, arguments (as the model wrote them), exit
+    code, duration, output size and error; its message links to the assistant message that made it."""
+    out = []
+    for r in rows:
+        seq = r["message_seq"]
+        msg = "" if seq is None else f'<a href="#msg-{seq}">#{seq}</a>'
+        out.append(
+            f'<tr class="{"" if r["valid"] and not r["timed_out"] else "invalid"}" data-tool-call="{r["index"]}">'
+            f"<td>{r['index']}</td><td>{r['step_index']}</td><td>{msg}</td><td>{esc(r['call_id'])}</td>"
+            f"<td><code>{esc(r['name'])}</code></td><td><code>{esc(r['arguments'])}</code></td>"
+            f"<td>{'yes' if r['valid'] else 'no'}</td><td>{'' if r['exit_code'] is None else r['exit_code']}</td>"
+            f'<td class="num">{r["duration_s"]:.2f} s</td><td class="num">{r["output_bytes"]:,}</td>'
+            f"<td>{'yes' if r['timed_out'] else ''}</td><td>{esc(r['error'])}</td></tr>"
+        )
+    return (
+        '<table class="data"><thead><tr><th>#</th><th>step</th><th>message</th><th>call id</th><th>tool</th>'
+        "<th>arguments</th><th>valid</th><th>exit code</th><th>duration</th><th>output bytes</th><th>timed out</th>"
+        f"<th>error</th></tr></thead><tbody>{''.join(out)}</tbody></table>"
+    )
+
+
+def _message_calls_html(raw: str | None) -> str:
+    """An assistant message's tool calls (name, arguments, call id) under its text; the stored text as it is
+    when it is not the runtime's JSON."""
+    calls = message_calls(raw)
+    if calls is None:
+        return f'<pre class="tool-calls">{esc(raw)}</pre>'
+    items = "".join(
+        f'<li data-call-id="{esc(c.id)}">call <code>{esc(c.name)}</code> <code>{esc(c.arguments)}</code> '
+        f'<span class="tag">id {esc(c.id)}</span></li>'
+        for c in calls
+    )
+    return f'<ol class="tool-calls">{items}</ol>' if items else ""
+
+
 def _message_li(m: dict[str, Any], *, hit: bool = False) -> str:
+    answers = m.get("tool_call_id")
     tag = (
         f"#{m['seq']} {esc(m['role'])} · {esc(m['kind'])}{' · pinned' if m.get('pinned') else ''}"
         f"{'' if m.get('node_id') is None else ' · node ' + str(m['node_id'])}"
+        f"{'' if answers is None else ' · answers call ' + esc(answers)}"
     )
+    calls = _message_calls_html(m.get("tool_calls"))
+    text = "" if calls and not m["content"] else f"<pre>{esc(m['content'])}</pre>"
     return (
         f'<li class="msg {esc(m["role"])}{" hit" if hit else ""}" id="msg-{m["seq"]}" data-seq="{m["seq"]}">'
-        f'<span class="tag">{tag}</span><pre>{esc(m["content"])}</pre></li>'
+        f'<span class="tag">{tag}</span>{text}{calls}</li>'
     )
 
 

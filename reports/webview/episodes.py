@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from reports.webview.errors import BadRequest
@@ -88,8 +88,8 @@ def _count(snap: Snapshot, where: list[str], hits: str, params: dict[str, Any]) 
 
 @dataclass
 class Episode:
-    """One episode as the viewer shows it: its row and the rows of its tree nodes, steps, calls and messages, and
-    the query time (ms)."""
+    """One episode as the viewer shows it: its row and the rows of its tree nodes, steps, calls, messages (each with
+    its ``tool_call_id`` and ``tool_calls``, None when it has none) and tool calls, and the query time (ms)."""
 
     meta: dict[str, Any]
     nodes: list[dict[str, Any]]
@@ -97,6 +97,8 @@ class Episode:
     calls: list[dict[str, Any]]
     messages: list[dict[str, Any]]
     elapsed_ms: float
+    #: the ``tool_calls`` rows, in the order they were made ([] for a run without any)
+    tool_calls: list[dict[str, Any]] = field(default_factory=list)
 
 
 def find_episode(snap: Snapshot, episode_id: str, run_id: str | None) -> tuple[str, str]:
@@ -131,9 +133,31 @@ def episode(snap: Snapshot, run_id: str, episode_id: str) -> Episode:
         "SELECT * FROM _episode_list WHERE run_id = $r AND episode_id = $e", {"r": run_id, "e": episode_id}
     ).dicts()
     m = {**(extra[0] if extra else {}), **meta[0]}
-    out = Episode(m, mine("viewer_nodes"), mine("viewer_steps"), mine("viewer_calls"), mine("viewer_messages"), 0.0)
+    out = Episode(
+        m,
+        mine("viewer_nodes"),
+        mine("viewer_steps"),
+        mine("viewer_calls"),
+        with_tool_fields(mine("viewer_messages"), mine("viewer_message_tools")),
+        0.0,
+        mine("viewer_tool_calls"),
+    )
     out.elapsed_ms = (time.perf_counter() - t0) * 1000
     return out
+
+
+def with_tool_fields(messages: list[dict[str, Any]], tools: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``messages`` with each one's ``tool_call_id`` and ``tool_calls`` (None where ``tools``, the rows of
+    viewer_message_tools, has none). Kept as a query of its own so the report's viewer_messages stays as it was."""
+    by_seq = {t["seq"]: t for t in tools}
+    return [
+        {
+            **m,
+            "tool_call_id": by_seq.get(m["seq"], {}).get("tool_call_id"),
+            "tool_calls": by_seq.get(m["seq"], {}).get("tool_calls"),
+        }
+        for m in messages
+    ]
 
 
 def call_window(snap: Snapshot, run_id: str, episode_id: str, call_index: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
@@ -149,7 +173,7 @@ def call_window(snap: Snapshot, run_id: str, episode_id: str, call_index: int) -
     msgs = snap.query(
         "WITH w AS (SELECT unnest(window_seqs) AS seq, generate_subscripts(window_seqs, 1) AS pos FROM llm_calls "
         "WHERE run_id = $r AND episode_id = $e AND call_index = $c) "
-        "SELECT w.pos, w.seq, m.role, m.kind, m.pinned, m.node_id, m.content FROM w "
+        "SELECT w.pos, w.seq, m.role, m.kind, m.pinned, m.node_id, m.content, m.tool_call_id, m.tool_calls FROM w "
         "LEFT JOIN messages m ON m.run_id = $r AND m.episode_id = $e AND m.seq = w.seq ORDER BY w.pos",
         {"r": run_id, "e": episode_id, "c": call_index},
     ).dicts()

@@ -48,6 +48,8 @@ def test_forwarder_batches_and_skips_calls_when_the_gateway_writes_them():
         "content": "m0",
         "node_id": None,
         "pinned": False,
+        "tool_call_id": None,
+        "tool_calls": None,
     }
     assert waited == [1, 2]  # the first batch was awaited before the second went out; close waits for the last
     keep = RecordForwarder("run1", send=lambda rows: sent.append(rows), wait=lambda r: None, skip_calls=False)

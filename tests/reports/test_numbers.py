@@ -603,7 +603,7 @@ def test_overview_and_runs(con_a):
             "skipped_part_files": 0,
         }
     ]
-    assert named_query(con_a, "runs").rows == [("runA", 2, "1970-01-01 00:16:40 UTC", "hostA2", "abc123", "hashA", 4, 18, 8)]
+    assert named_query(con_a, "runs").rows == [("runA", 2, "1970-01-01 00:16:40 UTC", "hostA2", "abc123", "hashA", 5, 18, 8)]
     assert named_query(con_a, "events_summary").rows == [
         ("gateway", "retry", "warning", 2, 2),
         ("pipeline", "worker_restart", "error", 1, 0),

@@ -23,7 +23,18 @@ from reports.views import (
 from schemas.parts import part_files
 from schemas.tables import TABLES
 
-NAMED_VIEWS = ["attempts", "terminal", "outcomes", "calls", "nodes", "tree_stats", "step_patterns", "episode_modes", "failures"]
+NAMED_VIEWS = [
+    "attempts",
+    "terminal",
+    "outcomes",
+    "calls",
+    "nodes",
+    "tree_stats",
+    "step_patterns",
+    "tool_stats",
+    "episode_modes",
+    "failures",
+]
 
 
 def _columns(con, name: str) -> list[tuple[str, str]]:

@@ -9,7 +9,7 @@ import pytest
 
 from schemas import SCHEMA_VERSION, TABLES, arrow_schema, record_to_row
 from schemas.parts import PartWriter, check_parts, read_table
-from schemas.records import ALL_RECORD_TYPES, CallRecord, MessageRecord, NodeRecord, NodeVersion, StepRecord
+from schemas.records import ALL_RECORD_TYPES, CallRecord, MessageRecord, NodeRecord, NodeVersion, StepRecord, ToolCallRecord
 
 
 def test_each_table_has_run_id_then_the_record_fields_and_a_version():
@@ -23,6 +23,7 @@ def test_each_table_has_run_id_then_the_record_fields_and_a_version():
         "run",
         "wiki_pages",
         "wiki_requests",
+        "tool_calls",
     }
     for rt in ALL_RECORD_TYPES:
         schema = arrow_schema(rt.table)
@@ -34,6 +35,31 @@ def test_each_table_has_run_id_then_the_record_fields_and_a_version():
     # the provider model string and the model's name in the sweep (schema version 3), side by side
     assert (calls.field("model").type, calls.field("model").nullable) == (pa.string(), False)
     assert (calls.field("model_name").type, calls.field("model_name").nullable) == (pa.string(), True)
+    # tool calls (schema version 5): the messages' tool columns are nullable text, and the
+    # tool_calls table's optional columns are nullable
+    msgs = arrow_schema("messages")
+    assert [(n, msgs.field(n).type, msgs.field(n).nullable) for n in ("tool_call_id", "tool_calls")] == [
+        ("tool_call_id", pa.string(), True),
+        ("tool_calls", pa.string(), True),
+    ]
+    tools = arrow_schema("tool_calls")
+    assert [(f.name, str(f.type), f.nullable) for f in tools] == [
+        ("run_id", "string", False),
+        ("episode_id", "string", False),
+        ("index", "int64", False),
+        ("step_index", "int64", False),
+        ("name", "string", False),
+        ("arguments", "string", False),
+        ("valid", "bool", False),
+        ("call_id", "string", True),
+        ("message_seq", "int64", True),
+        ("node_id", "int64", True),
+        ("error", "string", True),
+        ("exit_code", "int64", True),
+        ("duration_s", "double", False),
+        ("output_bytes", "int64", False),
+        ("timed_out", "bool", False),
+    ]
     with pytest.raises(KeyError, match="unknown table 'nope'"):
         arrow_schema("nope")
 
@@ -86,3 +112,23 @@ def test_a_corrupt_part_file_is_reported_not_fatal(tmp_path):
     assert table.num_rows == 3 and len(bad) == 1
     empty, _ = read_table(tmp_path, "episodes")
     assert empty.num_rows == 0 and empty.schema == arrow_schema("episodes")
+
+
+def test_tool_call_rows_and_tool_messages_round_trip(tmp_path):
+    calls = '[{"id": "c1", "name": "bash", "arguments": "{\\"command\\": \\"ls\\"}"}]'
+    records = [
+        MessageRecord("e1", 0, "assistant", "reply", "", tool_calls=calls),
+        MessageRecord("e1", 1, "tool", "tool_result", "a.txt", tool_call_id="c1"),
+        ToolCallRecord("e1", 0, 0, "bash", '{"command": "ls"}', True, "c1", 0, None, None, 0, 0.25, 6, False),
+        ToolCallRecord("e1", 1, 1, "bash", "{oops", False, "c2", 2, error="arguments are not JSON"),
+    ]
+    PartWriter(tmp_path).write_records("r", records)
+    msgs, bad = read_table(tmp_path, "messages")
+    assert bad == []
+    assert [(m["role"], m["tool_call_id"], m["tool_calls"]) for m in msgs.to_pylist()] == [
+        ("assistant", None, calls),
+        ("tool", "c1", None),
+    ]
+    rows, bad = read_table(tmp_path, "tool_calls")
+    assert bad == [] and rows.to_pylist() == [record_to_row(r, "r") for r in records[2:]]
+    assert rows.to_pylist()[1]["exit_code"] is None and rows.to_pylist()[1]["duration_s"] == 0.0

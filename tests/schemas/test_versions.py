@@ -153,7 +153,7 @@ def test_the_views_and_status_read_a_version_1_run(v1_run):
 
 
 def test_a_version_1_run_is_read_not_continued(v1_run):
-    with pytest.raises(RunFolderError, match=r"written with schema version 1, this recap writes 4: its rows stay readable"):
+    with pytest.raises(RunFolderError, match=r"written with schema version 1, this recap writes 5: its rows stay readable"):
         RunStore(v1_run).check_can_hold("old")
 
 
@@ -306,7 +306,7 @@ def test_a_version_3_run_is_continued_and_its_parts_read_as_one_table(v3_run):
     plan = expand(spec)
     diff = diff_plans(json.loads((v3_run / "plan.json").read_text()), plan)
     assert (len(diff.unchanged), diff.new, diff.changed, diff.removed) == (6, [], [], [])
-    # the continuation writes the sampling seed 1 units as version 4 parts beside the old one
+    # the continuation writes the sampling seed 1 units as current-version parts beside the old one
     w = PartWriter(v3_run, "new")
     w.write_records("old3", [_episode(u, success=True) for u in plan.units if u.sampling_seed == 1])
     table, bad = read_table(v3_run, "episodes")
