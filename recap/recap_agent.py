@@ -33,6 +33,7 @@ from recap.config import ReCAPConfig
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
 from recap.jsonreply import recap_reply
+from recap.recap_tools import finish_kinds, play_tools
 from recap.release_prompt import ReleasePrompt
 from recap.runtime import Episode, EpisodeEnd
 from recap.tree import Node
@@ -80,6 +81,9 @@ class ReCAPAgent(Agent):
         return ep.extra
 
     def play(self, ep: Episode, reset: Reset) -> None:
+        if ep.env.tool_defs():  # a coding environment: the paper's tool-call mode (recap.recap_tools)
+            ep.extra["tool_mode"] = True
+            return play_tools(self, ep, reset)
         cfg = self.config
         st = self._state(ep)
         st.update(nodes=[], iterations=0, rules=ep.env.rules(), max_depth=0, remind=False, next_reminder_call=cfg.reminder_period)
@@ -258,5 +262,7 @@ class ReCAPAgent(Agent):
         return int(self._state(ep).get("max_depth", 0))
 
     def finish(self, ep: Episode) -> None:
+        if ep.extra.get("tool_mode"):
+            finish_kinds(self._state(ep))
         for node in self._state(ep).get("nodes", []):
             ep.emit(node.record(ep.conv.episode_id))
