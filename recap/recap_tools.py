@@ -24,7 +24,8 @@ as it stands (``submit``), since the root was not taken from it (the release sho
 after its head, which is then empty); a reply that is neither usable JSON nor tool calls is
 repaired (the runtime's JSON repair) where the release re-queries with its format-error
 template; ``max_level`` (the depth ablations) asks a node at the cap to act or finish rather
-than decompose, and asks again if it decomposes; no rule reminders (the release has none there).
+than decompose (on entering it, and again if it decomposes all the same: its list is kept but
+not descended into); no rule reminders (the release has none there).
 
 Tree records: the pre-root is the tree's root node (depth 0, ``root``), the task's root its first
 child (depth 1), as the release counts depth (:623). A node that called tools and has no
@@ -116,7 +117,11 @@ def play_tools(agent: ReCAPAgent, ep: Episode, reset: Reset) -> None:
                 prompt, kind, shown = TP.depth_cap_prompt(node.task), "depth_cap", ()
                 continue
             node = agent._new_node(ep, node, subtasks[0])
-            prompt, kind, shown = TP.down_prompt(node.task), "descend", ()
+            if cfg.max_level is not None and node.depth >= cfg.max_level:
+                prompt, kind = TP.depth_cap_prompt(node.task), "depth_cap"
+            else:
+                prompt, kind = TP.down_prompt(node.task), "descend"
+            shown = ()
             continue
         node.status = "done"
         _set_kind(node, acted)
