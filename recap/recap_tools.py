@@ -36,17 +36,28 @@ children is ``primitive`` (its ``step_index``: its first call's attempt); a tool
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from recap import recap_tool_prompts as TP
+from recap.config import ReCAPConfig
 from recap.env import Reset
 from recap.jsonreply import parse_json_object, recap_reply
 from recap.llm import ToolCall
 from recap.runtime import Episode, EpisodeEnd
 from recap.tree import Node
 
-if TYPE_CHECKING:
-    from recap.recap_agent import ReCAPAgent
+
+class TreeAgent(Protocol):
+    """What the loop uses of :class:`recap.recap_agent.ReCAPAgent` (named here, not imported:
+    the agent imports this module): its settings, its episode state and its node maker, so both
+    modes keep one tree the same way."""
+
+    config: ReCAPConfig
+
+    def _state(self, ep: Episode) -> dict[str, Any]: ...
+
+    def _new_node(self, ep: Episode, parent: Node | None, task: str) -> Node: ...
+
 
 #: the tool-choice setting of every request (the release's function calling leaves it to the model)
 TOOL_CHOICE = "auto"
@@ -66,7 +77,7 @@ def _parser(with_think: bool) -> Callable[[dict[str, Any]], dict[str, Any]]:
     return parse
 
 
-def play_tools(agent: ReCAPAgent, ep: Episode, reset: Reset) -> None:
+def play_tools(agent: TreeAgent, ep: Episode, reset: Reset) -> None:
     """One ReCAP episode on an environment with tools (see the module docstring); returns when
     the agent finishes at the pre-root, else an EpisodeEnd (success on the final submit) ends it."""
     cfg, st = agent.config, agent._state(ep)

@@ -217,7 +217,7 @@ class ReActAgent(Agent):
 
     def play(self, ep: Episode, reset: Reset) -> None:
         if self.with_think and ep.env.tool_defs():  # a coding environment: mini-SWE-agent's loop
-            return play_swe(self, ep, reset)
+            return play_swe(ep, reset, self.config.max_json_repairs)
         if self.config.reply_format == "text":
             return play_text(self, ep, reset)
         cfg, d = self.config, ep.driver

@@ -26,15 +26,12 @@ doubles: ``text_layout: bash_block`` (the expert answers with the plan's bash eq
 from __future__ import annotations
 
 import re
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from recap.baselines import react_swe_prompts as S
 from recap.baselines.react_text import raw_text
 from recap.env import Reset
 from recap.runtime import Episode, EpisodeEnd
-
-if TYPE_CHECKING:
-    from recap.baselines.react import ReActAgent
 
 #: the text layout the offline test doubles write (workers/llm/offline/expert_tools.py)
 BASH_BLOCK = "bash_block"
@@ -51,9 +48,10 @@ def bash_blocks(text: str) -> list[str]:
     return [m.strip() for m in ACTION_RE.findall(text)]
 
 
-def play_swe(agent: ReActAgent, ep: Episode, reset: Reset) -> None:
-    """One mini-SWE-agent episode (see the module docstring); ends by an EpisodeEnd."""
-    cfg, d = agent.config, ep.driver
+def play_swe(ep: Episode, reset: Reset, max_repairs: int) -> None:
+    """One mini-SWE-agent episode (see the module docstring; ``max_repairs``: format errors allowed
+    in a row); ends by an EpisodeEnd."""
+    d = ep.driver
     ep.conv.pin("task", S.task_prompt(rules=ep.env.rules(), issue=reset.observation, goal=reset.goal))
     context = {"task": reset.goal, "depth": 0, "valid_actions": None, "text_layout": BASH_BLOCK}
     prompt: str | None = None
@@ -63,7 +61,7 @@ def play_swe(agent: ReActAgent, ep: Episode, reset: Reset) -> None:
         raw, _ = ep.conv.ask(prompt, kind, _keep, context=context, decode=raw_text)
         blocks = bash_blocks(raw["text"])
         if len(blocks) != 1:
-            if errors >= cfg.max_json_repairs:
+            if errors >= max_repairs:
                 raise EpisodeEnd("json_failures", f"{errors + 1} replies in a row without exactly one bash block")
             errors += 1
             ep.conv.usage.json_repairs += 1
