@@ -17,6 +17,8 @@ Control flow (see the paper, section 2, and docs/method.md):
   or control-loop iterations (``iterations``: every child entered, shortcuts included, and every
   return; the released code), prepended to whichever prompt is sent next; at ``max_level`` a
   node is asked for a single valid action instead of a decomposition;
+* on an environment with tools (a coding benchmark) the episode runs in the paper's tool-call
+  mode instead (:mod:`recap.recap_tools`);
 * ``shortcut_trace`` (released code): a shortcut child still leaves its descend prompt and a
   synthetic reply naming the action in the history (no call is made).
 """
