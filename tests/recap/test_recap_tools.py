@@ -258,3 +258,22 @@ def test_a_repaired_tool_reply_has_its_calls_answered_as_not_run():
     result, rows, _, env = run(replies)
     assert result.end_reason == "agent_done" and env.calls == []
     assert [(m.role, m.tool_call_id, m.content) for m in messages(rows) if m.role == "tool"] == [("tool", "call_1", NOT_RUN)]
+
+
+def test_the_window_never_sends_a_tool_result_without_its_call():
+    result, _, client, _ = run(SHORT_EPISODE, ReCAPConfig(window=4))
+    assert result.end_reason == "success"
+    assert [[m.role for m in r.messages] for r in client.requests] == [
+        ["user"],
+        ["user", "assistant", "user"],
+        ["user", "assistant", "user", "assistant", "tool"],
+        ["user", "assistant", "tool", "assistant", "user"],
+        ["user", "assistant", "user", "assistant", "tool"],
+        ["user", "assistant", "tool", "assistant", "user"],
+        ["user", "assistant", "user", "assistant", "user"],
+        ["user", "assistant", "user", "assistant", "tool"],
+    ]
+    for r in client.requests:
+        for i, m in enumerate(r.messages):
+            if m.role == "tool":
+                assert m.tool_call_id in [c.id for c in r.messages[i - 1].tool_calls]
