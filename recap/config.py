@@ -49,6 +49,13 @@ PROFILES: dict[str, dict[str, Any]] = {
     "released": {"window": 128, "temperature": None, "window_counts_pins": True, "window_mode": "pair", "max_tokens": None},
 }
 
+#: what the paper's SWE-bench runs set for every method, under either profile, for a coding
+#: benchmark's protocol to add in :meth:`BenchmarkProtocol.profile_settings` (ReCAP's tool-call
+#: mode and mini-SWE-agent's ReAct): temperature 0 ("temperature set to zero", section
+#: "SWE-bench" and the appendix "SWE-bench Verified Experiment Details"; no demonstration there
+#: either, which the environment declares by having none)
+CODING_PROFILE: dict[str, Any] = {"temperature": 0.0}
+
 #: whether observations list the currently valid actions, where a benchmark makes that optional
 #: (ALFWorld): ``shown`` in the episode and in the one-shot demonstration, ``episode`` in the
 #: episode only (the demonstration stays as written), ``hidden`` nowhere; None: the benchmark's

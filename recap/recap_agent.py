@@ -17,6 +17,8 @@ Control flow (see the paper, section 2, and docs/method.md):
   or control-loop iterations (``iterations``: every child entered, shortcuts included, and every
   return; the released code), prepended to whichever prompt is sent next; at ``max_level`` a
   node is asked for a single valid action instead of a decomposition;
+* on an environment with tools (a coding benchmark) the episode runs in the paper's tool-call
+  mode instead (:mod:`recap.recap_tools`);
 * ``shortcut_trace`` (released code): a shortcut child still leaves its descend prompt and a
   synthetic reply naming the action in the history (no call is made).
 """
@@ -33,6 +35,7 @@ from recap.config import ReCAPConfig
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
 from recap.jsonreply import recap_reply
+from recap.recap_tools import finish_kinds, play_tools
 from recap.release_prompt import ReleasePrompt
 from recap.runtime import Episode, EpisodeEnd
 from recap.tree import Node
@@ -80,6 +83,9 @@ class ReCAPAgent(Agent):
         return ep.extra
 
     def play(self, ep: Episode, reset: Reset) -> None:
+        if ep.env.tool_defs():  # a coding environment: the paper's tool-call mode (recap.recap_tools)
+            ep.extra["tool_mode"] = True
+            return play_tools(self, ep, reset)
         cfg = self.config
         st = self._state(ep)
         st.update(nodes=[], iterations=0, rules=ep.env.rules(), max_depth=0, remind=False, next_reminder_call=cfg.reminder_period)
@@ -258,5 +264,7 @@ class ReCAPAgent(Agent):
         return int(self._state(ep).get("max_depth", 0))
 
     def finish(self, ep: Episode) -> None:
+        if ep.extra.get("tool_mode"):
+            finish_kinds(self._state(ep))
         for node in self._state(ep).get("nodes", []):
             ep.emit(node.record(ep.conv.episode_id))

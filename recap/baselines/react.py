@@ -25,6 +25,9 @@ give up after 3 rounds of 5 consecutive invalid actions), Act with no window; on
 released react.py / act.py (valid actions in every observation, "OK." for a thought, explained
 feedback after an invalid command, 128 messages counting the pins; Act with no window).
 
+On an environment with tools (a coding benchmark) ReAct runs as mini-SWE-agent does, the paper's
+ReAct baseline there (:mod:`recap.baselines.react_swe`).
+
 ``reply_format: text`` (the ``released`` profile's choice where the release reads plain text)
 runs the same episode through :mod:`recap.baselines.react_text`: other reply parsing, the same
 history, observations and explained feedback (:meth:`ReActAgent.explained_feedback`).
@@ -36,6 +39,7 @@ for offline models: ``task`` (the goal), ``depth`` 0, ``valid_actions``.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
@@ -43,11 +47,12 @@ from recap.agent import Agent
 from recap.baselines import prompts as P
 from recap.baselines import text_prompts as T
 from recap.baselines.act_json import MALFORMED_JSON, PARSE_ERROR_ACTION, read_reply
+from recap.baselines.react_swe import play_swe
 from recap.baselines.react_text import demo_texts, play_text, raw_text
 from recap.baselines.reply_format import RELEASED_TEXT, check_reply_format
 from recap.config import AgentConfig, ConfigError
 from recap.demo_script import DemoScript
-from recap.env import InvalidActionError, Reset
+from recap.env import Environment, InvalidActionError, Reset
 from recap.jsonreply import action_reply
 from recap.runtime import Episode, EpisodeEnd
 
@@ -202,7 +207,17 @@ class ReActAgent(Agent):
             return demo_texts(self, replies)
         return super().shape_demo_replies(replies)
 
+    def episode_config(self, env: Environment) -> AgentConfig:
+        """The derived settings, and on an environment with tools (mini-SWE-agent's loop) no JSON
+        mode: its replies are plain text."""
+        cfg = super().episode_config(env)
+        if self.with_think and env.tool_defs() and cfg.json_mode:
+            cfg = dataclasses.replace(cfg, json_mode=False)
+        return cfg
+
     def play(self, ep: Episode, reset: Reset) -> None:
+        if self.with_think and ep.env.tool_defs():  # a coding environment: mini-SWE-agent's loop
+            return play_swe(ep, reset, self.config.max_json_repairs)
         if self.config.reply_format == "text":
             return play_text(self, ep, reset)
         cfg, d = self.config, ep.driver

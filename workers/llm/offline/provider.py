@@ -9,11 +9,12 @@ like a provider would (counted with the documented chars/4 estimate).
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from recap.baselines.textreply import render as render_text
 from workers.llm.offline.expert import expert_reply
+from workers.llm.offline.expert_tools import BASH_BLOCK, ToolAnswer, bash_plan, render_bash_block, tool_reply
 from workers.llm.offline.knobs import MALFORMED_JSON, Knobs, OfflineOptionsError, draw
 from workers.llm.offline.random_model import random_reply
 from workers.llm.offline.replay import ReplayError, replay_index
@@ -31,49 +32,94 @@ MODELS = ("expert", "random", "replay")
 
 
 def offline_text(name: str, messages: list[dict[str, str]], metadata: Mapping[str, Any] | None, api_base: str | None) -> str:
-    """The reply text of test double ``name`` (without the ``offline/`` prefix)."""
+    """The reply text of test double ``name`` (without the ``offline/`` prefix) to a request
+    without tools."""
+    return offline_reply(name, messages, metadata, api_base).text
+
+
+def offline_reply(
+    name: str,
+    messages: list[dict[str, str]],
+    metadata: Mapping[str, Any] | None,
+    api_base: str | None,
+    tools: Sequence[str] = (),
+) -> ToolAnswer:
+    """The reply of test double ``name`` (without the ``offline/`` prefix): its text and, for
+    ``offline/expert`` asked with ``tools`` (the offered tools' names), its tool calls
+    (:mod:`workers.llm.offline.expert_tools`)."""
     meta = dict((metadata or {}).get(METADATA_KEY) or {})
     call_key = str(meta.get("call_key", ""))
     hints = meta.get("hints") or {}
     if name == "replay":
         if not api_base:
             raise ReplayError("offline/replay needs api_base = the run folder to replay")
-        return replay_index(api_base).answer(messages, call_key)
+        return ToolAnswer(replay_index(api_base).answer(messages, call_key))
     maker = _REPLY_MAKERS.get(name)
     if maker is None:
         raise OfflineOptionsError(f"unknown offline model offline/{name}; known: {', '.join('offline/' + m for m in MODELS)}")
     knobs = Knobs.from_options(meta.get("options"))
     if knobs.malformed_json_rate > 0 and draw(call_key, knobs.noise_seed, "malformed") < knobs.malformed_json_rate:
-        return MALFORMED_JSON
-    reply = maker(hints, knobs, call_key)
+        return ToolAnswer(MALFORMED_JSON)
+    if tools and name == "expert":  # a coding environment's tools: the gold patch's play as calls
+        return tool_reply(hints, call_key)
     layout = hints.get("text_layout")
+    if layout == BASH_BLOCK:  # one bash command per turn (mini-SWE-agent): the plan's bash equivalents
+        hints = {**hints, "expert_plan": bash_plan(hints)}
+        return ToolAnswer(render_bash_block(maker(hints, knobs, call_key)))
+    reply = maker(hints, knobs, call_key)
     if layout:  # an agent reading plain text (reply_format: text) names its layout
-        return render_text(str(layout), reply)
-    return json.dumps(reply)
+        return ToolAnswer(render_text(str(layout), reply))
+    return ToolAnswer(json.dumps(reply))
+
+
+def tool_names(optional_params: Mapping[str, Any] | None) -> tuple[str, ...]:
+    """The names of the tools a litellm call offers (its ``tools`` in the OpenAI shape)."""
+    names = []
+    for tool in (optional_params or {}).get("tools") or ():
+        function = tool.get("function") if isinstance(tool, Mapping) else None
+        if isinstance(function, Mapping) and function.get("name"):
+            names.append(str(function["name"]))
+    return tuple(names)
 
 
 def _make_provider_class() -> type:
     # litellm only once it is imported offline and quiet (workers.llm.litellm_import)
     from litellm import CustomLLM
     from litellm.llms.custom_llm import CustomLLMError
-    from litellm.types.utils import Usage
+    from litellm.types.utils import ChatCompletionMessageToolCall, Function, Usage
 
     class OfflineProvider(CustomLLM):
         """TEST DOUBLE provider for ``offline/expert``, ``offline/random``, ``offline/replay``."""
 
         def _fill(
-            self, model: str, messages: list, api_base: str | None, model_response: Any, litellm_params: Mapping[str, Any] | None
+            self,
+            model: str,
+            messages: list,
+            api_base: str | None,
+            model_response: Any,
+            litellm_params: Mapping[str, Any] | None,
+            optional_params: Mapping[str, Any] | None = None,
         ) -> Any:
             msgs = [{"role": str(m["role"]), "content": str(m.get("content") or "")} for m in messages]
             try:
-                text = offline_text(model, msgs, (litellm_params or {}).get("metadata"), api_base)
+                answer = offline_reply(model, msgs, (litellm_params or {}).get("metadata"), api_base, tool_names(optional_params))
             except (ReplayError, OfflineOptionsError, ValueError) as exc:
                 raise CustomLLMError(status_code=400, message=str(exc)) from None
-            model_response.choices[0].message.content = text
+            text = answer.text
+            message = model_response.choices[0].message
+            message.content = text
             model_response.choices[0].finish_reason = "stop"
+            if answer.tool_calls:  # as a provider sends them: OpenAI-shaped calls, finish reason tool_calls
+                message.tool_calls = [
+                    ChatCompletionMessageToolCall(
+                        id=c["id"], type="function", function=Function(name=c["name"], arguments=c["arguments"])
+                    )
+                    for c in answer.tool_calls
+                ]
+                model_response.choices[0].finish_reason = "tool_calls"
             model_response.model = f"{PROVIDER}/{model}"
             prompt = estimate_prompt_tokens(msgs)
-            completion = estimate_text_tokens(text)
+            completion = estimate_text_tokens(text + "".join(c["name"] + c["arguments"] for c in answer.tool_calls))
             model_response.usage = Usage(prompt_tokens=prompt, completion_tokens=completion, total_tokens=prompt + completion)
             return model_response
 
@@ -96,7 +142,7 @@ def _make_provider_class() -> type:
             timeout=None,
             client=None,
         ):  # litellm's CustomLLM signature; litellm passes every argument by keyword
-            return self._fill(model, messages, api_base, model_response, litellm_params)
+            return self._fill(model, messages, api_base, model_response, litellm_params, optional_params)
 
         async def acompletion(self, *args, **kwargs):  # the same answer, awaited (litellm's async path)
             return self.completion(*args, **kwargs)
