@@ -461,8 +461,11 @@ class EnvDriver:
         self._record(action, valid, step.observation, step.done, node_id)
         if step.success:
             raise EpisodeEnd("success")
-        if step.done and step.info.get("end_reason") == "agent_done":  # e.g. FEVER's wrong verdict
+        said = step.info.get("end_reason")
+        if step.done and said == "agent_done":  # e.g. FEVER's wrong verdict, a coding fix that fails its tests
             raise EpisodeEnd("agent_done", f"the environment ended the episode after {self.steps} steps without success")
+        if step.done and said == "episode_limit":  # the environment's own limit (a coding sandbox's wall time)
+            raise EpisodeEnd("episode_limit", str(step.info.get("detail") or f"the environment's limit after {self.steps} steps"))
         if step.done or self.steps >= self.env.max_steps:
             raise EpisodeEnd("step_cap", f"{self.steps} steps (cap {self.env.max_steps})")
         return step

@@ -4,7 +4,9 @@ call is in Parquet; a worker killed mid-episode leaves no sandbox behind."""
 
 from __future__ import annotations
 
+import http.client
 import os
+import re
 import signal
 import subprocess
 import threading
@@ -18,6 +20,7 @@ from pipeline.gateway_backend import make_backend
 from pipeline.spec import parse_spec
 from pipeline.sqlview import open_tables
 from pipeline.store import RunStore
+from reports.webview.server import serve, stop
 from workers.envs.swe.examples import make_fixtures
 from workers.sandbox import LABEL_EPISODE, LABEL_RUN
 
@@ -70,7 +73,7 @@ def _check_run(out: Path, n: int) -> None:
     # episode before its answer), and its tree has the review-and-submit node above the task
     recap_calls = q(
         con,
-        """select count(*), count(distinct t.call_id), bool_and(t.valid), bool_and(t.message_seq is not null)
+        """select count(*), count(distinct t.episode_id || t.call_id), bool_and(t.valid), bool_and(t.message_seq is not null)
            from tool_calls t join episodes e using (episode_id) where e.method = 'recap'""",
     )
     assert recap_calls[0][0] == recap_calls[0][1] and recap_calls[0][2:] == (True, True)
@@ -78,7 +81,7 @@ def _check_run(out: Path, n: int) -> None:
         con,
         """select count(*) from messages m join episodes e using (episode_id)
            where e.method = 'recap' and m.role = 'tool'
-             and m.tool_call_id not in (select call_id from tool_calls where call_id is not null)""",
+             and (m.episode_id, m.tool_call_id) not in (select (episode_id, call_id) from tool_calls)""",
     ) == [(0,)]
     assert q(
         con,
@@ -120,6 +123,22 @@ def test_a_local_sandbox_sweep_resolves_every_fixture(ray_address, tmp_path):
     summary = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
     assert (summary.total, summary.finished_now, summary.exit_code()) == (10, 10, 0)
     _check_run(out, len(NAMES))
+    # the viewer shows one ReCAP episode's commands: a row per tool call, in order
+    con, _ = open_tables(RunStore(out))
+    episode = q(con, "select episode_id from episodes where method = 'recap' and instance_id = 'swe/fixture__twofiles-1'")[0][0]
+    calls = q(con, f"select name from tool_calls where episode_id = '{episode}' order by index")
+    server, thread = serve([out], 0, poll_s=0)
+    try:
+        conn = http.client.HTTPConnection("127.0.0.1", server.server_address[1], timeout=30)
+        conn.request("GET", f"/episode?id={episode}")
+        body = conn.getresponse().read().decode()
+    finally:
+        stop(server, thread)
+    section = re.search(r'<section id="tool-calls">(.*?)</section>', body, re.S)
+    assert section is not None
+    shown = re.findall(r"<tr[^>]*data-tool-call[^>]*>.*?<td[^>]*><code>(\w+)</code></td>", section.group(1), re.S)
+    assert shown == [name for (name,) in calls]
+    assert shown.count("str_replace") == 2 and shown[-2:] == ["submit", "submit"]  # two files fixed, review, submit
 
 
 @pytest.mark.docker
@@ -150,6 +169,8 @@ def test_a_killed_workers_container_is_removed_and_its_unit_resolves(ray_address
     assert len(killed["seen"]) == 1  # the killed attempt's container was running
     assert _containers(**{LABEL_EPISODE: killed["episode"]}) == []
     con, _ = open_tables(RunStore(out))
-    assert q(con, "select count(*) from episodes where end_reason = 'success'") == [(4,)]
+    assert q(con, "select count(*) from episodes where end_reason = 'success'") == [(4,)], q(
+        con, "select unit_id, attempt, end_reason, error from episodes order by 1, 2"
+    )
     removed = q(con, "select detail->>'removed', detail->>'worker' is not null from events where kind = 'leftovers_removed'")
     assert ("1", True) in removed

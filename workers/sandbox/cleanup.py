@@ -8,6 +8,7 @@ label: every container carrying them, and every local sandbox registered with th
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import signal
@@ -15,6 +16,8 @@ from collections.abc import Mapping
 
 from workers.sandbox import registry
 from workers.sandbox.local_sandbox import kill_cgroup
+
+log = logging.getLogger(__name__)
 
 
 def remove_labelled(labels: Mapping[str, str], *, docker: bool = True) -> int:
@@ -41,7 +44,12 @@ def _remove_containers(labels: Mapping[str, str]) -> int:
             c.remove(force=True)
             n += 1
         except docker.errors.NotFound:
-            pass
+            pass  # removed meanwhile (its episode closed it)
+        except docker.errors.APIError as exc:
+            # 409 "removal already in progress": its own close is removing it; anything else must
+            # not keep the other containers from going
+            if exc.status_code != 409:
+                log.warning("could not remove container %s: %s", c.short_id, str(exc).splitlines()[0][:200])
     return n
 
 

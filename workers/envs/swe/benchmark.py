@@ -27,6 +27,7 @@ from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any
 
+from recap.config import CODING_PROFILE, AgentConfig
 from recap.env import Environment, UnknownInstanceError
 from workers.envs.registry import Benchmark
 from workers.sandbox import LABEL_EPISODE, LABEL_RUN, LABEL_WORKER, check_ready, open_sandbox, remove_labelled
@@ -110,6 +111,13 @@ class SweBenchmark(Benchmark):
         or one of them, left: :func:`workers.sandbox.remove_labelled` by their labels."""
         labels = {LABEL_RUN: run_id, **({LABEL_WORKER: worker_id} if worker_id is not None else {})}
         return remove_labelled(labels)
+
+    def profile_settings(
+        self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
+    ) -> dict[str, Any]:
+        """Every profile on SWE-bench runs at temperature 0 (the paper's SWE-bench protocol:
+        :data:`recap.config.CODING_PROFILE`), beside what the profile sets anywhere."""
+        return {**generic, **CODING_PROFILE}
 
     def refuses_method(self, method: str) -> str | None:
         """CoT, Standard, Act, ADaPT: see :data:`REFUSED_METHODS`; ReCAP and ReAct run."""

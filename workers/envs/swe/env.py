@@ -27,6 +27,7 @@ exhausted budget), ``end_reason`` ``step_cap`` (commands) or ``episode_limit``.
 from __future__ import annotations
 
 import json
+import re
 import shlex
 import subprocess
 import time
@@ -157,8 +158,7 @@ class SweEnvironment(Environment):
 
     def _run_tool(self, box: Sandbox, name: str, args: Mapping[str, Any]) -> T.ToolOutcome:
         if name == T.BASH:
-            self._commands_run.add(args["command"])
-            return T.run_bash(box, self.limits, args["command"])
+            return self._bash(box, args["command"])
         if name == T.VIEW:
             out = T.run_view(box, self.limits, args["path"], args.get("view_range"))
             rel = T.repo_relative(box.workdir, args["path"])
@@ -169,6 +169,18 @@ class SweEnvironment(Environment):
             return T.run_str_replace(box, self.limits, args["path"], args["old_str"], args.get("new_str", ""))
         return T.run_create(box, self.limits, args["path"], args["file_text"])
 
+    def _bash(self, box: Sandbox, command: str) -> T.ToolOutcome:
+        """Run one shell command; a command that only prints a file (``cat -n F``, ``sed -n 'a,bp' F``,
+        ``nl F``) counts as viewing it, as the ``view`` tool does (the expert plan's views are done
+        once, whichever way the agent looked)."""
+        self._commands_run.add(command)
+        out = T.run_bash(box, self.limits, command)
+        shown = _printed_file(command)
+        rel = T.repo_relative(box.workdir, shown) if shown is not None else None
+        if out.error is None and out.exit_code == 0 and rel is not None:
+            self._viewed.add(rel)
+        return out
+
     def step(self, action: str) -> Step:
         """The text action: one bash command (mini-SWE-agent); its sentinel output submits at once."""
         if not isinstance(action, str):
@@ -176,13 +188,12 @@ class SweEnvironment(Environment):
         box = self._start_call()
         started = time.monotonic()
         try:
-            self._commands_run.add(action)
-            out = T.run_bash(box, self.limits, action)
+            out = self._bash(box, action)
             if out.error is None and _is_sentinel(out.observation):
-                return self._submit(review=False, started=started, spent=out)
+                return _as_command(self._submit(review=False, started=started, spent=out))
         except SandboxError as exc:
             raise EnvError(f"{self.instance_id}: the sandbox failed: {exc}") from exc
-        return self._after(out)
+        return _as_command(self._after(out))
 
     def _start_call(self) -> Sandbox:
         box = self._box()
@@ -200,7 +211,7 @@ class SweEnvironment(Environment):
             return Step(out.observation, None, False, False, out.info())
         reason, note = limit
         ev = self._judge()
-        info = {**out.info(), **self._verdict_info(ev), "limit": note}
+        info = {**out.info(), **self._verdict_info(ev), "limit": note, "detail": note}
         if not ev.resolved:
             info["end_reason"] = reason
         obs = f"{out.observation}\n[{note}: the episode ends and your current changes are submitted]"
@@ -361,3 +372,25 @@ def submitted_text(ev: Evaluation) -> str:
         "timeout": "the tests ran past the time limit",
     }[ev.reason]
     return f"Your changes were submitted; {verdict}."
+
+
+def _printed_file(command: str) -> str | None:
+    """The one file a command that only prints it names (``cat [-n] F``, ``nl F``, ``sed -n 'a,bp' F``);
+    None for any other command."""
+    try:
+        words = shlex.split(command)
+    except ValueError:
+        return None
+    if len(words) == 2 and words[0] in ("cat", "nl"):
+        return words[1]
+    if len(words) == 3 and words[:2] == ["cat", "-n"]:
+        return words[2]
+    if len(words) == 4 and words[:2] == ["sed", "-n"] and re.fullmatch(r"\d+,(\d+|\$)p", words[2]):
+        return words[3]
+    return None
+
+
+def _as_command(step: Step) -> Step:
+    """A text action's step, marked as the shell command it ran (``info["tool"]``), so its
+    ``tool_calls`` row is written like a tool call's (recap.runtime.EnvDriver.execute)."""
+    return replace(step, info={**step.info, "tool": T.BASH})

@@ -203,7 +203,7 @@ def make_fixtures(folder: Path, names: tuple[str, ...] | None = None) -> Fixture
         _git(repo, "add", "-A")
         _git(repo, "commit", "-q", "-m", "base")
         base_commit = _git(repo, "rev-parse", "HEAD").strip()
-        record = {
+        record: dict[str, object] = {
             "instance_id": f"fixture__{task.name}-1",
             "repo": f"fixture/{task.name}",
             "base_commit": base_commit,

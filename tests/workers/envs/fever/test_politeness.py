@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -88,8 +89,13 @@ def test_the_driver_starts_the_actor_only_for_a_fever_sweep(ray_address):
     assert env is not None
     assert env["env_vars"][POLITENESS_VAR] == name and env["env_vars"]["PYTHONPATH"] == runtime_env()["env_vars"]["PYTHONPATH"]
     started.close()
+    # ray.kill is asynchronous: a call sent at once may still be served; the actor is gone soon
+    # after (never restarted), so a later call fails
+    deadline = time.monotonic() + 60
     with pytest.raises(ray.exceptions.RayActorError):
-        ray.get(actor.stats.remote(), timeout=60)
+        while time.monotonic() < deadline:
+            ray.get(actor.stats.remote(), timeout=60)
+            time.sleep(0.1)
 
 
 def test_outside_ray_the_process_bucket_is_shared(claims_dir, monkeypatch):
