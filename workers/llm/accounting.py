@@ -108,13 +108,15 @@ class Sizing:
 
 
 def size_request(
-    model: str, messages: list[dict[str, str]], params: Mapping[str, Any], counted: TokenCount | None = None
+    model: str, messages: list[dict[str, Any]], params: Mapping[str, Any], counted: TokenCount | None = None
 ) -> Sizing:
     """What is known of a request before it is sent (:class:`Sizing`): our prompt count
     (``counted``, when the caller already has it), its upper bound, ``max_tokens`` (``params`` must
     hold it) and the choices."""
-    counted = counted or count_prompt_tokens(model, messages)
-    return Sizing(counted, prompt_token_bound(model, messages, counted), int(params["max_tokens"]), output_choices(params))
+    tools = params.get("tools") or None
+    counted = counted or count_prompt_tokens(model, messages, tools)
+    bound = prompt_token_bound(model, messages, counted, tools)
+    return Sizing(counted, bound, int(params["max_tokens"]), output_choices(params))
 
 
 def worst_case_pico(price: Price | None, sizing: Sizing) -> int | None:

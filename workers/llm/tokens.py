@@ -18,6 +18,7 @@ Two numbers are used:
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -51,19 +52,50 @@ class TokenCount:
     source: str  # "tokenizer" | "estimate"
 
 
+#: what a tool definition costs beside its JSON in our count (the provider's framing of it)
+TOKENS_PER_TOOL = 8
+#: the same, in the upper bound: a provider's rendering of one tool (name, description, a
+#: namespace line) never adds more than this beyond its JSON's bytes
+BOUND_TOKENS_PER_TOOL = 64
+
+
 def estimate_text_tokens(text: str) -> int:
     """The documented estimate: ceil(characters / 4)."""
     return math.ceil(len(text) / CHARS_PER_TOKEN)
 
 
 def _content(message: Mapping[str, Any]) -> str:
+    """The text of a message a provider bills: its content, and an assistant's tool calls (each
+    call's id, name and arguments) or a tool result's call id."""
     content = message.get("content") or ""
-    return content if isinstance(content, str) else str(content)
+    text = content if isinstance(content, str) else str(content)
+    calls = message.get("tool_calls") or ()
+    parts = [text]
+    for call in calls:
+        fn = call.get("function") or {} if isinstance(call, Mapping) else {}
+        parts += [
+            str(call.get("id", "")) if isinstance(call, Mapping) else "",
+            str(fn.get("name", "")),
+            str(fn.get("arguments", "")),
+        ]
+    if message.get("tool_call_id"):
+        parts.append(str(message["tool_call_id"]))
+    return "\n".join(p for p in parts if p)
 
 
-def estimate_prompt_tokens(messages: Sequence[Mapping[str, Any]]) -> int:
-    """Estimate of a chat prompt: per message ceil(chars/4) + 3, plus 3 for the reply."""
-    return REPLY_PRIMING_TOKENS + sum(TOKENS_PER_MESSAGE + estimate_text_tokens(_content(m)) for m in messages)
+def tools_text(tools: Sequence[Mapping[str, Any]] | None) -> str:
+    """The tool definitions of a request as the text we count (their JSON); providers render them
+    into the prompt in their own form, which the per-tool allowance covers."""
+    return json.dumps(list(tools), sort_keys=True, ensure_ascii=False) if tools else ""
+
+
+def estimate_prompt_tokens(messages: Sequence[Mapping[str, Any]], tools: Sequence[Mapping[str, Any]] | None = None) -> int:
+    """Estimate of a chat prompt: per message ceil(chars/4) + 3, plus 3 for the reply, plus the
+    tool definitions' JSON at ceil(chars/4) and :data:`TOKENS_PER_TOOL` each."""
+    n = REPLY_PRIMING_TOKENS + sum(TOKENS_PER_MESSAGE + estimate_text_tokens(_content(m)) for m in messages)
+    if tools:
+        n += estimate_text_tokens(tools_text(tools)) + TOKENS_PER_TOOL * len(tools)
+    return n
 
 
 def _bundled_encoding_available(name: str) -> bool:
@@ -100,15 +132,19 @@ def _encoding_for(model: str) -> Any:
     return tiktoken.get_encoding(name)
 
 
-def count_prompt_tokens(model: str, messages: Sequence[Mapping[str, Any]]) -> TokenCount:
-    """Prompt tokens of a chat request, counted offline."""
+def count_prompt_tokens(
+    model: str, messages: Sequence[Mapping[str, Any]], tools: Sequence[Mapping[str, Any]] | None = None
+) -> TokenCount:
+    """Prompt tokens of a chat request (its messages and tool definitions), counted offline."""
     enc = _encoding_for(model)
     if enc is None:
-        return TokenCount(estimate_prompt_tokens(messages), "estimate")
+        return TokenCount(estimate_prompt_tokens(messages, tools), "estimate")
     n = REPLY_PRIMING_TOKENS
     for m in messages:
         n += TOKENS_PER_MESSAGE + len(enc.encode(_content(m), disallowed_special=()))
         n += len(enc.encode(str(m.get("role", "")), disallowed_special=()))
+    if tools:
+        n += len(enc.encode(tools_text(tools), disallowed_special=())) + TOKENS_PER_TOOL * len(tools)
     return TokenCount(n, "tokenizer")
 
 
@@ -120,9 +156,18 @@ def count_text_tokens(model: str, text: str) -> TokenCount:
     return TokenCount(len(enc.encode(text, disallowed_special=())), "tokenizer")
 
 
-def prompt_token_bound(model: str, messages: Sequence[Mapping[str, Any]], counted: TokenCount | None = None) -> int:
-    """An upper bound on the prompt tokens any provider will bill for these messages."""
-    counted = counted or count_prompt_tokens(model, messages)
+def prompt_token_bound(
+    model: str,
+    messages: Sequence[Mapping[str, Any]],
+    counted: TokenCount | None = None,
+    tools: Sequence[Mapping[str, Any]] | None = None,
+) -> int:
+    """An upper bound on the prompt tokens any provider will bill for these messages and tool
+    definitions (a provider renders the tools into the prompt in its own words: at most one token
+    per byte of their JSON plus :data:`BOUND_TOKENS_PER_TOOL` each)."""
+    counted = counted or count_prompt_tokens(model, messages, tools)
+    tool_slack = BOUND_TOKENS_PER_TOOL * len(tools or ())
     if counted.source == "tokenizer":
-        return counted.tokens + BOUND_TOKENS_PER_REQUEST
-    return BOUND_TOKENS_PER_REQUEST + sum(BOUND_TOKENS_PER_MESSAGE + len(_content(m).encode("utf-8")) for m in messages)
+        return counted.tokens + BOUND_TOKENS_PER_REQUEST + tool_slack
+    bound = BOUND_TOKENS_PER_REQUEST + sum(BOUND_TOKENS_PER_MESSAGE + len(_content(m).encode("utf-8")) for m in messages)
+    return bound + len(tools_text(tools).encode("utf-8")) + tool_slack

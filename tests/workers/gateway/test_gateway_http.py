@@ -243,3 +243,52 @@ def test_api_keys_never_reach_records_logs_or_errors(fake_server, run_dir, fake_
     assert "Incorrect API key provided: [REDACTED]" in table_text
     log_text = caplog.text
     assert fake_key not in log_text and WRONG_KEY not in log_text
+
+
+def test_tool_calls_are_served_again_from_the_ledger_and_the_cache(fake_server, run_dir):
+    """A duplicate call (same key: a retried worker) and an identical request (the cache) return the
+    model's tool calls as the provider gave them, not an empty reply, and pay nothing."""
+    import dataclasses
+
+    from recap.llm import ToolDef
+
+    server = fake_server(latency_s=0.1)
+    gw = DeploymentGateway(config(server, cache=True), run_dir=run_dir)
+    tools = (
+        ToolDef(
+            "bash", "run one command", {"type": "object", "properties": {"command": {"type": "string"}}, "required": ["command"]}
+        ),
+        ToolDef("view", "show a file", {"type": "object", "properties": {"path": {"type": "string"}}, "required": ["path"]}),
+    )
+
+    def request(i: int):
+        return dataclasses.replace(make_request(i, "FAKE:paralleltools"), tools=tools, tool_choice="auto")
+
+    async def go():
+        first, twin = await asyncio.gather(gw.complete(request(0)), gw.complete(request(0)))
+        again = await gw.complete(request(0))
+        cached = await gw.complete(request(1))
+        await gw.aclose()
+        return first, twin, again, cached
+
+    first, twin, again, cached = asyncio.run(go())
+    assert len(server.log) == 1
+    assert [(c.id, c.name, c.args) for c in first.tool_calls] == [
+        ("call_fake_1_0", "bash", {"command": "fake"}),
+        ("call_fake_1_1", "view", {"path": "fake"}),
+    ]
+    assert [(r.served_from, r.cost_usd, r.tool_calls) for r in (twin, again, cached)] == [
+        ("ledger", 0.0, first.tool_calls),
+        ("ledger", 0.0, first.tool_calls),
+        ("cache", 0.0, first.tool_calls),
+    ]
+    # a request with other tools is another request: not served from the cache
+    other = dataclasses.replace(request(2), tools=tools[:1])
+    gw2 = DeploymentGateway(config(server, cache=True), run_dir=run_dir)
+
+    async def go2():
+        out = await gw2.complete(other)
+        await gw2.aclose()
+        return out
+
+    assert asyncio.run(go2()).served_from == "provider" and len(server.log) == 2

@@ -8,6 +8,7 @@ from recap.llm import ChatMessage, LLMRequest, ToolCall, ToolDef
 from workers.llm.direct import LiteLLMClient
 from workers.llm.offline.fake_server import DEFAULT_REPLY
 from workers.llm.providers import DeploymentConfig
+from workers.llm.tokens import TOKENS_PER_TOOL, estimate_text_tokens, tools_text
 
 BASH = ToolDef(
     "bash",
@@ -49,9 +50,13 @@ def test_one_tool_call_comes_back_parsed_with_usage(client_and_server):
     assert resp.tool_calls == (ToolCall("call_fake_1_0", "bash", '{"command": "fake"}', {"command": "fake"}, None),)
     assert (resp.text, resp.finish_reason) == ("", "tool_calls")
     # prompt: 3 + 3 + ceil(13/4) = 10; completion: ceil(len('bash{"command": "fake"}') / 4) = 6
-    assert (resp.prompt_tokens, resp.completion_tokens, resp.token_count_source) == (10, 6, "provider")
-    assert resp.cost_usd == (10 * 1 + 6 * 2) / 1e6
-    assert [(r.status, r.prompt_tokens, r.completion_tokens) for r in records] == [("ok", 10, 6)]
+    # the provider bills the tool definitions it was sent: the messages' 10 tokens, the tools' JSON
+    # at ceil(chars / 4) and a framing allowance per tool
+    tools = 10 + estimate_text_tokens(tools_text([BASH.as_dict(), VIEW.as_dict()])) + 2 * TOKENS_PER_TOOL
+    assert tools == 131
+    assert (resp.prompt_tokens, resp.completion_tokens, resp.token_count_source) == (tools, 6, "provider")
+    assert resp.cost_usd == (tools * 1 + 6 * 2) / 1e6
+    assert [(r.status, r.prompt_tokens, r.completion_tokens) for r in records] == [("ok", tools, 6)]
     body = server.bodies[0]
     assert body["tools"] == [BASH.as_dict(), VIEW.as_dict()]
     assert body["tools"][0] == {

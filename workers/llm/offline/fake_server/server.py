@@ -238,7 +238,17 @@ class FakeServer:
             seen = normalize(messages)
         except Exception:
             return bad
-        prompt_tokens = estimate_prompt_tokens([{"role": m.role, "content": m.text} for m in seen])
+        # the messages' text, their tool calls and the tool definitions, counted as our
+        # estimate counts them (a provider bills the tools it was sent)
+        billed = [
+            {
+                "role": m.role,
+                "content": m.text,
+                **{k: raw[k] for k in ("tool_calls", "tool_call_id") if isinstance(raw, dict) and raw.get(k)},
+            }
+            for m, raw in zip(seen, messages)
+        ]
+        prompt_tokens = estimate_prompt_tokens(billed, body.get("tools") or None)
         mode = self._mode_of(messages)
         key = request.headers.get("Authorization", "").removeprefix("Bearer ").strip()
         if cfg.require_api_key is not None and key != cfg.require_api_key:
