@@ -32,6 +32,7 @@ from recap.release_prompt import ReleasePrompt
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import check_vocabulary, record_to_row
+from workers import agents as _package_agents  # noqa: F401  registers mini_swe & co. in driver and workers alike
 from workers.envs import registry  # called through the module: a test may swap make_env there
 from workers.envs.registry import place_of
 from workers.log_setup import configure_from_env
