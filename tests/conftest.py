@@ -16,6 +16,10 @@ os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 os.environ.setdefault("ROBOTOUILLE_DATA", str(SHARED_DATA / "robotouille"))
 os.environ.setdefault("ALFWORLD_DATA", str(SHARED_DATA / "alfworld"))
 
+# the full method registry in every test process, as the CLI and the episode workers have it:
+# workers/agents registers mini_swe (recap/ registers the six built-in methods itself)
+import workers.agents  # noqa: E402,F401
+
 
 @pytest.fixture(scope="session")
 def ray_address() -> Iterator[str]:

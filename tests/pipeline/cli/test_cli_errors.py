@@ -54,7 +54,7 @@ CASES = [
     (
         "unknown method",
         ("- method: recap", "- method: recapp"),
-        "recap: error: sweep.yaml: methods[0] (recapp): unknown method 'recapp'; known: act, adapt, cot, react, recap, standard",
+        "recap: error: sweep.yaml: methods[0] (recapp): unknown method 'recapp'; known: act, adapt, cot, mini_swe, react, recap, standard",
     ),
     (
         "unknown method setting",
