@@ -176,7 +176,7 @@ def evaluate(
     ``grading``: ``ours``, ``official`` or ``both`` (:mod:`.grading`); ``both`` without the
     ``swebench`` package grades with ours alone (a warning says so)."""
     started = time.monotonic()
-    ev, log_bytes = _evaluate(instance, model_patch, open_clean_sandbox)
+    ev = _evaluate(instance, model_patch, open_clean_sandbox)
     official: OfficialGrade | None = None
     if grading != "ours":
         problem = official_problem()
@@ -194,7 +194,6 @@ def evaluate(
         official=official,
         grading=grading,
         pass_to_pass=instance.pass_to_pass,
-        log_bytes=log_bytes,
         duration_s=time.monotonic() - started,
     )
 
@@ -243,12 +242,11 @@ def _warn_once(problem: str) -> None:
         log.warning("grading 'both': only our evaluation runs: %s", problem)
 
 
-def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Callable[[], Sandbox]) -> tuple[Evaluation, int]:
-    """Our evaluation (the module docstring), the test run's output kept whole in ``test_output``,
-    and the whole log's size in bytes."""
+def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Callable[[], Sandbox]) -> Evaluation:
+    """Our evaluation (the module docstring), the test run's output kept whole in ``test_output``."""
     wanted = (*instance.fail_to_pass, *instance.pass_to_pass)
     if not model_patch.strip():
-        return Evaluation(False, "no_patch", {t: MISSING for t in wanted}, ""), 0
+        return Evaluation(False, "no_patch", {t: MISSING for t in wanted}, "")
     log: list[str] = []
     with open_clean_sandbox() as sandbox:
         if not _apply(sandbox, model_patch, MODEL_PATCH_FILE, log, "the model's patch"):
@@ -275,6 +273,7 @@ def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Calla
     return _logged(Evaluation(resolved, reason, tests, test_output=output, exit_code=res.exit_code), log)
 
 
-def _logged(ev: Evaluation, log: list[str]) -> tuple[Evaluation, int]:
+def _logged(ev: Evaluation, log: list[str]) -> Evaluation:
+    """``ev`` with the log's tail (:func:`_tail`) and the whole log's size."""
     text = "\n".join(log)
-    return replace(ev, log=_tail(text)), len(text.encode("utf-8"))
+    return replace(ev, log=_tail(text), log_bytes=len(text.encode("utf-8")))

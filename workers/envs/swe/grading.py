@@ -103,8 +103,7 @@ def _harness() -> dict[str, Any]:
     registry = getattr(LP, "PARSER_REGISTRY", None)
     if not isinstance(registry, dict) or not hasattr(G, "get_logs_eval"):
         raise ImportError("swebench.harness.log_parsers.PARSER_REGISTRY is missing (swebench 5.x is needed)")
-    names = {id(fn): name for name, fn in reversed(list(registry.items()))}  # the first name of each function
-    return {"C": C, "G": G, "TestSpec": TestSpec, "by_repo": by_repo, "registry": registry, "names": names}
+    return {"C": C, "G": G, "TestSpec": TestSpec, "by_repo": by_repo, "registry": registry}
 
 
 def parser_name(repo: str) -> str:
@@ -112,9 +111,12 @@ def parser_name(repo: str) -> str:
     (``django/django`` -> ``parse_log_django``); :data:`DEFAULT_PARSER` for a repository it does not know."""
     h = _harness()
     fn = h["by_repo"].get(repo)
-    if fn is None:
+    names = [name for name, f in h["registry"].items() if f is fn] if fn is not None else []
+    if not names:
         return DEFAULT_PARSER
-    return str(h["names"].get(id(fn), DEFAULT_PARSER))
+    # several names may hold one function (parse_log_astropy = parse_log_pytest_v2): the repository's own first
+    own = f"parse_log_{repo.rsplit('/', 1)[-1].replace('-', '_')}"
+    return own if own in names else str(names[0])
 
 
 def harness_log(test_log: str, *, patch_applied: bool, timed_out: bool = False, exit_code: int | None = None) -> str:
