@@ -279,3 +279,17 @@ def test_the_environment_hands_each_evaluation_over_once(swe_env) -> None:
         ("e1", "swe/fixture__format-1", "no_patch", False, 0)
     ]
     assert env.take_records("e1", "r1") == []
+
+
+def test_grading_official_is_refused_without_the_package(fixtures: Fixtures, sandboxes: SandboxLog, monkeypatch) -> None:
+    from workers.envs import swe
+    from workers.envs.registry import make_env
+
+    monkeypatch.setattr(swe.grading, "official_problem", lambda: "no swebench here")
+    with pytest.raises(ValueError) as err:
+        make_env("swe/fixture__format-1", instances_file=str(fixtures.tasks_file), open_sandbox=sandboxes, grading="official")
+    assert str(err.value) == "grading 'official': no swebench here"
+    with pytest.raises(ValueError) as err:
+        make_env("swe/fixture__format-1", instances_file=str(fixtures.tasks_file), open_sandbox=sandboxes, grading="both ")
+    assert str(err.value) == "grading must be one of ours, official, both, got 'both '"
+    assert sandboxes.opened == []
