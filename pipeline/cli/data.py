@@ -46,6 +46,13 @@ this command works on whatever the registered benchmarks declare:
   commit (a one-commit partial fetch, so the release's large data files are never downloaded), or
   from ``--mirror``, which here names the repository itself (a local clone, bare or not, or a git
   URL). It is not part of ``all``: name it.
+* ``swebench-verified`` (SWE-bench Verified, benchmark ``swe-verified``): not downloaded file by
+  file but loaded: ``princeton-nlp/SWE-bench_Verified`` (split ``test``) through the ``datasets``
+  library, or ``--from FILE`` (a local Parquet or JSONL copy); checked (500 records unless
+  ``--subset``, recorded as a subset) and stored as ``instances.jsonl`` + ``SOURCE.json`` with the
+  folder's own ``MANIFEST.sha256`` (:mod:`workers.envs.swe_verified.dataset`); a bad file is one line,
+  exit 2, nothing written. ``check`` adds how many instances have their harness image here. Not
+  part of ``all``: name it.
 * ALFWorld 2.1.2: ``json_2.1.2_tw-pddl.zip`` (the ``TW_PDDL_FILES_URL`` of alfworld 0.4.2's
   ``alfworld-download``).
 
