@@ -46,6 +46,13 @@ this command works on whatever the registered benchmarks declare:
   commit (a one-commit partial fetch, so the release's large data files are never downloaded), or
   from ``--mirror``, which here names the repository itself (a local clone, bare or not, or a git
   URL). It is not part of ``all``: name it.
+* ``swebench-verified`` (SWE-bench Verified, benchmark ``swe-verified``): not downloaded file by
+  file but loaded: ``princeton-nlp/SWE-bench_Verified`` (split ``test``) through the ``datasets``
+  library, or ``--from FILE`` (a local Parquet or JSONL copy); checked (500 records unless
+  ``--subset``, recorded as a subset) and stored as ``instances.jsonl`` + ``SOURCE.json`` with the
+  folder's own ``MANIFEST.sha256`` (:mod:`workers.envs.swe_verified.dataset`); a bad file is one line,
+  exit 2, nothing written. ``check`` adds how many instances have their harness image here. Not
+  part of ``all``: name it.
 * ALFWorld 2.1.2: ``json_2.1.2_tw-pddl.zip`` (the ``TW_PDDL_FILES_URL`` of alfworld 0.4.2's
   ``alfworld-download``).
 
@@ -89,7 +96,7 @@ from functools import partial
 from typing import TextIO
 
 from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError
-from pipeline.data import DataError, MirrorError, check_folder, describe, folders, not_found, search
+from pipeline.data import DataError, InputError, MirrorError, check_folder, describe, folders, not_found, search
 from pipeline.data_fetch import check_mirror, default_dest, fetch_one
 from pipeline.errors import one_line
 from workers.envs.data_sources import DataFolder
@@ -137,21 +144,45 @@ def cmd_check(benches: list[DataFolder], data_dir: str | None, out: TextIO) -> l
             continue
         result.source = used.step
         print(result.line(), file=out)
+        if result.ok and bench.check_notes is not None:
+            try:
+                notes = bench.check_notes(used.path.resolve())
+            except Exception as exc:  # a verified folder whose notes cannot be read: one failure line
+                notes = []
+                failures.append(f"{bench.name}: {one_line(exc)}")
+            for note in notes:
+                print(f"{bench.name}: {note}", file=out)
         if not result.ok:
             failures.append(f"{bench.name}: {sum(result.missing.values())} missing, {len(result.mismatched)} mismatched")
     return failures
 
 
-def cmd_fetch(benches: list[DataFolder], dest: str | None, mirror: str | None, out: TextIO) -> list[str]:
+def cmd_fetch(
+    benches: list[DataFolder],
+    dest: str | None,
+    mirror: str | None,
+    out: TextIO,
+    from_file: str | None = None,
+    subset: bool = False,
+) -> list[str]:
     """``recap data fetch``: fetch, verify and move each benchmark's folder into place. Returns one
-    failure line per benchmark that failed (nothing of it is written); a bad mirror raises
-    MirrorError (exit 2) before any fetch."""
+    failure line per benchmark that failed (nothing of it is written); a bad mirror, or ``--from``/
+    ``--subset`` for a folder that is not loaded from a file, raises (exit 2) before any fetch, and
+    so does a ``--from`` file that is not the folder's data (InputError)."""
     check_mirror(mirror)
+    loaded = [b.name for b in benches if b.load is not None]
+    if (from_file is not None or subset) and (len(benches) != 1 or not loaded):
+        flag = "--from" if from_file is not None else "--subset"
+        raise UsageError(
+            f"{flag} is for a folder loaded from a file ({', '.join(n for n in folders() if folders()[n].load)}): name it as BENCH"
+        )
+    if mirror is not None and loaded and len(benches) == 1:
+        raise UsageError(f"--mirror does not apply to {loaded[0]}: pass a local copy with --from FILE")
     failures = []
     for bench in benches:
         target = default_dest(bench, dest, several=len(benches) > 1)
         try:
-            fetch_one(bench, target, mirror, out)
+            fetch_one(bench, target, mirror, out, from_file, subset)
         except DataError as exc:
             failures.append(f"{bench.name}: {exc}; nothing was written")
         except OSError as exc:  # the destination cannot be written (permissions, disk full)
@@ -204,6 +235,17 @@ def _parser(out: TextIO) -> CommandParser:
         "--mirror", metavar="DIR_OR_URL", help="folder or URL prefix holding the upstream file names (default: upstream URLs)"
     )
     f.add_argument(
+        "--from",
+        dest="from_file",
+        metavar="FILE",
+        help="swebench-verified: a local copy of the dataset (Parquet or JSONL) instead of the Hugging Face Hub",
+    )
+    f.add_argument(
+        "--subset",
+        action="store_true",
+        help="swebench-verified: accept fewer records than the full split, recorded as a subset",
+    )
+    f.add_argument(
         "--dest",
         metavar="DIR",
         help="the folder (with BENCH) or the parent of the folders (without); default ~/.cache/recap-eval/data/<bench>",
@@ -226,7 +268,7 @@ def _run(args: argparse.Namespace, stdout: TextIO) -> list[str]:
         return cmd_list(benches, args.data_dir, stdout)
     if args.action == "check":
         return cmd_check(benches, args.data_dir, stdout)
-    return cmd_fetch(benches, args.dest, args.mirror, stdout)
+    return cmd_fetch(benches, args.dest, args.mirror, stdout, args.from_file, args.subset)
 
 
 def data_main(argv: list[str], stdout: TextIO, stderr: TextIO) -> int:
@@ -236,7 +278,7 @@ def data_main(argv: list[str], stdout: TextIO, stderr: TextIO) -> int:
         failures = _run(args, stdout)
     except HelpExit as exc:
         return exc.status
-    except (UsageError, MirrorError) as exc:
+    except (UsageError, MirrorError, InputError) as exc:
         print(f"recap: error: data: {one_line(exc)}", file=stderr)
         return EXIT_USAGE
     except DataError as exc:

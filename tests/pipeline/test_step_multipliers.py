@@ -112,7 +112,7 @@ TASKS = (
             "{robotouille/synchronous/2: 3,",
             "{synchronous/2: 3,",
             E + "methods[2] (recap): step_multipliers: 'synchronous/2': unknown benchmark 'synchronous'; "
-            "known: blocksworld, robotouille, alfworld, fever, swe",
+            "known: blocksworld, robotouille, alfworld, fever, swe, swe-verified",
         ),
         (
             "{robotouille/synchronous/2: 3,",

@@ -76,9 +76,11 @@ class CommandResult:
 class SandboxSpec:
     """What to open: the repository (a local git repository checked out at ``base_commit``),
     the image (docker), the limits, extra environment variables (never the host's own), and the
-    labels to put on everything started."""
+    labels to put on everything started. ``repo_path`` None: the image itself holds the
+    repository at ``workdir``, at ``base_commit`` (the SWE-bench harness's per-instance images,
+    ``/testbed``); nothing is copied in, and only a docker sandbox can open it."""
 
-    repo_path: str
+    repo_path: str | None
     base_commit: str
     image: str = "recap-eval/sandbox:py311"
     limits: SandboxLimits = field(default_factory=SandboxLimits)

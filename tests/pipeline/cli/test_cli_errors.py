@@ -39,7 +39,7 @@ CASES = [
     (
         "unknown environment",
         ("benchmark: blocksworld", "benchmark: kitchen"),
-        "recap: error: sweep.yaml: environments[0]: unknown benchmark 'kitchen'; known: blocksworld, robotouille, alfworld, fever, swe",
+        "recap: error: sweep.yaml: environments[0]: unknown benchmark 'kitchen'; known: blocksworld, robotouille, alfworld, fever, swe, swe-verified",
     ),
     (
         "unknown task",
