@@ -2,9 +2,9 @@
 
 Why both: our evaluator runs the tests and reads pytest's ``-rA`` summary; the harness's reading
 of the same log is what published SWE-bench numbers mean (a PASS_TO_PASS test that is skipped is
-kept, a FAIL_TO_PASS one that is skipped is not, a truncated parametrized id matches by prefix, a
-run whose exit status contradicts its log counts as no run). So the same log goes through the
-``swebench`` package's own functions (swebench 5.x, ``swebench/harness/grading.py``):
+kept; in 5.x a truncated parametrized id matches by prefix and a run whose exit status contradicts
+its log counts as no run; in 4.x, the pinned version, a skipped FAIL_TO_PASS test is no failure). So the same log goes through the
+``swebench`` package's own functions (``swebench/harness/grading.py``, 4.x or 5.x):
 
 * the log is framed as the harness's eval script frames it (``START_TEST_OUTPUT`` /
   ``END_TEST_OUTPUT``, then ``TEST_EXIT_CODE: n``; ``APPLY_PATCH_FAIL`` when the patch did not
@@ -28,6 +28,7 @@ modal, GitPython...), imported only here and only when a grade is asked for.
 from __future__ import annotations
 
 import importlib
+import inspect
 import os
 import tempfile
 from collections.abc import Mapping
@@ -65,11 +66,11 @@ class OfficialGrade:
 
 
 def official_problem() -> str | None:
-    """Why the official grading cannot run here (one line), or None when ``swebench`` 5.x imports."""
+    """Why the official grading cannot run here (one line), or None when ``swebench`` imports."""
     try:
         _harness()
     except ImportError as exc:
-        return f"the official SWE-bench grading needs the swebench package (5.x): {INSTALL_HINT} ({exc})"
+        return f"the official SWE-bench grading needs the swebench package: {INSTALL_HINT} ({exc})"
     return None
 
 
@@ -85,11 +86,21 @@ def check_grading(value: Any) -> Grading:
 
 @lru_cache(maxsize=1)
 def _harness() -> dict[str, Any]:
-    """The harness's functions and constants (imported once; ImportError without swebench 5.x)."""
+    """The harness's functions and constants, imported once (ImportError without ``swebench``).
+
+    Works with swebench 4.x (what ``recap-eval[swe]`` installs: it also has each repository's test
+    command, which swe-verified needs) and 5.x: the parser maps are read from the per-language
+    modules both have (``MAP_REPO_TO_PARSER_PY`` ...), the parsers by name from 5.x's
+    ``PARSER_REGISTRY`` or, in 4.x, from the functions themselves."""
     from swebench.harness import constants as C
     from swebench.harness import grading as G
     from swebench.harness import log_parsers as LP
-    from swebench.types import TestSpec
+
+    try:
+        from swebench.types import TestSpec  # 5.x
+    except ImportError:
+        from swebench.harness.test_spec.test_spec import TestSpec  # 4.x
+    from swebench.harness.log_parsers.python import parse_log_pytest
 
     by_repo: dict[str, Any] = {}
     for lang in ("python", "javascript", "c", "go", "java", "php", "ruby", "rust"):
@@ -101,9 +112,61 @@ def _harness() -> dict[str, Any]:
             if name.startswith("MAP_REPO_TO_PARSER_"):
                 by_repo.update(getattr(mod, name))
     registry = getattr(LP, "PARSER_REGISTRY", None)
-    if not isinstance(registry, dict) or not hasattr(G, "get_logs_eval"):
-        raise ImportError("swebench.harness.log_parsers.PARSER_REGISTRY is missing (swebench 5.x is needed)")
-    return {"C": C, "G": G, "TestSpec": TestSpec, "by_repo": by_repo, "registry": registry}
+    if not isinstance(registry, dict):  # 4.x: no registry; a parser is named by its function
+        registry = {f.__name__: f for f in by_repo.values()}
+        registry.setdefault(DEFAULT_PARSER, parse_log_pytest)
+    if not hasattr(G, "get_logs_eval") or not hasattr(G, "get_resolution_status"):
+        raise ImportError("swebench.harness.grading lacks get_logs_eval / get_resolution_status")
+    specs = getattr(C, "MAP_REPO_VERSION_TO_SPECS", None)  # 4.x only
+    return {"C": C, "G": G, "TestSpec": TestSpec, "by_repo": by_repo, "registry": registry, "specs": specs}
+
+
+def _test_spec(h: dict[str, Any], instance: SweInstance, parser: str) -> Any:
+    """A ``TestSpec`` for grading: the fields the installed version's class takes, from the
+    instance (no image, no scripts: the log is already written)."""
+    C = h["C"]
+    values: dict[str, Any] = {
+        "instance_id": instance.instance_id,
+        "repo": instance.repo,
+        "version": str(instance.extra.get("version", "")),
+        "FAIL_TO_PASS": list(instance.fail_to_pass),
+        "PASS_TO_PASS": list(instance.pass_to_pass),
+        "image": "",
+        "eval_script_list": [],
+        "repo_script_list": [],
+        "env_script_list": [],
+        "arch": "x86_64",
+        "language": "py",
+        "docker_specs": {},
+        "namespace": None,
+        "log_parser": parser,
+    }
+    if hasattr(C, "EvalType"):
+        values["eval_type"] = C.EvalType.PASS_AND_FAIL.value
+    accepted = inspect.signature(h["TestSpec"]).parameters
+    return h["TestSpec"](**{k: v for k, v in values.items() if k in accepted})
+
+
+def _logs_eval(h: dict[str, Any], spec: Any, instance: SweInstance, parser: str, path: str) -> tuple[dict[str, str], bool]:
+    """The harness's ``get_logs_eval`` on the framed log. swebench 4.x's looks the parser and the
+    test command up by repository and version, so for a repository it does not know (our
+    fixtures, a user's tasks) its same steps run here with its own markers and
+    ``parse_log_pytest``: a log with a failure marker, or without the test-output markers, has no
+    results; else the parser reads the output between the markers (the whole log when that gives
+    nothing)."""
+    C, G = h["C"], h["G"]
+    specs = h["specs"]
+    if specs is None or spec.version in specs.get(instance.repo, {}):
+        return G.get_logs_eval(spec, path)
+    with open(path, encoding="utf-8") as fh:
+        content = fh.read()
+    if any(code in content for code in (C.APPLY_PATCH_FAIL, C.RESET_FAILED, C.TESTS_ERROR, C.TESTS_TIMEOUT)):
+        return {}, False
+    if not (C.START_TEST_OUTPUT in content and C.END_TEST_OUTPUT in content):
+        return {}, False
+    parse = h["registry"][parser]
+    status_map = parse(content.split(C.START_TEST_OUTPUT)[1].split(C.END_TEST_OUTPUT)[0], spec)
+    return (status_map or parse(content, spec)), True
 
 
 def parser_name(repo: str) -> str:
@@ -126,7 +189,7 @@ def harness_log(test_log: str, *, patch_applied: bool, timed_out: bool = False, 
     if not patch_applied:
         return f"{C.APPLY_PATCH_FAIL}:\n{test_log}\n"
     out = f"{C.START_TEST_OUTPUT}\n{test_log.rstrip()}\n{C.END_TEST_OUTPUT}\n"
-    if exit_code is not None and not timed_out:
+    if exit_code is not None and not timed_out and hasattr(C, "TEST_EXIT_CODE"):  # 5.x cross-checks it
         out += f"{C.TEST_EXIT_CODE}: {exit_code}\n"
     if timed_out:
         out += f"\n{C.TESTS_TIMEOUT}\n"
@@ -144,23 +207,13 @@ def official_grade(
     C, G = h["C"], h["G"]
     name = parser_name(instance.repo)
     f2p, p2p = list(instance.fail_to_pass), list(instance.pass_to_pass)
-    spec = h["TestSpec"](
-        instance_id=instance.instance_id,
-        image="",
-        eval_script_list=[],
-        repo=instance.repo,
-        version=str(instance.extra.get("version", "")),
-        FAIL_TO_PASS=f2p,
-        PASS_TO_PASS=p2p,
-        log_parser=name,
-        eval_type=C.EvalType.PASS_AND_FAIL.value,
-    )
+    spec = _test_spec(h, instance, name)
     content = harness_log(test_log, patch_applied=patch_applied, timed_out=timed_out, exit_code=exit_code)
     fd, path = tempfile.mkstemp(prefix="recap-eval-swe-", suffix=".log")
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(content)
-        status_map, found = G.get_logs_eval(spec, path)
+        status_map, found = _logs_eval(h, spec, instance, name, path)
     finally:
         os.unlink(path)
     tests = {t: _status_of(G, t, status_map) for t in (*f2p, *p2p)}

@@ -175,7 +175,7 @@ def read_hub() -> list[tuple[str, Any]]:
     try:
         import datasets
     except ImportError:
-        raise LoadError(f"the datasets library is not installed (pip install 'recap-eval[swebench]'); or {hint}") from None
+        raise LoadError(f"the datasets library is not installed (pip install 'recap-eval[swe]'); or {hint}") from None
     try:
         import huggingface_hub.utils
 

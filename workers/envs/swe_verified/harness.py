@@ -3,7 +3,7 @@
 The harness runs ``MAP_REPO_VERSION_TO_SPECS[repo][version]["test_cmd"]`` (swebench 4.x,
 ``swebench/harness/constants``; e.g. django 3.0: ``./tests/runtests.py --verbosity 2
 --settings=test_sqlite --parallel 1``) in the instance's image. That table is the harness's, kept
-up to date by its authors, so it is read from the package (``pip install 'recap-eval[swebench]'``)
+up to date by its authors, so it is read from the package (``pip install 'recap-eval[swe]'``)
 rather than copied here; without the package a swe-verified episode is refused with one line.
 """
 
@@ -22,7 +22,7 @@ def _specs() -> dict[str, dict[str, dict[str, Any]]]:
     except ImportError:
         raise HarnessMissingError(
             "swe-verified reads each repository's test command from the SWE-bench harness: "
-            "pip install 'recap-eval[swebench]' (swebench 4.x)"
+            "pip install 'recap-eval[swe]' (swebench 4.x)"
         ) from None
     specs: dict[str, dict[str, dict[str, Any]]] = MAP_REPO_VERSION_TO_SPECS
     return specs

@@ -128,12 +128,12 @@ def test_a_django_log_goes_through_djangos_parser() -> None:
     grade = official_grade(inst, DJANGO_LOG, patch_applied=True, exit_code=1)
     assert grade == OfficialGrade(
         resolved=False,
-        status="RESOLVED_PARTIAL",  # one of two FAIL_TO_PASS passes; the skipped PASS_TO_PASS test is kept
+        status="RESOLVED_PARTIAL",  # one of two FAIL_TO_PASS passes; the skipped PASS_TO_PASS test is no failure
         parser="parse_log_django",
         tests={add: "PASSED", change: "FAILED", delete: "SKIPPED"},
         fail_to_pass_success=(add,),
         fail_to_pass_failure=(change,),
-        pass_to_pass_success=(delete,),
+        pass_to_pass_success=(),  # 4.x lists a skipped test as neither success nor failure
         pass_to_pass_failure=(),
     )
     fixed = DJANGO_LOG.replace(f"{change} ... FAIL", f"{change} ... ok")
@@ -149,8 +149,8 @@ def test_parser_names_of_swebench_repositories() -> None:
     assert [parser_name(r) for r in ("django/django", "sympy/sympy", "astropy/astropy", "psf/requests", "me/mine")] == [
         "parse_log_django",
         "parse_log_sympy",
-        "parse_log_astropy",
-        "parse_log_requests",
+        "parse_log_pytest_v2",  # 4.x names astropy's parser by its function
+        "parse_log_pytest_options",  # and psf/requests' likewise
         "parse_log_pytest",
     ]
 
@@ -170,30 +170,39 @@ PASSED tests/test_a.py::test_other
 
 
 @pytest.mark.parametrize(
-    ("f2p", "p2p", "resolved", "status"),
+    ("f2p", "p2p", "resolved", "official", "status"),
     [
-        (("tests/test_a.py::test_fix",), ("tests/test_a.py::test_kept", "tests/test_a.py::test_other"), True, "RESOLVED_FULL"),
-        (("tests/test_a.py::test_kept",), ("tests/test_a.py::test_other",), False, "RESOLVED_NO"),
-        (("tests/test_a.py::test_fix", "tests/test_a.py::test_gone"), (), False, "RESOLVED_PARTIAL"),
+        (
+            ("tests/test_a.py::test_fix",),
+            ("tests/test_a.py::test_kept", "tests/test_a.py::test_other"),
+            True,
+            True,
+            "RESOLVED_FULL",
+        ),
+        # swebench 4.x (the pinned harness) counts a skipped FAIL_TO_PASS test as neither passed nor
+        # failed, and with no failure reports FULL; our criterion does not resolve it. The two
+        # verdicts differ here, and the evaluations row keeps both (ours_resolved, official_resolved)
+        (("tests/test_a.py::test_kept",), ("tests/test_a.py::test_other",), False, True, "RESOLVED_FULL"),
+        (("tests/test_a.py::test_fix", "tests/test_a.py::test_gone"), (), False, False, "RESOLVED_PARTIAL"),
     ],
 )
-def test_skipped_tests_count_alike_in_both(f2p, p2p, resolved, status) -> None:
-    """A skipped PASS_TO_PASS test is kept, a skipped FAIL_TO_PASS one is not, a missing one fails:
-    our criterion and the harness's agree."""
+def test_skipped_and_missing_tests_in_both_gradings(f2p, p2p, resolved, official, status) -> None:
+    """A skipped PASS_TO_PASS test is kept and a missing test fails in both; a skipped
+    FAIL_TO_PASS test is the one known difference (above)."""
     inst = _synthetic("fixture/a", f2p, p2p)
     grade = official_grade(inst, PYTEST_LOG, patch_applied=True, exit_code=0)
     ours = {t: parse_summary(PYTEST_LOG, (*f2p, *p2p)).get(t, "MISSING") for t in (*f2p, *p2p)}
-    assert (ours_resolved(inst, ours), grade.resolved, grade.status) == (resolved, resolved, status)
+    assert (ours_resolved(inst, ours), grade.resolved, grade.status) == (resolved, official, status)
     assert dict(grade.tests) == ours
 
 
-def test_a_log_that_contradicts_the_exit_status_is_no_run() -> None:
-    """The harness's cross-check: a test command that exited non-zero with only PASSED lines
-    (a patch printing its own) is not a run."""
+def test_the_pinned_harness_reads_the_log_not_the_exit_status() -> None:
+    """swebench 4.x grades the log alone: a test command that exited non-zero with only PASSED
+    lines still counts (5.x added a cross-check with the exit status)."""
     inst = _synthetic("fixture/a", ("tests/test_a.py::test_fix",), ())
     assert official_grade(inst, PYTEST_LOG, patch_applied=True, exit_code=0).resolved is True
     forged = official_grade(inst, PYTEST_LOG, patch_applied=True, exit_code=1)
-    assert (forged.resolved, forged.status) == (False, None)
+    assert (forged.resolved, forged.status) == (True, "RESOLVED_FULL")
 
 
 def test_check_grading() -> None:

@@ -226,7 +226,7 @@ def test_no_datasets_hub_is_one_line(cache, capsys, monkeypatch) -> None:
     assert code == 1
     assert err == [
         "recap: error: data fetch: swebench-verified: the datasets library is not installed (pip install "
-        "'recap-eval[swebench]'); or download princeton-nlp/SWE-bench_Verified (test) elsewhere and pass --from FILE "
+        "'recap-eval[swe]'); or download princeton-nlp/SWE-bench_Verified (test) elsewhere and pass --from FILE "
         "(Parquet or JSONL); nothing was written"
     ]
     assert not cache.parent.exists()
