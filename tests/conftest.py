@@ -33,7 +33,8 @@ def ray_address() -> Iterator[str]:
     from pipeline.raysetup import init_ray, shutdown_ray
     from pipeline.spec import RaySpec
 
-    started = init_ray(RaySpec(num_cpus=2))
+    # one sandbox slot per node (ray.sandboxes_per_node): a coding sweep that asks for the bound runs one worker here
+    started = init_ray(RaySpec(num_cpus=2, sandboxes_per_node=1))
     yield ray.get_runtime_context().gcs_address
     if started:
         shutdown_ray()

@@ -75,6 +75,9 @@ class Benchmark(BenchmarkProtocol, ABC):
     """
 
     name: str = ""
+    #: its environments run in sandboxes (containers): a sweep's ``ray.sandboxes_per_node``
+    #: bounds how many of its episode workers share a node
+    sandboxed: bool = False
 
     @abstractmethod
     def list_instances(self, selector: str | None = None) -> list[str]:

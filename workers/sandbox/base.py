@@ -25,6 +25,10 @@ from typing import Literal
 SandboxKind = Literal["docker", "local"]
 SANDBOX_KINDS: tuple[SandboxKind, ...] = ("docker", "local")
 
+#: the Ray node resource that bounds sandboxes per node (``ray.sandboxes_per_node``): a node
+#: declaring N runs at most N episode workers of a coding sweep
+NODE_RESOURCE = "recap_sandbox"
+
 #: labels on every container/process group a sandbox starts (the cleanup keys)
 LABEL_RUN = "recap-eval.run"
 LABEL_EPISODE = "recap-eval.episode"

@@ -106,6 +106,7 @@ class SweBenchmark(Benchmark):
     """SWE-bench's registry entry: records from ``options.instances_file``, episodes in a sandbox."""
 
     name = BENCHMARK_NAME
+    sandboxed = True
 
     def owner_options(self, run_id: str, worker_id: str, episode_id: str) -> dict[str, Any]:
         """The sandbox's labels: the run, the worker and the episode that own it."""
