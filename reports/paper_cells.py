@@ -18,6 +18,7 @@ BENCH_ROWS = (
     ("robotouille", "synchronous", "Robotouille (Sync)"),
     ("robotouille", "asynchronous", "Robotouille (Async)"),
     ("fever", None, "FEVER"),
+    ("swe-verified", None, "SWE-bench Verified"),
 )
 
 INTRO = (
@@ -72,6 +73,7 @@ def arm_protocol(cell: dict[str, Any]) -> paper.ArmProtocol:
         tasks=tasks,
         method=cell.get("method") or "recap",
         episodes=cell.get("episodes"),
+        instances=cell.get("instances"),
     )
 
 
@@ -114,7 +116,8 @@ def add_holm(rows: list[dict[str, Any]], keys: Iterable[str]) -> int:
 
 
 def method_rank(order: tuple[str, ...], method: str) -> int:
-    """Where ``method`` stands in a table's method order (unknown ones last)."""
+    """Where ``method`` stands in a table's method order (unknown ones last; mini-SWE-agent in ReAct's place)."""
+    method = paper.COLUMN_OF.get(method, method)
     return order.index(method) if method in order else len(order)
 
 
@@ -132,6 +135,8 @@ class Cells:
     """paper_cells and paper_pairs rows, indexed for the layouts."""
 
     def __init__(self, q: Query) -> None:
+        #: for the queries only some tables need (SWE-bench Verified's temperatures)
+        self.q = q
         self.cells = q("paper_cells").dicts()
         self.pairs = q("paper_pairs").dicts()
         self._pairs = {
