@@ -99,11 +99,16 @@ def fill_rate(
     """One success cell: ours, the paper's value (or a footnote mark), the difference, p."""
     row[key] = rate_ci(cell)
     if ref is not None and why is None:
-        row[f"{key}:paper"] = format_value("ref", ref)
+        row[f"{key}:paper"] = paper_value(ref)
         row[f"{key}:diff"] = 100.0 * cell["successes"] / cell["episodes"] - ref
     elif ref is not None and why is not None:
         row[f"{key}:paper"] = notes.mark(why)
     row[f"{key}:p"] = p
+
+
+def paper_value(ref: float) -> str:
+    """The paper's number as the paper prints it: one decimal, or two where it gives two (SWE-bench's 39.58)."""
+    return format_value("ref", ref) if round(ref, 1) == ref else f"{ref:.2f}"
 
 
 def add_holm(rows: list[dict[str, Any]], keys: Iterable[str]) -> int:
