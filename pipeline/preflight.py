@@ -317,6 +317,10 @@ def _check_agents(spec: SweepSpec, env: Environment, probe: _EnvProbe) -> None:
     """Each method configuration of the probe builds its episode and renders its demonstration on ``env``."""
     method_index = {m.name: i for i, m in enumerate(spec.methods)}
     for u, agent in probe.methods:
+        refused = agent.refuses_env(env)
+        if refused is not None:  # the method cannot play this benchmark at all (a coding agent elsewhere)
+            i = method_index.get(u.method_label)
+            raise SpecError(_fit(f"methods[{i}] ({u.method_label}) cannot run on {stratum(u.instance_id)}: ", refused))
         try:
             agent.episode_config(env)
             agent.demonstration_text(env)

@@ -26,7 +26,7 @@ from typing import ClassVar
 
 from recap.agent import Agent
 from recap.config import AgentConfig, ConfigError
-from recap.env import Reset
+from recap.env import Environment, Reset
 from recap.runtime import Episode, EpisodeEnd
 
 #: the package's import name
@@ -76,9 +76,17 @@ class MiniSweAgent(Agent):
         """The package's ``step_limit`` for a step cap of ``max_steps`` commands: as many model calls."""
         return max_steps
 
+    def refuses_env(self, env: Environment) -> str | None:
+        """mini-SWE-agent acts with shell commands in a repository: only a coding environment (one
+        with tools) can host it; preflight refuses any other before anything runs."""
+        if env.tool_defs():
+            return None
+        return f"mini_swe runs only on a coding benchmark (swe, swe-verified), not on {env.benchmark}"
+
     def play(self, ep: Episode, reset: Reset) -> None:
-        if not ep.env.tool_defs():
-            raise EpisodeEnd("env_error", f"mini_swe runs only on a coding benchmark, not on {ep.env.benchmark}")
+        refused = self.refuses_env(ep.env)
+        if refused is not None:
+            raise EpisodeEnd("env_error", refused)
         from workers.agents.mini_swe_package import play_package  # the package only when an episode plays
 
         cfg = ep.conv.config

@@ -203,3 +203,20 @@ def test_mini_swe_refuses_an_environment_without_tools():
     result = make_agent("mini_swe").run(env, ScriptedClient([]))
     assert (result.end_reason, result.llm_calls) == ("env_error", 0)
     assert result.error is not None and "mini_swe runs only on a coding benchmark" in result.error
+
+
+def test_mini_swe_on_a_benchmark_without_tools_is_refused_before_anything_runs(tmp_path, capsys):
+    from pipeline.cli import main
+
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(
+        f"run: r\noutput: {tmp_path / 'out'}\nmodels: [{{model: offline/expert}}]\n"
+        "methods: [{method: mini_swe}]\nenvironments: [{benchmark: blocksworld, tasks: ['3'], limit: 1}]\n"
+    )
+    assert main(["run", str(spec), "--progress", "off"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "recap: error: sweep.yaml: methods[0] (mini_swe) cannot run on blocksworld/3: "
+        "mini_swe runs only on a coding benchmark (swe, swe-verified), not on blocksworld"
+    ]
+    assert not (tmp_path / "out").exists()  # nothing written
