@@ -377,3 +377,15 @@ def test_the_real_daemon_fails_the_pull_in_one_line(stored, capsys, docker_ready
     assert re.fullmatch(rf"failed {re.escape(name)}: \S.*", out[1]), out[1]
     assert out[2:] == ["swebench-verified: 0 pulled, 1 failed; 0 of 1 instances have their image here"]
     assert err == ["recap: error: data images: 1 of 1 image(s) could not be pulled"]
+
+
+def test_an_unreachable_daemon_is_one_line_exit_1(stored, capsys, monkeypatch) -> None:
+    def refuse(**_k: Any) -> None:
+        raise docker.errors.DockerException("Error while fetching server API version: ('Connection aborted.',\n more)")
+
+    monkeypatch.setattr("docker.from_env", refuse)
+    code, out, err = cli(capsys, "--pull")
+    assert (code, out) == (1, [])
+    assert err == [
+        "recap: error: data: the Docker daemon is unreachable (Error while fetching server API version: ('Connection aborted.',)"
+    ]
