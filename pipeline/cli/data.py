@@ -25,6 +25,12 @@ The data never lives in this repository. Three benchmark folders exist: ``roboto
   removes the stage, so no half-written folder is ever left). Default destination:
   recap-eval's cache; ``--dest`` names the folder for one benchmark, or the parent of the three
   folders when no benchmark is named. A destination that exists is verified, not overwritten.
+* ``recap data images swebench-verified [SELECTOR ...] [--pull | --build] [--workers N] [--dry-run]``
+  - the SWE-bench harness's per-instance images the selected instances lack (selectors as
+  ``recap env list swe-verified`` takes them; default all): listed, pulled from Docker Hub
+  through the Docker SDK, or built with the harness itself, N at a time, one line per image
+  (:mod:`workers.envs.swe_verified.get_images`). Exit 0 when every selected instance has its
+  image at the end, 1 when some are missing or failed, 2 for bad usage.
 
 Sources (``--mirror`` replaces the base of every URL below with a folder or a URL prefix holding
 the same file names; ``file://`` URLs work). Each benchmark declares its folders, their file
@@ -99,7 +105,11 @@ from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError
 from pipeline.data import DataError, InputError, MirrorError, check_folder, describe, folders, not_found, search
 from pipeline.data_fetch import check_mirror, default_dest, fetch_one
 from pipeline.errors import one_line
+from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
+from workers.envs.swe_verified.get_images import DEFAULT_WORKERS, ImagesError, get_images, selected_records
+from workers.envs.swe_verified.get_images import FOLDERS as IMAGE_FOLDERS
+from workers.sandbox.base import SandboxError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -204,7 +214,7 @@ def _parser(out: TextIO) -> CommandParser:
         dest="action",
         required=True,
         metavar="ACTION",
-        help="list, check or fetch",
+        help="list, check, fetch or images",
         parser_class=partial(CommandParser, out=out, hint=True),
     )  # type: ignore[call-overload]  # a class with its out bound
     choices = (*folders(), "all")
@@ -250,7 +260,70 @@ def _parser(out: TextIO) -> CommandParser:
         metavar="DIR",
         help="the folder (with BENCH) or the parent of the folders (without); default ~/.cache/recap-eval/data/<bench>",
     )
+    _add_images(sub)
     return p
+
+
+def _add_images(sub: argparse._SubParsersAction[CommandParser]) -> None:
+    """``recap data images``: the per-instance images a folder's instances run in."""
+    im = sub.add_parser(
+        "images",
+        help="list, pull or build the per-instance images (swebench-verified)",
+        description="List the SWE-bench harness's per-instance images the selected instances lack;\n"
+        "pull them from Docker Hub (--pull) or build them with the harness (--build).",
+        epilog="examples:\n  recap data images swebench-verified\n  recap data images swebench-verified django/django --pull "
+        "--workers 8\n  recap data images swebench-verified django__django-11099 --build --dry-run\n\n"
+        "exit status: 0 every selected instance has its image (at the end); 1 some are missing or failed; 2 bad usage",
+    )
+    im.add_argument("bench", choices=IMAGE_FOLDERS, metavar="BENCH", help=f"one of {', '.join(IMAGE_FOLDERS)}")
+    im.add_argument(
+        "selectors",
+        nargs="*",
+        default=[],
+        metavar="SELECTOR",
+        help="as `recap env list swe-verified` takes them: all, a repository (owner/name), an instance id (default all)",
+    )
+    how = im.add_mutually_exclusive_group()
+    how.add_argument("--pull", action="store_true", help="pull the missing published images from Docker Hub")
+    how.add_argument("--build", action="store_true", help="build the missing images with the SWE-bench harness")
+    im.add_argument(
+        "--workers",
+        type=_workers,
+        default=DEFAULT_WORKERS,
+        metavar="N",
+        help=f"pulls or builds at a time (default {DEFAULT_WORKERS})",
+    )
+    im.add_argument("--dry-run", dest="dry_run", action="store_true", help="print what --pull or --build would do")
+    im.add_argument("--data-dir", dest="data_dir", metavar="DIR", help="the data folder (default: the usual search)")
+
+
+def _workers(text: str) -> int:
+    """argparse type: a whole number >= 1."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid whole number: {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return n
+
+
+def cmd_images(args: argparse.Namespace, out: TextIO) -> list[str]:
+    """``recap data images``: list, pull or build the images the selected instances lack. Returns
+    the failure lines; a bad selector is a UsageError, no data folder or no daemon a DataError."""
+    if args.dry_run and not (args.pull or args.build):
+        raise UsageError("--dry-run needs --pull or --build")
+    try:
+        recs = selected_records(args.selectors, args.data_dir)
+    except UnknownInstanceError as exc:
+        raise UsageError(str(exc)) from None
+    except (DataNotFoundError, EnvError) as exc:
+        raise DataError(str(exc)) from None
+    action = "pull" if args.pull else "build" if args.build else None
+    try:
+        return get_images(args.bench, recs, action, args.workers, out, args.dry_run)
+    except (ImagesError, SandboxError) as exc:
+        raise DataError(str(exc)) from None
 
 
 def parser() -> argparse.ArgumentParser:
@@ -260,6 +333,8 @@ def parser() -> argparse.ArgumentParser:
 
 def _run(args: argparse.Namespace, stdout: TextIO) -> list[str]:
     """The parsed action's failure lines (empty: all verified)."""
+    if args.action == "images":
+        return cmd_images(args, stdout)
     by_name = folders()
     benches = [b for b in by_name.values() if b.in_all] if args.bench == "all" else [by_name[args.bench]]
     if getattr(args, "data_dir", None) is not None and args.bench == "all":

@@ -14,6 +14,7 @@ takes as long as checking one.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from typing import Any
 
 from workers.sandbox.base import SandboxError
 
@@ -84,3 +85,15 @@ def images_line(instance_ids: Sequence[str], present: set[str], shown: int = 3) 
         return head
     more = f" and {len(missing) - shown} more" if len(missing) > shown else ""
     return f"{head}; {len(missing)} missing: {', '.join(missing[:shown])}{more}; get them with {how_to_get(missing)}"
+
+
+def present_tags(client: Any) -> set[str]:
+    """Every ``repository:tag`` the daemon of ``client`` (a Docker SDK client) holds, from one
+    ``images.list()``; SandboxError (one line) when it cannot list them."""
+    import docker.errors
+
+    try:
+        listed = client.images.list()
+    except docker.errors.DockerException as exc:
+        raise SandboxError(f"cannot list the Docker images: {str(exc).splitlines()[0][:160]}") from None
+    return {tag for image in listed for tag in (image.tags or [])}
