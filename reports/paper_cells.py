@@ -18,7 +18,6 @@ BENCH_ROWS = (
     ("robotouille", "synchronous", "Robotouille (Sync)"),
     ("robotouille", "asynchronous", "Robotouille (Async)"),
     ("fever", None, "FEVER"),
-    ("swe-verified", None, "SWE-bench Verified"),
 )
 
 INTRO = (
@@ -73,7 +72,6 @@ def arm_protocol(cell: dict[str, Any]) -> paper.ArmProtocol:
         tasks=tasks,
         method=cell.get("method") or "recap",
         episodes=cell.get("episodes"),
-        instances=cell.get("instances"),
     )
 
 
@@ -99,16 +97,11 @@ def fill_rate(
     """One success cell: ours, the paper's value (or a footnote mark), the difference, p."""
     row[key] = rate_ci(cell)
     if ref is not None and why is None:
-        row[f"{key}:paper"] = paper_value(ref)
+        row[f"{key}:paper"] = format_value("ref", ref)
         row[f"{key}:diff"] = 100.0 * cell["successes"] / cell["episodes"] - ref
     elif ref is not None and why is not None:
         row[f"{key}:paper"] = notes.mark(why)
     row[f"{key}:p"] = p
-
-
-def paper_value(ref: float) -> str:
-    """The paper's number as the paper prints it: one decimal, or two where it gives two (SWE-bench's 39.58)."""
-    return format_value("ref", ref) if round(ref, 1) == ref else f"{ref:.2f}"
 
 
 def add_holm(rows: list[dict[str, Any]], keys: Iterable[str]) -> int:
@@ -121,8 +114,7 @@ def add_holm(rows: list[dict[str, Any]], keys: Iterable[str]) -> int:
 
 
 def method_rank(order: tuple[str, ...], method: str) -> int:
-    """Where ``method`` stands in a table's method order (unknown ones last; mini-SWE-agent in ReAct's place)."""
-    method = paper.COLUMN_OF.get(method, method)
+    """Where ``method`` stands in a table's method order (unknown ones last)."""
     return order.index(method) if method in order else len(order)
 
 
@@ -140,8 +132,6 @@ class Cells:
     """paper_cells and paper_pairs rows, indexed for the layouts."""
 
     def __init__(self, q: Query) -> None:
-        #: for the queries only some tables need (SWE-bench Verified's temperatures)
-        self.q = q
         self.cells = q("paper_cells").dicts()
         self.pairs = q("paper_pairs").dicts()
         self._pairs = {
