@@ -61,6 +61,8 @@ class AttemptHandling:
     done_times: list[float]
     #: removes what lost workers' environments left running (pipeline.leftovers)
     leftovers: Leftovers
+    #: the cluster's sandbox slots, which cap the workers (None: no bound)
+    sandbox_slots: int | None
 
     # -- helpers --------------------------------------------------------------------------------
     def _event(

@@ -33,6 +33,10 @@ class MirrorError(Exception):
     """A ``--mirror`` that cannot work, refused before any download: ``recap data`` exits 2."""
 
 
+class InputError(Exception):
+    """``--from FILE`` is not the folder's data (bad records, wrong count): ``recap data`` exits 2, nothing written."""
+
+
 # ---------------------------------------------------------------------------------------------
 # what each benchmark folder holds: declared by the benchmarks (Benchmark.data_folders)
 
@@ -162,8 +166,15 @@ class CheckResult:
 
 
 def check_folder(bench: DataFolder, folder: Path, only: Callable[[Group], bool] = lambda g: True) -> CheckResult:
-    """``folder`` against the repository's manifest of ``bench`` (files of groups ``only`` keeps)."""
-    manifest = read_manifest(manifest_file(bench))
+    """``folder`` against the repository's manifest of ``bench`` (files of groups ``only`` keeps);
+    a folder the benchmark loads itself (``bench.load``) against its own ``MANIFEST.sha256``."""
+    if bench.load is not None:
+        own = folder / MANIFEST_NAME
+        if not own.is_file():
+            return CheckResult(bench, folder, checked=1, missing={MANIFEST_NAME: 1})
+        manifest = read_manifest(own)
+    else:
+        manifest = read_manifest(manifest_file(bench))
     generated = read_manifest(generated_manifest_file(bench)) if bench.generate is not None else {}
     result = CheckResult(bench, folder)
     for rel, digest in manifest.items():

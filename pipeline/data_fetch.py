@@ -27,6 +27,7 @@ from typing import IO, TextIO
 from pipeline.data import (
     MANIFEST_NAME,
     DataError,
+    InputError,
     MirrorError,
     check_folder,
     describe,
@@ -263,10 +264,39 @@ def _generate(bench: DataFolder, generate: Callable[[Path], list[str]], data: Pa
     return got
 
 
-def fetch_one(bench: DataFolder, dest: Path, mirror: str | None, out: TextIO) -> None:
+def _stage_loaded(bench: DataFolder, from_file: str | None, subset: bool, stage: Path, out: TextIO) -> dict[str, str]:
+    """A folder the benchmark loads itself (``bench.load``): its files in ``stage/data`` with their
+    own manifest. InputError (exit 2) for bad input, DataError when nothing can be read."""
+    assert bench.load is not None
+    data = stage / "data"
+    data.mkdir()
+    try:
+        written = bench.load(from_file, subset, data, out)
+    except ValueError as exc:
+        raise InputError(f"{bench.name}: {one_line(exc)}; nothing was written") from None
+    except Exception as exc:  # the loader's library failing (no network, no package): one line
+        raise DataError(one_line(exc) or type(exc).__name__) from None
+    got = {rel: sha256_file(data / rel) for rel in written}
+    write_manifest(data / MANIFEST_NAME, got)
+    return got
+
+
+def _same_as(dest: Path, got: dict[str, str]) -> bool:
+    """Whether the folder ``dest`` already holds exactly the files ``got`` (by sha256)."""
+    return all((dest / rel).is_file() and sha256_file(dest / rel) == digest for rel, digest in got.items())
+
+
+def fetch_one(
+    bench: DataFolder, dest: Path, mirror: str | None, out: TextIO, from_file: str | None = None, subset: bool = False
+) -> None:
     """Fetch ``bench`` into ``dest`` (must not exist, or be empty); DataError on any failure,
-    leaving ``dest`` and its parents as they were."""
+    leaving ``dest`` and its parents as they were. A folder the benchmark loads itself
+    (``bench.load``: ``from_file``, ``subset``) is read and checked before ``dest`` is looked at,
+    so bad input is refused (InputError) even where a folder exists."""
     dest = dest.expanduser().absolute()
+    if bench.load is not None:
+        _fetch_loaded(bench, dest, from_file, subset, out)
+        return
     if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
         if not dest.is_dir():
             raise DataError(f"{dest} exists and is not a folder")
@@ -300,6 +330,42 @@ def fetch_one(bench: DataFolder, dest: Path, mirror: str | None, out: TextIO) ->
                 except OSError:
                     break
     print(f"{bench.name}: {dest}: {len(got)} files fetched and verified", file=out)
+    if bench.after_fetch:
+        print(f"{bench.name}: note: {bench.after_fetch}", file=out)
+    _note_precedence(bench, dest, out)
+
+
+def _fetch_loaded(bench: DataFolder, dest: Path, from_file: str | None, subset: bool, out: TextIO) -> None:
+    """:func:`fetch_one` for a folder the benchmark loads itself: stage, check, then move into place."""
+    with tempfile.TemporaryDirectory(prefix=f".{bench.name}.load-") as tmp:
+        print(f"{bench.name}: loading {from_file or 'from upstream'}", file=out, flush=True)
+        got = _stage_loaded(bench, from_file, subset, Path(tmp), out)
+        if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
+            if dest.is_dir() and _same_as(dest, got):
+                print(f"{bench.name}: {dest} is already there and holds the same records ({len(got)} files)", file=out)
+                return
+            raise DataError(f"{dest} exists and holds other files; remove it or pass another --dest")
+        created = [p for p in [dest.parent, *dest.parent.parents] if not p.exists()]
+        done = False
+        try:
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            stage = Path(tempfile.mkdtemp(prefix=f".{dest.name}.partial-", dir=dest.parent))
+            try:
+                shutil.copytree(Path(tmp) / "data", stage / "data")
+                if dest.is_dir():
+                    dest.rmdir()  # empty (checked above)
+                os.rename(stage / "data", dest)
+                done = True
+            finally:
+                shutil.rmtree(stage, ignore_errors=True)
+        finally:
+            if not done:
+                for folder in created:
+                    try:
+                        folder.rmdir()
+                    except OSError:
+                        break
+    print(f"{bench.name}: {dest}: {len(got)} files stored and verified", file=out)
     if bench.after_fetch:
         print(f"{bench.name}: note: {bench.after_fetch}", file=out)
     _note_precedence(bench, dest, out)

@@ -85,7 +85,9 @@ from pipeline.stopping import DEFAULT_GRACE_S, StopRequests
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
 from pipeline.worker_pool import InProcessWorkerPool, RayWorkerPool, WorkerPool
 from schemas.records import EpisodeRecord
+from workers.envs.registry import get_benchmark
 from workers.episode_worker import EpisodeRunner, worker_actor
+from workers.sandbox.base import NODE_RESOURCE
 from workers.sink import recover_wal
 
 #: where attempts run: Ray actors (the default), or threads of the driver (``recap run --executor in-process``)
@@ -137,6 +139,8 @@ class Driver(SessionLoop):
         self.pool: WorkerPool | None = None
         self.channel: SinkChannel | None = None
         self.services: RunServices | None = None
+        #: the cluster's sandbox slots (ray.sandboxes_per_node on a coding sweep); None: unbounded
+        self.sandbox_slots: int | None = None
         self._last_push = time.monotonic()
         self.work: RunStore = prepared.store
         self.records_out: list[EpisodeRecord] = []
@@ -215,9 +219,30 @@ class Driver(SessionLoop):
         # in-process threads share their process's): on the driver's node, named in the workers' environment
         self.services = RunServices.start(self.spec, self.run_id, ray.get_runtime_context().get_node_id())
         worker_cls = worker_actor(
-            num_cpus=self.spec.ray.worker_cpus, spread=multi_node, runtime_env=self.services.worker_runtime_env()
+            num_cpus=self.spec.ray.worker_cpus,
+            spread=multi_node,
+            runtime_env=self.services.worker_runtime_env(),
+            resources=self._sandbox_resources(),
         )
         return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session)
+
+    def _sandbox_resources(self) -> dict[str, float] | None:
+        """``{recap_sandbox: 1}`` per episode worker when the sweep bounds sandboxes per node and
+        runs a sandboxed benchmark; the cluster's total then caps the workers (``sandbox_slots``).
+        PipelineError (one line) when no node declares the resource (no worker could start)."""
+        import ray  # lazy: importing this module (prepare, the CLI's checks) must not load Ray
+
+        per_node = self.spec.ray.sandboxes_per_node
+        if per_node is None or not any(get_benchmark(e.benchmark).sandboxed for e in self.spec.environments):
+            return None
+        total = int(ray.cluster_resources().get(NODE_RESOURCE, 0))
+        if total < 1:
+            raise PipelineError(
+                f"ray.sandboxes_per_node is {per_node} but no node of the cluster declares the resource {NODE_RESOURCE} "
+                f"(start its nodes with --resources '{{\"{NODE_RESOURCE}\": {per_node}}}', or leave the setting out)"
+            )
+        self.sandbox_slots = total
+        return {NODE_RESOURCE: 1}
 
     def _run_locked(self) -> RunSummary:
         import ray  # lazy: importing this module (prepare, the CLI's checks) must not load Ray

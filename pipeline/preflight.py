@@ -252,6 +252,20 @@ def _check_refusal(spec: SweepSpec, u: Unit) -> None:
         raise SpecError(_fit(f"methods[{i}] ({u.method_label}) cannot run on {u.benchmark}: ", refusal))
 
 
+def check_benchmarks(plan: Plan) -> None:
+    """Each benchmark's own check of all its instances at once (:meth:`Benchmark.preflight`), per
+    ``environments[]`` entry (its options); SpecError (one line) naming the entry otherwise."""
+    groups: dict[tuple[str, str], list[Unit]] = {}
+    for u in plan.units:
+        groups.setdefault((u.benchmark, _canonical(u.env_options)), []).append(u)
+    for (bench, _), units in groups.items():
+        ids = list(dict.fromkeys(u.instance_id for u in units))
+        refusal = registry.get_benchmark(bench).preflight(ids, dict(units[0].env_options or {}))
+        if refusal is not None:
+            head = f"environments[{_env_index(plan.spec, bench, units[0].env_options)}] ({bench}): "
+            raise SpecError(_fit(head, refusal))
+
+
 @dataclass
 class _EnvProbe:
     """One environment to open (its first unit and make() options) and the agents to try on it."""
@@ -303,6 +317,10 @@ def _check_agents(spec: SweepSpec, env: Environment, probe: _EnvProbe) -> None:
     """Each method configuration of the probe builds its episode and renders its demonstration on ``env``."""
     method_index = {m.name: i for i, m in enumerate(spec.methods)}
     for u, agent in probe.methods:
+        refused = agent.refuses_env(env)
+        if refused is not None:  # the method cannot play this benchmark at all (a coding agent elsewhere)
+            i = method_index.get(u.method_label)
+            raise SpecError(_fit(f"methods[{i}] ({u.method_label}) cannot run on {stratum(u.instance_id)}: ", refused))
         try:
             agent.episode_config(env)
             agent.demonstration_text(env)
@@ -332,6 +350,7 @@ def check_plan(plan: Plan) -> None:
     as ``env_error``, count as done and show up in the report as a 0 % method.
     """
     check_output_caps(plan)
+    check_benchmarks(plan)
     for probe in _env_probes(plan):
         env = _open_env(plan.spec, probe)
         try:

@@ -24,6 +24,7 @@ from pipeline.spec import RaySpec
 from workers.envs.data_paths import CACHE_ENV
 from workers.envs.registry import data_env_vars
 from workers.log_setup import LEVEL_VAR
+from workers.sandbox.base import NODE_RESOURCE
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
@@ -86,6 +87,7 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
                     include_dashboard=ray_spec.dashboard,
                     dashboard_host="127.0.0.1",
                     object_store_memory=ray_spec.object_store_mb * 1024 * 1024,
+                    resources={NODE_RESOURCE: ray_spec.sandboxes_per_node} if ray_spec.sandboxes_per_node else None,
                     _temp_dir=str(folder),
                     **common,
                 )

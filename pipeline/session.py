@@ -164,6 +164,8 @@ class SessionLoop(AttemptHandling):
         assert self.pool is not None
         self.caps.check(self.backend.spend())
         self.n_workers = max(1, min(self.spec.workers, len(self.queue))) if len(self.queue) else 0
+        if self.sandbox_slots is not None:  # no more workers than the nodes have sandbox slots
+            self.n_workers = min(self.n_workers, self.sandbox_slots)
         nodes = self.pool.start(self.n_workers)
         self._event("workers_started", workers=nodes, nodes=len(set(nodes.values())))
 

@@ -192,6 +192,12 @@ class Agent(ABC):
     def reply_format(self) -> str:
         return self.expected_format
 
+    def refuses_env(self, env: Environment) -> str | None:
+        """Why this method cannot play ``env`` at all (one line), or None. Preflight asks before
+        anything runs (a coding agent on a benchmark whose actions are not tool calls). Default:
+        every environment."""
+        return None
+
     def max_depth(self, ep: Episode) -> int:
         return 0
 

@@ -63,19 +63,19 @@ def build_report(run_dirs: Sequence[str | Path], options: ReportOptions = Report
             else []
         )
         paper = paper_section(q, results)
-        secs = (
-            [paper]
-            if options.paper_only
-            else [
+        if options.paper_only:
+            secs = [paper]
+        else:
+            secs = [
                 sections.overview(q),
                 sections.success(q),
                 sections.costs(q),
                 sections.context(q),
                 sections.trees(q),
                 sections.failures(q),
-                paper,
             ]
-        )
+            coding = sections.coding(q, results)  # None for a run without coding episodes
+            secs += ([coding] if coding is not None else []) + [paper]
         viewer_html = build_viewer(con, ids, results) if ids else ""
         dirs = [str(r[0]) for r in con.execute("SELECT run_dir FROM run_dirs").fetchall()]
     finally:

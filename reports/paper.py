@@ -30,7 +30,19 @@ MAIN: dict[tuple[str, str | None], dict[str, float]] = {
     ("robotouille", "asynchronous"): {"recap": 53.0, "react": 24.0, "adapt": 14.0, "act": 8.0, "cot": 5.0, "standard": 2.0},
     ("alfworld", None): {"recap": 91.0, "react": 84.0, "act": 74.0, "adapt": 71.6},
     ("fever", None): {"recap": 63.5, "react": 63.5, "cot": 58.5, "act": 58.5, "standard": 53.5},
+    # GPT-4.1 (2025-04-14), temperature 0, no demonstrations, the 500 instances (Table 1's last row,
+    # appendix "SWE-bench Verified Experiment Details"); ReAct is mini-SWE-agent's leaderboard number
+    ("swe-verified", None): {"recap": 44.8, "react": 39.58},
 }
+#: methods that stand in another method's column of the main table: the paper's ReAct baseline on
+#: SWE-bench Verified is mini-SWE-agent (ReCAP.tex, Baselines: "we used mini-SWE-agent ... as the
+#: ReAct baseline")
+COLUMN_OF = {"mini_swe": "react"}
+#: SWE-bench Verified as the paper ran it: every one of its 500 instances once, GPT-4.1, temperature 0
+SWE_VERIFIED = "swe-verified"
+SWE_VERIFIED_INSTANCES = 500
+SWE_MODEL_NAME = "GPT-4.1 (2025-04-14)"
+SWE_TEMPERATURE = 0.0
 #: main-table numbers that are not the paper's own GPT-4o runs: never comparable, with the reason
 FOREIGN: dict[tuple[str, str], str] = {
     ("alfworld", "adapt"): "the paper's ADaPT ALFWorld number (71.6) is GPT-3.5, quoted from the ADaPT paper",
@@ -221,6 +233,10 @@ class ArmProtocol:
     method: str = "recap"
     #: episodes the cell counts (FEVER's number needs the paper's 200 claims)
     episodes: int | None = None
+    #: distinct instances the cell counts (SWE-bench Verified's number needs the paper's 500)
+    instances: int | None = None
+    #: the temperatures the arm's settings carried (None: not read; SWE-bench Verified needs 0)
+    temperatures: tuple[float | None, ...] | None = None
 
 
 def _task_key(split: str, task: str) -> str:
@@ -236,6 +252,8 @@ def mismatch(protocol: Protocol, arm: ArmProtocol, expected_tasks: Iterable[str]
     """
     if arm.test_double:
         return "a test double, not a language model"
+    if arm.benchmark == SWE_VERIFIED:
+        return swe_mismatch(arm)
     model = paper_model(arm.provider_model)
     if model not in protocol.models:
         wanted = " or ".join(CROSS_MODEL_NAMES[m] for m in protocol.models)
@@ -275,6 +293,33 @@ def mismatch(protocol: Protocol, arm: ArmProtocol, expected_tasks: Iterable[str]
     return None
 
 
+def is_swe_model(provider_model: str | None) -> bool:
+    """Whether a provider model string is the paper's SWE-bench model, GPT-4.1: its snapshot
+    (2025-04-14) or the bare alias, any provider prefix (``gpt-4.1-mini`` is not GPT-4.1)."""
+    return (provider_model or "").lower().rsplit("/", 1)[-1] in ("gpt-4.1", "gpt-4.1-2025-04-14")
+
+
+def swe_mismatch(arm: ArmProtocol) -> str | None:
+    """None when ``arm`` ran SWE-bench Verified as the paper did (GPT-4.1, profile paper,
+    temperature 0, each of the 500 instances once); else the first difference, as a footnote phrase.
+    The paper states no context window for SWE-bench (mini-SWE-agent keeps its whole history), so
+    none is checked."""
+    if arm.test_double:
+        return "a test double, not a language model"
+    if not is_swe_model(arm.provider_model):
+        return f"model {arm.provider_model or '?'}, the paper used {SWE_MODEL_NAME}"
+    if arm.profile != "paper":
+        return f"profile {arm.profile or 'none'}, the paper's runs are profile paper"
+    temps = sorted({"none" if t is None else f"{t:g}" for t in (arm.temperatures or (None,))})
+    if temps != [f"{SWE_TEMPERATURE:g}"]:
+        return f"temperature {', '.join(temps)}, the paper used {SWE_TEMPERATURE:g}"
+    if arm.instances is not None and arm.instances != SWE_VERIFIED_INSTANCES:
+        return f"ran {arm.instances} of the paper's {SWE_VERIFIED_INSTANCES} instances (a subset)"
+    if arm.episodes is not None and arm.instances is not None and arm.episodes != arm.instances:
+        return f"{arm.episodes} episodes over {arm.instances} instances, the paper ran each instance once (pass@1)"
+    return None
+
+
 def _natural(key: str) -> tuple[str, int]:
     head, _, tail = key.partition(":")
     return (head, int(tail)) if tail.isdigit() else (key, -1)
@@ -287,9 +332,10 @@ def main_reference(env_split: str, method: str) -> float | None:
     """The paper's main-table success rate (%) for ``method`` on ``env_split`` ("robotouille/synchronous",
     "alfworld", ...); None when the paper has none."""
     bench, _, split = env_split.partition("/")
+    column = COLUMN_OF.get(method, method) if bench == SWE_VERIFIED else method
     for key in ((bench, split), (bench, None)):
-        if key in MAIN and method in MAIN[key]:
-            return MAIN[key][method]
+        if key in MAIN and column in MAIN[key]:
+            return MAIN[key][column]
     return None
 
 

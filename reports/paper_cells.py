@@ -18,6 +18,7 @@ BENCH_ROWS = (
     ("robotouille", "synchronous", "Robotouille (Sync)"),
     ("robotouille", "asynchronous", "Robotouille (Async)"),
     ("fever", None, "FEVER"),
+    ("swe-verified", None, "SWE-bench Verified"),
 )
 
 INTRO = (
@@ -72,6 +73,7 @@ def arm_protocol(cell: dict[str, Any]) -> paper.ArmProtocol:
         tasks=tasks,
         method=cell.get("method") or "recap",
         episodes=cell.get("episodes"),
+        instances=cell.get("instances"),
     )
 
 
@@ -97,11 +99,16 @@ def fill_rate(
     """One success cell: ours, the paper's value (or a footnote mark), the difference, p."""
     row[key] = rate_ci(cell)
     if ref is not None and why is None:
-        row[f"{key}:paper"] = format_value("ref", ref)
+        row[f"{key}:paper"] = paper_value(ref)
         row[f"{key}:diff"] = 100.0 * cell["successes"] / cell["episodes"] - ref
     elif ref is not None and why is not None:
         row[f"{key}:paper"] = notes.mark(why)
     row[f"{key}:p"] = p
+
+
+def paper_value(ref: float) -> str:
+    """The paper's number as the paper prints it: one decimal, or two where it gives two (SWE-bench's 39.58)."""
+    return format_value("ref", ref) if round(ref, 1) == ref else f"{ref:.2f}"
 
 
 def add_holm(rows: list[dict[str, Any]], keys: Iterable[str]) -> int:
@@ -114,7 +121,8 @@ def add_holm(rows: list[dict[str, Any]], keys: Iterable[str]) -> int:
 
 
 def method_rank(order: tuple[str, ...], method: str) -> int:
-    """Where ``method`` stands in a table's method order (unknown ones last)."""
+    """Where ``method`` stands in a table's method order (unknown ones last; mini-SWE-agent in ReAct's place)."""
+    method = paper.COLUMN_OF.get(method, method)
     return order.index(method) if method in order else len(order)
 
 
@@ -132,6 +140,8 @@ class Cells:
     """paper_cells and paper_pairs rows, indexed for the layouts."""
 
     def __init__(self, q: Query) -> None:
+        #: for the queries only some tables need (SWE-bench Verified's temperatures)
+        self.q = q
         self.cells = q("paper_cells").dicts()
         self.pairs = q("paper_pairs").dicts()
         self._pairs = {

@@ -21,6 +21,7 @@ from reports.paper_cells import (
     test_double_last,
     test_notes,
 )
+from reports.paper_swe import SWE_NOTE, swe_mismatch
 
 #: a cell (or pair) of :class:`Cells`: column name to value
 Cell = dict[str, Any]
@@ -36,12 +37,15 @@ def main_table(cells: Cells) -> Table | str:
         for c in cells.select(level="split")
         if c["ablation"] == "original"
         and (
-            c["benchmark"] in ("alfworld", "fever")
+            c["benchmark"] in ("alfworld", "fever", paper.SWE_VERIFIED)
             or (c["benchmark"], c["split"]) in (("robotouille", "synchronous"), ("robotouille", "asynchronous"))
         )
     ]
     if not pool:
-        return "Main results: no arm without an ablation ran Robotouille (synchronous or asynchronous), ALFWorld or FEVER."
+        return (
+            "Main results: no arm without an ablation ran Robotouille (synchronous or asynchronous), ALFWorld, FEVER "
+            "or SWE-bench Verified."
+        )
     arms = sorted({(c["method"], c["arm_label"]) for c in pool}, key=lambda a: (method_rank(paper.MAIN_ORDER, a[0]), a[1]))
     cols = [Column("benchmark", "benchmark"), Column("model", "model")]
     for _, label in arms:
@@ -67,13 +71,17 @@ def main_table(cells: Cells) -> Table | str:
             if (c["benchmark"], c["split"], c["model_label"]) != (bench, split, model):
                 continue
             ref = paper.main_reference(f"{bench}/{split}", c["method"])
-            why = paper.FOREIGN.get((bench, c["method"])) or paper.mismatch(paper.PROTOCOLS["main"], arm_protocol(c))
+            if bench == paper.SWE_VERIFIED:
+                why = swe_mismatch(cells, c)
+            else:
+                why = paper.FOREIGN.get((bench, c["method"])) or paper.mismatch(paper.PROTOCOLS["main"], arm_protocol(c))
             fill_rate(row, c["arm_label"], c, ref, why, notes, paired_p(cells, c, pool, used))
         rows.append(row)
     m = add_holm(rows, [a[1] for a in arms])
     note = join_notes(
         "Columns: method arms in the paper's order (ReCAP, ADaPT, ReAct, CoT, Act, Standard). p: against the ReCAP "
         f"arm of the same model, profile and window; {m} comparisons (Holm over the table).",
+        SWE_NOTE if any(c["benchmark"] == paper.SWE_VERIFIED for c in pool) else "",
         test_notes(pool, used),
         notes.text(),
     )

@@ -301,3 +301,43 @@ def lines(
                 )
     body.append(f'<line x1="{left}" x2="{right}" y1="{bottom}" y2="{bottom}" stroke="#333"/>')
     return _frame(title, body, list(series))
+
+
+def scatter(
+    title: str,
+    series: Mapping[str, Sequence[tuple[float, float, bool]]],
+    *,
+    x_label: str = "",
+    y_label: str = "",
+    y_fmt: Callable[[float], str] = _fmt_tick,
+) -> str:
+    """One dot per point ``(x, y, filled)``, a colour per series; a filled dot is a success, a ring a
+    failure. Every dot carries its values as ``data-x`` / ``data-y`` (and ``data-series``,
+    ``data-filled``) and a ``<title>``, so a reader (or a test) gets the numbers back exactly."""
+    left, right, top, bottom = 70.0, WIDTH - 10.0, 36.0, HEIGHT - 45.0
+    xs = [p[0] for pts in series.values() for p in pts]
+    ys = [p[1] for pts in series.values() for p in pts]
+    x_ticks = nice_ticks(0.0, max(xs, default=1.0) or 1.0, 8)
+    y_ticks = nice_ticks(0.0, max(ys, default=1.0) or 1.0)
+
+    def x_of(v: float) -> float:
+        return left + (right - left) * v / (x_ticks[-1] or 1.0)
+
+    def y_of(v: float) -> float:
+        return bottom - (bottom - top) * v / (y_ticks[-1] or 1.0)
+
+    body = _y_axis(y_ticks, y_of, left, right, y_label, y_fmt)
+    for t in x_ticks:
+        body.append(f'<text x="{x_of(t):.1f}" y="{bottom + 14}" text-anchor="middle">{escape(_fmt_tick(t))}</text>')
+    body.append(f'<text x="{(left + right) / 2}" y="{HEIGHT - 8}" text-anchor="middle">{escape(x_label)}</text>')
+    for si, (name, pts) in enumerate(series.items()):
+        for x, y, filled in sorted(pts):
+            fill = color(si) if filled else "none"
+            tip = f"{name}: {_fmt_tick(x)}, {y_fmt(y)} ({'resolved' if filled else 'not resolved'})"
+            body.append(
+                f'<circle class="dot" data-series="{escape(name)}" data-x="{x:g}" data-y="{y:g}" '
+                f'data-filled="{str(filled).lower()}" cx="{x_of(x):.1f}" cy="{y_of(y):.1f}" r="3" fill="{fill}" '
+                f'stroke="{color(si)}"><title>{escape(tip)}</title></circle>'
+            )
+    body.append(f'<line x1="{left}" x2="{right}" y1="{bottom}" y2="{bottom}" stroke="#333"/>')
+    return _frame(title, body, list(series))

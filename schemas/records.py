@@ -24,7 +24,9 @@ from schemas.kinds import CallStatus, EventKind, EventSource, LLMErrorKind, Node
 #: earlier have their ``seed`` column read as ``sampling_seed``
 #: 5: tool calls (issue 28): ``messages`` gained ``tool_call_id`` and ``tool_calls`` (null in parts
 #: of version 4 or earlier: those runs had no tool calls), and the new ``tool_calls`` table holds
-#: one row per call a model made (a run without that table has none)
+#: one row per call a model made (a run without that table has none); the ``evaluations`` table
+#: (issue 29: one row per judged SWE-bench submission) was added under the same version, since a
+#: new table changes no part of an existing one (a run without it has no rows there)
 SCHEMA_VERSION = 5
 
 
@@ -302,6 +304,50 @@ class WikiRequestRecord:
     encoding: str
 
 
+@dataclass(frozen=True)
+class EvaluationRecord:
+    """How one SWE-bench submission was judged: the ``evaluations`` table, one row per judged
+    episode (workers/envs/swe/evaluate.py, grading.py).
+
+    ``resolved``/``reason`` are the verdict the episode's ``success`` is (``graded_by``: the
+    official harness's grade when it ran, else ours); ``ours_resolved`` is our evaluator's own
+    verdict and ``official_resolved``/``official_status`` the harness's (``RESOLVED_FULL``,
+    ``RESOLVED_PARTIAL``, ``RESOLVED_NO``; null status where the harness writes no report: no
+    patch, a patch that does not apply, a timeout; both null when the official grading did not
+    run, ``grading`` ``ours`` or no ``swebench`` package). ``reason``: ``resolved``, ``no_patch``,
+    ``patch_failed``, ``tests_failed``, ``timeout``. ``tests`` is JSON, each FAIL_TO_PASS and
+    PASS_TO_PASS test id -> its status as the deciding grader read the log (``MISSING``: not
+    reported); the counts are that grader's. ``patch`` is the submitted diff (``patch_bytes`` its
+    UTF-8 size); ``log`` the evaluation's log, its last :data:`EVALUATION_LOG_CAP` bytes when longer
+    (``log_bytes`` the whole log's size); ``duration_s`` the evaluation's wall time."""
+
+    table: ClassVar[str] = "evaluations"
+    episode_id: str
+    instance_id: str
+    resolved: bool
+    reason: str
+    graded_by: str
+    grading: str
+    ours_resolved: bool
+    tests: str
+    fail_to_pass_passed: int
+    fail_to_pass_total: int
+    pass_to_pass_passed: int
+    pass_to_pass_total: int
+    patch: str
+    patch_bytes: int
+    log: str
+    log_bytes: int
+    duration_s: float
+    official_resolved: bool | None = None
+    official_status: str | None = None
+    official_parser: str | None = None
+
+
+#: bytes of an evaluation's log an ``evaluations`` row keeps (the tail: pytest's summary is last)
+EVALUATION_LOG_CAP = 200_000
+
+
 Record = (
     MessageRecord
     | CallRecord
@@ -313,6 +359,7 @@ Record = (
     | RunRecord
     | WikiPageRecord
     | WikiRequestRecord
+    | EvaluationRecord
 )
 
 ALL_RECORD_TYPES: tuple[type, ...] = (
@@ -326,6 +373,7 @@ ALL_RECORD_TYPES: tuple[type, ...] = (
     WikiPageRecord,
     WikiRequestRecord,
     ToolCallRecord,
+    EvaluationRecord,
 )
 
 # keeps `field` importable for callers building records generically

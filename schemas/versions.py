@@ -49,6 +49,12 @@ Version 4 -> 5 (tool calls, issue 28):
   reader already takes as a table without rows (an empty view with the full schema), so such a
   run reads as one whose episodes made no tool calls.
 
+Also under version 5, ``evaluations`` (issue 29): a new table, one row per judged SWE-bench
+submission. No version bump: a new table adds no column to an existing one, a run folder without
+an ``evaluations`` folder reads as a table without rows (as above), and a version 5 run continued
+by a recap that writes it only gains rows there, so every earlier reader and writer of version 5
+stays right.
+
 A run folder of version 2, 3 or 4 may be continued by this version (:func:`continues`): its
 parts differ from the current ones only by ``model_name`` and the messages' tool columns (filled
 on read) and the name of the sampling seed's column (renamed on read), so parts of several

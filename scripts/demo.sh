@@ -13,7 +13,7 @@ cd "$(dirname "$0")/.."
 ROOT="$(pwd)"
 
 if [ "${RECAP_SKIP_INSTALL:-0}" != "1" ]; then
-  bash scripts/setup_venv.sh "alfworld,test"   # the same environment as the test command
+  bash scripts/setup_venv.sh "alfworld,test,swe"   # the same environment as the test command
 fi
 
 export LITELLM_LOCAL_MODEL_COST_MAP=True

@@ -6,7 +6,7 @@
 # pytest's exit code 5 (no tests collected) is a failure here.
 set -uo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup_venv.sh "alfworld,test" || exit 1
+bash scripts/setup_venv.sh "alfworld,test,swe" || exit 1
 # The report's browser check (tests/reports/test_browser.py, default suite) renders the HTML in
 # the distribution's headless Chromium; nothing is downloaded at run time. Without a Chromium
 # that test fails; RECAP_SKIP_BROWSER=1 is the explicit opt-out (the test is then skipped).

@@ -16,6 +16,10 @@ os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 os.environ.setdefault("ROBOTOUILLE_DATA", str(SHARED_DATA / "robotouille"))
 os.environ.setdefault("ALFWORLD_DATA", str(SHARED_DATA / "alfworld"))
 
+# the full method registry in every test process, as the CLI and the episode workers have it:
+# workers/agents registers mini_swe (recap/ registers the six built-in methods itself)
+import workers.agents  # noqa: E402,F401
+
 
 @pytest.fixture(scope="session")
 def ray_address() -> Iterator[str]:
@@ -29,7 +33,8 @@ def ray_address() -> Iterator[str]:
     from pipeline.raysetup import init_ray, shutdown_ray
     from pipeline.spec import RaySpec
 
-    started = init_ray(RaySpec(num_cpus=2))
+    # one sandbox slot per node (ray.sandboxes_per_node): a coding sweep that asks for the bound runs one worker here
+    started = init_ray(RaySpec(num_cpus=2, sandboxes_per_node=1))
     yield ray.get_runtime_context().gcs_address
     if started:
         shutdown_ray()

@@ -232,7 +232,7 @@ def test_registration_is_lazy_named_once_and_undone(corridor):
         bench.name = "tunnel"
         return bench
 
-    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever", "swe", NAME]
+    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever", "swe", "swe-verified", NAME]
     register_benchmark("tunnel", factory)
     try:
         assert built == []
@@ -243,7 +243,7 @@ def test_registration_is_lazy_named_once_and_undone(corridor):
         unregister_benchmark("tunnel")
     with pytest.raises(
         UnknownInstanceError,
-        match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, fever, swe, corridor$",
+        match=r"^unknown benchmark 'tunnel'; known: blocksworld, robotouille, alfworld, fever, swe, swe-verified, corridor$",
     ):
         registry.get_benchmark("tunnel")
     # the declared hooks' defaults: no per-method options, no data folder, nothing to forward
@@ -263,9 +263,17 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
             "ALFWORLD_DATA",
             "ALFWORLD_DATA_2_1_2",
             "FEVER_DATA",
+            "SWEBENCH_VERIFIED_DATA",
             "RECAP_RELEASE_DATA",
         )
-        assert list(registry.data_folders()) == ["robotouille", "alfworld", "alfworld-2.1.2", "fever", "recap-release"]
+        assert list(registry.data_folders()) == [
+            "robotouille",
+            "alfworld",
+            "alfworld-2.1.2",
+            "fever",
+            "swebench-verified",
+            "recap-release",
+        ]
         assert registry.data_folder("alfworld-2.1.2").location.env_var == "ALFWORLD_DATA_2_1_2"
         assert registry.make_env("blocksworld/3@1").instance_id == "blocksworld/3@1"
     finally:
@@ -280,7 +288,7 @@ def test_a_benchmark_that_cannot_be_imported_affects_only_itself():
             registry.get_benchmark("plain")
     finally:
         unregister_benchmark("plain")
-    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever", "swe"]
+    assert registry.benchmark_names() == ["blocksworld", "robotouille", "alfworld", "fever", "swe", "swe-verified"]
 
 
 #: a benchmark package of its own, written into a temporary folder: its environment, its
@@ -391,6 +399,6 @@ def test_build_agent_refuses_an_unknown_benchmark_by_name():
     from workers.episode_worker import build_agent
 
     with pytest.raises(
-        ConfigError, match=r"^unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld, fever, swe$"
+        ConfigError, match=r"^unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld, fever, swe, swe-verified$"
     ):
         build_agent("react", profile="paper", benchmark="nowhere")

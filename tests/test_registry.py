@@ -91,7 +91,7 @@ def test_concurrent_registrations_and_lookups_are_consistent():
 def test_methods_and_benchmarks_use_the_one_mechanism():
     assert isinstance(METHODS, Registry) and isinstance(BENCHMARKS, Registry) and isinstance(EXTRA_FOLDERS, Registry)
     assert (METHODS.kind, BENCHMARKS.kind) == ("method", "benchmark")
-    with pytest.raises(ConfigError, match=r"^unknown method 'x'; known: recap, react, act, cot, standard, adapt$"):
+    with pytest.raises(ConfigError, match=r"^unknown method 'x'; known: recap, react, act, cot, standard, adapt, mini_swe$"):
         METHODS.get("x")
 
 
@@ -126,7 +126,7 @@ print(list(demo.replies))
 print(sorted(m for m in ("recap.methods", "recap.recap_agent", "recap.baselines") if m in sys.modules))
 from workers.envs.registry import benchmark_names
 print(benchmark_names())
-print([m for m in ("workers.envs.blocksworld", "workers.envs.robotouille", "workers.envs.alfworld", "workers.envs.fever", "workers.envs.swe") if m in sys.modules])
+print([m for m in ("workers.envs.blocksworld", "workers.envs.robotouille", "workers.envs.alfworld", "workers.envs.fever", "workers.envs.swe", "workers.envs.swe_verified") if m in sys.modules])
 """
 
 
@@ -137,6 +137,6 @@ def test_a_fresh_process_knows_every_builtin_without_side_effect_imports():
     assert out.splitlines() == [
         "['recap', 'react', 'act', 'cot', 'standard']",
         "['recap.baselines', 'recap.recap_agent']",
-        "['blocksworld', 'robotouille', 'alfworld', 'fever', 'swe']",
+        "['blocksworld', 'robotouille', 'alfworld', 'fever', 'swe', 'swe-verified']",
         "[]",
     ]

@@ -32,6 +32,7 @@ from recap.release_prompt import ReleasePrompt
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
 from schemas.records import CallRecord
 from schemas.tables import check_vocabulary, record_to_row
+from workers import agents as _package_agents  # noqa: F401  registers mini_swe & co. in driver and workers alike
 from workers.envs import registry  # called through the module: a test may swap make_env there
 from workers.envs.registry import place_of
 from workers.log_setup import configure_from_env
@@ -410,7 +411,9 @@ class _EpisodeWorker:
         return self.runner.run_unit(unit, attempt)
 
 
-def worker_actor(num_cpus: float = 0.05, spread: bool = False, runtime_env: dict | None = None) -> Any:
+def worker_actor(
+    num_cpus: float = 0.05, spread: bool = False, runtime_env: dict | None = None, resources: dict[str, float] | None = None
+) -> Any:
     """The Ray actor class with the given resource shape.
 
     ``max_restarts=0``: the driver replaces dead workers itself, so that it can count attempts
@@ -423,4 +426,6 @@ def worker_actor(num_cpus: float = 0.05, spread: bool = False, runtime_env: dict
         options["scheduling_strategy"] = "SPREAD"
     if runtime_env:
         options["runtime_env"] = runtime_env
+    if resources:  # a coding sweep's sandbox slot on its node (ray.sandboxes_per_node)
+        options["resources"] = resources
     return ray.remote(**options)(_EpisodeWorker)

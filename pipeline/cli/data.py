@@ -25,6 +25,12 @@ The data never lives in this repository. Three benchmark folders exist: ``roboto
   removes the stage, so no half-written folder is ever left). Default destination:
   recap-eval's cache; ``--dest`` names the folder for one benchmark, or the parent of the three
   folders when no benchmark is named. A destination that exists is verified, not overwritten.
+* ``recap data images swebench-verified [SELECTOR ...] [--pull | --build] [--workers N] [--dry-run]``
+  - the SWE-bench harness's per-instance images the selected instances lack (selectors as
+  ``recap env list swe-verified`` takes them; default all): listed, pulled from Docker Hub
+  through the Docker SDK, or built with the harness itself, N at a time, one line per image
+  (:mod:`workers.envs.swe_verified.get_images`). Exit 0 when every selected instance has its
+  image at the end, 1 when some are missing or failed, 2 for bad usage.
 
 Sources (``--mirror`` replaces the base of every URL below with a folder or a URL prefix holding
 the same file names; ``file://`` URLs work). Each benchmark declares its folders, their file
@@ -46,6 +52,13 @@ this command works on whatever the registered benchmarks declare:
   commit (a one-commit partial fetch, so the release's large data files are never downloaded), or
   from ``--mirror``, which here names the repository itself (a local clone, bare or not, or a git
   URL). It is not part of ``all``: name it.
+* ``swebench-verified`` (SWE-bench Verified, benchmark ``swe-verified``): not downloaded file by
+  file but loaded: ``princeton-nlp/SWE-bench_Verified`` (split ``test``) through the ``datasets``
+  library, or ``--from FILE`` (a local Parquet or JSONL copy); checked (500 records unless
+  ``--subset``, recorded as a subset) and stored as ``instances.jsonl`` + ``SOURCE.json`` with the
+  folder's own ``MANIFEST.sha256`` (:mod:`workers.envs.swe_verified.dataset`); a bad file is one line,
+  exit 2, nothing written. ``check`` adds how many instances have their harness image here. Not
+  part of ``all``: name it.
 * ALFWorld 2.1.2: ``json_2.1.2_tw-pddl.zip`` (the ``TW_PDDL_FILES_URL`` of alfworld 0.4.2's
   ``alfworld-download``).
 
@@ -89,10 +102,14 @@ from functools import partial
 from typing import TextIO
 
 from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError
-from pipeline.data import DataError, MirrorError, check_folder, describe, folders, not_found, search
+from pipeline.data import DataError, InputError, MirrorError, check_folder, describe, folders, not_found, search
 from pipeline.data_fetch import check_mirror, default_dest, fetch_one
 from pipeline.errors import one_line
+from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
+from workers.envs.swe_verified.get_images import DEFAULT_WORKERS, ImagesError, get_images, selected_records
+from workers.envs.swe_verified.get_images import FOLDERS as IMAGE_FOLDERS
+from workers.sandbox.base import SandboxError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -137,21 +154,45 @@ def cmd_check(benches: list[DataFolder], data_dir: str | None, out: TextIO) -> l
             continue
         result.source = used.step
         print(result.line(), file=out)
+        if result.ok and bench.check_notes is not None:
+            try:
+                notes = bench.check_notes(used.path.resolve())
+            except Exception as exc:  # a verified folder whose notes cannot be read: one failure line
+                notes = []
+                failures.append(f"{bench.name}: {one_line(exc)}")
+            for note in notes:
+                print(f"{bench.name}: {note}", file=out)
         if not result.ok:
             failures.append(f"{bench.name}: {sum(result.missing.values())} missing, {len(result.mismatched)} mismatched")
     return failures
 
 
-def cmd_fetch(benches: list[DataFolder], dest: str | None, mirror: str | None, out: TextIO) -> list[str]:
+def cmd_fetch(
+    benches: list[DataFolder],
+    dest: str | None,
+    mirror: str | None,
+    out: TextIO,
+    from_file: str | None = None,
+    subset: bool = False,
+) -> list[str]:
     """``recap data fetch``: fetch, verify and move each benchmark's folder into place. Returns one
-    failure line per benchmark that failed (nothing of it is written); a bad mirror raises
-    MirrorError (exit 2) before any fetch."""
+    failure line per benchmark that failed (nothing of it is written); a bad mirror, or ``--from``/
+    ``--subset`` for a folder that is not loaded from a file, raises (exit 2) before any fetch, and
+    so does a ``--from`` file that is not the folder's data (InputError)."""
     check_mirror(mirror)
+    loaded = [b.name for b in benches if b.load is not None]
+    if (from_file is not None or subset) and (len(benches) != 1 or not loaded):
+        flag = "--from" if from_file is not None else "--subset"
+        raise UsageError(
+            f"{flag} is for a folder loaded from a file ({', '.join(n for n in folders() if folders()[n].load)}): name it as BENCH"
+        )
+    if mirror is not None and loaded and len(benches) == 1:
+        raise UsageError(f"--mirror does not apply to {loaded[0]}: pass a local copy with --from FILE")
     failures = []
     for bench in benches:
         target = default_dest(bench, dest, several=len(benches) > 1)
         try:
-            fetch_one(bench, target, mirror, out)
+            fetch_one(bench, target, mirror, out, from_file, subset)
         except DataError as exc:
             failures.append(f"{bench.name}: {exc}; nothing was written")
         except OSError as exc:  # the destination cannot be written (permissions, disk full)
@@ -173,7 +214,7 @@ def _parser(out: TextIO) -> CommandParser:
         dest="action",
         required=True,
         metavar="ACTION",
-        help="list, check or fetch",
+        help="list, check, fetch or images",
         parser_class=partial(CommandParser, out=out, hint=True),
     )  # type: ignore[call-overload]  # a class with its out bound
     choices = (*folders(), "all")
@@ -204,11 +245,85 @@ def _parser(out: TextIO) -> CommandParser:
         "--mirror", metavar="DIR_OR_URL", help="folder or URL prefix holding the upstream file names (default: upstream URLs)"
     )
     f.add_argument(
+        "--from",
+        dest="from_file",
+        metavar="FILE",
+        help="swebench-verified: a local copy of the dataset (Parquet or JSONL) instead of the Hugging Face Hub",
+    )
+    f.add_argument(
+        "--subset",
+        action="store_true",
+        help="swebench-verified: accept fewer records than the full split, recorded as a subset",
+    )
+    f.add_argument(
         "--dest",
         metavar="DIR",
         help="the folder (with BENCH) or the parent of the folders (without); default ~/.cache/recap-eval/data/<bench>",
     )
+    _add_images(sub)
     return p
+
+
+def _add_images(sub: argparse._SubParsersAction[CommandParser]) -> None:
+    """``recap data images``: the per-instance images a folder's instances run in."""
+    im = sub.add_parser(
+        "images",
+        help="list, pull or build the per-instance images (swebench-verified)",
+        description="List the SWE-bench harness's per-instance images the selected instances lack;\n"
+        "pull them from Docker Hub (--pull) or build them with the harness (--build).",
+        epilog="examples:\n  recap data images swebench-verified\n  recap data images swebench-verified django/django --pull "
+        "--workers 8\n  recap data images swebench-verified django__django-11099 --build --dry-run\n\n"
+        "exit status: 0 every selected instance has its image (at the end); 1 some are missing or failed; 2 bad usage",
+    )
+    im.add_argument("bench", choices=IMAGE_FOLDERS, metavar="BENCH", help=f"one of {', '.join(IMAGE_FOLDERS)}")
+    im.add_argument(
+        "selectors",
+        nargs="*",
+        default=[],
+        metavar="SELECTOR",
+        help="as `recap env list swe-verified` takes them: all, a repository (owner/name), an instance id (default all)",
+    )
+    how = im.add_mutually_exclusive_group()
+    how.add_argument("--pull", action="store_true", help="pull the missing published images from Docker Hub")
+    how.add_argument("--build", action="store_true", help="build the missing images with the SWE-bench harness")
+    im.add_argument(
+        "--workers",
+        type=_workers,
+        default=DEFAULT_WORKERS,
+        metavar="N",
+        help=f"pulls or builds at a time (default {DEFAULT_WORKERS})",
+    )
+    im.add_argument("--dry-run", dest="dry_run", action="store_true", help="print what --pull or --build would do")
+    im.add_argument("--data-dir", dest="data_dir", metavar="DIR", help="the data folder (default: the usual search)")
+
+
+def _workers(text: str) -> int:
+    """argparse type: a whole number >= 1."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid whole number: {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return n
+
+
+def cmd_images(args: argparse.Namespace, out: TextIO) -> list[str]:
+    """``recap data images``: list, pull or build the images the selected instances lack. Returns
+    the failure lines; a bad selector is a UsageError, no data folder or no daemon a DataError."""
+    if args.dry_run and not (args.pull or args.build):
+        raise UsageError("--dry-run needs --pull or --build")
+    try:
+        recs = selected_records(args.selectors, args.data_dir)
+    except UnknownInstanceError as exc:
+        raise UsageError(str(exc)) from None
+    except (DataNotFoundError, EnvError) as exc:
+        raise DataError(str(exc)) from None
+    action = "pull" if args.pull else "build" if args.build else None
+    try:
+        return get_images(args.bench, recs, action, args.workers, out, args.dry_run)
+    except (ImagesError, SandboxError) as exc:
+        raise DataError(str(exc)) from None
 
 
 def parser() -> argparse.ArgumentParser:
@@ -218,6 +333,8 @@ def parser() -> argparse.ArgumentParser:
 
 def _run(args: argparse.Namespace, stdout: TextIO) -> list[str]:
     """The parsed action's failure lines (empty: all verified)."""
+    if args.action == "images":
+        return cmd_images(args, stdout)
     by_name = folders()
     benches = [b for b in by_name.values() if b.in_all] if args.bench == "all" else [by_name[args.bench]]
     if getattr(args, "data_dir", None) is not None and args.bench == "all":
@@ -226,7 +343,7 @@ def _run(args: argparse.Namespace, stdout: TextIO) -> list[str]:
         return cmd_list(benches, args.data_dir, stdout)
     if args.action == "check":
         return cmd_check(benches, args.data_dir, stdout)
-    return cmd_fetch(benches, args.dest, args.mirror, stdout)
+    return cmd_fetch(benches, args.dest, args.mirror, stdout, args.from_file, args.subset)
 
 
 def data_main(argv: list[str], stdout: TextIO, stderr: TextIO) -> int:
@@ -236,7 +353,7 @@ def data_main(argv: list[str], stdout: TextIO, stderr: TextIO) -> int:
         failures = _run(args, stdout)
     except HelpExit as exc:
         return exc.status
-    except (UsageError, MirrorError) as exc:
+    except (UsageError, MirrorError, InputError) as exc:
         print(f"recap: error: data: {one_line(exc)}", file=stderr)
         return EXIT_USAGE
     except DataError as exc:

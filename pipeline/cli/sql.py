@@ -67,7 +67,7 @@ examples:
 {names}
 tables: episodes, llm_calls, messages, tree_nodes, steps, tool_calls, events, run, bad_parts,
   wiki_requests, wiki_pages (FEVER: each page body once per run; wiki_pages_raw: the rows as
-  written);
+  written), evaluations (SWE-bench: each judged submission);
 views: attempts, terminal, calls, nodes, tree_stats, step_patterns, tool_stats, episode_modes,
   failures
 

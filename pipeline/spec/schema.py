@@ -310,6 +310,11 @@ class RaySpec(StrictModel):
     object_store_mb: Annotated[int, NOT_BOOL, Bounded("ray.object_store_mb")] = 256
     #: CPU share of one episode worker actor (small: workers wait on the model)
     worker_cpus: Annotated[float, NOT_BOOL, Bounded("ray.worker_cpus")] = 0.05
+    #: coding sweeps: at most this many episode workers (each with its sandbox container, and its
+    #: evaluation's while it judges a submission) on one node. A Ray started here declares the
+    #: node resource ``recap_sandbox`` = N; the nodes of an existing cluster must declare it
+    #: themselves (``ray start --resources '{"recap_sandbox": N}'``, cluster.yaml)
+    sandboxes_per_node: Annotated[int, NOT_BOOL, Bounded("ray.sandboxes_per_node")] | None = None
 
 
 class SweepSpec(StrictModel):

@@ -8,11 +8,13 @@ the paper's layout (methods x splits) happens here; the long results themselves 
 Modules: :mod:`~reports.sections.common` (the query runner and pivot helpers),
 :mod:`~reports.sections.plans` (planned units from plan.json), and one per section:
 :mod:`~reports.sections.overview`, :mod:`~reports.sections.success`, :mod:`~reports.sections.costs`,
-:mod:`~reports.sections.context`, :mod:`~reports.sections.trees`, :mod:`~reports.sections.failures`.
+:mod:`~reports.sections.context`, :mod:`~reports.sections.trees`, :mod:`~reports.sections.failures`,
+:mod:`~reports.sections.coding` (only for a run with coding episodes).
 """
 
 from __future__ import annotations
 
+from reports.sections.coding import coding
 from reports.sections.common import PAPER_POINTER, Query, make_query
 from reports.sections.context import context
 from reports.sections.costs import costs
@@ -28,6 +30,7 @@ __all__ = [
     "PLAN_FILE",
     "SPEC_FILE",
     "Query",
+    "coding",
     "context",
     "costs",
     "failures",

@@ -5,6 +5,7 @@ call is in Parquet; a worker killed mid-episode leaves no sandbox behind."""
 from __future__ import annotations
 
 import http.client
+import json
 import os
 import re
 import signal
@@ -16,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from pipeline.driver import Driver, Hooks, prepare
+from pipeline.errors import PipelineError
 from pipeline.gateway_backend import make_backend
 from pipeline.spec import parse_spec
 from pipeline.sqlview import open_tables
@@ -174,3 +176,65 @@ def test_a_killed_workers_container_is_removed_and_its_unit_resolves(ray_address
     )
     removed = q(con, "select detail->>'removed', detail->>'worker' is not null from events where kind = 'leftovers_removed'")
     assert ("1", True) in removed
+
+
+@pytest.mark.docker
+def test_a_resume_removes_the_containers_a_killed_driver_left(ray_address, docker_ready, tmp_path):
+    """A driver killed with SIGKILL leaves its episodes' containers; the next session of the run
+    removes every container carrying the run's label before its workers start."""
+    out, spec, text = _sweep(tmp_path, "docker", ("offbyone",))
+    first = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert first.exit_code() == 0
+    run_id = RunStore(out).identity().run_id
+    # what a SIGKILLed driver's worker leaves: a running container with the run's labels
+    left = subprocess.run(
+        [
+            "docker",
+            "run",
+            "-d",
+            "--network",
+            "none",
+            f"--label={LABEL_RUN}={run_id}",
+            f"--label={LABEL_EPISODE}=gone-1",
+            docker_ready,
+            "sleep",
+            "600",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
+    assert _containers(**{LABEL_RUN: run_id}) == [left[:12]]
+    again = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert (again.finished_now, again.exit_code()) == (0, 0)
+    assert _containers(**{LABEL_RUN: run_id}) == []
+    con, _ = open_tables(RunStore(out))
+    assert q(con, "select detail->>'removed' from events where kind = 'leftovers_removed'") == [("1",)]
+
+
+def test_sandboxes_per_node_caps_the_workers_of_a_coding_sweep(ray_address, tmp_path):
+    """The test cluster's node declares one sandbox slot: a coding sweep asking for the bound runs
+    one episode worker however many it asks for, and resolves its tasks."""
+    out, spec, text = _sweep(tmp_path, "local", ("offbyone", "format"))
+    text = text + "ray: {sandboxes_per_node: 1}\n"
+    spec = parse_spec(text, "sweep.yaml")
+    summary = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert (summary.finished_now, summary.exit_code()) == (4, 0)
+    con, _ = open_tables(RunStore(out))
+    started = q(con, "select detail->>'workers' from events where kind = 'workers_started'")
+    assert len(started) == 1 and len(json.loads(started[0][0])) == 1  # workers: 2 asked, 1 slot
+
+
+def test_sandboxes_per_node_without_the_resource_is_refused(ray_address, tmp_path, monkeypatch):
+    import ray
+
+    out, spec, text = _sweep(tmp_path, "local", ("offbyone",))
+    text = text + "ray: {sandboxes_per_node: 2}\n"
+    spec = parse_spec(text, "sweep.yaml")
+    monkeypatch.setattr(ray, "cluster_resources", lambda: {"CPU": 2.0})
+    with pytest.raises(PipelineError) as err:
+        Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert str(err.value) == (
+        "ray.sandboxes_per_node is 2 but no node of the cluster declares the resource recap_sandbox "
+        """(start its nodes with --resources '{"recap_sandbox": 2}', or leave the setting out)"""
+    )

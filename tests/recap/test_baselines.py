@@ -166,7 +166,12 @@ def test_plan_demonstration_is_one_prompt_and_the_plan(agent):
     )
 
 
-@pytest.mark.parametrize("method", sorted(METHODS))
+#: the methods with a one-shot demonstration (mini_swe, a coding agent, has none: the paper's
+#: SWE-bench protocol)
+DEMONSTRATED = sorted(m for m in METHODS if m != "mini_swe")
+
+
+@pytest.mark.parametrize("method", DEMONSTRATED)
 def test_every_method_renders_and_pins_its_demonstration(method):
     agent = make_agent(method)
     env = BENCHMARK.make("blocksworld/3@1")
@@ -206,6 +211,7 @@ def test_registry_maps_every_method_to_its_agent_and_config():
         "cot": ("CoTAgent", "PlanConfig"),
         "standard": ("StandardAgent", "PlanConfig"),
         "adapt": ("ADaPTAgent", "ADaPTConfig"),
+        "mini_swe": ("MiniSweAgent", "MiniSweConfig"),
     }
     for method, (agent_cls, _) in METHODS.items():
         assert agent_cls.style == method
@@ -231,7 +237,9 @@ def test_make_agent_applies_profile_ablation_and_settings():
 
 
 def test_make_agent_rejects_unknown_names_and_bad_values():
-    with pytest.raises(ConfigError, match=r"^unknown method 'reflexion'; known: recap, react, act, cot, standard, adapt$"):
+    with pytest.raises(
+        ConfigError, match=r"^unknown method 'reflexion'; known: recap, react, act, cot, standard, adapt, mini_swe$"
+    ):
         make_agent("reflexion")
     with pytest.raises(ConfigError, match=r"^unknown setting\(s\) max_depth for ReActConfig; known: "):
         make_agent("react", max_depth=3)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 
+import workers.agents  # noqa: F401  (registers the workers' method, mini_swe: the registry's full list, in every process)
 from recap.agent import Agent
 from recap.baselines import ADaPTAgent, ReActAgent, ReActConfig
 from recap.config import AgentConfig, ConfigError, ReCAPConfig
@@ -18,7 +19,8 @@ PLAN = ["pick up B", "stack B on A"]
 
 
 def test_the_registry_names_the_built_in_methods_in_order():
-    assert tuple(METHODS) == ("recap", "react", "act", "cot", "standard", "adapt")
+    # the six of recap/method_registry.py, then mini_swe (registered by workers/agents)
+    assert tuple(METHODS) == ("recap", "react", "act", "cot", "standard", "adapt", "mini_swe")
     for name, (agent_cls, _config_cls) in METHODS.items():
         assert agent_cls.style == name
 
@@ -31,6 +33,7 @@ def test_each_method_declares_its_reply_fields():
         "cot": ("think", "actions"),
         "standard": ("actions",),
         "adapt": ("think", "action"),
+        "mini_swe": ("think", "action"),
     }
 
 
@@ -45,6 +48,7 @@ def test_the_estimate_asks_the_agent_class():
         "cot": (True, (1.0, 2.5)),
         "standard": (True, (1.0, 2.5)),
         "adapt": (False, (1.0, 3.0)),
+        "mini_swe": (False, (1.0, 1.0)),
     }
     assert call_shape("no_such_method") == (False, (1.0, 2.5))
 

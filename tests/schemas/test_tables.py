@@ -24,6 +24,7 @@ def test_each_table_has_run_id_then_the_record_fields_and_a_version():
         "wiki_pages",
         "wiki_requests",
         "tool_calls",
+        "evaluations",
     }
     for rt in ALL_RECORD_TYPES:
         schema = arrow_schema(rt.table)

@@ -13,6 +13,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 from workers.envs.data_paths import DataLocation, Rung
 
@@ -79,6 +80,14 @@ class DataFolder:
     #: part of ``recap data ... all``; False for a folder asked for by name only (the authors'
     #: released prompts: only ``prompts: release`` runs need it, so its absence fails nothing else)
     in_all: bool = True
+    #: the folder's own fetch, for data whose bytes the repository cannot pin (SWE-bench Verified:
+    #: a dataset read through a library, or a local copy): ``load(from_file or None, subset, folder,
+    #: out)`` writes the files into the empty ``folder`` and returns their paths; ValueError for bad
+    #: input (exit 2), any other exception when nothing can be read (exit 1). Such a folder carries
+    #: its own ``MANIFEST.sha256``, written by the fetch, which ``recap data check`` verifies
+    load: Callable[[str | None, bool, Path, TextIO], list[str]] | None = None
+    #: extra lines ``recap data check`` prints for a verified folder (SWE-bench Verified: its images)
+    check_notes: Callable[[Path], list[str]] | None = None
 
     def group_of(self, rel: str) -> Group:
         for group in self.groups:

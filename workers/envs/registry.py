@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -75,6 +75,9 @@ class Benchmark(BenchmarkProtocol, ABC):
     """
 
     name: str = ""
+    #: its environments run in sandboxes (containers): a sweep's ``ray.sandboxes_per_node``
+    #: bounds how many of its episode workers share a node
+    sandboxed: bool = False
 
     @abstractmethod
     def list_instances(self, selector: str | None = None) -> list[str]:
@@ -101,6 +104,13 @@ class Benchmark(BenchmarkProtocol, ABC):
         """Why ``method`` (its name: ``adapt``...) cannot run on this benchmark, in one line, or
         None; preflight refuses a sweep that pairs them before anything runs (FEVER: the paper
         has no ADaPT result). Default: every method runs."""
+        return None
+
+    def preflight(self, instance_ids: Sequence[str], options: Mapping[str, Any]) -> str | None:
+        """Why a sweep's ``instance_ids`` (all of one ``environments[]`` entry, with its ``make()``
+        options) cannot run here, in one line, or None; checked before anything runs, in one
+        go for all of them (SWE-bench Verified: one ``docker images`` listing for every
+        instance's image). Default: nothing to check beyond opening one environment."""
         return None
 
     def data_folders(self) -> Mapping[str, DataFolder]:
@@ -325,5 +335,6 @@ register_benchmark("robotouille", "workers.envs.robotouille")
 register_benchmark("alfworld", "workers.envs.alfworld")
 register_benchmark("fever", "workers.envs.fever")
 register_benchmark("swe", "workers.envs.swe")
+register_benchmark("swe-verified", "workers.envs.swe_verified")
 #: the authors' released prompt and demonstration files (``prompts: release``): read by no benchmark
 register_data_folder("recap-release", "workers.release.folder:FOLDER")

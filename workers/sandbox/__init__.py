@@ -40,7 +40,10 @@ def open_sandbox(kind: SandboxKind | str, spec: SandboxSpec) -> Sandbox:
     """Start a sandbox of ``kind`` for ``spec``; SandboxError (one line) when it cannot."""
     if kind not in SANDBOX_KINDS:
         raise SandboxError(f"unknown sandbox kind {kind!r} (known: {', '.join(SANDBOX_KINDS)})")
-    check_repo(spec.repo_path, spec.base_commit)
+    if spec.repo_path is None and kind != "docker":
+        raise SandboxError("this repository is inside a Docker image (repo_path None): only a docker sandbox can open it")
+    if spec.repo_path is not None:
+        check_repo(spec.repo_path, spec.base_commit)
     if kind == "docker":
         from workers.sandbox.docker_sandbox import DockerSandbox
 

@@ -25,6 +25,10 @@ from typing import Literal
 SandboxKind = Literal["docker", "local"]
 SANDBOX_KINDS: tuple[SandboxKind, ...] = ("docker", "local")
 
+#: the Ray node resource that bounds sandboxes per node (``ray.sandboxes_per_node``): a node
+#: declaring N runs at most N episode workers of a coding sweep
+NODE_RESOURCE = "recap_sandbox"
+
 #: labels on every container/process group a sandbox starts (the cleanup keys)
 LABEL_RUN = "recap-eval.run"
 LABEL_EPISODE = "recap-eval.episode"
@@ -76,9 +80,11 @@ class CommandResult:
 class SandboxSpec:
     """What to open: the repository (a local git repository checked out at ``base_commit``),
     the image (docker), the limits, extra environment variables (never the host's own), and the
-    labels to put on everything started."""
+    labels to put on everything started. ``repo_path`` None: the image itself holds the
+    repository at ``workdir``, at ``base_commit`` (the SWE-bench harness's per-instance images,
+    ``/testbed``); nothing is copied in, and only a docker sandbox can open it."""
 
-    repo_path: str
+    repo_path: str | None
     base_commit: str
     image: str = "recap-eval/sandbox:py311"
     limits: SandboxLimits = field(default_factory=SandboxLimits)

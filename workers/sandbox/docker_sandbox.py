@@ -11,7 +11,9 @@ swap) and pids limits; all capabilities dropped but the few a root shell needs f
 processes, and ``no-new-privileges``; the environment is only ``PATH``/``HOME``/``LANG`` and
 ``spec.env`` (the Docker daemon never passes the host's variables, so no API key is inside). The
 repository is cloned on the host at ``base_commit`` (:mod:`workers.sandbox.repo_copy`), tarred
-and copied in with ``put_archive`` at ``spec.workdir``, ``.git`` included, and git gets a user.
+and copied in with ``put_archive`` at ``spec.workdir``, ``.git`` included, and git gets a user. An image that holds
+the repository itself (``spec.repo_path`` None: the SWE-bench harness's images, ``/testbed``) gets
+nothing copied: git gets its user there, and the repository's HEAD must be ``spec.base_commit``.
 
 Disk: overlay2 on this host has no size quota, and a tmpfs work folder cannot receive
 ``put_archive`` (Docker copies under the mount, moby#22020) and would hold the repository in
@@ -107,10 +109,12 @@ class DockerSandbox(Sandbox):
         lim = spec.limits
         env = {**BASE_ENV, **spec.env}
         with tempfile.TemporaryDirectory(prefix="recap-sandbox-clone-") as tmp:
-            clone = Path(tmp) / "repo"
-            self.base_commit = clone_at(spec.repo_path, spec.base_commit, clone)
-            tar_path = Path(tmp) / "repo.tar"
-            _tar_tree(clone, spec.workdir.strip("/"), tar_path)
+            tar_path: Path | None = None
+            if spec.repo_path is not None:  # else the image holds the repository at workdir
+                clone = Path(tmp) / "repo"
+                self.base_commit = clone_at(spec.repo_path, spec.base_commit, clone)
+                tar_path = Path(tmp) / "repo.tar"
+                _tar_tree(clone, spec.workdir.strip("/"), tar_path)
             try:
                 self._container = self._client.containers.run(
                     spec.image,
@@ -129,9 +133,10 @@ class DockerSandbox(Sandbox):
                     working_dir="/",
                     hostname="sandbox",
                 )
-                with open(tar_path, "rb") as f:
-                    if not self._container.put_archive("/", f):
-                        raise SandboxError("copying the repository into the container failed")
+                if tar_path is not None:
+                    with open(tar_path, "rb") as f:
+                        if not self._container.put_archive("/", f):
+                            raise SandboxError("copying the repository into the container failed")
             except docker.errors.DockerException as e:
                 self.close()
                 raise SandboxError(f"starting the sandbox container failed: {str(e).splitlines()[0][:200]}") from None
@@ -148,6 +153,18 @@ class DockerSandbox(Sandbox):
         if res.exit_code != 0:
             self.close()
             raise SandboxError(f"configuring git in the sandbox failed: {res.output.strip()[:200]}")
+        if spec.repo_path is None:
+            self.base_commit = self._image_commit(spec)
+
+    def _image_commit(self, spec: SandboxSpec) -> str:
+        """The commit the image's repository is at, checked to be ``spec.base_commit``."""
+        res = self.run("git rev-parse --verify HEAD")
+        head = res.output.strip().splitlines()[-1:] if res.exit_code == 0 else []
+        if not head or not head[0].startswith(spec.base_commit):
+            self.close()
+            where = f"is at {head[0]}" if head else f"is not a git repository ({res.output.strip()[:120]})"
+            raise SandboxError(f"{spec.workdir} in the image {spec.image} {where}, not at base_commit {spec.base_commit}")
+        return head[0]
 
     # -- commands -------------------------------------------------------------------------
 

@@ -103,6 +103,8 @@ class LocalSandbox(Sandbox):
         self.id = f"local-{secrets.token_hex(6)}"
         self._closed = False
         self._lock = threading.Lock()
+        if spec.repo_path is None:  # the repository is inside a Docker image: nothing to clone here
+            raise SandboxError("this repository is inside a Docker image (repo_path None): only a docker sandbox can open it")
         self.root = Path(tempfile.mkdtemp(prefix="recap-sandbox-local-"))
         self.repo = self.root / spec.workdir.strip("/")
         self.workdir = str(self.repo)

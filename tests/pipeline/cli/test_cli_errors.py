@@ -39,7 +39,7 @@ CASES = [
     (
         "unknown environment",
         ("benchmark: blocksworld", "benchmark: kitchen"),
-        "recap: error: sweep.yaml: environments[0]: unknown benchmark 'kitchen'; known: blocksworld, robotouille, alfworld, fever, swe",
+        "recap: error: sweep.yaml: environments[0]: unknown benchmark 'kitchen'; known: blocksworld, robotouille, alfworld, fever, swe, swe-verified",
     ),
     (
         "unknown task",
@@ -54,7 +54,7 @@ CASES = [
     (
         "unknown method",
         ("- method: recap", "- method: recapp"),
-        "recap: error: sweep.yaml: methods[0] (recapp): unknown method 'recapp'; known: act, adapt, cot, react, recap, standard",
+        "recap: error: sweep.yaml: methods[0] (recapp): unknown method 'recapp'; known: act, adapt, cot, mini_swe, react, recap, standard",
     ),
     (
         "unknown method setting",

@@ -19,7 +19,7 @@ from pipeline.cli import COMMANDS, command_parsers, main
 
 GOLDEN = Path(__file__).resolve().with_name("cli_golden")
 #: the actions of ``recap data`` (its parser is built apart: command_parsers leaves it out)
-DATA_PATHS = [("data",), ("data", "list"), ("data", "check"), ("data", "fetch")]
+DATA_PATHS = [("data",), ("data", "list"), ("data", "check"), ("data", "fetch"), ("data", "images")]
 
 
 def _cases() -> dict[str, list[str]]:

@@ -118,7 +118,7 @@ def test_spec_errors_are_one_line(text, message):
     [
         (
             ("benchmark: blocksworld", "benchmark: nowhere"),
-            "environments[0]: unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld, fever, swe",
+            "environments[0]: unknown benchmark 'nowhere'; known: blocksworld, robotouille, alfworld, fever, swe, swe-verified",
         ),
         (
             ('tasks: ["3"]', 'tasks: ["9"]'),

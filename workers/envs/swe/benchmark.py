@@ -12,6 +12,9 @@ Options of :meth:`SweBenchmark.make` (and of a sweep's ``environments[].options`
   (:class:`~workers.sandbox.base.SandboxLimits`); ``max_commands`` is the step cap;
 - ``total_output_bytes``: all observations' bytes together; ``eval_timeout_s``: the evaluation's
   test run (default: the record's, else 30 minutes);
+- ``grading``: ``both`` (default: our evaluation and the official SWE-bench harness's grading of
+  the same test log, the official verdict deciding success; ours alone without the ``swebench``
+  package), ``official`` (refused without the package) or ``ours`` (:mod:`.grading`);
 - ``step_multiplier`` and ``seed`` are accepted and have no effect (a fixed cap; no randomness);
 - ``open_sandbox``: a callable ``SandboxSpec -> Sandbox`` a caller passes in (tests), used instead
   of ``sandbox``;
@@ -34,6 +37,7 @@ from workers.sandbox import LABEL_EPISODE, LABEL_RUN, LABEL_WORKER, check_ready,
 from workers.sandbox.base import SANDBOX_KINDS, SandboxLimits, SandboxSpec
 
 from .env import DEFAULT_TOTAL_OUTPUT_BYTES, OpenSandbox, SweEnvironment
+from .grading import DEFAULT_GRADING, check_grading
 from .instances import BENCHMARK_NAME, SweInstance, load_instances
 
 INSTANCES_FILE = "instances_file"
@@ -53,6 +57,7 @@ ACCEPTED = (
     *_LIMIT_OPTIONS,
     "total_output_bytes",
     "eval_timeout_s",
+    "grading",
     "step_multiplier",
     "seed",
     "sandbox_labels",
@@ -101,6 +106,7 @@ class SweBenchmark(Benchmark):
     """SWE-bench's registry entry: records from ``options.instances_file``, episodes in a sandbox."""
 
     name = BENCHMARK_NAME
+    sandboxed = True
 
     def owner_options(self, run_id: str, worker_id: str, episode_id: str) -> dict[str, Any]:
         """The sandbox's labels: the run, the worker and the episode that own it."""
@@ -176,6 +182,7 @@ class SweBenchmark(Benchmark):
         eval_timeout = options.get("eval_timeout_s")
         if eval_timeout is not None:
             eval_timeout = _positive("eval_timeout_s", eval_timeout, float)
+        grading = check_grading(options.get("grading", DEFAULT_GRADING))
         opener: Callable[..., Any] | None = options.get("open_sandbox")
         if opener is not None and not callable(opener):
             raise ValueError(f"open_sandbox must be a callable SandboxSpec -> Sandbox, got {opener!r}")
@@ -199,6 +206,7 @@ class SweBenchmark(Benchmark):
             total_output_bytes=total,
             eval_timeout_s=eval_timeout,
             labels=labels,
+            grading=grading,
         )
 
 

@@ -41,8 +41,9 @@ from schemas.kinds import EndReason
 from workers.sandbox.base import Sandbox, SandboxError, SandboxLimits, SandboxSpec
 
 from . import tools as T
-from .evaluate import Evaluation, evaluate
+from .evaluate import Evaluation, evaluate, evaluation_record
 from .expert import parse_patch, replacements
+from .grading import DEFAULT_GRADING, Grading
 from .instances import SweInstance
 from .rules import goal_text, review_text, rules_text
 
@@ -74,6 +75,7 @@ class SweEnvironment(Environment):
         labels: Mapping[str, str] | None = None,
         total_output_bytes: int = DEFAULT_TOTAL_OUTPUT_BYTES,
         eval_timeout_s: float | None = None,
+        grading: Grading = DEFAULT_GRADING,
     ) -> None:
         self.instance = instance
         self.instance_id = instance.id
@@ -90,9 +92,12 @@ class SweEnvironment(Environment):
             limits=self.limits,
             labels=dict(labels or {}),
         )
+        self.grading = grading
         self._open = open_sandbox
         self._sandbox: Sandbox | None = None
         self.evaluation: Evaluation | None = None
+        #: the judged submissions not yet handed over (:meth:`take_records`): evaluation and diff
+        self._judged: list[tuple[Evaluation, str]] = []
         self._clear()
 
     def _clear(self) -> None:
@@ -212,10 +217,10 @@ class SweEnvironment(Environment):
         reason, note = limit
         ev = self._judge()
         info = {**out.info(), **self._verdict_info(ev), "limit": note, "detail": note}
-        if not ev.resolved:
+        if not ev.success:
             info["end_reason"] = reason
         obs = f"{out.observation}\n[{note}: the episode ends and your current changes are submitted]"
-        return Step(obs, None, True, ev.resolved, info)
+        return Step(obs, None, True, ev.success, info)
 
     def _limit_reached(self) -> tuple[EndReason, str] | None:
         if self._steps_taken >= self.limits.max_commands:
@@ -250,20 +255,38 @@ class SweEnvironment(Environment):
         base = spent if spent is not None else T.ToolOutcome(observation="", exit_code=0)
         base.duration_s = time.monotonic() - started
         info = {**base.info(), **self._verdict_info(ev)}
-        if not ev.resolved:
+        if not ev.success:
             info["end_reason"] = "agent_done"
-        return Step(submitted_text(ev), None, True, ev.resolved, info)
+        return Step(submitted_text(ev), None, True, ev.success, info)
 
     def _judge(self) -> Evaluation:
         """Take the diff, end the episode, judge the diff on a clean copy."""
         diff = self.current_diff()
         self._done = True
-        self.evaluation = evaluate(self.instance, diff, self._open_clean)
+        self.evaluation = evaluate(self.instance, diff, self._open_clean, grading=self.grading)
         self._patch = diff
+        self._judged.append((self.evaluation, diff))
         return self.evaluation
 
     def _verdict_info(self, ev: Evaluation) -> dict[str, Any]:
-        return {"patch": self._patch, "resolved": ev.resolved, "eval_reason": ev.reason, "tests": dict(ev.tests)}
+        """The verdict in the step's info: the deciding one (``resolved``, ``eval_reason``) and,
+        when the official grading ran, its status (``official_status``)."""
+        info: dict[str, Any] = {
+            "patch": self._patch,
+            "resolved": ev.success,
+            "eval_reason": ev.verdict_reason,
+            "tests": dict(ev.tests),
+            "graded_by": ev.graded_by,
+        }
+        if ev.official is not None:
+            info["official_status"] = ev.official.status
+        return info
+
+    def take_records(self, episode_id: str, run_id: str) -> list[Any]:
+        """The ``evaluations`` row of each submission judged since the last call
+        (:class:`~schemas.records.EvaluationRecord`), each handed over once."""
+        judged, self._judged = self._judged, []
+        return [evaluation_record(episode_id, self.instance, ev, patch) for ev, patch in judged]
 
     # -- prompt material -------------------------------------------------------------------------
     def rules(self) -> str:
@@ -363,14 +386,14 @@ def _quote(text: str) -> str:
 
 def submitted_text(ev: Evaluation) -> str:
     """The final observation: the submission was taken, and (for the record) how it was judged."""
-    failing = [t for t, s in ev.tests.items() if s not in ("PASSED", "XFAIL")]
+    failing = ev.failing_tests()
     verdict = {
         "resolved": "it resolves the issue (every listed test passes)",
         "no_patch": "it changes nothing",
         "patch_failed": "it does not apply to a clean copy of the repository",
         "tests_failed": f"tests still fail: {', '.join(failing)}",
         "timeout": "the tests ran past the time limit",
-    }[ev.reason]
+    }[ev.verdict_reason]
     return f"Your changes were submitted; {verdict}."
 
 

@@ -6,29 +6,46 @@ swebench/harness/constants.py ``GIT_APPLY_CMDS``); put the test files the test p
 the base commit and apply the test patch (the model cannot change the tests it is judged by); run
 the instance's ``test_cmd -rA`` on the FAIL_TO_PASS and PASS_TO_PASS node ids, its output written to
 a file in ``.git`` (a command's output cap would cut pytest's summary, which comes last); read each
-test's status from pytest's ``-rA`` short summary. Resolved iff every listed test passed (``PASSED``
-or ``XFAIL``, as the harness counts them). A test run past ``eval_timeout_s`` is not resolved.
+test's status from pytest's ``-rA`` short summary. Resolved iff every FAIL_TO_PASS test passed
+(``PASSED`` or ``XFAIL``) and every PASS_TO_PASS test passed or was skipped, as the harness counts
+them (swebench/harness/grading.py ``test_passed``, ``test_maintained``). A test run past
+``eval_timeout_s`` is not resolved.
+
+The same test log is also graded by the official harness's own functions (:mod:`.grading`,
+``grading`` ``both``, the default, or ``official``): :attr:`Evaluation.success` is the official
+verdict when that grading ran (published SWE-bench numbers are the harness's), else ours; the
+two are kept side by side (``ours_resolved``, ``official``) so a disagreement shows in the data.
 """
 
 from __future__ import annotations
 
+import json
+import logging
 import re
 import shlex
+import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
+from schemas.records import EVALUATION_LOG_CAP, EvaluationRecord
 from workers.sandbox.base import Sandbox
 
+from .grading import DEFAULT_GRADING, Grading, OfficialGrade, official_grade, official_problem
 from .instances import SweInstance
+
+log = logging.getLogger(__name__)
 
 EvalReason = Literal["resolved", "no_patch", "patch_failed", "tests_failed", "timeout"]
 #: statuses the harness counts as a pass (swebench/harness/grading.py test_passed)
 PASSING = ("PASSED", "XFAIL")
+#: a PASS_TO_PASS test is kept when it passes or is skipped (grading.py ``test_maintained``)
+MAINTAINED = (*PASSING, "SKIPPED")
 #: a listed test that the summary does not name (not collected, a collection error)
 MISSING = "MISSING"
-#: bytes of evaluation log kept on the Evaluation (the tail: pytest's summary is last)
-LOG_CAP = 20_000
+#: characters of evaluation log kept on the Evaluation (the tail: pytest's summary is last); the
+#: ``evaluations`` row keeps as much (schemas.records.EVALUATION_LOG_CAP)
+LOG_CAP = EVALUATION_LOG_CAP
 #: files the evaluation writes inside the sandbox's ``.git`` (never part of a diff)
 MODEL_PATCH_FILE = ".git/recap-eval-model.patch"
 TEST_PATCH_FILE = ".git/recap-eval-test.patch"
@@ -39,12 +56,52 @@ _DIFF_FILE = re.compile(r"^diff --git a/(.+?) b/(.+)$")
 
 @dataclass(frozen=True)
 class Evaluation:
-    """The verdict on one patch: resolved, why (``reason``), each listed test's status and the log."""
+    """Our verdict on one patch: resolved, why (``reason``), each listed test's status and the log
+    (its tail, :data:`LOG_CAP`); beside it the official grade of the same test log (``official``,
+    None where it did not run) and what the record keeps (``test_output``: the test run's whole
+    output; ``duration_s``)."""
 
     resolved: bool
     reason: EvalReason
     tests: Mapping[str, str] = field(default_factory=dict)
     log: str = ""
+    official: OfficialGrade | None = None
+    grading: Grading = DEFAULT_GRADING
+    test_output: str = ""
+    exit_code: int | None = None
+    #: the whole log's size in UTF-8 bytes (``log`` holds its tail)
+    log_bytes: int = 0
+    #: the instance's PASS_TO_PASS ids (a skipped one is kept, not failed)
+    pass_to_pass: tuple[str, ...] = ()
+    duration_s: float = 0.0
+
+    @property
+    def graded_by(self) -> Literal["ours", "official"]:
+        """Whose verdict :attr:`success` is: the official one when it ran and ``grading`` is not ``ours``."""
+        return "official" if self.official is not None and self.grading != "ours" else "ours"
+
+    @property
+    def success(self) -> bool:
+        """The verdict the episode's success is: the official grade's when it ran, else ours."""
+        return self.official.resolved if self.graded_by == "official" and self.official is not None else self.resolved
+
+    def verdict_tests(self) -> Mapping[str, str]:
+        """Each listed test's status as the deciding grader (:attr:`graded_by`) read the log."""
+        return self.official.tests if self.graded_by == "official" and self.official is not None else self.tests
+
+    def failing_tests(self) -> list[str]:
+        """The listed tests the deciding grader counts as failed, FAIL_TO_PASS first."""
+        if self.graded_by == "official" and self.official is not None:
+            return [*self.official.fail_to_pass_failure, *self.official.pass_to_pass_failure]
+        return [t for t, s in self.tests.items() if s not in (MAINTAINED if t in self.pass_to_pass else PASSING)]
+
+    @property
+    def verdict_reason(self) -> EvalReason:
+        """:attr:`reason`, made to agree with :attr:`success` (the official grade decides ``resolved``
+        or ``tests_failed`` when the tests ran)."""
+        if self.reason in ("resolved", "tests_failed"):
+            return "resolved" if self.success else "tests_failed"
+        return self.reason
 
 
 def parse_summary(output: str, wanted: tuple[str, ...] = ()) -> dict[str, str]:
@@ -75,7 +132,11 @@ def patch_files(patch: str) -> list[str]:
 
 
 def _tail(text: str) -> str:
-    return text if len(text) <= LOG_CAP else "[log cut: the last part follows]\n" + text[-LOG_CAP:]
+    """The log's last :data:`LOG_CAP` bytes (whole UTF-8 characters), marked as cut when it was longer."""
+    raw = text.encode("utf-8")
+    if len(raw) <= LOG_CAP:
+        return text
+    return "[log cut: the last part follows]\n" + raw[-LOG_CAP:].decode("utf-8", errors="ignore")
 
 
 def _apply(sandbox: Sandbox, patch: str, file: str, log: list[str], what: str) -> bool:
@@ -96,22 +157,106 @@ def eval_command(instance: SweInstance) -> str:
     return f"{instance.test_cmd} -rA {ids}"
 
 
-def evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Callable[[], Sandbox]) -> Evaluation:
+def ours_resolved(instance: SweInstance, tests: Mapping[str, str]) -> bool:
+    """Our criterion: every FAIL_TO_PASS test passed, every PASS_TO_PASS test passed or was skipped."""
+    return all(tests.get(t) in PASSING for t in instance.fail_to_pass) and all(
+        tests.get(t) in MAINTAINED for t in instance.pass_to_pass
+    )
+
+
+def evaluate(
+    instance: SweInstance,
+    model_patch: str,
+    open_clean_sandbox: Callable[[], Sandbox],
+    *,
+    grading: Grading = DEFAULT_GRADING,
+) -> Evaluation:
     """The verdict on ``model_patch`` for ``instance`` (see the module docstring); the sandbox
-    ``open_clean_sandbox`` gives is closed before this returns. A sandbox failure raises SandboxError."""
-    if not model_patch.strip():
-        return Evaluation(False, "no_patch", {t: MISSING for t in (*instance.fail_to_pass, *instance.pass_to_pass)}, "")
-    log: list[str] = []
+    ``open_clean_sandbox`` gives is closed before this returns. A sandbox failure raises SandboxError.
+    ``grading``: ``ours``, ``official`` or ``both`` (:mod:`.grading`); ``both`` without the
+    ``swebench`` package grades with ours alone (a warning says so)."""
+    started = time.monotonic()
+    ev = _evaluate(instance, model_patch, open_clean_sandbox)
+    official: OfficialGrade | None = None
+    if grading != "ours":
+        problem = official_problem()
+        if problem is None:
+            ran = ev.reason in ("resolved", "tests_failed", "timeout")  # the patches applied, the tests ran
+            official = official_grade(
+                instance, ev.test_output, patch_applied=ran, timed_out=ev.reason == "timeout", exit_code=ev.exit_code
+            )
+        elif grading == "official":
+            raise RuntimeError(problem)
+        else:
+            _warn_once(problem)
+    return replace(
+        ev,
+        official=official,
+        grading=grading,
+        pass_to_pass=instance.pass_to_pass,
+        duration_s=time.monotonic() - started,
+    )
+
+
+def evaluation_record(episode_id: str, instance: SweInstance, ev: Evaluation, patch: str) -> EvaluationRecord:
+    """The ``evaluations`` row of one judged submission (:class:`~schemas.records.EvaluationRecord`):
+    the deciding verdict, both graders' verdicts, the deciding grader's per-test statuses and
+    counts, the diff and the log (its tail past :data:`~schemas.records.EVALUATION_LOG_CAP` bytes)."""
+    tests = ev.verdict_tests()
+    o = ev.official if ev.graded_by == "official" else None
+    if o is not None:
+        f2p_passed, p2p_passed = len(o.fail_to_pass_success), len(o.pass_to_pass_success)
+    else:
+        f2p_passed = sum(tests.get(t) in PASSING for t in instance.fail_to_pass)
+        p2p_passed = sum(tests.get(t) in MAINTAINED for t in instance.pass_to_pass)
+    return EvaluationRecord(
+        episode_id=episode_id,
+        instance_id=instance.id,
+        resolved=ev.success,
+        reason=ev.verdict_reason,
+        graded_by=ev.graded_by,
+        grading=ev.grading,
+        ours_resolved=ev.resolved,
+        tests=json.dumps(dict(tests), sort_keys=True),
+        fail_to_pass_passed=int(f2p_passed),
+        fail_to_pass_total=len(instance.fail_to_pass),
+        pass_to_pass_passed=int(p2p_passed),
+        pass_to_pass_total=len(instance.pass_to_pass),
+        patch=patch,
+        patch_bytes=len(patch.encode("utf-8")),
+        log=ev.log,
+        log_bytes=ev.log_bytes,
+        duration_s=ev.duration_s,
+        official_resolved=ev.official.resolved if ev.official is not None else None,
+        official_status=ev.official.status if ev.official is not None else None,
+        official_parser=ev.official.parser if ev.official is not None else None,
+    )
+
+
+_warned: set[str] = set()
+
+
+def _warn_once(problem: str) -> None:
+    if problem not in _warned:
+        _warned.add(problem)
+        log.warning("grading 'both': only our evaluation runs: %s", problem)
+
+
+def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Callable[[], Sandbox]) -> Evaluation:
+    """Our evaluation (the module docstring), the test run's output kept whole in ``test_output``."""
     wanted = (*instance.fail_to_pass, *instance.pass_to_pass)
+    if not model_patch.strip():
+        return Evaluation(False, "no_patch", {t: MISSING for t in wanted}, "")
+    log: list[str] = []
     with open_clean_sandbox() as sandbox:
         if not _apply(sandbox, model_patch, MODEL_PATCH_FILE, log, "the model's patch"):
-            return Evaluation(False, "patch_failed", {t: MISSING for t in wanted}, _tail("\n".join(log)))
+            return _logged(Evaluation(False, "patch_failed", {t: MISSING for t in wanted}), log)
         files = [shlex.quote(f) for f in patch_files(instance.test_patch)]
         if files:  # the test files back at the base commit (a file the base lacks is removed)
             for f in files:
                 sandbox.run(f"git checkout -q {shlex.quote(instance.base_commit)} -- {f} 2>/dev/null || rm -f {f}")
         if instance.test_patch.strip() and not _apply(sandbox, instance.test_patch, TEST_PATCH_FILE, log, "the test patch"):
-            return Evaluation(False, "patch_failed", {t: MISSING for t in wanted}, _tail("\n".join(log)))
+            return _logged(Evaluation(False, "patch_failed", {t: MISSING for t in wanted}), log)
         cmd = eval_command(instance)
         res = sandbox.run(f"{cmd} > {TEST_LOG_FILE} 2>&1", timeout_s=instance.eval_timeout_s)
         try:
@@ -122,6 +267,13 @@ def evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Callab
     found = parse_summary(output, wanted)
     tests = {t: found.get(t, MISSING) for t in wanted}
     if res.timed_out:
-        return Evaluation(False, "timeout", tests, _tail("\n".join(log)))
-    resolved = all(s in PASSING for s in tests.values())
-    return Evaluation(resolved, "resolved" if resolved else "tests_failed", tests, _tail("\n".join(log)))
+        return _logged(Evaluation(False, "timeout", tests, test_output=output, exit_code=res.exit_code), log)
+    resolved = ours_resolved(instance, tests)
+    reason: EvalReason = "resolved" if resolved else "tests_failed"
+    return _logged(Evaluation(resolved, reason, tests, test_output=output, exit_code=res.exit_code), log)
+
+
+def _logged(ev: Evaluation, log: list[str]) -> Evaluation:
+    """``ev`` with the log's tail (:func:`_tail`) and the whole log's size."""
+    text = "\n".join(log)
+    return replace(ev, log=_tail(text), log_bytes=len(text.encode("utf-8")))

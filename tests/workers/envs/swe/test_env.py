@@ -210,7 +210,7 @@ def test_benchmark_lists_by_file_repository_and_id(fixtures: Fixtures) -> None:
         ({"image": ""}, "image must be a docker image name, got ''"),
         (
             {"colour": 1},
-            "unknown swe option(s) colour; accepted: instances_file, sandbox, image, network, command_timeout_s, output_bytes, max_commands, wall_time_s, total_output_bytes, eval_timeout_s, step_multiplier, seed",
+            "unknown swe option(s) colour; accepted: instances_file, sandbox, image, network, command_timeout_s, output_bytes, max_commands, wall_time_s, total_output_bytes, eval_timeout_s, grading, step_multiplier, seed",
         ),
     ],
 )

@@ -1,0 +1,193 @@
+"""SWE-bench Verified for the registry: the 500 instances of the stored dataset, each in its harness image.
+
+Instance ids are ``swe-verified/<instance_id>`` (``swe-verified/django__django-11099``), listed in
+the dataset's order. Selectors: ``all``, a repository (``django/django``), an instance id (with or
+without ``swe-verified/``). The records come from the data folder ``swebench-verified``
+(``recap data fetch swebench-verified``; found by the shared rule, or ``options.data_dir``).
+
+Options of :meth:`VerifiedBenchmark.make` (and a sweep's ``environments[].options``): ``data_dir``;
+``sandbox`` (``docker`` only: the instance's image is a Docker image); ``network``;
+``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``, ``disk_bytes`` (the
+repository folder's cap, default :data:`DEFAULT_DISK_BYTES`: the harness's repositories are larger
+than the example tasks), ``total_output_bytes``, ``eval_timeout_s``; ``step_multiplier``/``seed``
+(no effect); ``open_sandbox``/``sandbox_labels`` (as for ``swe``).
+
+The methods, profiles and leftover removal are the ``swe`` benchmark's (this class extends it).
+Preflight (:meth:`VerifiedBenchmark.preflight`) refuses a sweep whose instances lack their image
+with one ``docker images`` listing, however many instances.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+from recap.env import Environment, UnknownInstanceError
+from workers.envs.data_sources import DataFolder
+from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
+from workers.envs.swe.env import DEFAULT_TOTAL_OUTPUT_BYTES
+from workers.envs.swe.instances import SweInstance
+from workers.sandbox.base import SandboxError, SandboxLimits
+
+from . import harness
+from .data_folders import FOLDER
+from .dataset import FOLDER_NAME, ID_PATTERN, records
+from .env import BENCHMARK_NAME, VerifiedEnvironment
+from .images import how_to_get, image_of, local_images, missing_images
+
+#: the repository folder's size cap (the harness's repositories with their builds run to a few hundred MB)
+DEFAULT_DISK_BYTES = 4 << 30
+_LIMITS = ("command_timeout_s", "output_bytes", "max_commands", "wall_time_s", "disk_bytes")
+ACCEPTED = (
+    "data_dir",
+    "sandbox",
+    "network",
+    *_LIMITS,
+    "total_output_bytes",
+    "eval_timeout_s",
+    "step_multiplier",
+    "seed",
+    "sandbox_labels",
+    "open_sandbox",
+)
+LOCAL_REFUSAL = (
+    "swe-verified runs in the SWE-bench harness's per-instance Docker images (the repository and its "
+    "environment are in the image): sandbox 'local' cannot run it; use sandbox: docker"
+)
+
+
+def _positive(name: str, value: Any, kind: type) -> Any:
+    if isinstance(value, bool) or not isinstance(value, (int, float) if kind is float else int) or not value > 0:
+        raise ValueError(f"{name} must be a positive {'number' if kind is float else 'integer'}, got {value!r}")
+    return kind(value)
+
+
+def as_instance(rec: Mapping[str, str], test_cmd: str) -> SweInstance:
+    """A stored record as the coding environment's instance (no host repository: ``repo_path`` empty)."""
+    extra = ("hints_text", "created_at", "version", "environment_setup_commit", "difficulty")
+    return SweInstance(
+        instance_id=rec["instance_id"],
+        repo=rec["repo"],
+        base_commit=rec["base_commit"],
+        problem_statement=rec["problem_statement"],
+        fail_to_pass=tuple(json.loads(rec["FAIL_TO_PASS"])),
+        pass_to_pass=tuple(json.loads(rec["PASS_TO_PASS"])),
+        patch=rec["patch"],
+        test_patch=rec["test_patch"],
+        repo_path="",
+        test_cmd=test_cmd,
+        extra={k: rec[k] for k in extra},
+    )
+
+
+class VerifiedBenchmark(SweBenchmark):
+    """SWE-bench Verified's registry entry (see the module docstring)."""
+
+    name = BENCHMARK_NAME
+
+    def data_folders(self) -> Mapping[str, DataFolder]:
+        """The stored dataset (``swebench-verified``)."""
+        return {FOLDER_NAME: FOLDER}
+
+    def list_instances(self, selector: str | None = None) -> list[str]:
+        """:meth:`list_instances_for` on the folder the shared rule finds."""
+        return self.list_instances_for(selector, {})
+
+    def list_instances_for(self, selector: str | None, options: Mapping[str, Any]) -> list[str]:
+        """``None``/``all``: every instance in the dataset's order; ``owner/name``: that
+        repository's; an instance id: that one; UnknownInstanceError otherwise."""
+        recs = records(options.get("data_dir"))
+        ids = [f"{BENCHMARK_NAME}/{r['instance_id']}" for r in recs]
+        if selector in (None, "", "all"):
+            return ids
+        wanted = selector.removeprefix(f"{BENCHMARK_NAME}/")
+        found = [i for i, r in zip(ids, recs) if r["repo"] == selector or r["instance_id"] == wanted]
+        if not found:
+            raise UnknownInstanceError(
+                f"no SWE-bench Verified instance is {selector!r}; selectors: all, a repository (owner/name), an instance id"
+            )
+        return found
+
+    def canonical_id(self, instance_id: str) -> str:
+        """``swe-verified/<owner__repo-NUMBER>`` as written; UnknownInstanceError otherwise."""
+        bench, _, rest = instance_id.partition("/")
+        if bench != BENCHMARK_NAME or ID_PATTERN.match(rest) is None:
+            raise UnknownInstanceError(
+                f"a SWE-bench Verified instance id looks like {BENCHMARK_NAME}/owner__repo-NUMBER, got {instance_id!r}"
+            )
+        return instance_id
+
+    def preflight(self, instance_ids: Sequence[str], options: Mapping[str, Any]) -> str | None:
+        """Refuse a sweep that cannot run: a ``local`` sandbox, or instances whose image is not
+        here (one ``docker images`` listing for all of them)."""
+        if options.get("sandbox", "docker") == "local":
+            return LOCAL_REFUSAL
+        if options.get("open_sandbox") is not None:
+            return None
+        try:
+            present = local_images()
+        except SandboxError as exc:
+            return str(exc)
+        names = [i.partition("/")[2] for i in instance_ids]
+        missing = missing_images(names, present)
+        if missing:
+            return (
+                f"{len(missing)} of {len(names)} instances have no image here (first: {missing[0]}); pull them "
+                "(docker pull swebench/sweb.eval.x86_64.<id>:latest) or build them with the SWE-bench harness "
+                "(python -m swebench.harness.prepare_images)"
+            )
+        return None
+
+    def make(self, instance_id: str, **options: Any) -> Environment:
+        """A fresh environment for ``swe-verified/<instance_id>`` in its image (opened at reset)."""
+        unknown = sorted(set(options) - set(ACCEPTED))
+        if unknown:
+            raise ValueError(f"unknown swe-verified option(s) {', '.join(unknown)}; accepted: {', '.join(ACCEPTED[:-2])}")
+        self.canonical_id(instance_id)
+        kind = options.get("sandbox", "docker")
+        if kind == "local":
+            raise ValueError(LOCAL_REFUSAL)
+        if kind != "docker":
+            raise ValueError(f"sandbox must be 'docker', got {kind!r}")
+        network = options.get("network", False)
+        if not isinstance(network, bool):
+            raise ValueError(f"network must be true or false, got {network!r}")
+        limits = SandboxLimits(
+            network=network,
+            disk_bytes=DEFAULT_DISK_BYTES,
+            **{k: _positive(k, options[k], float if k.endswith("_s") else int) for k in _LIMITS if k in options},
+        )
+        total = _positive("total_output_bytes", options.get("total_output_bytes", DEFAULT_TOTAL_OUTPUT_BYTES), int)
+        eval_timeout = options.get("eval_timeout_s")
+        if eval_timeout is not None:
+            eval_timeout = _positive("eval_timeout_s", eval_timeout, float)
+        opener: Callable[..., Any] | None = options.get("open_sandbox")
+        if opener is not None and not callable(opener):
+            raise ValueError(f"open_sandbox must be a callable SandboxSpec -> Sandbox, got {opener!r}")
+        labels = options.get("sandbox_labels") or {}
+        if not isinstance(labels, Mapping) or not all(isinstance(v, str) for v in labels.values()):
+            raise ValueError(f"sandbox_labels must map label names to strings, got {labels!r}")
+        wanted = instance_id.partition("/")[2]
+        data_dir = options.get("data_dir")
+        rec = next((r for r in records(data_dir) if r["instance_id"] == wanted), None)
+        if rec is None:
+            raise UnknownInstanceError(f"no SWE-bench Verified instance {wanted!r} in the stored dataset")
+        inst = as_instance(rec, harness.test_cmd(rec["repo"], rec["version"]))
+        image = image_of(wanted, local_images()) if opener is None else None
+        if opener is None and image is None:
+            missing = missing_images([wanted], set())
+            raise SandboxError(f"the image of {wanted} is not here ({missing[0]}); get it with {how_to_get(missing)}")
+        return VerifiedEnvironment(
+            inst,
+            opener if opener is not None else default_open_sandbox(kind),
+            split="test",
+            limits=limits,
+            image=image or "",
+            total_output_bytes=total,
+            eval_timeout_s=eval_timeout,
+            labels=labels,
+        )
+
+
+BENCHMARK = VerifiedBenchmark()

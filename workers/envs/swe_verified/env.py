@@ -1,0 +1,74 @@
+"""A SWE-bench Verified episode: the coding environment of ``workers/envs/swe`` in the instance's own image.
+
+What differs from :class:`~workers.envs.swe.env.SweEnvironment` (everything else - tools, limits,
+submission, evaluation - is the same class):
+
+* no repository is copied in: the harness's image holds it at ``/testbed`` at the base commit
+  (``SandboxSpec.repo_path`` None), with its environment installed; commands see the harness's
+  conda environment first on ``PATH`` (its eval script runs ``conda activate testbed``);
+* the submission is the diff against the image's own starting state, not the base commit: the
+  harness's install step edits some repositories' files in the image (sphinx's ``tox.ini``...),
+  and those edits are not the model's; the evaluation's clean copy starts from the same image, so
+  the diff applies there;
+* the expert reads the base commit's files from the sandbox (there is no repository on the host).
+"""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import replace
+from typing import Any
+
+from recap.env import EnvError, Reset
+from workers.envs.swe.env import SUBMISSION_FILE, SweEnvironment
+from workers.sandbox.base import SandboxError
+from workers.sandbox.docker_sandbox import BASE_ENV
+
+from .images import CONDA_BIN, CONDA_ENV_BIN, TESTBED
+
+BENCHMARK_NAME = "swe-verified"
+#: where the base commit's copy of a file is written for the expert (inside ``.git``: never in a diff)
+BASE_FILE = ".git/recap-eval-base.txt"
+
+
+class VerifiedEnvironment(SweEnvironment):
+    """A SWE-bench Verified instance in its harness image (see the module docstring)."""
+
+    benchmark = BENCHMARK_NAME
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.instance_id = f"{BENCHMARK_NAME}/{self.instance.instance_id}"
+        path = f"{CONDA_ENV_BIN}:{CONDA_BIN}:{BASE_ENV['PATH']}"
+        self.spec = replace(self.spec, repo_path=None, workdir=TESTBED, env={**self.spec.env, "PATH": path})
+        self._start_tree = ""
+
+    def reset(self) -> Reset:
+        """The sandbox of the image, and the tree it starts from (what the submission is diffed against)."""
+        first = super().reset()
+        res = self._box().run("git add -A && git write-tree")
+        tree = res.output.strip().splitlines()[-1:] if res.exit_code == 0 else []
+        if not tree or len(tree[0]) < 40:
+            self.close()
+            raise EnvError(f"{self.instance_id}: cannot read the image's repository state: {res.output.strip()[:200]}")
+        self._start_tree = tree[0]
+        return first
+
+    def current_diff(self) -> str:
+        """The changes against the image's starting state, new files included."""
+        box = self._box()
+        res = box.run(f"git add -A && git diff --cached {self._start_tree} > {SUBMISSION_FILE}")
+        if res.exit_code != 0:
+            raise SandboxError(f"git diff failed in the sandbox: {res.output.strip()[:300]}")
+        return box.read_file(SUBMISSION_FILE).decode("utf-8", errors="replace")
+
+    def _base_text(self, path: str) -> str:
+        box = self._box()
+        spec = shlex.quote(f"{self.instance.base_commit}:{path}")
+        if box.run(f"git show {spec} > {BASE_FILE}").exit_code != 0:
+            raise EnvError(f"{self.instance_id}: the gold patch names {path}, which the base commit lacks")
+        return box.read_file(BASE_FILE).decode("utf-8", errors="replace")
+
+    def _exists_at_base(self, path: str) -> bool:
+        spec = shlex.quote(f"{self.instance.base_commit}:{path}")
+        return self._box().run(f"git cat-file -e {spec}").exit_code == 0
