@@ -72,12 +72,10 @@ def _content(message: Mapping[str, Any]) -> str:
     calls = message.get("tool_calls") or ()
     parts = [text]
     for call in calls:
-        fn = call.get("function") or {} if isinstance(call, Mapping) else {}
-        parts += [
-            str(call.get("id", "")) if isinstance(call, Mapping) else "",
-            str(fn.get("name", "")),
-            str(fn.get("arguments", "")),
-        ]
+        if not isinstance(call, Mapping):
+            continue
+        fn = call.get("function") or {}
+        parts += [str(call.get("id", "")), str(fn.get("name", "")), str(fn.get("arguments", ""))]
     if message.get("tool_call_id"):
         parts.append(str(message["tool_call_id"]))
     return "\n".join(p for p in parts if p)
