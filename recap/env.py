@@ -30,6 +30,17 @@ class EnvError(RuntimeError):
     own (FEVER's Wikipedia errors end ``wiki_error``)."""
 
     end_reason: EndReason = "env_error"
+    #: the failure's kind, written first in the episode's error (``"KIND: ..."``), or None. The
+    #: pipeline reads it from the row: a kind it lists as infrastructure (``sandbox``: the
+    #: container service failed, not the agent) makes the attempt an ``infra_error`` that the
+    #: next resume runs again, instead of a 0 % outcome
+    kind: str | None = None
+
+    def row_error(self, what: str = "") -> str:
+        """The episode's error for this failure: its kind first when it has one, then ``what``
+        (e.g. ``"reset failed"``), then the message."""
+        text = f"{what}: {self}" if what else str(self)
+        return f"{self.kind}: {text}" if self.kind else text
 
 
 class InvalidActionError(ValueError):

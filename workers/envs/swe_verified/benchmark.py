@@ -28,7 +28,7 @@ from workers.envs.data_sources import DataFolder
 from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
 from workers.envs.swe.env import DEFAULT_TOTAL_OUTPUT_BYTES
 from workers.envs.swe.instances import SweInstance
-from workers.sandbox.base import SandboxError, SandboxLimits
+from workers.sandbox.base import SandboxError, SandboxLimits, episode_failure
 
 from . import harness
 from .data_folders import FOLDER
@@ -174,7 +174,10 @@ class VerifiedBenchmark(SweBenchmark):
         if rec is None:
             raise UnknownInstanceError(f"no SWE-bench Verified instance {wanted!r} in the stored dataset")
         inst = as_instance(rec, harness.test_cmd(rec["repo"], rec["version"]))
-        image = image_of(wanted, local_images()) if opener is None else None
+        try:
+            image = image_of(wanted, local_images()) if opener is None else None
+        except SandboxError as exc:  # the daemon failed: infrastructure when it is the service
+            raise episode_failure(instance_id, "the images cannot be listed", exc) from exc
         if opener is None and image is None:
             missing = missing_images([wanted], set())
             raise SandboxError(f"the image of {wanted} is not here ({missing[0]}); get it with {how_to_get(missing)}")
