@@ -9,7 +9,9 @@ Options of :meth:`VerifiedBenchmark.make` (and a sweep's ``environments[].option
 ``sandbox`` (``docker`` only: the instance's image is a Docker image); ``network``;
 ``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``, ``disk_bytes`` (the
 repository folder's cap, default :data:`DEFAULT_DISK_BYTES`: the harness's repositories are larger
-than the example tasks), ``total_output_bytes``, ``eval_timeout_s``; ``step_multiplier``/``seed``
+than the example tasks), ``total_output_bytes``, ``eval_timeout_s``; ``grading`` (``both``, the default, ``ours``, ``official``, or
+``harness``: the harness's own run_evaluation in the instance's image decides,
+:mod:`.harness_eval`); ``step_multiplier``/``seed``
 (no effect); ``open_sandbox``/``sandbox_labels`` (as for ``swe``).
 
 The methods, profiles and leftover removal are the ``swe`` benchmark's (this class extends it).
@@ -27,6 +29,7 @@ from recap.env import Environment, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
 from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
 from workers.envs.swe.env import DEFAULT_TOTAL_OUTPUT_BYTES
+from workers.envs.swe.grading import DEFAULT_GRADING, GRADINGS, Grading, check_grading
 from workers.envs.swe.instances import SweInstance
 from workers.sandbox.base import SandboxError, SandboxLimits, episode_failure
 
@@ -34,8 +37,11 @@ from . import harness
 from .data_folders import FOLDER
 from .dataset import FOLDER_NAME, ID_PATTERN, records
 from .env import BENCHMARK_NAME, VerifiedEnvironment
+from .harness_eval import HARNESS_GRADING
 from .images import how_to_get, image_of, local_images, missing_images
 
+#: the grading modes here: the coding env's three, and the harness's own full evaluation
+VERIFIED_GRADINGS: tuple[Grading, ...] = (*GRADINGS, HARNESS_GRADING)
 #: the repository folder's size cap (the harness's repositories with their builds run to a few hundred MB)
 DEFAULT_DISK_BYTES = 4 << 30
 _LIMITS = ("command_timeout_s", "output_bytes", "max_commands", "wall_time_s", "disk_bytes")
@@ -46,6 +52,7 @@ ACCEPTED = (
     *_LIMITS,
     "total_output_bytes",
     "eval_timeout_s",
+    "grading",
     "step_multiplier",
     "seed",
     "sandbox_labels",
@@ -181,9 +188,12 @@ class VerifiedBenchmark(SweBenchmark):
         if opener is None and image is None:
             missing = missing_images([wanted], set())
             raise SandboxError(f"the image of {wanted} is not here ({missing[0]}); get it with {how_to_get(missing)}")
+        grading = check_grading(options.get("grading", DEFAULT_GRADING), VERIFIED_GRADINGS)
         return VerifiedEnvironment(
             inst,
             opener if opener is not None else default_open_sandbox(kind),
+            record=rec,
+            grading=grading,
             split="test",
             limits=limits,
             image=image or "",
