@@ -21,7 +21,7 @@ import pytest
 from workers.envs.registry import make_env
 from workers.envs.swe.instances import SweInstance
 from workers.envs.swe_verified import images
-from workers.envs.swe_verified.harness_eval import HarnessRun, harness_evaluation, namespace_for, run_harness, eval_test_output
+from workers.envs.swe_verified.harness_eval import HarnessRun, eval_test_output, harness_evaluation, namespace_for, run_harness
 from workers.sandbox.base import SandboxError
 
 from .conftest import write_jsonl
@@ -58,10 +58,20 @@ def test_the_harness_report_decides_and_our_reading_of_its_log_sits_beside_it() 
     }
     ev = harness_evaluation(_instance(), HarnessRun(report, LOG, "instance log", 0, ""))
     assert eval_test_output(LOG) == f"'\nPASSED {P2P}\nFAILED {F2P} - assert [1, 2] == [1, 2, 3]\n+ : '"
-    assert (ev.success, ev.graded_by, ev.verdict_reason, ev.grading, ev.log) == (False, "official", "tests_failed", "harness", "instance log")
+    assert (ev.success, ev.graded_by, ev.verdict_reason, ev.grading, ev.log) == (
+        False,
+        "official",
+        "tests_failed",
+        "harness",
+        "instance log",
+    )
     assert ev.tests == {F2P: "FAILED", P2P: "PASSED"}  # ours, from the same log
     assert ev.official is not None and ev.official.status == "RESOLVED_NO"
-    assert (ev.official.fail_to_pass_failure, ev.official.pass_to_pass_success, ev.official.parser) == ((F2P,), (P2P,), "parse_log_pytest")
+    assert (ev.official.fail_to_pass_failure, ev.official.pass_to_pass_success, ev.official.parser) == (
+        (F2P,),
+        (P2P,),
+        "parse_log_pytest",
+    )
 
 
 def test_without_a_report_the_harness_log_says_why_and_a_harness_that_ran_nothing_is_the_service() -> None:
@@ -69,7 +79,9 @@ def test_without_a_report_the_harness_log_says_why_and_a_harness_that_ran_nothin
     assert (applied.success, applied.verdict_reason) == (False, "patch_failed")
     slow = harness_evaluation(_instance(), HarnessRun(None, "", "Test timed out after 60 seconds.\n", 0, ""))
     assert slow.verdict_reason == "timeout"
-    with pytest.raises(SandboxError, match=r"^the SWE-bench harness evaluated nothing \(exit 1\): docker.errors.DockerException: gone$") as err:
+    with pytest.raises(
+        SandboxError, match=r"^the SWE-bench harness evaluated nothing \(exit 1\): docker.errors.DockerException: gone$"
+    ) as err:
         harness_evaluation(_instance(), HarnessRun(None, "", "", 1, "Traceback\ndocker.errors.DockerException: gone\n"))
     assert err.value.service
 
@@ -121,7 +133,9 @@ def test_an_episode_graded_by_the_harness_is_resolved_by_its_report(harness_imag
     name, rec = harness_image
     from pipeline.cli import main
 
-    assert main(["data", "fetch", "swebench-verified", "--from", str(write_jsonl(tmp_path / "one.jsonl", [rec])), "--subset"]) == 0
+    assert (
+        main(["data", "fetch", "swebench-verified", "--from", str(write_jsonl(tmp_path / "one.jsonl", [rec])), "--subset"]) == 0
+    )
     env = make_env(f"swe-verified/{rec['instance_id']}", command_timeout_s=30, grading="harness")
     try:
         env.reset()
@@ -149,12 +163,19 @@ def test_an_episode_graded_by_the_harness_is_resolved_by_its_report(harness_imag
     finally:
         env.close()
     # a patch that applies but leaves the bug: the harness runs the tests and reports the failure
-    notes = "diff --git a/notes.txt b/notes.txt\nnew file mode 100644\n--- /dev/null\n+++ b/notes.txt\n@@ -0,0 +1 @@\n+not fixed\n"
+    notes = (
+        "diff --git a/notes.txt b/notes.txt\nnew file mode 100644\n--- /dev/null\n+++ b/notes.txt\n@@ -0,0 +1 @@\n+not fixed\n"
+    )
     run = run_harness(rec, notes, run_id="recap-test-" + secrets.token_hex(4), namespace="swebench", timeout_s=120)
     assert run.report is not None and run.report["resolved"] is False
     assert run.report["tests_status"]["FAIL_TO_PASS"] == {"success": [], "failure": [F2P]}
     assert run.report["tests_status"]["PASS_TO_PASS"] == {"success": [P2P], "failure": []}
     ev = harness_evaluation(_instance(), run)
-    assert (ev.success, ev.verdict_reason, ev.resolved, ev.tests) == (False, "tests_failed", False, {F2P: "FAILED", P2P: "PASSED"})
+    assert (ev.success, ev.verdict_reason, ev.resolved, ev.tests) == (
+        False,
+        "tests_failed",
+        False,
+        {F2P: "FAILED", P2P: "PASSED"},
+    )
     leftover = subprocess.run(["docker", "ps", "-aq", "--filter", f"ancestor={name}"], capture_output=True, text=True)
     assert leftover.stdout.strip() == ""
