@@ -47,3 +47,23 @@ def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setenv("RECAP_EVAL_CACHE", str(tmp_path / "cache"))
     monkeypatch.delenv("SWEBENCH_VERIFIED_DATA", raising=False)
     return tmp_path / "cache" / "data" / "swebench-verified"
+
+
+def build_test_image(base: str, repo: Path, tag: str, extra: str = "") -> None:
+    """An image ``FROM base`` with ``repo`` at ``/testbed`` (plus the Dockerfile lines ``extra``),
+    tagged ``tag`` and labelled as a test image (the test removes it)."""
+    import io
+    import tarfile
+
+    from workers.sandbox.docker_sandbox import docker_client
+
+    dockerfile = f"FROM {base}\nCOPY repo /testbed\nWORKDIR /testbed\n{extra}".encode()
+    context = io.BytesIO()
+    with tarfile.open(fileobj=context, mode="w") as tar:
+        info = tarfile.TarInfo("Dockerfile")
+        info.size = len(dockerfile)
+        tar.addfile(info, io.BytesIO(dockerfile))
+        tar.add(str(repo), arcname="repo")
+    docker_client().images.build(
+        fileobj=io.BytesIO(context.getvalue()), custom_context=True, tag=tag, rm=True, labels={"recap-eval.test": "swe-verified"}
+    )

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import io
 import json
 import secrets
 import subprocess
-import tarfile
 from collections.abc import Iterator
 
 import pytest
@@ -15,7 +13,7 @@ from workers.envs.registry import make_env
 from workers.envs.swe.examples import TEST_CMD
 from workers.envs.swe_verified import images
 
-from .conftest import write_jsonl
+from .conftest import build_test_image, write_jsonl
 
 
 @pytest.fixture
@@ -26,19 +24,9 @@ def instance_image(docker_ready: str, verified_fixtures, records, tmp_path) -> I
 
     number = str(secrets.randbelow(10**9) + 10**9)
     rec = {**records[0], "instance_id": f"fixture__offbyone-{number}"}
-    repo = verified_fixtures.tasks_file.parent / "repos" / "offbyone"
-    context = io.BytesIO()
-    with tarfile.open(fileobj=context, mode="w") as tar:
-        dockerfile = f"FROM {docker_ready}\nCOPY repo /testbed\nWORKDIR /testbed\n".encode()
-        info = tarfile.TarInfo("Dockerfile")
-        info.size = len(dockerfile)
-        tar.addfile(info, io.BytesIO(dockerfile))
-        tar.add(str(repo), arcname="repo")
     name = images.local_image(rec["instance_id"])
+    build_test_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name)
     client = docker_client()
-    client.images.build(
-        fileobj=io.BytesIO(context.getvalue()), custom_context=True, tag=name, rm=True, labels={"recap-eval.test": "swe-verified"}
-    )
     try:
         yield name, rec
     finally:

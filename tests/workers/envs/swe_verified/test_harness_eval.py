@@ -9,11 +9,9 @@ patch, the eval script, the log parser, report.json - is the installed harness's
 
 from __future__ import annotations
 
-import io
 import json
 import secrets
 import subprocess
-import tarfile
 from collections.abc import Iterator
 
 import pytest
@@ -24,7 +22,7 @@ from workers.envs.swe_verified import images
 from workers.envs.swe_verified.harness_eval import HarnessRun, eval_test_output, harness_evaluation, namespace_for, run_harness
 from workers.sandbox.base import SandboxError
 
-from .conftest import write_jsonl
+from .conftest import build_test_image, write_jsonl
 
 F2P, P2P = "tests/test_mathutil.py::test_count_range_inclusive", "tests/test_mathutil.py::test_total"
 
@@ -106,22 +104,12 @@ def harness_image(docker_ready: str, verified_fixtures, records) -> Iterator[tup
 
     rec = {**records[0], "instance_id": f"pytest-dev__pytest-{secrets.randbelow(10**9) + 10**9}"}
     rec.update(repo="pytest-dev/pytest", version="7.0")
-    repo = verified_fixtures.tasks_file.parent / "repos" / "offbyone"
-    dockerfile = (
-        f"FROM {docker_ready}\nCOPY repo /testbed\nWORKDIR /testbed\nENV PYTHONPATH=/testbed\n"
-        "RUN mkdir -p /opt/miniconda3/bin && printf 'conda() { :; }\\n' > /opt/miniconda3/bin/activate\n"
-    ).encode()
-    context = io.BytesIO()
-    with tarfile.open(fileobj=context, mode="w") as tar:
-        info = tarfile.TarInfo("Dockerfile")
-        info.size = len(dockerfile)
-        tar.addfile(info, io.BytesIO(dockerfile))
-        tar.add(str(repo), arcname="repo")
     name = images.remote_image(rec["instance_id"])
-    client = docker_client()
-    client.images.build(
-        fileobj=io.BytesIO(context.getvalue()), custom_context=True, tag=name, rm=True, labels={"recap-eval.test": "harness"}
+    conda = (
+        "ENV PYTHONPATH=/testbed\nRUN mkdir -p /opt/miniconda3/bin && printf 'conda() { :; }\\n' > /opt/miniconda3/bin/activate\n"
     )
+    build_test_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name, conda)
+    client = docker_client()
     try:
         yield name, rec
     finally:
