@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -49,9 +51,10 @@ def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return tmp_path / "cache" / "data" / "swebench-verified"
 
 
-def build_test_image(base: str, repo: Path, tag: str, extra: str = "") -> None:
+@contextmanager
+def built_image(base: str, repo: Path, tag: str, extra: str = "") -> Iterator[str]:
     """An image ``FROM base`` with ``repo`` at ``/testbed`` (plus the Dockerfile lines ``extra``),
-    tagged ``tag`` and labelled as a test image (the test removes it)."""
+    tagged ``tag`` and labelled as a test image while the block runs, removed after it."""
     import io
     import tarfile
 
@@ -64,6 +67,11 @@ def build_test_image(base: str, repo: Path, tag: str, extra: str = "") -> None:
         info.size = len(dockerfile)
         tar.addfile(info, io.BytesIO(dockerfile))
         tar.add(str(repo), arcname="repo")
-    docker_client().images.build(
+    client = docker_client()
+    client.images.build(
         fileobj=io.BytesIO(context.getvalue()), custom_context=True, tag=tag, rm=True, labels={"recap-eval.test": "swe-verified"}
     )
+    try:
+        yield tag
+    finally:
+        client.images.remove(tag, force=True)

@@ -13,24 +13,18 @@ from workers.envs.registry import make_env
 from workers.envs.swe.examples import TEST_CMD
 from workers.envs.swe_verified import images
 
-from .conftest import build_test_image, write_jsonl
+from .conftest import built_image, write_jsonl
 
 
 @pytest.fixture
 def instance_image(docker_ready: str, verified_fixtures, records, tmp_path) -> Iterator[tuple[str, dict[str, str]]]:
     """A record with a unique id and its image, named as the harness names a local build:
     ``FROM`` the sandbox image, the fixture repository at ``/testbed`` at the base commit. Removed afterwards."""
-    from workers.sandbox.docker_sandbox import docker_client
-
     number = str(secrets.randbelow(10**9) + 10**9)
     rec = {**records[0], "instance_id": f"fixture__offbyone-{number}"}
     name = images.local_image(rec["instance_id"])
-    build_test_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name)
-    client = docker_client()
-    try:
+    with built_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name):
         yield name, rec
-    finally:
-        client.images.remove(name, force=True)
 
 
 @pytest.mark.docker

@@ -22,7 +22,7 @@ from workers.envs.swe_verified import images
 from workers.envs.swe_verified.harness_eval import HarnessRun, eval_test_output, harness_evaluation, namespace_for, run_harness
 from workers.sandbox.base import SandboxError
 
-from .conftest import build_test_image, write_jsonl
+from .conftest import built_image, write_jsonl
 
 F2P, P2P = "tests/test_mathutil.py::test_count_range_inclusive", "tests/test_mathutil.py::test_total"
 
@@ -100,20 +100,14 @@ def test_harness_grading_is_swe_verified_only(tmp_path) -> None:
 @pytest.fixture
 def harness_image(docker_ready: str, verified_fixtures, records) -> Iterator[tuple[str, dict[str, str]]]:
     """A record filed under ``pytest-dev/pytest`` 7.0 with a unique id, and its image under the published name."""
-    from workers.sandbox.docker_sandbox import docker_client
-
     rec = {**records[0], "instance_id": f"pytest-dev__pytest-{secrets.randbelow(10**9) + 10**9}"}
     rec.update(repo="pytest-dev/pytest", version="7.0")
     name = images.remote_image(rec["instance_id"])
     conda = (
         "ENV PYTHONPATH=/testbed\nRUN mkdir -p /opt/miniconda3/bin && printf 'conda() { :; }\\n' > /opt/miniconda3/bin/activate\n"
     )
-    build_test_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name, conda)
-    client = docker_client()
-    try:
+    with built_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name, conda):
         yield name, rec
-    finally:
-        client.images.remove(name, force=True)
 
 
 @pytest.mark.docker
