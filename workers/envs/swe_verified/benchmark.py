@@ -37,7 +37,7 @@ from . import harness
 from .data_folders import FOLDER
 from .dataset import FOLDER_NAME, ID_PATTERN, records
 from .env import BENCHMARK_NAME, VerifiedEnvironment
-from .harness_eval import HARNESS_GRADING
+from .harness_eval import HARNESS_GRADING, remove_harness_containers
 from .images import how_to_get, image_of, local_images, missing_images
 
 #: the grading modes here: the coding env's three, and the harness's own full evaluation
@@ -96,6 +96,11 @@ class VerifiedBenchmark(SweBenchmark):
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The stored dataset (``swebench-verified``)."""
         return {FOLDER_NAME: FOLDER}
+
+    def remove_leftovers(self, run_id: str, worker_id: str | None = None) -> int:
+        """The episodes' sandboxes by label (as ``swe``), and the containers of ``grading: harness``
+        evaluations by the harness's name for them (:func:`.harness_eval.harness_run_id`)."""
+        return super().remove_leftovers(run_id, worker_id) + remove_harness_containers(run_id, worker_id)
 
     def list_instances(self, selector: str | None = None) -> list[str]:
         """:meth:`list_instances_for` on the folder the shared rule finds."""

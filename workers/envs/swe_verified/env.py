@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import shlex
 import time
-import uuid
 from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
@@ -28,7 +27,7 @@ from workers.envs.swe.evaluate import MISSING, Evaluation
 from workers.sandbox.base import SandboxError
 from workers.sandbox.docker_sandbox import BASE_ENV
 
-from .harness_eval import HARNESS_GRADING, harness_evaluation, namespace_for, run_harness
+from .harness_eval import HARNESS_GRADING, harness_evaluation, harness_run_id, namespace_for, run_harness
 from .images import CONDA_BIN, CONDA_ENV_BIN, TESTBED
 
 BENCHMARK_NAME = "swe-verified"
@@ -85,7 +84,7 @@ class VerifiedEnvironment(SweEnvironment):
             run = run_harness(
                 self.record,
                 diff,
-                run_id=f"recap-{uuid.uuid4().hex[:12]}",
+                run_id=harness_run_id(self.spec.labels),
                 namespace=namespace_for(self.spec.image),
                 timeout_s=self.eval_timeout_s,
             )

@@ -23,9 +23,11 @@ crashes is bounded by a timeout and cannot take the episode worker with it.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import tempfile
+import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +36,7 @@ from typing import Any
 from workers.envs.swe.evaluate import MISSING, EvalReason, Evaluation, ours_resolved, parse_summary, with_log
 from workers.envs.swe.grading import Grading, OfficialGrade, parser_name
 from workers.envs.swe.instances import SweInstance
-from workers.sandbox.base import SandboxError
+from workers.sandbox.base import LABEL_RUN, LABEL_WORKER, SandboxError
 
 from .images import NAMESPACE
 
@@ -60,6 +62,42 @@ class HarnessRun:
     instance_log: str
     returncode: int
     output: str
+
+
+def harness_run_id(labels: Mapping[str, str]) -> str:
+    """The harness run id of one evaluation: ``recap-<run>-<worker>-<random>`` from the sandbox
+    labels (12 characters of each). The harness names its container ``sweb.eval.<id>.<run id>``,
+    so a container a killed worker's evaluation left is found by name on resume
+    (:func:`remove_harness_containers`), as the episode's own are by label."""
+    run, worker = _short(labels.get(LABEL_RUN, "")), _short(labels.get(LABEL_WORKER, ""))
+    return f"recap-{run}-{worker}-{uuid.uuid4().hex[:8]}"
+
+
+def _short(value: str) -> str:
+    return (re.sub(r"[^a-z0-9]+", "", value.lower()) or "x")[:12]
+
+
+def remove_harness_containers(run_id: str, worker_id: str | None = None) -> int:
+    """Remove the harness containers of the run's evaluations (or one worker's); the number
+    removed. Nothing without a reachable daemon (no container of ours can run then)."""
+    import docker
+    import docker.errors
+
+    prefix = f"recap-{_short(run_id)}-" + (f"{_short(worker_id)}-" if worker_id is not None else "")
+    pattern = re.compile(r"^sweb\.eval\..+\." + re.escape(prefix))
+    try:
+        found = docker.from_env().containers.list(all=True, filters={"name": prefix})
+    except docker.errors.DockerException:
+        return 0
+    n = 0
+    for c in found:
+        if pattern.match(c.name or ""):
+            try:
+                c.remove(force=True)
+                n += 1
+            except docker.errors.NotFound:
+                pass
+    return n
 
 
 def namespace_for(image: str) -> str:

@@ -19,7 +19,14 @@ import pytest
 from workers.envs.registry import make_env
 from workers.envs.swe.instances import SweInstance
 from workers.envs.swe_verified import images
-from workers.envs.swe_verified.harness_eval import HarnessRun, eval_test_output, harness_evaluation, namespace_for, run_harness
+from workers.envs.swe_verified.harness_eval import (
+    HarnessRun,
+    eval_test_output,
+    harness_evaluation,
+    harness_run_id,
+    namespace_for,
+    run_harness,
+)
 from workers.sandbox.base import SandboxError
 
 from .conftest import built_image, write_jsonl
@@ -161,3 +168,36 @@ def test_an_episode_graded_by_the_harness_is_resolved_by_its_report(harness_imag
     )
     leftover = subprocess.run(["docker", "ps", "-aq", "--filter", f"ancestor={name}"], capture_output=True, text=True)
     assert leftover.stdout.strip() == ""
+
+
+def test_the_harness_run_id_carries_the_run_and_the_worker() -> None:
+    from workers.sandbox import LABEL_RUN, LABEL_WORKER
+
+    rid = harness_run_id({LABEL_RUN: "Run_2026-11-26T0500abcdef", LABEL_WORKER: "w-3"})
+    assert rid.startswith("recap-run20261126t-w3-") and len(rid) == len("recap-run20261126t-w3-") + 8
+
+
+@pytest.mark.docker
+def test_resume_removes_the_harness_containers_a_killed_worker_left(docker_ready: str) -> None:
+    """A worker killed while the harness evaluated leaves the harness's container (named by it,
+    not labelled by us); the benchmark's leftover removal finds it by that name - the run's only."""
+    from workers.envs.registry import get_benchmark
+    from workers.sandbox import LABEL_RUN, LABEL_WORKER
+
+    run = "run" + secrets.token_hex(4)
+    ours = f"sweb.eval.django__django-1.{harness_run_id({LABEL_RUN: run, LABEL_WORKER: 'w1'})}"
+    other = f"sweb.eval.django__django-1.{harness_run_id({LABEL_RUN: 'another' + run, LABEL_WORKER: 'w1'})}"
+    for name in (ours, other):
+        subprocess.run(
+            ["docker", "run", "-d", "--network", "none", "--name", name, docker_ready, "sleep", "600"],
+            check=True,
+            capture_output=True,
+        )
+    try:
+        bench = get_benchmark("swe-verified")
+        assert bench.remove_leftovers(run, "w2") == 0  # another worker's: kept
+        assert bench.remove_leftovers(run) == 1
+        names = subprocess.run(["docker", "ps", "-a", "--format", "{{.Names}}"], capture_output=True, text=True).stdout.split()
+        assert ours not in names and other in names
+    finally:
+        subprocess.run(["docker", "rm", "-f", ours, other], capture_output=True)
