@@ -60,6 +60,9 @@ class SandboxUnavailable(EnvError):
 
     kind = SANDBOX_INFRA_KIND
 
+    def __init__(self, message: str) -> None:
+        super().__init__(f"{SANDBOX_INFRA_KIND}: {message}")
+
 
 def episode_failure(instance_id: str, what: str, exc: SandboxError) -> EnvError:
     """What an environment raises for a sandbox failure during an episode: a
