@@ -15,6 +15,7 @@ two base URLs) never share a cap or a spend figure.
 
 from __future__ import annotations
 
+import logging
 import os
 import uuid
 from dataclasses import dataclass
@@ -22,9 +23,12 @@ from typing import Any
 
 from pipeline.backend import RateStats, Spend
 from pipeline.deployments import deployment_config
+from pipeline.errors import PipelineError
 from pipeline.preflight import key_variables
 from pipeline.raysetup import runtime_env
 from pipeline.spec import SweepSpec
+
+log = logging.getLogger(__name__)
 
 #: times a call in flight on a gateway (or budget) actor that died is re-sent to its restart;
 #: bounded so that a request that kills the actor every time cannot loop for ever
@@ -153,16 +157,26 @@ class GatewayBackend:
         if self._closed or self.budget is None:
             return
         self._closed = True
-        ray.get([a.close.remote() for a in self.actors.values()])
+        # each gateway on its own: one that fails to close must not keep the others' rows unwritten
+        closing = {label: a.close.remote() for label, a in self.actors.items()}
+        failed: list[str] = []
+        for label, ref in closing.items():
+            try:
+                ray.get(ref)
+            except Exception as exc:
+                log.warning("the gateway of %s could not write its last llm_calls rows: %s: %s", label, type(exc).__name__, exc)
+                failed.append(label)
         ray.get(self.budget.close.remote())
+        if failed:
+            raise PipelineError(f"the gateways of {', '.join(failed)} failed to close (their last llm_calls rows may be missing)")
 
     def close(self) -> None:
         import ray  # lazy: Ray loads only where a session uses it
 
         try:
             self.flush()
-        except Exception:
-            pass
+        except Exception as exc:  # closing goes on (the actors are killed below); the cause is logged
+            log.warning("closing the model gateways: %s: %s", type(exc).__name__, exc)
         for a in list(self.actors.values()) + ([self.budget] if self.budget is not None else []):
             try:
                 ray.kill(a)

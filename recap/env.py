@@ -30,6 +30,22 @@ class EnvError(RuntimeError):
     own (FEVER's Wikipedia errors end ``wiki_error``)."""
 
     end_reason: EndReason = "env_error"
+    #: the failure's kind, or None; an error with a kind has a message that starts ``"KIND: "``
+    #: (FEVER's ``unavailable``, the sandbox service's ``sandbox``). The pipeline reads it from the
+    #: row: a kind it lists as infrastructure makes the attempt an ``infra_error`` (or a FEVER
+    #: ``wiki_unavailable``) that the next resume runs again, instead of a 0 % outcome
+    kind: str | None = None
+
+    def row_error(self, what: str = "") -> str:
+        """The episode's error for this failure: the message, with ``what`` (e.g. ``"reset failed"``)
+        put after its kind, so the kind stays the first word."""
+        text = str(self)
+        if not what:
+            return text
+        head = f"{self.kind}: " if self.kind else ""
+        if head and text.startswith(head):
+            return f"{head}{what}: {text[len(head) :]}"
+        return f"{what}: {text}"
 
 
 class InvalidActionError(ValueError):

@@ -144,6 +144,13 @@ class LLMRequest:
     tools: tuple[ToolDef, ...] = ()
     #: "auto", "required", "none" or the name of one of ``tools``; None: the provider's default
     tool_choice: str | None = None
+    #: the episode's own cost cap (``limits.usd``, per instance; None: none) and what the episode
+    #: has spent before this call: the gateway refuses a call whose worst case would pass the cap
+    #: before anything is sent (a reservation, like the run's and the model's caps), so a long
+    #: coding episode stops under its cap instead of one call past it. Never sent to a provider,
+    #: not part of the call key or the cache fingerprint.
+    episode_cap_usd: float | None = None
+    episode_spent_usd: float = 0.0
 
     def __post_init__(self) -> None:
         if self.tool_choice is None:

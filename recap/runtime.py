@@ -278,6 +278,8 @@ class Conversation:
             hints={"style": self.style, "purpose": purpose, "reply_fields": self.reply_fields, **context},
             tools=tools.tools,
             tool_choice=tools.choice,
+            episode_cap_usd=self.config.max_episode_cost_usd,
+            episode_spent_usd=self.usage.cost_usd,
         )
 
     def _end_on_error(self, exc: LLMError) -> None:
@@ -287,6 +289,10 @@ class Conversation:
             if self.history.drop_oldest(self.config.context_drop) == 0:
                 raise EpisodeEnd("llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind) from None
             return
+        if exc.kind == "budget" and exc.refusal is not None and exc.refusal.scope == "episode":
+            # the episode's own cap refused the call before it was sent: the episode is over, the
+            # run and the model go on (not budget_exhausted, which a raised cap would resume)
+            raise EpisodeEnd("episode_limit", exc.message, error_kind=exc.kind) from None
         if exc.kind == "budget":
             raise EpisodeEnd("budget_exhausted", exc.message, error_kind=exc.kind, refusal=exc.refusal) from None
         raise EpisodeEnd("llm_error", str(exc), error_kind=exc.kind) from None
@@ -378,7 +384,7 @@ class EnvDriver:
         try:
             r = self.env.reset()
         except EnvError as exc:  # the environment's own reason when it has one (FEVER: wiki_error)
-            raise EpisodeEnd(exc.end_reason, f"reset failed: {exc}") from exc
+            raise EpisodeEnd(exc.end_reason, exc.row_error("reset failed")) from exc
         except Exception as exc:  # engine failure at reset
             raise EpisodeEnd("env_error", f"reset failed: {exc}") from exc
         self.observation, self.goal = r.observation, r.goal
@@ -415,7 +421,7 @@ class EnvDriver:
             self.reject(action, node_id)
             raise
         except EnvError as exc:
-            raise EpisodeEnd(exc.end_reason, str(exc)) from exc
+            raise EpisodeEnd(exc.end_reason, exc.row_error()) from exc
         except Exception as exc:
             raise EpisodeEnd("env_error", f"{type(exc).__name__}: {exc}") from exc
         tool = step.info.get("tool")  # a coding environment's text action is a shell command
@@ -443,7 +449,7 @@ class EnvDriver:
         try:
             step = self.env.call_tool(call.name, call.args)
         except EnvError as exc:
-            raise EpisodeEnd(exc.end_reason, str(exc)) from exc
+            raise EpisodeEnd(exc.end_reason, exc.row_error()) from exc
         except Exception as exc:
             raise EpisodeEnd("env_error", f"{type(exc).__name__}: {exc}") from exc
         valid = step.info.get("error") is None

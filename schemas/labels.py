@@ -25,7 +25,12 @@ VERSION_1_PROFILES = ("paper", "released")
 #: the end reason of a row whose unit failed on infrastructure (the model service, a worker)
 INFRA_ERROR: Final = "infra_error"
 #: LLM error kinds (the first word of a row's error) that say the model service failed
-INFRA_ERROR_KINDS = ("rate_limit", "timeout", "server_error", "auth", "connection", "not_found")
+INFRA_ERROR_KINDS = ("rate_limit", "timeout", "server_error", "auth", "connection", "not_found", "sandbox")
+#: the kind (first word of the error) of an ``env_error`` row whose sandbox service failed (the
+#: Docker daemon unreachable, a container that could not start or is gone): infrastructure, run
+#: again by the next resume. A sandbox that fails for the instance itself (an image at the wrong
+#: commit) or for the agent (a repository it broke) has no kind: an outcome, like any env_error.
+SANDBOX_INFRA_KIND = "sandbox"
 #: the end reason of an episode stopped because a Wikipedia answer could not be had or read (FEVER)
 WIKI_ERROR: Final = "wiki_error"
 #: the kind (first word of the error) of a ``wiki_error`` row that is infrastructure: the site
@@ -50,6 +55,8 @@ def infra_failure(end_reason: str | None, error: str | None) -> str | None:
       (``"auth: ..."``), a ``bad_request`` that is a 404 is ``not_found``, else ``infra``;
     * ``wiki_error`` rows (FEVER): ``wiki_unavailable`` when the error's kind is ``unavailable``
       (Wikipedia refused or timed out after the retries), else an outcome;
+    * ``env_error`` rows: ``sandbox`` when the error's kind is ``sandbox`` (the container service
+      failed: :class:`workers.sandbox.base.SandboxUnavailable`), else an outcome;
     * ``llm_error`` rows (version 1 wrote infrastructure failures so): the error starts with
       an infrastructure kind, or is a 404 ``bad_request`` (a wrong ``api_base`` path or model
       name); ``context_length`` and other bad requests are outcomes of the agent's requests.
@@ -68,6 +75,8 @@ def infra_failure(end_reason: str | None, error: str | None) -> str | None:
         return "infra" if end_reason == INFRA_ERROR else None
     if end_reason == WIKI_ERROR:  # "unavailable: ..." is the site failing, retried like infra_error
         return "wiki_unavailable" if text.split(":", 1)[0].strip() == WIKI_INFRA_KIND else None
+    if end_reason == "env_error":  # "sandbox: ..." is the container service failing
+        return SANDBOX_INFRA_KIND if text.split(":", 1)[0].strip() == SANDBOX_INFRA_KIND else None
     if end_reason not in ("llm_error", INFRA_ERROR):
         return None
     kind = text.split(":", 1)[0].strip()

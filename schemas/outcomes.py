@@ -18,9 +18,11 @@ from typing import Any, Literal
 from schemas.kinds import EndReason
 
 #: which cap refused a call: the run's, the model's, or a capped run that cannot price the model;
-#: or ``usage``: the model's provider reported impossible usage too often, its calls are refused
-RefusalScope = Literal["run", "model", "unpriced", "usage"]
-REFUSAL_SCOPES: tuple[RefusalScope, ...] = ("run", "model", "unpriced", "usage")
+#: or ``usage``: the model's provider reported impossible usage too often, its calls are refused;
+#: or ``episode``: the call's worst case would take its episode past the per-instance cap
+#: (``limits.usd``) - that episode ends ``episode_limit``, nothing else stops
+RefusalScope = Literal["run", "model", "unpriced", "usage", "episode"]
+REFUSAL_SCOPES: tuple[RefusalScope, ...] = ("run", "model", "unpriced", "usage", "episode")
 
 #: where an attempt crashed (not: ended): the model client, or the agent's own code
 CrashSource = Literal["client", "agent"]
@@ -65,6 +67,11 @@ class BudgetRefusal:
             return (
                 f"{self.model}: provider usage rejected as impossible in {self.rejected} replies "
                 "(each charged at its worst case); no more calls to it this session"
+            )
+        if self.scope == "episode":
+            return (
+                f"episode budget: spent {_usd(self.committed_pico)} + this call's worst case "
+                f"{_usd(self.worst_pico or 0)} > the per-instance cap {_usd(self.cap_pico or 0)}"
             )
         who = "run" if self.scope == "run" else self.model
         return (

@@ -26,7 +26,7 @@ from typing import Any, Protocol
 import recap.methods as methods
 from recap.agent import Agent
 from recap.config import ConfigError
-from recap.env import Environment
+from recap.env import EnvError, Environment
 from recap.llm import LLMClient, LLMError, LLMRequest, LLMResponse
 from recap.release_prompt import ReleasePrompt
 from schemas.outcomes import Crash, EnvFacts, EpisodeOutcome, EpisodeResult, UnitWork
@@ -369,7 +369,11 @@ class EpisodeRunner:
 
 
 def _env_error(exc: Exception) -> EpisodeResult:
-    """The result of an attempt whose environment (or released text) could not be had."""
+    """The result of an attempt whose environment (or released text) could not be had. An
+    :class:`recap.env.EnvError` with a kind (``sandbox``: the container service failed) writes
+    that kind first, so the row is read as what it is (infrastructure, run again by resume)."""
+    if isinstance(exc, EnvError) and exc.kind:
+        return EpisodeResult(exc.end_reason, False, 0, 0, error=exc.row_error()[:2000])
     return EpisodeResult("env_error", False, 0, 0, error=f"{type(exc).__name__}: {exc}"[:2000])
 
 

@@ -179,6 +179,50 @@ def test_a_killed_workers_container_is_removed_and_its_unit_resolves(ray_address
 
 
 @pytest.mark.docker
+def test_a_container_removed_under_its_episode_is_infrastructure_and_resume_runs_it_again(ray_address, docker_ready, tmp_path):
+    """The container service failing under an episode (here: its container removed while the agent
+    works) is not the agent's 0 %: the row is ``infra_error`` with a ``sandbox:`` error, the session
+    exits as an infrastructure failure, and the next session runs that unit again."""
+    from pipeline.run_summary import EXIT_INFRA
+
+    out, spec, text = _sweep(tmp_path, "docker", ("offbyone", "format"))
+    removed: dict[str, object] = {}
+
+    def remove_its_container(unit, attempt, actor):
+        if removed:
+            return
+        removed["episode"] = episode = f"{unit.unit_id}-{attempt}"
+
+        def remove() -> None:
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and not (ids := _containers(**{LABEL_EPISODE: episode})):
+                time.sleep(0.02)
+            removed["ids"] = ids
+            subprocess.run(["docker", "rm", "-f", *ids], capture_output=True, check=True)
+
+        threading.Thread(target=remove, daemon=True).start()
+
+    first = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_dispatch=remove_its_container)).run()
+    con, _ = open_tables(RunStore(out))
+    rows = q(con, "select episode_id, end_reason, error from episodes order by 1")
+    assert (first.exit_code(), first.infra_kinds, first.finished_now) == (EXIT_INFRA, {"sandbox": 1}, 3), rows
+    failed = [r for r in rows if r[1] != "success"]
+    assert [(r[0], r[1]) for r in failed] == [(removed["episode"], "infra_error")]
+    # where the removal met the episode (its start, a command, its evaluation) varies; the kind does not
+    assert re.match(
+        r"sandbox: (reset failed: )?swe/fixture__(offbyone|format)-1: the sandbox (cannot be opened|failed): ", failed[0][2]
+    )
+    again = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert (again.finished_now, again.exit_code()) == (1, 0)
+    unit = str(removed["episode"]).rsplit("-", 1)[0]
+    con, _ = open_tables(RunStore(out))
+    assert q(con, f"select attempt, end_reason from episodes where unit_id = '{unit}' order by 1") == [
+        (1, "infra_error"),
+        (2, "success"),
+    ]
+
+
+@pytest.mark.docker
 def test_a_resume_removes_the_containers_a_killed_driver_left(ray_address, docker_ready, tmp_path):
     """A driver killed with SIGKILL leaves its episodes' containers; the next session of the run
     removes every container carrying the run's label before its workers start."""

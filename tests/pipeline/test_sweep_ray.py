@@ -310,3 +310,45 @@ workers: 2
     assert "units 2/2 done, 2 succeeded" in capsys.readouterr().out
     assert main(["sql", uri, "select count(*) as n from episodes where success", "--csv"]) == 0
     assert capsys.readouterr().out.splitlines() == ["n", "2"]
+
+
+PER_INSTANCE = """models:
+  - model: offline/expert
+    params: {max_tokens: 64}
+methods:
+  - method: react
+environments:
+  - benchmark: blocksworld
+    tasks: ["4"]
+workers: 2
+limits:
+  usd: 0.008
+"""
+
+
+def test_a_per_instance_cap_ends_each_episode_under_it_and_the_run_goes_on(ray_address, tmp_path):
+    """``limits.usd`` is a reservation at the gateway: no episode's calls cost more than the cap
+    (the call that would pass it is refused unsent), each such episode ends ``episode_limit``
+    (terminal: resume does not run it again) and nothing else is stopped."""
+    out = tmp_path / "per-instance"
+    text, spec = make_spec(out, PER_INSTANCE)
+    summary = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert (summary.exit_code(), summary.stopped) == (0, None)
+    con, _ = open_tables(RunStore(out))
+    episodes = q(con, "select episode_id, end_reason, error from episodes order by 1")
+    assert [e[1] for e in episodes] == ["episode_limit"] * 3
+    assert all(e[2].startswith("episode budget: spent $") and e[2].endswith("> the per-instance cap $0.008000") for e in episodes)
+    per_episode = q(
+        con,
+        """select episode_id, sum(cost_usd), count(*) filter (where status = 'ok'),
+                  count(*) filter (where status = 'error' and error_kind = 'budget')
+           from llm_calls group by 1 order by 1""",
+    )
+    assert [(p[0], p[3]) for p in per_episode] == [(e[0], 1) for e in episodes]  # one refused call each, the last
+    assert all(0 < p[1] <= 0.008 and p[2] >= 1 for p in per_episode)
+    # the refused calls reached no provider: every settled ledger entry is an ok call
+    ledger = [json.loads(line) for line in (out / "gateway" / "ledger.jsonl").read_text().splitlines()]
+    assert sum(1 for e in ledger if e["op"] == "reserve") == sum(p[2] for p in per_episode)
+    again = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+    assert again.total == 3 and again.all_done  # episode_limit is an end, not a stop: nothing to resume
+    assert q(con, "select count(*) from episodes") == [(3,)]

@@ -35,7 +35,7 @@ from schemas.records import EventRecord  # noqa: E402
 from workers.gateway.call_log import run_id_of  # noqa: E402
 from workers.gateway.client import GatewayClient  # noqa: E402
 from workers.gateway.core import DeploymentGateway  # noqa: E402
-from workers.gateway.ledger import BudgetLedger, LocalBudget  # noqa: E402
+from workers.gateway.ledger import BudgetLedger, EpisodeBudget, LocalBudget  # noqa: E402
 from workers.llm.errors import scrub  # noqa: E402
 from workers.llm.providers import DeploymentConfig  # noqa: E402
 from workers.log_setup import configure_from_env  # noqa: E402
@@ -134,11 +134,13 @@ class RemoteBudget:
         self.handle = handle
         self._unconfirmed: list[Any] = []  # settlements sent without waiting
 
-    async def begin(self, call_key: str, name: str, worst_pico: int, cache_key: str | None, owner: str) -> Any:
-        return await self.handle.begin.remote(call_key, name, worst_pico, cache_key, owner)
+    async def begin(
+        self, call_key: str, name: str, worst_pico: int, cache_key: str | None, owner: str, episode: EpisodeBudget | None = None
+    ) -> Any:
+        return await self.handle.begin.remote(call_key, name, worst_pico, cache_key, owner, episode)
 
-    async def reserve(self, call_key: str, name: str, worst_pico: int, owner: str) -> Any:
-        return await self.handle.reserve.remote(call_key, name, worst_pico, owner)
+    async def reserve(self, call_key: str, name: str, worst_pico: int, owner: str, episode: EpisodeBudget | None = None) -> Any:
+        return await self.handle.reserve.remote(call_key, name, worst_pico, owner, episode)
 
     async def settle(
         self, rid: int, cost_pico: int, status: str, result: Any, cache_key: str | None, litellm_cost_usd: float | None

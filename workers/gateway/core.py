@@ -69,7 +69,7 @@ from workers.gateway.call_state import (
     calls_as_result,
     response_as_result,
 )
-from workers.gateway.ledger import BudgetLedger, LocalBudget
+from workers.gateway.ledger import BudgetLedger, EpisodeBudget, LocalBudget
 from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
 from workers.llm.accounting import (
     USAGE_REJECTED_EVENT,
@@ -83,7 +83,7 @@ from workers.llm.calling import Attempt, attempt_async, litellm_kwargs, redacted
 from workers.llm.errors import Classified, classify, redact_known, refused_retry_after
 from workers.llm.fingerprint import request_fingerprint
 from workers.llm.litellm_setup import get_litellm
-from workers.llm.pricing import PriceTable, pico_to_usd
+from workers.llm.pricing import PriceTable, pico_to_usd, usd_to_pico
 from workers.llm.providers import DeploymentConfig, DeploymentConfigError, provider_messages, url_secrets
 
 #: extra seconds granted to litellm's own timeout before asyncio cuts the attempt
@@ -336,11 +336,12 @@ class DeploymentGateway(CallRecorder):
             raise FinalFailure(Classified("timeout", f"no capacity within the total timeout {cfg.total_timeout_s}s")) from None
         key = call.request.call_key
         try:
+            episode = self._episode_budget(call)
             if not call.begun:
-                answer = await self.budget.begin(key, self.deployment, call.worst, call.cache_key, self.instance)
+                answer = await self.budget.begin(key, self.deployment, call.worst, call.cache_key, self.instance, episode)
                 call.begun = True
             elif call.rid is None:
-                answer = await self.budget.reserve(key, self.deployment, call.worst, self.instance)
+                answer = await self.budget.reserve(key, self.deployment, call.worst, self.instance, episode)
             else:
                 return ticket
         except BaseException:
@@ -356,6 +357,15 @@ class DeploymentGateway(CallRecorder):
         raise FinalFailure(
             Classified("budget", answer["message"], refusal=BudgetRefusal.from_dict(refusal) if refusal is not None else None)
         )
+
+    @staticmethod
+    def _episode_budget(call: CallState) -> EpisodeBudget | None:
+        """The episode's cap and its spend so far (pico-USD) for this attempt's reservation: what
+        the episode spent before the call plus what earlier attempts of the call were charged."""
+        cap = call.request.episode_cap_usd
+        if cap is None:
+            return None
+        return (usd_to_pico(cap), usd_to_pico(call.request.episode_spent_usd) + call.charged)
 
     async def _one_attempt(self, call: CallState) -> Attempt:
         cfg = self.config

@@ -47,6 +47,9 @@ from workers.llm.pricing import pico_to_usd, usd_to_pico
 
 JOURNAL_NAME = "gateway/ledger.jsonl"
 
+#: an episode's own cap and what it spent before the call, in pico-USD (see ``BudgetLedger._refusal``)
+EpisodeBudget = tuple[int, int]
+
 
 class BudgetLedger:
     """Budget caps, reservations, settlements and recorded results of one run.
@@ -146,9 +149,14 @@ class BudgetLedger:
         self._journal.append(entry)
         self._settle_state(rid, int(pico), entry)
 
-    def _refusal(self, name: str, worst: int | None) -> BudgetRefusal | None:
+    def _refusal(self, name: str, worst: int | None, episode: EpisodeBudget | None = None) -> BudgetRefusal | None:
         """The cap this call would pass (typed: the driver stops the run or only the model by
-        its ``scope``), or None when it fits."""
+        its ``scope``; scope ``episode`` ends only the calling episode), or None when it fits.
+
+        ``episode``: (the episode's cap, what it spent before this call), in pico-USD. The
+        episode's calls are sequential, so the caller's own count is exact and the ledger keeps
+        no per-episode state. An unpriced call is not refused for the episode's cap alone (it
+        costs nothing we can count: a self-hosted model)."""
         if worst is None:
             if self.run_cap is not None or name in self.model_caps:
                 return BudgetRefusal("unpriced", name)
@@ -159,6 +167,10 @@ class BudgetLedger:
         committed = self.spent_by_model[name] + self.reserved_by_model[name]
         if cap is not None and committed + worst > cap:
             return BudgetRefusal("model", name, cap, committed, worst)
+        if episode is not None:
+            ep_cap, ep_spent = int(episode[0]), int(episode[1])
+            if ep_spent + worst > ep_cap:
+                return BudgetRefusal("episode", name, ep_cap, ep_spent, worst)
         return None
 
     # ---- public API (all amounts pico-USD; results are plain dicts so they cross Ray) ----
@@ -171,24 +183,33 @@ class BudgetLedger:
         owner: str = "",
         *,
         defer_sync: bool = False,
+        episode: EpisodeBudget | None = None,
     ) -> dict[str, Any]:
         """A recorded result for this call (idempotency / cache), or a reservation, or a refusal.
 
         A reservation is on disk when this returns, unless ``defer_sync``: then it is written
-        (and counted) but the caller must ``await commit()`` before sending the call."""
+        (and counted) but the caller must ``await commit()`` before sending the call. A recorded
+        result costs nothing, so it is served whatever ``episode`` (see :meth:`_refusal`) says."""
         with self._lock:
             if call_key in self.results:
                 return {"status": "recorded", "served_from": "ledger", "result": self.results[call_key]}
             if cache_key is not None and cache_key in self.cache:
                 return {"status": "recorded", "served_from": "cache", "result": self.cache[cache_key]}
-            return self._reserve(call_key, name, worst_pico, owner, defer_sync)
+            return self._reserve(call_key, name, worst_pico, owner, defer_sync, episode)
 
     def reserve(
-        self, call_key: str, name: str, worst_pico: int | None, owner: str = "", *, defer_sync: bool = False
+        self,
+        call_key: str,
+        name: str,
+        worst_pico: int | None,
+        owner: str = "",
+        *,
+        defer_sync: bool = False,
+        episode: EpisodeBudget | None = None,
     ) -> dict[str, Any]:
         """Another reservation for the same call (the previous attempt's was charged)."""
         with self._lock:
-            return self._reserve(call_key, name, worst_pico, owner, defer_sync)
+            return self._reserve(call_key, name, worst_pico, owner, defer_sync, episode)
 
     async def commit(self) -> None:
         """Return once every reservation written so far is on disk (group commit: concurrent
@@ -196,8 +217,16 @@ class BudgetLedger:
         if self.durable_reservations:
             await self._journal.commit()
 
-    def _reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str, defer_sync: bool = False) -> dict[str, Any]:
-        refusal = self._refusal(name, worst_pico)
+    def _reserve(
+        self,
+        call_key: str,
+        name: str,
+        worst_pico: int | None,
+        owner: str,
+        defer_sync: bool = False,
+        episode: EpisodeBudget | None = None,
+    ) -> dict[str, Any]:
+        refusal = self._refusal(name, worst_pico, episode)
         if refusal is not None:
             self.refusals += 1
             return {"status": "refused", "message": refusal.message, "refusal": refusal.to_dict()}
@@ -309,16 +338,25 @@ class LocalBudget:
         self.group_commit = group_commit
 
     async def begin(
-        self, call_key: str, name: str, worst_pico: int | None, cache_key: str | None, owner: str
+        self,
+        call_key: str,
+        name: str,
+        worst_pico: int | None,
+        cache_key: str | None,
+        owner: str,
+        episode: EpisodeBudget | None = None,
     ) -> Mapping[str, Any]:
         if not self.group_commit:
-            return self.ledger.begin(call_key, name, worst_pico, cache_key, owner)
-        return await self._durable(self.ledger.begin(call_key, name, worst_pico, cache_key, owner, defer_sync=True))
+            return self.ledger.begin(call_key, name, worst_pico, cache_key, owner, episode=episode)
+        answer = self.ledger.begin(call_key, name, worst_pico, cache_key, owner, defer_sync=True, episode=episode)
+        return await self._durable(answer)
 
-    async def reserve(self, call_key: str, name: str, worst_pico: int | None, owner: str) -> Mapping[str, Any]:
+    async def reserve(
+        self, call_key: str, name: str, worst_pico: int | None, owner: str, episode: EpisodeBudget | None = None
+    ) -> Mapping[str, Any]:
         if not self.group_commit:
-            return self.ledger.reserve(call_key, name, worst_pico, owner)
-        return await self._durable(self.ledger.reserve(call_key, name, worst_pico, owner, defer_sync=True))
+            return self.ledger.reserve(call_key, name, worst_pico, owner, episode=episode)
+        return await self._durable(self.ledger.reserve(call_key, name, worst_pico, owner, defer_sync=True, episode=episode))
 
     async def _durable(self, answer: dict[str, Any]) -> dict[str, Any]:
         """The answer, once its reservation is on disk. If the commit fails or the caller is

@@ -22,6 +22,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
+from recap.env import EnvError
+from schemas.labels import SANDBOX_INFRA_KIND
+
 SandboxKind = Literal["docker", "local"]
 SANDBOX_KINDS: tuple[SandboxKind, ...] = ("docker", "local")
 
@@ -36,8 +39,36 @@ LABEL_WORKER = "recap-eval.worker"
 
 
 class SandboxError(RuntimeError):
-    """The sandbox itself failed (Docker unreachable, image missing, container gone): the episode
-    ends ``env_error``; a model's failing command is never a SandboxError."""
+    """The sandbox itself failed (Docker unreachable, image missing, container gone); a model's
+    failing command is never a SandboxError.
+
+    ``service``: the container service failed (the daemon unreachable or erroring, a container
+    that could not start or is gone) - infrastructure, which may work on another try; False: the
+    sandbox cannot work for this instance (an image missing or at the wrong commit, a repository
+    that is not one), which would fail the same way again. :func:`episode_failure` turns either
+    into what the episode ends with."""
+
+    def __init__(self, message: str, *, service: bool = False) -> None:
+        super().__init__(message)
+        self.service = service
+
+
+class SandboxUnavailable(EnvError):
+    """The episode's sandbox service failed (:attr:`SandboxError.service`): the row's error starts
+    with ``sandbox:``, which the pipeline reads as infrastructure (``infra_error``, run again by
+    the next resume) instead of a 0 % outcome of the agent."""
+
+    kind = SANDBOX_INFRA_KIND
+
+    def __init__(self, message: str) -> None:
+        super().__init__(f"{SANDBOX_INFRA_KIND}: {message}")
+
+
+def episode_failure(instance_id: str, what: str, exc: SandboxError) -> EnvError:
+    """What an environment raises for a sandbox failure during an episode: a
+    :class:`SandboxUnavailable` when the service failed, else an ``env_error`` outcome."""
+    cls = SandboxUnavailable if exc.service else EnvError
+    return cls(f"{instance_id}: {what}: {exc}")
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import io
+import logging
 import posixpath
 import secrets
 import tarfile
@@ -38,11 +39,13 @@ import tempfile
 import time
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from workers.sandbox.base import CommandResult, Sandbox, SandboxError, SandboxKind, SandboxSpec
 from workers.sandbox.repo_copy import clone_at
 from workers.sandbox.wrapper import WRAPPER, parse
+
+log = logging.getLogger(__name__)
 
 BASE_ENV: Mapping[str, str] = {
     "PATH": "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin",
@@ -68,7 +71,8 @@ def docker_client(timeout_s: float = 120.0) -> Any:
     except docker.errors.DockerException as e:
         raise SandboxError(
             f"the Docker daemon is unreachable ({str(e).splitlines()[0][:160]}); start it "
-            "(`sudo systemctl start docker` or `sudo dockerd &`) or use `sandbox: local`"
+            "(`sudo systemctl start docker` or `sudo dockerd &`) or use `sandbox: local`",
+            service=True,
         ) from None
     return client
 
@@ -136,14 +140,20 @@ class DockerSandbox(Sandbox):
                 if tar_path is not None:
                     with open(tar_path, "rb") as f:
                         if not self._container.put_archive("/", f):
-                            raise SandboxError("copying the repository into the container failed")
+                            raise SandboxError("copying the repository into the container failed", service=True)
             except docker.errors.DockerException as e:
                 self.close()
-                raise SandboxError(f"starting the sandbox container failed: {str(e).splitlines()[0][:200]}") from None
+                raise SandboxError(
+                    f"starting the sandbox container failed: {str(e).splitlines()[0][:200]}", service=True
+                ) from None
             except BaseException:
                 self.close()
                 raise
-        self._keeper = self._keeper_pid()
+        try:
+            self._keeper = self._keeper_pid()
+        except SandboxError:
+            self.close()
+            raise
         name, email = GIT_USER
         setup = (
             f"git config --global user.name '{name}' && git config --global user.email '{email}'"
@@ -175,8 +185,32 @@ class DockerSandbox(Sandbox):
 
     def _keeper_pid(self) -> str:
         """PID 1's child (``sleep infinity``): the wrapper never kills it."""
-        code, out = self._container.exec_run(["cat", "/proc/1/task/1/children"])
+        try:
+            code, out = self._container.exec_run(["cat", "/proc/1/task/1/children"])
+        except Exception as e:  # an API error, or the daemon gone
+            self._service_failed(e)
         return out.decode().split()[0] if code == 0 and out.split() else "0"
+
+    def _service_failed(self, exc: Exception) -> NoReturn:
+        """Raise the SandboxError (``service``) for a Docker API failure under an open sandbox:
+        its container gone, or the daemon erroring."""
+        if not self._running():
+            raise SandboxError("the sandbox container is gone", service=True) from None
+        raise SandboxError(f"the sandbox cannot run commands: {str(exc).splitlines()[0][:200]}", service=True) from None
+
+    def _running(self) -> bool:
+        """Whether the container still exists and runs (asked of the daemon)."""
+        import docker.errors
+
+        if self._container is None:
+            return False
+        try:
+            self._container.reload()
+        except docker.errors.NotFound:
+            return False
+        except Exception as e:  # the daemon errs or is gone (a refused connection is not a DockerException)
+            raise SandboxError(f"the Docker daemon does not answer: {str(e).splitlines()[0][:200]}", service=True) from None
+        return bool(self._container.status == "running")
 
     def _live(self) -> None:
         if self._closed or self._container is None:
@@ -197,9 +231,9 @@ class DockerSandbox(Sandbox):
         try:
             exec_id = api.exec_create(self._container.id, argv, stdout=True, stderr=False)["Id"]
         except docker.errors.NotFound:
-            raise SandboxError("the sandbox container is gone") from None
-        except docker.errors.APIError as e:
-            raise SandboxError(f"the sandbox cannot run commands: {str(e)[:200]}") from None
+            raise SandboxError("the sandbox container is gone", service=True) from None
+        except Exception as e:  # an API error, or the daemon gone (requests' ConnectionError)
+            self._service_failed(e)
         pool = concurrent.futures.ThreadPoolExecutor(max_workers=1)
         fut = pool.submit(api.exec_start, exec_id, stream=False, demux=False)
         guarded = False
@@ -212,8 +246,8 @@ class DockerSandbox(Sandbox):
                 raw = fut.result(timeout=GUARD_GRACE_S)
             except concurrent.futures.TimeoutError:
                 raw = b""
-        except docker.errors.APIError as e:
-            raise SandboxError(f"the sandbox cannot run commands: {str(e)[:200]}") from None
+        except Exception as e:  # an API error, or the daemon gone (requests' ConnectionError)
+            self._service_failed(e)
         finally:
             pool.shutdown(wait=False)
         duration = time.monotonic() - t0
@@ -221,6 +255,8 @@ class DockerSandbox(Sandbox):
         if parsed is None:
             if guarded:
                 return CommandResult(None, f"[killed: no answer {tmo:g} s after the timeout]", 0, duration, timed_out=True)
+            if not self._running():  # killed under the command (the daemon, an OOM kill, a removal)
+                raise SandboxError("the sandbox container is gone", service=True)
             info = api.exec_inspect(exec_id)
             raise SandboxError(
                 f"the sandbox could not run the command wrapper (exit {info.get('ExitCode')}): "
@@ -278,7 +314,11 @@ class DockerSandbox(Sandbox):
             try:
                 stream, _stat = self._container.get_archive(target)
             except docker.errors.NotFound:
+                if not self._running():  # the container, not the file, is missing
+                    raise SandboxError("the sandbox container is gone", service=True) from None
                 raise FileNotFoundError(2, "No such file or directory", path) from None
+            except Exception as e:  # an API error, or the daemon gone
+                self._service_failed(e)
             with tarfile.open(fileobj=io.BytesIO(b"".join(stream))) as tar:
                 member = tar.next()
                 if member is None:
@@ -308,6 +348,8 @@ class DockerSandbox(Sandbox):
         try:
             ok = self._container.put_archive("/", buf.getvalue())
         except Exception as e:
+            if not self._running():  # the container is gone: not a file the agent can fix
+                raise SandboxError("the sandbox container is gone", service=True) from None
             raise OSError(f"cannot write {path}: {str(e)[:200]}") from None
         if not ok:
             raise OSError(f"cannot write {path}")
@@ -326,6 +368,8 @@ class DockerSandbox(Sandbox):
             c.remove(force=True)
         except docker.errors.NotFound:
             pass
+        except Exception as e:  # the daemon is gone: the run's next session removes what is left
+            log.warning("the sandbox container %s could not be removed: %s", c.id[:12], str(e).splitlines()[0][:200])
 
 
 def _tar_tree(src: Path, arcname: str, dest: Path) -> None:

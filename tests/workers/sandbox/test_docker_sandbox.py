@@ -109,18 +109,44 @@ def test_remove_labelled_refuses_empty_labels() -> None:
 
 
 def test_open_sandbox_refusals(repo: Repo, tmp_path: Path) -> None:
-    with pytest.raises(SandboxError, match=r"^unknown sandbox kind 'vm' \(known: docker, local\)$"):
+    """What would fail the same way on every try is not the container service (``service`` False)."""
+    with pytest.raises(SandboxError, match=r"^unknown sandbox kind 'vm' \(known: docker, local\)$") as e1:
         open_sandbox("vm", SandboxSpec(str(repo.path), repo.commit))
-    with pytest.raises(SandboxError, match=f"^repo_path is not a git repository: {tmp_path}$"):
+    with pytest.raises(SandboxError, match=f"^repo_path is not a git repository: {tmp_path}$") as e2:
         open_sandbox("local", SandboxSpec(str(tmp_path), "HEAD"))
-    with pytest.raises(SandboxError, match=f"^base_commit 'deadbeef' is not a commit of {repo.path}$"):
+    with pytest.raises(SandboxError, match=f"^base_commit 'deadbeef' is not a commit of {repo.path}$") as e3:
         open_sandbox("local", SandboxSpec(str(repo.path), "deadbeef"))
+    assert (e1.value.service, e2.value.service, e3.value.service) == (False, False, False)
 
 
 def test_open_sandbox_says_how_to_start_an_unreachable_daemon(repo: Repo, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DOCKER_HOST", "unix:///nonexistent/docker.sock")
-    with pytest.raises(SandboxError, match=r"^the Docker daemon is unreachable \(.*\); start it .*or use `sandbox: local`$"):
+    with pytest.raises(
+        SandboxError, match=r"^the Docker daemon is unreachable \(.*\); start it .*or use `sandbox: local`$"
+    ) as err:
         open_sandbox("docker", SandboxSpec(str(repo.path), repo.commit))
+    assert err.value.service  # the service: infrastructure, which the next resume tries again
+
+
+@docker
+def test_a_removed_container_is_the_service_failing_for_commands_and_files(
+    docker_ready: str, repo: Repo, labels: dict[str, str]
+) -> None:
+    """A container removed under a live sandbox (a daemon restart, an OOM kill of the container)
+    answers every command and file access with the service's SandboxError - never a "no such
+    file" the agent would be shown as if its path were wrong."""
+    box = open_sandbox("docker", SandboxSpec(str(repo.path), repo.commit, labels=labels))
+    try:
+        assert box.read_file("a.txt")
+        (c,) = _containers(labels)
+        c.remove(force=True)  # type: ignore[attr-defined]
+        for act in (lambda: box.run("true"), lambda: box.read_file("a.txt"), lambda: box.write_file("x.txt", b"x")):
+            with pytest.raises(SandboxError, match="^the sandbox container is gone$") as err:
+                act()
+            assert err.value.service
+    finally:
+        box.close()  # removing a container that is gone is no error
+    assert _containers(labels) == []
 
 
 @docker

@@ -38,7 +38,7 @@ from typing import Any
 from recap.env import Demonstration, EnvError, Environment, InvalidActionError, Reset, Step
 from recap.llm import ToolDef
 from schemas.kinds import EndReason
-from workers.sandbox.base import Sandbox, SandboxError, SandboxLimits, SandboxSpec
+from workers.sandbox.base import Sandbox, SandboxError, SandboxLimits, SandboxSpec, episode_failure
 
 from . import tools as T
 from .evaluate import Evaluation, evaluate, evaluation_record
@@ -136,7 +136,7 @@ class SweEnvironment(Environment):
         try:
             self._sandbox = self._open(self.spec)
         except SandboxError as exc:
-            raise EnvError(f"{self.instance_id}: the sandbox cannot be opened: {exc}") from exc
+            raise episode_failure(self.instance_id, "the sandbox cannot be opened", exc) from exc
         return Reset(observation=self.instance.problem_statement, valid_actions=None, goal=goal_text(self.workdir))
 
     def tool_defs(self) -> tuple[ToolDef, ...]:
@@ -158,7 +158,7 @@ class SweEnvironment(Environment):
             else:
                 out = self._run_tool(box, name, args)
         except SandboxError as exc:
-            raise EnvError(f"{self.instance_id}: the sandbox failed: {exc}") from exc
+            raise episode_failure(self.instance_id, "the sandbox failed", exc) from exc
         return self._after(out)
 
     def _run_tool(self, box: Sandbox, name: str, args: Mapping[str, Any]) -> T.ToolOutcome:
@@ -197,7 +197,7 @@ class SweEnvironment(Environment):
             if out.error is None and _is_sentinel(out.observation):
                 return _as_command(self._submit(review=False, started=started, spent=out))
         except SandboxError as exc:
-            raise EnvError(f"{self.instance_id}: the sandbox failed: {exc}") from exc
+            raise episode_failure(self.instance_id, "the sandbox failed", exc) from exc
         return _as_command(self._after(out))
 
     def _start_call(self) -> Sandbox:

@@ -275,5 +275,9 @@ def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Calla
 
 def _logged(ev: Evaluation, log: list[str]) -> Evaluation:
     """``ev`` with the log's tail (:func:`_tail`) and the whole log's size."""
-    text = "\n".join(log)
+    return with_log(ev, "\n".join(log))
+
+
+def with_log(ev: Evaluation, text: str) -> Evaluation:
+    """``ev`` with ``text`` as its log: the tail kept (:data:`LOG_CAP`), the whole size counted."""
     return replace(ev, log=_tail(text), log_bytes=len(text.encode("utf-8")))

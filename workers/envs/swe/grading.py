@@ -38,8 +38,10 @@ from typing import Any, Literal
 
 from .instances import SweInstance
 
-Grading = Literal["ours", "official", "both"]
-#: the grading modes: our evaluator only, the official harness's only, or both (the default)
+Grading = Literal["ours", "official", "both", "harness"]
+#: the grading modes: our evaluator only, the official harness's only, or both (the default);
+#: SWE-bench Verified has a fourth, ``harness`` (the harness's own full Docker evaluation,
+#: :mod:`workers.envs.swe_verified.harness_eval`), which needs the instance's harness image
 GRADINGS: tuple[Grading, ...] = ("ours", "official", "both")
 DEFAULT_GRADING: Grading = "both"
 #: a listed test the parser did not report (as :data:`.evaluate.MISSING`)
@@ -74,13 +76,14 @@ def official_problem() -> str | None:
     return None
 
 
-def check_grading(value: Any) -> Grading:
-    """``value`` as a grading mode; ValueError (one line) for another value, or for ``official``
-    where ``swebench`` cannot be imported (``both`` then grades with ours alone, see :func:`official_grade`)."""
-    if value not in GRADINGS:
-        raise ValueError(f"grading must be one of {', '.join(GRADINGS)}, got {value!r}")
-    if value == "official" and (problem := official_problem()) is not None:
-        raise ValueError(f"grading 'official': {problem}")
+def check_grading(value: Any, choices: tuple[Grading, ...] = GRADINGS) -> Grading:
+    """``value`` as one of ``choices``; ValueError (one line) for another value, or for ``official``
+    or ``harness`` where ``swebench`` cannot be imported (``both`` then grades with ours alone, see
+    :func:`official_grade`)."""
+    if value not in choices:
+        raise ValueError(f"grading must be one of {', '.join(choices)}, got {value!r}")
+    if value in ("official", "harness") and (problem := official_problem()) is not None:
+        raise ValueError(f"grading {value!r}: {problem}")
     return value
 
 

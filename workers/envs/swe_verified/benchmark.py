@@ -9,7 +9,9 @@ Options of :meth:`VerifiedBenchmark.make` (and a sweep's ``environments[].option
 ``sandbox`` (``docker`` only: the instance's image is a Docker image); ``network``;
 ``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``, ``disk_bytes`` (the
 repository folder's cap, default :data:`DEFAULT_DISK_BYTES`: the harness's repositories are larger
-than the example tasks), ``total_output_bytes``, ``eval_timeout_s``; ``step_multiplier``/``seed``
+than the example tasks), ``total_output_bytes``, ``eval_timeout_s``; ``grading`` (``both``, the default, ``ours``, ``official``, or
+``harness``: the harness's own run_evaluation in the instance's image decides,
+:mod:`.harness_eval`); ``step_multiplier``/``seed``
 (no effect); ``open_sandbox``/``sandbox_labels`` (as for ``swe``).
 
 The methods, profiles and leftover removal are the ``swe`` benchmark's (this class extends it).
@@ -27,15 +29,19 @@ from recap.env import Environment, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
 from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
 from workers.envs.swe.env import DEFAULT_TOTAL_OUTPUT_BYTES
+from workers.envs.swe.grading import DEFAULT_GRADING, GRADINGS, Grading, check_grading
 from workers.envs.swe.instances import SweInstance
-from workers.sandbox.base import SandboxError, SandboxLimits
+from workers.sandbox.base import SandboxError, SandboxLimits, episode_failure
 
 from . import harness
 from .data_folders import FOLDER
 from .dataset import FOLDER_NAME, ID_PATTERN, records
 from .env import BENCHMARK_NAME, VerifiedEnvironment
+from .harness_eval import HARNESS_GRADING, remove_harness_containers
 from .images import how_to_get, image_of, local_images, missing_images
 
+#: the grading modes here: the coding env's three, and the harness's own full evaluation
+VERIFIED_GRADINGS: tuple[Grading, ...] = (*GRADINGS, HARNESS_GRADING)
 #: the repository folder's size cap (the harness's repositories with their builds run to a few hundred MB)
 DEFAULT_DISK_BYTES = 4 << 30
 _LIMITS = ("command_timeout_s", "output_bytes", "max_commands", "wall_time_s", "disk_bytes")
@@ -46,6 +52,7 @@ ACCEPTED = (
     *_LIMITS,
     "total_output_bytes",
     "eval_timeout_s",
+    "grading",
     "step_multiplier",
     "seed",
     "sandbox_labels",
@@ -89,6 +96,11 @@ class VerifiedBenchmark(SweBenchmark):
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The stored dataset (``swebench-verified``)."""
         return {FOLDER_NAME: FOLDER}
+
+    def remove_leftovers(self, run_id: str, worker_id: str | None = None) -> int:
+        """The episodes' sandboxes by label (as ``swe``), and the containers of ``grading: harness``
+        evaluations by the harness's name for them (:func:`.harness_eval.harness_run_id`)."""
+        return super().remove_leftovers(run_id, worker_id) + remove_harness_containers(run_id, worker_id)
 
     def list_instances(self, selector: str | None = None) -> list[str]:
         """:meth:`list_instances_for` on the folder the shared rule finds."""
@@ -174,13 +186,19 @@ class VerifiedBenchmark(SweBenchmark):
         if rec is None:
             raise UnknownInstanceError(f"no SWE-bench Verified instance {wanted!r} in the stored dataset")
         inst = as_instance(rec, harness.test_cmd(rec["repo"], rec["version"]))
-        image = image_of(wanted, local_images()) if opener is None else None
+        try:
+            image = image_of(wanted, local_images()) if opener is None else None
+        except SandboxError as exc:  # the daemon failed: infrastructure when it is the service
+            raise episode_failure(instance_id, "the images cannot be listed", exc) from exc
         if opener is None and image is None:
             missing = missing_images([wanted], set())
             raise SandboxError(f"the image of {wanted} is not here ({missing[0]}); get it with {how_to_get(missing)}")
+        grading = check_grading(options.get("grading", DEFAULT_GRADING), VERIFIED_GRADINGS)
         return VerifiedEnvironment(
             inst,
             opener if opener is not None else default_open_sandbox(kind),
+            record=rec,
+            grading=grading,
             split="test",
             limits=limits,
             image=image or "",

@@ -16,14 +16,18 @@ submission, evaluation - is the same class):
 from __future__ import annotations
 
 import shlex
+import time
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
 from recap.env import EnvError, Reset
 from workers.envs.swe.env import SUBMISSION_FILE, SweEnvironment
+from workers.envs.swe.evaluate import MISSING, Evaluation
 from workers.sandbox.base import SandboxError
 from workers.sandbox.docker_sandbox import BASE_ENV
 
+from .harness_eval import HARNESS_GRADING, harness_evaluation, harness_run_id, namespace_for, run_harness
 from .images import CONDA_BIN, CONDA_ENV_BIN, TESTBED
 
 BENCHMARK_NAME = "swe-verified"
@@ -36,8 +40,10 @@ class VerifiedEnvironment(SweEnvironment):
 
     benchmark = BENCHMARK_NAME
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, record: Mapping[str, Any] | None = None, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        #: the dataset record as stored (what ``grading: harness`` hands the harness)
+        self.record = dict(record or {})
         self.instance_id = f"{BENCHMARK_NAME}/{self.instance.instance_id}"
         path = f"{CONDA_ENV_BIN}:{CONDA_BIN}:{BASE_ENV['PATH']}"
         self.spec = replace(self.spec, repo_path=None, workdir=TESTBED, env={**self.spec.env, "PATH": path})
@@ -61,6 +67,32 @@ class VerifiedEnvironment(SweEnvironment):
         if res.exit_code != 0:
             raise SandboxError(f"git diff failed in the sandbox: {res.output.strip()[:300]}")
         return box.read_file(SUBMISSION_FILE).decode("utf-8", errors="replace")
+
+    def _judge(self) -> Evaluation:
+        """``grading: harness``: the diff goes to the harness's own run_evaluation
+        (:mod:`.harness_eval`) instead of our clean copy; every other mode is the coding env's."""
+        if self.grading != HARNESS_GRADING:
+            return super()._judge()
+        started = time.monotonic()
+        diff = self.current_diff()
+        self._done = True
+        if not diff.strip():  # the harness skips an empty patch: nothing to run
+            wanted = (*self.instance.fail_to_pass, *self.instance.pass_to_pass)
+            ev = Evaluation(False, "no_patch", {t: MISSING for t in wanted}, grading=HARNESS_GRADING)
+        else:
+            self.close()  # the episode's container is done with; the harness starts its own
+            run = run_harness(
+                self.record,
+                diff,
+                run_id=harness_run_id(self.spec.labels),
+                namespace=namespace_for(self.spec.image),
+                timeout_s=self.eval_timeout_s,
+            )
+            ev = harness_evaluation(self.instance, run)
+        self.evaluation = replace(ev, pass_to_pass=self.instance.pass_to_pass, duration_s=time.monotonic() - started)
+        self._patch = diff
+        self._judged.append((self.evaluation, diff))
+        return self.evaluation
 
     def _base_text(self, path: str) -> str:
         box = self._box()

@@ -54,7 +54,7 @@ def local_images() -> set[str]:
     try:
         listed = client.api.images()
     except docker.errors.DockerException as exc:
-        raise SandboxError(f"cannot list the Docker images: {str(exc).splitlines()[0][:160]}") from None
+        raise SandboxError(f"cannot list the Docker images: {str(exc).splitlines()[0][:160]}", service=True) from None
     return {tag for image in listed for tag in (image.get("RepoTags") or []) if tag and tag != "<none>:<none>"}
 
 
@@ -95,5 +95,5 @@ def present_tags(client: Any) -> set[str]:
     try:
         listed = client.images.list()
     except docker.errors.DockerException as exc:
-        raise SandboxError(f"cannot list the Docker images: {str(exc).splitlines()[0][:160]}") from None
+        raise SandboxError(f"cannot list the Docker images: {str(exc).splitlines()[0][:160]}", service=True) from None
     return {tag for image in listed for tag in (image.tags or [])}

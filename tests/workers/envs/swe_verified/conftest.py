@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -47,3 +49,29 @@ def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setenv("RECAP_EVAL_CACHE", str(tmp_path / "cache"))
     monkeypatch.delenv("SWEBENCH_VERIFIED_DATA", raising=False)
     return tmp_path / "cache" / "data" / "swebench-verified"
+
+
+@contextmanager
+def built_image(base: str, repo: Path, tag: str, extra: str = "") -> Iterator[str]:
+    """An image ``FROM base`` with ``repo`` at ``/testbed`` (plus the Dockerfile lines ``extra``),
+    tagged ``tag`` and labelled as a test image while the block runs, removed after it."""
+    import io
+    import tarfile
+
+    from workers.sandbox.docker_sandbox import docker_client
+
+    dockerfile = f"FROM {base}\nCOPY repo /testbed\nWORKDIR /testbed\n{extra}".encode()
+    context = io.BytesIO()
+    with tarfile.open(fileobj=context, mode="w") as tar:
+        info = tarfile.TarInfo("Dockerfile")
+        info.size = len(dockerfile)
+        tar.addfile(info, io.BytesIO(dockerfile))
+        tar.add(str(repo), arcname="repo")
+    client = docker_client()
+    client.images.build(
+        fileobj=io.BytesIO(context.getvalue()), custom_context=True, tag=tag, rm=True, labels={"recap-eval.test": "swe-verified"}
+    )
+    try:
+        yield tag
+    finally:
+        client.images.remove(tag, force=True)

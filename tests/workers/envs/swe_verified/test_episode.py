@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import io
 import json
 import secrets
 import subprocess
-import tarfile
 from collections.abc import Iterator
 
 import pytest
@@ -15,34 +13,18 @@ from workers.envs.registry import make_env
 from workers.envs.swe.examples import TEST_CMD
 from workers.envs.swe_verified import images
 
-from .conftest import write_jsonl
+from .conftest import built_image, write_jsonl
 
 
 @pytest.fixture
 def instance_image(docker_ready: str, verified_fixtures, records, tmp_path) -> Iterator[tuple[str, dict[str, str]]]:
     """A record with a unique id and its image, named as the harness names a local build:
     ``FROM`` the sandbox image, the fixture repository at ``/testbed`` at the base commit. Removed afterwards."""
-    from workers.sandbox.docker_sandbox import docker_client
-
     number = str(secrets.randbelow(10**9) + 10**9)
     rec = {**records[0], "instance_id": f"fixture__offbyone-{number}"}
-    repo = verified_fixtures.tasks_file.parent / "repos" / "offbyone"
-    context = io.BytesIO()
-    with tarfile.open(fileobj=context, mode="w") as tar:
-        dockerfile = f"FROM {docker_ready}\nCOPY repo /testbed\nWORKDIR /testbed\n".encode()
-        info = tarfile.TarInfo("Dockerfile")
-        info.size = len(dockerfile)
-        tar.addfile(info, io.BytesIO(dockerfile))
-        tar.add(str(repo), arcname="repo")
     name = images.local_image(rec["instance_id"])
-    client = docker_client()
-    client.images.build(
-        fileobj=io.BytesIO(context.getvalue()), custom_context=True, tag=name, rm=True, labels={"recap-eval.test": "swe-verified"}
-    )
-    try:
+    with built_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name):
         yield name, rec
-    finally:
-        client.images.remove(name, force=True)
 
 
 @pytest.mark.docker

@@ -1,0 +1,123 @@
+"""A sandbox that fails under an episode: when the container service failed (the daemon, a
+container gone) the episode's error starts with ``sandbox:`` and the pipeline reads the row as
+infrastructure (``infra_error``, run again by resume); when the sandbox fails for the instance or
+for what the agent did, it stays an ``env_error`` outcome. Played through the agent's runtime on
+the fixture tasks with real local sandboxes, one of which is made to fail."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from recap.methods import make_agent
+from schemas.labels import infra_failure
+from workers.envs.registry import get_benchmark, make_env
+from workers.envs.swe.env import SweEnvironment
+from workers.envs.swe.examples import Fixtures
+from workers.episode_worker import EpisodeClient
+from workers.llm.direct import LiteLLMClient
+from workers.llm.providers import DeploymentConfig
+from workers.sandbox import Sandbox, SandboxError, SandboxSpec, open_sandbox
+
+
+class _FailsAfter:
+    """A local sandbox whose commands fail with ``error`` after ``after`` of them ran."""
+
+    def __init__(self, box: Sandbox, after: int, error: SandboxError) -> None:
+        self.box, self.after, self.error, self.runs = box, after, error, 0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.box, name)
+
+    def __enter__(self) -> _FailsAfter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.box.close()
+
+    def run(self, command: str, **kw: Any) -> Any:
+        self.runs += 1
+        if self.runs > self.after:
+            raise self.error
+        return self.box.run(command, **kw)
+
+
+def _opener(after: int, error: SandboxError, opened: list[Any], fail_open: bool = False) -> Callable[[SandboxSpec], Any]:
+    def open_(spec: SandboxSpec) -> Any:
+        if fail_open:
+            raise error
+        box = _FailsAfter(open_sandbox("local", spec), after, error)
+        opened.append(box)
+        return box
+
+    return open_
+
+
+def _play(fixtures: Fixtures, opener: Callable[[SandboxSpec], Any], method: str = "recap") -> Any:
+    env = make_env("swe/fixture__format-1", instances_file=str(fixtures.tasks_file), open_sandbox=opener)
+    assert isinstance(env, SweEnvironment)
+    agent = make_agent(method, profile="paper", benchmark=get_benchmark("swe"))
+    try:
+        # the offline expert through litellm, with the expert plan of the current state as a worker adds it
+        client = EpisodeClient(LiteLLMClient(DeploymentConfig(model="offline/expert")), env, sampling_seed=0, offline=True)
+        return agent.run(env, client, episode_id="ep", demonstration=False)
+    finally:
+        env.close()
+
+
+RUNS = {"recap": [2], "react": [2]}
+
+
+@pytest.mark.parametrize("method", ["recap", "react"])
+def test_a_container_that_is_gone_mid_episode_is_infrastructure(fixtures: Fixtures, method: str) -> None:
+    opened: list[Any] = []
+    gone = SandboxError("the sandbox container is gone", service=True)
+    result = _play(fixtures, _opener(1, gone, opened), method)
+    assert (result.end_reason, result.error) == (
+        "env_error",
+        "sandbox: swe/fixture__format-1: the sandbox failed: the sandbox container is gone",
+    )
+    assert [b.runs for b in opened] == RUNS[method]  # one command ran, the second met the failure
+    assert infra_failure(result.end_reason, result.error) == "sandbox"
+    assert infra_failure("infra_error", result.error) == "sandbox"  # the row as the pipeline writes it
+
+
+def test_a_daemon_that_cannot_open_the_sandbox_at_reset_is_infrastructure(fixtures: Fixtures) -> None:
+    down = SandboxError("the Docker daemon is unreachable (connection refused); start it", service=True)
+    result = _play(fixtures, _opener(0, down, [], fail_open=True))
+    assert result.error == (
+        "sandbox: reset failed: swe/fixture__format-1: the sandbox cannot be opened: "
+        "the Docker daemon is unreachable (connection refused); start it"
+    )
+    assert infra_failure(result.end_reason, result.error) == "sandbox"
+
+
+def test_a_sandbox_that_fails_for_the_instance_or_the_agent_is_an_outcome(fixtures: Fixtures) -> None:
+    # an image at the wrong commit would fail the same way on every try: not infrastructure
+    wrong = SandboxError("/testbed in the image x is at 1234, not at base_commit abcd")
+    result = _play(fixtures, _opener(0, wrong, [], fail_open=True))
+    assert result.error == "reset failed: swe/fixture__format-1: the sandbox cannot be opened: " + str(wrong)
+    assert infra_failure(result.end_reason, result.error) is None
+    # a repository the agent broke (git cannot diff it) is the agent's outcome
+    broken = SandboxError("git diff failed in the sandbox: fatal: not a git repository")
+    result = _play(fixtures, _opener(3, broken, []))
+    assert (result.end_reason, infra_failure(result.end_reason, result.error)) == ("env_error", None)
+    assert (
+        result.error == "swe/fixture__format-1: the sandbox failed: git diff failed in the sandbox: fatal: not a git repository"
+    )
+
+
+@pytest.mark.parametrize(
+    ("end_reason", "error", "kind"),
+    [
+        ("env_error", "sandbox: x: the sandbox failed: gone", "sandbox"),
+        ("env_error", "SandboxError: the sandbox container is gone", None),  # rows written before the kind: outcomes
+        ("env_error", "x: the sandbox failed: sandbox: gone", None),  # the kind is the first word only
+        ("infra_error", "sandbox: x", "sandbox"),
+        ("wiki_error", "sandbox: x", None),
+    ],
+)
+def test_only_an_error_that_starts_with_the_sandbox_kind_is_infrastructure(end_reason: str, error: str, kind: str | None) -> None:
+    assert infra_failure(end_reason, error) == kind
