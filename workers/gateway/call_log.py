@@ -98,16 +98,21 @@ class CallLog:
             self._write_events(events)
 
     async def run_periodic_flush(self) -> None:
-        """Flush every ``flush_interval_s`` until cancelled (then flush once more)."""
+        """Flush every ``flush_interval_s`` until cancelled (then flush once more).
+
+        A batch being written when the task is cancelled is waited for before the task ends:
+        the rows were already taken off the buffer, and the thread writing them cannot be
+        cancelled, so a caller that awaited this task and then ended the process (the gateway's
+        close, then ``ray.kill``) would otherwise lose them."""
         try:
             while True:
                 await asyncio.sleep(self.flush_interval_s)
                 rows, self._pending = self._pending, []
                 if rows:
-                    await asyncio.to_thread(self._write, rows)
+                    await _finish(asyncio.ensure_future(asyncio.to_thread(self._write, rows)))
                 events, self._events = self._events, []
                 if events:
-                    await asyncio.to_thread(self._write_events, events)
+                    await _finish(asyncio.ensure_future(asyncio.to_thread(self._write_events, events)))
         finally:
             self.flush()
 
@@ -124,3 +129,13 @@ class CallLog:
     @property
     def pending(self) -> int:
         return len(self._pending)
+
+
+async def _finish(write: asyncio.Future) -> None:
+    """Await ``write``; when cancelled meanwhile, still wait for it to end, then pass the
+    cancellation on (the write is a thread: it goes on either way, and must end before we do)."""
+    try:
+        await asyncio.shield(write)
+    except asyncio.CancelledError:
+        await asyncio.wait([write])
+        raise
