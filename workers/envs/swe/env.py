@@ -260,9 +260,12 @@ class SweEnvironment(Environment):
         return Step(submitted_text(ev), None, True, ev.success, info)
 
     def _judge(self) -> Evaluation:
-        """Take the diff, end the episode, judge the diff on a clean copy."""
+        """Take the diff, end the episode, judge the diff on a clean copy. The episode's sandbox
+        is closed first: an episode never holds two containers, so ``ray.sandboxes_per_node``
+        bounds the evaluations' containers too."""
         diff = self.current_diff()
         self._done = True
+        self.close()
         self.evaluation = evaluate(self.instance, diff, self._open_clean, grading=self.grading)
         self._patch = diff
         self._judged.append((self.evaluation, diff))

@@ -80,7 +80,7 @@ class VerifiedEnvironment(SweEnvironment):
             wanted = (*self.instance.fail_to_pass, *self.instance.pass_to_pass)
             ev = Evaluation(False, "no_patch", {t: MISSING for t in wanted}, grading=HARNESS_GRADING)
         else:
-            self.close()  # the episode's container is done with; the harness starts its own
+            self.close()  # the episode's container is done with; the harness starts its own (one at a time)
             run = run_harness(
                 self.record,
                 diff,
