@@ -63,6 +63,29 @@ def _containers(**labels: str) -> list[str]:
     return done.stdout.split()
 
 
+class _FirstContainer:
+    """A driver hook: once the first dispatched episode's container runs, ``act(container ids,
+    worker actor)`` in a thread (the episode it acted on and the ids it saw are kept)."""
+
+    def __init__(self, act) -> None:
+        self.act = act
+        self.episode = ""
+        self.seen: list[str] = []
+
+    def hook(self, unit, attempt, actor) -> None:
+        if self.episode:
+            return
+        self.episode = f"{unit.unit_id}-{attempt}"
+        threading.Thread(target=self._wait_then_act, args=(actor,), daemon=True).start()
+
+    def _wait_then_act(self, actor) -> None:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not self.seen:
+            self.seen = _containers(**{LABEL_EPISODE: self.episode})
+            time.sleep(0.02)
+        self.act(self.seen, actor)
+
+
 def _check_run(out: Path, n: int) -> None:
     con, bad = open_tables(RunStore(out))
     assert bad == []
@@ -148,28 +171,11 @@ def test_a_killed_workers_container_is_removed_and_its_unit_resolves(ray_address
     import ray
 
     out, spec, text = _sweep(tmp_path, "docker", ("offbyone", "format"))
-    killed: dict[str, object] = {}
-
-    def kill_when_its_container_runs(unit, attempt, actor):
-        if killed:
-            return
-        killed["episode"] = episode = f"{unit.unit_id}-{attempt}"
-
-        def kill() -> None:
-            deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and not _containers(**{LABEL_EPISODE: episode}):
-                time.sleep(0.05)
-            killed["seen"] = _containers(**{LABEL_EPISODE: episode})
-            os.kill(ray.get(actor.pid.remote()), signal.SIGKILL)
-
-        threading.Thread(target=kill, daemon=True).start()
-
-    summary = Driver(
-        prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_dispatch=kill_when_its_container_runs)
-    ).run()
+    killed = _FirstContainer(lambda ids, actor: os.kill(ray.get(actor.pid.remote()), signal.SIGKILL))
+    summary = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_dispatch=killed.hook)).run()
     assert (summary.finished_now, summary.worker_restarts, summary.exit_code()) == (4, 1, 0)
-    assert len(killed["seen"]) == 1  # the killed attempt's container was running
-    assert _containers(**{LABEL_EPISODE: killed["episode"]}) == []
+    assert len(killed.seen) == 1  # the killed attempt's container was running
+    assert _containers(**{LABEL_EPISODE: killed.episode}) == []
     con, _ = open_tables(RunStore(out))
     assert q(con, "select count(*) from episodes where end_reason = 'success'") == [(4,)], q(
         con, "select unit_id, attempt, end_reason, error from episodes order by 1, 2"
@@ -186,35 +192,20 @@ def test_a_container_removed_under_its_episode_is_infrastructure_and_resume_runs
     from pipeline.run_summary import EXIT_INFRA
 
     out, spec, text = _sweep(tmp_path, "docker", ("offbyone", "format"))
-    removed: dict[str, object] = {}
-
-    def remove_its_container(unit, attempt, actor):
-        if removed:
-            return
-        removed["episode"] = episode = f"{unit.unit_id}-{attempt}"
-
-        def remove() -> None:
-            deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and not (ids := _containers(**{LABEL_EPISODE: episode})):
-                time.sleep(0.02)
-            removed["ids"] = ids
-            subprocess.run(["docker", "rm", "-f", *ids], capture_output=True, check=True)
-
-        threading.Thread(target=remove, daemon=True).start()
-
-    first = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_dispatch=remove_its_container)).run()
+    removed = _FirstContainer(lambda ids, actor: subprocess.run(["docker", "rm", "-f", *ids], capture_output=True, check=True))
+    first = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_dispatch=removed.hook)).run()
     con, _ = open_tables(RunStore(out))
     rows = q(con, "select episode_id, end_reason, error from episodes order by 1")
     assert (first.exit_code(), first.infra_kinds, first.finished_now) == (EXIT_INFRA, {"sandbox": 1}, 3), rows
     failed = [r for r in rows if r[1] != "success"]
-    assert [(r[0], r[1]) for r in failed] == [(removed["episode"], "infra_error")]
+    assert [(r[0], r[1]) for r in failed] == [(removed.episode, "infra_error")]
     # where the removal met the episode (its start, a command, its evaluation) varies; the kind does not
     assert re.match(
         r"sandbox: (reset failed: )?swe/fixture__(offbyone|format)-1: the sandbox (cannot be opened|failed): ", failed[0][2]
     )
     again = Driver(prepare(spec, text), make_backend(spec), progress="off").run()
     assert (again.finished_now, again.exit_code()) == (1, 0)
-    unit = str(removed["episode"]).rsplit("-", 1)[0]
+    unit = removed.episode.rsplit("-", 1)[0]
     con, _ = open_tables(RunStore(out))
     assert q(con, f"select attempt, end_reason from episodes where unit_id = '{unit}' order by 1") == [
         (1, "infra_error"),

@@ -260,6 +260,10 @@ def _check_holm(t, keys: list[str]) -> None:
     assert f"; {len(slots)} comparisons (Holm over the table)." in t.note
 
 
+# ~3 minutes of one test worker (six methods x twenty Robotouille tasks and six ALFWorld types through
+# the whole pipeline): in the slow suite (`bash scripts/test.sh slow`); the cross-model and ablation
+# protocols below take the same paper-section path from a real sweep in the default suite
+@pytest.mark.slow
 def test_paper_section_from_the_main_protocols(main_runs, tmp_path):
     main_dirs = main_runs
     report = build_report(main_dirs, ReportOptions(formats=("md",), paper_only=True))

@@ -95,6 +95,7 @@ class SweEnvironment(Environment):
         self.grading = grading
         self._open = open_sandbox
         self._sandbox: Sandbox | None = None
+        self._last_workdir = ""
         self.evaluation: Evaluation | None = None
         #: the judged submissions not yet handed over (:meth:`take_records`): evaluation and diff
         self._judged: list[tuple[Evaluation, str]] = []
@@ -114,8 +115,11 @@ class SweEnvironment(Environment):
     # -- sandbox ---------------------------------------------------------------------------------
     @property
     def workdir(self) -> str:
-        """The repository folder as commands see it (the spec's until a sandbox is open)."""
-        return self._sandbox.workdir if self._sandbox is not None else self.spec.workdir
+        """The repository folder as commands see it (the spec's until a sandbox is open; the last
+        sandbox's once the episode's is closed)."""
+        if self._sandbox is not None:
+            return self._sandbox.workdir
+        return self._last_workdir or self.spec.workdir
 
     def _box(self) -> Sandbox:
         if self._sandbox is None:
@@ -201,10 +205,9 @@ class SweEnvironment(Environment):
         return _as_command(self._after(out))
 
     def _start_call(self) -> Sandbox:
-        box = self._box()
-        if self._done:
+        if self._done:  # its sandbox is closed once the diff is judged
             raise EnvError(f"{self.instance_id}: the episode is over; call reset() to play again")
-        return box
+        return self._box()
 
     def _after(self, out: T.ToolOutcome, extra_s: float = 0.0) -> Step:
         """Count the call against the episode's limits; end the episode when one is reached."""
@@ -375,6 +378,7 @@ class SweEnvironment(Environment):
         """Close the episode's sandbox (safe to call twice)."""
         box, self._sandbox = self._sandbox, None
         if box is not None:
+            self._last_workdir = box.workdir
             box.close()
 
 
