@@ -198,7 +198,7 @@ def test_a_container_removed_under_its_episode_is_infrastructure_and_resume_runs
     rows = q(con, "select episode_id, end_reason, error from episodes order by 1")
     assert (first.exit_code(), first.infra_kinds, first.finished_now) == (EXIT_INFRA, {"sandbox": 1}, 3), rows
     failed = [r for r in rows if r[1] != "success"]
-    assert [(r[0], r[1]) for r in failed] == [(removed.episode, "infra_error")]
+    assert [(r[0], r[1]) for r in failed] == [(removed.episode, "infra_error")], rows
     # where the removal met the episode (its start, a command, its evaluation) varies; the kind does not
     assert re.match(
         r"sandbox: (reset failed: )?swe/fixture__(offbyone|format)-1: the sandbox (cannot be opened|failed): ", failed[0][2]
