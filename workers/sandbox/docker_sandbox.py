@@ -257,7 +257,10 @@ class DockerSandbox(Sandbox):
                 return CommandResult(None, f"[killed: no answer {tmo:g} s after the timeout]", 0, duration, timed_out=True)
             if not self._running():  # killed under the command (the daemon, an OOM kill, a removal)
                 raise SandboxError("the sandbox container is gone", service=True)
-            info = api.exec_inspect(exec_id)
+            try:
+                info = api.exec_inspect(exec_id)
+            except Exception as e:  # an API error, or the daemon gone
+                self._service_failed(e)
             raise SandboxError(
                 f"the sandbox could not run the command wrapper (exit {info.get('ExitCode')}): "
                 f"{raw[-200:].decode(errors='replace').strip()}"
@@ -313,13 +316,14 @@ class DockerSandbox(Sandbox):
         for _ in range(16):
             try:
                 stream, _stat = self._container.get_archive(target)
+                data = b"".join(stream)  # read here: a daemon that fails mid-stream is the service too
             except docker.errors.NotFound:
                 if not self._running():  # the container, not the file, is missing
                     raise SandboxError("the sandbox container is gone", service=True) from None
                 raise FileNotFoundError(2, "No such file or directory", path) from None
             except Exception as e:  # an API error, or the daemon gone
                 self._service_failed(e)
-            with tarfile.open(fileobj=io.BytesIO(b"".join(stream))) as tar:
+            with tarfile.open(fileobj=io.BytesIO(data)) as tar:
                 member = tar.next()
                 if member is None:
                     raise FileNotFoundError(2, "No such file or directory", path)

@@ -170,3 +170,32 @@ def test_wrapper_trailer_cannot_be_forged_by_output() -> None:
         True,
     )
     assert parse(b"out\nabc 0 1 2 0\n", "nonce1") is None
+
+
+class _DaemonFailsMidStream:
+    """A container whose file archive breaks off mid-stream (the daemon failing while it sends)."""
+
+    status = "running"
+    id = "c0ffee"
+
+    def reload(self) -> None:
+        pass
+
+    def get_archive(self, path: str):
+        import requests
+
+        def chunks():
+            yield b"partial"
+            raise requests.exceptions.ChunkedEncodingError("Connection broken: IncompleteRead")
+
+        return chunks(), {}
+
+
+def test_a_daemon_failing_mid_stream_is_the_service_not_a_missing_file() -> None:
+    from workers.sandbox.docker_sandbox import DockerSandbox
+
+    box = object.__new__(DockerSandbox)  # no daemon here: the container double is all it talks to
+    box._closed, box._container, box.workdir = False, _DaemonFailsMidStream(), "/repo"
+    with pytest.raises(SandboxError, match=r"^the sandbox cannot run commands: Connection broken: IncompleteRead$") as err:
+        box.read_file("a.txt")
+    assert err.value.service
