@@ -260,19 +260,16 @@ def stacked_shares(
     return _frame(title, body, layers)
 
 
-def lines(
-    title: str,
-    series: Mapping[str, Sequence[tuple[float, float]]],
-    *,
-    x_label: str = "",
-    y_label: str = "",
-) -> str:
-    """One polyline per series (points sorted by x), with dots when there are few points."""
-    left, right, top, bottom = 70.0, WIDTH - 10.0, 36.0, HEIGHT - 45.0
-    xs = [x for pts in series.values() for x, _ in pts]
-    ys = [y for pts in series.values() for _, y in pts]
-    x_ticks = nice_ticks(min(xs, default=0.0), max(xs, default=1.0), 8)
-    y_ticks = nice_ticks(0.0, max(ys, default=1.0) or 1.0)
+#: the plotting area of an x-y plot (lines, scatter): left, right, top, bottom
+_XY_AREA = (70.0, WIDTH - 10.0, 36.0, HEIGHT - 45.0)
+
+
+def _xy_axes(
+    x_ticks: list[float], y_ticks: list[float], x_label: str, y_label: str, y_fmt: Callable[[float], str]
+) -> tuple[Callable[[float], float], Callable[[float], float], list[str]]:
+    """The x and y scales of an x-y plot over its ticks (x from its first tick, y from 0) and the
+    axes drawn: the y grid, tick labels and label, the x tick labels and label."""
+    left, right, top, bottom = _XY_AREA
 
     def x_of(v: float) -> float:
         span = (x_ticks[-1] - x_ticks[0]) or 1.0
@@ -281,10 +278,26 @@ def lines(
     def y_of(v: float) -> float:
         return bottom - (bottom - top) * v / (y_ticks[-1] or 1.0)
 
-    body = _y_axis(y_ticks, y_of, left, right, y_label, _fmt_tick)
+    body = _y_axis(y_ticks, y_of, left, right, y_label, y_fmt)
     for t in x_ticks:
         body.append(f'<text x="{x_of(t):.1f}" y="{bottom + 14}" text-anchor="middle">{escape(_fmt_tick(t))}</text>')
     body.append(f'<text x="{(left + right) / 2}" y="{HEIGHT - 8}" text-anchor="middle">{escape(x_label)}</text>')
+    return x_of, y_of, body
+
+
+def lines(
+    title: str,
+    series: Mapping[str, Sequence[tuple[float, float]]],
+    *,
+    x_label: str = "",
+    y_label: str = "",
+) -> str:
+    """One polyline per series (points sorted by x), with dots when there are few points."""
+    left, right, _top, bottom = _XY_AREA
+    xs = [x for pts in series.values() for x, _ in pts]
+    ys = [y for pts in series.values() for _, y in pts]
+    x_ticks = nice_ticks(min(xs, default=0.0), max(xs, default=1.0), 8)
+    x_of, y_of, body = _xy_axes(x_ticks, nice_ticks(0.0, max(ys, default=1.0) or 1.0), x_label, y_label, _fmt_tick)
     for si, (name, pts) in enumerate(series.items()):
         pts = sorted(pts)
         if not pts:
@@ -314,22 +327,11 @@ def scatter(
     """One dot per point ``(x, y, filled)``, a colour per series; a filled dot is a success, a ring a
     failure. Every dot carries its values as ``data-x`` / ``data-y`` (and ``data-series``,
     ``data-filled``) and a ``<title>``, so a reader (or a test) gets the numbers back exactly."""
-    left, right, top, bottom = 70.0, WIDTH - 10.0, 36.0, HEIGHT - 45.0
+    left, right, _top, bottom = _XY_AREA
     xs = [p[0] for pts in series.values() for p in pts]
     ys = [p[1] for pts in series.values() for p in pts]
     x_ticks = nice_ticks(0.0, max(xs, default=1.0) or 1.0, 8)
-    y_ticks = nice_ticks(0.0, max(ys, default=1.0) or 1.0)
-
-    def x_of(v: float) -> float:
-        return left + (right - left) * v / (x_ticks[-1] or 1.0)
-
-    def y_of(v: float) -> float:
-        return bottom - (bottom - top) * v / (y_ticks[-1] or 1.0)
-
-    body = _y_axis(y_ticks, y_of, left, right, y_label, y_fmt)
-    for t in x_ticks:
-        body.append(f'<text x="{x_of(t):.1f}" y="{bottom + 14}" text-anchor="middle">{escape(_fmt_tick(t))}</text>')
-    body.append(f'<text x="{(left + right) / 2}" y="{HEIGHT - 8}" text-anchor="middle">{escape(x_label)}</text>')
+    x_of, y_of, body = _xy_axes(x_ticks, nice_ticks(0.0, max(ys, default=1.0) or 1.0), x_label, y_label, y_fmt)
     for si, (name, pts) in enumerate(series.items()):
         for x, y, filled in sorted(pts):
             fill = color(si) if filled else "none"
