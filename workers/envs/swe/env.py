@@ -269,10 +269,14 @@ class SweEnvironment(Environment):
         diff = self.current_diff()
         self._done = True
         self.close()
-        self.evaluation = evaluate(self.instance, diff, self._open_clean, grading=self.grading)
+        self.evaluation = self._evaluate(diff)
         self._patch = diff
         self._judged.append((self.evaluation, diff))
         return self.evaluation
+
+    def _evaluate(self, diff: str) -> Evaluation:
+        """The verdict on ``diff``: our evaluation in a clean copy, graded per ``grading`` (:mod:`.evaluate`)."""
+        return evaluate(self.instance, diff, self._open_clean, grading=self.grading)
 
     def _verdict_info(self, ev: Evaluation) -> dict[str, Any]:
         """The verdict in the step's info: the deciding one (``resolved``, ``eval_reason``) and,

@@ -23,7 +23,7 @@ from typing import Any
 
 from recap.env import EnvError, Reset
 from workers.envs.swe.env import SUBMISSION_FILE, SweEnvironment
-from workers.envs.swe.evaluate import MISSING, Evaluation
+from workers.envs.swe.evaluate import Evaluation
 from workers.sandbox.base import SandboxError
 from workers.sandbox.docker_sandbox import BASE_ENV
 
@@ -68,31 +68,21 @@ class VerifiedEnvironment(SweEnvironment):
             raise SandboxError(f"git diff failed in the sandbox: {res.output.strip()[:300]}")
         return box.read_file(SUBMISSION_FILE).decode("utf-8", errors="replace")
 
-    def _judge(self) -> Evaluation:
-        """``grading: harness``: the diff goes to the harness's own run_evaluation
-        (:mod:`.harness_eval`) instead of our clean copy; every other mode is the coding env's."""
-        if self.grading != HARNESS_GRADING:
-            return super()._judge()
+    def _evaluate(self, diff: str) -> Evaluation:
+        """``grading: harness``: a diff goes to the harness's own run_evaluation (:mod:`.harness_eval`)
+        instead of our clean copy (an empty one is judged as in every mode: no patch)."""
+        if self.grading != HARNESS_GRADING or not diff.strip():
+            return super()._evaluate(diff)
         started = time.monotonic()
-        diff = self.current_diff()
-        self._done = True
-        if not diff.strip():  # the harness skips an empty patch: nothing to run
-            wanted = (*self.instance.fail_to_pass, *self.instance.pass_to_pass)
-            ev = Evaluation(False, "no_patch", {t: MISSING for t in wanted}, grading=HARNESS_GRADING)
-        else:
-            self.close()  # the episode's container is done with; the harness starts its own (one at a time)
-            run = run_harness(
-                self.record,
-                diff,
-                run_id=harness_run_id(self.spec.labels),
-                namespace=namespace_for(self.spec.image),
-                timeout_s=self.eval_timeout_s,
-            )
-            ev = harness_evaluation(self.instance, run)
-        self.evaluation = replace(ev, pass_to_pass=self.instance.pass_to_pass, duration_s=time.monotonic() - started)
-        self._patch = diff
-        self._judged.append((self.evaluation, diff))
-        return self.evaluation
+        run = run_harness(
+            self.record,
+            diff,
+            run_id=harness_run_id(self.spec.labels),
+            namespace=namespace_for(self.spec.image),
+            timeout_s=self.eval_timeout_s,
+        )
+        ev = harness_evaluation(self.instance, run)
+        return replace(ev, pass_to_pass=self.instance.pass_to_pass, duration_s=time.monotonic() - started)
 
     def _base_text(self, path: str) -> str:
         box = self._box()

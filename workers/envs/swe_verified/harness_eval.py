@@ -215,6 +215,4 @@ def _resolution(f2p: Mapping[str, Any], p2p: Mapping[str, Any]) -> str:
     """The harness's resolution status of a report's test lists (``get_resolution_status``)."""
     from swebench.harness.grading import get_resolution_status  # lazy: an optional dependency
 
-    report = {"FAIL_TO_PASS": {"success": list(f2p.get("success", [])), "failure": list(f2p.get("failure", []))}}
-    report["PASS_TO_PASS"] = {"success": list(p2p.get("success", [])), "failure": list(p2p.get("failure", []))}
-    return str(get_resolution_status(report))
+    return str(get_resolution_status({"FAIL_TO_PASS": f2p, "PASS_TO_PASS": p2p}))
