@@ -141,6 +141,8 @@ class Driver(SessionLoop):
         self.services: RunServices | None = None
         #: the cluster's sandbox slots (ray.sandboxes_per_node on a coding sweep); None: unbounded
         self.sandbox_slots: int | None = None
+        #: the resources each episode worker asks for (the sandbox slot of a bounded coding sweep)
+        self.worker_resources: dict[str, float] | None = None
         self._last_push = time.monotonic()
         self.work: RunStore = prepared.store
         self.records_out: list[EpisodeRecord] = []
@@ -222,7 +224,7 @@ class Driver(SessionLoop):
             num_cpus=self.spec.ray.worker_cpus,
             spread=multi_node,
             runtime_env=self.services.worker_runtime_env(),
-            resources=self._sandbox_resources(),
+            resources=self.worker_resources,
         )
         return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session)
 
@@ -261,6 +263,8 @@ class Driver(SessionLoop):
         self.stop.install()  # ray.init set a SIGTERM handler of its own
         self.channel = SinkChannel(store.path, self.run_id, self.events, session=self.session)
         try:
+            # a cluster that cannot host the sweep's workers is refused before any actor starts
+            self.worker_resources = self._sandbox_resources()
             node_id = ray.get_runtime_context().get_node_id()
             self.channel.start(node_id)
             if recovered is not None and recovered.rows:

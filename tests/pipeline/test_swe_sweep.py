@@ -65,25 +65,38 @@ def _containers(**labels: str) -> list[str]:
 
 class _FirstContainer:
     """A driver hook: once the first dispatched episode's container runs, ``act(container ids,
-    worker actor)`` in a thread (the episode it acted on and the ids it saw are kept)."""
+    worker actor)`` in a thread (the episode it acted on and the ids it saw are kept).
 
-    def __init__(self, act) -> None:
+    The sweep's gateways are paused from that first dispatch until ``act`` has run, so every
+    episode waits at its next model call: the first one cannot finish before it is acted on,
+    however loaded the machine (its container start alone outlasts the pause's round trip)."""
+
+    def __init__(self, act, backend) -> None:
         self.act = act
+        self.backend = backend
         self.episode = ""
         self.seen: list[str] = []
 
     def hook(self, unit, attempt, actor) -> None:
+        import ray
+
         if self.episode:
             return
         self.episode = f"{unit.unit_id}-{attempt}"
+        ray.get([g.pause.remote() for g in self.backend.actors.values()])
         threading.Thread(target=self._wait_then_act, args=(actor,), daemon=True).start()
 
     def _wait_then_act(self, actor) -> None:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not self.seen:
-            self.seen = _containers(**{LABEL_EPISODE: self.episode})
-            time.sleep(0.02)
-        self.act(self.seen, actor)
+        import ray
+
+        try:
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and not self.seen:
+                self.seen = _containers(**{LABEL_EPISODE: self.episode})
+                time.sleep(0.02)
+            self.act(self.seen, actor)
+        finally:
+            ray.get([g.resume.remote() for g in self.backend.actors.values()])
 
 
 def _check_run(out: Path, n: int) -> None:
@@ -171,9 +184,12 @@ def test_a_killed_workers_container_is_removed_and_its_unit_resolves(ray_address
     import ray
 
     out, spec, text = _sweep(tmp_path, "docker", ("offbyone", "format"))
-    killed = _FirstContainer(lambda ids, actor: os.kill(ray.get(actor.pid.remote()), signal.SIGKILL))
-    summary = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_dispatch=killed.hook)).run()
-    assert (summary.finished_now, summary.worker_restarts, summary.exit_code()) == (4, 1, 0)
+    backend = make_backend(spec)
+    killed = _FirstContainer(lambda ids, actor: os.kill(ray.get(actor.pid.remote()), signal.SIGKILL), backend)
+    summary = Driver(prepare(spec, text), backend, progress="off", hooks=Hooks(on_dispatch=killed.hook)).run()
+    con, _ = open_tables(RunStore(out))
+    rows = q(con, "select unit_id, attempt, end_reason, error from episodes order by 1, 2")
+    assert (summary.finished_now, summary.worker_restarts, summary.exit_code()) == (4, 1, 0), (rows, summary)
     assert len(killed.seen) == 1  # the killed attempt's container was running
     assert _containers(**{LABEL_EPISODE: killed.episode}) == []
     con, _ = open_tables(RunStore(out))
@@ -192,8 +208,11 @@ def test_a_container_removed_under_its_episode_is_infrastructure_and_resume_runs
     from pipeline.run_summary import EXIT_INFRA
 
     out, spec, text = _sweep(tmp_path, "docker", ("offbyone", "format"))
-    removed = _FirstContainer(lambda ids, actor: subprocess.run(["docker", "rm", "-f", *ids], capture_output=True, check=True))
-    first = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_dispatch=removed.hook)).run()
+    backend = make_backend(spec)
+    removed = _FirstContainer(
+        lambda ids, actor: subprocess.run(["docker", "rm", "-f", *ids], capture_output=True, check=True), backend
+    )
+    first = Driver(prepare(spec, text), backend, progress="off", hooks=Hooks(on_dispatch=removed.hook)).run()
     con, _ = open_tables(RunStore(out))
     rows = q(con, "select episode_id, end_reason, error from episodes order by 1")
     assert (first.exit_code(), first.infra_kinds, first.finished_now) == (EXIT_INFRA, {"sandbox": 1}, 3), rows
@@ -267,8 +286,12 @@ def test_sandboxes_per_node_without_the_resource_is_refused(ray_address, tmp_pat
     text = text + "ray: {sandboxes_per_node: 2}\n"
     spec = parse_spec(text, "sweep.yaml")
     monkeypatch.setattr(ray, "cluster_resources", lambda: {"CPU": 2.0})
+    backend = make_backend(spec)
+    driver = Driver(prepare(spec, text), backend, progress="off")
     with pytest.raises(PipelineError) as err:
-        Driver(prepare(spec, text), make_backend(spec), progress="off").run()
+        driver.run()
+    # refused before any actor started: no sink, no budget or gateway
+    assert (driver.channel.actor, backend.budget, backend.actors) == (None, None, {})
     assert str(err.value) == (
         "ray.sandboxes_per_node is 2 but no node of the cluster declares the resource recap_sandbox "
         """(start its nodes with --resources '{"recap_sandbox": 2}', or leave the setting out)"""
