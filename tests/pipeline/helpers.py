@@ -3,8 +3,9 @@
 Used only where the pipeline must be exercised apart from the LLM gateway (the driver's
 dispatch, retry and resume logic); the end-to-end tests go through the real gateway backend.
 The expert follows ``hints["expert_plan"]`` (added by the episode worker), so a correct worker
-makes every blocksworld episode succeed; a fixed latency makes episodes last long enough to be
-killed mid-way; a tiny budget actor refuses calls past a cap, like the gateway's ledger.
+makes every blocksworld episode succeed; a fixed latency makes episodes last long; a tiny budget
+actor refuses calls past a cap, like the gateway's ledger, and can hold every call (``hold`` /
+``release``) so that a test kills a worker mid-episode however loaded the machine is.
 """
 
 from __future__ import annotations
@@ -31,8 +32,13 @@ class TinyExpert:
     def complete(self, request: LLMRequest) -> LLMResponse:
         import ray
 
-        if self.budget is not None and not ray.get(self.budget.reserve.remote(self.model, PRICE_PER_CALL)):
-            raise LLMError("budget", "run cap reached")
+        if self.budget is not None:
+            granted = ray.get(self.budget.reserve.remote(self.model, PRICE_PER_CALL))
+            while granted is None:  # held: ask again
+                time.sleep(0.02)
+                granted = ray.get(self.budget.reserve.remote(self.model, PRICE_PER_CALL))
+            if not granted:
+                raise LLMError("budget", "run cap reached")
         if self.latency_s:
             time.sleep(self.latency_s)
         plan = list(request.hints.get("expert_plan") or [])
@@ -60,8 +66,18 @@ class _Budget:
     def __init__(self, cap: float | None = None) -> None:
         self.cap = cap
         self.spent: dict[str, float] = {}
+        self.held = False
 
-    def reserve(self, model: str, amount: float) -> bool:
+    def hold(self) -> None:
+        """Hold every call (``reserve`` answers None, the caller asks again) until :meth:`release`."""
+        self.held = True
+
+    def release(self) -> None:
+        self.held = False
+
+    def reserve(self, model: str, amount: float) -> bool | None:
+        if self.held:
+            return None
         total = sum(self.spent.values())
         if self.cap is not None and total + amount > self.cap + 1e-12:
             return False

@@ -543,17 +543,24 @@ max_attempts: 2
     prepared = prepare(spec, text, check_keys=False)
     target = next(u.unit_id for u in prepared.plan.units if u.instance_id == "blocksworld/3@1")
 
+    backend = TinyBackend(latency_s=0.15)
+
     def kill_target(unit, attempt, actor):
         if unit.unit_id != target:
             return
+        # every model call waits until the kill: the episode cannot finish first on a loaded machine
+        ray.get(backend.budget.hold.remote())
 
         def kill():
-            time.sleep(0.5)  # a few model calls into the episode
-            os.kill(ray.get(actor.pid.remote()), signal.SIGKILL)
+            try:
+                time.sleep(0.3)  # into the episode (its reset, maybe a call)
+                os.kill(ray.get(actor.pid.remote()), signal.SIGKILL)
+            finally:
+                ray.get(backend.budget.release.remote())
 
         threading.Thread(target=kill, daemon=True).start()
 
-    summary = Driver(prepared, TinyBackend(latency_s=0.15), progress="off", hooks=Hooks(on_dispatch=kill_target)).run()
+    summary = Driver(prepared, backend, progress="off", hooks=Hooks(on_dispatch=kill_target)).run()
     assert (summary.abandoned, summary.infra_failed, summary.infra_kinds, summary.finished_now) == (1, 1, {"worker_lost": 1}, 1)
     assert summary.exit_code() == EXIT_INFRA == 4
     assert "1 units ended in an infrastructure failure (worker_lost 1)" in summary.retry_hint()

@@ -129,23 +129,29 @@ workers: 2
 """,
     )
     killed: dict[str, object] = {}
+    backend = TinyBackend(latency_s=0.15)
 
     def kill_later(unit, attempt, actor):
         if killed:
             return
         killed["unit"] = unit.unit_id
+        # every model call waits until the kill: the episode cannot finish first on a loaded machine
+        ray.get(backend.budget.hold.remote())
 
         def kill():
-            time.sleep(0.6)  # a few model calls into the episode
-            pid = ray.get(actor.pid.remote())
-            killed["pid"] = pid
-            os.kill(pid, signal.SIGKILL)
+            try:
+                time.sleep(0.3)  # into the episode (its reset, maybe a call)
+                pid = ray.get(actor.pid.remote())
+                killed["pid"] = pid
+                os.kill(pid, signal.SIGKILL)
+            finally:
+                ray.get(backend.budget.release.remote())
 
         threading.Thread(target=kill, daemon=True).start()
 
     results: list[tuple[str, int]] = []
     hooks = Hooks(on_dispatch=kill_later, on_result=lambda u, a, o: results.append((u.unit_id, a)))
-    summary = Driver(prepare(spec, text, check_keys=False), TinyBackend(latency_s=0.15), progress="off", hooks=hooks).run()
+    summary = Driver(prepare(spec, text, check_keys=False), backend, progress="off", hooks=hooks).run()
     assert (summary.finished_now, summary.worker_restarts, summary.exit_code()) == (4, 1, 0)
     assert (killed["unit"], 1) not in results  # the killed attempt never returned
     con, _ = open_tables(RunStore(out))
