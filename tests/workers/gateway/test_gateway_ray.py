@@ -50,12 +50,15 @@ def test_client_round_trip_error_kinds_and_control_beside_requests(ray_session, 
         client.complete(make_request(1, "FAKE:ctx"))
     assert err.value.kind == "context_length" and err.value.retries == 0
 
-    server.config.latency_s = 1.5
+    server.config.latency_s = 3.0
+    arrived = server.arrivals
     pending = [client.actor.complete.remote(make_request(10 + i)) for i in range(6)]
-    time.sleep(0.5)
+    deadline = time.monotonic() + 30
+    while server.arrivals < arrived + 6 and time.monotonic() < deadline:  # all six at the server (a loaded machine is slow)
+        time.sleep(0.02)
     stats = client.stats()  # answered while the six requests are still waiting on the server
     ready, _ = ray.wait(pending, num_returns=len(pending), timeout=0)
-    assert stats["inflight"] == 6 and not ready
+    assert (server.arrivals - arrived, stats["inflight"], ready) == (6, 6, [])
     client.pause()
     held = client.actor.complete.remote(make_request(20))
     ray.get(pending)
@@ -79,9 +82,12 @@ def test_killed_actors_are_recreated_and_continue_from_recorded_spend(ray_sessio
     first = client.complete(make_request(0))
     for i in range(1, 6):
         client.complete(make_request(i))
-    server.config.latency_s = 2.0
+    server.config.latency_s = 5.0
+    arrived = server.arrivals
     in_flight = [client.actor.complete.remote(make_request(100 + i)) for i in range(4)]
-    time.sleep(0.8)
+    deadline = time.monotonic() + 30
+    while server.arrivals < arrived + 4 and time.monotonic() < deadline:  # reserved and sent, waiting on the server
+        time.sleep(0.02)
     ray.kill(gws.actors[cfg.deployment_name], no_restart=True)
     ray.kill(gws.budget, no_restart=True)
     with pytest.raises(ray.exceptions.RayActorError):

@@ -38,6 +38,9 @@ class FakeServer:
     def __init__(self, config: FakeServerConfig | None = None):
         self.config = config or FakeServerConfig()
         self.log: list[FakeCall] = []
+        #: chat requests received so far, answered or not (``log`` records each when it is answered):
+        #: a test waits on it to know its requests are at the provider
+        self.arrivals = 0
         self.bodies: list[dict[str, Any]] = []
         self._window: deque[tuple[float, int]] = deque()
         self._window_tokens = 0
@@ -117,6 +120,7 @@ class FakeServer:
 
     def reset(self) -> None:
         self.log.clear()
+        self.arrivals = 0
         self.bodies.clear()
         self._window.clear()
         self._window_tokens = 0
@@ -201,6 +205,7 @@ class FakeServer:
 
     # ---- one chat completion, step by step ----
     async def _chat(self, request: web.Request) -> web.StreamResponse:
+        self.arrivals += 1
         req = await self._read(request)
         if isinstance(req, web.Response):
             return req
