@@ -263,8 +263,9 @@ class Driver(SessionLoop):
         self.stop.install()  # ray.init set a SIGTERM handler of its own
         self.channel = SinkChannel(store.path, self.run_id, self.events, session=self.session)
         try:
-            # a cluster that cannot host the sweep's workers is refused before any actor starts
-            self.worker_resources = self._sandbox_resources()
+            # a cluster that cannot host the sweep's worker actors is refused before any actor starts
+            if self.executor == "ray":
+                self.worker_resources = self._sandbox_resources()
             node_id = ray.get_runtime_context().get_node_id()
             self.channel.start(node_id)
             if recovered is not None and recovered.rows:

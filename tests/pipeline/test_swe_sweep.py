@@ -296,3 +296,18 @@ def test_sandboxes_per_node_without_the_resource_is_refused(ray_address, tmp_pat
         "ray.sandboxes_per_node is 2 but no node of the cluster declares the resource recap_sandbox "
         """(start its nodes with --resources '{"recap_sandbox": 2}', or leave the setting out)"""
     )
+
+
+def test_sandboxes_per_node_bounds_worker_actors_so_the_in_process_executor_runs_without_the_resource(
+    ray_address, tmp_path, monkeypatch
+):
+    """The bound is a Ray resource of the episode-worker actors; threads of the driver take none,
+    so ``--executor in-process`` is not refused on a cluster that does not declare it."""
+    import ray
+
+    out, spec, text = _sweep(tmp_path, "local", ("offbyone",))
+    text = text + "ray: {sandboxes_per_node: 2}\n"
+    spec = parse_spec(text, "sweep.yaml")
+    monkeypatch.setattr(ray, "cluster_resources", lambda: {"CPU": 2.0})
+    summary = Driver(prepare(spec, text), make_backend(spec), progress="off", executor="in-process").run()
+    assert (summary.finished_now, summary.exit_code()) == (2, 0)
