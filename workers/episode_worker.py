@@ -341,6 +341,10 @@ class EpisodeRunner:
             log.warning("%s: the model client failed: %s", episode_id, exc)
             out.crash = Crash("client", str(exc)[:2000])
             return
+        except EnvError as exc:  # the environment failed outside a step (the expert plan a test-double model reads)
+            log.warning("%s: the environment failed: %s", episode_id, exc)
+            out.result = _env_error(exc)
+            return
         except Exception as exc:
             log.exception("%s: the agent crashed", episode_id)
             out.crash = Crash("agent", f"{type(exc).__name__}: {exc}"[:2000], traceback.format_exc()[-4000:])

@@ -161,9 +161,9 @@ class SweEnvironment(Environment):
                 return self._submit(review=True, started=started)
             else:
                 out = self._run_tool(box, name, args)
+            return self._after(out)  # inside: reaching a limit judges the diff in the sandbox
         except SandboxError as exc:
             raise episode_failure(self.instance_id, "the sandbox failed", exc) from exc
-        return self._after(out)
 
     def _run_tool(self, box: Sandbox, name: str, args: Mapping[str, Any]) -> T.ToolOutcome:
         if name == T.BASH:
@@ -200,9 +200,9 @@ class SweEnvironment(Environment):
             out = self._bash(box, action)
             if out.error is None and _is_sentinel(out.observation):
                 return _as_command(self._submit(review=False, started=started, spent=out))
+            return _as_command(self._after(out))  # inside: reaching a limit judges the diff in the sandbox
         except SandboxError as exc:
             raise episode_failure(self.instance_id, "the sandbox failed", exc) from exc
-        return _as_command(self._after(out))
 
     def _start_call(self) -> Sandbox:
         if self._done:  # its sandbox is closed once the diff is judged
@@ -314,9 +314,16 @@ class SweEnvironment(Environment):
         when it was changed otherwise, then one ``str_replace`` per hunk (``create`` for a new file);
         then the FAIL_TO_PASS tests' files through bash (once; the tests themselves arrive with the
         evaluation's test patch) and ``submit`` twice (review, then final).
-        None once the episode is over, or for a gold patch with binary files."""
+        None once the episode is over, or for a gold patch with binary files. It reads the sandbox's
+        files, so a sandbox that fails here ends the episode as a tool call's would."""
         if self._done:
             return None
+        try:
+            return self._expert_calls()
+        except SandboxError as exc:
+            raise episode_failure(self.instance_id, "the sandbox failed", exc) from exc
+
+    def _expert_calls(self) -> list[str] | None:
         files = parse_patch(self.instance.patch)
         if any(f.binary for f in files):
             return None

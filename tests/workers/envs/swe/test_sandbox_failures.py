@@ -20,6 +20,7 @@ from workers.episode_worker import EpisodeClient
 from workers.llm.direct import LiteLLMClient
 from workers.llm.providers import DeploymentConfig
 from workers.sandbox import Sandbox, SandboxError, SandboxSpec, open_sandbox
+from workers.sandbox.base import SandboxUnavailable
 
 
 class _FailsAfter:
@@ -44,11 +45,27 @@ class _FailsAfter:
         return self.box.run(command, **kw)
 
 
-def _opener(after: int, error: SandboxError, opened: list[Any], fail_open: bool = False) -> Callable[[SandboxSpec], Any]:
+class _ReadsFail(_FailsAfter):
+    """Its file reads fail once ``after`` commands ran; its commands never do (the failure meets
+    whatever reads first)."""
+
+    def run(self, command: str, **kw: Any) -> Any:
+        self.runs += 1
+        return self.box.run(command, **kw)
+
+    def read_file(self, path: str, **kw: Any) -> Any:
+        if self.runs >= self.after:
+            raise self.error
+        return self.box.read_file(path, **kw)
+
+
+def _opener(
+    after: int, error: SandboxError, opened: list[Any], fail_open: bool = False, reads: bool = False
+) -> Callable[[SandboxSpec], Any]:
     def open_(spec: SandboxSpec) -> Any:
         if fail_open:
             raise error
-        box = _FailsAfter(open_sandbox("local", spec), after, error)
+        box = (_ReadsFail if reads else _FailsAfter)(open_sandbox("local", spec), after, error)
         opened.append(box)
         return box
 
@@ -121,3 +138,74 @@ def test_a_sandbox_that_fails_for_the_instance_or_the_agent_is_an_outcome(fixtur
 )
 def test_only_an_error_that_starts_with_the_sandbox_kind_is_infrastructure(end_reason: str, error: str, kind: str | None) -> None:
     assert infra_failure(end_reason, error) == kind
+
+
+GONE_ROW = "sandbox: swe/fixture__format-1: the sandbox failed: the sandbox container is gone"
+
+
+def test_the_expert_plan_reading_a_gone_container_is_the_sandbox_failing(fixtures: Fixtures) -> None:
+    """The plan a test-double model reads is made from the sandbox's files: a container gone
+    under it is the service failing (as under a tool call), not a raw error out of the agent."""
+    gone = SandboxError("the sandbox container is gone", service=True)
+    env = make_env(
+        "swe/fixture__format-1", instances_file=str(fixtures.tasks_file), open_sandbox=_opener(0, gone, [], reads=True)
+    )
+    try:
+        env.reset()
+        with pytest.raises(SandboxUnavailable) as err:
+            env.expert_plan()
+    finally:
+        env.close()
+    assert err.value.row_error() == GONE_ROW
+
+
+def test_a_container_gone_when_a_limit_ends_the_episode_is_the_sandbox_failing(fixtures: Fixtures) -> None:
+    """Reaching the command limit judges the diff in the sandbox; a container gone then is the
+    service failing, read as infrastructure like any tool call's."""
+    gone = SandboxError("the sandbox container is gone", service=True)
+    env = make_env(
+        "swe/fixture__format-1", instances_file=str(fixtures.tasks_file), max_commands=1, open_sandbox=_opener(1, gone, [])
+    )
+    try:
+        env.reset()
+        with pytest.raises(SandboxUnavailable) as err:
+            env.call_tool("bash", {"command": "true"})  # the one command runs; judging its diff meets the failure
+    finally:
+        env.close()
+    assert err.value.row_error() == GONE_ROW
+
+
+def test_a_worker_whose_expert_plan_meets_a_gone_container_writes_an_infrastructure_row(
+    fixtures: Fixtures, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Through the episode worker: the attempt ends with a result whose error carries the kind
+    (the row the pipeline reads as ``infra_error`` and resume runs again), not an agent crash
+    (which the driver retried at once, writing no row for it)."""
+    from schemas.outcomes import UnitWork
+    from workers.envs import registry
+    from workers.episode_worker import EpisodeRunner
+
+    gone = SandboxError("the sandbox container is gone", service=True)
+    real_make_env = registry.make_env
+    monkeypatch.setattr(
+        registry,
+        "make_env",
+        lambda instance_id, **kw: real_make_env(
+            instance_id, **kw, instances_file=str(fixtures.tasks_file), open_sandbox=_opener(0, gone, [], reads=True)
+        ),
+    )
+
+    class Expert:
+        writes_llm_calls = False
+
+        def client(self, model: str) -> Any:
+            return LiteLLMClient(DeploymentConfig(model="offline/expert"))
+
+    config = make_agent("recap", profile="paper", benchmark=get_benchmark("swe")).config.to_json()
+    unit = UnitWork(
+        "u1", "swe/fixture__format-1", "recap", config, "expert", "offline/expert", sampling_seed=0, step_multiplier=1.0
+    )
+    out = EpisodeRunner("w1", "run1", Expert(), send=lambda rows: None, wait=lambda ref: None).run_unit(unit, 1)
+    assert out.crash is None
+    assert out.result is not None and (out.result.end_reason, out.result.error) == ("env_error", GONE_ROW)
+    assert infra_failure("infra_error", out.result.error) == "sandbox"
