@@ -250,6 +250,9 @@ class Conversation:
                 self._record_error(request, exc, time.perf_counter() - started)
                 self._end_on_error(exc)
                 continue  # the oldest messages were dropped: ask again
+            except EnvError as exc:  # the client reads the environment (an offline model's expert plan)
+                self.usage.calls -= 1  # nothing was sent
+                raise EpisodeEnd(exc.end_reason, exc.row_error()) from exc
             seq = self._record_reply(request, response)
             if response.finish_reason == "length":
                 # the reply hit the output cap: whatever it holds is cut off, so it is neither

@@ -341,7 +341,7 @@ class EpisodeRunner:
             log.warning("%s: the model client failed: %s", episode_id, exc)
             out.crash = Crash("client", str(exc)[:2000])
             return
-        except EnvError as exc:  # the environment failed outside a step (the expert plan a test-double model reads)
+        except EnvError as exc:  # out of an agent that does not end its episode on one (not the shared runtime's)
             log.warning("%s: the environment failed: %s", episode_id, exc)
             out.result = _env_error(exc)
             return
@@ -373,7 +373,8 @@ class EpisodeRunner:
 
 
 def _env_error(exc: Exception) -> EpisodeResult:
-    """The result of an attempt whose environment (or released text) could not be had. An
+    """The result of an attempt whose environment (or released text) could not be had, or that an
+    environment failure ended outside the agent's own handling (no partial counts then). An
     :class:`recap.env.EnvError` with a kind (``sandbox``: the container service failed) writes
     that kind first, so the row is read as what it is (infrastructure, run again by resume)."""
     if isinstance(exc, EnvError) and exc.kind:

@@ -26,12 +26,13 @@ exhausted budget), ``end_reason`` ``step_cap`` (commands) or ``episode_limit``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import shlex
 import subprocess
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import replace
 from typing import Any
 
@@ -152,7 +153,7 @@ class SweEnvironment(Environment):
         box = self._start_call()
         defs = {t.name: t for t in self.tool_defs()}
         started = time.monotonic()
-        try:
+        with self._sandbox_failures():
             if name not in defs:
                 out = T.refused(f"unknown tool {name!r}; the tools are {', '.join(defs)}")
             elif (problem := T.check_args(defs[name], args)) is not None:
@@ -162,8 +163,6 @@ class SweEnvironment(Environment):
             else:
                 out = self._run_tool(box, name, args)
             return self._after(out)  # inside: reaching a limit judges the diff in the sandbox
-        except SandboxError as exc:
-            raise episode_failure(self.instance_id, "the sandbox failed", exc) from exc
 
     def _run_tool(self, box: Sandbox, name: str, args: Mapping[str, Any]) -> T.ToolOutcome:
         if name == T.BASH:
@@ -196,11 +195,18 @@ class SweEnvironment(Environment):
             raise InvalidActionError(f"a SWE-bench text action is a bash command string, got {type(action).__name__}")
         box = self._start_call()
         started = time.monotonic()
-        try:
+        with self._sandbox_failures():
             out = self._bash(box, action)
             if out.error is None and _is_sentinel(out.observation):
                 return _as_command(self._submit(review=False, started=started, spent=out))
             return _as_command(self._after(out))  # inside: reaching a limit judges the diff in the sandbox
+
+    @contextlib.contextmanager
+    def _sandbox_failures(self) -> Iterator[None]:
+        """A sandbox failing under the episode's work ends the episode (:func:`episode_failure`:
+        the service's failure is infrastructure, any other the episode's outcome)."""
+        try:
+            yield
         except SandboxError as exc:
             raise episode_failure(self.instance_id, "the sandbox failed", exc) from exc
 
@@ -318,18 +324,13 @@ class SweEnvironment(Environment):
         files, so a sandbox that fails here ends the episode as a tool call's would."""
         if self._done:
             return None
-        try:
-            return self._expert_calls()
-        except SandboxError as exc:
-            raise episode_failure(self.instance_id, "the sandbox failed", exc) from exc
-
-    def _expert_calls(self) -> list[str] | None:
         files = parse_patch(self.instance.patch)
         if any(f.binary for f in files):
             return None
         calls: list[dict[str, Any]] = []
-        for f in files:
-            calls += self._expert_file(f)
+        with self._sandbox_failures():
+            for f in files:
+                calls += self._expert_file(f)
         test_files = dict.fromkeys(t.split("::", 1)[0] for t in self.instance.fail_to_pass)  # the new tests are not here yet
         test = f"{self.instance.test_cmd} " + " ".join(_quote(f) for f in test_files)
         if self._submit_stage == 0 and test not in self._commands_run:

@@ -209,3 +209,12 @@ def test_a_worker_whose_expert_plan_meets_a_gone_container_writes_an_infrastruct
     assert out.crash is None
     assert out.result is not None and (out.result.end_reason, out.result.error) == ("env_error", GONE_ROW)
     assert infra_failure("infra_error", out.result.error) == "sandbox"
+
+
+@pytest.mark.parametrize("method", ["recap", "react"])
+def test_the_runtime_ends_an_episode_whose_model_call_meets_the_sandbox_failing(fixtures: Fixtures, method: str) -> None:
+    """The agent's runtime ends the episode through its one end-of-episode path (as for a step's
+    failure): a result with the failure's kind first, its calls counted as sent (none here)."""
+    gone = SandboxError("the sandbox container is gone", service=True)
+    result = _play(fixtures, _opener(0, gone, [], reads=True), method)
+    assert (result.end_reason, result.error, result.llm_calls, result.steps) == ("env_error", GONE_ROW, 0, 0)
