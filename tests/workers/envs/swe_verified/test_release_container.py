@@ -22,6 +22,7 @@ import pytest
 from workers.envs.registry import get_benchmark, make_env
 from workers.envs.swe.examples import TEST_CMD
 from workers.envs.swe_verified import images
+from workers.envs.swe_verified.env import VerifiedEnvironment
 from workers.envs.swe_verified.release_container import (
     RELEASE_ENV,
     RELEASE_IMAGE,
@@ -219,7 +220,8 @@ def test_a_release_episode_runs_at_the_base_commit_and_its_diff_is_graded_in_the
 
 def test_harness_stays_the_default_of_make(stored) -> None:
     env = make_env(f"swe-verified/{stored['instance_id']}", open_sandbox=print)
-    assert type(env).__name__ == "VerifiedEnvironment" and env.workdir == images.TESTBED
+    assert isinstance(env, VerifiedEnvironment) and not isinstance(env, ReleaseEnvironment)
+    assert env.workdir == images.TESTBED
     assert env.limits.network is False
 
 
@@ -262,7 +264,7 @@ def test_an_episode_runs_in_the_release_container_at_the_base_commit_and_is_grad
         assert box.run("echo $TQDM_DISABLE $GIT_PAGER").output.strip() == "1 cat"
         assert box.run("test -e /testbed").exit_code == 1  # not the harness's image
         inspect = subprocess.run(
-            ["docker", "inspect", "-f", "{{.Config.Image}} {{.HostConfig.NetworkMode}}", box.container_id],  # type: ignore[attr-defined]
+            ["docker", "inspect", "-f", "{{.Config.Image}} {{.HostConfig.NetworkMode}}", box.container_id],
             capture_output=True,
             text=True,
             check=True,
