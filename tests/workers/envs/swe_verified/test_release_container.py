@@ -279,3 +279,50 @@ def test_an_episode_runs_in_the_release_container_at_the_base_commit_and_is_grad
     for image in (base, harness):
         left = subprocess.run(["docker", "ps", "-aq", "--filter", f"ancestor={image}"], capture_output=True, text=True)
         assert left.stdout.strip() == ""
+
+
+# -- the sweep's preflight ------------------------------------------------------------------------------------
+
+SWEEP = """run: containers
+output: /tmp/never-written
+models:
+  - model: offline/expert
+methods:
+  - method: recap
+  - method: mini_swe
+environments:
+  - benchmark: swe-verified
+    tasks: [{iid}]
+{options}"""
+
+
+def _check(stored, options: str = "") -> str | None:
+    from pipeline.errors import SpecError
+    from pipeline.preflight import check_plan
+    from pipeline.spec import parse_spec
+    from pipeline.units import expand
+
+    try:
+        check_plan(expand(parse_spec(SWEEP.format(iid=stored["instance_id"], options=options), "sweep.yaml")))
+    except SpecError as exc:
+        return str(exc)
+    return None
+
+
+def test_a_sweep_whose_release_image_is_missing_is_refused_before_it_runs(stored, monkeypatch) -> None:
+    """ReCAP's column runs in the release's container by default: its image missing refuses the
+    sweep in one line (mini_swe alone runs in the harness's image and needs none)."""
+    harness_image = images.remote_image(stored["instance_id"])
+    monkeypatch.setattr("workers.envs.swe_verified.benchmark.local_images", lambda: {harness_image})
+    message = _check(stored)
+    assert message == (
+        f"environments[0] (swe-verified): cannot open swe-verified/{stored['instance_id']}: SandboxError: container "
+        "release runs in the image python:3.11, which is not here; `docker pull python:3.11` where a registry is "
+        "reachable, or set release_image to a local image"
+    )
+    assert _check(stored, "    options: {container: harness}") is None  # every column in the harness's image
+    monkeypatch.setattr("workers.envs.swe_verified.benchmark.local_images", lambda: {harness_image, "python:3.11"})
+    assert _check(stored) is None
+    assert _check(stored, "    options: {container: docker}") == (
+        "environments[0] (swe-verified): container must be one of harness, release, got 'docker'"
+    )
