@@ -46,7 +46,7 @@ from .env import BENCHMARK_NAME, VerifiedEnvironment
 from .harness_eval import HARNESS_GRADING, remove_harness_containers
 from .images import how_to_get, image_of, local_images, missing_images
 from .release_container import OPTIONS as CONTAINER_OPTIONS
-from .release_container import ReleaseEnvironment, default_container, missing_image, release_of
+from .release_container import ReleaseEnvironment, agent_options, missing_image, release_of
 
 #: the grading modes here: the coding env's three, and the harness's own full evaluation
 VERIFIED_GRADINGS: tuple[Grading, ...] = (*GRADINGS, HARNESS_GRADING)
@@ -113,9 +113,9 @@ class VerifiedBenchmark(SweBenchmark):
 
     def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
         """The container of the set-up the method's paper number came from (ReCAP: ``release``;
-        mini-SWE-agent: ``harness``), unless the sweep sets ``container``
-        (:func:`.release_container.default_container`)."""
-        return {"container": default_container(style)}
+        mini-SWE-agent: ``harness``, network on under 1.0.0's configuration), unless the sweep sets
+        them (:func:`.release_container.agent_options`)."""
+        return agent_options(style, config)
 
     def list_instances(self, selector: str | None = None) -> list[str]:
         """:meth:`list_instances_for` on the folder the shared rule finds."""

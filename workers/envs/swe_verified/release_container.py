@@ -76,6 +76,17 @@ def default_container(style: str) -> Container:
     return METHOD_CONTAINERS.get(style, DEFAULT_CONTAINER)
 
 
+def agent_options(style: str, config: Any = None) -> dict[str, Any]:
+    """The ``make()`` options of a method's set-up unless the sweep sets them: its container and,
+    for mini-SWE-agent with 1.0.0's configuration (``profile: released``), the network on, as 1.0.0
+    started the harness's image (``docker run`` with no network option:
+    ``microsweagent/environments/docker.py:41-53``)."""
+    out: dict[str, Any] = {"container": default_container(style)}
+    if style == "mini_swe" and getattr(config, "package_config", None) == "1.0.0":
+        out["network"] = True
+    return out
+
+
 @dataclass(frozen=True)
 class ReleaseContainer:
     """The ``release`` container of one sweep entry: its image and where repositories come from

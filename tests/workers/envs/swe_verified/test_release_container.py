@@ -114,6 +114,13 @@ def test_each_method_defaults_to_the_set_up_of_its_paper_number() -> None:
         {"container": "harness"},
     ]
     assert default_container("recap") == "release"
+    from recap.methods import make_agent
+
+    released = make_agent("mini_swe", profile="released", benchmark=bench).config
+    paper = make_agent("mini_swe", profile="paper", benchmark=bench).config
+    # mini-swe-agent 1.0.0 started the harness's image with Docker's default network
+    assert bench.options_for_agent("mini_swe", released) == {"container": "harness", "network": True}
+    assert bench.options_for_agent("mini_swe", paper) == {"container": "harness"}
 
 
 @pytest.mark.parametrize(
