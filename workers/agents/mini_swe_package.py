@@ -141,7 +141,7 @@ def _as_1_0_0(agent_cls: type) -> type:
     * no submit check of its own: our environment submits on 1.0.0's line (and raises
       ``Submitted`` through :meth:`SandboxEnvironment.execute`); the installed check would also
       accept lines 1.0.0 did not;
-    * templates rendered as 1.0.0 rendered them (``microsweagent/agents/default.py:64-66``): an
+    * templates rendered as 1.0.0 rendered them (``microsweagent/agents/default.py:63-65``, system text added as written at ``:73``): an
       undefined name is empty rather than an error, the system text is sent as written (1.0.0 did
       not render it; rendering drops its final newline)."""
     from jinja2 import Template
