@@ -283,9 +283,10 @@ def test_an_episode_runs_in_the_release_container_at_the_base_commit_and_is_grad
         assert step.info["patch"] == stored["patch"]
     finally:
         env.close()
-    for image in (base, harness):
-        left = subprocess.run(["docker", "ps", "-aq", "--filter", f"ancestor={image}"], capture_output=True, text=True)
-        assert left.stdout.strip() == ""
+    # nothing left: no container of either image (by the name it was started with; the stand-in is a
+    # tag of the shared sandbox image, whose other containers ``ancestor=`` would also match)
+    left = subprocess.run(["docker", "ps", "-a", "--format", "{{.Image}}"], capture_output=True, text=True, check=True)
+    assert not {base, harness} & set(left.stdout.split())
 
 
 # -- the sweep's preflight ------------------------------------------------------------------------------------
