@@ -21,6 +21,7 @@ import pytest
 
 from workers.envs.registry import get_benchmark, make_env
 from workers.envs.swe.examples import TEST_CMD
+from workers.envs.swe.rules import NETWORK_OFF, NETWORK_ON
 from workers.envs.swe_verified import images
 from workers.envs.swe_verified.env import VerifiedEnvironment
 from workers.envs.swe_verified.release_container import (
@@ -201,6 +202,7 @@ def test_a_release_episode_runs_at_the_base_commit_and_its_diff_is_graded_in_the
     try:
         assert env.workdir == "/fixture__offbyone"
         env.reset()
+        assert NETWORK_ON in env.rules() and NETWORK_OFF not in env.rules()  # the release's container has it
         episode = opened[0]
         assert (episode.image, episode.workdir, dict(episode.env), episode.limits.network) == (
             RELEASE_IMAGE,
@@ -229,7 +231,7 @@ def test_harness_stays_the_default_of_make(stored) -> None:
     env = make_env(f"swe-verified/{stored['instance_id']}", open_sandbox=print)
     assert isinstance(env, VerifiedEnvironment) and not isinstance(env, ReleaseEnvironment)
     assert env.workdir == images.TESTBED
-    assert env.limits.network is False
+    assert env.limits.network is False and NETWORK_OFF in env.rules()
 
 
 # -- Docker -------------------------------------------------------------------------------------------------
