@@ -12,15 +12,17 @@ repository folder's cap, default :data:`DEFAULT_DISK_BYTES`: the harness's repos
 than the example tasks), ``total_output_bytes``, ``eval_timeout_s``; ``grading`` (``both``, the default, ``ours``, ``official``, or
 ``harness``: the harness's own run_evaluation in the instance's image decides,
 :mod:`.harness_eval`); ``step_multiplier``/``seed``
-(no effect); ``open_sandbox``/``sandbox_labels`` (as for ``swe``); ``container`` (``harness``, the
-harness's image, or ``release``, the ReCAP release's ``python:3.11`` container, graded in the
-harness's image; default: the method's, :meth:`VerifiedBenchmark.options_for_agent`),
-``release_image`` and ``repo_mirror`` (:mod:`.release_container`); ``network`` defaults to on in
-the ``release`` container (as the release ran), off in the harness's.
+(no effect); ``open_sandbox``/``sandbox_labels`` (as for ``swe``).
 
 The methods, profiles and leftover removal are the ``swe`` benchmark's (this class extends it).
 Preflight (:meth:`VerifiedBenchmark.preflight`) refuses a sweep whose instances lack their image
 with one ``docker images`` listing, however many instances.
+
+Where an episode runs (:mod:`.release_container`): ``container`` ``harness`` (the harness's image)
+or ``release`` (the ReCAP release's ``python:3.11`` container, its diff graded in the harness's
+image), by default the method's (:meth:`VerifiedBenchmark.options_for_agent`); ``release_image``
+and ``repo_mirror``; ``network`` defaults to on in the ``release`` container (as the release ran),
+off in the harness's.
 """
 
 from __future__ import annotations
