@@ -156,10 +156,12 @@ def missing_image(release: ReleaseContainer, present: set[str]) -> str | None:
     )
 
 
-def fetch_at(source: str, base_commit: str, dest: Path, timeout_s: float = FETCH_TIMEOUT_S) -> None:
+def fetch_at(source: str, base_commit: str, dest: Path, timeout_s: float = FETCH_TIMEOUT_S, *, remote: bool = True) -> None:
     """``dest`` a repository holding ``base_commit`` alone, checked out (detached): what the
     release's clone leaves (repo.py:168-173), fetched on this host; SandboxError (one line) when
-    the source or the commit cannot be reached."""
+    the source or the commit cannot be reached: a service failure (``infra_error``, run again on
+    resume) for a ``remote`` source (GitHub: the network may come back), the instance's own for a
+    local mirror (it would fail the same way again)."""
     dest.mkdir(parents=True)
     for args in (
         ["init", "--quiet"],
@@ -169,10 +171,12 @@ def fetch_at(source: str, base_commit: str, dest: Path, timeout_s: float = FETCH
         try:
             proc = subprocess.run(["git", *args], cwd=dest, capture_output=True, text=True, timeout=timeout_s)
         except subprocess.TimeoutExpired:
-            raise SandboxError(f"fetching {base_commit} from {source} took over {timeout_s:g} s", service=True) from None
+            raise SandboxError(f"fetching {base_commit} from {source} took over {timeout_s:g} s", service=remote) from None
         if proc.returncode != 0:
             last = (proc.stderr.strip().splitlines() or [""])[-1][:200]
-            raise SandboxError(f"git {args[0]} of {base_commit} from {source} failed: {last}", service=args[0] == "fetch")
+            raise SandboxError(
+                f"git {args[0]} of {base_commit} from {source} failed: {last}", service=remote and args[0] == "fetch"
+            )
 
 
 OpenSandbox = Callable[[SandboxSpec], Sandbox]
@@ -186,7 +190,7 @@ def release_opener(open_sandbox: OpenSandbox, release: ReleaseContainer, repo: s
     def open_release(spec: SandboxSpec) -> Sandbox:
         with tempfile.TemporaryDirectory(prefix="recap-release-repo-") as tmp:
             dest = Path(tmp) / "repo"
-            fetch_at(release.source(repo), spec.base_commit, dest, release.fetch_timeout_s)
+            fetch_at(release.source(repo), spec.base_commit, dest, release.fetch_timeout_s, remote=release.mirror is None)
             return open_sandbox(replace(spec, repo_path=str(dest)))
 
     return open_release

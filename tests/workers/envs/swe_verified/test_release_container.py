@@ -173,8 +173,12 @@ def test_fetch_at_leaves_the_base_commit_alone(mirror, stored, tmp_path) -> None
     assert not (dest / "LATER.txt").exists()
     from workers.sandbox.base import SandboxError
 
-    with pytest.raises(SandboxError, match=r"^git fetch of 0{40} from .* failed: "):
-        fetch_at(str(mirror / "fixture__offbyone"), "0" * 40, tmp_path / "bad")
+    with pytest.raises(SandboxError, match=r"^git fetch of 0{40} from .* failed: ") as info:
+        fetch_at(str(mirror / "fixture__offbyone"), "0" * 40, tmp_path / "bad", remote=False)
+    assert info.value.service is False  # a mirror without the commit fails the same way again
+    with pytest.raises(SandboxError) as info:
+        fetch_at(str(mirror / "fixture__offbyone"), "0" * 40, tmp_path / "bad2")
+    assert info.value.service is True  # GitHub: the network may come back (infra_error, resumed)
 
 
 # -- an episode ---------------------------------------------------------------------------------------------
