@@ -64,6 +64,9 @@ class SweEnvironment(Environment):
     benchmark = "swe"
     invalid_action_mode = "step"
     partially_observed = True
+    #: the first output line of a text action that submits (the mini_swe method sets its
+    #: configuration's: mini-swe-agent 1.0.0 printed another, workers/agents/mini_swe_package.py)
+    submit_sentinel = SUBMIT_SENTINEL
 
     def __init__(
         self,
@@ -197,7 +200,7 @@ class SweEnvironment(Environment):
         started = time.monotonic()
         with self._sandbox_failures():
             out = self._bash(box, action)
-            if out.error is None and _is_sentinel(out.observation):
+            if out.error is None and _is_sentinel(out.observation, self.submit_sentinel):
                 return _as_command(self._submit(review=False, started=started, spent=out))
             return _as_command(self._after(out))  # inside: reaching a limit judges the diff in the sandbox
 
@@ -394,9 +397,9 @@ class SweEnvironment(Environment):
             box.close()
 
 
-def _is_sentinel(output: str) -> bool:
+def _is_sentinel(output: str, sentinel: str = SUBMIT_SENTINEL) -> bool:
     """Whether a command's output starts with the submit line (mini-SWE-agent: first line, stripped)."""
-    return output.lstrip().split("\n", 1)[0].strip() == SUBMIT_SENTINEL
+    return output.lstrip().split("\n", 1)[0].strip() == sentinel
 
 
 def _quote(text: str) -> str:
