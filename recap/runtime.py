@@ -50,7 +50,13 @@ class EpisodeEnd(Exception):
     """Raised from anywhere inside an episode to end it with a named reason."""
 
     def __init__(
-        self, reason: EndReason, detail: str = "", *, error_kind: LLMErrorKind | None = None, refusal: BudgetRefusal | None = None
+        self,
+        reason: EndReason,
+        detail: str = "",
+        *,
+        error_kind: LLMErrorKind | None = None,
+        refusal: BudgetRefusal | None = None,
+        resolved: bool = False,
     ):
         if reason not in END_REASONS:
             raise ValueError(f"unknown end reason {reason!r}")
@@ -60,6 +66,29 @@ class EpisodeEnd(Exception):
         self.error_kind = error_kind
         #: ``budget_exhausted``: the cap that refused the call
         self.refusal = refusal
+        #: ``autosubmitted``: the verdict on the work handed in at the limit
+        self.resolved = resolved
+
+    @property
+    def success(self) -> bool:
+        """Whether the episode reached its goal: ``success``, or work handed in at a limit that
+        was judged resolved."""
+        return self.reason == "success" or (self.reason == "autosubmitted" and self.resolved)
+
+
+#: the end reasons that are a limit reached (not a failure of the model service or the
+#: environment): the cost, token and call caps (``episode_limit`` also for the gateway's refusal
+#: at the per-instance cap, and an environment's own time or output limit), the step cap, and
+#: unusable replies past the repair budget (the release's ``exit_format``, agents.py:1308-1315).
+#: A context overflow (``llm_error`` of kind ``context_length``) is one too (:func:`is_limit`)
+LIMIT_END_REASONS: frozenset[str] = frozenset({"episode_limit", "call_cap", "step_cap", "json_failures"})
+
+
+def is_limit(end: EpisodeEnd) -> bool:
+    """Whether ``end`` is a limit reached, after which the work so far is handed in and graded
+    (SWE-agent's ``exit_cost``, ``exit_context``, ``exit_total_execution_time``, ``exit_format``
+    autosubmissions, swebench-recap/sweagent/agent/agents.py:1250-1315)."""
+    return end.reason in LIMIT_END_REASONS or (end.reason == "llm_error" and end.error_kind == "context_length")
 
 
 def repair_prompt(problem: str, expected: str) -> str:
@@ -289,6 +318,10 @@ class Conversation:
         """End the episode for a failed call; returns only for a context overflow after dropping the
         oldest messages (the call is then made again)."""
         if exc.kind == "context_length":
+            if self.config.context_overflow == "end":  # SWE-agent's exit_context (agents.py:1272-1276)
+                raise EpisodeEnd(
+                    "llm_error", "context length exceeded (the whole history is kept)", error_kind=exc.kind
+                ) from None
             if self.history.drop_oldest(self.config.context_drop) == 0:
                 raise EpisodeEnd("llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind) from None
             return
@@ -461,6 +494,27 @@ class EnvDriver:
         self._record_tool(call.name, call.arguments, step, node_id, call, message_seq)
         return self._took(action, valid, step, node_id)
 
+    def submit_at_limit(self, end: EpisodeEnd) -> EpisodeEnd:
+        """How the episode ends when ``end`` is a limit (:func:`is_limit`): the environment hands
+        in the work so far and judges it (:meth:`Environment.submit_at_limit`), and the episode
+        ends ``autosubmitted``, its success the verdict and its detail the limit first
+        (``episode_limit: $10.0100 spent (limit $10)``). ``end`` itself for any other end, or when
+        there is nothing to hand in (no changes); an environment that breaks while handing in
+        ends the episode with its own error."""
+        if not is_limit(end):
+            return end
+        limit = f"{end.reason}: {end.detail}" if end.detail else end.reason
+        try:
+            step = self.env.submit_at_limit(limit)
+        except EnvError as exc:
+            return EpisodeEnd(exc.end_reason, exc.row_error(f"handing in the work at {limit}"))
+        except Exception as exc:
+            return EpisodeEnd("env_error", f"handing in the work at {limit}: {type(exc).__name__}: {exc}")
+        if step is None:
+            return end
+        self.success = step.success
+        return EpisodeEnd("autosubmitted", limit, error_kind=end.error_kind, resolved=step.success)
+
     def _took(self, action: str, valid: bool, step: Step, node_id: int | None) -> Step:
         """Count a step the environment took, record it and end the episode where it ends."""
         self.steps += 1
@@ -545,7 +599,7 @@ class Episode:
         u = self.conv.usage
         return EpisodeResult(
             end_reason=end.reason,
-            success=end.reason == "success",
+            success=end.success,
             steps=self.driver.steps,
             llm_calls=u.calls,
             prompt_tokens=u.prompt_tokens,

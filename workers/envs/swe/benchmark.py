@@ -30,7 +30,7 @@ from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any
 
-from recap.config import CODING_PROFILE, AgentConfig
+from recap.config import CODING_PROFILE, SETTING_BOUNDS, AgentConfig, ReCAPConfig
 from recap.env import Environment, UnknownInstanceError
 from workers.envs.registry import Benchmark
 from workers.sandbox import LABEL_EPISODE, LABEL_RUN, LABEL_WORKER, check_ready, open_sandbox, remove_labelled
@@ -47,6 +47,20 @@ REFUSED_METHODS = {
     "standard": "Standard writes one plan before any observation and cannot run commands in a repository (the paper has no SWE-bench Standard)",
     "act": "the paper's SWE-bench baseline is ReAct (mini-SWE-agent); it reports no Act result (Table 1: --)",
     "adapt": "the paper reports no ADaPT result on SWE-bench (Table 1: --)",
+}
+#: ReCAP on SWE-bench as the release ran it (GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f):
+#: a $10 per-instance cap (swebench-recap/run_swe_bench_tasks.py:87; a sweep's ``limits.usd``
+#: still wins); the whole history, no window (config/recap.yaml:142-144 has only a cache-control
+#: processor), and a context overflow ends the episode (sweagent/agent/agents.py:1272-1276), its
+#: diff handed in; exactly one tool call per reply (sweagent/tools/parsing.py:439-449); the reply
+#: under a strict JSON schema (sweagent/agent/models.py:707-731)
+RELEASED_RECAP: dict[str, Any] = {
+    "max_episode_cost_usd": 10.0,
+    "window": int(SETTING_BOUNDS["window"][1]),
+    "window_counts_pins": True,
+    "context_overflow": "end",
+    "tool_calls_per_reply": "one",
+    "reply_schema": True,
 }
 _LIMIT_OPTIONS = ("command_timeout_s", "output_bytes", "max_commands", "wall_time_s")
 ACCEPTED = (
@@ -122,8 +136,12 @@ class SweBenchmark(Benchmark):
         self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
     ) -> dict[str, Any]:
         """Every profile on SWE-bench runs at temperature 0 (the paper's SWE-bench protocol:
-        :data:`recap.config.CODING_PROFILE`), beside what the profile sets anywhere."""
-        return {**generic, **CODING_PROFILE}
+        :data:`recap.config.CODING_PROFILE`), beside what the profile sets anywhere; ReCAP under
+        ``released`` as swebench-recap ran it (:data:`RELEASED_RECAP`)."""
+        out = {**generic, **CODING_PROFILE}
+        if profile == "released" and issubclass(config_cls, ReCAPConfig):
+            out.update(RELEASED_RECAP)
+        return out
 
     def refuses_method(self, method: str) -> str | None:
         """CoT, Standard, Act, ADaPT: see :data:`REFUSED_METHODS`; ReCAP and ReAct run."""

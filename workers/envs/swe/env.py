@@ -20,8 +20,11 @@ Two ways to act:
 
 Per-episode limits (:class:`~workers.sandbox.base.SandboxLimits` ``max_commands`` and
 ``wall_time_s``, and a total of output bytes) are enforced here: the call that reaches one is
-answered, then the episode ends with the current diff judged (SWE-agent's submission after an
-exhausted budget), ``end_reason`` ``step_cap`` (commands) or ``episode_limit``.
+answered, then the episode ends ``step_cap`` (commands) or ``episode_limit``. At that end, and at
+every other limit (the model's cost, tokens, calls, context), the runtime asks
+:meth:`SweEnvironment.submit_at_limit` to hand in the current diff: a non-empty one is judged and
+the episode ends ``autosubmitted`` (SWE-agent's autosubmission, swebench-recap/sweagent/agent/
+agents.py:1250-1285), its success the verdict.
 """
 
 from __future__ import annotations
@@ -224,12 +227,11 @@ class SweEnvironment(Environment):
         if limit is None:
             return Step(out.observation, None, False, False, out.info())
         reason, note = limit
-        ev = self._judge()
-        info = {**out.info(), **self._verdict_info(ev), "limit": note, "detail": note}
-        if not ev.success:
-            info["end_reason"] = reason
+        # the episode ends here; the runtime then hands in the current diff (submit_at_limit),
+        # as it does at every other limit
+        info = {**out.info(), "end_reason": reason, "limit": note, "detail": note}
         obs = f"{out.observation}\n[{note}: the episode ends and your current changes are submitted]"
-        return Step(obs, None, True, ev.success, info)
+        return Step(obs, None, True, False, info)
 
     def _limit_reached(self) -> tuple[EndReason, str] | None:
         if self._steps_taken >= self.limits.max_commands:
@@ -266,6 +268,22 @@ class SweEnvironment(Environment):
         info = {**base.info(), **self._verdict_info(ev)}
         if not ev.success:
             info["end_reason"] = "agent_done"
+        return Step(submitted_text(ev), None, True, ev.success, info)
+
+    def submit_at_limit(self, limit: str) -> Step | None:
+        """SWE-agent's autosubmission (swebench-recap/sweagent/agent/agents.py:888-933): at a limit
+        (``limit``: which one) the repository's diff is taken as a submission does it and, when
+        it is not empty, judged like a submitted one (its ``evaluations`` row is written); None
+        for an empty diff (nothing was handed in: the release's submission is then empty too,
+        :911-915), once the episode is judged, or before reset. A sandbox that fails here ends the
+        episode as a tool call's failure does."""
+        if self._done or self._sandbox is None:
+            return None
+        with self._sandbox_failures():
+            if not self.current_diff().strip():
+                return None
+            ev = self._judge()
+        info = {**self._verdict_info(ev), "limit": limit, "autosubmitted": True}
         return Step(submitted_text(ev), None, True, ev.success, info)
 
     def _judge(self) -> Evaluation:

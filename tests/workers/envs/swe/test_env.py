@@ -158,11 +158,36 @@ def test_command_limit_ends_the_episode_and_submits(swe_env: Callable[..., SweEn
         "Error: unknown tool 'nope'; the tools are bash, view, str_replace, create, submit\n"
         "[command limit reached (2 commands): the episode ends and your current changes are submitted]"
     )
-    assert (last.info["end_reason"], last.info["eval_reason"], last.info["limit"]) == (
+    assert (last.info["end_reason"], last.info["limit"], "eval_reason" in last.info) == (
         "step_cap",
-        "no_patch",
         "command limit reached (2 commands)",
+        False,  # judged by the runtime's submit_at_limit, not here
     )
+    # nothing was changed: nothing is handed in, nothing judged
+    assert env.submit_at_limit("step_cap: 2 steps (cap 2)") is None
+    assert env.take_records("e", "r") == []
+
+
+def test_at_a_limit_a_non_empty_diff_is_handed_in_and_judged(swe_env: Callable[..., SweEnvironment]) -> None:
+    env = swe_env("format", max_commands=2)
+    env.reset()
+    env.call_tool("str_replace", {"path": "shop.py", "old_str": "{cents / 100}", "new_str": "{cents / 100:.2f}"})
+    last = env.call_tool("bash", {"command": "echo two"})
+    assert (last.done, last.success, last.info["end_reason"]) == (True, False, "step_cap")
+    step = env.submit_at_limit("step_cap: 2 steps (cap 2)")
+    assert step is not None
+    assert (step.done, step.success, step.info["autosubmitted"], step.info["limit"], step.info["eval_reason"]) == (
+        True,
+        True,
+        True,
+        "step_cap: 2 steps (cap 2)",
+        "resolved",
+    )
+    assert step.observation == "Your changes were submitted; it resolves the issue (every listed test passes)."
+    (row,) = env.take_records("e", "r")
+    assert (row.episode_id, row.resolved, row.reason) == ("e", True, "resolved")
+    assert row.patch == step.info["patch"] and '+    return f"${cents / 100:.2f}"' in row.patch
+    assert env.submit_at_limit("again") is None  # judged once
 
 
 def test_output_limit_is_an_episode_limit(swe_env: Callable[..., SweEnvironment]) -> None:
