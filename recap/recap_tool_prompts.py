@@ -1,7 +1,7 @@
 """ReCAP's prompts in tool-call mode (coding environments), in our own words.
 
 What each prompt carries follows the paper's "Tool Call Prioritized Prompt for SWE-bench"
-appendix and the release's templates (swebench-recap/config/recap.yaml:32-58): the *action
+appendix and the release's templates (swebench-recap/config/recap.yaml:28-55): the *action
 taken* prompt shows the latest observation, the current task and the subtasks proposed before;
 the *down* prompt names the child's task; the *up* prompt names the finished task, the parent's
 task, the parent's latest think and its remaining subtasks (the structured re-injection). Each
@@ -84,7 +84,7 @@ _CHOICES_DOWN = (
 
 def action_taken_prompt(*, observation: str, task: str, subtasks: Sequence[str]) -> str:
     """After a tool call: the latest observation, the current task and the list proposed before
-    (recap.yaml:33-41); it is the content of the call's tool message, as in the release
+    (recap.yaml:28-37); it is the content of the call's tool message, as in the release
     (agents.py:750-753)."""
     return (
         f"Latest observation:\n{observation}\n\nYour current task: {task}\n\n"
@@ -93,7 +93,7 @@ def action_taken_prompt(*, observation: str, task: str, subtasks: Sequence[str])
 
 
 def down_prompt(task: str) -> str:
-    """On entering a child node (recap.yaml:42-46)."""
+    """On entering a child node (recap.yaml:38-43)."""
     return f"OK.\n\nYour current task: {task}\n\n{_CHOICES_DOWN}"
 
 
@@ -117,7 +117,7 @@ def _thought(thinks: Sequence[str], mode: str) -> str | None:
 def up_prompt(
     *, done_task: str, task: str, thinks: Sequence[str], subtasks: Sequence[str], think_mode: str, name_only: bool
 ) -> str:
-    """Back at the parent (recap.yaml:47-58): the finished task, the parent's task, its latest
+    """Back at the parent (recap.yaml:44-55): the finished task, the parent's task, its latest
     think (``think_mode``: latest | many | none) and remaining subtasks (left out under
     ``name_only``)."""
     parts = [

@@ -1,6 +1,6 @@
 """The tools a coding model calls, and how each runs against a :class:`~workers.sandbox.base.Sandbox`.
 
-The set follows what SWE-agent gives the paper's ReCAP runs (swebench-recap/config/recap.yaml:116-139:
+The set follows what SWE-agent gives the paper's ReCAP runs (swebench-recap/config/recap.yaml:116-119 and 139:
 the bash tool, ``tools/edit_anthropic`` and ``tools/review_on_submit_m``): one ``bash`` command
 per call; the editor split into ``view`` (a file as ``cat -n`` shows it, a folder two levels deep,
 tools/edit_anthropic/config.yaml:10), ``str_replace`` (``old_str`` must occur exactly once, :16-17)
