@@ -131,3 +131,13 @@ def up_prompt(
         parts.append("Its remaining subtasks:\n" + numbered(subtasks))
     parts.append(_CHOICES)
     return "\n\n".join(parts)
+
+
+def one_call_prompt(n_calls: int) -> str:
+    """The re-ask after a reply that made several tool calls where one is allowed (the release's
+    format-error requery for ``multiple`` calls, swebench-recap/sweagent/tools/parsing.py:384-385,
+    439-449): none of them was run; make exactly one call per reply, the JSON text beside it."""
+    return (
+        f"Your last reply made {n_calls} tool calls, and none of them was run: make exactly one tool call "
+        "per reply, with your JSON object as the reply's text. Reply again with your first call only."
+    )

@@ -40,10 +40,14 @@ NOT_RUN = "not run: the reply that made this call could not be used"
 
 @dataclass(frozen=True)
 class ToolUse:
-    """The tools one request offers and its tool-choice setting (none: a plain chat request)."""
+    """The tools one request offers and its tool-choice setting (none: a plain chat request).
+    ``one_call``: a reply may make at most one tool call; one that makes more is re-asked with
+    the text this gives for its number of calls (SWE-agent's function-calling parser,
+    swebench-recap/sweagent/tools/parsing.py:439-449)."""
 
     tools: tuple[ToolDef, ...] = ()
     choice: str | None = None
+    one_call: Callable[[int], str] | None = None
 
 
 class EpisodeEnd(Exception):
@@ -89,6 +93,14 @@ def is_limit(end: EpisodeEnd) -> bool:
     (SWE-agent's ``exit_cost``, ``exit_context``, ``exit_total_execution_time``, ``exit_format``
     autosubmissions, swebench-recap/sweagent/agent/agents.py:1250-1315)."""
     return end.reason in LIMIT_END_REASONS or (end.reason == "llm_error" and end.error_kind == "context_length")
+
+
+class _TooManyCalls(ReplyFormatError):
+    """A reply that made more tool calls than one where one is allowed; ``prompt`` re-asks."""
+
+    def __init__(self, prompt: str, problem: str) -> None:
+        super().__init__(problem)
+        self.prompt = prompt
 
 
 def repair_prompt(problem: str, expected: str) -> str:
@@ -221,6 +233,7 @@ class Conversation:
         node_id: int | None = None,
         context: Mapping[str, Any] | None = None,
         decode: Callable[[str], dict[str, Any]] = parse_json_object,
+        one_call: Callable[[int], str] | None = None,
     ) -> tuple[dict[str, Any], tuple[ToolCall, ...], int]:
         """:meth:`ask` with ``tools`` the model may call: (parsed text, tool calls, reply seq).
 
@@ -228,10 +241,13 @@ class Conversation:
         decides what an empty reply means). The caller must answer every returned call with
         :meth:`add_tool_result` before it asks again. A reply whose text cannot be used is
         repaired as in :meth:`ask`; its tool calls are answered first as not run, so the
-        history stays a valid tool conversation."""
+        history stays a valid tool conversation. With ``one_call`` (the re-ask text for a number
+        of calls), a reply making several calls is re-asked the same way, from the same repair
+        budget (SWE-agent requeries its format errors from one budget, then exits with the work
+        handed in: swebench-recap/sweagent/agent/agents.py:1204,1217-1221,1308-1315)."""
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
-        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice))
+        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice, one_call))
 
     def add_tool_result(self, call: ToolCall, content: str, node_id: int | None = None) -> int:
         """Answer one tool call of the last reply with its result (a ``tool`` message)."""
@@ -253,6 +269,8 @@ class Conversation:
             response, seq = self._call(purpose, node_id, context or {}, tools)
             calls = response.tool_calls
             try:
+                if tools.one_call is not None and len(calls) > 1:
+                    raise _TooManyCalls(tools.one_call(len(calls)), f"the reply made {len(calls)} tool calls")
                 obj = {} if calls and not response.text.strip() else decode(response.text)
                 return parse(obj), calls, seq
             except ReplyFormatError as exc:
@@ -262,7 +280,8 @@ class Conversation:
                 self.usage.json_repairs += 1
                 for call in calls:
                     self.add_tool_result(call, NOT_RUN, node_id)
-                self.history.add("user", "repair", repair_prompt(str(exc), self.expected_format), node_id)
+                text = exc.prompt if isinstance(exc, _TooManyCalls) else repair_prompt(str(exc), self.expected_format)
+                self.history.add("user", "repair", text, node_id)
                 purpose = "repair"
 
     # -- one model call, with context-length recovery -------------------------------------------
