@@ -12,7 +12,8 @@ base commit, new files included (bin/submit:24: ``git add -A && git diff --cache
 Two ways to act:
 
 * tool calls (:meth:`SweEnvironment.call_tool`, the paper's ReCAP): ``bash``, ``view``,
-  ``str_replace``, ``create``, ``submit`` (:mod:`.tools`);
+  ``str_replace``, ``create``, ``submit`` (:mod:`.tools`); ``bash`` runs in one session per
+  episode (:mod:`workers.sandbox.session`: cd and variables carry over, as in SWE-agent);
 * text (:meth:`SweEnvironment.step`, the mini-SWE-agent baseline): the action is one bash command;
   one whose output starts with the line ``COMPLETE_TASK_AND_SUBMIT_FINAL_OUTPUT`` submits at once
   (mini-SWE-agent's sentinel, checked by ``DefaultAgent.has_finished`` in minisweagent/agents/default.py;
@@ -43,6 +44,7 @@ from recap.env import Demonstration, EnvError, Environment, InvalidActionError, 
 from recap.llm import ToolDef
 from schemas.kinds import EndReason
 from workers.sandbox.base import Sandbox, SandboxError, SandboxLimits, SandboxSpec, episode_failure
+from workers.sandbox.session import ShellSession
 
 from . import tools as T
 from .evaluate import Evaluation, evaluate, evaluation_record
@@ -99,6 +101,8 @@ class SweEnvironment(Environment):
         self.grading = grading
         self._open = open_sandbox
         self._sandbox: Sandbox | None = None
+        #: the ``bash`` tool's session over the episode's sandbox (state carried between calls)
+        self._session: ShellSession | None = None
         self._last_workdir = ""
         self.evaluation: Evaluation | None = None
         #: the judged submissions not yet handed over (:meth:`take_records`): evaluation and diff
@@ -143,6 +147,7 @@ class SweEnvironment(Environment):
         self._clear()
         try:
             self._sandbox = self._open(self.spec)
+            self._session = ShellSession(self._sandbox)
         except SandboxError as exc:
             raise episode_failure(self.instance_id, "the sandbox cannot be opened", exc) from exc
         return Reset(observation=self.instance.problem_statement, valid_actions=None, goal=goal_text(self.workdir))
@@ -169,7 +174,7 @@ class SweEnvironment(Environment):
 
     def _run_tool(self, box: Sandbox, name: str, args: Mapping[str, Any]) -> T.ToolOutcome:
         if name == T.BASH:
-            return self._bash(box, args["command"])
+            return self._bash(box, args["command"], self._session)
         if name == T.VIEW:
             out = T.run_view(box, self.limits, args["path"], args.get("view_range"))
             rel = T.repo_relative(box.workdir, args["path"])
@@ -180,12 +185,13 @@ class SweEnvironment(Environment):
             return T.run_str_replace(box, self.limits, args["path"], args["old_str"], args.get("new_str", ""))
         return T.run_create(box, self.limits, args["path"], args["file_text"])
 
-    def _bash(self, box: Sandbox, command: str) -> T.ToolOutcome:
-        """Run one shell command; a command that only prints a file (``cat -n F``, ``sed -n 'a,bp' F``,
-        ``nl F``) counts as viewing it, as the ``view`` tool does (the expert plan's views are done
-        once, whichever way the agent looked)."""
+    def _bash(self, box: Sandbox, command: str, session: ShellSession | None = None) -> T.ToolOutcome:
+        """Run one shell command (in ``session``: the ``bash`` tool's; else afresh, a text action);
+        a command that only prints a file (``cat -n F``, ``sed -n 'a,bp' F``, ``nl F``) counts as
+        viewing it, as the ``view`` tool does (the expert plan's views are done once, whichever way
+        the agent looked)."""
         self._commands_run.add(command)
-        out = T.run_bash(box, self.limits, command)
+        out = T.run_bash(box, self.limits, command, session)
         shown = _printed_file(command)
         rel = T.repo_relative(box.workdir, shown) if shown is not None else None
         if out.error is None and out.exit_code == 0 and rel is not None:
@@ -407,6 +413,7 @@ class SweEnvironment(Environment):
     def close(self) -> None:
         """Close the episode's sandbox (safe to call twice)."""
         box, self._sandbox = self._sandbox, None
+        self._session = None
         if box is not None:
             self._last_workdir = box.workdir
             box.close()

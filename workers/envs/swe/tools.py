@@ -2,7 +2,7 @@
 
 The set follows what SWE-agent gives the paper's ReCAP runs (swebench-recap/config/recap.yaml:116-119 and 139:
 the bash tool, ``tools/edit_anthropic`` and ``tools/review_on_submit_m``): one ``bash`` command
-per call; the editor split into ``view`` (a file as ``cat -n`` shows it, a folder two levels deep,
+per call, in one bash session per episode (:mod:`workers.sandbox.session`); the editor split into ``view`` (a file as ``cat -n`` shows it, a folder two levels deep,
 tools/edit_anthropic/config.yaml:10), ``str_replace`` (``old_str`` must occur exactly once, :16-17)
 and ``create`` (never over an existing file, :11); and ``submit`` without arguments (the review
 step lives in the environment, :mod:`.env`). Descriptions are our own words and state the limits.
@@ -24,6 +24,7 @@ from typing import Any
 
 from recap.llm import ToolDef
 from workers.sandbox.base import CommandResult, Sandbox, SandboxLimits
+from workers.sandbox.session import ShellSession
 
 BASH = "bash"
 VIEW = "view"
@@ -45,10 +46,12 @@ def tool_defs(workdir: str, limits: SandboxLimits) -> tuple[ToolDef, ...]:
     return (
         ToolDef(
             BASH,
-            f"Run one shell command with bash in {workdir} (each call starts there; no state but the files carries over). "
-            f"A command is stopped after {limits.command_timeout_s:g} seconds. The model sees at most {cap} bytes of its "
-            "combined stdout and stderr; longer output is cut and the cut is said. No network. Do not start "
-            "interactive programs (editors, pagers, a Python prompt).",
+            f"Run a shell command in one bash session kept for the whole task: it starts in {workdir}, and the working "
+            "directory, variables (exported or not), functions and aliases carry over from one call to the next; "
+            "background processes do not (whatever a command started is stopped when it returns). "
+            f"A command is stopped after {limits.command_timeout_s:g} seconds, and the session then goes on as it was "
+            f"before that command. The model sees at most {cap} bytes of its combined stdout and stderr; longer output "
+            "is cut and the cut is said. No network. Do not start interactive programs (editors, pagers, a Python prompt).",
             {
                 "type": "object",
                 "properties": {"command": {"type": "string", "description": "The command line to run."}},
@@ -235,13 +238,23 @@ def command_observation(res: CommandResult, limits: SandboxLimits, timeout_s: fl
     return "\n".join(parts) if parts else "[no output]"
 
 
-def run_bash(sandbox: Sandbox, limits: SandboxLimits, command: str) -> ToolOutcome:
-    """One shell command, its observation and the ``tool_calls`` fields."""
+def run_bash(sandbox: Sandbox, limits: SandboxLimits, command: str, session: ShellSession | None = None) -> ToolOutcome:
+    """One shell command, its observation and the ``tool_calls`` fields: in the episode's
+    ``session`` (the ``bash`` tool: cd and variables carry over) or afresh in the repository
+    folder (a text action, as mini-SWE-agent runs each command in its own subprocess)."""
     if not command.strip():
         return refused("bash: the command is empty")
-    res = sandbox.run(command, timeout_s=limits.command_timeout_s)
+    if session is None:
+        res = sandbox.run(command, timeout_s=limits.command_timeout_s)
+        observation = command_observation(res, limits, limits.command_timeout_s)
+    else:
+        ran = session.run(command, timeout_s=limits.command_timeout_s)
+        res = ran.result
+        observation = command_observation(res, limits, limits.command_timeout_s)
+        if ran.restored:
+            observation += "\n[the shell session goes on from its state before this command]"
     return ToolOutcome(
-        observation=command_observation(res, limits, limits.command_timeout_s),
+        observation=observation,
         exit_code=res.exit_code,
         duration_s=res.duration_s,
         output_bytes=res.output_bytes,

@@ -280,3 +280,19 @@ def test_methods_that_cannot_act_are_refused() -> None:
     assert bench.canonical_id("swe/django__django-1") == "swe/django__django-1"
     with pytest.raises(UnknownInstanceError):
         bench.canonical_id("swe/")
+
+
+def test_the_bash_tool_keeps_one_session_and_a_text_action_starts_afresh(swe_env: Callable[..., SweEnvironment]) -> None:
+    env = swe_env("format", command_timeout_s=2)
+    env.reset()
+    root = env.workdir
+    assert env.call_tool("bash", {"command": "mkdir -p scratch && cd scratch && export MARK=7"}).observation == "[no output]"
+    assert env.call_tool("bash", {"command": "pwd; echo $MARK"}).observation == f"{root}/scratch\n7"
+    slow = env.call_tool("bash", {"command": "cd / && sleep 30"})
+    assert slow.observation == (
+        "[the command was stopped after 2 seconds]\n[the shell session goes on from its state before this command]"
+    )
+    assert slow.info["timed_out"] is True
+    assert env.call_tool("bash", {"command": "pwd"}).observation == f"{root}/scratch"
+    # mini-SWE-agent's text actions each run in a fresh subprocess in the repository folder
+    assert env.step('pwd; echo "${MARK-unset}"').observation == f"{root}\nunset"
