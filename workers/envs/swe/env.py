@@ -12,7 +12,7 @@ base commit, new files included (bin/submit:24: ``git add -A && git diff --cache
 Two ways to act:
 
 * tool calls (:meth:`SweEnvironment.call_tool`, the paper's ReCAP): ``bash``, ``view``,
-  ``str_replace``, ``create``, ``submit`` (:mod:`.tools`); ``bash`` runs in one session per
+  ``str_replace``, ``create``, ``insert``, ``undo_edit``, ``submit`` (:mod:`.tools`); ``bash`` runs in one session per
   episode (:mod:`workers.sandbox.session`: cd and variables carry over, as in SWE-agent);
 * text (:meth:`SweEnvironment.step`, the mini-SWE-agent baseline): the action is one bash command;
   one whose output starts with the line ``COMPLETE_TASK_AND_SUBMIT_FINAL_OUTPUT`` submits at once
@@ -119,6 +119,8 @@ class SweEnvironment(Environment):
         self._commands_run: set[str] = set()
         self._patch = ""
         self.evaluation = None
+        #: the editor's changes, for undo_edit
+        self._edits = T.EditHistory()
 
     # -- sandbox ---------------------------------------------------------------------------------
     @property
@@ -153,7 +155,8 @@ class SweEnvironment(Environment):
         return Reset(observation=self.instance.problem_statement, valid_actions=None, goal=goal_text(self.workdir))
 
     def tool_defs(self) -> tuple[ToolDef, ...]:
-        """bash, view, str_replace, create, submit (:mod:`.tools`), describing this episode's limits."""
+        """bash, view, str_replace, create, insert, undo_edit, submit (:mod:`.tools`), describing this
+        episode's limits."""
         return T.tool_defs(self.workdir, self.limits)
 
     def call_tool(self, name: str, args: Mapping[str, Any]) -> Step:
@@ -182,8 +185,12 @@ class SweEnvironment(Environment):
                 self._viewed.add(rel)
             return out
         if name == T.STR_REPLACE:
-            return T.run_str_replace(box, self.limits, args["path"], args["old_str"], args.get("new_str", ""))
-        return T.run_create(box, self.limits, args["path"], args["file_text"])
+            return T.run_str_replace(box, self.limits, args["path"], args["old_str"], args.get("new_str", ""), self._edits)
+        if name == T.INSERT:
+            return T.run_insert(box, self.limits, args["path"], args["insert_line"], args["new_str"], self._edits)
+        if name == T.UNDO_EDIT:
+            return T.run_undo_edit(box, self.limits, args["path"], self._edits)
+        return T.run_create(box, self.limits, args["path"], args["file_text"], self._edits)
 
     def _bash(self, box: Sandbox, command: str, session: ShellSession | None = None) -> T.ToolOutcome:
         """Run one shell command (in ``session``: the ``bash`` tool's; else afresh, a text action);

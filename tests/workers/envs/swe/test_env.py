@@ -155,7 +155,7 @@ def test_command_limit_ends_the_episode_and_submits(swe_env: Callable[..., SweEn
     last = env.call_tool("nope", {})
     assert last.done is True and last.success is False
     assert last.observation == (
-        "Error: unknown tool 'nope'; the tools are bash, view, str_replace, create, submit\n"
+        "Error: unknown tool 'nope'; the tools are bash, view, str_replace, create, insert, undo_edit, submit\n"
         "[command limit reached (2 commands): the episode ends and your current changes are submitted]"
     )
     assert (last.info["end_reason"], last.info["limit"], "eval_reason" in last.info) == (
