@@ -13,6 +13,7 @@ The sentences are ours.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from recap.recap_prompts import numbered
 
@@ -27,6 +28,25 @@ def reply_format(with_think: bool) -> str:
     if with_think:
         return '{"think": "<your reasoning>", "subtasks": ["<subtask>", ...]}'
     return '{"subtasks": ["<subtask>", ...]}'
+
+
+def reply_schema(with_think: bool) -> dict[str, Any]:
+    """The reply text's JSON schema for strict structured output (``reply_schema``), as the
+    release asks for its replies (swebench-recap/sweagent/agent/models.py:707-731: an object of
+    a string ``think`` and a list of strings ``subtasks``, both required, nothing else); the
+    descriptions are ours. Without a think (``no_think``) only ``subtasks``."""
+    props: dict[str, Any] = {}
+    if with_think:
+        props["think"] = {"type": "string", "description": "Your reasoning about the current task and the latest observation."}
+    props["subtasks"] = {
+        "type": "array",
+        "items": {"type": "string"},
+        "description": "The ordered subtasks still needed for the current task; empty when it is complete.",
+    }
+    return {
+        "name": "ReCAP",
+        "schema": {"type": "object", "properties": props, "required": list(props), "additionalProperties": False},
+    }
 
 
 def pre_root_think(issue: str) -> str:

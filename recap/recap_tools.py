@@ -91,6 +91,8 @@ def play_tools(agent: TreeAgent, ep: Episode, reset: Reset) -> None:
     parse = _parser(with_think)
     #: ``tool_calls_per_reply: one``: a reply with several calls is re-asked (the release's parser)
     one_call = TP.one_call_prompt if cfg.tool_calls_per_reply == "one" else None
+    #: ``reply_schema``: the reply text under a strict JSON schema where the provider has one
+    schema = TP.reply_schema(with_think) if cfg.reply_schema else None
     pre = agent._new_node(ep, None, TP.PRE_ROOT_TASK)
     pre.kind = "root"
     pre.add_version(TP.pre_root_think(reset.observation), (TP.SUBMIT_SUBTASK,), None, None)
@@ -121,6 +123,7 @@ def play_tools(agent: TreeAgent, ep: Episode, reset: Reset) -> None:
             context=context,
             decode=_decode,
             one_call=one_call,
+            schema=schema,
         )
         if reply["subtasks"] is not None:
             node.add_version(reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq)

@@ -48,6 +48,8 @@ class ToolUse:
     tools: tuple[ToolDef, ...] = ()
     choice: str | None = None
     one_call: Callable[[int], str] | None = None
+    #: the reply text's JSON schema (:attr:`recap.llm.LLMRequest.response_schema`)
+    schema: Mapping[str, Any] | None = None
 
 
 class EpisodeEnd(Exception):
@@ -234,6 +236,7 @@ class Conversation:
         context: Mapping[str, Any] | None = None,
         decode: Callable[[str], dict[str, Any]] = parse_json_object,
         one_call: Callable[[int], str] | None = None,
+        schema: Mapping[str, Any] | None = None,
     ) -> tuple[dict[str, Any], tuple[ToolCall, ...], int]:
         """:meth:`ask` with ``tools`` the model may call: (parsed text, tool calls, reply seq).
 
@@ -244,10 +247,12 @@ class Conversation:
         history stays a valid tool conversation. With ``one_call`` (the re-ask text for a number
         of calls), a reply making several calls is re-asked the same way, from the same repair
         budget (SWE-agent requeries its format errors from one budget, then exits with the work
-        handed in: swebench-recap/sweagent/agent/agents.py:1204,1217-1221,1308-1315)."""
+        handed in: swebench-recap/sweagent/agent/agents.py:1204,1217-1221,1308-1315). ``schema``:
+        the reply text's JSON schema, sent as a strict response format where the provider
+        supports it (:attr:`recap.llm.LLMRequest.response_schema`)."""
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
-        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice, one_call))
+        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice, one_call, schema))
 
     def add_tool_result(self, call: ToolCall, content: str, node_id: int | None = None) -> int:
         """Answer one tool call of the last reply with its result (a ``tool`` message)."""
@@ -329,6 +334,7 @@ class Conversation:
             hints={"style": self.style, "purpose": purpose, "reply_fields": self.reply_fields, **context},
             tools=tools.tools,
             tool_choice=tools.choice,
+            response_schema=tools.schema,
             episode_cap_usd=self.config.max_episode_cost_usd,
             episode_spent_usd=self.usage.cost_usd,
         )

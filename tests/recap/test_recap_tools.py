@@ -315,3 +315,30 @@ def test_one_call_per_reply_past_the_repair_budget_ends_json_failures():
         2,
     )
     assert env.calls == []
+
+
+def test_reply_schema_sends_the_think_subtasks_schema_and_no_think_leaves_think_out():
+    result, _, client, _ = run([plan("stop"), plan("stop")], ReCAPConfig(window=100, reply_schema=True))
+    assert result.end_reason == "agent_done"
+    schema = {
+        "name": "ReCAP",
+        "schema": {
+            "type": "object",
+            "properties": {
+                "think": {"type": "string", "description": "Your reasoning about the current task and the latest observation."},
+                "subtasks": {
+                    "type": "array",
+                    "items": {"type": "string"},
+                    "description": "The ordered subtasks still needed for the current task; empty when it is complete.",
+                },
+            },
+            "required": ["think", "subtasks"],
+            "additionalProperties": False,
+        },
+    }
+    assert [r.response_schema for r in client.requests] == [schema, schema]
+    _, _, plain, _ = run([plan("stop"), plan("stop")])
+    assert [r.response_schema for r in plain.requests] == [None, None]
+    _, _, bare, _ = run([J({"subtasks": []}), J({"subtasks": []})], ReCAPConfig(window=100, reply_schema=True, think="none"))
+    sent = bare.requests[0].response_schema
+    assert sent is not None and list(sent["schema"]["properties"]) == ["subtasks"] and sent["schema"]["required"] == ["subtasks"]
