@@ -10,6 +10,8 @@ Options of :meth:`SweBenchmark.make` (and of a sweep's ``environments[].options`
 - ``network``: network inside the sandbox (default false);
 - ``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``: the episode's limits
   (:class:`~workers.sandbox.base.SandboxLimits`); ``max_commands`` is the step cap;
+- ``max_timeouts_in_row``: commands in a row that may run past ``command_timeout_s`` before the
+  episode ends (default: no such limit; the release's SWE-agent: 3);
 - ``total_output_bytes``: all observations' bytes together; ``eval_timeout_s``: the evaluation's
   test run (default: the record's, else 30 minutes);
 - ``grading``: ``both`` (default: our evaluation and the official SWE-bench harness's grading of
@@ -70,6 +72,7 @@ ACCEPTED = (
     "network",
     *_LIMIT_OPTIONS,
     "total_output_bytes",
+    "max_timeouts_in_row",
     "eval_timeout_s",
     "grading",
     "step_multiplier",
@@ -197,6 +200,9 @@ class SweBenchmark(Benchmark):
             **{k: _positive(k, options[k], float if k.endswith("_s") else int) for k in _LIMIT_OPTIONS if k in options},
         )
         total = _positive("total_output_bytes", options.get("total_output_bytes", DEFAULT_TOTAL_OUTPUT_BYTES), int)
+        in_row = options.get("max_timeouts_in_row")
+        if in_row is not None:
+            in_row = _positive("max_timeouts_in_row", in_row, int)
         eval_timeout = options.get("eval_timeout_s")
         if eval_timeout is not None:
             eval_timeout = _positive("eval_timeout_s", eval_timeout, float)
@@ -222,6 +228,7 @@ class SweBenchmark(Benchmark):
             limits=limits,
             image=image,
             total_output_bytes=total,
+            max_timeouts_in_row=in_row,
             eval_timeout_s=eval_timeout,
             labels=labels,
             grading=grading,

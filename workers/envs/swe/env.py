@@ -82,6 +82,7 @@ class SweEnvironment(Environment):
         total_output_bytes: int = DEFAULT_TOTAL_OUTPUT_BYTES,
         eval_timeout_s: float | None = None,
         grading: Grading = DEFAULT_GRADING,
+        max_timeouts_in_row: int | None = None,
     ) -> None:
         self.instance = instance
         self.instance_id = instance.id
@@ -90,6 +91,10 @@ class SweEnvironment(Environment):
         self.limits = limits if limits is not None else SandboxLimits()
         self.max_steps = self.limits.max_commands
         self.total_output_bytes = total_output_bytes
+        #: commands in a row that may run past their time limit before the episode ends (None: no
+        #: such limit; SWE-agent's max_consecutive_execution_timeouts, 3 in swebench-recap/sweagent/
+        #: tools/tools.py:150, after which it hands the work in: agents.py:1033-1040, 1265-1270)
+        self.max_timeouts_in_row = max_timeouts_in_row
         self.eval_timeout_s = eval_timeout_s if eval_timeout_s is not None else instance.eval_timeout_s
         self.spec = SandboxSpec(
             repo_path=instance.repo_path,
@@ -113,6 +118,7 @@ class SweEnvironment(Environment):
         self._steps_taken = 0
         self._time_used = 0.0
         self._output_used = 0
+        self._timeouts_in_row = 0
         self._submit_stage = 0
         self._done = False
         self._viewed: set[str] = set()
@@ -236,6 +242,7 @@ class SweEnvironment(Environment):
         self._steps_taken += 1
         self._time_used += out.duration_s + extra_s
         self._output_used += out.output_bytes
+        self._timeouts_in_row = self._timeouts_in_row + 1 if out.timed_out else 0
         limit = self._limit_reached()
         if limit is None:
             return Step(out.observation, None, False, False, out.info())
@@ -253,6 +260,8 @@ class SweEnvironment(Environment):
             return "episode_limit", f"time limit reached ({self.limits.wall_time_s:g} seconds of commands)"
         if self._output_used >= self.total_output_bytes:
             return "episode_limit", f"output limit reached ({self.total_output_bytes} bytes in all)"
+        if self.max_timeouts_in_row is not None and self._timeouts_in_row >= self.max_timeouts_in_row:
+            return "episode_limit", f"timeout limit reached ({self._timeouts_in_row} commands in a row stopped at the time limit)"
         return None
 
     # -- submission ------------------------------------------------------------------------------

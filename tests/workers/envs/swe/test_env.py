@@ -233,9 +233,10 @@ def test_benchmark_lists_by_file_repository_and_id(fixtures: Fixtures) -> None:
         ({"command_timeout_s": -1}, "command_timeout_s must be a positive number, got -1"),
         ({"output_bytes": 1.5}, "output_bytes must be a positive integer, got 1.5"),
         ({"image": ""}, "image must be a docker image name, got ''"),
+        ({"max_timeouts_in_row": 0}, "max_timeouts_in_row must be a positive integer, got 0"),
         (
             {"colour": 1},
-            "unknown swe option(s) colour; accepted: instances_file, sandbox, image, network, command_timeout_s, output_bytes, max_commands, wall_time_s, total_output_bytes, eval_timeout_s, grading, step_multiplier, seed",
+            "unknown swe option(s) colour; accepted: instances_file, sandbox, image, network, command_timeout_s, output_bytes, max_commands, wall_time_s, total_output_bytes, max_timeouts_in_row, eval_timeout_s, grading, step_multiplier, seed",
         ),
     ],
 )
@@ -296,3 +297,17 @@ def test_the_bash_tool_keeps_one_session_and_a_text_action_starts_afresh(swe_env
     assert env.call_tool("bash", {"command": "pwd"}).observation == f"{root}/scratch"
     # mini-SWE-agent's text actions each run in a fresh subprocess in the repository folder
     assert env.step('pwd; echo "${MARK-unset}"').observation == f"{root}\nunset"
+
+
+def test_commands_timing_out_in_a_row_reach_the_timeout_limit(swe_env: Callable[..., SweEnvironment]) -> None:
+    env = swe_env("format", command_timeout_s=1, max_timeouts_in_row=2)
+    env.reset()
+    assert env.call_tool("bash", {"command": "sleep 5"}).done is False
+    assert env.call_tool("bash", {"command": "true"}).done is False  # a command in time starts the count again
+    assert env.call_tool("bash", {"command": "sleep 5"}).done is False
+    last = env.call_tool("bash", {"command": "sleep 5"})
+    assert (last.done, last.info["end_reason"], last.info["limit"]) == (
+        True,
+        "episode_limit",
+        "timeout limit reached (2 commands in a row stopped at the time limit)",
+    )
