@@ -138,3 +138,29 @@ def test_under_context_overflow_end_the_first_overflow_ends_and_hands_in(swe_env
         "llm_error: context length exceeded (the whole history is kept)",
     )
     assert [r.resolved for r in rows] == [True]
+
+
+def test_released_recap_on_a_fixture_one_call_schema_and_the_ten_dollar_cap(swe_env: Callable[..., SweEnvironment]) -> None:
+    from recap.methods import make_agent
+    from workers.envs.registry import get_benchmark
+
+    env = swe_env("format")
+    agent = make_agent("recap", profile="released", benchmark=get_benchmark("swe"))
+    two = reply(PLAN, ("c1", "view", json.dumps({"path": "shop.py"})), ("c2", "str_replace", FIX), cost=1.0)
+    replies = [
+        two,  # re-asked: one call per reply
+        reply(PLAN, ("c3", "str_replace", FIX), cost=6.0),
+        reply("", ("c4", "bash", json.dumps({"command": "cd tests && export X=1"})), cost=4.0),  # $11: past the $10 cap
+    ]
+    client = ScriptedClient(replies)
+    result = agent.run(env, client, episode_id="e", demonstration=False)
+    rows = env.take_records("e", "r")
+    assert [r.purpose for r in client.requests] == ["task", "repair", "action_taken"]
+    assert all(r.response_schema is not None for r in client.requests)
+    assert (result.end_reason, result.success, result.error, result.json_repairs) == (
+        "autosubmitted",
+        True,
+        "episode_limit: $11.0000 spent (limit $10.0)",
+        1,
+    )
+    assert [r.resolved for r in rows] == [True]
