@@ -99,6 +99,18 @@ class BenchmarkProtocol:
         return {}
 
 
+#: settings added after units were first planned, each with the value it stands for when left
+#: out: :meth:`AgentConfig.to_json` leaves a setting out while it holds that value and
+#: :meth:`AgentConfig.from_json` fills it in, so the hashes of units planned before the setting
+#: existed do not change
+LATE_SETTINGS: dict[str, Any] = {
+    "prompts": "ours",
+    "context_overflow": "drop",
+    "tool_calls_per_reply": "any",
+    "reply_schema": False,
+}
+
+
 @dataclass(frozen=True)
 class AgentConfig:
     """Settings every agent shares: the window, generation settings and per-episode caps."""
@@ -131,6 +143,11 @@ class AgentConfig:
     #: ``prompts: release``; ``release`` until the digest is known). Left out of :meth:`to_json`
     #: while ``ours``, so the hashes of units planned before it existed do not change.
     prompts: str = "ours"
+    #: what a context overflow does: ``drop`` the oldest unpinned messages and ask again (the
+    #: paper's reading), or ``end`` the episode (SWE-agent's ``exit_context``, after which the
+    #: work so far is handed in: swebench-recap/sweagent/agent/agents.py:1272-1276). Left out of
+    #: :meth:`to_json` while ``drop`` (:data:`LATE_SETTINGS`)
+    context_overflow: Literal["drop", "end"] = "drop"
 
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
@@ -162,6 +179,8 @@ class AgentConfig:
             raise ConfigError(f"valid_actions must be shown, episode, hidden or null, got {self.valid_actions!r}")
         if not re.fullmatch(r"ours|release(:[0-9a-f]{64})?", str(self.prompts)):
             raise ConfigError(f"prompts must be ours or release, got {self.prompts!r}")
+        if self.context_overflow not in ("drop", "end"):
+            raise ConfigError(f"context_overflow must be drop or end, got {self.context_overflow!r}")
 
     def history_window(self) -> int:
         """K as the shared history applies it (ReAct's ``history: last`` narrows it)."""
@@ -178,8 +197,9 @@ class AgentConfig:
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): part of a unit's content hash and of episode rows."""
         values = dataclasses.asdict(self)
-        if values.get("prompts") == "ours":
-            del values["prompts"]
+        for name, default in LATE_SETTINGS.items():
+            if name in values and values[name] == default:
+                del values[name]
         return json.dumps(values, sort_keys=True)
 
     @classmethod
@@ -197,7 +217,7 @@ class AgentConfig:
         if not isinstance(values, dict):
             raise ConfigError(f"{cls.__name__}: resolved settings must be a JSON object")
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - {"prompts"})
+        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - set(LATE_SETTINGS))
         if unknown or missing:
             raise ConfigError(
                 f"{cls.__name__}: resolved settings do not match this version "
@@ -227,6 +247,14 @@ class ReCAPConfig(AgentConfig):
     #: the released code leaves a shortcut's trace in the history (the descend prompt and a
     #: synthetic reply naming the action, no call); the paper describes no such messages
     shortcut_trace: bool = False
+    #: tool-call mode: ``any`` number of tool calls per reply, each run in order (the paper is
+    #: silent), or exactly ``one`` per reply that calls tools, a reply with several re-asked
+    #: (SWE-agent's function-calling parser, swebench-recap/sweagent/tools/parsing.py:439-449)
+    tool_calls_per_reply: Literal["any", "one"] = "any"
+    #: tool-call mode: ask for the ``{think, subtasks}`` reply under a strict JSON schema
+    #: (``response_format`` ``json_schema``, swebench-recap/sweagent/agent/models.py:707-731)
+    #: where the provider supports it, plain JSON otherwise; False: no response format
+    reply_schema: bool = False
 
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
@@ -249,6 +277,8 @@ class ReCAPConfig(AgentConfig):
             raise ConfigError("reminder_period must be >= 1 or null")
         if self.reminder_on not in ("calls", "iterations"):
             raise ConfigError(f"reminder_on must be calls or iterations, got {self.reminder_on!r}")
+        if self.tool_calls_per_reply not in ("any", "one"):
+            raise ConfigError(f"tool_calls_per_reply must be any or one, got {self.tool_calls_per_reply!r}")
 
 
 #: the paper's ablation names, as settings of ReCAPConfig

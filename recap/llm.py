@@ -144,6 +144,11 @@ class LLMRequest:
     tools: tuple[ToolDef, ...] = ()
     #: "auto", "required", "none" or the name of one of ``tools``; None: the provider's default
     tool_choice: str | None = None
+    #: the reply text's JSON schema for strict structured output, ``{"name": ..., "schema": {...}}``
+    #: (ReCAP's ``{think, subtasks}`` under ``reply_schema``): the provider layer sends it as a
+    #: ``json_schema`` response format where the model supports one, as ``json_object`` where it
+    #: supports only that, and not at all otherwise (workers.llm.providers.DeploymentConfig.schema_params)
+    response_schema: Mapping[str, Any] | None = None
     #: the episode's own cost cap (``limits.usd``, per instance; None: none) and what the episode
     #: has spent before this call: the gateway refuses a call whose worst case would pass the cap
     #: before anything is sent (a reservation, like the run's and the model's caps), so a long

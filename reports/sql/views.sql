@@ -200,11 +200,12 @@ FROM tool_calls
 GROUP BY run_id, episode_id;
 
 -- episode_modes: every unit's row (terminal, any state) with one failure mode, first match wins:
---   success                     end_reason success
+--   success                     end_reason success, or autosubmitted with success (the diff handed in at a limit resolved)
 --   infra_error:<kind>          an infrastructure failure (infra_kind: auth, worker_lost ...)
 --   model_error:<kind>          end_reason llm_error; kind = error_kind of the episode's last failed call
 --   json_failures | truncated | budget_exhausted | episode_limit | env_error    those end reasons
 --                               (truncated: a reply cut at the output cap, never counted as a JSON failure)
+--   autosubmitted               a limit ended it and the diff handed in there did not resolve (error: the limit)
 --   invalid_action_loop         step_cap / call_cap / agent_done with invalid_loop
 --   repeated_action_loop        step_cap / call_cap / agent_done with repeated_loop
 --   agent_done_early            agent_done (the agent declared the task finished; it was not)
@@ -225,10 +226,10 @@ SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.labe
   p.loop_cycle_len,
   le.last_error_kind,
   CASE
-    WHEN t.end_reason = 'success' THEN 'success'
+    WHEN t.end_reason = 'success' OR (t.end_reason = 'autosubmitted' AND t.success) THEN 'success'
     WHEN t.infra_kind IS NOT NULL THEN 'infra_error:' || t.infra_kind
     WHEN t.end_reason = 'llm_error' THEN 'model_error:' || coalesce(le.last_error_kind, 'unknown')
-    WHEN t.end_reason IN ('json_failures', 'truncated', 'budget_exhausted', 'episode_limit', 'env_error', 'wiki_error') THEN t.end_reason
+    WHEN t.end_reason IN ('json_failures', 'truncated', 'budget_exhausted', 'episode_limit', 'env_error', 'wiki_error', 'autosubmitted') THEN t.end_reason
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.invalid_loop, false) THEN 'invalid_action_loop'
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.repeated_loop, false) THEN 'repeated_action_loop'
     WHEN t.end_reason = 'agent_done' THEN 'agent_done_early'

@@ -33,6 +33,8 @@ def rules_text(workdir: str, limits: SandboxLimits, total_output_bytes: int, sen
         "- view: show a file with line numbers, or list a folder two levels deep.\n"
         "- str_replace: replace text that occurs exactly once in a file.\n"
         "- create: write a new file.\n"
+        "- insert: insert lines after a given line of a file.\n"
+        "- undo_edit: undo your last change to a file made with str_replace, insert or create.\n"
         "- submit: hand in your changes. The first call shows your diff for a last review; call it again to finish.\n"
         "If you act with plain text instead of tool calls, each action is one bash command, and the command "
         f"`echo {sentinel}` hands in your changes at once.\n"
