@@ -134,15 +134,20 @@ def react_loop(source: str) -> ReActLoop:
     start, stop = (ast.literal_eval(a) for a in loop.iter.args)
     final: tuple[int, str] | None = None
     for node in loop.body:
-        test = node.test if isinstance(node, ast.If) else None
-        if isinstance(test, ast.Compare) and isinstance(test.comparators[0], ast.Constant) and test.comparators[0].value != start:
-            assign = node.body[0] if isinstance(node, ast.If) and node.body else None
-            if (
-                isinstance(assign, ast.Assign)
-                and isinstance(assign.value, ast.BinOp)
-                and isinstance(assign.value.left, ast.Constant)
-            ):
-                final = (int(test.comparators[0].value), str(assign.value.left.value))
+        if not isinstance(node, ast.If) or not isinstance(node.test, ast.Compare) or not node.body:
+            continue
+        bound = node.test.comparators[0]
+        assign = node.body[0]
+        if (
+            isinstance(bound, ast.Constant)
+            and isinstance(bound.value, int)
+            and bound.value != start
+            and isinstance(assign, ast.Assign)
+            and isinstance(assign.value, ast.BinOp)
+            and isinstance(assign.value.left, ast.Constant)
+            and isinstance(assign.value.left.value, str)
+        ):
+            final = (bound.value, assign.value.left.value)
     if final is None:
         raise NotebookError("webthink() has no final-round sentence (if i == N: prompt = '...' + prompt)")
     return ReActLoop(prompt_file.removeprefix("./"), key, int(stop) - int(start), final[0], final[1])
