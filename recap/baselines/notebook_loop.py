@@ -8,32 +8,36 @@ the rounds, the final-round sentence, the CoT/Standard frame). What this module 
 notebooks' lines (cell 4 of ``React.ipynb`` / ``baseline_act.ipynb``; cell 2 of
 ``baseline_cot.ipynb`` / ``baseline_standard.ipynb``):
 
-ReAct/Act (``webthink``):
+ReAct/Act (``webthink``; "cell 4:N" is line N of the cell's source, the same in both notebooks
+unless said):
 
-* no system message; the demonstration is the first user message
-  (``history.append({"role": "user", "content": webthink_prompt})``);
-* each round ``i`` (``for i in range(1, 11)``) sends one user message, ``Thought i:`` (Act:
-  ``Action i:``), after the question and a newline on round 1 and after the final-round
-  sentence on the last round (``if i == 1`` / ``if i == 10``);
-* the call carries ``stop=["\\nObservation i:"]`` and no temperature (the ``llm`` helper of
-  cell 1 has it commented out); its reply is stripped (``.strip()`` in ``llm``);
-* ReAct splits the stripped reply on ``"\\nAction i: "`` into exactly a thought and an action;
-  otherwise (``except:``) it adds the user message ``Thought i: <the reply's first line>\\nAction
-  i:`` and asks again with ``stop=["\\n"]``, the stripped answer being the action. Act takes
-  ``split("Action i:")[-1].strip()`` of the reply;
-* the action is stepped with only its first character lower-cased (``action[0].lower() +
+* no system message; the demonstration is the first user message (cell 4:14,
+  ``history.append({"role": "user", "content": webthink_prompt})``; the prompt read at 4:4-9);
+* each round ``i`` (``for i in range(1, 11)``, 4:24) sends one user message, ``Thought i:`` (Act:
+  ``Action i:``, 4:25), after the question and a newline on round 1 (4:26-27) and after the
+  final-round sentence on the last round (React 4:28-29, Act 4:29-30), appended at 4:32;
+* the call carries ``stop=[f"\\nObservation {i}:"]`` (4:35) and no temperature (cell 1:11, the
+  ``llm`` helper's ``temperature`` commented out); its reply is stripped (cell 1:18);
+* ReAct splits the stripped reply on ``"\\nAction i: "`` into exactly a thought and an action
+  (4:37); otherwise (``except:``, 4:38-44) it adds the user message ``Thought i: <the reply's
+  first line>\\nAction i:`` (4:42-43) and asks again with ``stop=["\\n"]``, the stripped answer
+  being the action (4:44). Act takes ``action_str.split(f"Action {i}:")[-1].strip()`` (Act 4:38;
+  its ``except`` never runs: ``split`` does not raise);
+* the action is stepped with only its first character lower-cased (4:46, ``action[0].lower() +
   action[1:]``: the environment's ``lower_first`` spelling), the observation has every ``\\n``
-  (a backslash and an n) removed (``obs.replace('\\\\n', '')``), and the round leaves one
-  assistant message ``Thought i: …\\nAction i: …\\nObservation i: …\\n`` (Act: without the
-  thought): the model's own reply is taken out of the context (its ``messages`` row stays);
-* an empty action makes the notebook's ``action[0]`` raise, which its runner scores 0
-  (``except Exception: rs.append(0)``): the episode ends unsuccessful;
-* ten rounds without a verdict: the notebook steps ``finish[]`` (scored 0); here the
-  environment's own cap of 10 actions ends the episode first, with the same score.
+  (a backslash and an n) removed (4:47), and the round leaves one assistant message
+  ``Thought i: …\\nAction i: …\\nObservation i: …\\n`` (Act: without the thought; 4:48-49):
+  the model's own reply is taken out of the context (its ``messages`` row stays);
+* an empty action makes ``action[0]`` raise (4:46), which the runner scores 0 (4:93-97,
+  ``except Exception: rs.append(0)``): the episode ends unsuccessful;
+* ten rounds without a verdict: the notebook steps ``finish[]`` (4:54-55; scored 0); here the
+  environment's own cap of 10 actions ends the episode first (``step_cap``), with the same score.
 
-CoT/Standard (``run_hotpotqa``): one user message, the notebook's text around the question; the
-answer is the stripped reply after its last ``Answer:`` (CoT: ``response.split("Answer:")[-1]``)
-or the whole stripped reply (Standard), stepped once as ``finish[<answer>]``.
+CoT/Standard (``run_hotpotqa``, cell 2): one user message, the notebook's text around the
+question (baseline_cot.ipynb 2:24-26, baseline_standard.ipynb 2:24-25), sent without stop or
+temperature (cell 1: neither passed); the answer is the stripped reply after its last
+``Answer:`` (CoT 2:30, ``response.split("Answer:")[-1].strip()``) or the whole stripped reply
+(Standard 2:27, cell 1:26), stepped once as ``finish[<answer>]`` (CoT 2:32, Standard 2:30).
 """
 
 from __future__ import annotations

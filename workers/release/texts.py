@@ -15,6 +15,9 @@ yields exactly the part the released code sends before the episode's first obser
 * YAML prompt templates (Robotouille baselines, ``agents/prompt_builder/prompts``): their
   ``system`` and ``instructions`` fields;
 * in-context example files (``agents/in_context_examples/data/<split>/<kind>/*.txt``): each file whole.
+* FEVER's notebooks (ReAct, Act, CoT, Standard: ``fever-recap/*.ipynb``): read by
+  :mod:`workers.release.fever_notebooks` (the loop cell's literals with :mod:`ast`, and the
+  demonstration in the JSON file the cell names).
 
 Parts are joined by one blank line. What each method reads (and the released file that makes it
 so) is :func:`sources`. The released code's framing sentences around a demonstration live in

@@ -6,7 +6,7 @@ Read from GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f (``fever-recap``) and the p
 "FEVER Experiment Details":
 
 * the cap: 10 actions for every method (the paper; ``conf/config.toml:3`` ``max_retry = 10`` and
-  the notebooks' ``for i in range(1, 11)``, React.ipynb / baseline_act.ipynb). The environment
+  the notebooks' ``for i in range(1, 11)``, React.ipynb / baseline_act.ipynb cell 4:24). The environment
   enforces it (``workers/envs/fever/env.py``: ``max_steps`` 10);
 * ``paper``: the Robotouille hyperparameters (temperature 0.5, no output cap) for every method,
   which is the generic profile; an episode of 10 actions never reaches its window;
