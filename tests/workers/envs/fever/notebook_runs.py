@@ -16,7 +16,6 @@ import ast
 import json
 import re
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from tests.conftest import SHARED_DATA
 
@@ -166,7 +165,3 @@ def episodes(method: str) -> list[Episode]:
 def available() -> bool:
     """Whether the release copy with the notebooks is beside the checkout."""
     return all((FEVER / name).is_file() for name in NOTEBOOKS.values()) and (FEVER / "prompts" / "fever.json").is_file()
-
-
-def read_path(path: Path) -> str:
-    return path.read_text(encoding="utf-8-sig")
