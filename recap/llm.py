@@ -156,6 +156,9 @@ class LLMRequest:
     #: not part of the call key or the cache fingerprint.
     episode_cap_usd: float | None = None
     episode_spent_usd: float = 0.0
+    #: stop sequences sent with the request (none: the provider's default, nothing sent); part of
+    #: the generation settings, so of the response cache's key
+    stop: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.tool_choice is None:
@@ -176,6 +179,10 @@ class LLMRequest:
         elif self.tool_choice is not None:
             params["tool_choice"] = {"type": "function", "function": {"name": self.tool_choice}}
         return params
+
+    def stop_params(self) -> dict[str, Any]:
+        """``stop`` as litellm receives it (empty without stop sequences)."""
+        return {"stop": list(self.stop)} if self.stop else {}
 
     @property
     def call_key(self) -> str:

@@ -22,8 +22,10 @@ frames it (and re-sends ``rules`` in its reminders).
 ``first_turn`` says whose released code the agent's first turn follows, so an agent never asks
 which benchmark it plays: ``labelled`` (Robotouille's releases: the observation, or ReCAP's
 template-framed task) or ``framed`` (the ALFWorld release: the environment's rule and the task
-framed as react.py / act.py / chatbot.py:242-253 send it). Only the release files decide it
-(:mod:`workers.release.texts`).
+framed as react.py / act.py / chatbot.py:242-253 send it) or ``notebook`` (the FEVER notebooks'
+own loops, :mod:`recap.baselines.notebook_loop`: ``rounds``, ``final_round`` and
+``final_sentence`` for ReAct/Act, ``claim_frame`` for CoT/Standard, all read from the notebook
+cells). Only the release files decide it (:mod:`workers.release.texts`).
 """
 
 from __future__ import annotations
@@ -45,7 +47,14 @@ class ReleasePrompt:
     rules: str | None = None
     planner: tuple[tuple[str, str], ...] = ()
     executor: tuple[tuple[str, str], ...] = ()
-    first_turn: Literal["labelled", "framed"] = "labelled"
+    first_turn: Literal["labelled", "framed", "notebook"] = "labelled"
+    #: the notebook loop's rounds (``range(1, rounds + 1)``), the round that gets
+    #: ``final_sentence`` before its label (ReAct/Act; None elsewhere)
+    rounds: int | None = None
+    final_round: int | None = None
+    final_sentence: str | None = None
+    #: the one prompt's text before and after the question (CoT/Standard notebooks)
+    claim_frame: tuple[str, str] | None = None
 
     def __post_init__(self) -> None:
         for role, content in (*self.messages, *self.planner, *self.executor):

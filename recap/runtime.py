@@ -40,13 +40,16 @@ NOT_RUN = "not run: the reply that made this call could not be used"
 
 @dataclass(frozen=True)
 class ToolUse:
-    """The tools one request offers and its tool-choice setting (none: a plain chat request).
+    """The tools one request offers and its tool-choice setting (none: a plain chat request),
+    and the stop sequences it is sent with (none: the provider's default; the released FEVER
+    notebooks stop each call at ``"\nObservation i:"``, React.ipynb cell 4).
     ``one_call``: a reply may make at most one tool call; one that makes more is re-asked with
     the text this gives for its number of calls (SWE-agent's function-calling parser,
     swebench-recap/sweagent/tools/parsing.py:439-449)."""
 
     tools: tuple[ToolDef, ...] = ()
     choice: str | None = None
+    stop: tuple[str, ...] = ()
     one_call: Callable[[int], str] | None = None
     #: the reply text's JSON schema (:attr:`recap.llm.LLMRequest.response_schema`)
     schema: Mapping[str, Any] | None = None
@@ -196,6 +199,11 @@ class Conversation:
     def pin(self, kind: str, content: str) -> int:
         return self.history.pin("user", kind, content)
 
+    def forget(self, seq: int) -> None:
+        """Take the message ``seq`` out of the context (its ``messages`` row stays): a released
+        loop that keeps its own record of a step instead of the model's reply (React.ipynb cell 4)."""
+        self.history.forget(seq)
+
     def pin_message(self, role: str, kind: str, content: str) -> int:
         """Pin a message with its own role (the authors' system text and example replies)."""
         return self.history.pin(role, kind, content)
@@ -209,8 +217,10 @@ class Conversation:
         node_id: int | None = None,
         context: Mapping[str, Any] | None = None,
         decode: Callable[[str], dict[str, Any]] = parse_json_object,
+        stop: tuple[str, ...] = (),
     ) -> tuple[dict[str, Any], int]:
-        """Send ``prompt`` and return (parsed reply, seq of the reply message).
+        """Send ``prompt`` and return (parsed reply, seq of the reply message); ``stop``: the
+        stop sequences the request carries.
 
         ``prompt`` None means the prompt is already in the history (the pinned task prompt).
         A malformed reply is answered with a repair message, at most ``max_json_repairs`` times;
@@ -221,7 +231,7 @@ class Conversation:
         """
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
-        parsed, _calls, seq = self._ask_loop(kind, parse, node_id, context, decode, ToolUse())
+        parsed, _calls, seq = self._ask_loop(kind, parse, node_id, context, decode, ToolUse(stop=tuple(stop)))
         return parsed, seq
 
     def ask_tools(
@@ -335,6 +345,7 @@ class Conversation:
             tools=tools.tools,
             tool_choice=tools.choice,
             response_schema=tools.schema,
+            stop=tools.stop,
             episode_cap_usd=self.config.max_episode_cost_usd,
             episode_spent_usd=self.usage.cost_usd,
         )

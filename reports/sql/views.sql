@@ -244,8 +244,14 @@ LEFT JOIN last_error le ON le.run_id = t.run_id AND le.episode_id = t.episode_id
 CREATE VIEW failures AS
 SELECT * FROM episode_modes WHERE mode <> 'success' AND state = 'finished';
 
+-- fever_samples: the claims of the release's two FEVER samples (main.py's seed 42, the ReAct/Act
+-- notebooks' seed 233), one row per claim and sample. Filled by the report builder
+-- (reports.sections.fever_samples) from the claims file; empty in a plain `recap sql` session.
+CREATE TABLE fever_samples (instance_id VARCHAR, sample_seed BIGINT);
+
 -- paper_scoped: the outcomes rows the paper section counts, once per scope: 'all', and again as
--- 'sync_2_4_6' for Robotouille synchronous tasks 2, 4 and 6 (the cross-model table's tasks);
+-- 'sync_2_4_6' for Robotouille synchronous tasks 2, 4 and 6 (the cross-model table's tasks), and
+-- as 'fever_seed42' / 'fever_seed233' for the FEVER claims of each release sample;
 -- arm_label is the arm (its label, else the method), variant the ablation.
 CREATE VIEW paper_scoped AS
 WITH counted AS (
@@ -254,7 +260,10 @@ WITH counted AS (
 SELECT *, 'all' AS scope FROM counted
 UNION ALL
 SELECT *, 'sync_2_4_6' FROM counted
-WHERE benchmark = 'robotouille' AND split = 'synchronous' AND split_part(task, '_', 1) IN ('2', '4', '6');
+WHERE benchmark = 'robotouille' AND split = 'synchronous' AND split_part(task, '_', 1) IN ('2', '4', '6')
+UNION ALL
+SELECT c.*, 'fever_seed' || s.sample_seed FROM counted c JOIN fever_samples s USING (instance_id)
+WHERE c.benchmark = 'fever';
 
 -- planned_units: the units each run folder's plan.json lists (run_id from its run.json), with
 -- whether its model is a test double (from the folder's spec.yaml; NULL when unknown). Filled by

@@ -229,6 +229,7 @@ class DeploymentGateway(CallRecorder):
             **cfg.generation_params(request.temperature, request.max_tokens, request.json_mode),
             **request.tool_params(),
             **cfg.schema_params(request.response_schema),
+            **request.stop_params(),
         }
         sizing = size_request(cfg.model, messages, params)
         counted = sizing.counted

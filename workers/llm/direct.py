@@ -101,6 +101,7 @@ class LiteLLMClient:
             **cfg.generation_params(request.temperature, request.max_tokens, request.json_mode),
             **request.tool_params(),
             **cfg.schema_params(request.response_schema),
+            **request.stop_params(),
         }
         sizing = size_request(cfg.model, messages, params)
         send = mark(self.markers, request.episode_id, messages) if self.markers is not None else messages
