@@ -49,10 +49,10 @@ class ToolUse:
 
     tools: tuple[ToolDef, ...] = ()
     choice: str | None = None
-    stop: tuple[str, ...] = ()
     one_call: Callable[[int], str] | None = None
     #: the reply text's JSON schema (:attr:`recap.llm.LLMRequest.response_schema`)
     schema: Mapping[str, Any] | None = None
+    stop: tuple[str, ...] = ()
 
 
 class EpisodeEnd(Exception):
@@ -262,7 +262,7 @@ class Conversation:
         supports it (:attr:`recap.llm.LLMRequest.response_schema`)."""
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
-        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice, one_call, schema))
+        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice, one_call=one_call, schema=schema))
 
     def add_tool_result(self, call: ToolCall, content: str, node_id: int | None = None) -> int:
         """Answer one tool call of the last reply with its result (a ``tool`` message)."""
