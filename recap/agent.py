@@ -171,8 +171,10 @@ class Agent(ABC):
             raise EpisodeEnd("agent_done")
         except EpisodeEnd as end:
             # a limit reached: the work so far is handed in and graded where the environment
-            # has any (SWE-agent's autosubmission), under every profile
-            result = ep.result(ep.driver.submit_at_limit(end), self.max_depth(ep))
+            # has any (SWE-agent's autosubmission), under every profile, unless the method's
+            # own loop handed in nothing at its limits (submit_at_limit off)
+            handed_in = ep.driver.submit_at_limit(end) if self.config.submit_at_limit else end
+            result = ep.result(handed_in, self.max_depth(ep))
         finally:
             self.finish(ep)
         return result

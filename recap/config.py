@@ -108,6 +108,7 @@ LATE_SETTINGS: dict[str, Any] = {
     "context_overflow": "drop",
     "tool_calls_per_reply": "any",
     "reply_schema": False,
+    "submit_at_limit": True,
 }
 
 
@@ -148,6 +149,12 @@ class AgentConfig:
     #: work so far is handed in: swebench-recap/sweagent/agent/agents.py:1272-1276). Left out of
     #: :meth:`to_json` while ``drop`` (:data:`LATE_SETTINGS`)
     context_overflow: Literal["drop", "end"] = "drop"
+    #: at a limit (cost, tokens, calls, steps, time, context), hand in the work so far and have
+    #: it judged where the environment has any (SWE-agent's autosubmission,
+    #: swebench-recap/sweagent/agent/agents.py:888-933): the default under every profile. False
+    #: for a loop that submitted nothing at its limits (mini-swe-agent 1.0.0, :mod:`workers.agents.mini_swe`).
+    #: Left out of :meth:`to_json` while True (:data:`LATE_SETTINGS`)
+    submit_at_limit: bool = True
 
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:

@@ -62,10 +62,16 @@ class MiniSweConfig(AgentConfig):
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
         """``released``: mini-swe-agent 1.0.0's configuration and its ``cost_limit: 3.``
-        (mini_swe_1_0_0/swebench.yaml)."""
+        (mini_swe_1_0_0/swebench.yaml), and nothing handed in at a limit: 1.0.0's SWE-bench
+        runner writes the agent's result as the prediction, and a limit gives the result ``""``
+        (micro-swe-agent 1.0.0 ``agents/default.py`` ``run``: a ``TerminatingException`` such as
+        ``LimitsExceeded`` returns its message, empty; ``run/extra/swebench.py:133-147``), so the
+        leaderboard graded an empty patch there, never the diff so far."""
         out = super().profile_defaults(profile, ablation)
         if profile == "released":
-            out.update(package_config=RELEASED_VERSION, max_episode_cost_usd=PACKAGE_COST_LIMIT_USD)
+            out.update(
+                package_config=RELEASED_VERSION, max_episode_cost_usd=PACKAGE_COST_LIMIT_USD, submit_at_limit=False
+            )
         return out
 
     def to_json(self) -> str:

@@ -164,3 +164,24 @@ def test_released_recap_on_a_fixture_one_call_schema_and_the_ten_dollar_cap(swe_
         1,
     )
     assert [r.resolved for r in rows] == [True]
+
+
+def test_a_method_that_hands_in_nothing_at_its_limits_ends_there_ungraded(
+    swe_env: Callable[..., SweEnvironment],
+) -> None:
+    """``submit_at_limit: false`` (mini-swe-agent 1.0.0's loop under ``released``): the cost cap
+    with a diff in the repository ends the episode at the limit, and nothing is graded."""
+    env = swe_env("format")
+    replies = [
+        reply(PLAN, ("c1", "str_replace", FIX)),
+        reply("", ("c2", "bash", json.dumps({"command": "echo checked"}))),
+    ]
+    result, client, rows = play(env, replies, max_episode_cost_usd=0.05, submit_at_limit=False)
+    assert (result.end_reason, result.success, result.error, result.llm_calls, result.steps) == (
+        "episode_limit",
+        False,
+        "$0.0600 spent (limit $0.05)",
+        2,
+        2,
+    )
+    assert rows == []
