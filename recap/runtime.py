@@ -262,7 +262,9 @@ class Conversation:
         supports it (:attr:`recap.llm.LLMRequest.response_schema`)."""
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
-        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice, one_call=one_call, schema=schema))
+        return self._ask_loop(
+            kind, parse, node_id, context, decode, ToolUse(tools, tool_choice, one_call=one_call, schema=schema)
+        )
 
     def add_tool_result(self, call: ToolCall, content: str, node_id: int | None = None) -> int:
         """Answer one tool call of the last reply with its result (a ``tool`` message)."""

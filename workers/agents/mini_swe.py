@@ -69,9 +69,7 @@ class MiniSweConfig(AgentConfig):
         leaderboard graded an empty patch there, never the diff so far."""
         out = super().profile_defaults(profile, ablation)
         if profile == "released":
-            out.update(
-                package_config=RELEASED_VERSION, max_episode_cost_usd=PACKAGE_COST_LIMIT_USD, submit_at_limit=False
-            )
+            out.update(package_config=RELEASED_VERSION, max_episode_cost_usd=PACKAGE_COST_LIMIT_USD, submit_at_limit=False)
         return out
 
     def to_json(self) -> str:

@@ -91,7 +91,9 @@ def test_released_selects_1_0_0_and_paper_keeps_the_installed_configuration() ->
     assert (released.package_config, released.max_episode_cost_usd, released.temperature) == ("1.0.0", 3.0, 0.0)
     assert (released.submit_at_limit, paper.submit_at_limit) == (False, True)  # 1.0.0 handed in "" at a limit
     assert paper.package_config == "installed"
-    assert "package_config" not in paper.to_json() and "submit_at_limit" not in paper.to_json()  # the hash of units planned before it is unchanged
+    assert (
+        "package_config" not in paper.to_json() and "submit_at_limit" not in paper.to_json()
+    )  # the hash of units planned before it is unchanged
     assert MiniSweConfig.from_json(paper.to_json()) == paper and MiniSweConfig.from_json(released.to_json()) == released
     installed = mini_swe_package.load_package()
     assert installed.agent_settings["step_limit"] != 0  # what the installed version would have run (250)
