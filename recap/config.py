@@ -221,12 +221,32 @@ class ReCAPConfig(AgentConfig):
     reminder_period: int | None = 10
     #: what the reminder period counts: ``calls`` (LLM calls, the paper) or ``iterations``
     #: (control-loop iterations: every child entered, shortcuts included, and every return;
-    #: the released code). The reminder goes on whichever prompt is sent next.
-    reminder_on: Literal["calls", "iterations"] = "calls"
+    #: the released code), or ``nth_call`` (the prompt of call number period, 2 x period, ...:
+    #: the released FEVER loop, fever-recap/MATRIX/MATRIX/chatbot.py:350-360). The reminder goes
+    #: on whichever prompt is sent next.
+    reminder_on: Literal["calls", "iterations", "nth_call"] = "calls"
     shortcut: bool = True
     #: the released code leaves a shortcut's trace in the history (the descend prompt and a
     #: synthetic reply naming the action, no call); the paper describes no such messages
     shortcut_trace: bool = False
+    #: a one-item list reaches the environment only when the item (stripped) matches this regex;
+    #: otherwise it is a leaf failure that uses no step (None: every item the environment accepts,
+    #: the paper). The released FEVER loop's check (fever-recap/MATRIX/MATRIX/chatbot.py:308-312,
+    #: 379-381, 412-423); it also makes a one-item root list a leaf, as that loop does
+    action_pattern: str | None = None
+    #: when the root's list empties, one more call asks for the final answer and its first
+    #: subtask is sent as the last action (fever-recap/MATRIX/MATRIX/chatbot.py:470-478)
+    final_answer: bool = False
+    #: False: the task prompt is the first windowed message instead of a pin, so the window drops
+    #: it first and only the demonstration stays (fever-recap/MATRIX/MATRIX/chatbot.py:42-44)
+    pin_task: bool = True
+    #: text deleted from every observation before a prompt shows it (the released FEVER runner
+    #: deletes the two characters backslash-n: fever-recap/hotpotqa/hotpotqa_simulator.py:42)
+    observation_drop: str = ""
+    #: None: the benchmark's step cap; a number: the released code has no step cap
+    #: (hotpotqa_simulator.py:22,33 never counts), so this safety bound replaces it and an
+    #: episode it ends says so in its row (end reason step_cap/call_cap, error "safety bound ...")
+    safety_steps: int | None = None
 
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
@@ -247,8 +267,15 @@ class ReCAPConfig(AgentConfig):
             raise ConfigError(f"think must be latest, none or many, got {self.think!r}")
         if self.reminder_period is not None and self.reminder_period < 1:
             raise ConfigError("reminder_period must be >= 1 or null")
-        if self.reminder_on not in ("calls", "iterations"):
-            raise ConfigError(f"reminder_on must be calls or iterations, got {self.reminder_on!r}")
+        if self.reminder_on not in ("calls", "iterations", "nth_call"):
+            raise ConfigError(f"reminder_on must be calls, iterations or nth_call, got {self.reminder_on!r}")
+        if self.action_pattern is not None:
+            try:
+                re.compile(self.action_pattern)
+            except re.error as exc:
+                raise ConfigError(f"action_pattern is not a regular expression: {exc}") from None
+        if self.safety_steps is not None and self.safety_steps < 1:
+            raise ConfigError("safety_steps must be >= 1 or null (the benchmark's step cap)")
 
 
 #: the paper's ablation names, as settings of ReCAPConfig
@@ -282,6 +309,7 @@ SETTING_BOUNDS: dict[str, tuple[float, float]] = {
     "context_drop": (2, 100_000),
     "max_level": (2, 100),
     "reminder_period": (1, 100_000),
+    "safety_steps": (1, 100_000),
     "max_depth": (1, 100),
     "executor_steps": (1, 100_000),
     "executor_patience": (1, 100_000),

@@ -24,12 +24,39 @@ which benchmark it plays: ``labelled`` (Robotouille's releases: the observation,
 template-framed task) or ``framed`` (the ALFWorld release: the environment's rule and the task
 framed as react.py / act.py / chatbot.py:242-253 send it). Only the release files decide it
 (:mod:`workers.release.texts`).
+
+Where the released code's own prompt templates are read whole (ReCAP on FEVER:
+``fever-recap/MATRIX/MATRIX/chatbot.py``'s ``Prompt`` methods and its reminder, read with
+:mod:`ast` by :mod:`workers.release.fever_matrix`), ``first_turn`` is ``templated``: ``templates``
+maps a prompt's name to a :meth:`str.format` template with the released placeholders
+(:data:`TEMPLATE_NAMES`), ``empty_list`` holds the text a template shows for an empty
+subtask list, the root's task is the environment's first observation and ``first_observation``
+the text the released runner shows as the initial observation (hotpotqa_simulator.py:26).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Literal
+
+#: the prompts a ``templated`` release gives, and the placeholders each may hold: ``task``
+#: (task_name, init_obs, rule, system_prompt), ``descend`` (task_name), ``leaf_done`` / ``leaf_judge``
+#: / ``leaf_fail`` (obs, done_task_name or fail_task_name, previous_stage_task_name,
+#: previous_stage_think, remaining_subtask_str), ``nonleaf_done`` / ``nonleaf_judge`` (the same
+#: without obs), ``reminder`` (rule; put before the prompt), ``final_answer`` (none), ``demo``
+#: (few_shot_str)
+TEMPLATE_NAMES = (
+    "task",
+    "descend",
+    "leaf_done",
+    "leaf_judge",
+    "leaf_fail",
+    "nonleaf_done",
+    "nonleaf_judge",
+    "reminder",
+    "final_answer",
+    "demo",
+)
 
 
 @dataclass(frozen=True)
@@ -45,9 +72,24 @@ class ReleasePrompt:
     rules: str | None = None
     planner: tuple[tuple[str, str], ...] = ()
     executor: tuple[tuple[str, str], ...] = ()
-    first_turn: Literal["labelled", "framed"] = "labelled"
+    first_turn: Literal["labelled", "framed", "templated"] = "labelled"
+    templates: tuple[tuple[str, str], ...] = ()
+    #: per template name: the text it shows for an empty remaining-subtask list
+    empty_list: tuple[tuple[str, str], ...] = ()
+    first_observation: str | None = None
+
+    def template(self, name: str) -> str:
+        """The ``templated`` release's template ``name``; KeyError when it has none."""
+        return dict(self.templates)[name]
+
+    def render(self, name: str, **values: str) -> str:
+        """Template ``name`` with ``values`` filled in (placeholders it does not hold are ignored)."""
+        return self.template(name).format(**values)
 
     def __post_init__(self) -> None:
+        for name, _ in self.templates:
+            if name not in TEMPLATE_NAMES:
+                raise ValueError(f"unknown release template {name!r}")
         for role, content in (*self.messages, *self.planner, *self.executor):
             if role not in ("system", "user", "assistant") or not isinstance(content, str):
                 raise ValueError(f"a release message needs a role system/user/assistant and text, got {role!r}")
