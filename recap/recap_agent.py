@@ -289,8 +289,11 @@ class ReCAPAgent(Agent):
 
     def _observation(self, ep: Episode) -> str:
         """The latest observation as prompts show it (``observation_drop`` deleted)."""
-        drop = self.config.observation_drop
-        return ep.driver.observation.replace(drop, "") if drop else ep.driver.observation
+        drop, observation = self.config.observation_drop, ep.driver.observation
+        release = self._release_templates(ep)
+        if release is not None and release.first_observation is not None and ep.driver.steps == 0:
+            observation = release.first_observation  # before any step (hotpotqa_simulator.py:26; chatbot.py:345)
+        return observation.replace(drop, "") if drop else observation
 
     def _final_answer(self, ep: Episode, root: Node) -> None:
         """The released FEVER loop's last call (fever-recap/MATRIX/MATRIX/chatbot.py:470-478): ask
