@@ -7,7 +7,9 @@ Read from GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f (``fever-recap``) and the p
 
 * the cap: 10 actions for every method (the paper; ``conf/config.toml:3`` ``max_retry = 10`` and
   the notebooks' ``for i in range(1, 11)``, React.ipynb / baseline_act.ipynb). The environment
-  enforces it (``workers/envs/fever/env.py``: ``max_steps`` 10);
+  enforces it (``workers/envs/fever/env.py``: ``max_steps`` 10). ReCAP under ``released`` is the
+  exception: ``max_retry`` reaches hotpotqa_simulator.py as ``max_steps`` but nothing counts
+  against it (below), so the environment gets the safety bound instead (:func:`env_options`);
 * ``paper``: the Robotouille hyperparameters (temperature 0.5, no output cap) for every method,
   which is the generic profile; an episode of 10 actions never reaches its window;
 * ``released``: no temperature in any released FEVER call (ReCAP: MATRIX/MATRIX/chatbot.py:49

@@ -70,7 +70,7 @@ def _load_release_chatbot(monkeypatch: pytest.MonkeyPatch, sent: list[list[tuple
     openai.OpenAI = lambda api_key=None: types.SimpleNamespace(chat=types.SimpleNamespace(completions=Completions()))  # type: ignore[attr-defined]
     openai.BadRequestError = type("BadRequestError", (Exception,), {})  # type: ignore[attr-defined]
     package = types.ModuleType("released_matrix")
-    package.__path__ = []  # type: ignore[attr-defined]
+    package.__path__ = []
     prompt_llm = types.ModuleType("released_matrix.prompt_llm")
     prompt_llm.time = __import__("time")  # type: ignore[attr-defined]
     for name, module in {"openai": openai, "released_matrix": package, "released_matrix.prompt_llm": prompt_llm}.items():
