@@ -39,10 +39,12 @@ def reply(think: str, *subtasks: str) -> str:
     return json.dumps({"think": think, "subtasks": list(subtasks)})
 
 
-#: 20 calls: a failed action (no step), a search, a lookup, failing rounds past the 10th call
-#: (the reminder) and past 32 messages (the cut), the root's list emptied, the final answer
+#: 28 calls reaching every prompt of the released loop: a failed action (no step), a search, a
+#: lookup, failing rounds past the 10th call (the reminder) and past 32 messages (the cut), two
+#: composite subtasks (the non-leaf returns, with and without subtasks left, and a leaf return
+#: with none left), the root's list emptied and the final answer
 SCRIPT = [
-    reply("plan", "find the actor", "check Fox", "decide"),
+    reply("plan", "find the actor", "check Fox", "decide"),  # the root
     reply("a1", "search the actor"),  # not an action: the fail prompt
     reply("plan2", f"Search[{ENTITY}]", "check Fox", "decide"),
     reply("s", f"Search[{ENTITY}]"),
@@ -52,7 +54,19 @@ SCRIPT = [
 ]
 for i in range(5):
     SCRIPT += [reply(f"x{i}", "look again"), reply(f"plan{5 + i}", "check Fox", "decide")]
-SCRIPT += [reply("y", "Lookup[Fox]"), reply("plan10"), reply("final", "Finish[SUPPORTS]")]
+SCRIPT += [
+    reply("comp", "Lookup[Fox]", "judge it"),  # 'check Fox' is composite
+    reply("y", "Lookup[Fox]"),
+    reply("comp2"),  # back in 'check Fox' (a leaf return, a subtask left): done, so back to the root
+    reply("plan10", "decide"),  # the root after a non-leaf return with a subtask left
+    reply("d", "Lookup[Fox]", "conclude"),  # 'decide' is composite
+    reply("g", "Lookup[Fox]"),
+    reply("d2", "Lookup[Sun]"),
+    reply("g2", "Lookup[Sun]"),
+    reply("d3"),  # a leaf return with nothing left, then done
+    reply("end"),  # the root after a non-leaf return with nothing left: the list empties
+    reply("final", "Finish[SUPPORTS]"),
+]
 
 
 def _load_release_chatbot(monkeypatch: pytest.MonkeyPatch, sent: list[list[tuple[str, str]]]) -> types.ModuleType:
@@ -147,7 +161,7 @@ seeds: [0]
     runner = EpisodeRunner("w0", "run", factory, send=send, wait=lambda _ref: None)
     outcome = runner.run_unit(unit.work(), 1)
     assert outcome.crash is None and outcome.result is not None
-    assert (outcome.result.end_reason, outcome.result.steps) == ("success", 4)
+    assert (outcome.result.end_reason, outcome.result.steps) == ("success", 6)
     ours = [[(m.role, m.content) for m in r.messages] for r in factory.clients[0].requests]
     steps = sorted(rows["steps"], key=lambda r: r["index"])
     assert [(s["action"], s["valid"]) for s in steps] == [
@@ -156,19 +170,39 @@ seeds: [0]
         ("lookup[Fox]", True),
         *[("look again", False)] * 5,
         ("lookup[Fox]", True),
+        ("lookup[Fox]", True),
+        ("lookup[Sun]", True),
         ("finish[SUPPORTS]", True),
     ]
+    kinds = {m["kind"] for m in rows["messages"] if m["role"] == "user"}
+    assert kinds == {
+        "release",
+        "task",
+        "descend",
+        "leaf_fail",
+        "leaf_done",
+        "leaf_judge",
+        "nonleaf_done",
+        "nonleaf_judge",
+        "final_answer",
+    }
     observations = [s["observation"] for s in steps if s["valid"]]
 
     released, actions = _released_requests(monkeypatch, tmp_path, "Claim: " + _claim(claims_dir), observations)
-    assert actions == [f"Search[{ENTITY}]", "Lookup[Fox]", "Lookup[Fox]", "Finish[SUPPORTS]"]
+    assert actions == [f"Search[{ENTITY}]", "Lookup[Fox]", "Lookup[Fox]", "Lookup[Fox]", "Lookup[Sun]", "Finish[SUPPORTS]"]
     # the first messages: the framed demonstration (chatbot.py:324-330) and the first prompt (:333-338)
     assert ours[0] == released[0] and len(ours[0]) == 2
     assert str(json.loads((FEVER / "prompts" / "fever_matrix.json").read_text(encoding="utf-8"))) in ours[0][0][1]
-    assert len(ours) == len(released) == len(SCRIPT) == 20
+    assert len(ours) == len(released) == len(SCRIPT) == 28
     for n, (a, b) in enumerate(zip(ours, released, strict=True), 1):
         assert a == b, f"call {n} differs"
     assert len(ours[16]) == 32 and ours[16][0] == ours[0][0] and ours[16][1] != ours[0][1]  # the cut: the task prompt went first
+    reminded = [n for n, request in enumerate(ours, 1) if config_rules() in request[-1][1] and n > 1]
+    assert reminded == [10, 20]  # chatbot.py:352-360 (the rules are in the first prompt too)
+
+
+def config_rules() -> str:
+    return str(tomllib.loads((FEVER / "conf" / "config.toml").read_text(encoding="utf-8-sig"))["rule_description"])
 
 
 def _claim(claims_dir: Path) -> str:
