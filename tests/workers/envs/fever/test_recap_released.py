@@ -192,3 +192,16 @@ def test_the_safety_bound_ends_a_runaway_episode_and_says_so():
     assert run.result.error == "safety bound (2 steps (cap 2); safety_steps 2, the released code has no cap)"
     default = methods.make_agent("recap", profile="released", benchmark=BENCHMARK).config
     assert BENCHMARK.options_for_agent("recap", default) == {"max_steps": 50}
+
+
+def test_a_one_item_root_list_is_the_roots_own_action_then_the_final_answer():
+    """chatbot.py:346, 379-394: the first call is a descend too, so a one-item root list is acted
+    on (when it matches) and the loop is left for the final answer (:470-478); one that does not
+    match takes no step and the final answer is asked for at once (the release's fail path reads
+    the root's parent and the error ends its loop, :414-421, 461-469)."""
+    run = Run([reply("t", "Search[Mercury]"), reply("a", "Finish[SUPPORTS]")])
+    assert [run.prompt(2)] == [P.final_answer_prompt()] and len(run.client.requests) == 2
+    assert run.steps() == [("search[Mercury]", True, 1), ("finish[SUPPORTS]", True, 2)]
+    run = Run([reply("t", "verify it"), reply("a", "Finish[REFUTES]")])
+    assert run.prompt(2) == P.final_answer_prompt()
+    assert run.steps() == [("verify it", False, 0), ("finish[REFUTES]", True, 1)] and run.result.end_reason == "agent_done"
