@@ -104,7 +104,8 @@ class AgentConfig:
     """Settings every agent shares: the window, generation settings and per-episode caps."""
 
     window: int = 64
-    window_mode: Literal["pair", "block"] = "pair"
+    #: see recap/history.py (``prompt``: the released FEVER ReCAP's cut before each prompt)
+    window_mode: Literal["pair", "block", "prompt"] = "pair"
     window_block: int | None = None
     #: True: K bounds the whole history, pins included (the released code); False: K bounds
     #: the messages after the two pins (the paper's reading)
@@ -142,8 +143,8 @@ class AgentConfig:
     def validate(self) -> None:
         if self.window < 2:
             raise ConfigError(f"window must be >= 2 messages, got {self.window}")
-        if self.window_mode not in ("pair", "block"):
-            raise ConfigError(f"window_mode must be 'pair' or 'block', got {self.window_mode!r}")
+        if self.window_mode not in ("pair", "block", "prompt"):
+            raise ConfigError(f"window_mode must be 'pair', 'block' or 'prompt', got {self.window_mode!r}")
         if self.temperature is not None and not 0 <= self.temperature <= 2:
             raise ConfigError(f"temperature must be in [0, 2], got {self.temperature}")
         if self.max_json_repairs < 0:
@@ -243,6 +244,10 @@ class ReCAPConfig(AgentConfig):
     #: text deleted from every observation before a prompt shows it (the released FEVER runner
     #: deletes the two characters backslash-n: fever-recap/hotpotqa/hotpotqa_simulator.py:42)
     observation_drop: str = ""
+    #: a reply that is not strict JSON (code fences removed) or lacks ``subtasks`` gets an error
+    #: message and the same prompt again, bounded only by the call cap, instead of our repair
+    #: message (fever-recap/MATRIX/MATRIX/chatbot.py:370-371, 461-469: the loop runs again)
+    resend_bad_replies: bool = False
     #: None: the benchmark's step cap; a number: the released code has no step cap
     #: (hotpotqa_simulator.py:22,33 never counts), so this safety bound replaces it and an
     #: episode it ends says so in its row (end reason step_cap/call_cap, error "safety bound ...")

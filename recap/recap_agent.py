@@ -37,6 +37,7 @@ Control flow (see the paper, section 2, and docs/method.md):
 from __future__ import annotations
 
 import dataclasses
+import json
 import re
 from functools import partial
 from typing import Any
@@ -49,7 +50,7 @@ from recap.env import InvalidActionError, Reset
 from recap.jsonreply import ReplyFormatError, parse_json_object, recap_reply
 from recap.recap_tools import finish_kinds, play_tools
 from recap.release_prompt import ReleasePrompt
-from recap.runtime import Episode, EpisodeEnd
+from recap.runtime import Episode, EpisodeEnd, repair_prompt
 from recap.tree import Node
 
 
@@ -236,8 +237,41 @@ class ReCAPAgent(Agent):
             "remaining": list(shown if shown is not None else node.subtasks),
             "valid_actions": list(d.valid_actions) if d.valid_actions is not None else None,
         }
-        reply, seq = ep.conv.ask(prompt, kind, parse, node_id=node.node_id, context=context)
+        if self.config.resend_bad_replies and prompt is not None:
+            reply, seq = self._ask_resending(ep, node, prompt, kind, context)
+        else:
+            reply, seq = ep.conv.ask(prompt, kind, parse, node_id=node.node_id, context=context)
         node.add_version(reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq)
+
+    def _ask_resending(
+        self, ep: Episode, node: Node, prompt: str, kind: str, context: dict[str, Any]
+    ) -> tuple[dict[str, Any], int]:
+        """The released FEVER loop's answer to a reply it cannot use (fever-recap/MATRIX/MATRIX/
+        chatbot.py:370-371, 461-469): the reply is read as strict JSON once code fences are
+        removed (:9, 12-18); one that is not gets the JSON error message, one without
+        ``subtasks`` the error message naming the missing key, and the loop sends the same prompt
+        again (a reminder due on that call goes before it too, :352-360), with no bound but the
+        call cap. A reply the release would take but our parser refuses (a think that is not
+        text, subtasks that are not a list of text) gets our repair message instead."""
+        release = self._release_templates(ep)
+        while True:
+            raw, seq = ep.conv.ask(prompt, kind, _same, node_id=node.node_id, context=context, decode=_raw)
+            try:
+                obj = json.loads(_FENCE.sub("", raw["text"]))
+            except ValueError:
+                problem = release.render("json_error") if release is not None else P.bad_json_text()
+            else:
+                if isinstance(obj, dict) and "subtasks" not in obj:  # a KeyError in the release (:379)
+                    problem = release.render("error", e="'subtasks'") if release is not None else P.reply_error_text("'subtasks'")
+                else:
+                    try:
+                        return recap_reply(obj, with_think=self.config.think != "none"), seq
+                    except ReplyFormatError as exc:
+                        problem = repair_prompt(str(exc), self.reply_format())
+            ep.conv.usage.json_repairs += 1
+            ep.conv.history.add("user", "repair", problem, node.node_id)
+            if self._reminder_due(ep):
+                prompt = self._with_reminder(ep, prompt)
 
     # -- the recursive loop --------------------------------------------------------------------
     def _loop(self, ep: Episode, node: Node) -> None:
@@ -303,7 +337,7 @@ class ReCAPAgent(Agent):
         reply is not repaired (the release gives up on one it cannot parse, :479-480)."""
         release = self._release_templates(ep)
         prompt = release.render("final_answer") if release is not None else P.final_answer_prompt()
-        reply, seq = ep.conv.ask(prompt, "final_answer", lambda obj: obj, node_id=root.node_id, decode=_raw)
+        reply, seq = ep.conv.ask(prompt, "final_answer", _same, node_id=root.node_id, decode=_raw)
         answer = _first_subtask(reply["text"])
         node = self._new_node(ep, root, answer if answer is not None else "")
         node.kind = "primitive"
@@ -374,6 +408,15 @@ class ReCAPAgent(Agent):
             finish_kinds(self._state(ep))
         for node in self._state(ep).get("nodes", []):
             ep.emit(node.record(ep.conv.episode_id))
+
+
+#: a run of backticks, with the word json right after it: removed before a reply is read as JSON
+#: under ``resend_bad_replies`` (fever-recap/MATRIX/MATRIX/chatbot.py:9, 12-18)
+_FENCE = re.compile(r"`+(?:json)?", re.IGNORECASE)
+
+
+def _same(obj: dict[str, Any]) -> dict[str, Any]:
+    return obj
 
 
 def _raw(text: str) -> dict[str, Any]:

@@ -213,3 +213,14 @@ def final_answer_prompt() -> str:
         "The task list is finished. Give your final answer now as one action in your subtasks, "
         "as concrete as you can and without a long sentence."
     )
+
+
+def bad_json_text() -> str:
+    """The message after a reply that is not JSON (``resend_bad_replies``); the prompt follows again."""
+    return "Your reply could not be read as JSON. Check its format."
+
+
+def reply_error_text(error: str) -> str:
+    """The message after a JSON reply that could not be used (``resend_bad_replies``); ``error``
+    names what went wrong; the prompt follows again."""
+    return f"Your reply could not be used ({error}). Try again."

@@ -44,7 +44,7 @@ from typing import Literal
 #: / ``leaf_fail`` (obs, done_task_name or fail_task_name, previous_stage_task_name,
 #: previous_stage_think, remaining_subtask_str), ``nonleaf_done`` / ``nonleaf_judge`` (the same
 #: without obs), ``reminder`` (rule; put before the prompt), ``final_answer`` (none), ``demo``
-#: (few_shot_str)
+#: (few_shot_str), ``json_error`` (none: a reply that is not JSON), ``error`` (e: another error)
 TEMPLATE_NAMES = (
     "task",
     "descend",
@@ -56,6 +56,8 @@ TEMPLATE_NAMES = (
     "reminder",
     "final_answer",
     "demo",
+    "json_error",
+    "error",
 )
 
 

@@ -11,7 +11,8 @@ builds and none of its text lives in this repository:
   descend prompt :189-195, the four return prompts :199-256 and 282-305, the fail prompt
   :258-280) with the text each shows for an empty subtask list (:207-210, 288-291), and in
   ``chatbot()`` the demonstration's frame (:324-329, around ``str(few_shot_list)``), the
-  reminder (:352-360) and the final-answer prompt (:471);
+  reminder (:352-360), the final-answer prompt (:471) and the two messages after a reply it
+  cannot use (:464 not JSON, :466 another error);
 * ``conf/config.toml``: the rules and the (empty) system text ``main.py:44-45`` hands on;
 * ``hotpotqa/hotpotqa_simulator.py``: the initial observation the runner gives before any step
   (:26, ``obs_str``).
@@ -145,10 +146,27 @@ def chatbot_templates(source: str) -> tuple[dict[str, str], dict[str, str]]:
                     and isinstance(stmt.args[0], ast.Constant)
                 ):
                     templates["final_answer"] = template(stmt.args[0])
-    missing = sorted({*METHODS.values(), *ASSIGNED.values(), "final_answer"} - set(templates))
+                content = _appended_content(stmt)
+                if content is not None:  # the messages after a reply it cannot use (:464, 466)
+                    templates.setdefault("json_error" if isinstance(content, ast.Constant) else "error", template(content))
+    missing = sorted({*METHODS.values(), *ASSIGNED.values(), "final_answer", "json_error", "error"} - set(templates))
     if missing:
         raise FeverMatrixError(f"{CHATBOT_PY}: no template for {', '.join(missing)}")
     return templates, empty
+
+
+def _appended_content(node: ast.AST) -> ast.expr | None:
+    """The ``content`` of a ``{"role": ..., "content": ...}`` literal a call ``x.append(...)``
+    adds (chatbot.py:464, 466: the history gets a user message), else None."""
+    if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "append" and node.args):
+        return None
+    arg = node.args[0]
+    if not isinstance(arg, ast.Dict):
+        return None
+    for key, value in zip(arg.keys, arg.values, strict=True):
+        if isinstance(key, ast.Constant) and key.value == "content" and isinstance(value, ast.Constant | ast.JoinedStr):
+            return value
+    return None
 
 
 def first_observation(source: str) -> str:

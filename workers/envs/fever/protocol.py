@@ -24,12 +24,14 @@ Read from GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f (``fever-recap``) and the p
   the final-answer prompt is sent and its first subtask is the last action (:470-478); the rules
   go before the prompt of every 10th call (:350-360: ``invoke_cnt`` counts every call of the loop;
   this module's docstring used to say the release sends no reminder, which the code contradicts);
-  past 32 messages ``history[1:3]`` is deleted before the prompt goes in (:42-44), so the
+  past 32 messages ``history[1:3]`` is deleted before the prompt goes in (:42-44; ``window_mode:
+  prompt``, two messages and only then, so a call may see 33 after an odd error message), so the
   demonstration (history[0], :76, 330) stays and the task prompt goes first (32 dropped on a
   context-length error, :59-62); all of a node's thoughts are re-injected, numbered from 1
   (``get_latest_think``, :122-126, used at :402, 410, 421, 445, 452); the two characters
   backslash-n are deleted from every observation (hotpotqa_simulator.py:42); no shortcut (the
-  check runs only on a reply, :379). ReAct and Act resend the whole growing
+  check runs only on a reply, :379); a reply that is not JSON gets the release's error message
+  and the same prompt again (:370-371, 461-469; no bound there, the call cap here). ReAct and Act resend the whole growing
   trajectory every call (React.ipynb: ``prompt += ...`` each step), so no window. The released
   ReAct/Act reply format ("Thought i:" / "Action i:" lines cut at a stop sequence) is not one of
   our text layouts, so ``released`` keeps our JSON replies there, as it does for CoT/Standard;
@@ -67,6 +69,7 @@ RELEASED_ACTION = r"^([Ss]earch|[Ll]ookup|[Ff]inish)\[.*\]$"
 RECAP_RELEASED: dict[str, Any] = {
     "window": 32,
     "window_counts_pins": True,
+    "window_mode": "prompt",
     "pin_task": False,
     "context_drop": 32,
     "reminder_period": 10,
@@ -79,6 +82,7 @@ RECAP_RELEASED: dict[str, Any] = {
     "final_answer": True,
     "observation_drop": "\\n",
     "safety_steps": SAFETY_STEPS,
+    "resend_bad_replies": True,
 }
 #: React.ipynb / baseline_act.ipynb: the whole trajectory is resent on every call
 REACT_RELEASED: dict[str, Any] = {"history": "all", "temperature": None}

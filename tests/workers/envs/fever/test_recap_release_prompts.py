@@ -36,11 +36,13 @@ ENTITY = "Nikolaj Coster-Waldau"
 
 
 def reply(think: str, *subtasks: str) -> str:
-    return json.dumps({"think": think, "subtasks": list(subtasks)})
+    """A reply in a JSON code fence, which the released loop removes (chatbot.py:9, 12-18)."""
+    return "```json\n" + json.dumps({"think": think, "subtasks": list(subtasks)}) + "\n```"
 
 
-#: 28 calls reaching every prompt of the released loop: a failed action (no step), a search, a
-#: lookup, failing rounds past the 10th call (the reminder) and past 32 messages (the cut), two
+#: 31 calls reaching every prompt of the released loop: a failed action (no step), a search, a
+#: lookup, two replies it cannot use (each answered, the prompt sent again, the 10th call's with
+#: the reminder), failing rounds past 32 messages (the cut), two
 #: composite subtasks (the non-leaf returns, with and without subtasks left, and a leaf return
 #: with none left), the root's list emptied and the final answer
 SCRIPT = [
@@ -51,9 +53,13 @@ SCRIPT = [
     reply("plan3", "check Fox", "decide"),
     reply("c", "Lookup[Fox]"),
     reply("plan4", "check Fox", "decide"),
+    "Let me look again.",  # not JSON: the error message, the same prompt again (chatbot.py:461-464)
+    json.dumps({"think": "no list"}),  # no subtasks: the other error message (:465-466), again
 ]
 for i in range(5):
     SCRIPT += [reply(f"x{i}", "look again"), reply(f"plan{5 + i}", "check Fox", "decide")]
+    if i == 2:  # a third unusable reply: an odd message, so a call sees 33 messages (chatbot.py:42-45)
+        SCRIPT.append("{not json")
 SCRIPT += [
     reply("comp", "Lookup[Fox]", "judge it"),  # 'check Fox' is composite
     reply("y", "Lookup[Fox]"),
@@ -179,6 +185,7 @@ seeds: [0]
         "release",
         "task",
         "descend",
+        "repair",
         "leaf_fail",
         "leaf_done",
         "leaf_judge",
@@ -193,12 +200,15 @@ seeds: [0]
     # the first messages: the framed demonstration (chatbot.py:324-330) and the first prompt (:333-338)
     assert ours[0] == released[0] and len(ours[0]) == 2
     assert str(json.loads((FEVER / "prompts" / "fever_matrix.json").read_text(encoding="utf-8"))) in ours[0][0][1]
-    assert len(ours) == len(released) == len(SCRIPT) == 28
+    assert len(ours) == len(released) == len(SCRIPT) == 31
     for n, (a, b) in enumerate(zip(ours, released, strict=True), 1):
         assert a == b, f"call {n} differs"
-    assert len(ours[16]) == 32 and ours[16][0] == ours[0][0] and ours[16][1] != ours[0][1]  # the cut: the task prompt went first
+    # the cut (chatbot.py:42-44): the demonstration stays, the task prompt goes first; 32 messages,
+    # 33 once an odd error message is in
+    assert [len(r) for r in ours[13:]] == [30, 32, 32] + [33] * 15
+    assert ours[0][1] in ours[14] and all(r[0] == ours[0][0] and ours[0][1] not in r for r in ours[15:])
     reminded = [n for n, request in enumerate(ours, 1) if config_rules() in request[-1][1] and n > 1]
-    assert reminded == [10, 20]  # chatbot.py:352-360 (the rules are in the first prompt too)
+    assert reminded == [10, 20, 30]  # chatbot.py:352-360 (the rules are in the first prompt too)
 
 
 def config_rules() -> str:

@@ -4,6 +4,7 @@ receives in one episode (workers/envs/fever/protocol.py RECAP_RELEASED says whic
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import recap.methods as methods
@@ -205,3 +206,22 @@ def test_a_one_item_root_list_is_the_roots_own_action_then_the_final_answer():
     run = Run([reply("t", "verify it"), reply("a", "Finish[REFUTES]")])
     assert run.prompt(2) == P.final_answer_prompt()
     assert run.steps() == [("verify it", False, 0), ("finish[REFUTES]", True, 1)] and run.result.end_reason == "agent_done"
+
+
+def test_a_reply_it_cannot_use_gets_the_error_message_and_the_same_prompt_again():
+    """chatbot.py:370-371, 461-469: not JSON -> the JSON error message, no subtasks -> the error
+    message naming the key; either way the loop sends the same prompt again, with no bound of
+    its own (before: our repair message, and json_failures after three)."""
+    bad = ["not json", '{"think": "no list"}', "```json\n{oops", "still not json"]
+    run = Run(
+        [reply("t0", "find Mercury", "decide"), *bad, reply("c", "Search[Mercury]"), reply("end"), reply("a", "Finish[SUPPORTS]")]
+    )
+    descend = P.descend_prompt("find Mercury")
+    errors = [P.bad_json_text(), P.reply_error_text("'subtasks'"), P.bad_json_text(), P.bad_json_text()]
+    assert run.sent(6)[1:] == [
+        ("user", task_prompt(run.rules)),
+        ("assistant", json.dumps({"think": "t0", "subtasks": ["find Mercury", "decide"]})),
+        ("user", descend),
+        *[m for text, error in zip(bad, errors, strict=True) for m in (("assistant", text), ("user", error), ("user", descend))],
+    ]
+    assert run.result.end_reason == "success" and run.result.json_repairs == 4
