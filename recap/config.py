@@ -30,7 +30,7 @@ import dataclasses
 import json
 import re
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from schemas.ranges import range_problem
 
@@ -132,6 +132,9 @@ class AgentConfig:
     #: ``prompts: release``; ``release`` until the digest is known). Left out of :meth:`to_json`
     #: while ``ours``, so the hashes of units planned before it existed do not change.
     prompts: str = "ours"
+    #: fields added after units were first planned: left out of :meth:`to_json` while at their
+    #: default (the behaviour before they existed), so those units keep their hashes
+    LATE_FIELDS: ClassVar[frozenset[str]] = frozenset({"prompts"})
 
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
@@ -179,8 +182,9 @@ class AgentConfig:
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): part of a unit's content hash and of episode rows."""
         values = dataclasses.asdict(self)
-        if values.get("prompts") == "ours":
-            del values["prompts"]
+        for f in dataclasses.fields(self):
+            if f.name in self.LATE_FIELDS and values[f.name] == f.default:
+                del values[f.name]
         return json.dumps(values, sort_keys=True)
 
     @classmethod
@@ -198,7 +202,7 @@ class AgentConfig:
         if not isinstance(values, dict):
             raise ConfigError(f"{cls.__name__}: resolved settings must be a JSON object")
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - {"prompts"})
+        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - cls.LATE_FIELDS)
         if unknown or missing:
             raise ConfigError(
                 f"{cls.__name__}: resolved settings do not match this version "
@@ -252,6 +256,14 @@ class ReCAPConfig(AgentConfig):
     #: (hotpotqa_simulator.py:22,33 never counts), so this safety bound replaces it and an
     #: episode it ends says so in its row (end reason step_cap/call_cap, error "safety bound ...")
     safety_steps: int | None = None
+    LATE_FIELDS: ClassVar[frozenset[str]] = AgentConfig.LATE_FIELDS | {
+        "action_pattern",
+        "final_answer",
+        "pin_task",
+        "observation_drop",
+        "resend_bad_replies",
+        "safety_steps",
+    }
 
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
