@@ -265,7 +265,7 @@ def expand(spec: SweepSpec) -> Plan:
     methods_by_benchmark: dict[str, list[tuple[Any, dict[str, Any], str]]] = {}
     units: list[Unit] = []
     seen: dict[str, str] = {}
-    release: dict[tuple[str, str], str] = {}
+    release: dict[tuple[str, str, str], str] = {}
     benchmarks = {inst.split("/", 1)[0] for inst, _ in instances}
     multipliers = [method_step_multipliers(spec, i, benchmarks) for i in range(len(spec.methods))]
     for inst, options in instances:
@@ -362,13 +362,17 @@ def step_multiplier_for(spec: SweepSpec, index: int, instance_id: str, task_mult
     return float(m.step_multiplier if m.step_multiplier is not None else spec.step_multiplier)
 
 
-def with_release_digest(spec: SweepSpec, m: Any, instance_id: str, method_config: str, cache: dict[tuple[str, str], str]) -> str:
+def with_release_digest(
+    spec: SweepSpec, m: Any, instance_id: str, method_config: str, cache: dict[tuple[str, str, str], str]
+) -> str:
     """``method_config`` with ``prompts`` pinned to the digest of the released text this instance's
     episode will show (``release:<sha256>``), so the unit's hash covers that text: an edited release
     file makes a different unit. SpecError (naming the fetch command) when the release folder is
     missing or has no prompts for the method here: before anything runs."""
     bench, split, task = place_of(instance_id)
-    key = (method_config, f"{bench}/{split}/{task}")
+    # the method is part of the key: two methods can share one settings text (ReAct and Act under
+    # the same profile) and still read different release files
+    key = (m.method, method_config, f"{bench}/{split}/{task}")
     if key not in cache:
         where = f"methods[{spec.methods.index(m)}] ({m.name}): prompts: release"
         values = json.loads(method_config)

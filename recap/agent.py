@@ -170,7 +170,9 @@ class Agent(ABC):
             self.play(ep, reset)
             raise EpisodeEnd("agent_done")
         except EpisodeEnd as end:
-            result = ep.result(end, self.max_depth(ep))
+            # a limit reached: the work so far is handed in and graded where the environment
+            # has any (SWE-agent's autosubmission), under every profile
+            result = ep.result(ep.driver.submit_at_limit(end), self.max_depth(ep))
         finally:
             self.finish(ep)
         return result

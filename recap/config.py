@@ -30,7 +30,7 @@ import dataclasses
 import json
 import re
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from typing import Any, Literal
 
 from schemas.ranges import range_problem
 
@@ -99,6 +99,25 @@ class BenchmarkProtocol:
         return {}
 
 
+#: settings added after units were first planned, each with the value it stands for when left
+#: out: :meth:`AgentConfig.to_json` leaves a setting out while it holds that value and
+#: :meth:`AgentConfig.from_json` fills it in, so the hashes of units planned before the setting
+#: existed do not change
+LATE_SETTINGS: dict[str, Any] = {
+    "prompts": "ours",
+    "context_overflow": "drop",
+    "tool_calls_per_reply": "any",
+    "reply_schema": False,
+    # the released FEVER ReCAP loop's settings (workers/envs/fever/protocol.py RECAP_RELEASED)
+    "action_pattern": None,
+    "final_answer": False,
+    "pin_task": True,
+    "observation_drop": "",
+    "resend_bad_replies": False,
+    "safety_steps": None,
+}
+
+
 @dataclass(frozen=True)
 class AgentConfig:
     """Settings every agent shares: the window, generation settings and per-episode caps."""
@@ -132,9 +151,11 @@ class AgentConfig:
     #: ``prompts: release``; ``release`` until the digest is known). Left out of :meth:`to_json`
     #: while ``ours``, so the hashes of units planned before it existed do not change.
     prompts: str = "ours"
-    #: fields added after units were first planned: left out of :meth:`to_json` while at their
-    #: default (the behaviour before they existed), so those units keep their hashes
-    LATE_FIELDS: ClassVar[frozenset[str]] = frozenset({"prompts"})
+    #: what a context overflow does: ``drop`` the oldest unpinned messages and ask again (the
+    #: paper's reading), or ``end`` the episode (SWE-agent's ``exit_context``, after which the
+    #: work so far is handed in: swebench-recap/sweagent/agent/agents.py:1272-1276). Left out of
+    #: :meth:`to_json` while ``drop`` (:data:`LATE_SETTINGS`)
+    context_overflow: Literal["drop", "end"] = "drop"
 
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
@@ -166,6 +187,8 @@ class AgentConfig:
             raise ConfigError(f"valid_actions must be shown, episode, hidden or null, got {self.valid_actions!r}")
         if not re.fullmatch(r"ours|release(:[0-9a-f]{64})?", str(self.prompts)):
             raise ConfigError(f"prompts must be ours or release, got {self.prompts!r}")
+        if self.context_overflow not in ("drop", "end"):
+            raise ConfigError(f"context_overflow must be drop or end, got {self.context_overflow!r}")
 
     def history_window(self) -> int:
         """K as the shared history applies it (ReAct's ``history: last`` narrows it)."""
@@ -182,9 +205,9 @@ class AgentConfig:
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): part of a unit's content hash and of episode rows."""
         values = dataclasses.asdict(self)
-        for f in dataclasses.fields(self):
-            if f.name in self.LATE_FIELDS and values[f.name] == f.default:
-                del values[f.name]
+        for name, default in LATE_SETTINGS.items():
+            if name in values and values[name] == default:
+                del values[name]
         return json.dumps(values, sort_keys=True)
 
     @classmethod
@@ -202,7 +225,7 @@ class AgentConfig:
         if not isinstance(values, dict):
             raise ConfigError(f"{cls.__name__}: resolved settings must be a JSON object")
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - cls.LATE_FIELDS)
+        unknown, missing = sorted(set(values) - names), sorted(names - set(values) - set(LATE_SETTINGS))
         if unknown or missing:
             raise ConfigError(
                 f"{cls.__name__}: resolved settings do not match this version "
@@ -256,14 +279,14 @@ class ReCAPConfig(AgentConfig):
     #: (hotpotqa_simulator.py:22,33 never counts), so this safety bound replaces it and an
     #: episode it ends says so in its row (end reason step_cap/call_cap, error "safety bound ...")
     safety_steps: int | None = None
-    LATE_FIELDS: ClassVar[frozenset[str]] = AgentConfig.LATE_FIELDS | {
-        "action_pattern",
-        "final_answer",
-        "pin_task",
-        "observation_drop",
-        "resend_bad_replies",
-        "safety_steps",
-    }
+    #: tool-call mode: ``any`` number of tool calls per reply, each run in order (the paper is
+    #: silent), or exactly ``one`` per reply that calls tools, a reply with several re-asked
+    #: (SWE-agent's function-calling parser, swebench-recap/sweagent/tools/parsing.py:439-449)
+    tool_calls_per_reply: Literal["any", "one"] = "any"
+    #: tool-call mode: ask for the ``{think, subtasks}`` reply under a strict JSON schema
+    #: (``response_format`` ``json_schema``, swebench-recap/sweagent/agent/models.py:707-731)
+    #: where the provider supports it, plain JSON otherwise; False: no response format
+    reply_schema: bool = False
 
     @classmethod
     def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
@@ -286,6 +309,8 @@ class ReCAPConfig(AgentConfig):
             raise ConfigError("reminder_period must be >= 1 or null")
         if self.reminder_on not in ("calls", "iterations", "nth_call"):
             raise ConfigError(f"reminder_on must be calls, iterations or nth_call, got {self.reminder_on!r}")
+        if self.tool_calls_per_reply not in ("any", "one"):
+            raise ConfigError(f"tool_calls_per_reply must be any or one, got {self.tool_calls_per_reply!r}")
         if self.action_pattern is not None:
             try:
                 re.compile(self.action_pattern)

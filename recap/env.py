@@ -203,6 +203,14 @@ class Environment(ABC):
         environment itself broke (the sandbox is gone)."""
         raise InvalidActionError(f"{name}: this environment has no tools")
 
+    def submit_at_limit(self, limit: str) -> Step | None:
+        """Hand in the work so far when a limit ends the episode (``limit``: which one, one line)
+        and judge it: SWE-agent's autosubmission (swebench-recap/sweagent/agent/agents.py:888-933),
+        which a coding environment does with a non-empty diff. The returned step's ``success`` is
+        the verdict; None when there is nothing to hand in (no changes, an environment without
+        submissions: the default). Raises :class:`EnvError` when the environment broke."""
+        return None
+
     def failure_hints(self) -> str:
         """Hints shown after an invalid action (e.g. occupied station, inexact name); may be ''."""
         return ""

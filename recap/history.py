@@ -197,6 +197,15 @@ class History:
         self.dropped += n
         return n
 
+    def forget(self, seq: int) -> None:
+        """Remove the unpinned message ``seq`` from the context (its row was emitted when it was
+        added); KeyError when the window holds no such message."""
+        for n, entry in enumerate(self._live):
+            if entry.seq == seq:
+                del self._live[n]
+                return
+        raise KeyError(f"no unpinned message {seq} in the context")
+
     # -- reading -------------------------------------------------------------------------
     @property
     def next_seq(self) -> int:

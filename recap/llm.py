@@ -144,6 +144,11 @@ class LLMRequest:
     tools: tuple[ToolDef, ...] = ()
     #: "auto", "required", "none" or the name of one of ``tools``; None: the provider's default
     tool_choice: str | None = None
+    #: the reply text's JSON schema for strict structured output, ``{"name": ..., "schema": {...}}``
+    #: (ReCAP's ``{think, subtasks}`` under ``reply_schema``): the provider layer sends it as a
+    #: ``json_schema`` response format where the model supports one, as ``json_object`` where it
+    #: supports only that, and not at all otherwise (workers.llm.providers.DeploymentConfig.schema_params)
+    response_schema: Mapping[str, Any] | None = None
     #: the episode's own cost cap (``limits.usd``, per instance; None: none) and what the episode
     #: has spent before this call: the gateway refuses a call whose worst case would pass the cap
     #: before anything is sent (a reservation, like the run's and the model's caps), so a long
@@ -151,6 +156,9 @@ class LLMRequest:
     #: not part of the call key or the cache fingerprint.
     episode_cap_usd: float | None = None
     episode_spent_usd: float = 0.0
+    #: stop sequences sent with the request (none: the provider's default, nothing sent); part of
+    #: the generation settings, so of the response cache's key
+    stop: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.tool_choice is None:
@@ -171,6 +179,10 @@ class LLMRequest:
         elif self.tool_choice is not None:
             params["tool_choice"] = {"type": "function", "function": {"name": self.tool_choice}}
         return params
+
+    def stop_params(self) -> dict[str, Any]:
+        """``stop`` as litellm receives it (empty without stop sequences)."""
+        return {"stop": list(self.stop)} if self.stop else {}
 
     @property
     def call_key(self) -> str:

@@ -1,7 +1,7 @@
 """ReCAP's prompts in tool-call mode (coding environments), in our own words.
 
 What each prompt carries follows the paper's "Tool Call Prioritized Prompt for SWE-bench"
-appendix and the release's templates (swebench-recap/config/recap.yaml:32-58): the *action
+appendix and the release's templates (swebench-recap/config/recap.yaml:28-55): the *action
 taken* prompt shows the latest observation, the current task and the subtasks proposed before;
 the *down* prompt names the child's task; the *up* prompt names the finished task, the parent's
 task, the parent's latest think and its remaining subtasks (the structured re-injection). Each
@@ -13,6 +13,7 @@ The sentences are ours.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from recap.recap_prompts import numbered
 
@@ -27,6 +28,25 @@ def reply_format(with_think: bool) -> str:
     if with_think:
         return '{"think": "<your reasoning>", "subtasks": ["<subtask>", ...]}'
     return '{"subtasks": ["<subtask>", ...]}'
+
+
+def reply_schema(with_think: bool) -> dict[str, Any]:
+    """The reply text's JSON schema for strict structured output (``reply_schema``), as the
+    release asks for its replies (swebench-recap/sweagent/agent/models.py:707-731: an object of
+    a string ``think`` and a list of strings ``subtasks``, both required, nothing else); the
+    descriptions are ours. Without a think (``no_think``) only ``subtasks``."""
+    props: dict[str, Any] = {}
+    if with_think:
+        props["think"] = {"type": "string", "description": "Your reasoning about the current task and the latest observation."}
+    props["subtasks"] = {
+        "type": "array",
+        "items": {"type": "string"},
+        "description": "The ordered subtasks still needed for the current task; empty when it is complete.",
+    }
+    return {
+        "name": "ReCAP",
+        "schema": {"type": "object", "properties": props, "required": list(props), "additionalProperties": False},
+    }
 
 
 def pre_root_think(issue: str) -> str:
@@ -84,7 +104,7 @@ _CHOICES_DOWN = (
 
 def action_taken_prompt(*, observation: str, task: str, subtasks: Sequence[str]) -> str:
     """After a tool call: the latest observation, the current task and the list proposed before
-    (recap.yaml:33-41); it is the content of the call's tool message, as in the release
+    (recap.yaml:28-37); it is the content of the call's tool message, as in the release
     (agents.py:750-753)."""
     return (
         f"Latest observation:\n{observation}\n\nYour current task: {task}\n\n"
@@ -93,7 +113,7 @@ def action_taken_prompt(*, observation: str, task: str, subtasks: Sequence[str])
 
 
 def down_prompt(task: str) -> str:
-    """On entering a child node (recap.yaml:42-46)."""
+    """On entering a child node (recap.yaml:38-43)."""
     return f"OK.\n\nYour current task: {task}\n\n{_CHOICES_DOWN}"
 
 
@@ -117,7 +137,7 @@ def _thought(thinks: Sequence[str], mode: str) -> str | None:
 def up_prompt(
     *, done_task: str, task: str, thinks: Sequence[str], subtasks: Sequence[str], think_mode: str, name_only: bool
 ) -> str:
-    """Back at the parent (recap.yaml:47-58): the finished task, the parent's task, its latest
+    """Back at the parent (recap.yaml:44-55): the finished task, the parent's task, its latest
     think (``think_mode``: latest | many | none) and remaining subtasks (left out under
     ``name_only``)."""
     parts = [
@@ -131,3 +151,13 @@ def up_prompt(
         parts.append("Its remaining subtasks:\n" + numbered(subtasks))
     parts.append(_CHOICES)
     return "\n\n".join(parts)
+
+
+def one_call_prompt(n_calls: int) -> str:
+    """The re-ask after a reply that made several tool calls where one is allowed (the release's
+    format-error requery for ``multiple`` calls, swebench-recap/sweagent/tools/parsing.py:384-385,
+    439-449): none of them was run; make exactly one call per reply, the JSON text beside it."""
+    return (
+        f"Your last reply made {n_calls} tool calls, and none of them was run: make exactly one tool call "
+        "per reply, with your JSON object as the reply's text. Reply again with your first call only."
+    )

@@ -25,7 +25,11 @@ after its head, which is then empty); a reply that is neither usable JSON nor to
 repaired (the runtime's JSON repair) where the release re-queries with its format-error
 template; ``max_level`` (the depth ablations) asks a node at the cap to act or finish rather
 than decompose (on entering it, and again if it decomposes all the same: its list is kept but
-not descended into); no rule reminders (the release has none there).
+not descended into); no rule reminders (the release has none there). Under
+``tool_calls_per_reply: one`` (``profile: released`` on SWE-bench) a reply with several calls is
+re-asked, none of its calls run (:func:`recap.recap_tool_prompts.one_call_prompt`; the release's
+parser, swebench-recap/sweagent/tools/parsing.py:439-449, requeries it); the re-ask stays in the
+history, as our JSON repairs do, where the release's requery is temporary (agents.py:854-886).
 
 Tree records: the pre-root is the tree's root node (depth 0, ``root``), the task's root its first
 child (depth 1), as the release counts depth (:623). A node that called tools and has no
@@ -85,6 +89,10 @@ def play_tools(agent: TreeAgent, ep: Episode, reset: Reset) -> None:
     with_think = cfg.think != "none"
     tools = ep.env.tool_defs()
     parse = _parser(with_think)
+    #: ``tool_calls_per_reply: one``: a reply with several calls is re-asked (the release's parser)
+    one_call = TP.one_call_prompt if cfg.tool_calls_per_reply == "one" else None
+    #: ``reply_schema``: the reply text under a strict JSON schema where the provider has one
+    schema = TP.reply_schema(with_think) if cfg.reply_schema else None
     pre = agent._new_node(ep, None, TP.PRE_ROOT_TASK)
     pre.kind = "root"
     pre.add_version(TP.pre_root_think(reset.observation), (TP.SUBMIT_SUBTASK,), None, None)
@@ -106,7 +114,16 @@ def play_tools(agent: TreeAgent, ep: Episode, reset: Reset) -> None:
             "valid_actions": None,
         }
         reply, calls, seq = ep.conv.ask_tools(
-            prompt, kind, parse, tools=tools, tool_choice=TOOL_CHOICE, node_id=node.node_id, context=context, decode=_decode
+            prompt,
+            kind,
+            parse,
+            tools=tools,
+            tool_choice=TOOL_CHOICE,
+            node_id=node.node_id,
+            context=context,
+            decode=_decode,
+            one_call=one_call,
+            schema=schema,
         )
         if reply["subtasks"] is not None:
             node.add_version(reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq)

@@ -22,8 +22,10 @@ frames it (and re-sends ``rules`` in its reminders).
 ``first_turn`` says whose released code the agent's first turn follows, so an agent never asks
 which benchmark it plays: ``labelled`` (Robotouille's releases: the observation, or ReCAP's
 template-framed task) or ``framed`` (the ALFWorld release: the environment's rule and the task
-framed as react.py / act.py / chatbot.py:242-253 send it). Only the release files decide it
-(:mod:`workers.release.texts`).
+framed as react.py / act.py / chatbot.py:242-253 send it), ``notebook`` (the FEVER notebooks'
+own loops, :mod:`recap.baselines.notebook_loop`: ``rounds``, ``final_round`` and
+``final_sentence`` for ReAct/Act, ``claim_frame`` for CoT/Standard, all read from the notebook
+cells) or ``templated`` (below). Only the release files decide it (:mod:`workers.release.texts`).
 
 Where the released code's own prompt templates are read whole (ReCAP on FEVER:
 ``fever-recap/MATRIX/MATRIX/chatbot.py``'s ``Prompt`` methods and its reminder, read with
@@ -74,7 +76,14 @@ class ReleasePrompt:
     rules: str | None = None
     planner: tuple[tuple[str, str], ...] = ()
     executor: tuple[tuple[str, str], ...] = ()
-    first_turn: Literal["labelled", "framed", "templated"] = "labelled"
+    first_turn: Literal["labelled", "framed", "notebook", "templated"] = "labelled"
+    #: the notebook loop's rounds (``range(1, rounds + 1)``), the round that gets
+    #: ``final_sentence`` before its label (ReAct/Act; None elsewhere)
+    rounds: int | None = None
+    final_round: int | None = None
+    final_sentence: str | None = None
+    #: the one prompt's text before and after the question (CoT/Standard notebooks)
+    claim_frame: tuple[str, str] | None = None
     templates: tuple[tuple[str, str], ...] = ()
     #: per template name: the text it shows for an empty remaining-subtask list
     empty_list: tuple[tuple[str, str], ...] = ()

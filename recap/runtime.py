@@ -40,17 +40,32 @@ NOT_RUN = "not run: the reply that made this call could not be used"
 
 @dataclass(frozen=True)
 class ToolUse:
-    """The tools one request offers and its tool-choice setting (none: a plain chat request)."""
+    """The tools one request offers and its tool-choice setting (none: a plain chat request),
+    and the stop sequences it is sent with (none: the provider's default; the released FEVER
+    notebooks stop each call at ``"\nObservation i:"``, React.ipynb cell 4).
+    ``one_call``: a reply may make at most one tool call; one that makes more is re-asked with
+    the text this gives for its number of calls (SWE-agent's function-calling parser,
+    swebench-recap/sweagent/tools/parsing.py:439-449)."""
 
     tools: tuple[ToolDef, ...] = ()
     choice: str | None = None
+    one_call: Callable[[int], str] | None = None
+    #: the reply text's JSON schema (:attr:`recap.llm.LLMRequest.response_schema`)
+    schema: Mapping[str, Any] | None = None
+    stop: tuple[str, ...] = ()
 
 
 class EpisodeEnd(Exception):
     """Raised from anywhere inside an episode to end it with a named reason."""
 
     def __init__(
-        self, reason: EndReason, detail: str = "", *, error_kind: LLMErrorKind | None = None, refusal: BudgetRefusal | None = None
+        self,
+        reason: EndReason,
+        detail: str = "",
+        *,
+        error_kind: LLMErrorKind | None = None,
+        refusal: BudgetRefusal | None = None,
+        resolved: bool = False,
     ):
         if reason not in END_REASONS:
             raise ValueError(f"unknown end reason {reason!r}")
@@ -60,6 +75,37 @@ class EpisodeEnd(Exception):
         self.error_kind = error_kind
         #: ``budget_exhausted``: the cap that refused the call
         self.refusal = refusal
+        #: ``autosubmitted``: the verdict on the work handed in at the limit
+        self.resolved = resolved
+
+    @property
+    def success(self) -> bool:
+        """Whether the episode reached its goal: ``success``, or work handed in at a limit that
+        was judged resolved."""
+        return self.reason == "success" or (self.reason == "autosubmitted" and self.resolved)
+
+
+#: the end reasons that are a limit reached (not a failure of the model service or the
+#: environment): the cost, token and call caps (``episode_limit`` also for the gateway's refusal
+#: at the per-instance cap, and an environment's own time or output limit), the step cap, and
+#: unusable replies past the repair budget (the release's ``exit_format``, agents.py:1308-1315).
+#: A context overflow (``llm_error`` of kind ``context_length``) is one too (:func:`is_limit`)
+LIMIT_END_REASONS: frozenset[str] = frozenset({"episode_limit", "call_cap", "step_cap", "json_failures"})
+
+
+def is_limit(end: EpisodeEnd) -> bool:
+    """Whether ``end`` is a limit reached, after which the work so far is handed in and graded
+    (SWE-agent's ``exit_cost``, ``exit_context``, ``exit_total_execution_time``, ``exit_format``
+    autosubmissions, swebench-recap/sweagent/agent/agents.py:1250-1315)."""
+    return end.reason in LIMIT_END_REASONS or (end.reason == "llm_error" and end.error_kind == "context_length")
+
+
+class _TooManyCalls(ReplyFormatError):
+    """A reply that made more tool calls than one where one is allowed; ``prompt`` re-asks."""
+
+    def __init__(self, prompt: str, problem: str) -> None:
+        super().__init__(problem)
+        self.prompt = prompt
 
 
 def repair_prompt(problem: str, expected: str) -> str:
@@ -153,6 +199,11 @@ class Conversation:
     def pin(self, kind: str, content: str) -> int:
         return self.history.pin("user", kind, content)
 
+    def forget(self, seq: int) -> None:
+        """Take the message ``seq`` out of the context (its ``messages`` row stays): a released
+        loop that keeps its own record of a step instead of the model's reply (React.ipynb cell 4)."""
+        self.history.forget(seq)
+
     def pin_message(self, role: str, kind: str, content: str) -> int:
         """Pin a message with its own role (the authors' system text and example replies)."""
         return self.history.pin(role, kind, content)
@@ -166,8 +217,10 @@ class Conversation:
         node_id: int | None = None,
         context: Mapping[str, Any] | None = None,
         decode: Callable[[str], dict[str, Any]] = parse_json_object,
+        stop: tuple[str, ...] = (),
     ) -> tuple[dict[str, Any], int]:
-        """Send ``prompt`` and return (parsed reply, seq of the reply message).
+        """Send ``prompt`` and return (parsed reply, seq of the reply message); ``stop``: the
+        stop sequences the request carries.
 
         ``prompt`` None means the prompt is already in the history (the pinned task prompt).
         A malformed reply is answered with a repair message, at most ``max_json_repairs`` times;
@@ -178,7 +231,7 @@ class Conversation:
         """
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
-        parsed, _calls, seq = self._ask_loop(kind, parse, node_id, context, decode, ToolUse())
+        parsed, _calls, seq = self._ask_loop(kind, parse, node_id, context, decode, ToolUse(stop=tuple(stop)))
         return parsed, seq
 
     def ask_tools(
@@ -192,6 +245,8 @@ class Conversation:
         node_id: int | None = None,
         context: Mapping[str, Any] | None = None,
         decode: Callable[[str], dict[str, Any]] = parse_json_object,
+        one_call: Callable[[int], str] | None = None,
+        schema: Mapping[str, Any] | None = None,
     ) -> tuple[dict[str, Any], tuple[ToolCall, ...], int]:
         """:meth:`ask` with ``tools`` the model may call: (parsed text, tool calls, reply seq).
 
@@ -199,10 +254,15 @@ class Conversation:
         decides what an empty reply means). The caller must answer every returned call with
         :meth:`add_tool_result` before it asks again. A reply whose text cannot be used is
         repaired as in :meth:`ask`; its tool calls are answered first as not run, so the
-        history stays a valid tool conversation."""
+        history stays a valid tool conversation. With ``one_call`` (the re-ask text for a number
+        of calls), a reply making several calls is re-asked the same way, from the same repair
+        budget (SWE-agent requeries its format errors from one budget, then exits with the work
+        handed in: swebench-recap/sweagent/agent/agents.py:1204,1217-1221,1308-1315). ``schema``:
+        the reply text's JSON schema, sent as a strict response format where the provider
+        supports it (:attr:`recap.llm.LLMRequest.response_schema`)."""
         if prompt is not None:
             self.history.add("user", kind, prompt, node_id)
-        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice))
+        return self._ask_loop(kind, parse, node_id, context, decode, ToolUse(tools, tool_choice, one_call=one_call, schema=schema))
 
     def add_tool_result(self, call: ToolCall, content: str, node_id: int | None = None) -> int:
         """Answer one tool call of the last reply with its result (a ``tool`` message)."""
@@ -224,6 +284,8 @@ class Conversation:
             response, seq = self._call(purpose, node_id, context or {}, tools)
             calls = response.tool_calls
             try:
+                if tools.one_call is not None and len(calls) > 1:
+                    raise _TooManyCalls(tools.one_call(len(calls)), f"the reply made {len(calls)} tool calls")
                 obj = {} if calls and not response.text.strip() else decode(response.text)
                 return parse(obj), calls, seq
             except ReplyFormatError as exc:
@@ -233,7 +295,8 @@ class Conversation:
                 self.usage.json_repairs += 1
                 for call in calls:
                     self.add_tool_result(call, NOT_RUN, node_id)
-                self.history.add("user", "repair", repair_prompt(str(exc), self.expected_format), node_id)
+                text = exc.prompt if isinstance(exc, _TooManyCalls) else repair_prompt(str(exc), self.expected_format)
+                self.history.add("user", "repair", text, node_id)
                 purpose = "repair"
 
     # -- one model call, with context-length recovery -------------------------------------------
@@ -281,6 +344,8 @@ class Conversation:
             hints={"style": self.style, "purpose": purpose, "reply_fields": self.reply_fields, **context},
             tools=tools.tools,
             tool_choice=tools.choice,
+            response_schema=tools.schema,
+            stop=tools.stop,
             episode_cap_usd=self.config.max_episode_cost_usd,
             episode_spent_usd=self.usage.cost_usd,
         )
@@ -289,6 +354,10 @@ class Conversation:
         """End the episode for a failed call; returns only for a context overflow after dropping the
         oldest messages (the call is then made again)."""
         if exc.kind == "context_length":
+            if self.config.context_overflow == "end":  # SWE-agent's exit_context (agents.py:1272-1276)
+                raise EpisodeEnd(
+                    "llm_error", "context length exceeded (the whole history is kept)", error_kind=exc.kind
+                ) from None
             if self.history.drop_oldest(self.config.context_drop) == 0:
                 raise EpisodeEnd("llm_error", "context length exceeded with nothing left to drop", error_kind=exc.kind) from None
             return
@@ -461,6 +530,27 @@ class EnvDriver:
         self._record_tool(call.name, call.arguments, step, node_id, call, message_seq)
         return self._took(action, valid, step, node_id)
 
+    def submit_at_limit(self, end: EpisodeEnd) -> EpisodeEnd:
+        """How the episode ends when ``end`` is a limit (:func:`is_limit`): the environment hands
+        in the work so far and judges it (:meth:`Environment.submit_at_limit`), and the episode
+        ends ``autosubmitted``, its success the verdict and its detail the limit first
+        (``episode_limit: $10.0100 spent (limit $10)``). ``end`` itself for any other end, or when
+        there is nothing to hand in (no changes); an environment that breaks while handing in
+        ends the episode with its own error."""
+        if not is_limit(end):
+            return end
+        limit = f"{end.reason}: {end.detail}" if end.detail else end.reason
+        try:
+            step = self.env.submit_at_limit(limit)
+        except EnvError as exc:
+            return EpisodeEnd(exc.end_reason, exc.row_error(f"handing in the work at {limit}"))
+        except Exception as exc:
+            return EpisodeEnd("env_error", f"handing in the work at {limit}: {type(exc).__name__}: {exc}")
+        if step is None:
+            return end
+        self.success = step.success
+        return EpisodeEnd("autosubmitted", limit, error_kind=end.error_kind, resolved=step.success)
+
     def _took(self, action: str, valid: bool, step: Step, node_id: int | None) -> Step:
         """Count a step the environment took, record it and end the episode where it ends."""
         self.steps += 1
@@ -545,7 +635,7 @@ class Episode:
         u = self.conv.usage
         return EpisodeResult(
             end_reason=end.reason,
-            success=end.reason == "success",
+            success=end.success,
             steps=self.driver.steps,
             llm_calls=u.calls,
             prompt_tokens=u.prompt_tokens,

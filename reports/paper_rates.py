@@ -73,6 +73,8 @@ def main_table(cells: Cells) -> Table | str:
             ref = paper.main_reference(f"{bench}/{split}", c["method"])
             if bench == paper.SWE_VERIFIED:
                 why = swe_mismatch(cells, c)
+            elif bench == "fever":
+                c, why = fever_sample_cell(cells, c)
             else:
                 why = paper.FOREIGN.get((bench, c["method"])) or paper.mismatch(paper.PROTOCOLS["main"], arm_protocol(c))
             fill_rate(row, c["arm_label"], c, ref, why, notes, paired_p(cells, c, pool, used))
@@ -82,12 +84,34 @@ def main_table(cells: Cells) -> Table | str:
         "Columns: method arms in the paper's order (ReCAP, ADaPT, ReAct, CoT, Act, Standard). p: against the ReCAP "
         f"arm of the same model, profile and window; {m} comparisons (Holm over the table).",
         SWE_NOTE if any(c["benchmark"] == paper.SWE_VERIFIED for c in pool) else "",
+        paper.FEVER_NOTE if any(c["benchmark"] == "fever" for c in pool) else "",
         test_notes(pool, used),
         notes.text(),
     )
     return Table(
         "paper_main", "Main results: pass@1 (%) by benchmark and method (paper Table 1)", cols, rows, "paper_cells", note
     )
+
+
+def fever_sample_cell(cells: Cells, c: Cell) -> tuple[Cell, str | None]:
+    """A FEVER arm's cell over the sample behind its method's paper number
+    (:data:`reports.paper.FEVER_SAMPLE_SEED`) and why the paper's number may not stand beside it
+    (None: it may); the arm's whole cell with the reason when that sample cannot be told or was not run."""
+    seed = paper.FEVER_SAMPLE_SEED.get(c["method"])
+    if seed is None:
+        return c, paper.mismatch(paper.PROTOCOLS["main"], arm_protocol(c))
+    scoped = [
+        s
+        for s in cells.select(scope=f"fever_seed{seed}", level="split", benchmark="fever", split=c["split"])
+        if (s["arm_label"], s["model_label"]) == (c["arm_label"], c["model_label"])
+    ]
+    if not scoped:
+        if not any(s["scope"].startswith("fever_seed") for s in cells.cells):
+            return c, f"the paper's sample (seed {seed}) cannot be told here: no paper_dev.jsonl (set FEVER_DATA)"
+        return c, f"none of the paper's sample for it (seed {seed}) ran"
+    cell = scoped[0]
+    why = paper.mismatch(paper.PROTOCOLS["main"], arm_protocol(cell))
+    return cell, (f"{why} of its sample (seed {seed})" if why and "claims" in why else why)
 
 
 def per_task_tables(cells: Cells, split: str) -> list[Table] | str:

@@ -14,7 +14,12 @@ from typing import Literal, get_args
 #: why an episode ended (``episodes.end_reason``); ``infra_error`` is written by the driver only.
 #: ``wiki_error``: a Wikipedia answer (FEVER) could not be had or read; it is an environment
 #: error with its own reason because one kind of it (``unavailable``: the site refused or timed
-#: out after the retries) is infrastructure that ``recap resume`` retries (schemas.labels)
+#: out after the retries) is infrastructure that ``recap resume`` retries (schemas.labels).
+#: ``autosubmitted``: a limit ended the episode (cost cap, token/call/step/time limit, context
+#: overflow, repeated unusable replies) while the repository held a non-empty diff, and that diff
+#: was handed in and graded (SWE-agent's autosubmission, swebench-recap/sweagent/agent/agents.py:
+#: 888-933, 1250-1315): ``success`` is the verdict, ``error`` names the limit first
+#: (``episode_limit: $10.01 spent (limit $10)``)
 EndReason = Literal[
     "success",
     "step_cap",
@@ -27,6 +32,7 @@ EndReason = Literal[
     "env_error",
     "truncated",
     "wiki_error",
+    "autosubmitted",
 ]
 END_REASONS: tuple[str, ...] = get_args(EndReason)
 

@@ -55,6 +55,10 @@ an ``evaluations`` folder reads as a table without rows (as above), and a versio
 by a recap that writes it only gains rows there, so every earlier reader and writer of version 5
 stays right.
 
+Also under version 5, ``episodes.end_reason`` ``autosubmitted`` (issue 34: the diff handed in and
+graded at a limit). No version bump: a new value of a closed vocabulary adds no column, and no
+earlier row holds it.
+
 A run folder of version 2, 3 or 4 may be continued by this version (:func:`continues`): its
 parts differ from the current ones only by ``model_name`` and the messages' tool columns (filled
 on read) and the name of the sampling seed's column (renamed on read), so parts of several

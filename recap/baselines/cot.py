@@ -26,6 +26,7 @@ from typing import Any, ClassVar, Literal
 
 from recap.agent import Agent
 from recap.baselines import prompts as P
+from recap.baselines.notebook_loop import notebook_release, play_one_call
 from recap.baselines.plan_text import demo_texts, play_text
 from recap.baselines.react import flat_context
 from recap.baselines.reply_format import RELEASED_TEXT, check_reply_format
@@ -96,6 +97,9 @@ class CoTAgent(Agent):
         return super().shape_demo_replies(replies)
 
     def play(self, ep: Episode, reset: Reset) -> None:
+        notebook = notebook_release(ep)
+        if notebook is not None:  # prompts: release on FEVER: the notebook's one call
+            return play_one_call(ep, reset, notebook, self.with_think)
         if self.config.reply_format == "text":
             return play_text(self, ep, reset)
         ep.conv.pin(

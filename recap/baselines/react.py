@@ -47,6 +47,7 @@ from recap.agent import Agent
 from recap.baselines import prompts as P
 from recap.baselines import text_prompts as T
 from recap.baselines.act_json import MALFORMED_JSON, PARSE_ERROR_ACTION, read_reply
+from recap.baselines.notebook_loop import notebook_release, play_react
 from recap.baselines.react_swe import play_swe
 from recap.baselines.react_text import demo_texts, play_text, raw_text
 from recap.baselines.reply_format import RELEASED_TEXT, check_reply_format
@@ -216,6 +217,9 @@ class ReActAgent(Agent):
         return cfg
 
     def play(self, ep: Episode, reset: Reset) -> None:
+        notebook = notebook_release(ep)
+        if notebook is not None:  # prompts: release on FEVER: the notebook's own loop
+            return play_react(ep, reset, notebook, self.with_think)
         if self.with_think and ep.env.tool_defs():  # a coding environment: mini-SWE-agent's loop
             return play_swe(ep, reset, self.config.max_json_repairs)
         if self.config.reply_format == "text":

@@ -7,6 +7,7 @@ from typing import Any
 
 import duckdb
 
+from reports.sections.fever_samples import load_fever_samples
 from reports.sections.plans import load_plans
 from reports.views import Result, named_query
 
@@ -19,8 +20,10 @@ PAPER_POINTER = "The paper's values stand in the Paper section, beside arms that
 
 def make_query(con: duckdb.DuckDBPyConnection, results: dict[str, Result]) -> Query:
     """Run each named SQL file once; keep every result for the CSV output. The run folders'
-    plans are loaded first (:func:`load_plans`), for the coverage table."""
+    plans are loaded first (:func:`load_plans`), for the coverage table, and the FEVER samples
+    (:func:`load_fever_samples`), for the paper's FEVER numbers."""
     load_plans(con)
+    load_fever_samples(con)
 
     def q(name: str) -> Result:
         if name not in results:

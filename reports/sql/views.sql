@@ -200,11 +200,12 @@ FROM tool_calls
 GROUP BY run_id, episode_id;
 
 -- episode_modes: every unit's row (terminal, any state) with one failure mode, first match wins:
---   success                     end_reason success
+--   success                     end_reason success, or autosubmitted with success (the diff handed in at a limit resolved)
 --   infra_error:<kind>          an infrastructure failure (infra_kind: auth, worker_lost ...)
 --   model_error:<kind>          end_reason llm_error; kind = error_kind of the episode's last failed call
 --   json_failures | truncated | budget_exhausted | episode_limit | env_error    those end reasons
 --                               (truncated: a reply cut at the output cap, never counted as a JSON failure)
+--   autosubmitted               a limit ended it and the diff handed in there did not resolve (error: the limit)
 --   invalid_action_loop         step_cap / call_cap / agent_done with invalid_loop
 --   repeated_action_loop        step_cap / call_cap / agent_done with repeated_loop
 --   agent_done_early            agent_done (the agent declared the task finished; it was not)
@@ -225,10 +226,10 @@ SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.labe
   p.loop_cycle_len,
   le.last_error_kind,
   CASE
-    WHEN t.end_reason = 'success' THEN 'success'
+    WHEN t.end_reason = 'success' OR (t.end_reason = 'autosubmitted' AND t.success) THEN 'success'
     WHEN t.infra_kind IS NOT NULL THEN 'infra_error:' || t.infra_kind
     WHEN t.end_reason = 'llm_error' THEN 'model_error:' || coalesce(le.last_error_kind, 'unknown')
-    WHEN t.end_reason IN ('json_failures', 'truncated', 'budget_exhausted', 'episode_limit', 'env_error', 'wiki_error') THEN t.end_reason
+    WHEN t.end_reason IN ('json_failures', 'truncated', 'budget_exhausted', 'episode_limit', 'env_error', 'wiki_error', 'autosubmitted') THEN t.end_reason
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.invalid_loop, false) THEN 'invalid_action_loop'
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.repeated_loop, false) THEN 'repeated_action_loop'
     WHEN t.end_reason = 'agent_done' THEN 'agent_done_early'
@@ -243,8 +244,14 @@ LEFT JOIN last_error le ON le.run_id = t.run_id AND le.episode_id = t.episode_id
 CREATE VIEW failures AS
 SELECT * FROM episode_modes WHERE mode <> 'success' AND state = 'finished';
 
+-- fever_samples: the claims of the release's two FEVER samples (main.py's seed 42, the ReAct/Act
+-- notebooks' seed 233), one row per claim and sample. Filled by the report builder
+-- (reports.sections.fever_samples) from the claims file; empty in a plain `recap sql` session.
+CREATE TABLE fever_samples (instance_id VARCHAR, sample_seed BIGINT);
+
 -- paper_scoped: the outcomes rows the paper section counts, once per scope: 'all', and again as
--- 'sync_2_4_6' for Robotouille synchronous tasks 2, 4 and 6 (the cross-model table's tasks);
+-- 'sync_2_4_6' for Robotouille synchronous tasks 2, 4 and 6 (the cross-model table's tasks), and
+-- as 'fever_seed42' / 'fever_seed233' for the FEVER claims of each release sample;
 -- arm_label is the arm (its label, else the method), variant the ablation.
 CREATE VIEW paper_scoped AS
 WITH counted AS (
@@ -253,7 +260,10 @@ WITH counted AS (
 SELECT *, 'all' AS scope FROM counted
 UNION ALL
 SELECT *, 'sync_2_4_6' FROM counted
-WHERE benchmark = 'robotouille' AND split = 'synchronous' AND split_part(task, '_', 1) IN ('2', '4', '6');
+WHERE benchmark = 'robotouille' AND split = 'synchronous' AND split_part(task, '_', 1) IN ('2', '4', '6')
+UNION ALL
+SELECT c.*, 'fever_seed' || s.sample_seed FROM counted c JOIN fever_samples s USING (instance_id)
+WHERE c.benchmark = 'fever';
 
 -- planned_units: the units each run folder's plan.json lists (run_id from its run.json), with
 -- whether its model is a test double (from the folder's spec.yaml; NULL when unknown). Filled by

@@ -277,3 +277,68 @@ def test_the_window_never_sends_a_tool_result_without_its_call():
         for i, m in enumerate(r.messages):
             if m.role == "tool":
                 assert m.tool_call_id in [c.id for c in r.messages[i - 1].tool_calls]
+
+
+def test_one_call_per_reply_re_asks_a_reply_with_several_and_runs_none_of_them():
+    replies = [
+        reply(plan("two at once", "fix"), ("call_1", "view", J({"path": "app.py"})), ("call_2", "str_replace", FIX)),
+        reply(plan("one now", "fix"), ("call_3", "str_replace", FIX)),
+        plan("done"),
+        plan("stop"),
+    ]
+    result, rows, client, env = run(replies, ReCAPConfig(window=100, tool_calls_per_reply="one"))
+    assert (result.end_reason, result.json_repairs) == ("agent_done", 1)
+    assert [c[0] for c in env.calls] == ["str_replace"]  # the two calls of the first reply never ran
+    msgs = messages(rows)
+    assert [(m.role, m.kind, m.tool_call_id) for m in msgs[1:6]] == [
+        ("assistant", "reply", None),
+        ("tool", "tool_result", "call_1"),
+        ("tool", "tool_result", "call_2"),
+        ("user", "repair", None),
+        ("assistant", "reply", None),
+    ]
+    assert msgs[2].content == msgs[3].content == NOT_RUN
+    assert msgs[4].content == (
+        "Your last reply made 2 tool calls, and none of them was run: make exactly one tool call per reply, "
+        "with your JSON object as the reply's text. Reply again with your first call only."
+    )
+    assert [r.purpose for r in client.requests] == ["task", "repair", "action_taken", "return"]
+
+
+def test_one_call_per_reply_past_the_repair_budget_ends_json_failures():
+    two = reply("", ("call_1", "bash", J({"command": "ls"})), ("call_2", "bash", J({"command": "ls"})))
+    result, _, client, env = run([two, two], ReCAPConfig(window=100, tool_calls_per_reply="one", max_json_repairs=1))
+    assert (result.end_reason, result.error, result.json_repairs, len(client.requests)) == (
+        "json_failures",
+        "the reply made 2 tool calls",
+        1,
+        2,
+    )
+    assert env.calls == []
+
+
+def test_reply_schema_sends_the_think_subtasks_schema_and_no_think_leaves_think_out():
+    result, _, client, _ = run([plan("stop"), plan("stop")], ReCAPConfig(window=100, reply_schema=True))
+    assert result.end_reason == "agent_done"
+    schema = {
+        "name": "ReCAP",
+        "schema": {
+            "type": "object",
+            "properties": {
+                "think": {"type": "string", "description": "Your reasoning about the current task and the latest observation."},
+                "subtasks": {
+                    "type": "array",
+                    "items": {"type": "string"},
+                    "description": "The ordered subtasks still needed for the current task; empty when it is complete.",
+                },
+            },
+            "required": ["think", "subtasks"],
+            "additionalProperties": False,
+        },
+    }
+    assert [r.response_schema for r in client.requests] == [schema, schema]
+    _, _, plain, _ = run([plan("stop"), plan("stop")])
+    assert [r.response_schema for r in plain.requests] == [None, None]
+    _, _, bare, _ = run([J({"subtasks": []}), J({"subtasks": []})], ReCAPConfig(window=100, reply_schema=True, think="none"))
+    sent = bare.requests[0].response_schema
+    assert sent is not None and list(sent["schema"]["properties"]) == ["subtasks"] and sent["schema"]["required"] == ["subtasks"]

@@ -16,13 +16,20 @@ package's 250 for 250 commands: it counts model calls, format errors included) a
 is ``max_episode_cost_usd`` ($3 by default, the package's; null: no limit). ``max_json_repairs``
 has no effect: the package allows any number of format errors (each is counted in
 ``json_repairs``). It runs only on an environment with tools (a coding benchmark).
+
+``package_config``: whose SWE-bench configuration the loop runs: ``installed`` (the installed
+package's, the ``paper`` profile and the default) or ``1.0.0`` (``profile: released``):
+mini-swe-agent 1.0.0's, the version of the leaderboard run behind the paper's 39.58 %
+(``workers/agents/mini_swe_1_0_0/``, :mod:`.mini_swe_package`), with its own ``step_limit`` (0:
+none; the run's call cap stays a safety bound) and ``cost_limit`` ($3).
 """
 
 from __future__ import annotations
 
 import importlib.util
+import json
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from recap.agent import Agent
 from recap.config import AgentConfig, ConfigError
@@ -35,6 +42,9 @@ PACKAGE = "minisweagent"
 UNBOUNDED_WINDOW = 10**9
 #: the package's SWE-bench cost limit (config/extra/swebench.yaml: ``cost_limit: 3.``)
 PACKAGE_COST_LIMIT_USD = 3.0
+#: ``package_config`` values (workers.agents.mini_swe_package.PACKAGE_CONFIGS, kept here so that
+#: building a config imports neither the package nor yaml): the installed package's, or 1.0.0's
+INSTALLED, RELEASED_VERSION = "installed", "1.0.0"
 
 
 @dataclass(frozen=True)
@@ -45,6 +55,36 @@ class MiniSweConfig(AgentConfig):
     max_tokens: int | None = None
     json_mode: bool = False
     max_episode_cost_usd: float | None = PACKAGE_COST_LIMIT_USD
+    #: whose SWE-bench configuration runs: the installed package's, or 1.0.0's (``released``).
+    #: Left out of :meth:`to_json` while ``installed``, so units planned before it keep their hash
+    package_config: str = INSTALLED
+
+    @classmethod
+    def profile_defaults(cls, profile: str, ablation: str | None) -> dict[str, Any]:
+        """``released``: mini-swe-agent 1.0.0's configuration and its ``cost_limit: 3.``
+        (mini_swe_1_0_0/swebench.yaml)."""
+        out = super().profile_defaults(profile, ablation)
+        if profile == "released":
+            out.update(package_config=RELEASED_VERSION, max_episode_cost_usd=PACKAGE_COST_LIMIT_USD)
+        return out
+
+    def to_json(self) -> str:
+        values = json.loads(super().to_json())
+        if values.get("package_config") == INSTALLED:
+            del values["package_config"]
+        return json.dumps(values, sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> MiniSweConfig:
+        try:
+            values = json.loads(text)
+        except ValueError:
+            values = None
+        if isinstance(values, dict):
+            text = json.dumps({"package_config": INSTALLED, **values}, sort_keys=True)
+        cfg = super().from_json(text)
+        assert isinstance(cfg, MiniSweConfig)
+        return cfg
 
     def history_window(self) -> int:
         return UNBOUNDED_WINDOW
@@ -56,6 +96,8 @@ class MiniSweConfig(AgentConfig):
         super().validate()
         if self.json_mode:
             raise ConfigError("mini_swe replies are plain text (a THOUGHT and one bash block): json_mode must be false")
+        if self.package_config not in (INSTALLED, RELEASED_VERSION):
+            raise ConfigError(f"package_config must be {INSTALLED} or {RELEASED_VERSION}, got {self.package_config!r}")
         if importlib.util.find_spec(PACKAGE) is None:  # refused when the sweep is planned, before any call
             raise ConfigError(f"mini_swe needs the mini-SWE-agent package: pip install 'recap-eval[swe]' (no module {PACKAGE!r})")
 
@@ -87,7 +129,14 @@ class MiniSweAgent(Agent):
         refused = self.refuses_env(ep.env)
         if refused is not None:
             raise EpisodeEnd("env_error", refused)
-        from workers.agents.mini_swe_package import play_package  # the package only when an episode plays
+        from workers.agents.mini_swe_package import load_package, play_package  # the package only when an episode plays
 
         cfg = ep.conv.config
-        play_package(ep, reset, step_limit=int(cfg.max_llm_calls or 0), cost_limit=float(cfg.max_episode_cost_usd or 0.0))
+        package = load_package(getattr(cfg, "package_config", INSTALLED))
+        play_package(
+            ep,
+            reset,
+            step_limit=int(cfg.max_llm_calls or 0),
+            cost_limit=float(cfg.max_episode_cost_usd or 0.0),
+            package=package,
+        )

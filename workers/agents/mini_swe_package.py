@@ -25,6 +25,19 @@ timeout apply before the package's templates see the output); the submission is 
 repository's diff by our environment, not from the sentinel command's printed diff; a context
 overflow ends the episode (``llm_error``) instead of crashing the package's process.
 
+Which configuration (``MiniSweConfig.package_config``): ``installed``, the installed package's own
+``swebench.yaml`` (the ``paper`` profile: today's package); or ``1.0.0`` (``profile: released``),
+the configuration of mini-swe-agent 1.0.0, the version of the leaderboard run behind the paper's
+39.58 % (``20250726_mini-v1.0.0_gpt-4.1-2025-04-14``), shipped in ``mini_swe_1_0_0/`` (MIT, with its
+licence and the wheel's digest: its README) and run on whatever version is installed: its
+templates, its action regex and timeout template (1.0.0's code defaults), its ``step_limit: 0.``
+(none: the run's own call cap stays as a safety bound, ``call_cap`` when it binds), its
+``cost_limit: 3.`` and its submit line ``MICRO_SWE_AGENT_FINAL_OUTPUT``, which our environment
+then submits on (the installed loop's own submit lines, which 1.0.0 never accepted, are not
+checked). 1.0.0 rendered its templates with undefined names left empty, so its task text's
+``{{working_dir}}`` (a name none of its environments defined) is rendered empty here too, and
+sent its system text unrendered (:func:`_as_1_0_0`).
+
 Importing the package prints a banner, creates a per-user config folder and loads a ``.env`` from
 it; :func:`load_package` silences the banner and points the folder at an empty temporary one, so
 nothing of a user's mini-SWE-agent setup leaks into a run.
@@ -49,6 +62,13 @@ from recap.runtime import Conversation, EnvDriver, Episode, EpisodeEnd
 
 #: the package's SWE-bench configuration, relative to its ``config`` folder
 SWEBENCH_CONFIG = "extra/swebench.yaml"
+#: the configurations ``MiniSweConfig.package_config`` names: the installed package's, or 1.0.0's (shipped)
+INSTALLED, RELEASED_VERSION = "installed", "1.0.0"
+PACKAGE_CONFIGS = (INSTALLED, RELEASED_VERSION)
+#: mini-swe-agent 1.0.0's configuration (README.md there: source, digests, licence)
+RELEASED_DIR = Path(__file__).resolve().parent / "mini_swe_1_0_0"
+#: the installed package's submit line (its swebench.yaml's; our environment's default)
+INSTALLED_SENTINEL = "COMPLETE_TASK_AND_SUBMIT_FINAL_OUTPUT"
 #: the repository folder the package's SWE-bench task text names (its docker image's)
 PACKAGE_WORKDIR = "/testbed"
 #: the text layout the offline test doubles write (workers/llm/offline/expert_tools.py)
@@ -74,10 +94,31 @@ class Package:
     limits_exceeded: type[Exception]
     agent_settings: Mapping[str, Any]
     version: str
+    #: whose configuration ``agent_settings`` is (:data:`PACKAGE_CONFIGS`)
+    config: str = INSTALLED
+    #: the first output line that submits (our environment is told it)
+    submit_sentinel: str = INSTALLED_SENTINEL
+
+    @property
+    def step_limit_from_run(self) -> bool:
+        """Whether the package's ``step_limit`` is the run's call cap (installed) or the
+        configuration's own (1.0.0: 0, none)."""
+        return self.config == INSTALLED
 
 
-def load_package() -> Package:
-    """Import mini-SWE-agent quietly (see the module docstring) and read its SWE-bench settings."""
+def released_settings() -> tuple[dict[str, Any], str]:
+    """mini-swe-agent 1.0.0's SWE-bench ``agent`` settings (its swebench.yaml over the code
+    defaults it relies on) and its submit line, from ``mini_swe_1_0_0/``."""
+    defaults = yaml.safe_load((RELEASED_DIR / "agent_defaults.yaml").read_text(encoding="utf-8"))
+    config = yaml.safe_load((RELEASED_DIR / "swebench.yaml").read_text(encoding="utf-8"))
+    return {**defaults["agent"], **config["agent"]}, str(defaults["submit_sentinel"])
+
+
+def load_package(config: str = INSTALLED) -> Package:
+    """Import mini-SWE-agent quietly (see the module docstring) and read the SWE-bench settings
+    ``config`` names (the installed package's, or 1.0.0's)."""
+    if config not in PACKAGE_CONFIGS:
+        raise ValueError(f"package_config must be one of {', '.join(PACKAGE_CONFIGS)}, got {config!r}")
     os.environ.setdefault("MSWEA_SILENT_STARTUP", "1")
     os.environ.setdefault("MSWEA_GLOBAL_CONFIG_DIR", str(Path(tempfile.gettempdir()) / "recap-eval-mini-swe-agent"))
     try:
@@ -86,8 +127,36 @@ def load_package() -> Package:
         from minisweagent.config import builtin_config_dir
     except ImportError as exc:
         raise PackageMissing(f"the mini_swe method needs mini-SWE-agent: pip install 'recap-eval[swe]' ({exc})") from None
-    config = yaml.safe_load((Path(builtin_config_dir) / SWEBENCH_CONFIG).read_text())
-    return Package(DefaultAgent, Submitted, LimitsExceeded, dict(config["agent"]), str(minisweagent.__version__))
+    version = str(minisweagent.__version__)
+    if config == RELEASED_VERSION:
+        settings, sentinel = released_settings()
+        return Package(_as_1_0_0(DefaultAgent), Submitted, LimitsExceeded, settings, version, config, sentinel)
+    installed = yaml.safe_load((Path(builtin_config_dir) / SWEBENCH_CONFIG).read_text())
+    return Package(DefaultAgent, Submitted, LimitsExceeded, dict(installed["agent"]), version)
+
+
+def _as_1_0_0(agent_cls: type) -> type:
+    """The installed ``DefaultAgent`` where 1.0.0's differs in what reaches the model:
+
+    * no submit check of its own: our environment submits on 1.0.0's line (and raises
+      ``Submitted`` through :meth:`SandboxEnvironment.execute`); the installed check would also
+      accept lines 1.0.0 did not;
+    * templates rendered as 1.0.0 rendered them (``microsweagent/agents/default.py:63-65``, system text added as written at ``:73``): an
+      undefined name is empty rather than an error, the system text is sent as written (1.0.0 did
+      not render it; rendering drops its final newline)."""
+    from jinja2 import Template
+
+    class ReleasedConfigAgent(agent_cls):
+        def has_finished(self, output: dict[str, str]) -> None:
+            return None
+
+        def render_template(self, template: str, **kwargs: Any) -> str:
+            if template is self.config.system_template:
+                return template
+            names = dataclasses.asdict(self.config) | self.env.get_template_vars() | self.model.get_template_vars()
+            return Template(template).render(**kwargs, **names, **getattr(self, "extra_template_vars", {}))
+
+    return ReleasedConfigAgent
 
 
 def command_output(observation: str, exit_code: int | None) -> str:
@@ -270,14 +339,22 @@ def play_package(ep: Episode, reset: Reset, *, step_limit: int, cost_limit: floa
     SWE-bench runner passes it); ends by an EpisodeEnd: our environment's, our caps', or the
     package's own limit (``call_cap`` for ``step_limit``, ``episode_limit`` for ``cost_limit``)."""
     pkg = package if package is not None else load_package()
+    if not pkg.step_limit_from_run:
+        step_limit = int(pkg.agent_settings["step_limit"])
     if len(ep.conv.history):
         raise EpisodeEnd("env_error", "mini_swe pins its own prompts: this episode already has a demonstration or release prompt")
     ep.conv = conv = whole_conversation(ep.conv)
     workdir = str(getattr(ep.env, "workdir", PACKAGE_WORKDIR))
     limits = getattr(ep.env, "limits", None)
     timeout = float(getattr(limits, "command_timeout_s", 60.0))
+    if hasattr(ep.env, "submit_sentinel"):
+        ep.env.submit_sentinel = pkg.submit_sentinel  # the line the configuration tells the model to print
+    elif pkg.submit_sentinel != INSTALLED_SENTINEL:
+        raise EpisodeEnd("env_error", f"mini_swe {pkg.config}: this environment cannot submit on {pkg.submit_sentinel}")
     env = SandboxEnvironment(ep.driver, pkg, cwd=workdir, timeout=timeout)
     hints = {"task": reset.goal, "depth": 0, "valid_actions": None, "text_layout": BASH_BLOCK}
+    if pkg.submit_sentinel != INSTALLED_SENTINEL:  # the offline test doubles submit with the configuration's line
+        hints["submit_sentinel"] = pkg.submit_sentinel
     model = GatewayModel(conv, env, hints)
     agent = pkg.agent_cls(model, env, **agent_settings(pkg, workdir=workdir, step_limit=step_limit, cost_limit=cost_limit))
     status, _ = agent.run(reset.observation)

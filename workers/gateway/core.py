@@ -225,7 +225,12 @@ class DeploymentGateway(CallRecorder):
         """The call's state before its first attempt: the messages to send, the sizing, the worst case, the cache key."""
         cfg = self.config
         messages = provider_messages(request.messages)
-        params = {**cfg.generation_params(request.temperature, request.max_tokens, request.json_mode), **request.tool_params()}
+        params = {
+            **cfg.generation_params(request.temperature, request.max_tokens, request.json_mode),
+            **request.tool_params(),
+            **cfg.schema_params(request.response_schema),
+            **request.stop_params(),
+        }
         sizing = size_request(cfg.model, messages, params)
         counted = sizing.counted
         call = CallState(

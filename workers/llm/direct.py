@@ -97,7 +97,12 @@ class LiteLLMClient:
         cfg = self.config
         t0 = time.monotonic()
         messages = provider_messages(request.messages)
-        params = {**cfg.generation_params(request.temperature, request.max_tokens, request.json_mode), **request.tool_params()}
+        params = {
+            **cfg.generation_params(request.temperature, request.max_tokens, request.json_mode),
+            **request.tool_params(),
+            **cfg.schema_params(request.response_schema),
+            **request.stop_params(),
+        }
         sizing = size_request(cfg.model, messages, params)
         send = mark(self.markers, request.episode_id, messages) if self.markers is not None else messages
         return _DirectCall(

@@ -348,6 +348,43 @@ class DeploymentConfig(BaseModel):
             params["response_format"] = {"type": "json_object"}
         return params
 
+    def schema_params(self, schema: Mapping[str, Any] | None) -> dict[str, Any]:
+        """The ``response_format`` for a request's reply schema (``LLMRequest.response_schema``):
+        strict ``json_schema`` where the model supports it (as swebench-recap/sweagent/agent/
+        models.py:707-731 sends it), ``json_object`` where it has only JSON mode, nothing where it
+        has neither, for a test double, or when the model's own ``params`` set a response format."""
+        if schema is None or "response_format" in self.params or self.is_offline:
+            return {}
+        support = response_format_support(self.model)
+        if support == "json_schema":
+            return {"response_format": {"type": "json_schema", "json_schema": {**schema, "strict": True}}}
+        if support == "json_object":
+            return {"response_format": {"type": "json_object"}}
+        return {}
+
+
+#: what a model accepts as a ``response_format`` (:func:`response_format_support`)
+ResponseFormatSupport = Literal["json_schema", "json_object", "none"]
+
+
+@functools.lru_cache(maxsize=256)
+def response_format_support(model: str) -> ResponseFormatSupport:
+    """How ``model`` can be held to a JSON reply, by litellm's model map: ``json_schema`` (strict
+    structured output, ``litellm.supports_response_schema``), ``json_object`` (JSON mode only),
+    or ``none`` (no ``response_format`` at all; the prompt alone asks for JSON)."""
+    import litellm  # heavy (seconds): only when a schema is asked for
+
+    try:
+        if litellm.supports_response_schema(model=model):
+            return "json_schema"
+    except Exception:  # a model litellm does not know
+        pass
+    try:
+        supported = litellm.get_supported_openai_params(model=model) or []
+    except Exception:
+        supported = []
+    return "json_object" if "response_format" in supported else "none"
+
 
 @functools.lru_cache(maxsize=256)
 def model_max_output_tokens(model: str) -> int | None:

@@ -15,6 +15,9 @@ yields exactly the part the released code sends before the episode's first obser
 * YAML prompt templates (Robotouille baselines, ``agents/prompt_builder/prompts``): their
   ``system`` and ``instructions`` fields;
 * in-context example files (``agents/in_context_examples/data/<split>/<kind>/*.txt``): each file whole.
+* FEVER's notebooks (ReAct, Act, CoT, Standard: ``fever-recap/*.ipynb``): read by
+  :mod:`workers.release.fever_notebooks` (the loop cell's literals with :mod:`ast`, and the
+  demonstration in the JSON file the cell names).
 
 Parts are joined by one blank line. What each method reads (and the released file that makes it
 so) is :func:`sources`. The released code's framing sentences around a demonstration live in
@@ -43,7 +46,7 @@ from recap.baselines.text_prompts import RELEASE_ALFWORLD_RULE
 from recap.env import DataNotFoundError
 from recap.release_prompt import ReleasePrompt
 from workers.envs import data_paths
-from workers.release import fever_matrix
+from workers.release import fever_matrix, fever_notebooks
 from workers.release.folder import FETCH_COMMAND, LOCATION, NAME
 
 _TEMPLATES = "robotouille-baselines/agents/prompt_builder/prompts"
@@ -160,6 +163,8 @@ def sources(
         raise ReleaseUnavailable(f"the release has no {method} prompts for alfworld")
     if benchmark == "fever" and method == "recap":  # main.py -> chatbot.py (workers/release/fever_matrix.py)
         return tuple(Part(path, "whole") for path in fever_matrix.SOURCES)
+    if benchmark == "fever" and fever_notebooks.covers(method):  # the notebooks (fever_notebooks)
+        return (Part(fever_notebooks.notebook_path(method), f"{fever_notebooks.NOTEBOOK_PICK}:{method}"),)
     raise ReleaseUnavailable(f"the release has no prompts for benchmark {benchmark!r}")
 
 
@@ -187,6 +192,8 @@ def _read(folder: Path, part: Part) -> str:
         raise ReleaseMissing(f"{NAME}: cannot read {part.path}: {exc}") from None
     kind, _, arg = part.pick.partition(":")
     try:
+        if kind == fever_notebooks.NOTEBOOK_PICK:
+            return fever_notebooks.release_text(folder, arg)[1]
         if kind == "few_shot":
             return join_messages(few_shot_literal(text, arg))
         if kind == "key":
@@ -198,6 +205,8 @@ def _read(folder: Path, part: Part) -> str:
         raise ReleaseMissing(
             f"{NAME}: {part.path} does not hold the expected {part.pick} ({type(exc).__name__}: {exc})"
         ) from None
+    except OSError as exc:  # a file the notebook names (fever-recap/prompts/fever.json)
+        raise ReleaseMissing(f"{NAME}: cannot read a file {part.path} names: {exc}; run `{FETCH_COMMAND}`") from None
 
 
 def few_shot_literal(source: str, function: str) -> list[dict[str, str]]:
@@ -344,6 +353,11 @@ def release_prompt(
     ALFWorld: one framed user message each (ReAct: the transcript as is, react.py:206-208; Act: the
     transcript re-read by :func:`act_example`, act.py:297-303; ReCAP: the example list joined,
     chatbot.py:391-398, with an empty system text and the released rule for its first prompt)."""
+    if benchmark == "fever" and fever_notebooks.covers(method):  # the notebooks' loops (fever_notebooks)
+        try:
+            return fever_notebooks.release_prompt(folder, method)
+        except (OSError, ValueError, SyntaxError) as exc:
+            raise ReleaseMissing(f"{NAME}: the {method} notebook or its prompt file cannot be read ({exc})") from None
     if method not in STRUCTURED.get(benchmark, ()):
         return None
     parts = sources(method, benchmark, split, task, think, name_only)

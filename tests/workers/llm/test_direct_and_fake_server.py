@@ -78,3 +78,15 @@ def test_fake_server_directives_truncation_and_cached_prefix(fake_server):
         _chat(url, "c FAKE:401", key="sk-secret-123456").json()["error"]["message"]
         == "Incorrect API key provided: sk-secret-123456."
     )
+
+
+def test_a_request_with_stop_sequences_reaches_the_provider_with_them(fake_server):
+    """The FEVER notebooks' calls stop at ``\\nObservation i:`` (React.ipynb cell 4): the stop list
+    travels to the provider; a request without one sends none."""
+    import dataclasses
+
+    server = fake_server(keep_bodies=True)
+    client = LiteLLMClient(DeploymentConfig(model="openai/fake-gpt", api_base=server.base_url, params={"max_tokens": 20}))
+    client.complete(dataclasses.replace(make_request(0, "Claim: x\nThought 1:"), stop=("\nObservation 1:",)))
+    client.complete(make_request(1, "hello"))
+    assert [b.get("stop") for b in server.bodies] == [["\nObservation 1:"], None]

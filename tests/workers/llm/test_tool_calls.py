@@ -146,3 +146,41 @@ def test_tool_call_parsing_and_message_rules():
         _request("x", tool_choice="grep")
     with pytest.raises(ValueError, match="tool_choice is set but the request has no tools"):
         _request("x", tools=(), tool_choice="auto")
+
+
+SCHEMA = {
+    "name": "ReCAP",
+    "schema": {
+        "type": "object",
+        "properties": {"subtasks": {"type": "array", "items": {"type": "string"}}},
+        "required": ["subtasks"],
+        "additionalProperties": False,
+    },
+}
+
+
+@pytest.mark.parametrize(
+    ("model", "sent"),
+    [
+        # a model with strict structured output gets the schema (issue 34: ReCAP's reply_schema)
+        ("openai/gpt-4.1", {"type": "json_schema", "json_schema": {**SCHEMA, "strict": True}}),
+        # one litellm knows only JSON mode for gets plain JSON
+        ("openai/fake-gpt", {"type": "json_object"}),
+    ],
+)
+def test_a_reply_schema_goes_out_as_the_models_strongest_json_format(fake_server, model, sent):
+    server = fake_server(keep_bodies=True)
+    client = LiteLLMClient(DeploymentConfig(model=model, api_base=server.base_url, max_attempts=1, params={"max_tokens": 50}))
+    request = _request("go")
+    client.complete(LLMRequest(**{**request.__dict__, "response_schema": SCHEMA}))
+    assert server.bodies[0]["response_format"] == sent
+    client.complete(request)  # no schema: no response format (tools and plain JSON text, as before)
+    assert "response_format" not in server.bodies[1]
+
+
+def test_no_response_format_where_the_model_has_none_or_for_a_test_double():
+    assert DeploymentConfig(model="nosuch/model").schema_params(SCHEMA) == {}
+    assert DeploymentConfig(model="offline/expert").schema_params(SCHEMA) == {}
+    assert DeploymentConfig(model="openai/gpt-4.1").schema_params(None) == {}
+    own = {"response_format": {"type": "text"}}
+    assert DeploymentConfig(model="openai/gpt-4.1", params=own).schema_params(SCHEMA) == {}

@@ -11,6 +11,9 @@ Options of :meth:`FeverBenchmark.make`:
 - ``max_steps``: actions per episode (default 10, the paper's cap).
 - ``verdict_only``: the method gives only a verdict (CoT, Standard; the pipeline sets it per
   method, :meth:`FeverBenchmark.options_for_agent`): the rules ask for a one-action plan.
+- ``sample_seed``: the seed of the shuffle behind the ``paper`` selector (default 42: ReCAP, CoT,
+  Standard, main.py; 233: the ReAct/Act notebooks' 200, :mod:`.claims`); read when the
+  instances are listed, accepted by make() and ignored there.
 - ``step_multiplier`` and ``seed`` are accepted and have no effect (a fixed cap; no randomness).
 - ``page_store`` / ``limiter``: objects a caller passes in (where answers read live are kept;
   the shared per-host rate limit); defaults: the environment keeps them and hands them to the
@@ -32,7 +35,7 @@ from workers.envs.data_sources import DataFolder
 from workers.envs.registry import Benchmark, RunService
 
 from . import protocol
-from .claims import BENCHMARK_NAME, find_claim, load_claims, resolve_data_dir, select
+from .claims import BENCHMARK_NAME, PAPER_SEED, check_sample_seed, find_claim, load_claims, resolve_data_dir, select
 from .data_folders import FOLDER
 from .demo import demonstration_for
 from .env import DEFAULT_MAX_STEPS, FeverEnvironment
@@ -137,10 +140,12 @@ class FeverBenchmark(Benchmark):
         return self.list_instances_for(selector, {})
 
     def list_instances_for(self, selector: str | None, options: Mapping[str, Any]) -> list[str]:
-        """:meth:`list_instances` of the claims in ``options['data_dir']`` when a sweep names one."""
+        """:meth:`list_instances` of the claims in ``options['data_dir']`` when a sweep names one,
+        ``paper`` meaning the sample of ``options['sample_seed']`` (default 42)."""
         data_dir = options.get("data_dir")
+        seed = check_sample_seed(options.get("sample_seed", PAPER_SEED))
         claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
-        return [c.instance_id for c in select(claims, selector)]
+        return [c.instance_id for c in select(claims, selector, seed)]
 
     def make(
         self,
@@ -153,6 +158,7 @@ class FeverBenchmark(Benchmark):
         max_steps: int = DEFAULT_MAX_STEPS,
         step_multiplier: float | None = None,
         seed: int = 0,
+        sample_seed: int = PAPER_SEED,
         verdict_only: bool = False,
         page_store: PageStore | None = None,
         limiter: RateLimiter | None = None,
@@ -162,8 +168,9 @@ class FeverBenchmark(Benchmark):
         if unknown:
             raise ValueError(
                 f"unknown FEVER option(s) {', '.join(sorted(unknown))}; accepted: data_dir, wikipedia_url, "
-                "wikipedia, wikipedia_rate, max_steps, verdict_only, step_multiplier, seed"
+                "wikipedia, wikipedia_rate, max_steps, verdict_only, sample_seed, step_multiplier, seed"
             )
+        check_sample_seed(sample_seed)  # it chose the instances; nothing in an episode reads it
         base = check_wikipedia_url(wikipedia_url)
         rate = check_rate(wikipedia_rate)
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:

@@ -4,7 +4,11 @@ The release reads ``data/paper_dev.jsonl`` line by line into ``(claim, label)`` 
 index is its 0-based line number (fever-recap/hotpotqa/wrappers.py:143-152). Its runner shuffles
 the indices ``0..7404`` - not the file's 9,999 lines - with ``random.Random(42)`` and runs the first
 ``test_count`` = 200 (fever-recap/main.py:26-40, conf/config.toml: seed 42, test_count 200);
-:func:`paper_indices` reproduces that list. Instance ids are ``fever/<claim id>`` (the ``id`` field).
+:func:`paper_indices` reproduces that list. The ReAct and Act notebooks shuffle the same range
+with ``random.Random(233)`` instead (fever-recap/React.ipynb and baseline_act.ipynb, cell 4:
+``random.Random(233).shuffle(idxs)``, ``for i in idxs[0:200]``): the option ``sample_seed``
+picks which sample ``paper`` means (:data:`NOTEBOOK_SEED` for the notebooks' 200; the two
+samples share 4 claims). CoT and Standard read the seed from ``conf/config.toml`` (42). Instance ids are ``fever/<claim id>`` (the ``id`` field).
 The folder is found by the shared rule of ``workers/envs/data_paths.py``: ``data_dir``, else
 ``$FEVER_DATA``, else recap-eval's cache, else ``<checkout>/../shared/data/fever``.
 """
@@ -27,6 +31,8 @@ CLAIMS_FILE = "paper_dev.jsonl"
 #: the release's shuffled index range (main.py:32), its seed and its count (conf/config.toml)
 PAPER_INDEX_RANGE = 7405
 PAPER_SEED = 42
+#: the seed of the ReAct/Act notebooks' shuffle (React.ipynb / baseline_act.ipynb cell 4)
+NOTEBOOK_SEED = 233
 PAPER_COUNT = 200
 LABELS = ("SUPPORTS", "REFUTES", "NOT ENOUGH INFO")
 
@@ -140,19 +146,31 @@ def load_claims(folder: Path) -> tuple[Claim, ...]:
     return _load(path, stat.st_mtime_ns)
 
 
-def paper_indices() -> list[int]:
-    """The release's 200 claim indices in its order (main.py:32-40)."""
+def check_sample_seed(seed: object) -> int:
+    """``seed`` when it is a non-negative integer (the ``sample_seed`` option), else ValueError."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(
+            f"sample_seed must be a non-negative integer (42: ReCAP/CoT/Standard, 233: the ReAct/Act notebooks), got {seed!r}"
+        )
+    return seed
+
+
+def paper_indices(seed: int = PAPER_SEED) -> list[int]:
+    """The release's 200 claim indices in its order: ``range(7405)`` shuffled by
+    ``random.Random(seed)``, the first 200 (main.py:32-40 with seed 42; the ReAct/Act notebooks'
+    cell 4 with 233)."""
     idxs = list(range(PAPER_INDEX_RANGE))
-    random.Random(PAPER_SEED).shuffle(idxs)
+    random.Random(check_sample_seed(seed)).shuffle(idxs)
     return idxs[:PAPER_COUNT]
 
 
-def select(claims: tuple[Claim, ...], selector: str | None) -> list[Claim]:
-    """``None``/``"paper"``: the paper's 200 in the release's order; ``"all"``: every claim in file order."""
+def select(claims: tuple[Claim, ...], selector: str | None, sample_seed: int = PAPER_SEED) -> list[Claim]:
+    """``None``/``"paper"``: the 200 of the release's shuffle with ``sample_seed`` (42: main.py,
+    233: the ReAct/Act notebooks) in its order; ``"all"``: every claim in file order."""
     if selector in (None, "", "paper"):
         if len(claims) < PAPER_INDEX_RANGE:
             raise ClaimsFileError(f"the claims file has {len(claims)} claims; the paper's set needs {PAPER_INDEX_RANGE}")
-        return [claims[i] for i in paper_indices()]
+        return [claims[i] for i in paper_indices(sample_seed)]
     if selector == "all":
         return list(claims)
     raise UnknownInstanceError(f"unknown FEVER selector {selector!r}; selectors: paper (the paper's 200, default), all")

@@ -6,7 +6,7 @@ Read from GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f (``fever-recap``) and the p
 "FEVER Experiment Details":
 
 * the cap: 10 actions for every method (the paper; ``conf/config.toml:3`` ``max_retry = 10`` and
-  the notebooks' ``for i in range(1, 11)``, React.ipynb / baseline_act.ipynb). The environment
+  the notebooks' ``for i in range(1, 11)``, React.ipynb / baseline_act.ipynb cell 4:24). The environment
   enforces it (``workers/envs/fever/env.py``: ``max_steps`` 10). ReCAP under ``released`` is the
   exception: ``max_retry`` reaches hotpotqa_simulator.py as ``max_steps`` but nothing counts
   against it (below), so the environment gets the safety bound instead (:func:`env_options`);
@@ -31,10 +31,23 @@ Read from GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f (``fever-recap``) and the p
   (``get_latest_think``, :122-126, used at :402, 410, 421, 445, 452); the two characters
   backslash-n are deleted from every observation (hotpotqa_simulator.py:42); no shortcut (the
   check runs only on a reply, :379); a reply that is not JSON gets the release's error message
-  and the same prompt again (:370-371, 461-469; no bound there, the call cap here). ReAct and Act resend the whole growing
-  trajectory every call (React.ipynb: ``prompt += ...`` each step), so no window. The released
-  ReAct/Act reply format ("Thought i:" / "Action i:" lines cut at a stop sequence) is not one of
-  our text layouts, so ``released`` keeps our JSON replies there, as it does for CoT/Standard;
+  and the same prompt again (:370-371, 461-469; no bound there, the call cap here). ReAct and
+  Act resend the whole growing trajectory every call (React.ipynb cell 4: ``history`` grows by one user and one assistant
+  message per round), so no window;
+* ``prompts: release`` (with ``released``: the notebooks as the authors ran them): ReAct, Act,
+  CoT and Standard run the notebooks' own loops (:mod:`recap.baselines.notebook_loop`) on the
+  text ``workers/release/fever_notebooks.py`` reads from them at run time: ReAct/Act as
+  React.ipynb / baseline_act.ipynb cell 4 (the demonstration ``fever.json`` ``webthink_simple3`` /
+  ``webact_simple3`` as the first user message, ``Thought i:`` / ``Action i:`` turns, stop
+  ``["\\nObservation i:"]``, one assistant message per round), CoT/Standard as
+  baseline_cot.ipynb / baseline_standard.ipynb cell 2 (one user message, ``finish[<answer>]``).
+  Plain-text replies (no JSON mode) and the whole history are what those loops need, so
+  ``prompts: release`` sets them (:func:`release_prompt_settings`). Under ``released`` with our
+  prompts, ReAct/Act/CoT/Standard keep our JSON replies: the notebooks' loops read the
+  release's text, which only ``prompts: release`` brings. ReCAP renders every prompt from the
+  released loop's own templates (chatbot.py's ``Prompt`` methods, its demonstration frame,
+  reminder, final-answer and error messages, conf/config.toml's rules), read by
+  ``workers/release/fever_matrix.py``;
 * CoT and Standard give the verdict only (the paper: "for Standard/CoT we prompt only the final
   verdict"; baseline_cot.ipynb / baseline_standard.ipynb step ``finish[<answer>]`` once): their
   environments are made with ``verdict_only`` (the rules then ask for a one-action plan);
@@ -115,11 +128,20 @@ def profile_settings(config_cls: type[AgentConfig], profile: str, generic: dict[
     return out
 
 
+#: what the notebooks' loops need under ``prompts: release`` (plain text, the whole history)
+NOTEBOOK_SETTINGS: dict[str, Any] = {**RELEASED_TEXT, "history": "all"}
+
+
 def release_prompt_settings(config_cls: type[AgentConfig]) -> dict[str, Any]:
-    """``prompts: release`` on FEVER implies no setting of ReCAP's: its released prompts are the
-    released templates (workers/release/fever_matrix.py) whatever the profile, and the release
-    does re-send its rules (chatbot.py:350-360), so the reminder stays the profile's; our reply
-    formats everywhere else (see the module docstring)."""
+    """``prompts: release`` on FEVER: ReCAP's released prompts are the released templates
+    (workers/release/fever_matrix.py) whatever the profile and imply no setting (the release does
+    re-send its rules, chatbot.py:350-360, so the reminder stays the profile's); ReAct, Act, CoT and
+    Standard run the notebooks' loops, which read plain-text replies and resend the whole history
+    (:data:`NOTEBOOK_SETTINGS`, see the module docstring)."""
+    if issubclass(config_cls, ReActConfig):
+        return dict(NOTEBOOK_SETTINGS)
+    if issubclass(config_cls, PlanConfig):
+        return {k: v for k, v in NOTEBOOK_SETTINGS.items() if k != "history"}
     return {}
 
 

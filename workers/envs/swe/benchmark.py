@@ -10,6 +10,8 @@ Options of :meth:`SweBenchmark.make` (and of a sweep's ``environments[].options`
 - ``network``: network inside the sandbox (default false);
 - ``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``: the episode's limits
   (:class:`~workers.sandbox.base.SandboxLimits`); ``max_commands`` is the step cap;
+- ``max_timeouts_in_row``: commands in a row that may run past ``command_timeout_s`` before the
+  episode ends (default: no such limit; the release's SWE-agent: 3);
 - ``total_output_bytes``: all observations' bytes together; ``eval_timeout_s``: the evaluation's
   test run (default: the record's, else 30 minutes);
 - ``grading``: ``both`` (default: our evaluation and the official SWE-bench harness's grading of
@@ -30,7 +32,7 @@ from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any
 
-from recap.config import CODING_PROFILE, AgentConfig
+from recap.config import CODING_PROFILE, SETTING_BOUNDS, AgentConfig, ReCAPConfig
 from recap.env import Environment, UnknownInstanceError
 from workers.envs.registry import Benchmark
 from workers.sandbox import LABEL_EPISODE, LABEL_RUN, LABEL_WORKER, check_ready, open_sandbox, remove_labelled
@@ -48,6 +50,20 @@ REFUSED_METHODS = {
     "act": "the paper's SWE-bench baseline is ReAct (mini-SWE-agent); it reports no Act result (Table 1: --)",
     "adapt": "the paper reports no ADaPT result on SWE-bench (Table 1: --)",
 }
+#: ReCAP on SWE-bench as the release ran it (GitHub ``ReCAP-Stanford/ReCAP`` at 2fb112f):
+#: a $10 per-instance cap (swebench-recap/run_swe_bench_tasks.py:87; a sweep's ``limits.usd``
+#: still wins); the whole history, no window (config/recap.yaml:142-144 has only a cache-control
+#: processor), and a context overflow ends the episode (sweagent/agent/agents.py:1272-1276), its
+#: diff handed in; exactly one tool call per reply (sweagent/tools/parsing.py:439-449); the reply
+#: under a strict JSON schema (sweagent/agent/models.py:707-731)
+RELEASED_RECAP: dict[str, Any] = {
+    "max_episode_cost_usd": 10.0,
+    "window": int(SETTING_BOUNDS["window"][1]),
+    "window_counts_pins": True,
+    "context_overflow": "end",
+    "tool_calls_per_reply": "one",
+    "reply_schema": True,
+}
 _LIMIT_OPTIONS = ("command_timeout_s", "output_bytes", "max_commands", "wall_time_s")
 ACCEPTED = (
     INSTANCES_FILE,
@@ -56,6 +72,7 @@ ACCEPTED = (
     "network",
     *_LIMIT_OPTIONS,
     "total_output_bytes",
+    "max_timeouts_in_row",
     "eval_timeout_s",
     "grading",
     "step_multiplier",
@@ -122,8 +139,12 @@ class SweBenchmark(Benchmark):
         self, config_cls: type[AgentConfig], profile: str, ablation: str | None, generic: dict[str, Any]
     ) -> dict[str, Any]:
         """Every profile on SWE-bench runs at temperature 0 (the paper's SWE-bench protocol:
-        :data:`recap.config.CODING_PROFILE`), beside what the profile sets anywhere."""
-        return {**generic, **CODING_PROFILE}
+        :data:`recap.config.CODING_PROFILE`), beside what the profile sets anywhere; ReCAP under
+        ``released`` as swebench-recap ran it (:data:`RELEASED_RECAP`)."""
+        out = {**generic, **CODING_PROFILE}
+        if profile == "released" and issubclass(config_cls, ReCAPConfig):
+            out.update(RELEASED_RECAP)
+        return out
 
     def refuses_method(self, method: str) -> str | None:
         """CoT, Standard, Act, ADaPT: see :data:`REFUSED_METHODS`; ReCAP and ReAct run."""
@@ -179,6 +200,9 @@ class SweBenchmark(Benchmark):
             **{k: _positive(k, options[k], float if k.endswith("_s") else int) for k in _LIMIT_OPTIONS if k in options},
         )
         total = _positive("total_output_bytes", options.get("total_output_bytes", DEFAULT_TOTAL_OUTPUT_BYTES), int)
+        in_row = options.get("max_timeouts_in_row")
+        if in_row is not None:
+            in_row = _positive("max_timeouts_in_row", in_row, int)
         eval_timeout = options.get("eval_timeout_s")
         if eval_timeout is not None:
             eval_timeout = _positive("eval_timeout_s", eval_timeout, float)
@@ -204,6 +228,7 @@ class SweBenchmark(Benchmark):
             limits=limits,
             image=image,
             total_output_bytes=total,
+            max_timeouts_in_row=in_row,
             eval_timeout_s=eval_timeout,
             labels=labels,
             grading=grading,

@@ -12,7 +12,8 @@ base commit, new files included (bin/submit:24: ``git add -A && git diff --cache
 Two ways to act:
 
 * tool calls (:meth:`SweEnvironment.call_tool`, the paper's ReCAP): ``bash``, ``view``,
-  ``str_replace``, ``create``, ``submit`` (:mod:`.tools`);
+  ``str_replace``, ``create``, ``insert``, ``undo_edit``, ``submit`` (:mod:`.tools`); ``bash`` runs in one session per
+  episode (:mod:`workers.sandbox.session`: cd and variables carry over, as in SWE-agent);
 * text (:meth:`SweEnvironment.step`, the mini-SWE-agent baseline): the action is one bash command;
   one whose output starts with the line ``COMPLETE_TASK_AND_SUBMIT_FINAL_OUTPUT`` submits at once
   (mini-SWE-agent's sentinel, checked by ``DefaultAgent.has_finished`` in minisweagent/agents/default.py;
@@ -20,8 +21,11 @@ Two ways to act:
 
 Per-episode limits (:class:`~workers.sandbox.base.SandboxLimits` ``max_commands`` and
 ``wall_time_s``, and a total of output bytes) are enforced here: the call that reaches one is
-answered, then the episode ends with the current diff judged (SWE-agent's submission after an
-exhausted budget), ``end_reason`` ``step_cap`` (commands) or ``episode_limit``.
+answered, then the episode ends ``step_cap`` (commands) or ``episode_limit``. At that end, and at
+every other limit (the model's cost, tokens, calls, context), the runtime asks
+:meth:`SweEnvironment.submit_at_limit` to hand in the current diff: a non-empty one is judged and
+the episode ends ``autosubmitted`` (SWE-agent's autosubmission, swebench-recap/sweagent/agent/
+agents.py:1250-1285), its success the verdict.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ from recap.env import Demonstration, EnvError, Environment, InvalidActionError, 
 from recap.llm import ToolDef
 from schemas.kinds import EndReason
 from workers.sandbox.base import Sandbox, SandboxError, SandboxLimits, SandboxSpec, episode_failure
+from workers.sandbox.session import ShellSession
 
 from . import tools as T
 from .evaluate import Evaluation, evaluate, evaluation_record
@@ -64,6 +69,9 @@ class SweEnvironment(Environment):
     benchmark = "swe"
     invalid_action_mode = "step"
     partially_observed = True
+    #: the first output line of a text action that submits (the mini_swe method sets its
+    #: configuration's: mini-swe-agent 1.0.0 printed another, workers/agents/mini_swe_package.py)
+    submit_sentinel = SUBMIT_SENTINEL
 
     def __init__(
         self,
@@ -77,6 +85,7 @@ class SweEnvironment(Environment):
         total_output_bytes: int = DEFAULT_TOTAL_OUTPUT_BYTES,
         eval_timeout_s: float | None = None,
         grading: Grading = DEFAULT_GRADING,
+        max_timeouts_in_row: int | None = None,
     ) -> None:
         self.instance = instance
         self.instance_id = instance.id
@@ -85,6 +94,10 @@ class SweEnvironment(Environment):
         self.limits = limits if limits is not None else SandboxLimits()
         self.max_steps = self.limits.max_commands
         self.total_output_bytes = total_output_bytes
+        #: commands in a row that may run past their time limit before the episode ends (None: no
+        #: such limit; SWE-agent's max_consecutive_execution_timeouts, 3 in swebench-recap/sweagent/
+        #: tools/tools.py:150, after which it hands the work in: agents.py:1033-1040, 1265-1270)
+        self.max_timeouts_in_row = max_timeouts_in_row
         self.eval_timeout_s = eval_timeout_s if eval_timeout_s is not None else instance.eval_timeout_s
         self.spec = SandboxSpec(
             repo_path=instance.repo_path,
@@ -96,6 +109,8 @@ class SweEnvironment(Environment):
         self.grading = grading
         self._open = open_sandbox
         self._sandbox: Sandbox | None = None
+        #: the ``bash`` tool's session over the episode's sandbox (state carried between calls)
+        self._session: ShellSession | None = None
         self._last_workdir = ""
         self.evaluation: Evaluation | None = None
         #: the judged submissions not yet handed over (:meth:`take_records`): evaluation and diff
@@ -106,12 +121,15 @@ class SweEnvironment(Environment):
         self._steps_taken = 0
         self._time_used = 0.0
         self._output_used = 0
+        self._timeouts_in_row = 0
         self._submit_stage = 0
         self._done = False
         self._viewed: set[str] = set()
         self._commands_run: set[str] = set()
         self._patch = ""
         self.evaluation = None
+        #: the editor's changes, for undo_edit
+        self._edits = T.EditHistory()
 
     # -- sandbox ---------------------------------------------------------------------------------
     @property
@@ -140,12 +158,14 @@ class SweEnvironment(Environment):
         self._clear()
         try:
             self._sandbox = self._open(self.spec)
+            self._session = ShellSession(self._sandbox)
         except SandboxError as exc:
             raise episode_failure(self.instance_id, "the sandbox cannot be opened", exc) from exc
         return Reset(observation=self.instance.problem_statement, valid_actions=None, goal=goal_text(self.workdir))
 
     def tool_defs(self) -> tuple[ToolDef, ...]:
-        """bash, view, str_replace, create, submit (:mod:`.tools`), describing this episode's limits."""
+        """bash, view, str_replace, create, insert, undo_edit, submit (:mod:`.tools`), describing this
+        episode's limits."""
         return T.tool_defs(self.workdir, self.limits)
 
     def call_tool(self, name: str, args: Mapping[str, Any]) -> Step:
@@ -166,7 +186,7 @@ class SweEnvironment(Environment):
 
     def _run_tool(self, box: Sandbox, name: str, args: Mapping[str, Any]) -> T.ToolOutcome:
         if name == T.BASH:
-            return self._bash(box, args["command"])
+            return self._bash(box, args["command"], self._session)
         if name == T.VIEW:
             out = T.run_view(box, self.limits, args["path"], args.get("view_range"))
             rel = T.repo_relative(box.workdir, args["path"])
@@ -174,15 +194,20 @@ class SweEnvironment(Environment):
                 self._viewed.add(rel)
             return out
         if name == T.STR_REPLACE:
-            return T.run_str_replace(box, self.limits, args["path"], args["old_str"], args.get("new_str", ""))
-        return T.run_create(box, self.limits, args["path"], args["file_text"])
+            return T.run_str_replace(box, self.limits, args["path"], args["old_str"], args.get("new_str", ""), self._edits)
+        if name == T.INSERT:
+            return T.run_insert(box, self.limits, args["path"], args["insert_line"], args["new_str"], self._edits)
+        if name == T.UNDO_EDIT:
+            return T.run_undo_edit(box, self.limits, args["path"], self._edits)
+        return T.run_create(box, self.limits, args["path"], args["file_text"], self._edits)
 
-    def _bash(self, box: Sandbox, command: str) -> T.ToolOutcome:
-        """Run one shell command; a command that only prints a file (``cat -n F``, ``sed -n 'a,bp' F``,
-        ``nl F``) counts as viewing it, as the ``view`` tool does (the expert plan's views are done
-        once, whichever way the agent looked)."""
+    def _bash(self, box: Sandbox, command: str, session: ShellSession | None = None) -> T.ToolOutcome:
+        """Run one shell command (in ``session``: the ``bash`` tool's; else afresh, a text action);
+        a command that only prints a file (``cat -n F``, ``sed -n 'a,bp' F``, ``nl F``) counts as
+        viewing it, as the ``view`` tool does (the expert plan's views are done once, whichever way
+        the agent looked)."""
         self._commands_run.add(command)
-        out = T.run_bash(box, self.limits, command)
+        out = T.run_bash(box, self.limits, command, session)
         shown = _printed_file(command)
         rel = T.repo_relative(box.workdir, shown) if shown is not None else None
         if out.error is None and out.exit_code == 0 and rel is not None:
@@ -197,7 +222,7 @@ class SweEnvironment(Environment):
         started = time.monotonic()
         with self._sandbox_failures():
             out = self._bash(box, action)
-            if out.error is None and _is_sentinel(out.observation):
+            if out.error is None and _is_sentinel(out.observation, self.submit_sentinel):
                 return _as_command(self._submit(review=False, started=started, spent=out))
             return _as_command(self._after(out))  # inside: reaching a limit judges the diff in the sandbox
 
@@ -220,16 +245,16 @@ class SweEnvironment(Environment):
         self._steps_taken += 1
         self._time_used += out.duration_s + extra_s
         self._output_used += out.output_bytes
+        self._timeouts_in_row = self._timeouts_in_row + 1 if out.timed_out else 0
         limit = self._limit_reached()
         if limit is None:
             return Step(out.observation, None, False, False, out.info())
         reason, note = limit
-        ev = self._judge()
-        info = {**out.info(), **self._verdict_info(ev), "limit": note, "detail": note}
-        if not ev.success:
-            info["end_reason"] = reason
+        # the episode ends here; the runtime then hands in the current diff (submit_at_limit),
+        # as it does at every other limit
+        info = {**out.info(), "end_reason": reason, "limit": note, "detail": note}
         obs = f"{out.observation}\n[{note}: the episode ends and your current changes are submitted]"
-        return Step(obs, None, True, ev.success, info)
+        return Step(obs, None, True, False, info)
 
     def _limit_reached(self) -> tuple[EndReason, str] | None:
         if self._steps_taken >= self.limits.max_commands:
@@ -238,6 +263,8 @@ class SweEnvironment(Environment):
             return "episode_limit", f"time limit reached ({self.limits.wall_time_s:g} seconds of commands)"
         if self._output_used >= self.total_output_bytes:
             return "episode_limit", f"output limit reached ({self.total_output_bytes} bytes in all)"
+        if self.max_timeouts_in_row is not None and self._timeouts_in_row >= self.max_timeouts_in_row:
+            return "episode_limit", f"timeout limit reached ({self._timeouts_in_row} commands in a row stopped at the time limit)"
         return None
 
     # -- submission ------------------------------------------------------------------------------
@@ -266,6 +293,22 @@ class SweEnvironment(Environment):
         info = {**base.info(), **self._verdict_info(ev)}
         if not ev.success:
             info["end_reason"] = "agent_done"
+        return Step(submitted_text(ev), None, True, ev.success, info)
+
+    def submit_at_limit(self, limit: str) -> Step | None:
+        """SWE-agent's autosubmission (swebench-recap/sweagent/agent/agents.py:888-933): at a limit
+        (``limit``: which one) the repository's diff is taken as a submission does it and, when
+        it is not empty, judged like a submitted one (its ``evaluations`` row is written); None
+        for an empty diff (nothing was handed in: the release's submission is then empty too,
+        :911-915), once the episode is judged, or before reset. A sandbox that fails here ends the
+        episode as a tool call's failure does."""
+        if self._done or self._sandbox is None:
+            return None
+        with self._sandbox_failures():
+            if not self.current_diff().strip():
+                return None
+            ev = self._judge()
+        info = {**self._verdict_info(ev), "limit": limit, "autosubmitted": True}
         return Step(submitted_text(ev), None, True, ev.success, info)
 
     def _judge(self) -> Evaluation:
@@ -389,14 +432,15 @@ class SweEnvironment(Environment):
     def close(self) -> None:
         """Close the episode's sandbox (safe to call twice)."""
         box, self._sandbox = self._sandbox, None
+        self._session = None
         if box is not None:
             self._last_workdir = box.workdir
             box.close()
 
 
-def _is_sentinel(output: str) -> bool:
+def _is_sentinel(output: str, sentinel: str = SUBMIT_SENTINEL) -> bool:
     """Whether a command's output starts with the submit line (mini-SWE-agent: first line, stripped)."""
-    return output.lstrip().split("\n", 1)[0].strip() == SUBMIT_SENTINEL
+    return output.lstrip().split("\n", 1)[0].strip() == sentinel
 
 
 def _quote(text: str) -> str:

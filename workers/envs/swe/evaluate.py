@@ -31,8 +31,9 @@ from typing import Literal
 from schemas.records import EVALUATION_LOG_CAP, EvaluationRecord
 from workers.sandbox.base import Sandbox
 
-from .grading import DEFAULT_GRADING, Grading, OfficialGrade, official_grade, official_problem
+from .grading import DEFAULT_GRADING, Grading, OfficialGrade, harness_statuses, official_grade, official_problem
 from .instances import SweInstance
+from .test_log import harness_test_section, read_pytest_log
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +51,6 @@ LOG_CAP = EVALUATION_LOG_CAP
 MODEL_PATCH_FILE = ".git/recap-eval-model.patch"
 TEST_PATCH_FILE = ".git/recap-eval-test.patch"
 TEST_LOG_FILE = ".git/recap-eval-tests.log"
-_SUMMARY = re.compile(r"^(PASSED|FAILED|ERROR|SKIPPED|XFAIL|XPASS) (.+)$")
 _DIFF_FILE = re.compile(r"^diff --git a/(.+?) b/(.+)$")
 
 
@@ -105,18 +105,24 @@ class Evaluation:
 
 
 def parse_summary(output: str, wanted: tuple[str, ...] = ()) -> dict[str, str]:
-    """Test statuses from pytest's ``-rA`` short summary lines (``PASSED node``, ``FAILED node - msg``).
-    A line naming one of ``wanted`` (exactly, or followed by `` - ``) is keyed by that id, so a node
-    id holding `` - `` itself is read right; other lines by the text before `` - ``."""
-    out: dict[str, str] = {}
-    for line in output.splitlines():
-        m = _SUMMARY.match(line.rstrip())
-        if not m:
-            continue
-        status, rest = m.group(1), m.group(2)
-        key = next((w for w in wanted if rest == w or rest.startswith(w + " - ")), None)
-        out[key if key is not None else rest.split(" - ", 1)[0]] = status
-    return out
+    """Test statuses in pytest's ``output``, read by our own reader (:func:`.test_log.read_pytest_log`:
+    ``-rA`` summary, verbose, coloured and old-pytest lines alike); a line naming one of ``wanted``
+    is keyed by that id, whole (a parametrized id may hold spaces, brackets, `` - ``)."""
+    return read_pytest_log(output, wanted)
+
+
+def read_tests(instance: SweInstance, output: str) -> dict[str, str]:
+    """Each of the instance's FAIL_TO_PASS and PASS_TO_PASS tests' status in ``output`` (a test
+    run's output, or an eval script's with the harness's markers), :data:`MISSING` where the log
+    does not name it. Read by the harness's own parser for the instance's repository where SWE-bench
+    knows it (every SWE-bench Verified instance: Django's and SymPy's runners print no pytest line),
+    else by our pytest reader (a user's task), on the part of the log the harness reads
+    (:func:`.test_log.harness_test_section`)."""
+    wanted = (*instance.fail_to_pass, *instance.pass_to_pass)
+    found = harness_statuses(instance, output)
+    if found is None:
+        found = parse_summary(harness_test_section(output), wanted)
+    return {t: found.get(t, MISSING) for t in wanted}
 
 
 def patch_files(patch: str) -> list[str]:
@@ -264,8 +270,7 @@ def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Calla
         except FileNotFoundError:
             output = res.output
         log.append(f"$ {cmd}\n{output.rstrip()}\n[exit {res.exit_code}{', timed out' if res.timed_out else ''}]")
-    found = parse_summary(output, wanted)
-    tests = {t: found.get(t, MISSING) for t in wanted}
+    tests = read_tests(instance, output)
     if res.timed_out:
         return _logged(Evaluation(False, "timeout", tests, test_output=output, exit_code=res.exit_code), log)
     resolved = ours_resolved(instance, tests)

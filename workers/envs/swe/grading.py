@@ -1,7 +1,9 @@
 """The official SWE-bench harness's grading of a test log, beside our own (:mod:`.evaluate`).
 
-Why both: our evaluator runs the tests and reads pytest's ``-rA`` summary; the harness's reading
-of the same log is what published SWE-bench numbers mean (a PASS_TO_PASS test that is skipped is
+Why both: our evaluator runs the tests and reads their log (with the harness's own parser for a
+repository SWE-bench knows, :func:`harness_statuses`; our pytest reader for a user's task) and
+decides by our criterion; the harness's grading of the same log is what published SWE-bench
+numbers mean (a PASS_TO_PASS test that is skipped is
 kept; in 5.x a truncated parametrized id matches by prefix and a run whose exit status contradicts
 its log counts as no run; in 4.x, the pinned version, a skipped FAIL_TO_PASS test is no failure). So the same log goes through the
 ``swebench`` package's own functions (``swebench/harness/grading.py``, 4.x or 5.x):
@@ -31,12 +33,13 @@ import importlib
 import inspect
 import os
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any, Literal
 
 from .instances import SweInstance
+from .test_log import harness_test_section, has_markers
 
 Grading = Literal["ours", "official", "both", "harness"]
 #: the grading modes: our evaluator only, the official harness's only, or both (the default);
@@ -185,13 +188,48 @@ def parser_name(repo: str) -> str:
     return own if own in names else str(names[0])
 
 
+def harness_parser(repo: str) -> Callable[..., dict[str, str]] | None:
+    """The harness's own log parser for ``repo`` (``MAP_REPO_TO_PARSER_*``), or None where SWE-bench
+    does not know the repository or the ``swebench`` package is not installed (a user's task:
+    our pytest reader, :func:`.test_log.read_pytest_log`, reads its log)."""
+    try:
+        h = _harness()
+    except ImportError:
+        return None
+    fn = h["by_repo"].get(repo)
+    return fn if callable(fn) else None
+
+
+def harness_statuses(instance: SweInstance, log: str) -> dict[str, str] | None:
+    """Each test's status in ``log`` (a test run's output, or a whole eval-script output with the
+    harness's markers) as the harness's parser for ``instance.repo`` reads it: the section between
+    the markers (:func:`.test_log.harness_test_section`), the whole log when that section gives
+    none, as ``get_logs_eval`` does (swebench/harness/grading.py 4.1.0:79-89). None where the
+    repository has no harness parser (:func:`harness_parser`)."""
+    parse = harness_parser(instance.repo)
+    if parse is None:
+        return None
+    spec = _test_spec(_harness(), instance, parser_name(instance.repo))
+    section = harness_test_section(log)
+    found = parse(section, spec) if section else {}
+    if not found and section and has_markers(log):
+        found = parse(log, spec)
+    return {str(k): str(v) for k, v in found.items()}
+
+
 def harness_log(test_log: str, *, patch_applied: bool, timed_out: bool = False, exit_code: int | None = None) -> str:
     """``test_log`` framed as the harness's eval script and run_evaluation.py write it (markers of
-    ``swebench.harness.constants``)."""
+    ``swebench.harness.constants``). A log that is already an eval script's output (both markers
+    in it: the harness's ``test_output.txt``) keeps its own markers, so the harness reads the same
+    section of it as when it wrote it; a harness 2.x log (no markers: that harness read the whole
+    log, grading.py:34-74 at tag v2.0.13) is framed whole."""
     C = _harness()["C"]
     if not patch_applied:
         return f"{C.APPLY_PATCH_FAIL}:\n{test_log}\n"
-    out = f"{C.START_TEST_OUTPUT}\n{test_log.rstrip()}\n{C.END_TEST_OUTPUT}\n"
+    if C.START_TEST_OUTPUT in test_log and C.END_TEST_OUTPUT in test_log:
+        out = f"{test_log.rstrip()}\n"
+    else:
+        out = f"{C.START_TEST_OUTPUT}\n{test_log.rstrip()}\n{C.END_TEST_OUTPUT}\n"
     if exit_code is not None and not timed_out and hasattr(C, "TEST_EXIT_CODE"):  # 5.x cross-checks it
         out += f"{C.TEST_EXIT_CODE}: {exit_code}\n"
     if timed_out:

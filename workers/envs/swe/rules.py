@@ -16,8 +16,14 @@ def goal_text(workdir: str) -> str:
     return f"Change the code in the repository at {workdir} so that the issue described above is resolved."
 
 
+#: the rules' line on the network, as the sandbox has it (on in the ReCAP release's container,
+#: workers/envs/swe_verified/release_container.py, or where a sweep turns it on)
+NETWORK_OFF = "- There is no network access: nothing can be installed or downloaded."
+NETWORK_ON = "- The network is on: packages can be installed and files downloaded."
+
+
 def rules_text(workdir: str, limits: SandboxLimits, total_output_bytes: int, sentinel: str) -> str:
-    """The environment's rules: the repository, the tools, the limits, no network, tests left alone."""
+    """The environment's rules: the repository, the tools, the limits, the network, tests left alone."""
     return (
         f"You work in a Python code repository checked out at {workdir}. The task is a real issue report "
         "(shown as the first observation); change the repository so the issue is resolved.\n"
@@ -27,6 +33,8 @@ def rules_text(workdir: str, limits: SandboxLimits, total_output_bytes: int, sen
         "- view: show a file with line numbers, or list a folder two levels deep.\n"
         "- str_replace: replace text that occurs exactly once in a file.\n"
         "- create: write a new file.\n"
+        "- insert: insert lines after a given line of a file.\n"
+        "- undo_edit: undo your last change to a file made with str_replace, insert or create.\n"
         "- submit: hand in your changes. The first call shows your diff for a last review; call it again to finish.\n"
         "If you act with plain text instead of tool calls, each action is one bash command, and the command "
         f"`echo {sentinel}` hands in your changes at once.\n"
@@ -36,7 +44,7 @@ def rules_text(workdir: str, limits: SandboxLimits, total_output_bytes: int, sen
         "change or delete test files. Change only what the issue needs, in the non-test code.\n"
         "- A good way to work: read the code the issue concerns, write a small script that reproduces the "
         "problem and run it, fix the code, run the script again, think about edge cases, remove the script.\n"
-        "- There is no network access: nothing can be installed or downloaded.\n"
+        f"{NETWORK_ON if limits.network else NETWORK_OFF}\n"
         f"- Each command is stopped after {limits.command_timeout_s:g} seconds and shows at most "
         f"{limits.output_bytes} bytes of output. The episode allows {limits.max_commands} tool calls, "
         f"{limits.wall_time_s:g} seconds of command time and {total_output_bytes} bytes of output in all; "

@@ -1,10 +1,12 @@
 """The tools a coding model calls, and how each runs against a :class:`~workers.sandbox.base.Sandbox`.
 
-The set follows what SWE-agent gives the paper's ReCAP runs (swebench-recap/config/recap.yaml:116-139:
+The set follows what SWE-agent gives the paper's ReCAP runs (swebench-recap/config/recap.yaml:116-119 and 139:
 the bash tool, ``tools/edit_anthropic`` and ``tools/review_on_submit_m``): one ``bash`` command
-per call; the editor split into ``view`` (a file as ``cat -n`` shows it, a folder two levels deep,
+per call, in one bash session per episode (:mod:`workers.sandbox.session`); the editor split into ``view`` (a file as ``cat -n`` shows it, a folder two levels deep,
 tools/edit_anthropic/config.yaml:10), ``str_replace`` (``old_str`` must occur exactly once, :16-17)
-and ``create`` (never over an existing file, :11); and ``submit`` without arguments (the review
+``create`` (never over an existing file, :11), ``insert`` (after a line, 0 for the top) and
+``undo_edit`` (the editor's last change to a file undone, :13; a created file is removed, where
+the release's editor keeps it); and ``submit`` without arguments (the review
 step lives in the environment, :mod:`.env`). Descriptions are our own words and state the limits.
 
 A refused call (unknown tool, an argument missing, unknown or of the wrong type, a path outside the
@@ -24,13 +26,16 @@ from typing import Any
 
 from recap.llm import ToolDef
 from workers.sandbox.base import CommandResult, Sandbox, SandboxLimits
+from workers.sandbox.session import ShellSession
 
 BASH = "bash"
 VIEW = "view"
 STR_REPLACE = "str_replace"
 CREATE = "create"
+INSERT = "insert"
+UNDO_EDIT = "undo_edit"
 SUBMIT = "submit"
-TOOL_NAMES = (BASH, VIEW, STR_REPLACE, CREATE, SUBMIT)
+TOOL_NAMES = (BASH, VIEW, STR_REPLACE, CREATE, INSERT, UNDO_EDIT, SUBMIT)
 #: lines shown around an edit so the model sees its result
 SNIPPET_LINES = 4
 
@@ -45,10 +50,12 @@ def tool_defs(workdir: str, limits: SandboxLimits) -> tuple[ToolDef, ...]:
     return (
         ToolDef(
             BASH,
-            f"Run one shell command with bash in {workdir} (each call starts there; no state but the files carries over). "
-            f"A command is stopped after {limits.command_timeout_s:g} seconds. The model sees at most {cap} bytes of its "
-            "combined stdout and stderr; longer output is cut and the cut is said. No network. Do not start "
-            "interactive programs (editors, pagers, a Python prompt).",
+            f"Run a shell command in one bash session kept for the whole task: it starts in {workdir}, and the working "
+            "directory, variables (exported or not), functions and aliases carry over from one call to the next; "
+            "background processes do not (whatever a command started is stopped when it returns). "
+            f"A command is stopped after {limits.command_timeout_s:g} seconds, and the session then goes on as it was "
+            f"before that command. The model sees at most {cap} bytes of its combined stdout and stderr; longer output "
+            "is cut and the cut is said. No network. Do not start interactive programs (editors, pagers, a Python prompt).",
             {
                 "type": "object",
                 "properties": {"command": {"type": "string", "description": "The command line to run."}},
@@ -109,6 +116,34 @@ def tool_defs(workdir: str, limits: SandboxLimits) -> tuple[ToolDef, ...]:
                     "file_text": {"type": "string", "description": "The whole content of the new file."},
                 },
                 "required": ["path", "file_text"],
+                "additionalProperties": False,
+            },
+        ),
+        ToolDef(
+            INSERT,
+            "Insert text into a file after a given line (0: at the top). The edited region is shown afterwards.",
+            {
+                "type": "object",
+                "properties": {
+                    "path": path_arg,
+                    "insert_line": {
+                        "type": "integer",
+                        "description": "The line after which the text goes, counting from 1; 0 puts it before the first line.",
+                    },
+                    "new_str": {"type": "string", "description": "The text to insert (one or more whole lines)."},
+                },
+                "required": ["path", "insert_line", "new_str"],
+                "additionalProperties": False,
+            },
+        ),
+        ToolDef(
+            UNDO_EDIT,
+            "Undo the last change made to a file with str_replace, insert or create (a created file is removed); "
+            "several calls undo several changes, newest first. Changes made with bash are not undone.",
+            {
+                "type": "object",
+                "properties": {"path": path_arg},
+                "required": ["path"],
                 "additionalProperties": False,
             },
         ),
@@ -235,13 +270,23 @@ def command_observation(res: CommandResult, limits: SandboxLimits, timeout_s: fl
     return "\n".join(parts) if parts else "[no output]"
 
 
-def run_bash(sandbox: Sandbox, limits: SandboxLimits, command: str) -> ToolOutcome:
-    """One shell command, its observation and the ``tool_calls`` fields."""
+def run_bash(sandbox: Sandbox, limits: SandboxLimits, command: str, session: ShellSession | None = None) -> ToolOutcome:
+    """One shell command, its observation and the ``tool_calls`` fields: in the episode's
+    ``session`` (the ``bash`` tool: cd and variables carry over) or afresh in the repository
+    folder (a text action, as mini-SWE-agent runs each command in its own subprocess)."""
     if not command.strip():
         return refused("bash: the command is empty")
-    res = sandbox.run(command, timeout_s=limits.command_timeout_s)
+    if session is None:
+        res = sandbox.run(command, timeout_s=limits.command_timeout_s)
+        observation = command_observation(res, limits, limits.command_timeout_s)
+    else:
+        ran = session.run(command, timeout_s=limits.command_timeout_s)
+        res = ran.result
+        observation = command_observation(res, limits, limits.command_timeout_s)
+        if ran.restored:
+            observation += "\n[the shell session goes on from its state before this command]"
     return ToolOutcome(
-        observation=command_observation(res, limits, limits.command_timeout_s),
+        observation=observation,
         exit_code=res.exit_code,
         duration_s=res.duration_s,
         output_bytes=res.output_bytes,
@@ -329,7 +374,28 @@ def _snippet(text: str, start_line: int, n_lines: int) -> str:
     return numbered(lines[lo - 1 : hi], lo)
 
 
-def run_str_replace(sandbox: Sandbox, limits: SandboxLimits, path: str, old_str: str, new_str: str) -> ToolOutcome:
+class EditHistory:
+    """What each file held before each of the editor's changes in this episode, for ``undo_edit``
+    (the release's editor keeps a per-file history: tools/edit_anthropic/bin/str_replace_editor
+    :354-360, 632-639). None: the file did not exist (a ``create``), so undoing removes it."""
+
+    def __init__(self) -> None:
+        self._before: dict[str, list[str | None]] = {}
+
+    def record(self, rel: str, before: str | None) -> None:
+        self._before.setdefault(rel, []).append(before)
+
+    def pop(self, rel: str) -> tuple[bool, str | None]:
+        """(whether there was a change to undo, the text before it)."""
+        stack = self._before.get(rel)
+        if not stack:
+            return False, None
+        return True, stack.pop()
+
+
+def run_str_replace(
+    sandbox: Sandbox, limits: SandboxLimits, path: str, old_str: str, new_str: str, history: EditHistory | None = None
+) -> ToolOutcome:
     """Replace the one occurrence of ``old_str``; refused when it occurs zero or several times."""
     started = time.monotonic()
     rel = repo_relative(sandbox.workdir, path)
@@ -361,13 +427,17 @@ def run_str_replace(sandbox: Sandbox, limits: SandboxLimits, path: str, old_str:
         )
     new_text = text[:first_at] + new_str + text[first_at + len(old_str) :]
     sandbox.write_file(rel, new_text.encode("utf-8"))
+    if history is not None:
+        history.record(rel, text)
     line = text.count("\n", 0, first_at) + 1
     snippet = _snippet(new_text, line, new_str.count("\n") + 1)
     obs = f"Edited {shown}. The region around the change now reads:\n{snippet}"
     return _finish(ToolOutcome(observation=obs, exit_code=0), limits, started)
 
 
-def run_create(sandbox: Sandbox, limits: SandboxLimits, path: str, file_text: str) -> ToolOutcome:
+def run_create(
+    sandbox: Sandbox, limits: SandboxLimits, path: str, file_text: str, history: EditHistory | None = None
+) -> ToolOutcome:
     """Write a new file; refused when the path exists."""
     started = time.monotonic()
     rel = repo_relative(sandbox.workdir, path)
@@ -378,5 +448,71 @@ def run_create(sandbox: Sandbox, limits: SandboxLimits, path: str, file_text: st
     if exists.exit_code == 0:
         return refused(f"create: {shown} already exists; use str_replace to change it")
     sandbox.write_file(rel, file_text.encode("utf-8"))
+    if history is not None:
+        history.record(rel, None)
     n = len(file_text.split("\n")) - (1 if file_text.endswith("\n") else 0)
     return _finish(ToolOutcome(observation=f"Created {shown} ({n} lines).", exit_code=0), limits, started)
+
+
+def _lines(text: str) -> list[str]:
+    """``text``'s lines as ``cat -n`` counts them (a final newline ends the last line, adds none)."""
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return lines
+
+
+def run_insert(
+    sandbox: Sandbox, limits: SandboxLimits, path: str, insert_line: int, new_str: str, history: EditHistory | None = None
+) -> ToolOutcome:
+    """Put ``new_str`` after line ``insert_line`` (0: before the first line), as the release's
+    editor does (tools/edit_anthropic/bin/str_replace_editor:594-630); refused for a line outside
+    0..the file's line count."""
+    started = time.monotonic()
+    rel = repo_relative(sandbox.workdir, path)
+    if rel is None:
+        return refused(f"insert: {path} is outside the repository {sandbox.workdir}")
+    shown = shown_path(sandbox.workdir, rel)
+    text, problem = _read_text(sandbox, rel, shown)
+    if text is None:
+        assert problem is not None
+        problem.error = f"insert: {problem.error}"
+        problem.observation = f"Error: {problem.error}"
+        return problem
+    lines = _lines(text)
+    if not 0 <= insert_line <= len(lines):
+        return refused(f"insert: insert_line {insert_line} is outside {shown}, which has {len(lines)} lines (0 to {len(lines)})")
+    added = _lines(new_str) or [""]
+    ends = text.endswith("\n") or not text
+    new_text = "\n".join(lines[:insert_line] + added + lines[insert_line:]) + ("\n" if ends else "")
+    sandbox.write_file(rel, new_text.encode("utf-8"))
+    if history is not None:
+        history.record(rel, text)
+    snippet = _snippet(new_text, insert_line + 1, len(added))
+    obs = f"Edited {shown}. The region around the inserted lines now reads:\n{snippet}"
+    return _finish(ToolOutcome(observation=obs, exit_code=0), limits, started)
+
+
+def run_undo_edit(sandbox: Sandbox, limits: SandboxLimits, path: str, history: EditHistory) -> ToolOutcome:
+    """Put the file back as it was before the editor's last change to it (remove a file the
+    editor created); refused when the editor has not changed it (the release: "no edit history",
+    str_replace_editor:632-639)."""
+    started = time.monotonic()
+    rel = repo_relative(sandbox.workdir, path)
+    if rel is None:
+        return refused(f"undo_edit: {path} is outside the repository {sandbox.workdir}")
+    shown = shown_path(sandbox.workdir, rel)
+    had, before = history.pop(rel)
+    if not had:
+        return refused(f"undo_edit: no change made with the editor to {shown} is left to undo")
+    if before is None:
+        res = sandbox.run(f"rm -f -- {shlex.quote(shown)}")
+        if res.exit_code != 0:
+            return refused(f"undo_edit: cannot remove {shown}: {res.output.strip()}")
+        return _finish(
+            ToolOutcome(observation=f"Undid the creation of {shown}: the file is removed.", exit_code=0), limits, started
+        )
+    sandbox.write_file(rel, before.encode("utf-8"))
+    body = numbered(_lines(before), 1)
+    obs = f"Undid the last change to {shown}. It now reads:\n{body}"
+    return _finish(ToolOutcome(observation=obs, exit_code=0), limits, started)

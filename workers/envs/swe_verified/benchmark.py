@@ -17,14 +17,22 @@ than the example tasks), ``total_output_bytes``, ``eval_timeout_s``; ``grading``
 The methods, profiles and leftover removal are the ``swe`` benchmark's (this class extends it).
 Preflight (:meth:`VerifiedBenchmark.preflight`) refuses a sweep whose instances lack their image
 with one ``docker images`` listing, however many instances.
+
+Where an episode runs (:mod:`.release_container`): ``container`` ``harness`` (the harness's image)
+or ``release`` (the ReCAP release's ``python:3.11`` container, its diff graded in the harness's
+image), by default the method's (:meth:`VerifiedBenchmark.options_for_agent`); ``release_image``
+and ``repo_mirror``; ``network`` defaults to on in the ``release`` container (as the release ran),
+off in the harness's.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from typing import Any
 
+from recap.config import AgentConfig
 from recap.env import Environment, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
 from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
@@ -39,6 +47,8 @@ from .dataset import FOLDER_NAME, ID_PATTERN, records
 from .env import BENCHMARK_NAME, VerifiedEnvironment
 from .harness_eval import HARNESS_GRADING, remove_harness_containers
 from .images import how_to_get, image_of, local_images, missing_images
+from .release_container import OPTIONS as CONTAINER_OPTIONS
+from .release_container import ReleaseEnvironment, agent_options, missing_image, release_of
 
 #: the grading modes here: the coding env's three, and the harness's own full evaluation
 VERIFIED_GRADINGS: tuple[Grading, ...] = (*GRADINGS, HARNESS_GRADING)
@@ -55,6 +65,7 @@ ACCEPTED = (
     "grading",
     "step_multiplier",
     "seed",
+    *CONTAINER_OPTIONS,
     "sandbox_labels",
     "open_sandbox",
 )
@@ -102,6 +113,12 @@ class VerifiedBenchmark(SweBenchmark):
         evaluations by the harness's name for them (:func:`.harness_eval.harness_run_id`)."""
         return super().remove_leftovers(run_id, worker_id) + remove_harness_containers(run_id, worker_id)
 
+    def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
+        """The container of the set-up the method's paper number came from (ReCAP: ``release``;
+        mini-SWE-agent: ``harness``, network on under 1.0.0's configuration), unless the sweep sets
+        them (:func:`.release_container.agent_options`)."""
+        return agent_options(style, config)
+
     def list_instances(self, selector: str | None = None) -> list[str]:
         """:meth:`list_instances_for` on the folder the shared rule finds."""
         return self.list_instances_for(selector, {})
@@ -135,12 +152,18 @@ class VerifiedBenchmark(SweBenchmark):
         here (one ``docker images`` listing for all of them)."""
         if options.get("sandbox", "docker") == "local":
             return LOCAL_REFUSAL
+        try:
+            release = release_of(options)
+        except ValueError as exc:
+            return str(exc)
         if options.get("open_sandbox") is not None:
             return None
         try:
             present = local_images()
         except SandboxError as exc:
             return str(exc)
+        if release is not None and (refusal := missing_image(release, present)) is not None:
+            return refusal
         names = [i.partition("/")[2] for i in instance_ids]
         missing = missing_images(names, present)
         if missing:
@@ -162,7 +185,8 @@ class VerifiedBenchmark(SweBenchmark):
             raise ValueError(LOCAL_REFUSAL)
         if kind != "docker":
             raise ValueError(f"sandbox must be 'docker', got {kind!r}")
-        network = options.get("network", False)
+        release = release_of(options)
+        network = options.get("network", release is not None)
         if not isinstance(network, bool):
             raise ValueError(f"network must be true or false, got {network!r}")
         limits = SandboxLimits(
@@ -193,8 +217,12 @@ class VerifiedBenchmark(SweBenchmark):
         if opener is None and image is None:
             missing = missing_images([wanted], set())
             raise SandboxError(f"the image of {wanted} is not here ({missing[0]}); get it with {how_to_get(missing)}")
+        if release is not None:
+            release.check_source(rec["repo"])
+            if opener is None and (refusal := missing_image(release, local_images())) is not None:
+                raise SandboxError(refusal)
         grading = check_grading(options.get("grading", DEFAULT_GRADING), VERIFIED_GRADINGS)
-        return VerifiedEnvironment(
+        return (VerifiedEnvironment if release is None else partial(ReleaseEnvironment, release=release))(
             inst,
             opener if opener is not None else default_open_sandbox(kind),
             record=rec,

@@ -10,7 +10,8 @@ here - ``--namespace swebench`` -, else the one the harness built - ``--namespac
 specs building whatever is missing), applies the patch with its own fallbacks, runs its eval
 script (the test patch, the repository's test command), parses the log with the repository's
 parser and writes ``report.json``. What it wrote is read back: the report decides ``resolved``;
-the eval script's output (``test_output.txt``) is also read by our pytest reader, so the two
+the eval script's output (``test_output.txt``) is also read by our reader (the harness's parser
+for the repository, :func:`~workers.envs.swe.evaluate.read_tests`), so the two
 verdicts sit side by side as in the other modes; the harness's instance log is the record's log.
 
 Why a subprocess, not ``run_instance`` in this process: the harness writes under a folder fixed
@@ -33,9 +34,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from workers.envs.swe.evaluate import MISSING, EvalReason, Evaluation, ours_resolved, parse_summary, with_log
+from workers.envs.swe.evaluate import MISSING, EvalReason, Evaluation, ours_resolved, read_tests, with_log
 from workers.envs.swe.grading import Grading, OfficialGrade, parser_name
 from workers.envs.swe.instances import SweInstance
+from workers.envs.swe.test_log import harness_test_section
 from workers.sandbox.base import LABEL_RUN, LABEL_WORKER, SandboxError
 
 from .images import NAMESPACE
@@ -45,9 +47,8 @@ HARNESS_GRADING: Grading = "harness"
 MODEL_NAME = "recap-eval"
 #: seconds the harness may take beyond the test timeout (container start, patch, grading)
 HARNESS_GRACE_S = 600.0
-#: the eval script's markers around the test run, and what the harness logs when the patch does
-#: not apply or the tests time out (swebench.harness.constants, run_evaluation.py)
-_START, _END = ">>>>> Start Test Output", ">>>>> End Test Output"
+#: what the harness logs when the patch does not apply or the tests time out
+#: (swebench.harness.constants, run_evaluation.py)
 _APPLY_FAIL, _TIMED_OUT = ">>>>> Patch Apply Failed", "Test timed out after"
 
 
@@ -165,9 +166,10 @@ def _read(path: Path) -> str:
 
 
 def eval_test_output(test_output: str) -> str:
-    """The test run's part of the eval script's output (between its start and end markers)."""
-    _, start, rest = test_output.partition(_START)
-    return rest.partition(_END)[0] if start else ""
+    """The test run's part of the eval script's output, cut as the harness cuts it
+    (:func:`~workers.envs.swe.test_log.harness_test_section`: after the start marker, up to the end
+    marker; the whole output of a harness 2.x eval script, which printed no markers)."""
+    return harness_test_section(test_output)
 
 
 def harness_evaluation(instance: SweInstance, run: HarnessRun) -> Evaluation:
@@ -177,8 +179,7 @@ def harness_evaluation(instance: SweInstance, run: HarnessRun) -> Evaluation:
     start, the daemon failed) is the sandbox service failing (SandboxError, ``service``)."""
     wanted = (*instance.fail_to_pass, *instance.pass_to_pass)
     section = eval_test_output(run.test_output)
-    found = parse_summary(section, wanted)
-    tests = {t: found.get(t, MISSING) for t in wanted}
+    tests = read_tests(instance, run.test_output) if section else {t: MISSING for t in wanted}
     ours = bool(section) and ours_resolved(instance, tests)
     log = run.instance_log or run.output
     if run.report is None:

@@ -115,7 +115,7 @@ def tool_reply(hints: Mapping[str, Any], call_key: str) -> ToolAnswer:
     return _plan_reply(f"Nothing left for {task!r}.", [])
 
 
-def bash_command(call: Mapping[str, Any]) -> str:
+def bash_command(call: Mapping[str, Any], sentinel: str = SUBMIT_SENTINEL) -> str:
     """One tool call as one bash command (the text-mode equivalent)."""
     name, args = str(call["name"]), call.get("arguments") or {}
     if name == "bash":
@@ -142,7 +142,7 @@ def bash_command(call: Mapping[str, Any]) -> str:
             f"p.write_text({json.dumps(str(args['file_text']))})",
         )
     if name == SUBMIT:
-        return f"echo {SUBMIT_SENTINEL}"
+        return f"echo {sentinel}"
     raise ValueError(f"offline/expert: no bash equivalent of the tool {name!r}")
 
 
@@ -153,10 +153,12 @@ def _python_script(*lines: str) -> str:
 
 
 def bash_plan(hints: Mapping[str, Any]) -> list[str]:
-    """The plan as bash commands, up to and including the first submit (as the sentinel)."""
+    """The plan as bash commands, up to and including the first submit (as the sentinel: the
+    hints' ``submit_sentinel`` where the agent's configuration prints another, mini-swe-agent 1.0.0's)."""
     out = []
+    sentinel = str(hints.get("submit_sentinel") or SUBMIT_SENTINEL)
     for call in plan_calls(hints):
-        out.append(bash_command(call))
+        out.append(bash_command(call, sentinel))
         if call["name"] == SUBMIT:
             break
     return out

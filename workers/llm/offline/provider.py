@@ -18,6 +18,7 @@ from workers.llm.offline.expert_tools import BASH_BLOCK, ToolAnswer, bash_plan, 
 from workers.llm.offline.knobs import MALFORMED_JSON, Knobs, OfflineOptionsError, draw
 from workers.llm.offline.random_model import random_reply
 from workers.llm.offline.replay import ReplayError, replay_index
+from workers.llm.offline.transcript import is_transcript, transcript_index
 from workers.llm.offline.wire import OFFLINE_METADATA_KEY
 from workers.llm.tokens import estimate_prompt_tokens, estimate_text_tokens
 
@@ -43,16 +44,20 @@ def offline_reply(
     metadata: Mapping[str, Any] | None,
     api_base: str | None,
     tools: Sequence[str] = (),
+    stop: Sequence[str] = (),
 ) -> ToolAnswer:
     """The reply of test double ``name`` (without the ``offline/`` prefix): its text and, for
     ``offline/expert`` asked with ``tools`` (the offered tools' names), its tool calls
-    (:mod:`workers.llm.offline.expert_tools`)."""
+    (:mod:`workers.llm.offline.expert_tools`); ``offline/replay`` of a transcript file matches
+    the request's ``stop`` list too (:mod:`workers.llm.offline.transcript`)."""
     meta = dict((metadata or {}).get(METADATA_KEY) or {})
     call_key = str(meta.get("call_key", ""))
     hints = meta.get("hints") or {}
     if name == "replay":
         if not api_base:
             raise ReplayError("offline/replay needs api_base = the run folder to replay")
+        if is_transcript(api_base):
+            return ToolAnswer(transcript_index(api_base).answer(messages, stop))
         return ToolAnswer(replay_index(api_base).answer(messages, call_key))
     maker = _REPLY_MAKERS.get(name)
     if maker is None:
@@ -82,6 +87,14 @@ def tool_names(optional_params: Mapping[str, Any] | None) -> tuple[str, ...]:
     return tuple(names)
 
 
+def stop_list(optional_params: Mapping[str, Any] | None) -> tuple[str, ...]:
+    """The stop sequences a litellm call carries (a string or a list; none: empty)."""
+    stop = (optional_params or {}).get("stop")
+    if stop is None:
+        return ()
+    return (stop,) if isinstance(stop, str) else tuple(str(s) for s in stop)
+
+
 def _make_provider_class() -> type:
     # litellm only once it is imported offline and quiet (workers.llm.litellm_import)
     from litellm import CustomLLM
@@ -102,7 +115,14 @@ def _make_provider_class() -> type:
         ) -> Any:
             msgs = [{"role": str(m["role"]), "content": str(m.get("content") or "")} for m in messages]
             try:
-                answer = offline_reply(model, msgs, (litellm_params or {}).get("metadata"), api_base, tool_names(optional_params))
+                answer = offline_reply(
+                    model,
+                    msgs,
+                    (litellm_params or {}).get("metadata"),
+                    api_base,
+                    tool_names(optional_params),
+                    stop_list(optional_params),
+                )
             except (ReplayError, OfflineOptionsError, ValueError) as exc:
                 raise CustomLLMError(status_code=400, message=str(exc)) from None
             text = answer.text

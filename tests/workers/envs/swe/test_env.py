@@ -155,14 +155,39 @@ def test_command_limit_ends_the_episode_and_submits(swe_env: Callable[..., SweEn
     last = env.call_tool("nope", {})
     assert last.done is True and last.success is False
     assert last.observation == (
-        "Error: unknown tool 'nope'; the tools are bash, view, str_replace, create, submit\n"
+        "Error: unknown tool 'nope'; the tools are bash, view, str_replace, create, insert, undo_edit, submit\n"
         "[command limit reached (2 commands): the episode ends and your current changes are submitted]"
     )
-    assert (last.info["end_reason"], last.info["eval_reason"], last.info["limit"]) == (
+    assert (last.info["end_reason"], last.info["limit"], "eval_reason" in last.info) == (
         "step_cap",
-        "no_patch",
         "command limit reached (2 commands)",
+        False,  # judged by the runtime's submit_at_limit, not here
     )
+    # nothing was changed: nothing is handed in, nothing judged
+    assert env.submit_at_limit("step_cap: 2 steps (cap 2)") is None
+    assert env.take_records("e", "r") == []
+
+
+def test_at_a_limit_a_non_empty_diff_is_handed_in_and_judged(swe_env: Callable[..., SweEnvironment]) -> None:
+    env = swe_env("format", max_commands=2)
+    env.reset()
+    env.call_tool("str_replace", {"path": "shop.py", "old_str": "{cents / 100}", "new_str": "{cents / 100:.2f}"})
+    last = env.call_tool("bash", {"command": "echo two"})
+    assert (last.done, last.success, last.info["end_reason"]) == (True, False, "step_cap")
+    step = env.submit_at_limit("step_cap: 2 steps (cap 2)")
+    assert step is not None
+    assert (step.done, step.success, step.info["autosubmitted"], step.info["limit"], step.info["eval_reason"]) == (
+        True,
+        True,
+        True,
+        "step_cap: 2 steps (cap 2)",
+        "resolved",
+    )
+    assert step.observation == "Your changes were submitted; it resolves the issue (every listed test passes)."
+    (row,) = env.take_records("e", "r")
+    assert (row.episode_id, row.resolved, row.reason) == ("e", True, "resolved")
+    assert row.patch == step.info["patch"] and '+    return f"${cents / 100:.2f}"' in row.patch
+    assert env.submit_at_limit("again") is None  # judged once
 
 
 def test_output_limit_is_an_episode_limit(swe_env: Callable[..., SweEnvironment]) -> None:
@@ -208,9 +233,10 @@ def test_benchmark_lists_by_file_repository_and_id(fixtures: Fixtures) -> None:
         ({"command_timeout_s": -1}, "command_timeout_s must be a positive number, got -1"),
         ({"output_bytes": 1.5}, "output_bytes must be a positive integer, got 1.5"),
         ({"image": ""}, "image must be a docker image name, got ''"),
+        ({"max_timeouts_in_row": 0}, "max_timeouts_in_row must be a positive integer, got 0"),
         (
             {"colour": 1},
-            "unknown swe option(s) colour; accepted: instances_file, sandbox, image, network, command_timeout_s, output_bytes, max_commands, wall_time_s, total_output_bytes, eval_timeout_s, grading, step_multiplier, seed",
+            "unknown swe option(s) colour; accepted: instances_file, sandbox, image, network, command_timeout_s, output_bytes, max_commands, wall_time_s, total_output_bytes, max_timeouts_in_row, eval_timeout_s, grading, step_multiplier, seed",
         ),
     ],
 )
@@ -255,3 +281,33 @@ def test_methods_that_cannot_act_are_refused() -> None:
     assert bench.canonical_id("swe/django__django-1") == "swe/django__django-1"
     with pytest.raises(UnknownInstanceError):
         bench.canonical_id("swe/")
+
+
+def test_the_bash_tool_keeps_one_session_and_a_text_action_starts_afresh(swe_env: Callable[..., SweEnvironment]) -> None:
+    env = swe_env("format", command_timeout_s=2)
+    env.reset()
+    root = env.workdir
+    assert env.call_tool("bash", {"command": "mkdir -p scratch && cd scratch && export MARK=7"}).observation == "[no output]"
+    assert env.call_tool("bash", {"command": "pwd; echo $MARK"}).observation == f"{root}/scratch\n7"
+    slow = env.call_tool("bash", {"command": "cd / && sleep 30"})
+    assert slow.observation == (
+        "[the command was stopped after 2 seconds]\n[the shell session goes on from its state before this command]"
+    )
+    assert slow.info["timed_out"] is True
+    assert env.call_tool("bash", {"command": "pwd"}).observation == f"{root}/scratch"
+    # mini-SWE-agent's text actions each run in a fresh subprocess in the repository folder
+    assert env.step('pwd; echo "${MARK-unset}"').observation == f"{root}\nunset"
+
+
+def test_commands_timing_out_in_a_row_reach_the_timeout_limit(swe_env: Callable[..., SweEnvironment]) -> None:
+    env = swe_env("format", command_timeout_s=1, max_timeouts_in_row=2)
+    env.reset()
+    assert env.call_tool("bash", {"command": "sleep 5"}).done is False
+    assert env.call_tool("bash", {"command": "true"}).done is False  # a command in time starts the count again
+    assert env.call_tool("bash", {"command": "sleep 5"}).done is False
+    last = env.call_tool("bash", {"command": "sleep 5"})
+    assert (last.done, last.info["end_reason"], last.info["limit"]) == (
+        True,
+        "episode_limit",
+        "timeout limit reached (2 commands in a row stopped at the time limit)",
+    )

@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 
 from recap.methods import make_agent
+from recap.runtime import EnvDriver, EpisodeEnd
 from schemas.labels import infra_failure
 from workers.envs.registry import get_benchmark, make_env
 from workers.envs.swe.env import SweEnvironment
@@ -160,19 +161,29 @@ def test_the_expert_plan_reading_a_gone_container_is_the_sandbox_failing(fixture
 
 
 def test_a_container_gone_when_a_limit_ends_the_episode_is_the_sandbox_failing(fixtures: Fixtures) -> None:
-    """Reaching the command limit judges the diff in the sandbox; a container gone then is the
-    service failing, read as infrastructure like any tool call's."""
+    """Reaching the command limit hands in the diff from the sandbox (submit_at_limit); a
+    container gone then is the service failing, read as infrastructure like any tool call's, and
+    through the runtime the episode ends with that failure's row error (kind first)."""
     gone = SandboxError("the sandbox container is gone", service=True)
     env = make_env(
         "swe/fixture__format-1", instances_file=str(fixtures.tasks_file), max_commands=1, open_sandbox=_opener(1, gone, [])
     )
     try:
         env.reset()
+        step = env.call_tool("bash", {"command": "true"})  # the one command runs and ends the episode
+        assert (step.done, step.info["end_reason"]) == (True, "step_cap")
         with pytest.raises(SandboxUnavailable) as err:
-            env.call_tool("bash", {"command": "true"})  # the one command runs; judging its diff meets the failure
+            env.submit_at_limit("step_cap: 1 steps (cap 1)")  # taking its diff meets the failure
+        end = EnvDriver(env, "ep", lambda _r: None).submit_at_limit(EpisodeEnd("step_cap", "1 steps (cap 1)"))
     finally:
         env.close()
     assert err.value.row_error() == GONE_ROW
+    assert (end.reason, end.detail) == (
+        "env_error",
+        "sandbox: handing in the work at step_cap: 1 steps (cap 1): swe/fixture__format-1: the sandbox failed: "
+        "the sandbox container is gone",
+    )
+    assert infra_failure(end.reason, end.detail) == "sandbox"
 
 
 def test_a_worker_whose_expert_plan_meets_a_gone_container_writes_an_infrastructure_row(

@@ -25,7 +25,9 @@ def _call(env: SweEnvironment, name: str, **args: Any) -> tuple[str, dict[str, A
 
 def test_tool_definitions(env: SweEnvironment) -> None:
     defs = {t.name: t for t in env.tool_defs()}
-    assert list(defs) == ["bash", "view", "str_replace", "create", "submit"]
+    assert list(defs) == ["bash", "view", "str_replace", "create", "insert", "undo_edit", "submit"]
+    assert defs["insert"].parameters["required"] == ["path", "insert_line", "new_str"]
+    assert defs["undo_edit"].parameters["required"] == ["path"]
     assert "stopped after 3 seconds" in defs["bash"].description
     assert "at most 200 bytes" in defs["bash"].description
     assert defs["view"].parameters["required"] == ["path"]
@@ -48,7 +50,9 @@ def test_bash_output_cap_and_timeout(env: SweEnvironment) -> None:
     assert obs == "x" * 200 + "\n[output cut: the first 200 of 500 bytes are shown]"
     assert info["output_bytes"] == 500
     obs, info = _call(env, "bash", command="echo start; sleep 30")
-    assert obs == "start\n[the command was stopped after 3 seconds]"
+    assert (
+        obs == "start\n[the command was stopped after 3 seconds]\n[the shell session goes on from its state before this command]"
+    )
     assert (info["exit_code"], info["timed_out"]) == (None, True)
 
 
@@ -90,7 +94,7 @@ def test_str_replace_and_create(env: SweEnvironment) -> None:
 @pytest.mark.parametrize(
     ("name", "args", "error"),
     [
-        ("rm", {}, "unknown tool 'rm'; the tools are bash, view, str_replace, create, submit"),
+        ("rm", {}, "unknown tool 'rm'; the tools are bash, view, str_replace, create, insert, undo_edit, submit"),
         ("bash", {}, "bash: missing argument 'command'"),
         ("bash", {"command": 5}, "bash: argument 'command' must be a string, got integer"),
         ("bash", {"command": "ls", "cwd": "/"}, "bash: unknown argument 'cwd' (accepted: command)"),
@@ -138,3 +142,41 @@ def test_refused_calls(env: SweEnvironment, name: str, args: dict[str, Any], err
     assert (step.done, step.success) == (False, False)
     assert env._box().read_file("convert.py") == before
     assert env.steps_taken == 1
+
+
+def test_insert_after_a_line_and_undo_edit_newest_first(env: SweEnvironment) -> None:
+    root = env.workdir
+    obs, info = _call(env, "insert", path="units.py", insert_line=0, new_str="# units\n")
+    assert (
+        obs
+        == f"Edited {root}/units.py. The region around the inserted lines now reads:\n     1\t# units\n     2\tCM_PER_INCH = 2.45"
+    )
+    assert (info["exit_code"], info["error"]) == (0, None)
+    obs, _ = _call(env, "insert", path="units.py", insert_line=2, new_str="MM_PER_CM = 10\nX = 1")
+    assert obs.endswith("     1\t# units\n     2\tCM_PER_INCH = 2.45\n     3\tMM_PER_CM = 10\n     4\tX = 1")
+    assert env._box().read_file("units.py") == b"# units\nCM_PER_INCH = 2.45\nMM_PER_CM = 10\nX = 1\n"
+    obs, info = _call(env, "insert", path="units.py", insert_line=5, new_str="Y = 2")
+    assert obs == f"Error: insert: insert_line 5 is outside {root}/units.py, which has 4 lines (0 to 4)"
+    assert info["error"] == f"insert: insert_line 5 is outside {root}/units.py, which has 4 lines (0 to 4)"
+    _call(env, "str_replace", path="units.py", old_str="2.45", new_str="2.54")
+    obs, _ = _call(env, "undo_edit", path="units.py")
+    assert obs == (
+        f"Undid the last change to {root}/units.py. It now reads:\n"
+        "     1\t# units\n     2\tCM_PER_INCH = 2.45\n     3\tMM_PER_CM = 10\n     4\tX = 1"
+    )
+    _call(env, "undo_edit", path="units.py")
+    _call(env, "undo_edit", path="units.py")
+    assert env._box().read_file("units.py") == b"CM_PER_INCH = 2.45\n"
+    obs, info = _call(env, "undo_edit", path="units.py")
+    assert obs == f"Error: undo_edit: no change made with the editor to {root}/units.py is left to undo"
+
+
+def test_undo_edit_of_a_created_file_removes_it_and_bash_changes_are_not_undone(env: SweEnvironment) -> None:
+    root = env.workdir
+    _call(env, "create", path="notes.py", file_text="x = 1\n")
+    obs, _ = _call(env, "undo_edit", path="notes.py")
+    assert obs == f"Undid the creation of {root}/notes.py: the file is removed."
+    assert _call(env, "bash", command="ls notes.py")[0].startswith("ls: cannot access")
+    _call(env, "bash", command="echo changed > units.py")
+    obs, _ = _call(env, "undo_edit", path="units.py")
+    assert obs == f"Error: undo_edit: no change made with the editor to {root}/units.py is left to undo"
