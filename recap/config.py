@@ -109,6 +109,13 @@ LATE_SETTINGS: dict[str, Any] = {
     "tool_calls_per_reply": "any",
     "reply_schema": False,
     "submit_at_limit": True,
+    # the released FEVER ReCAP loop's settings (workers/envs/fever/protocol.py RECAP_RELEASED)
+    "action_pattern": None,
+    "final_answer": False,
+    "pin_task": True,
+    "observation_drop": "",
+    "resend_bad_replies": False,
+    "safety_steps": None,
 }
 
 
@@ -117,7 +124,8 @@ class AgentConfig:
     """Settings every agent shares: the window, generation settings and per-episode caps."""
 
     window: int = 64
-    window_mode: Literal["pair", "block"] = "pair"
+    #: see recap/history.py (``prompt``: the released FEVER ReCAP's cut before each prompt)
+    window_mode: Literal["pair", "block", "prompt"] = "pair"
     window_block: int | None = None
     #: True: K bounds the whole history, pins included (the released code); False: K bounds
     #: the messages after the two pins (the paper's reading)
@@ -166,8 +174,8 @@ class AgentConfig:
     def validate(self) -> None:
         if self.window < 2:
             raise ConfigError(f"window must be >= 2 messages, got {self.window}")
-        if self.window_mode not in ("pair", "block"):
-            raise ConfigError(f"window_mode must be 'pair' or 'block', got {self.window_mode!r}")
+        if self.window_mode not in ("pair", "block", "prompt"):
+            raise ConfigError(f"window_mode must be 'pair', 'block' or 'prompt', got {self.window_mode!r}")
         if self.temperature is not None and not 0 <= self.temperature <= 2:
             raise ConfigError(f"temperature must be in [0, 2], got {self.temperature}")
         if self.max_json_repairs < 0:
@@ -248,12 +256,36 @@ class ReCAPConfig(AgentConfig):
     reminder_period: int | None = 10
     #: what the reminder period counts: ``calls`` (LLM calls, the paper) or ``iterations``
     #: (control-loop iterations: every child entered, shortcuts included, and every return;
-    #: the released code). The reminder goes on whichever prompt is sent next.
-    reminder_on: Literal["calls", "iterations"] = "calls"
+    #: the released code), or ``nth_call`` (the prompt of call number period, 2 x period, ...:
+    #: the released FEVER loop, fever-recap/MATRIX/MATRIX/chatbot.py:350-360). The reminder goes
+    #: on whichever prompt is sent next.
+    reminder_on: Literal["calls", "iterations", "nth_call"] = "calls"
     shortcut: bool = True
     #: the released code leaves a shortcut's trace in the history (the descend prompt and a
     #: synthetic reply naming the action, no call); the paper describes no such messages
     shortcut_trace: bool = False
+    #: a one-item list reaches the environment only when the item (stripped) matches this regex;
+    #: otherwise it is a leaf failure that uses no step (None: every item the environment accepts,
+    #: the paper). The released FEVER loop's check (fever-recap/MATRIX/MATRIX/chatbot.py:308-312,
+    #: 379-381, 412-423); it also makes a one-item root list a leaf, as that loop does
+    action_pattern: str | None = None
+    #: when the root's list empties, one more call asks for the final answer and its first
+    #: subtask is sent as the last action (fever-recap/MATRIX/MATRIX/chatbot.py:470-478)
+    final_answer: bool = False
+    #: False: the task prompt is the first windowed message instead of a pin, so the window drops
+    #: it first and only the demonstration stays (fever-recap/MATRIX/MATRIX/chatbot.py:42-44)
+    pin_task: bool = True
+    #: text deleted from every observation before a prompt shows it (the released FEVER runner
+    #: deletes the two characters backslash-n: fever-recap/hotpotqa/hotpotqa_simulator.py:42)
+    observation_drop: str = ""
+    #: a reply that is not strict JSON (code fences removed) or lacks ``subtasks`` gets an error
+    #: message and the same prompt again, bounded only by the call cap, instead of our repair
+    #: message (fever-recap/MATRIX/MATRIX/chatbot.py:370-371, 461-469: the loop runs again)
+    resend_bad_replies: bool = False
+    #: None: the benchmark's step cap; a number: the released code has no step cap
+    #: (hotpotqa_simulator.py:22,33 never counts), so this safety bound replaces it and an
+    #: episode it ends says so in its row (end reason step_cap/call_cap, error "safety bound ...")
+    safety_steps: int | None = None
     #: tool-call mode: ``any`` number of tool calls per reply, each run in order (the paper is
     #: silent), or exactly ``one`` per reply that calls tools, a reply with several re-asked
     #: (SWE-agent's function-calling parser, swebench-recap/sweagent/tools/parsing.py:439-449)
@@ -282,10 +314,17 @@ class ReCAPConfig(AgentConfig):
             raise ConfigError(f"think must be latest, none or many, got {self.think!r}")
         if self.reminder_period is not None and self.reminder_period < 1:
             raise ConfigError("reminder_period must be >= 1 or null")
-        if self.reminder_on not in ("calls", "iterations"):
-            raise ConfigError(f"reminder_on must be calls or iterations, got {self.reminder_on!r}")
+        if self.reminder_on not in ("calls", "iterations", "nth_call"):
+            raise ConfigError(f"reminder_on must be calls, iterations or nth_call, got {self.reminder_on!r}")
         if self.tool_calls_per_reply not in ("any", "one"):
             raise ConfigError(f"tool_calls_per_reply must be any or one, got {self.tool_calls_per_reply!r}")
+        if self.action_pattern is not None:
+            try:
+                re.compile(self.action_pattern)
+            except re.error as exc:
+                raise ConfigError(f"action_pattern is not a regular expression: {exc}") from None
+        if self.safety_steps is not None and self.safety_steps < 1:
+            raise ConfigError("safety_steps must be >= 1 or null (the benchmark's step cap)")
 
 
 #: the paper's ablation names, as settings of ReCAPConfig
@@ -319,6 +358,7 @@ SETTING_BOUNDS: dict[str, tuple[float, float]] = {
     "context_drop": (2, 100_000),
     "max_level": (2, 100),
     "reminder_period": (1, 100_000),
+    "safety_steps": (1, 100_000),
     "max_depth": (1, 100),
     "executor_steps": (1, 100_000),
     "executor_patience": (1, 100_000),

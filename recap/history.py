@@ -18,6 +18,12 @@ that starts after the pinned task prompt. Tool messages (the results of a reply'
 are dropped with the reply that called them: a window never starts with a tool result whose
 call it no longer holds.
 
+* ``prompt``: the released FEVER ReCAP's cut (fever-recap/MATRIX/MATRIX/chatbot.py:42-45): only
+  when a prompt goes in (a user message other than a repair message), and only if the history then
+  holds more than K messages, exactly the two oldest unpinned messages go first; nothing else
+  trims, so a call may see K + 1 messages after an odd message (the error message after a reply
+  that is not JSON, chatbot.py:464-466) as it does there.
+
 ``counts_pins`` makes K bound the whole history, pins included (the released code's reading:
 "more than ctx_len messages" counts the demonstration and the task prompt); otherwise K bounds
 the messages after the pins.
@@ -39,7 +45,7 @@ from typing import Literal
 from recap.llm import ChatMessage, ToolCall
 from schemas.records import MessageRecord
 
-WindowMode = Literal["pair", "block"]
+WindowMode = Literal["pair", "block", "prompt"]
 
 
 class SeqCounter:
@@ -84,8 +90,8 @@ class History:
     ) -> None:
         if window < 2:
             raise ValueError(f"window must be at least 2 messages, got {window}")
-        if mode not in ("pair", "block"):
-            raise ValueError(f"window mode must be 'pair' or 'block', got {mode!r}")
+        if mode not in ("pair", "block", "prompt"):
+            raise ValueError(f"window mode must be 'pair', 'block' or 'prompt', got {mode!r}")
         self.episode_id = episode_id
         self.window = window
         self.mode = mode
@@ -130,6 +136,12 @@ class History:
         """Add a windowed message (an assistant reply may carry ``tool_calls``; a ``tool``
         message answers one of them by ``tool_call_id``) and enforce the window."""
         message = ChatMessage(role, content, tool_calls=tool_calls, tool_call_id=tool_call_id)
+        if self.mode == "prompt":
+            if role == "user" and kind != "repair" and (len(self) if self.counts_pins else len(self._live)) > self.window:
+                n = min(2, max(0, len(self._live) - self.keep))
+                del self._live[self.keep : self.keep + n]  # chatbot.py:42-44: del history[1:3]
+                self.dropped += n
+            return self._insert(message, kind, node_id, pinned=False)
         seq = self._insert(message, kind, node_id, pinned=False)
         # the results of a reply's tool calls follow it at once: the window is enforced once the
         # last of them is in, never between a call and its result (see drop_oldest)

@@ -20,12 +20,25 @@ Control flow (see the paper, section 2, and docs/method.md):
 * on an environment with tools (a coding benchmark) the episode runs in the paper's tool-call
   mode instead (:mod:`recap.recap_tools`);
 * ``shortcut_trace`` (released code): a shortcut child still leaves its descend prompt and a
-  synthetic reply naming the action in the history (no call is made).
+  synthetic reply naming the action in the history (no call is made);
+* the released FEVER loop (``fever-recap/MATRIX/MATRIX/chatbot.py``, set by the FEVER protocol
+  under ``profile: released``): a one-item list reaches the environment only when it matches
+  ``action_pattern``, otherwise it is a leaf failure that uses no step (chatbot.py:308-312,
+  379-381, 412-423), the root's own one-item list included (its ``during_down`` is true on the
+  first call); when the root's list empties one more call asks for the final answer, whose
+  first subtask is the last action (``final_answer``, chatbot.py:470-478; ``finish[]`` follows
+  when that does not end the episode or the reply has no answer, hotpotqa_simulator.py:47-49);
+  the task prompt is windowed (``pin_task: false``, chatbot.py:42-44); ``observation_drop`` is
+  deleted from observations (hotpotqa_simulator.py:42); ``safety_steps`` replaces the missing
+  step cap and an episode it (or the call cap derived from it) ends says so in its row.
+  Under ``prompts: release`` every prompt is the released template (``ReleasePrompt.templates``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
+import re
 from functools import partial
 from typing import Any
 
@@ -34,10 +47,10 @@ from recap.agent import Agent
 from recap.config import ReCAPConfig
 from recap.demo_script import DemoScript
 from recap.env import InvalidActionError, Reset
-from recap.jsonreply import recap_reply
+from recap.jsonreply import ReplyFormatError, parse_json_object, recap_reply
 from recap.recap_tools import finish_kinds, play_tools
 from recap.release_prompt import ReleasePrompt
-from recap.runtime import Episode, EpisodeEnd
+from recap.runtime import Episode, EpisodeEnd, repair_prompt
 from recap.tree import Node
 
 
@@ -71,7 +84,10 @@ class ReCAPAgent(Agent):
         and shortcut ablations change how the agent runs, not the example it is shown)."""
         base = super().demo_config()
         assert isinstance(base, ReCAPConfig)
-        return dataclasses.replace(base, max_level=None, shortcut=True, reminder_period=None)
+        # the released FEVER loop's checks and last call are not part of the example either
+        return dataclasses.replace(
+            base, max_level=None, shortcut=True, reminder_period=None, action_pattern=None, final_answer=False, safety_steps=None
+        )
 
     def shape_demo_reply(self, reply: Any) -> Any:
         if self.config.think == "none":
@@ -86,6 +102,20 @@ class ReCAPAgent(Agent):
         if ep.env.tool_defs():  # a coding environment: the paper's tool-call mode (recap.recap_tools)
             ep.extra["tool_mode"] = True
             return play_tools(self, ep, reset)
+        if self.config.safety_steps is None or self.demo_mode:
+            return self._play(ep, reset)
+        try:
+            return self._play(ep, reset)
+        except EpisodeEnd as end:
+            if end.reason not in ("step_cap", "call_cap"):
+                raise
+            # the released code has no step cap (hotpotqa_simulator.py:22,33): this end is our bound
+            raise EpisodeEnd(
+                end.reason,
+                f"safety bound ({end.detail}; safety_steps {self.config.safety_steps}, the released code has no cap)",
+            ) from None
+
+    def _play(self, ep: Episode, reset: Reset) -> None:
         cfg = self.config
         st = self._state(ep)
         st.update(nodes=[], iterations=0, rules=ep.env.rules(), max_depth=0, remind=False, next_reminder_call=cfg.reminder_period)
@@ -93,7 +123,20 @@ class ReCAPAgent(Agent):
         root = self._new_node(ep, None, reset.goal)
         root.kind = "root"
         release = st.get("release")
-        if isinstance(release, ReleasePrompt) and release.system is not None and release.rules is not None:
+        if isinstance(release, ReleasePrompt) and release.first_turn == "templated":
+            # the released FEVER code's own first prompt (fever-recap/MATRIX/MATRIX/chatbot.py:333-338):
+            # the root's task is the first observation and the initial observation the runner's
+            # text (hotpotqa_simulator.py:25-26)
+            st["rules"] = release.rules or ""
+            root.task = reset.observation
+            task = release.render(
+                "task",
+                task_name=reset.observation,
+                init_obs=release.first_observation or "",
+                rule=st["rules"],
+                system_prompt=release.system or "",
+            )
+        elif isinstance(release, ReleasePrompt) and release.system is not None and release.rules is not None:
             # prompts: release: the released template's system text and rules frame the first
             # prompt (robotouille-recap/MATRIX/MATRIX/chatbot.py:247-261) and its reminders
             st["rules"] = release.rules
@@ -117,9 +160,25 @@ class ReCAPAgent(Agent):
                 with_think=with_think,
                 preamble=not self.demo_mode,
             )
-        ep.conv.pin("task", task)
-        self._ask(ep, root, None, "task")
-        self._loop(ep, root)
+        if cfg.pin_task:
+            ep.conv.pin("task", task)
+            self._ask(ep, root, None, "task")
+        else:  # windowed: dropped first once the history is full (chatbot.py:42-44)
+            self._ask(ep, root, task, "task")
+        if cfg.action_pattern is not None and len(root.subtasks) == 1:
+            # the released loop's first call is a descend too (chatbot.py:346, 379): a one-item
+            # root list is the root's own action, after which the root is left (:392-394). A
+            # non-matching one leaves the loop as well (the fail path reads the root's parent,
+            # :414-421, and the error ends the loop): the final answer is asked for at once
+            root.kind = "primitive"
+            if self._matches(root.subtasks[0]):
+                self._execute(ep, root, root.subtasks[0])
+            else:
+                self._fail(ep, root, root.subtasks[0])
+        else:
+            self._loop(ep, root)
+        if cfg.final_answer:
+            self._final_answer(ep, root)
 
     def _new_node(self, ep: Episode, parent: Node | None, task: str) -> Node:
         st = self._state(ep)
@@ -144,6 +203,8 @@ class ReCAPAgent(Agent):
         cfg, st = self.config, self._state(ep)
         if not cfg.reminder_period or self.demo_mode:
             return False
+        if cfg.reminder_on == "nth_call":  # the call about to be made is number period, 2 x period, ...
+            return (ep.conv.usage.calls + 1) % cfg.reminder_period == 0
         if cfg.reminder_on == "calls":
             # every reminder_period calls: the prompt of call period+1, 2*period+1, ... gets it
             due = st["next_reminder_call"] is not None and ep.conv.usage.calls >= st["next_reminder_call"]
@@ -154,13 +215,19 @@ class ReCAPAgent(Agent):
         due, st["remind"] = st["remind"], False
         return due
 
+    def _with_reminder(self, ep: Episode, prompt: str) -> str:
+        """``prompt`` with the rules reminder before it (the released template's where there is one)."""
+        st = self._state(ep)
+        release = st.get("release")
+        if isinstance(release, ReleasePrompt) and release.first_turn == "templated":
+            return release.render("reminder", rule=st["rules"]) + prompt  # fever chatbot.py:352-360
+        if isinstance(release, ReleasePrompt) and release.rules is not None:
+            return P.release_reminder(st["rules"]) + prompt
+        return P.reminder(st["rules"]) + "\n\n" + prompt
+
     def _ask(self, ep: Episode, node: Node, prompt: str | None, kind: str, shown: tuple[str, ...] | None = None) -> None:
         if prompt is not None and self._reminder_due(ep):
-            st = self._state(ep)
-            if isinstance(st.get("release"), ReleasePrompt) and st["release"].rules is not None:
-                prompt = P.release_reminder(st["rules"]) + prompt
-            else:
-                prompt = P.reminder(st["rules"]) + "\n\n" + prompt
+            prompt = self._with_reminder(ep, prompt)
         parse = partial(recap_reply, with_think=self.config.think != "none")
         d = ep.driver
         context = {
@@ -170,8 +237,41 @@ class ReCAPAgent(Agent):
             "remaining": list(shown if shown is not None else node.subtasks),
             "valid_actions": list(d.valid_actions) if d.valid_actions is not None else None,
         }
-        reply, seq = ep.conv.ask(prompt, kind, parse, node_id=node.node_id, context=context)
+        if self.config.resend_bad_replies and prompt is not None:
+            reply, seq = self._ask_resending(ep, node, prompt, kind, context)
+        else:
+            reply, seq = ep.conv.ask(prompt, kind, parse, node_id=node.node_id, context=context)
         node.add_version(reply["think"], reply["subtasks"], ep.conv.usage.calls - 1, seq)
+
+    def _ask_resending(
+        self, ep: Episode, node: Node, prompt: str, kind: str, context: dict[str, Any]
+    ) -> tuple[dict[str, Any], int]:
+        """The released FEVER loop's answer to a reply it cannot use (fever-recap/MATRIX/MATRIX/
+        chatbot.py:370-371, 461-469): the reply is read as strict JSON once code fences are
+        removed (:9, 12-18); one that is not gets the JSON error message, one without
+        ``subtasks`` the error message naming the missing key, and the loop sends the same prompt
+        again (a reminder due on that call goes before it too, :352-360), with no bound but the
+        call cap. A reply the release would take but our parser refuses (a think that is not
+        text, subtasks that are not a list of text) gets our repair message instead."""
+        release = self._release_templates(ep)
+        while True:
+            raw, seq = ep.conv.ask(prompt, kind, _same, node_id=node.node_id, context=context, decode=_raw)
+            try:
+                obj = json.loads(_FENCE.sub("", raw["text"]))
+            except ValueError:
+                problem = release.render("json_error") if release is not None else P.bad_json_text()
+            else:
+                if isinstance(obj, dict) and "subtasks" not in obj:  # a KeyError in the release (:379)
+                    problem = release.render("error", e="'subtasks'") if release is not None else P.reply_error_text("'subtasks'")
+                else:
+                    try:
+                        return recap_reply(obj, with_think=self.config.think != "none"), seq
+                    except ReplyFormatError as exc:
+                        problem = repair_prompt(str(exc), self.reply_format())
+            ep.conv.usage.json_repairs += 1
+            ep.conv.history.add("user", "repair", problem, node.node_id)
+            if self._reminder_due(ep):
+                prompt = self._with_reminder(ep, prompt)
 
     # -- the recursive loop --------------------------------------------------------------------
     def _loop(self, ep: Episode, node: Node) -> None:
@@ -193,7 +293,7 @@ class ReCAPAgent(Agent):
         if at_cap:
             self._ask(ep, child, P.depth_cap_prompt(child.task), "depth_cap")
         else:
-            self._ask(ep, child, P.descend_prompt(child.task), "descend")
+            self._ask(ep, child, self._descend_prompt(ep, child.task), "descend")
         subtasks = child.subtasks
         if not subtasks:
             child.status = "done"
@@ -201,11 +301,50 @@ class ReCAPAgent(Agent):
         if at_cap or len(subtasks) == 1:
             child.kind = "primitive"
             action = subtasks[0]
-            if d.is_valid(action):
+            if self._matches(action) and d.is_valid(action):
                 return self._execute(ep, child, action)
             return self._fail(ep, child, action)
         self._loop(ep, child)
         return "nonleaf", None
+
+    def _matches(self, action: str) -> bool:
+        """Whether a one-item list may reach the environment: ``action_pattern`` (stripped, as
+        fever-recap/MATRIX/MATRIX/chatbot.py:308-312 checks it) when one is set."""
+        pattern = self.config.action_pattern
+        return pattern is None or re.match(pattern, action.strip()) is not None
+
+    def _release_templates(self, ep: Episode) -> ReleasePrompt | None:
+        release = self._state(ep).get("release")
+        return release if isinstance(release, ReleasePrompt) and release.first_turn == "templated" else None
+
+    def _descend_prompt(self, ep: Episode, task: str) -> str:
+        release = self._release_templates(ep)
+        return release.render("descend", task_name=task) if release is not None else P.descend_prompt(task)
+
+    def _observation(self, ep: Episode) -> str:
+        """The latest observation as prompts show it (``observation_drop`` deleted)."""
+        drop, observation = self.config.observation_drop, ep.driver.observation
+        release = self._release_templates(ep)
+        if release is not None and release.first_observation is not None and ep.driver.steps == 0:
+            observation = release.first_observation  # before any step (hotpotqa_simulator.py:26; chatbot.py:345)
+        return observation.replace(drop, "") if drop else observation
+
+    def _final_answer(self, ep: Episode, root: Node) -> None:
+        """The released FEVER loop's last call (fever-recap/MATRIX/MATRIX/chatbot.py:470-478): ask
+        for the final answer; the reply's first subtask is sent as the last action, unchecked
+        (hotpotqa_simulator.py:34-41 steps whatever comes); a reply without one, or an action that
+        does not end the episode, is followed by ``finish[]`` (hotpotqa_simulator.py:47-49). The
+        reply is not repaired (the release gives up on one it cannot parse, :479-480)."""
+        release = self._release_templates(ep)
+        prompt = release.render("final_answer") if release is not None else P.final_answer_prompt()
+        reply, seq = ep.conv.ask(prompt, "final_answer", _same, node_id=root.node_id, decode=_raw)
+        answer = _first_subtask(reply["text"])
+        node = self._new_node(ep, root, answer if answer is not None else "")
+        node.kind = "primitive"
+        node.add_version(None, (answer,) if answer is not None else (), ep.conv.usage.calls - 1, seq)
+        if answer is not None:
+            self._execute(ep, node, answer)
+        self._execute(ep, node, "finish[]")
 
     def _shortcut_trace(self, ep: Episode, child: Node) -> int:
         """The released code's record of a shortcut: the descend prompt and a reply naming the
@@ -213,11 +352,7 @@ class ReCAPAgent(Agent):
         h = ep.conv.history
         prompt = P.descend_prompt(child.task)
         if self._reminder_due(ep):
-            st = self._state(ep)
-            if isinstance(st.get("release"), ReleasePrompt) and st["release"].rules is not None:
-                prompt = P.release_reminder(st["rules"]) + prompt
-            else:
-                prompt = P.reminder(st["rules"]) + "\n\n" + prompt
+            prompt = self._with_reminder(ep, prompt)
         h.add("user", "descend", prompt, child.node_id)
         reply = P.shortcut_reply(child.task, self.config.think != "none")
         return h.add("assistant", "shortcut", reply, child.node_id)
@@ -245,13 +380,18 @@ class ReCAPAgent(Agent):
         cfg = self.config
         self._tick_iteration(ep)
         shown = node.subtasks if outcome == "fail" else node.subtasks[1:]
+        release = self._release_templates(ep)
+        if release is not None:
+            kind, text = _release_return(release, outcome, child, node, shown, self._observation(ep), failed_action)
+            self._ask(ep, node, text, kind, shown=tuple(shown))
+            return
         kind, text = P.return_prompt(
             outcome=outcome,
             child_task=child.task,
             parent_task=node.task,
             thinks=node.thinks,
             subtasks=shown,
-            observation=ep.driver.observation if outcome in ("leaf", "fail") else None,
+            observation=self._observation(ep) if outcome in ("leaf", "fail") else None,
             think_mode=cfg.think,
             name_only=cfg.name_only,
             failed_action=failed_action,
@@ -268,3 +408,54 @@ class ReCAPAgent(Agent):
             finish_kinds(self._state(ep))
         for node in self._state(ep).get("nodes", []):
             ep.emit(node.record(ep.conv.episode_id))
+
+
+#: a run of backticks, with the word json right after it: removed before a reply is read as JSON
+#: under ``resend_bad_replies`` (fever-recap/MATRIX/MATRIX/chatbot.py:9, 12-18)
+_FENCE = re.compile(r"`+(?:json)?", re.IGNORECASE)
+
+
+def _same(obj: dict[str, Any]) -> dict[str, Any]:
+    return obj
+
+
+def _raw(text: str) -> dict[str, Any]:
+    """The reply text as is (the final answer is read without repairs)."""
+    return {"text": text}
+
+
+def _first_subtask(text: str) -> str | None:
+    """The first subtask of a final-answer reply, or None when it has none (not a JSON object,
+    no list, an empty list, or a first item that is not text)."""
+    try:
+        obj = parse_json_object(text)
+    except ReplyFormatError:
+        return None
+    subtasks = obj.get("subtasks")
+    if not isinstance(subtasks, list) or not subtasks or not isinstance(subtasks[0], str) or not subtasks[0]:
+        return None
+    return subtasks[0]
+
+
+def _release_return(
+    release: ReleasePrompt, outcome: str, child: Node, node: Node, shown: tuple[str, ...], observation: str, failed: str | None
+) -> tuple[str, str]:
+    """The return prompt from the released FEVER templates (fever-recap/MATRIX/MATRIX/chatbot.py:
+    leaf with subtasks left :398-404, leaf without :406-411, fail :417-423, non-leaf :442-453):
+    the node's thoughts all numbered from 1 (``Node.get_latest_think``, :122-126, the last 100),
+    its remaining subtasks one a line (the template's own text for none, :207-210, 288-291)."""
+    thinks = node.thinks[-100:]
+    values = {
+        "obs": observation,
+        "done_task_name": child.task,
+        "fail_task_name": failed or child.task,
+        "previous_stage_task_name": node.task,
+        "previous_stage_think": "\n".join(f"{i}. {t}" for i, t in enumerate(thinks, 1)) if thinks else "None",
+    }
+    if outcome == "fail":
+        kind = "leaf_fail"
+    else:
+        kind = ("leaf" if outcome == "leaf" else "nonleaf") + ("_done" if shown else "_judge")
+    empty = dict(release.empty_list).get(kind, "")
+    values["remaining_subtask_str"] = "\n".join(shown) if shown else empty
+    return kind, release.render(kind, **values)

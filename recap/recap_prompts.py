@@ -204,3 +204,23 @@ def reminder(rules: str) -> str:
     """The rules again, prepended to whichever prompt is sent next when a reminder is due (every
     ``reminder_period`` calls or control-loop iterations)."""
     return f"Reminder of the environment rules:\n{rules}"
+
+
+def final_answer_prompt() -> str:
+    """The last call when the root's list has emptied (``final_answer``): the answer as a single
+    action in the subtask list, short and concrete."""
+    return (
+        "The task list is finished. Give your final answer now as one action in your subtasks, "
+        "as concrete as you can and without a long sentence."
+    )
+
+
+def bad_json_text() -> str:
+    """The message after a reply that is not JSON (``resend_bad_replies``); the prompt follows again."""
+    return "Your reply could not be read as JSON. Check its format."
+
+
+def reply_error_text(error: str) -> str:
+    """The message after a JSON reply that could not be used (``resend_bad_replies``); ``error``
+    names what went wrong; the prompt follows again."""
+    return f"Your reply could not be used ({error}). Try again."

@@ -46,7 +46,7 @@ from recap.baselines.text_prompts import RELEASE_ALFWORLD_RULE
 from recap.env import DataNotFoundError
 from recap.release_prompt import ReleasePrompt
 from workers.envs import data_paths
-from workers.release import fever_notebooks
+from workers.release import fever_matrix, fever_notebooks
 from workers.release.folder import FETCH_COMMAND, LOCATION, NAME
 
 _TEMPLATES = "robotouille-baselines/agents/prompt_builder/prompts"
@@ -161,6 +161,8 @@ def sources(
         if method == "act":  # alfworld-recap/act_alfworld/act.py:151, 297
             return (Part(f"{_ALFWORLD}/act_alfworld/alfworld_3prompts_act.json", f"key:react_{task}_0"),)
         raise ReleaseUnavailable(f"the release has no {method} prompts for alfworld")
+    if benchmark == "fever" and method == "recap":  # main.py -> chatbot.py (workers/release/fever_matrix.py)
+        return tuple(Part(path, "whole") for path in fever_matrix.SOURCES)
     if benchmark == "fever" and fever_notebooks.covers(method):  # the notebooks (fever_notebooks)
         return (Part(fever_notebooks.notebook_path(method), f"{fever_notebooks.NOTEBOOK_PICK}:{method}"),)
     raise ReleaseUnavailable(f"the release has no prompts for benchmark {benchmark!r}")
@@ -271,7 +273,11 @@ _INTERACTION = re.compile(r"(?i)\bInteraction\s*\d+\s*\n+[-]+\n+")
 _PLANNER_REQUEST = re.compile(r"Observation:(.*?)Reasoning:", re.S)
 _PLANNER_RESPONSE = re.compile(r"Reasoning:(.*)", re.S)
 #: methods whose released messages :func:`release_prompt` builds in the released structure
-STRUCTURED = {"robotouille": ("react", "act", "recap", "standard", "cot", "adapt"), "alfworld": ("react", "act", "recap")}
+STRUCTURED = {
+    "robotouille": ("react", "act", "recap", "standard", "cot", "adapt"),
+    "alfworld": ("react", "act", "recap"),
+    "fever": ("recap",),
+}
 #: the released ALFWorld ReAct's one user message before the task: a sentence, then the example
 #: transcript (alfworld-recap/react_alfworld/react.py:206-208); the sentence is ours
 ALFWORLD_REACT_HEADER = "Complete a task by interacting with a household. One example follows.\n"
@@ -355,6 +361,11 @@ def release_prompt(
     if method not in STRUCTURED.get(benchmark, ()):
         return None
     parts = sources(method, benchmark, split, task, think, name_only)
+    if method == "recap" and benchmark == "fever":  # the released templates (workers/release/fever_matrix.py)
+        try:
+            return fever_matrix.release_prompt(folder)
+        except fever_matrix.FeverMatrixError as exc:
+            raise ReleaseMissing(f"{NAME}: {exc}") from None
     if method == "recap" and benchmark == "alfworld":
         # the framed example as the fixed message (chatbot.py:391-398); the first prompt has an
         # empty system text (SessionManager.py:83-84) and the rule main.py:70 hands it

@@ -126,10 +126,11 @@ def test_spec_errors_are_one_line(text, message):
         ),
         (
             ("- method: recap", "- method: recap\n    settings: {windw: 3}"),
-            "methods[0] (recap): unknown setting(s) windw for ReCAPConfig; known: context_drop, context_overflow, demo_observations, "
-            "json_mode, max_episode_cost_usd, max_episode_tokens, max_json_repairs, max_level, max_llm_calls, max_tokens, "
-            "name_only, reminder_on, reminder_period, reply_schema, shortcut, shortcut_trace, submit_at_limit, temperature, think, "
-            "tool_calls_per_reply, valid_actions, window, window_block, window_counts_pins, window_mode",
+            "methods[0] (recap): unknown setting(s) windw for ReCAPConfig; known: action_pattern, context_drop, "
+            "context_overflow, demo_observations, final_answer, json_mode, max_episode_cost_usd, max_episode_tokens, "
+            "max_json_repairs, max_level, max_llm_calls, max_tokens, name_only, observation_drop, pin_task, reminder_on, "
+            "reminder_period, reply_schema, resend_bad_replies, safety_steps, shortcut, shortcut_trace, submit_at_limit, temperature, "
+            "think, tool_calls_per_reply, valid_actions, window, window_block, window_counts_pins, window_mode",
         ),
         (
             ("- method: recap", "- method: recap\n    ablation: level_9"),

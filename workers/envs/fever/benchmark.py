@@ -128,7 +128,8 @@ class FeverBenchmark(Benchmark):
 
     def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
         """CoT and Standard (a plan config) give only the verdict (:func:`.protocol.verdict_only`)."""
-        return {protocol.VERDICT_ONLY: True} if protocol.verdict_only(config) else {}
+        options = {protocol.VERDICT_ONLY: True} if protocol.verdict_only(config) else {}
+        return {**options, **protocol.env_options(config)}  # ReCAP released: its safety bound
 
     def refuses_method(self, method: str) -> str | None:
         """ADaPT: the paper has no FEVER number (:func:`.protocol.refusal`)."""

@@ -27,9 +27,17 @@ def test_released_profile_settings_follow_the_release_and_paper_keeps_its_own():
         32,
         True,
         32,
-        None,
+        10,  # fever-recap/MATRIX/MATRIX/chatbot.py:352-360 re-sends the rules every 10th call
         None,
     )
+    assert (recap.reminder_on, recap.pin_task, recap.think, recap.final_answer, recap.safety_steps) == (
+        "nth_call",
+        False,
+        "many",
+        True,
+        50,
+    )
+    assert BENCHMARK.options_for_agent("recap", recap) == {"max_steps": 50}
     react = agent("react", "released").config
     assert (react.history, react.temperature, react.reply_format) == ("all", None, "json")
     act = agent("act", "released").config
