@@ -120,6 +120,12 @@ def test_mismatch_names_the_first_protocol_difference():
     fever = _arm(benchmark="fever", split="dev", tasks=labels, episodes=200)
     assert paper.mismatch(main, fever) is None
     assert paper.mismatch(main, _arm(benchmark="fever", split="dev", tasks=labels, episodes=3)) == ("3 claims, the paper ran 200")
+    # FEVER's numbers came from the released code: ReCAP's released window (32 messages,
+    # chatbot.py:42-44) is the paper's there; the notebooks' ReAct keeps its whole history
+    released = dict(benchmark="fever", split="dev", tasks=labels, episodes=200, profile="released")
+    assert paper.mismatch(main, _arm(windows=(32,), **released)) is None
+    assert paper.mismatch(main, _arm(windows=(128,), **released)) == "window 128 messages, the paper used 32"
+    assert paper.mismatch(main, _arm(method="react", windows=(100000,), **released)) is None
     assert paper.main_reference("fever/dev", "recap") == 63.5 and paper.main_reference("fever/dev", "adapt") is None
     alf = _arm(benchmark="alfworld", split="valid_unseen", tasks=tuple((t, (4.0,)) for t in paper.ALFWORLD_TYPES))
     assert paper.mismatch(main, alf) is None
