@@ -325,7 +325,7 @@ class SweEnvironment(Environment):
 
     def _evaluate(self, diff: str) -> Evaluation:
         """The verdict on ``diff``: our evaluation in a clean copy, graded per ``grading`` (:mod:`.evaluate`)."""
-        return evaluate(self.instance, diff, self._open_clean, grading=self.grading)
+        return evaluate(self.instance, diff, self._open_clean, grading=self.grading, eval_timeout_s=self.eval_timeout_s)
 
     def _verdict_info(self, ev: Evaluation) -> dict[str, Any]:
         """The verdict in the step's info: the deciding one (``resolved``, ``eval_reason``) and,

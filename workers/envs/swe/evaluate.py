@@ -9,7 +9,14 @@ a file in ``.git`` (a command's output cap would cut pytest's summary, which com
 test's status from pytest's ``-rA`` short summary. Resolved iff every FAIL_TO_PASS test passed
 (``PASSED`` or ``XFAIL``) and every PASS_TO_PASS test passed or was skipped, as the harness counts
 them (swebench/harness/grading.py ``test_passed``, ``test_maintained``). A test run past
-``eval_timeout_s`` is not resolved.
+``eval_timeout_s`` (the environment's option, else the instance's) is not resolved.
+
+An instance whose SWE-bench record is known (``swe-verified``) is evaluated as the harness does
+instead (``eval_script``, :mod:`.harness_script`): the model's diff applied with the harness's
+``GIT_APPLY_CMDS``, then the harness's own eval script (conda activation, the test patch, the
+repository's test command on the test patch's directives, the markers) run whole, its output kept;
+the tests' part of it (between the markers) is what both graders read (:func:`read_tests`). Only
+a user's task (``benchmark: swe``, no record) runs ``test_cmd -rA <ids>``.
 
 The same test log is also graded by the official harness's own functions (:mod:`.grading`,
 ``grading`` ``both``, the default, or ``official``): :attr:`Evaluation.success` is the official
@@ -32,6 +39,7 @@ from schemas.records import EVALUATION_LOG_CAP, EvaluationRecord
 from workers.sandbox.base import Sandbox
 
 from .grading import DEFAULT_GRADING, Grading, OfficialGrade, harness_statuses, official_grade, official_problem
+from .harness_script import apply_commands
 from .instances import SweInstance
 from .test_log import harness_test_section, read_pytest_log
 
@@ -51,6 +59,8 @@ LOG_CAP = EVALUATION_LOG_CAP
 MODEL_PATCH_FILE = ".git/recap-eval-model.patch"
 TEST_PATCH_FILE = ".git/recap-eval-test.patch"
 TEST_LOG_FILE = ".git/recap-eval-tests.log"
+#: the harness's eval script, where the evaluation runs it (the harness copies it to ``/eval.sh``)
+EVAL_SCRIPT_FILE = ".git/recap-eval-eval.sh"
 _DIFF_FILE = re.compile(r"^diff --git a/(.+?) b/(.+)$")
 
 
@@ -157,8 +167,12 @@ def _apply(sandbox: Sandbox, patch: str, file: str, log: list[str], what: str) -
     return False
 
 
-def eval_command(instance: SweInstance) -> str:
-    """The command the evaluation runs: ``test_cmd -rA`` and every listed node id, quoted."""
+def eval_command(instance: SweInstance, eval_script: str | None = None) -> str:
+    """The command the evaluation runs: with the harness's eval script (written to
+    :data:`EVAL_SCRIPT_FILE`), ``/bin/bash`` on it as the harness runs ``/eval.sh``; else (a user's
+    task) ``test_cmd -rA`` and every listed node id, quoted."""
+    if eval_script is not None:
+        return f"/bin/bash {EVAL_SCRIPT_FILE}"
     ids = " ".join(shlex.quote(t) for t in (*instance.fail_to_pass, *instance.pass_to_pass))
     return f"{instance.test_cmd} -rA {ids}"
 
@@ -176,13 +190,18 @@ def evaluate(
     open_clean_sandbox: Callable[[], Sandbox],
     *,
     grading: Grading = DEFAULT_GRADING,
+    eval_timeout_s: float | None = None,
+    eval_script: str | None = None,
 ) -> Evaluation:
     """The verdict on ``model_patch`` for ``instance`` (see the module docstring); the sandbox
     ``open_clean_sandbox`` gives is closed before this returns. A sandbox failure raises SandboxError.
     ``grading``: ``ours``, ``official`` or ``both`` (:mod:`.grading`); ``both`` without the
-    ``swebench`` package grades with ours alone (a warning says so)."""
+    ``swebench`` package grades with ours alone (a warning says so). ``eval_timeout_s``: the test
+    run's bound (default: the instance's). ``eval_script``: the harness's eval script of the
+    instance (:func:`.harness_script.eval_script`), run instead of ``test_cmd -rA <ids>``."""
     started = time.monotonic()
-    ev = _evaluate(instance, model_patch, open_clean_sandbox)
+    timeout_s = eval_timeout_s if eval_timeout_s is not None else instance.eval_timeout_s
+    ev = _evaluate(instance, model_patch, open_clean_sandbox, timeout_s=timeout_s, eval_script=eval_script)
     official: OfficialGrade | None = None
     if grading != "ours":
         problem = official_problem()
@@ -248,11 +267,21 @@ def _warn_once(problem: str) -> None:
         log.warning("grading 'both': only our evaluation runs: %s", problem)
 
 
-def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Callable[[], Sandbox]) -> Evaluation:
-    """Our evaluation (the module docstring), the test run's output kept whole in ``test_output``."""
+def _evaluate(
+    instance: SweInstance,
+    model_patch: str,
+    open_clean_sandbox: Callable[[], Sandbox],
+    *,
+    timeout_s: float,
+    eval_script: str | None = None,
+) -> Evaluation:
+    """Our evaluation (the module docstring), the test run's output kept whole in ``test_output``
+    (with the harness's eval script: the script's whole output, :func:`_evaluate_script`)."""
     wanted = (*instance.fail_to_pass, *instance.pass_to_pass)
     if not model_patch.strip():
         return Evaluation(False, "no_patch", {t: MISSING for t in wanted}, "")
+    if eval_script is not None:
+        return _evaluate_script(instance, model_patch, open_clean_sandbox, timeout_s=timeout_s, eval_script=eval_script)
     log: list[str] = []
     with open_clean_sandbox() as sandbox:
         if not _apply(sandbox, model_patch, MODEL_PATCH_FILE, log, "the model's patch"):
@@ -264,7 +293,7 @@ def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Calla
         if instance.test_patch.strip() and not _apply(sandbox, instance.test_patch, TEST_PATCH_FILE, log, "the test patch"):
             return _logged(Evaluation(False, "patch_failed", {t: MISSING for t in wanted}), log)
         cmd = eval_command(instance)
-        res = sandbox.run(f"{cmd} > {TEST_LOG_FILE} 2>&1", timeout_s=instance.eval_timeout_s)
+        res = sandbox.run(f"{cmd} > {TEST_LOG_FILE} 2>&1", timeout_s=timeout_s)
         try:
             output = sandbox.read_file(TEST_LOG_FILE).decode("utf-8", errors="replace")
         except FileNotFoundError:
@@ -276,6 +305,54 @@ def _evaluate(instance: SweInstance, model_patch: str, open_clean_sandbox: Calla
     resolved = ours_resolved(instance, tests)
     reason: EvalReason = "resolved" if resolved else "tests_failed"
     return _logged(Evaluation(resolved, reason, tests, test_output=output, exit_code=res.exit_code), log)
+
+
+def _apply_as_harness(sandbox: Sandbox, patch: str, log: list[str]) -> bool:
+    """The model's diff applied as the harness applies it (``run_instance``): written as it is,
+    then each of its ``GIT_APPLY_CMDS`` in turn until one succeeds, nothing undone between tries."""
+    sandbox.write_file(MODEL_PATCH_FILE, patch.encode("utf-8"))
+    for cmd in apply_commands():
+        res = sandbox.run(f"{cmd} {MODEL_PATCH_FILE}")
+        log.append(f"$ {cmd} {MODEL_PATCH_FILE}  # the model's patch\n{res.output.rstrip()}\n[exit {res.exit_code}]")
+        if res.exit_code == 0:
+            return True
+    return False
+
+
+def _evaluate_script(
+    instance: SweInstance,
+    model_patch: str,
+    open_clean_sandbox: Callable[[], Sandbox],
+    *,
+    timeout_s: float,
+    eval_script: str,
+) -> Evaluation:
+    """The harness's evaluation in our clean sandbox (:mod:`.harness_script`): the diff applied
+    as it applies it, its eval script run whole (output to :data:`TEST_LOG_FILE`, bounded by
+    ``timeout_s``); that output, kept whole in ``test_output`` as the harness keeps its
+    ``test_output.txt``, is read as the harness reads it (:func:`read_tests`: the part between its
+    markers, by the repository's parser) here and by the official grading in :func:`evaluate`
+    (which keeps its markers). The script's exit status is its last command's (the test files
+    put back), not the tests': ``exit_code`` stays None."""
+    wanted = (*instance.fail_to_pass, *instance.pass_to_pass)
+    log: list[str] = []
+    with open_clean_sandbox() as sandbox:
+        if not _apply_as_harness(sandbox, model_patch, log):
+            return _logged(Evaluation(False, "patch_failed", {t: MISSING for t in wanted}), log)
+        sandbox.write_file(EVAL_SCRIPT_FILE, eval_script.encode("utf-8"))
+        cmd = eval_command(instance, eval_script)
+        res = sandbox.run(f"{cmd} > {TEST_LOG_FILE} 2>&1", timeout_s=timeout_s)
+        try:
+            output = sandbox.read_file(TEST_LOG_FILE).decode("utf-8", errors="replace")
+        except FileNotFoundError:
+            output = res.output
+        log.append(f"$ {cmd}\n{output.rstrip()}\n[exit {res.exit_code}{', timed out' if res.timed_out else ''}]")
+    tests = read_tests(instance, output)
+    if res.timed_out:
+        return _logged(Evaluation(False, "timeout", tests, test_output=output), log)
+    resolved = bool(harness_test_section(output)) and ours_resolved(instance, tests)
+    reason: EvalReason = "resolved" if resolved else "tests_failed"
+    return _logged(Evaluation(resolved, reason, tests, test_output=output), log)
 
 
 def _logged(ev: Evaluation, log: list[str]) -> Evaluation:

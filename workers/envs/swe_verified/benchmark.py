@@ -9,9 +9,11 @@ Options of :meth:`VerifiedBenchmark.make` (and a sweep's ``environments[].option
 ``sandbox`` (``docker`` only: the instance's image is a Docker image); ``network``;
 ``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``, ``disk_bytes`` (the
 repository folder's cap, default :data:`DEFAULT_DISK_BYTES`: the harness's repositories are larger
-than the example tasks), ``total_output_bytes``, ``eval_timeout_s``; ``grading`` (``both``, the default, ``ours``, ``official``, or
-``harness``: the harness's own run_evaluation in the instance's image decides,
-:mod:`.harness_eval`); ``step_multiplier``/``seed``
+than the example tasks), ``total_output_bytes``, ``eval_timeout_s`` (the test run's bound under every grading); ``grading``
+(``harness``, the default: the harness's own run_evaluation in the instance's image decides,
+:mod:`.harness_eval`, as published SWE-bench numbers are made; ``both``, ``ours``, ``official``: the
+harness's eval script runs in our clean copy of the image, its log graded by the harness's parser
+and ours, see :mod:`workers.envs.swe.harness_script`); ``step_multiplier``/``seed``
 (no effect); ``open_sandbox``/``sandbox_labels`` (as for ``swe``).
 
 The methods, profiles and leftover removal are the ``swe`` benchmark's (this class extends it).
@@ -37,7 +39,7 @@ from recap.env import Environment, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
 from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
 from workers.envs.swe.env import DEFAULT_TOTAL_OUTPUT_BYTES
-from workers.envs.swe.grading import DEFAULT_GRADING, GRADINGS, Grading, check_grading
+from workers.envs.swe.grading import GRADINGS, Grading, check_grading
 from workers.envs.swe.instances import SweInstance
 from workers.sandbox.base import SandboxError, SandboxLimits, episode_failure
 
@@ -52,6 +54,8 @@ from .release_container import ReleaseEnvironment, agent_options, missing_image,
 
 #: the grading modes here: the coding env's three, and the harness's own full evaluation
 VERIFIED_GRADINGS: tuple[Grading, ...] = (*GRADINGS, HARNESS_GRADING)
+#: the default: the harness's own evaluation decides, as for a leaderboard submission
+VERIFIED_DEFAULT_GRADING: Grading = HARNESS_GRADING
 #: the repository folder's size cap (the harness's repositories with their builds run to a few hundred MB)
 DEFAULT_DISK_BYTES = 4 << 30
 _LIMITS = ("command_timeout_s", "output_bytes", "max_commands", "wall_time_s", "disk_bytes")
@@ -221,7 +225,7 @@ class VerifiedBenchmark(SweBenchmark):
             release.check_source(rec["repo"])
             if opener is None and (refusal := missing_image(release, local_images())) is not None:
                 raise SandboxError(refusal)
-        grading = check_grading(options.get("grading", DEFAULT_GRADING), VERIFIED_GRADINGS)
+        grading = check_grading(options.get("grading", VERIFIED_DEFAULT_GRADING), VERIFIED_GRADINGS)
         return (VerifiedEnvironment if release is None else partial(ReleaseEnvironment, release=release))(
             inst,
             opener if opener is not None else default_open_sandbox(kind),

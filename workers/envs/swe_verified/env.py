@@ -10,7 +10,9 @@ submission, evaluation - is the same class):
   harness's install step edits some repositories' files in the image (sphinx's ``tox.ini``...),
   and those edits are not the model's; the evaluation's clean copy starts from the same image, so
   the diff applies there;
-* the expert reads the base commit's files from the sandbox (there is no repository on the host).
+* the expert reads the base commit's files from the sandbox (there is no repository on the host);
+* the evaluation is the harness's under every grading (:meth:`VerifiedEnvironment._evaluate`): its
+  eval script, not ``test_cmd -rA <ids>`` (which Django's and SymPy's runners refuse).
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ from typing import Any
 
 from recap.env import EnvError, Reset
 from workers.envs.swe.env import SUBMISSION_FILE, SweEnvironment
-from workers.envs.swe.evaluate import Evaluation
+from workers.envs.swe.evaluate import Evaluation, evaluate
+from workers.envs.swe.harness_script import HarnessScriptError, eval_script
 from workers.sandbox.base import SandboxError
 from workers.sandbox.docker_sandbox import BASE_ENV
 
@@ -69,10 +72,20 @@ class VerifiedEnvironment(SweEnvironment):
         return box.read_file(SUBMISSION_FILE).decode("utf-8", errors="replace")
 
     def _evaluate(self, diff: str) -> Evaluation:
-        """``grading: harness``: a diff goes to the harness's own run_evaluation (:mod:`.harness_eval`)
-        instead of our clean copy (an empty one is judged as in every mode: no patch)."""
+        """The harness's evaluation of ``diff`` under every grading, bounded by ``eval_timeout_s``:
+        ``harness``: the harness's own run_evaluation (:mod:`.harness_eval`); ``ours``, ``official``,
+        ``both``: its eval script in our clean copy of the image (:mod:`workers.envs.swe.harness_script`),
+        the log graded by the harness's parser and/or ours. An empty diff is judged as in every mode: no patch."""
         if self.grading != HARNESS_GRADING or not diff.strip():
-            return super()._evaluate(diff)
+            script = self._eval_script()
+            return evaluate(
+                self.instance,
+                diff,
+                self._open_clean,
+                grading=self.grading,
+                eval_timeout_s=self.eval_timeout_s,
+                eval_script=script,
+            )
         started = time.monotonic()
         run = run_harness(
             self.record,
@@ -83,6 +96,17 @@ class VerifiedEnvironment(SweEnvironment):
         )
         ev = harness_evaluation(self.instance, run)
         return replace(ev, pass_to_pass=self.instance.pass_to_pass, duration_s=time.monotonic() - started)
+
+    def _eval_script(self) -> str | None:
+        """The harness's eval script of the record; None (the instance's ``test_cmd -rA <ids>``, as
+        for a user's task) where the harness has no specs for its repository and version - which
+        :meth:`~.benchmark.VerifiedBenchmark.make` refuses, so only a test's fixture table gets here."""
+        if not self.record:
+            return None
+        try:
+            return eval_script(self.record)
+        except HarnessScriptError:
+            return None
 
     def _base_text(self, path: str) -> str:
         box = self._box()

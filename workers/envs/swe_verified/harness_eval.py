@@ -1,9 +1,10 @@
-"""``grading: harness``: the SWE-bench harness's own full Docker evaluation of a submission.
+"""``grading: harness`` (swe-verified's default): the SWE-bench harness's own full Docker evaluation of a submission.
 
-The default grading (``both``) runs the tests in a clean copy of the episode's image with our
-evaluator and grades that log with the harness's functions (:mod:`workers.envs.swe.grading`).
-This mode hands the diff to the harness itself, as a leaderboard submission is evaluated: the
-``swebench`` package's ``python -m swebench.harness.run_evaluation`` on a one-line predictions
+The other gradings (``both``, ``ours``, ``official``) run the harness's eval script in a clean copy
+of the episode's image with our evaluator (:mod:`workers.envs.swe.harness_script`) and grade that
+log with the harness's functions (:mod:`workers.envs.swe.grading`) and/or ours. This mode hands
+the diff to the harness itself, as a leaderboard submission is evaluated: the ``swebench``
+package's ``swebench.harness.run_evaluation`` (:data:`_RUN_EVALUATION`) on a one-line predictions
 file and a one-record dataset file (the stored record, so no hub is needed), which starts the
 instance's container from its image (the published ``swebench/...`` image when that is what is
 here - ``--namespace swebench`` -, else the one the harness built - ``--namespace none``, its own
@@ -24,6 +25,7 @@ crashes is bounded by a timeout and cannot take the episode worker with it.
 from __future__ import annotations
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -47,6 +49,24 @@ HARNESS_GRADING: Grading = "harness"
 MODEL_NAME = "recap-eval"
 #: seconds the harness may take beyond the test timeout (container start, patch, grading)
 HARNESS_GRACE_S = 600.0
+#: ``python -m swebench.harness.run_evaluation`` as is, but for one thing when the published image
+#: is used (its first argument ``published``): ``make_test_spec`` also builds the environment
+#: script, fetching requirements.txt / environment.yml from GitHub for most repositories (Django's
+#: all), which offline fails before any container starts; with a published image that script is
+#: never run (the harness takes the image as it is), so those two fetches return a note instead.
+#: With a local build (``--namespace none``) nothing is replaced: the harness names the
+#: environment image it needs by a hash of that script.
+_RUN_EVALUATION = """
+import runpy, sys, warnings
+warnings.filterwarnings("ignore", message=".*found in sys.modules.*", category=RuntimeWarning)
+if sys.argv.pop(1) == "published":
+    from swebench.harness.test_spec import python as specs
+    note = "# recap-eval: not fetched; the published instance image holds the environment"
+    specs.get_requirements = lambda instance: note
+    specs.get_environment_yml = lambda instance, env_name: note
+sys.argv[0] = "run_evaluation"
+runpy.run_module("swebench.harness.run_evaluation", run_name="__main__", alter_sys=True)
+"""
 #: what the harness logs when the patch does not apply or the tests time out
 #: (swebench.harness.constants, run_evaluation.py)
 _APPLY_FAIL, _TIMED_OUT = ">>>>> Patch Apply Failed", "Test timed out after"
@@ -108,7 +128,9 @@ def namespace_for(image: str) -> str:
 
 
 def run_harness(record: Mapping[str, Any], patch: str, *, run_id: str, namespace: str, timeout_s: float) -> HarnessRun:
-    """``run_evaluation`` for one instance and one patch in a temporary folder (module docstring).
+    """``run_evaluation`` for one instance and one patch in a temporary folder (module docstring),
+    its ``--timeout`` (the eval script's bound inside the harness) ``timeout_s``, the episode's
+    ``eval_timeout_s``; the process itself is bounded by ``timeout_s`` + :data:`HARNESS_GRACE_S`.
     RuntimeError (one line) when the process cannot be started or runs past its bound."""
     iid = str(record["instance_id"])
     with tempfile.TemporaryDirectory(prefix="recap-eval-harness-") as tmp:
@@ -118,8 +140,9 @@ def run_harness(record: Mapping[str, Any], patch: str, *, run_id: str, namespace
         (folder / "predictions.jsonl").write_text(json.dumps(pred) + "\n")
         cmd = [
             sys.executable,
-            "-m",
-            "swebench.harness.run_evaluation",
+            "-c",
+            _RUN_EVALUATION,
+            "published" if namespace != "none" else "local",
             "--dataset_name",
             str(folder / "instance.json"),
             "--split",
@@ -133,7 +156,7 @@ def run_harness(record: Mapping[str, Any], patch: str, *, run_id: str, namespace
             "--run_id",
             run_id,
             "--timeout",
-            str(max(1, int(timeout_s))),
+            str(max(1, math.ceil(timeout_s))),
             "--namespace",
             namespace,
             "--cache_level",

@@ -1,4 +1,5 @@
-"""One swe-verified episode in a harness-named image that holds the repository at /testbed, played to ``resolved``."""
+"""One swe-verified episode in a harness-named image that holds the repository at /testbed, played to ``resolved``
+(graded by the harness's eval script run in our clean container)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,13 @@ from collections.abc import Iterator
 import pytest
 
 from workers.envs.registry import make_env
-from workers.envs.swe.examples import TEST_CMD
 from workers.envs.swe_verified import images
 
 from .conftest import built_image, write_jsonl
+
+#: the ``/opt/miniconda3/bin/activate`` the harness's eval script sources: a shell function
+#: standing in for conda (the image has one Python), as in test_harness_eval.py
+CONDA = "ENV PYTHONPATH=/testbed\nRUN mkdir -p /opt/miniconda3/bin && printf 'conda() { :; }\\n' > /opt/miniconda3/bin/activate\n"
 
 
 @pytest.fixture
@@ -21,27 +25,29 @@ def instance_image(docker_ready: str, verified_fixtures, records, tmp_path) -> I
     """A record with a unique id and its image, named as the harness names a local build:
     ``FROM`` the sandbox image, the fixture repository at ``/testbed`` at the base commit. Removed afterwards."""
     number = str(secrets.randbelow(10**9) + 10**9)
-    rec = {**records[0], "instance_id": f"fixture__offbyone-{number}"}
+    rec = {**records[0], "instance_id": f"pytest-dev__pytest-{number}"}
+    # filed under a repository the harness knows: its specs give the eval script every grading runs
+    rec.update(repo="pytest-dev/pytest", version="7.0")
     name = images.local_image(rec["instance_id"])
-    with built_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name):
+    with built_image(docker_ready, verified_fixtures.tasks_file.parent / "repos" / "offbyone", name, CONDA):
         yield name, rec
 
 
 @pytest.mark.docker
-def test_expert_resolves_in_the_instance_image(instance_image, tmp_path, cache, monkeypatch) -> None:
+def test_expert_resolves_in_the_instance_image(instance_image, tmp_path, cache) -> None:
     name, rec = instance_image
     src = write_jsonl(tmp_path / "one.jsonl", [rec])
     from pipeline.cli import main
 
     assert main(["data", "fetch", "swebench-verified", "--from", str(src), "--subset"]) == 0
-    # the harness's table knows no fixture repository: the test command is the example tasks'
-    monkeypatch.setattr("workers.envs.swe_verified.harness._specs", lambda: {"fixture/offbyone": {"0.1": {"test_cmd": TEST_CMD}}})
     from workers.envs.registry import get_benchmark
 
     bench = get_benchmark("swe-verified")
     iid = f"swe-verified/{rec['instance_id']}"
     assert bench.preflight([iid], {}) is None
-    env = make_env(iid, command_timeout_s=30)
+    # our evaluator runs the harness's eval script in a clean container of the image (a local
+    # build's name: the harness itself would want the environment image it was built from)
+    env = make_env(iid, command_timeout_s=30, grading="both")
     try:
         first = env.reset()
         assert first.observation == rec["problem_statement"]
@@ -59,6 +65,19 @@ def test_expert_resolves_in_the_instance_image(instance_image, tmp_path, cache, 
                 break
         assert calls == ["view", "str_replace", "bash", "submit", "submit"]
         assert step.success and step.info["resolved"] is True and step.info["eval_reason"] == "resolved"
+        assert step.info["official_status"] == "RESOLVED_FULL"
+        assert step.info["tests"] == {
+            "tests/test_mathutil.py::test_count_range_inclusive": "PASSED",
+            "tests/test_mathutil.py::test_total": "PASSED",
+        }
+        (record,) = env.take_records("ep-1", "run-1")
+        assert (record.grading, record.graded_by, record.ours_resolved, record.official_resolved) == (
+            "both",
+            "official",
+            True,
+            True,
+        )
+        assert "+ pytest -rA tests/test_mathutil.py\n" in record.log  # the harness's eval script ran
         assert step.info["patch"] == rec["patch"]
         assert env.instance_id == iid
     finally:
@@ -68,14 +87,13 @@ def test_expert_resolves_in_the_instance_image(instance_image, tmp_path, cache, 
 
 
 @pytest.mark.docker
-def test_an_image_at_another_commit_is_refused(instance_image, tmp_path, cache, monkeypatch) -> None:
+def test_an_image_at_another_commit_is_refused(instance_image, tmp_path, cache) -> None:
     name, rec = instance_image
     other = {**rec, "base_commit": "0" * 40}
     src = write_jsonl(tmp_path / "one.jsonl", [other])
     from pipeline.cli import main
 
     assert main(["data", "fetch", "swebench-verified", "--from", str(src), "--subset"]) == 0
-    monkeypatch.setattr("workers.envs.swe_verified.harness._specs", lambda: {"fixture/offbyone": {"0.1": {"test_cmd": TEST_CMD}}})
     env = make_env(f"swe-verified/{rec['instance_id']}")
     from recap.env import EnvError
 

@@ -201,7 +201,8 @@ def test_a_release_episode_runs_at_the_base_commit_and_its_diff_is_graded_in_the
         return open_sandbox("local", spec)
 
     iid = f"swe-verified/{stored['instance_id']}"
-    env = make_env(iid, container="release", repo_mirror=str(mirror), open_sandbox=opener, command_timeout_s=30)
+    # grading both: our evaluator in the (stand-in) harness spec; the harness's own run needs Docker
+    env = make_env(iid, container="release", repo_mirror=str(mirror), open_sandbox=opener, command_timeout_s=30, grading="both")
     assert isinstance(env, ReleaseEnvironment)
     try:
         assert env.workdir == "/fixture__offbyone"
@@ -267,7 +268,8 @@ def test_an_episode_runs_in_the_release_container_at_the_base_commit_and_is_grad
     options = {"container": "release", "release_image": base, "repo_mirror": str(mirror)}
     assert bench.preflight([iid], options) is None
     assert "which is not here" in str(bench.preflight([iid], {**options, "release_image": base + "-missing"}))
-    env = make_env(iid, command_timeout_s=30, **options)
+    # grading both: the fixture's repository is no SWE-bench repository, which the harness's own run needs
+    env = make_env(iid, command_timeout_s=30, grading="both", **options)
     try:
         env.reset()
         box = env._box()  # type: ignore[attr-defined]
