@@ -7,7 +7,7 @@ without ``swe-verified/``). The records come from the data folder ``swebench-ver
 
 Options of :meth:`VerifiedBenchmark.make` (and a sweep's ``environments[].options``): ``data_dir``;
 ``sandbox`` (``docker`` only: the instance's image is a Docker image); ``network``;
-``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``, ``disk_bytes`` (the
+``command_timeout_s``, ``max_timeouts_in_row``, ``output_bytes``, ``max_commands``, ``wall_time_s``, ``disk_bytes`` (the
 repository folder's cap, default :data:`DEFAULT_DISK_BYTES`: the harness's repositories are larger
 than the example tasks), ``total_output_bytes``, ``eval_timeout_s`` (the test run's bound under every grading); ``grading``
 (``harness``, the default: the harness's own run_evaluation in the instance's image decides,
@@ -65,6 +65,7 @@ ACCEPTED = (
     "network",
     *_LIMITS,
     "total_output_bytes",
+    "max_timeouts_in_row",
     "eval_timeout_s",
     "grading",
     "step_multiplier",
@@ -199,6 +200,9 @@ class VerifiedBenchmark(SweBenchmark):
             **{k: _positive(k, options[k], float if k.endswith("_s") else int) for k in _LIMITS if k in options},
         )
         total = _positive("total_output_bytes", options.get("total_output_bytes", DEFAULT_TOTAL_OUTPUT_BYTES), int)
+        in_row = options.get("max_timeouts_in_row")
+        if in_row is not None:
+            in_row = _positive("max_timeouts_in_row", in_row, int)
         eval_timeout = options.get("eval_timeout_s")
         if eval_timeout is not None:
             eval_timeout = _positive("eval_timeout_s", eval_timeout, float)
@@ -235,6 +239,7 @@ class VerifiedBenchmark(SweBenchmark):
             limits=limits,
             image=image or "",
             total_output_bytes=total,
+            max_timeouts_in_row=in_row,
             eval_timeout_s=eval_timeout,
             labels=labels,
         )

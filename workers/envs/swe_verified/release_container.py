@@ -64,6 +64,12 @@ RELEASE_ENV: Mapping[str, str] = {
     "TQDM_DISABLE": "1",
     "GIT_PAGER": "cat",
 }
+#: the limits of SWE-agent's tool execution that swebench-recap ran ReCAP under (its
+#: ``ToolConfig`` defaults; ``config/recap.yaml`` sets none): 30 s per command
+#: (sweagent/tools/tools.py:139), 1800 s of commands in all (:145), the episode ended after 3
+#: commands in a row that timed out (:150). ReCAP's released settings (one tool call per reply,
+#: workers/envs/swe/benchmark.py RELEASED_RECAP) bring them unless the sweep sets its own
+RELEASE_TOOL_LIMITS: Mapping[str, Any] = {"command_timeout_s": 30.0, "wall_time_s": 1800.0, "max_timeouts_in_row": 3}
 #: the options this module reads (the benchmark accepts them)
 OPTIONS = ("container", "release_image", "repo_mirror")
 #: each method's container when the sweep sets none: the set-up its paper number came from
@@ -84,6 +90,8 @@ def agent_options(style: str, config: Any = None) -> dict[str, Any]:
     out: dict[str, Any] = {"container": default_container(style)}
     if style == "mini_swe" and getattr(config, "package_config", None) == "1.0.0":
         out["network"] = True
+    if style == "recap" and getattr(config, "tool_calls_per_reply", None) == "one":
+        out.update(RELEASE_TOOL_LIMITS)  # ReCAP as swebench-recap ran it (profile: released)
     return out
 
 

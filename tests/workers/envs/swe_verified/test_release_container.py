@@ -122,6 +122,25 @@ def test_each_method_defaults_to_the_set_up_of_its_paper_number() -> None:
     # mini-swe-agent 1.0.0 started the harness's image with Docker's default network
     assert bench.options_for_agent("mini_swe", released) == {"container": "harness", "network": True}
     assert bench.options_for_agent("mini_swe", paper) == {"container": "harness"}
+    # ReCAP as swebench-recap ran it: SWE-agent's tool limits (sweagent/tools/tools.py:139-150)
+    recap_released = make_agent("recap", profile="released", benchmark=bench).config
+    recap_paper = make_agent("recap", profile="paper", benchmark=bench).config
+    assert bench.options_for_agent("recap", recap_released) == {
+        "container": "release",
+        "command_timeout_s": 30.0,
+        "wall_time_s": 1800.0,
+        "max_timeouts_in_row": 3,
+    }
+    assert bench.options_for_agent("recap", recap_paper) == {"container": "release"}
+
+
+def test_max_timeouts_in_row_reaches_the_verified_environment(stored) -> None:
+    """The release's ``max_consecutive_execution_timeouts`` (``max_timeouts_in_row``) is a
+    swe-verified option (it was refused as unknown) and reaches the environment."""
+    env = make_env(f"swe-verified/{stored['instance_id']}", open_sandbox=print, max_timeouts_in_row=3)
+    assert env.max_timeouts_in_row == 3
+    with pytest.raises(ValueError, match=r"^max_timeouts_in_row must be a positive integer, got 0$"):
+        make_env(f"swe-verified/{stored['instance_id']}", open_sandbox=print, max_timeouts_in_row=0)
 
 
 @pytest.mark.parametrize(
