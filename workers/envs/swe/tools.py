@@ -55,7 +55,8 @@ def tool_defs(workdir: str, limits: SandboxLimits) -> tuple[ToolDef, ...]:
             "background processes do not (whatever a command started is stopped when it returns). "
             f"A command is stopped after {limits.command_timeout_s:g} seconds, and the session then goes on as it was "
             f"before that command. The model sees at most {cap} bytes of its combined stdout and stderr; longer output "
-            "is cut and the cut is said. No network. Do not start interactive programs (editors, pagers, a Python prompt).",
+            f"is cut and the cut is said. {'The network is on.' if limits.network else 'No network.'} "
+            "Do not start interactive programs (editors, pagers, a Python prompt).",
             {
                 "type": "object",
                 "properties": {"command": {"type": "string", "description": "The command line to run."}},

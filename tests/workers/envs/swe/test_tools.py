@@ -30,9 +30,17 @@ def test_tool_definitions(env: SweEnvironment) -> None:
     assert defs["undo_edit"].parameters["required"] == ["path"]
     assert "stopped after 3 seconds" in defs["bash"].description
     assert "at most 200 bytes" in defs["bash"].description
+    assert "No network." in defs["bash"].description and "network is on" not in defs["bash"].description
+
     assert defs["view"].parameters["required"] == ["path"]
     assert defs["str_replace"].parameters["required"] == ["path", "old_str"]
     assert defs["submit"].parameters == {"type": "object", "properties": {}, "additionalProperties": False}
+
+
+def test_the_bash_tool_says_the_network_as_the_sandbox_has_it(swe_env: Callable[..., SweEnvironment]) -> None:
+    """The release's container has the network on: the tool must not say otherwise."""
+    on = {t.name: t for t in swe_env("twofiles", network=True).tool_defs()}["bash"].description
+    assert "The network is on." in on and "No network" not in on
 
 
 def test_bash_output_exit_code_and_info(env: SweEnvironment) -> None:
