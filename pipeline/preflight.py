@@ -54,6 +54,10 @@ def key_variables(m: ModelSpec) -> list[str]:
         return []
     if m.api_key_env:
         return [m.api_key_env]
+    # litellm imported before the environment is emptied: its import sets TIKTOKEN_CACHE_DIR (the
+    # bundled tokenizers), and a first import inside the patch would have that variable undone with
+    # the rest on exit, leaving the process to count OpenAI prompts by the estimate from then on
+    get_litellm()
     with mock.patch.dict(os.environ, {"LITELLM_LOCAL_MODEL_COST_MAP": "True"}, clear=True):
         return _litellm_missing_keys(m)
 

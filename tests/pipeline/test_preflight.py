@@ -4,6 +4,8 @@ one line before anything is written, not an ``env_error`` result that counts as 
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -192,3 +194,19 @@ def test_cli_refuses_a_unit_that_cannot_start(no_data, monkeypatch, capsys, argv
         assert err[0].startswith("recap: error: sweep.yaml: environments[0] (robotouille)")
         assert captured.out == ""
     assert not out.exists()
+
+
+def test_asking_litellm_for_key_names_first_keeps_the_bundled_tokenizer():
+    """A process whose first litellm import happened while preflight asked litellm for a
+    provider's key names (with the environment emptied) lost TIKTOKEN_CACHE_DIR when the
+    environment was restored, and counted OpenAI prompts by the estimate ever after (a fresh
+    interpreter, so the import really is the first)."""
+    code = (
+        "from pipeline.preflight import key_variables\n"
+        "from pipeline.spec import ModelSpec\n"
+        "from workers.llm.tokens import count_prompt_tokens\n"
+        "key_variables(ModelSpec(model='gpt-4o'))\n"
+        "print(count_prompt_tokens('openai/gpt-4o', [{'role': 'user', 'content': 'hi'}]).source)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False)
+    assert done.stdout.strip().splitlines()[-1:] == ["tokenizer"], done.stderr[-2000:]
