@@ -13,7 +13,8 @@ processes, and ``no-new-privileges``; the environment is only ``PATH``/``HOME``/
 repository is cloned on the host at ``base_commit`` (:mod:`workers.sandbox.repo_copy`), tarred
 and copied in with ``put_archive`` at ``spec.workdir``, ``.git`` included, and git gets a user. An image that holds
 the repository itself (``spec.repo_path`` None: the SWE-bench harness's images, ``/testbed``) gets
-nothing copied: git gets its user there, and the repository's HEAD must be ``spec.base_commit``.
+nothing copied: git gets its user there, and the repository's HEAD must be ``spec.base_commit`` or
+the harness's own commit on top of it (:func:`image_commit`).
 
 Disk: overlay2 on this host has no size quota, and a tmpfs work folder cannot receive
 ``put_archive`` (Docker copies under the mount, moby#22020) and would hold the repository in
@@ -37,7 +38,7 @@ import secrets
 import tarfile
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -86,6 +87,33 @@ def check_image(image: str, client: Any = None) -> None:
         client.images.get(image)
     except docker.errors.ImageNotFound:
         raise SandboxError(f"the sandbox image {image} is missing; build it with `bash scripts/build_sandbox_image.sh`") from None
+
+
+#: the subject of the commit the SWE-bench harness makes on top of the base commit when it builds an
+#: instance image (swebench 4.x ``harness/test_spec/python.py`` ``make_repo_script_list_py``: after
+#: the install, ``git commit --allow-empty -am SWE-bench``, so that a diff against HEAD holds only the
+#: user's changes; with ``-a`` that commit also holds what the install changed in tracked files)
+HARNESS_COMMIT_SUBJECT = "SWE-bench"
+
+
+def image_commit(run: Callable[[str], CommandResult], base_commit: str, where: str) -> str:
+    """The full hash of the commit an image's repository is at (``run`` runs a command in it), which
+    the episode's changes are measured against; SandboxError (one line, ``where`` names the
+    repository) unless it is ``base_commit`` itself or the SWE-bench harness's layout: one commit
+    with the subject :data:`HARNESS_COMMIT_SUBJECT` whose only parent is ``base_commit`` (the
+    harness's images: /testbed at the base commit plus that commit, whatever the install changed
+    in it). Any other commit - one more or less, another parent, another subject - is refused."""
+    res = run("git rev-parse --verify HEAD")
+    head = res.output.strip().splitlines()[-1:] if res.exit_code == 0 else []
+    if head and head[0].startswith(base_commit):
+        return head[0]
+    if head:
+        top = run("git log -1 --format=%P%n%s HEAD")
+        parents, _, subject = top.output.strip().partition("\n") if top.exit_code == 0 else ("", "", "")
+        if subject == HARNESS_COMMIT_SUBJECT and len(parents.split()) == 1 and parents.startswith(base_commit):
+            return head[0]
+    state = f"is at {head[0]}" if head else f"is not a git repository ({res.output.strip()[:120]})"
+    raise SandboxError(f"{where} {state}, not at base_commit {base_commit}")
 
 
 def truncate(data: bytes, cap: int) -> str:
@@ -167,14 +195,13 @@ class DockerSandbox(Sandbox):
             self.base_commit = self._image_commit(spec)
 
     def _image_commit(self, spec: SandboxSpec) -> str:
-        """The commit the image's repository is at, checked to be ``spec.base_commit``."""
-        res = self.run("git rev-parse --verify HEAD")
-        head = res.output.strip().splitlines()[-1:] if res.exit_code == 0 else []
-        if not head or not head[0].startswith(spec.base_commit):
+        """The commit the image's repository is at, checked by :func:`image_commit` (the sandbox is
+        closed when it is refused)."""
+        try:
+            return image_commit(self.run, spec.base_commit, f"{spec.workdir} in the image {spec.image}")
+        except SandboxError:
             self.close()
-            where = f"is at {head[0]}" if head else f"is not a git repository ({res.output.strip()[:120]})"
-            raise SandboxError(f"{spec.workdir} in the image {spec.image} {where}, not at base_commit {spec.base_commit}")
-        return head[0]
+            raise
 
     # -- commands -------------------------------------------------------------------------
 
