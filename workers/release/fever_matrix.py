@@ -110,15 +110,21 @@ def _returned(fn: ast.FunctionDef) -> ast.expr:
 def _empty_list_text(fn: ast.FunctionDef) -> str:
     """What the method shows for an empty remaining list: the string it assigns to
     ``remaining_subtask_str`` in that case (:207-210), else ``'\\n'.join([])``, nothing (:265)."""
-    for stmt in ast.walk(fn):
+    found = _string_assigned(fn, "remaining_subtask_str")
+    return found if found is not None else ""
+
+
+def _string_assigned(tree: ast.AST, name: str) -> str | None:
+    """The first string literal assigned to the variable ``name`` anywhere in ``tree``, or None."""
+    for node in ast.walk(tree):
         if (
-            isinstance(stmt, ast.Assign)
-            and any(isinstance(t, ast.Name) and t.id == "remaining_subtask_str" for t in stmt.targets)
-            and isinstance(stmt.value, ast.Constant)
-            and isinstance(stmt.value.value, str)
+            isinstance(node, ast.Assign)
+            and any(isinstance(t, ast.Name) and t.id == name for t in node.targets)
+            and isinstance(node.value, ast.Constant)
+            and isinstance(node.value.value, str)
         ):
-            return stmt.value.value
-    return ""
+            return node.value.value
+    return None
 
 
 def chatbot_templates(source: str) -> tuple[dict[str, str], dict[str, str]]:
@@ -172,15 +178,10 @@ def _appended_content(node: ast.AST) -> ast.expr | None:
 def first_observation(source: str) -> str:
     """The runner's observation before any step: the string ``run_hotpotqa`` first assigns to
     ``obs_str`` (hotpotqa_simulator.py:26)."""
-    for node in ast.walk(ast.parse(source)):
-        if (
-            isinstance(node, ast.Assign)
-            and any(isinstance(t, ast.Name) and t.id == "obs_str" for t in node.targets)
-            and isinstance(node.value, ast.Constant)
-            and isinstance(node.value.value, str)
-        ):
-            return node.value.value
-    raise FeverMatrixError(f"{SIMULATOR_PY}: no initial obs_str")
+    found = _string_assigned(ast.parse(source), "obs_str")
+    if found is None:
+        raise FeverMatrixError(f"{SIMULATOR_PY}: no initial obs_str")
+    return found
 
 
 def config_texts(source: str) -> tuple[str, str]:

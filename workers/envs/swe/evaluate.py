@@ -36,7 +36,7 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 from schemas.records import EVALUATION_LOG_CAP, EvaluationRecord
-from workers.sandbox.base import Sandbox
+from workers.sandbox.base import CommandResult, Sandbox
 
 from .grading import DEFAULT_GRADING, Grading, OfficialGrade, harness_statuses, official_grade, official_problem
 from .harness_script import apply_commands
@@ -292,19 +292,25 @@ def _evaluate(
                 sandbox.run(f"git checkout -q {shlex.quote(instance.base_commit)} -- {f} 2>/dev/null || rm -f {f}")
         if instance.test_patch.strip() and not _apply(sandbox, instance.test_patch, TEST_PATCH_FILE, log, "the test patch"):
             return _logged(Evaluation(False, "patch_failed", {t: MISSING for t in wanted}), log)
-        cmd = eval_command(instance)
-        res = sandbox.run(f"{cmd} > {TEST_LOG_FILE} 2>&1", timeout_s=timeout_s)
-        try:
-            output = sandbox.read_file(TEST_LOG_FILE).decode("utf-8", errors="replace")
-        except FileNotFoundError:
-            output = res.output
-        log.append(f"$ {cmd}\n{output.rstrip()}\n[exit {res.exit_code}{', timed out' if res.timed_out else ''}]")
+        res, output = _run_tests(sandbox, eval_command(instance), timeout_s, log)
     tests = read_tests(instance, output)
     if res.timed_out:
         return _logged(Evaluation(False, "timeout", tests, test_output=output, exit_code=res.exit_code), log)
     resolved = ours_resolved(instance, tests)
     reason: EvalReason = "resolved" if resolved else "tests_failed"
     return _logged(Evaluation(resolved, reason, tests, test_output=output, exit_code=res.exit_code), log)
+
+
+def _run_tests(sandbox: Sandbox, cmd: str, timeout_s: float, log: list[str]) -> tuple[CommandResult, str]:
+    """Run the evaluation's test command with its output in :data:`TEST_LOG_FILE` (read whole,
+    past the sandbox's per-command output cap), bounded by ``timeout_s``; logged to ``log``."""
+    res = sandbox.run(f"{cmd} > {TEST_LOG_FILE} 2>&1", timeout_s=timeout_s)
+    try:
+        output = sandbox.read_file(TEST_LOG_FILE).decode("utf-8", errors="replace")
+    except FileNotFoundError:
+        output = res.output
+    log.append(f"$ {cmd}\n{output.rstrip()}\n[exit {res.exit_code}{', timed out' if res.timed_out else ''}]")
+    return res, output
 
 
 def _apply_as_harness(sandbox: Sandbox, patch: str, log: list[str]) -> bool:
@@ -340,13 +346,7 @@ def _evaluate_script(
         if not _apply_as_harness(sandbox, model_patch, log):
             return _logged(Evaluation(False, "patch_failed", {t: MISSING for t in wanted}), log)
         sandbox.write_file(EVAL_SCRIPT_FILE, eval_script.encode("utf-8"))
-        cmd = eval_command(instance, eval_script)
-        res = sandbox.run(f"{cmd} > {TEST_LOG_FILE} 2>&1", timeout_s=timeout_s)
-        try:
-            output = sandbox.read_file(TEST_LOG_FILE).decode("utf-8", errors="replace")
-        except FileNotFoundError:
-            output = res.output
-        log.append(f"$ {cmd}\n{output.rstrip()}\n[exit {res.exit_code}{', timed out' if res.timed_out else ''}]")
+        res, output = _run_tests(sandbox, eval_command(instance, eval_script), timeout_s, log)
     tests = read_tests(instance, output)
     if res.timed_out:
         return _logged(Evaluation(False, "timeout", tests, test_output=output), log)

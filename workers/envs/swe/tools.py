@@ -295,20 +295,20 @@ def run_bash(sandbox: Sandbox, limits: SandboxLimits, command: str, session: She
     )
 
 
-def _read_text(sandbox: Sandbox, rel: str, shown: str) -> tuple[str | None, ToolOutcome | None]:
-    """A file's text, or the refusal saying why it cannot be had (missing, a folder, not UTF-8)."""
+def _read_text(sandbox: Sandbox, rel: str, shown: str, *, tool: str) -> str | ToolOutcome:
+    """A file's text, or ``tool``'s refusal saying why it cannot be had (missing, a folder, not UTF-8)."""
     try:
         data = sandbox.read_file(rel)
     except FileNotFoundError:
-        return None, refused(f"{shown} does not exist")
+        return refused(f"{tool}: {shown} does not exist")
     except IsADirectoryError:
-        return None, refused(f"{shown} is a directory")
+        return refused(f"{tool}: {shown} is a directory")
     except PermissionError:
-        return None, refused(f"{shown} cannot be read (permission denied)")
+        return refused(f"{tool}: {shown} cannot be read (permission denied)")
     try:
-        return data.decode("utf-8"), None
+        return data.decode("utf-8")
     except UnicodeDecodeError:
-        return None, refused(f"{shown} is not a UTF-8 text file")
+        return refused(f"{tool}: {shown} is not a UTF-8 text file")
 
 
 def _finish(out: ToolOutcome, limits: SandboxLimits, started: float) -> ToolOutcome:
@@ -405,12 +405,9 @@ def run_str_replace(
     shown = shown_path(sandbox.workdir, rel)
     if not old_str:
         return refused("str_replace: old_str is empty")
-    text, problem = _read_text(sandbox, rel, shown)
-    if text is None:
-        assert problem is not None
-        problem.error = f"str_replace: {problem.error}"
-        problem.observation = f"Error: {problem.error}"
-        return problem
+    text = _read_text(sandbox, rel, shown, tool="str_replace")
+    if isinstance(text, ToolOutcome):
+        return text
     count = text.count(old_str)
     if count == 0:
         return refused(f"str_replace: old_str does not occur in {shown} (it must match exactly, whitespace included)")
@@ -474,12 +471,9 @@ def run_insert(
     if rel is None:
         return refused(f"insert: {path} is outside the repository {sandbox.workdir}")
     shown = shown_path(sandbox.workdir, rel)
-    text, problem = _read_text(sandbox, rel, shown)
-    if text is None:
-        assert problem is not None
-        problem.error = f"insert: {problem.error}"
-        problem.observation = f"Error: {problem.error}"
-        return problem
+    text = _read_text(sandbox, rel, shown, tool="insert")
+    if isinstance(text, ToolOutcome):
+        return text
     lines = _lines(text)
     if not 0 <= insert_line <= len(lines):
         return refused(f"insert: insert_line {insert_line} is outside {shown}, which has {len(lines)} lines (0 to {len(lines)})")
