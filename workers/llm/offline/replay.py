@@ -10,8 +10,8 @@ window was answered several times, the answer recorded under the same call key i
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 
 from schemas.parts import read_table
@@ -70,14 +70,13 @@ class ReplayIndex:
         return found[0][1]
 
 
-_indexes: dict[str, ReplayIndex] = {}
-_lock = threading.Lock()
-
-
 def replay_index(run_dir: str) -> ReplayIndex:
     """The index of ``run_dir``, loaded once per process."""
-    resolved = str(Path(run_dir).resolve())
-    with _lock:
-        if resolved not in _indexes:
-            _indexes[resolved] = ReplayIndex.load(resolved)
-        return _indexes[resolved]
+    return _load(str(Path(run_dir).resolve()))
+
+
+@cache
+def _load(resolved: str) -> ReplayIndex:
+    """The index of the resolved path, read the first time it is asked for (a failed read is not
+    kept, so the next call tries again)."""
+    return ReplayIndex.load(resolved)

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import hashlib
 import json
-import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 
 from workers.llm.fingerprint import messages_fingerprint
@@ -64,10 +64,6 @@ class TranscriptIndex:
         return self.replies[key]
 
 
-_indexes: dict[str, TranscriptIndex] = {}
-_lock = threading.Lock()
-
-
 def is_transcript(api_base: str) -> bool:
     """Whether ``api_base`` names a transcript file."""
     return api_base.endswith(SUFFIX) and Path(api_base).is_file()
@@ -75,8 +71,11 @@ def is_transcript(api_base: str) -> bool:
 
 def transcript_index(path: str) -> TranscriptIndex:
     """The index of ``path``, loaded once per process."""
-    resolved = str(Path(path).resolve())
-    with _lock:
-        if resolved not in _indexes:
-            _indexes[resolved] = TranscriptIndex.load(resolved)
-        return _indexes[resolved]
+    return _load(str(Path(path).resolve()))
+
+
+@cache
+def _load(resolved: str) -> TranscriptIndex:
+    """The index of the resolved path, read the first time it is asked for (a failed read is not
+    kept, so the next call tries again)."""
+    return TranscriptIndex.load(resolved)
