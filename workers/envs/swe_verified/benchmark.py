@@ -47,6 +47,7 @@ from . import harness
 from .data_folders import FOLDER
 from .dataset import FOLDER_NAME, ID_PATTERN, records
 from .env import BENCHMARK_NAME, VerifiedEnvironment
+from .get_images import shown
 from .harness_eval import HARNESS_GRADING, remove_harness_containers
 from .images import how_to_get, image_of, local_images, missing_images
 from .release_container import OPTIONS as CONTAINER_OPTIONS
@@ -139,7 +140,7 @@ class VerifiedBenchmark(SweBenchmark):
         found = [i for i, r in zip(ids, recs) if r["repo"] == selector or r["instance_id"] == wanted]
         if not found:
             raise UnknownInstanceError(
-                f"no SWE-bench Verified instance is {selector!r}; selectors: all, a repository (owner/name), an instance id"
+                f"no SWE-bench Verified instance is {shown(selector)}; selectors: all, a repository (owner/name), an instance id"
             )
         return found
 
