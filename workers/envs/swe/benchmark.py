@@ -170,7 +170,8 @@ class SweBenchmark(Benchmark):
 
     def refuses_run_folder(self, options: Mapping[str, Any], run_folder: Path) -> str | None:
         """A task whose ``repo_path`` is the run folder or a folder above it: its clone would carry
-        the run's own files (records, logs) into the model's sandbox. One line naming the first."""
+        the run's own files (records, logs) into the model's sandbox. One line naming the first
+        (the task and the repository first: preflight cuts a long line at its end)."""
         if options.get(INSTANCES_FILE) is None:  # swe-verified: the repositories are in the images
             return None
         path, insts = instances_of(options)
@@ -178,10 +179,7 @@ class SweBenchmark(Benchmark):
         for inst in insts:
             repo = Path(inst.repo_path)
             if repo == run or repo in run.parents:
-                return (
-                    f"{path}: {inst.instance_id}: repo_path {repo} holds the run folder {run}; "
-                    "put the run (output:) outside the task's repository"
-                )
+                return f"the run folder is inside {inst.instance_id}'s repo_path {repo}: put output: outside it"
         return None
 
     def canonical_id(self, instance_id: str) -> str:
