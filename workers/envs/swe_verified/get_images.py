@@ -272,44 +272,13 @@ def get_images(
     return (pull if action == "pull" else build)(client, folder, selection, workers, out, dry_run)
 
 
-#: ``owner/name`` as GitHub spells a repository
-REPO_SELECTOR = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*")
-#: the longest selector quoted back in an error line
-SELECTOR_SHOWN = 80
-
-
-def shown(selector: str) -> str:
-    """``selector`` as an error line quotes it: repr, cut to :data:`SELECTOR_SHOWN` characters."""
-    return repr(selector if len(selector) <= SELECTOR_SHOWN else selector[: SELECTOR_SHOWN - 3] + "...")
-
-
-def selector_problem(selector: str) -> str | None:
-    """Why ``selector`` cannot select anything, by its form alone (no data folder needed), or None:
-    ``all``, a repository ``owner/name``, or an instance id (``owner__repo-NUMBER``, with or
-    without ``swe-verified/``) held to :func:`~workers.envs.swe.instances.id_problem`'s characters."""
-    from workers.envs.swe.instances import id_problem
-
-    from .benchmark import BENCHMARK_NAME
-    from .dataset import ID_PATTERN
-
-    iid = selector.removeprefix(f"{BENCHMARK_NAME}/")
-    if selector == "all" or (REPO_SELECTOR.fullmatch(selector) and ".." not in selector):
-        return None
-    if id_problem(iid) is None and ID_PATTERN.match(iid):
-        return None
-    return (
-        f"{shown(selector)} is not a selector: all, a repository (owner/name) or an instance id "
-        f"(owner__repo-NUMBER, as `recap env list {BENCHMARK_NAME}` prints them)"
-    )
-
-
 def selected_records(selectors: Sequence[str], data_dir: str | None = None) -> list[Mapping[str, str]]:
     """The stored records the selectors pick (as ``recap env list swe-verified`` takes them: ``all``,
     ``owner/name``, an instance id with or without ``swe-verified/``), each once, in the dataset's
-    order; none: all. UnknownInstanceError for a selector of no such form (:func:`selector_problem`,
+    order; none: all. UnknownInstanceError for a selector of no such form (:func:`.benchmark.selector_problem`,
     checked before the data folder is looked for) or one that picks nothing; DataNotFoundError
     when there is no data folder."""
-    from .benchmark import BENCHMARK
+    from .benchmark import BENCHMARK, selector_problem
 
     for selector in selectors:
         if (problem := selector_problem(selector)) is not None:
