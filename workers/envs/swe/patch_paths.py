@@ -95,7 +95,8 @@ def patch_refusal(patch: str) -> str | None:
     old = new = 0  # lines left in the current unified hunk
     current: str | None = None  # the file of the current ``diff --git`` block
     symlink_pending = False  # a symlink is created; its target is the next hunk's first '+' line
-    for number, line in enumerate(patch.splitlines(), 1):
+    for number, line in enumerate(patch.split("\n"), 1):  # git and patch split on newlines only
+        line = line.removesuffix("\r")
         if old > 0 or new > 0:
             head = line[:1]
             if head in ("", " "):

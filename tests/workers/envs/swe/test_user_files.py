@@ -128,6 +128,9 @@ def test_patch_headers_only_count_outside_hunks() -> None:
 
     inside = "diff --git a/x.sql b/x.sql\n--- a/x.sql\n+++ b/x.sql\n@@ -1,2 +1,2 @@\n--- ../x\n+++ /etc/passwd\n"
     assert patch_refusal(inside) is None
+    # a form feed inside a line is content (git splits on newlines only), as is a CRLF patch
+    feed = "diff --git a/x.py b/x.py\n--- a/x.py\n+++ b/x.py\n@@ -1,3 +1,3 @@\n a\x0c\n--- ../x\n+b\n c\n"
+    assert (patch_refusal(feed), patch_refusal(feed.replace("\n", "\r\n"))) == (None, None)
     assert (
         patch_refusal(inside + "rename to ../y\n")
         == "line 7 of the patch names '../y' (a '..' component), outside the repository"
