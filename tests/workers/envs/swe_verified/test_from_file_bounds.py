@@ -104,3 +104,19 @@ def test_an_id_with_dotdot_and_a_gold_patch_out_of_the_repository_are_refused(m:
         f"{PREFIX}verified.jsonl:1: field 'test_patch': line 6 of the patch creates the symlink 'etc' to '/etc', "
         f"outside the repository{SUFFIX}"
     ]
+
+
+def test_a_parquet_copy_is_held_to_the_same_bounds(m: Materials, tmp_path: Path) -> None:
+    """Read a batch at a time, the dataset's columns only; a deep test list is one line, exit 2."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    deep = {**m.verified(0), "FAIL_TO_PASS": "[" * 100_000 + "]" * 100_000}
+    src = tmp_path / "verified.parquet"
+    pq.write_table(pa.Table.from_pylist([m.verified(1), deep]), src)
+    res = fetch_from(tmp_path, src)
+    assert (res.code, res.written) == (2, [])
+    assert res.err == [
+        f"{PREFIX}verified.parquet:row 2: field 'FAIL_TO_PASS' is not a JSON-encoded list (nested deeper than 64 "
+        f"levels of arrays/objects){SUFFIX}"
+    ]
