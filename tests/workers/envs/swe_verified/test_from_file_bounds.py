@@ -120,3 +120,16 @@ def test_a_parquet_copy_is_held_to_the_same_bounds(m: Materials, tmp_path: Path)
         f"{PREFIX}verified.parquet:row 2: field 'FAIL_TO_PASS' is not a JSON-encoded list (nested deeper than 64 "
         f"levels of arrays/objects){SUFFIX}"
     ]
+
+
+def test_the_record_past_the_full_split_is_refused_where_it_is(m: Materials, tmp_path: Path) -> None:
+    """The 501st record is refused by its line; before, all were read and counted first."""
+    rec = m.verified()
+    rows = [{**rec, "instance_id": f"fixture__offbyone-{n}"} for n in range(1, 601)]
+    src = tmp_path / "verified.jsonl"
+    src.write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
+    res = fetch_from(tmp_path, src)
+    assert (res.code, res.written) == (2, [])
+    assert res.err == [
+        f"{PREFIX}verified.jsonl:501: more records than the 500 of princeton-nlp/SWE-bench_Verified (test){SUFFIX}"
+    ]
