@@ -18,6 +18,7 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 from unittest import mock
 
@@ -256,15 +257,26 @@ def _check_refusal(spec: SweepSpec, u: Unit) -> None:
         raise SpecError(_fit(f"methods[{i}] ({u.method_label}) cannot run on {u.benchmark}: ", refusal))
 
 
+def _local_folder(output: str) -> Path | None:
+    """The run folder ``output`` names on this machine (a path or ``file://``), or None (an object store)."""
+    if output.lower().startswith("file://"):
+        return Path(output[len("file://") :])
+    return None if "://" in output else Path(output)
+
+
 def check_benchmarks(plan: Plan) -> None:
     """Each benchmark's own check of all its instances at once (:meth:`Benchmark.preflight`), per
     ``environments[]`` entry (its options); SpecError (one line) naming the entry otherwise."""
     groups: dict[tuple[str, str], list[Unit]] = {}
     for u in plan.units:
         groups.setdefault((u.benchmark, _canonical(u.env_options)), []).append(u)
+    run_folder = _local_folder(plan.spec.output)
     for (bench, _), units in groups.items():
         ids = list(dict.fromkeys(u.instance_id for u in units))
-        refusal = registry.get_benchmark(bench).preflight(ids, dict(units[0].env_options or {}))
+        benchmark, options = registry.get_benchmark(bench), dict(units[0].env_options or {})
+        refusal = benchmark.preflight(ids, options)
+        if refusal is None and run_folder is not None:
+            refusal = benchmark.refuses_run_folder(options, run_folder)
         if refusal is not None:
             head = f"environments[{_env_index(plan.spec, bench, units[0].env_options)}] ({bench}): "
             raise SpecError(_fit(head, refusal))

@@ -315,7 +315,8 @@ class EvaluationRecord:
     ``RESOLVED_PARTIAL``, ``RESOLVED_NO``; null status where the harness writes no report: no
     patch, a patch that does not apply, a timeout; both null when the official grading did not
     run, ``grading`` ``ours`` or no ``swebench`` package). ``reason``: ``resolved``, ``no_patch``,
-    ``patch_failed``, ``tests_failed``, ``timeout``. ``tests`` is JSON, each FAIL_TO_PASS and
+    ``patch_failed``, ``patch_refused`` (it wrote outside the repository: never applied),
+    ``tests_failed``, ``timeout``. ``tests`` is JSON, each FAIL_TO_PASS and
     PASS_TO_PASS test id -> its status as the deciding grader read the log (``MISSING``: not
     reported); the counts are that grader's. ``patch`` is the submitted diff (``patch_bytes`` its
     UTF-8 size); ``log`` the evaluation's log, its last :data:`EVALUATION_LOG_CAP` bytes when longer

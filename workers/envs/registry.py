@@ -113,6 +113,13 @@ class Benchmark(BenchmarkProtocol, ABC):
         instance's image). Default: nothing to check beyond opening one environment."""
         return None
 
+    def refuses_run_folder(self, options: Mapping[str, Any], run_folder: Path) -> str | None:
+        """Why the instances an ``environments[]`` entry's options name cannot run with their
+        results in the local folder ``run_folder``, in one line, or None; checked before anything
+        runs (``swe``: a task's repository that holds the run folder would be cloned, run folder
+        and all, into each sandbox). Default: nothing to check."""
+        return None
+
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The data folders this benchmark reads, by folder name: how each is found, what it
         holds and where its files come from (``recap data list/check/fetch`` work on these).

@@ -168,6 +168,20 @@ class SweBenchmark(Benchmark):
             )
         return found
 
+    def refuses_run_folder(self, options: Mapping[str, Any], run_folder: Path) -> str | None:
+        """A task whose ``repo_path`` is the run folder or a folder above it: its clone would carry
+        the run's own files (records, logs) into the model's sandbox. One line naming the first
+        (the task and the repository first: preflight cuts a long line at its end)."""
+        if options.get(INSTANCES_FILE) is None:  # swe-verified: the repositories are in the images
+            return None
+        path, insts = instances_of(options)
+        run = run_folder.expanduser().resolve()
+        for inst in insts:
+            repo = Path(inst.repo_path)
+            if repo == run or repo in run.parents:
+                return f"the run folder is inside {inst.instance_id}'s repo_path {repo}: put output: outside it"
+        return None
+
     def canonical_id(self, instance_id: str) -> str:
         """``swe/<instance_id>`` as written; UnknownInstanceError for an id without one."""
         bench, _, rest = instance_id.partition("/")

@@ -454,6 +454,7 @@ def submitted_text(ev: Evaluation) -> str:
         "resolved": "it resolves the issue (every listed test passes)",
         "no_patch": "it changes nothing",
         "patch_failed": "it does not apply to a clean copy of the repository",
+        "patch_refused": "it was refused unapplied: it writes outside the repository ('..', an absolute path, .git, or a symlink out)",
         "tests_failed": f"tests still fail: {', '.join(failing)}",
         "timeout": "the tests ran past the time limit",
     }[ev.verdict_reason]

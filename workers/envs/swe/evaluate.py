@@ -41,11 +41,12 @@ from workers.sandbox.base import CommandResult, Sandbox
 from .grading import DEFAULT_GRADING, Grading, OfficialGrade, harness_statuses, official_grade, official_problem
 from .harness_script import apply_commands
 from .instances import SweInstance
+from .patch_paths import patch_refusal
 from .test_log import harness_test_section, read_pytest_log
 
 log = logging.getLogger(__name__)
 
-EvalReason = Literal["resolved", "no_patch", "patch_failed", "tests_failed", "timeout"]
+EvalReason = Literal["resolved", "no_patch", "patch_failed", "patch_refused", "tests_failed", "timeout"]
 #: statuses the harness counts as a pass (swebench/harness/grading.py test_passed)
 PASSING = ("PASSED", "XFAIL")
 #: a PASS_TO_PASS test is kept when it passes or is skipped (grading.py ``test_maintained``)
@@ -167,6 +168,19 @@ def _apply(sandbox: Sandbox, patch: str, file: str, log: list[str], what: str) -
     return False
 
 
+def refused_evaluation(instance: SweInstance, model_patch: str) -> Evaluation | None:
+    """The verdict on a model's patch that writes outside the repository (:func:`.patch_paths.patch_refusal`:
+    a ``..`` or absolute path, a path into ``.git``, a symlink out of the tree), given before any
+    ``git apply`` or ``patch`` runs: not resolved, reason ``patch_refused``, the log saying why.
+    The model wrote it, so it is the episode's outcome, never an infrastructure failure. None for
+    a patch that stays inside."""
+    refusal = patch_refusal(model_patch)
+    if refusal is None:
+        return None
+    ev = Evaluation(False, "patch_refused", {t: MISSING for t in (*instance.fail_to_pass, *instance.pass_to_pass)})
+    return with_log(ev, f"the model's patch was refused before it was applied: {refusal}")
+
+
 def eval_command(instance: SweInstance, eval_script: str | None = None) -> str:
     """The command the evaluation runs: with the harness's eval script (written to
     :data:`EVAL_SCRIPT_FILE`), ``/bin/bash`` on it as the harness runs ``/eval.sh``; else (a user's
@@ -280,6 +294,8 @@ def _evaluate(
     wanted = (*instance.fail_to_pass, *instance.pass_to_pass)
     if not model_patch.strip():
         return Evaluation(False, "no_patch", {t: MISSING for t in wanted}, "")
+    if (refused := refused_evaluation(instance, model_patch)) is not None:
+        return refused
     if eval_script is not None:
         return _evaluate_script(instance, model_patch, open_clean_sandbox, timeout_s=timeout_s, eval_script=eval_script)
     log: list[str] = []

@@ -8,16 +8,30 @@ from the JSONL file's folder). Optional: ``test_cmd`` (default ``python -m pytes
 ``eval_timeout_s`` (the evaluation's test run; default :data:`DEFAULT_EVAL_TIMEOUT_S`, the
 SWE-bench harness's 30 minutes). Every other field is kept in ``extra``. Every bad input is one
 ``ValueError`` line naming ``file:line`` and the field, before anything runs.
+
+The file is a user's, so it is read with bounds (:mod:`workers.envs.user_json`: a line at a time,
+each under 16 MiB, nesting checked before parsing) and each record's fields with limits of their
+own, because they reach paths, commands and prompts: ``instance_id`` is letters, digits, ``_``,
+``.``, ``-`` (no ``/``, no ``..``, no shell metacharacter; at most :data:`MAX_ID_CHARS`: it names
+containers, folders and files); ``repo_path`` is a git repository that is not ``/``, the home
+folder or a folder above it (the whole of it would be cloned into every sandbox); the gold
+``patch`` and the ``test_patch`` write only inside the repository (:mod:`.patch_paths`); the
+``problem_statement`` is at most :data:`MAX_PROBLEM_BYTES` (it is sent to the model on every call).
 """
 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from workers.envs import user_json
+
+from .patch_paths import patch_refusal
 
 #: the registry name, the first part of every instance id
 BENCHMARK_NAME = "swe"
@@ -29,6 +43,43 @@ REQUIRED_TEXT = ("instance_id", "repo", "base_commit", "problem_statement", "pat
 #: the test lists, JSON-encoded strings (SWE-bench) or lists
 TEST_LISTS = ("FAIL_TO_PASS", "PASS_TO_PASS")
 OPTIONAL = ("test_cmd", "eval_timeout_s")
+#: the longest instance id (SWE-bench's own, ``owner__repo-NUMBER``, are under 50 characters)
+MAX_ID_CHARS = 128
+#: an instance id's characters: it names containers, image tags, folders and files
+SAFE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+#: the largest problem statement, in UTF-8 bytes (SWE-bench Verified's largest is a few tens of kB)
+MAX_PROBLEM_BYTES = 1 << 20
+
+
+def id_problem(iid: str) -> str | None:
+    """Why ``iid`` cannot be an instance id (one phrase), or None: whitespace, a character outside
+    :data:`SAFE_ID` (``/``, a shell metacharacter), ``..``, or more than :data:`MAX_ID_CHARS`."""
+    if len(iid) > MAX_ID_CHARS:
+        return f"is {len(iid)} characters long, more than {MAX_ID_CHARS}"
+    if iid != iid.strip() or any(c.isspace() for c in iid):
+        return f"must not contain whitespace, got {iid!r}"
+    if SAFE_ID.fullmatch(iid) is None or ".." in iid:
+        return f"must be letters, digits, '_', '.' and '-' (starting with a letter or digit, no '..'), got {iid!r}"
+    return None
+
+
+def problem_size_problem(text: str) -> str | None:
+    """Why a problem statement is too large (its size and the cap), or None."""
+    size = len(text.encode("utf-8", errors="surrogatepass"))
+    if size > MAX_PROBLEM_BYTES:
+        return f"is {size} bytes, more than the {MAX_PROBLEM_BYTES} a problem statement may hold"
+    return None
+
+
+def repo_path_problem(path: Path) -> str | None:
+    """Why ``path`` (resolved) cannot be a task's repository, or None: ``/``, the home folder or
+    a folder above it (each would put a whole tree of this host into the sandboxes)."""
+    home = Path.home().resolve()
+    if path == Path(path.anchor):
+        return f"{path} is the root folder"
+    if path == home or path in home.parents:
+        return f"{path} is the home folder or above it"
+    return None
 
 
 @dataclass(frozen=True)
@@ -60,9 +111,11 @@ class SweInstance:
 def _test_list(where: str, name: str, value: Any) -> tuple[str, ...]:
     if isinstance(value, str):
         try:
-            value = json.loads(value)
+            value = user_json.loads(value)
         except json.JSONDecodeError as exc:
             raise ValueError(f"{where}: field {name!r} is not a JSON-encoded list ({exc.msg})") from None
+        except ValueError as exc:
+            raise ValueError(f"{where}: field {name!r}: {exc}") from None
     if not isinstance(value, list) or not all(isinstance(t, str) and t.strip() for t in value):
         raise ValueError(f"{where}: field {name!r} must be a list of pytest node ids (non-empty strings)")
     return tuple(value)
@@ -87,8 +140,13 @@ def parse_record(raw: Any, where: str, base: Path) -> SweInstance:
         if not raw[name].strip():
             raise ValueError(f"{where}: field {name!r} is empty")
     iid = raw["instance_id"]
-    if iid != iid.strip() or any(c.isspace() for c in iid):
-        raise ValueError(f"{where}: field 'instance_id' must not contain whitespace, got {iid!r}")
+    if (problem := id_problem(iid)) is not None:
+        raise ValueError(f"{where}: field 'instance_id' {problem}")
+    if (problem := problem_size_problem(raw["problem_statement"])) is not None:
+        raise ValueError(f"{where}: field 'problem_statement' {problem}")
+    for name in ("patch", "test_patch"):
+        if (problem := patch_refusal(raw[name])) is not None:
+            raise ValueError(f"{where}: field {name!r}: {problem}")
     f2p = _test_list(where, "FAIL_TO_PASS", raw["FAIL_TO_PASS"])
     p2p = _test_list(where, "PASS_TO_PASS", raw["PASS_TO_PASS"])
     if not f2p:
@@ -96,6 +154,8 @@ def parse_record(raw: Any, where: str, base: Path) -> SweInstance:
     repo_path = Path(raw["repo_path"]).expanduser()
     if not repo_path.is_absolute():
         repo_path = base / repo_path
+    if (problem := repo_path_problem(repo_path.resolve())) is not None:
+        raise ValueError(f"{where}: field 'repo_path': {problem}, not a task's repository")
     if not is_git_repo(repo_path):
         raise ValueError(f"{where}: field 'repo_path': {repo_path} is not a git repository")
     test_cmd = raw.get("test_cmd", DEFAULT_TEST_CMD)
@@ -136,27 +196,45 @@ def missing_commits(repo_path: str, commits: list[str]) -> list[str]:
     return [c for c, line in zip(commits, lines) if line.endswith(" missing") or not line.split(" ")[1:2] == ["commit"]]
 
 
+def _records(file: Path) -> Iterator[tuple[int, Any]]:
+    """``(line number, decoded JSON)`` of each non-blank line, read a line at a time with the
+    bounds of :mod:`workers.envs.user_json`; ValueError ``file:line: ...`` otherwise."""
+    try:
+        f = file.open("rb")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"SWE-bench instances file {file} does not exist") from None
+    except OSError as exc:
+        raise ValueError(f"{file}: cannot be read ({exc.strerror or exc})") from None
+    with f:
+        try:
+            for lineno, line in user_json.lines(f):
+                if not line.strip():
+                    continue
+                where = f"{file}:{lineno}"
+                try:
+                    text = line.decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    raise ValueError(f"{where}: cannot be read as UTF-8 text ({exc.reason} at byte {exc.start})") from None
+                try:
+                    raw = user_json.loads(text)
+                except json.JSONDecodeError as exc:
+                    raise ValueError(f"{where}: not valid JSON ({exc.msg} at column {exc.colno})") from None
+                except ValueError as exc:
+                    raise ValueError(f"{where}: {exc}") from None
+                yield lineno, raw
+        except user_json.LineTooLong as exc:
+            raise ValueError(f"{file}:{exc.number}: {exc}") from None
+
+
 def load_instances(path: str | Path) -> list[SweInstance]:
     """Every record of the JSONL file ``path`` in file order (blank lines skipped); ValueError
     ``file:line: ...`` for a missing or bad field, bad JSON, a duplicate id, a ``repo_path`` that
     is not a git repository or lacks the record's ``base_commit``; FileNotFoundError for no file."""
     file = Path(path).expanduser()
-    try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FileNotFoundError(f"SWE-bench instances file {file} does not exist") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{file}: cannot be read as UTF-8 text ({exc})") from None
     out: list[SweInstance] = []
     lines: dict[str, int] = {}
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        if not line.strip():
-            continue
+    for lineno, raw in _records(file):
         where = f"{file}:{lineno}"
-        try:
-            raw = json.loads(line)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{where}: not valid JSON ({exc.msg} at column {exc.colno})") from None
         inst = parse_record(raw, where, file.parent)
         if inst.instance_id in lines:
             raise ValueError(

@@ -30,6 +30,7 @@ off in the harness's.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from typing import Any
@@ -40,7 +41,7 @@ from workers.envs.data_sources import DataFolder
 from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
 from workers.envs.swe.env import DEFAULT_TOTAL_OUTPUT_BYTES
 from workers.envs.swe.grading import GRADINGS, Grading, check_grading
-from workers.envs.swe.instances import SweInstance
+from workers.envs.swe.instances import SweInstance, id_problem
 from workers.sandbox.base import SandboxError, SandboxLimits, episode_failure
 
 from . import harness
@@ -78,6 +79,32 @@ LOCAL_REFUSAL = (
     "swe-verified runs in the SWE-bench harness's per-instance Docker images (the repository and its "
     "environment are in the image): sandbox 'local' cannot run it; use sandbox: docker"
 )
+
+
+#: ``owner/name`` as GitHub spells a repository
+REPO_SELECTOR = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*")
+#: the longest selector quoted back in an error line
+SELECTOR_SHOWN = 80
+
+
+def shown(selector: str) -> str:
+    """``selector`` as an error line quotes it: repr, cut to :data:`SELECTOR_SHOWN` characters."""
+    return repr(selector if len(selector) <= SELECTOR_SHOWN else selector[: SELECTOR_SHOWN - 3] + "...")
+
+
+def selector_problem(selector: str) -> str | None:
+    """Why ``selector`` cannot select anything, by its form alone (no data folder needed), or None:
+    ``all``, a repository ``owner/name``, or an instance id (``owner__repo-NUMBER``, with or
+    without ``swe-verified/``) held to :func:`~workers.envs.swe.instances.id_problem`'s characters."""
+    iid = selector.removeprefix(f"{BENCHMARK_NAME}/")
+    if selector == "all" or (REPO_SELECTOR.fullmatch(selector) and ".." not in selector):
+        return None
+    if id_problem(iid) is None and ID_PATTERN.match(iid):
+        return None
+    return (
+        f"{shown(selector)} is not a selector: all, a repository (owner/name) or an instance id "
+        f"(owner__repo-NUMBER, as `recap env list {BENCHMARK_NAME}` prints them)"
+    )
 
 
 def _positive(name: str, value: Any, kind: type) -> Any:
@@ -139,7 +166,7 @@ class VerifiedBenchmark(SweBenchmark):
         found = [i for i, r in zip(ids, recs) if r["repo"] == selector or r["instance_id"] == wanted]
         if not found:
             raise UnknownInstanceError(
-                f"no SWE-bench Verified instance is {selector!r}; selectors: all, a repository (owner/name), an instance id"
+                f"no SWE-bench Verified instance is {shown(selector)}; selectors: all, a repository (owner/name), an instance id"
             )
         return found
 

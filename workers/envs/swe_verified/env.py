@@ -25,7 +25,8 @@ from typing import Any
 
 from recap.env import EnvError, Reset
 from workers.envs.swe.env import SUBMISSION_FILE, SweEnvironment
-from workers.envs.swe.evaluate import Evaluation, evaluate
+from workers.envs.swe.evaluate import MISSING, Evaluation, evaluate, refused_evaluation
+from workers.envs.swe.grading import OfficialGrade, parser_name
 from workers.envs.swe.harness_script import HarnessScriptError, eval_script
 from workers.sandbox.base import SandboxError
 from workers.sandbox.docker_sandbox import BASE_ENV
@@ -75,7 +76,8 @@ class VerifiedEnvironment(SweEnvironment):
         """The harness's evaluation of ``diff`` under every grading, bounded by ``eval_timeout_s``:
         ``harness``: the harness's own run_evaluation (:mod:`.harness_eval`); ``ours``, ``official``,
         ``both``: its eval script in our clean copy of the image (:mod:`workers.envs.swe.harness_script`),
-        the log graded by the harness's parser and/or ours. An empty diff is judged as in every mode: no patch."""
+        the log graded by the harness's parser and/or ours. An empty diff is judged as in every mode: no patch;
+        a diff that writes outside the repository likewise: refused unapplied (``patch_refused``)."""
         if self.grading != HARNESS_GRADING or not diff.strip():
             script = self._eval_script()
             return evaluate(
@@ -86,6 +88,9 @@ class VerifiedEnvironment(SweEnvironment):
                 eval_timeout_s=self.eval_timeout_s,
                 eval_script=script,
             )
+        if (refused := refused_evaluation(self.instance, diff)) is not None:  # never handed to the harness
+            official = OfficialGrade(False, None, parser_name(self.instance.repo), dict.fromkeys(refused.tests, MISSING))
+            return replace(refused, official=official, grading=HARNESS_GRADING, pass_to_pass=self.instance.pass_to_pass)
         started = time.monotonic()
         run = run_harness(
             self.record,

@@ -28,6 +28,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, TextIO
 
+from recap.env import UnknownInstanceError
+
 from .dataset import records as stored_records
 from .images import TAG, image_of, local_image, present_tags, remote_image
 
@@ -273,10 +275,14 @@ def get_images(
 def selected_records(selectors: Sequence[str], data_dir: str | None = None) -> list[Mapping[str, str]]:
     """The stored records the selectors pick (as ``recap env list swe-verified`` takes them: ``all``,
     ``owner/name``, an instance id with or without ``swe-verified/``), each once, in the dataset's
-    order; none: all. UnknownInstanceError for a selector that picks nothing; DataNotFoundError
+    order; none: all. UnknownInstanceError for a selector of no such form (:func:`.benchmark.selector_problem`,
+    checked before the data folder is looked for) or one that picks nothing; DataNotFoundError
     when there is no data folder."""
-    from .benchmark import BENCHMARK
+    from .benchmark import BENCHMARK, selector_problem
 
+    for selector in selectors:
+        if (problem := selector_problem(selector)) is not None:
+            raise UnknownInstanceError(problem)
     recs = stored_records(data_dir)
     wanted: set[str] = set()
     for selector in selectors or ["all"]:
