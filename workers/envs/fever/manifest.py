@@ -104,8 +104,7 @@ def verify(folder: Path, rows: Sequence[Entry], sealed: str | None, *, run_folde
     if found is None or (run_folder and sealed is None):
         what = f"no {MANIFEST_FILE}" if found is None else f"no {RUN_KEY} in run.json"
         raise SnapshotError(
-            f"{where!r} has no sealed page manifest ({what}: recorded before manifests, or by a run that did not end); "
-            f"{RERECORD}"
+            f"{where!r} has no sealed page manifest ({what}: recorded before manifests, or by a run that did not end); {RERECORD}"
         )
     stated, entries = found
     if digest(entries) != stated or (run_folder and sealed != stated):

@@ -120,14 +120,18 @@ DEFAULT_POLICY = RetryPolicy()
 def check_max_page_bytes(value: Any) -> int:
     """``value`` as a byte cap of one answer (a positive integer); else ValueError naming the option."""
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"wikipedia_max_page_bytes must be a positive number of bytes (default {DEFAULT_MAX_PAGE_BYTES}), got {value!r}")
+        raise ValueError(
+            f"wikipedia_max_page_bytes must be a positive number of bytes (default {DEFAULT_MAX_PAGE_BYTES}), got {value!r}"
+        )
     return value
 
 
 def check_deadline(value: Any) -> float:
     """``value`` as the seconds one answer may take (above 0, finite); else ValueError naming the option."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
-        raise ValueError(f"wikipedia_deadline_s must be a number of seconds above 0 (default {DEFAULT_DEADLINE_S:g}), got {value!r}")
+        raise ValueError(
+            f"wikipedia_deadline_s must be a number of seconds above 0 (default {DEFAULT_DEADLINE_S:g}), got {value!r}"
+        )
     return float(value)
 
 

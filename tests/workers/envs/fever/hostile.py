@@ -203,9 +203,7 @@ def servers(**routes_by_name: tuple[dict[str, Route], str, int]) -> Iterator[dic
             s.stop()
 
 
-def play(
-    base_url: str, entity: str, watched: dict[str, Server], policy: RetryPolicy, *, measure_memory: bool = False
-) -> Outcome:
+def play(base_url: str, entity: str, watched: dict[str, Server], policy: RetryPolicy, *, measure_memory: bool = False) -> Outcome:
     """Fetch ``entity``'s search page from ``base_url`` as an episode would; the outcome."""
     records = RunRecords()
     limiter = RecordingLimiter()
@@ -224,7 +222,13 @@ def play(
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
     return Outcome(
-        kind, message, elapsed, {n: len(s.hits) for n, s in watched.items()}, records.take("e1", uuid.uuid4().hex)  # a fresh run: every body read is handed over, limiter.hosts, peak
+        kind,
+        message,
+        elapsed,
+        {n: len(s.hits) for n, s in watched.items()},
+        records.take("e1", uuid.uuid4().hex),  # a fresh run id: every body read is handed over
+        limiter.hosts,
+        peak,
     )
 
 

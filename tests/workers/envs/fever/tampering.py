@@ -91,7 +91,9 @@ def tamper_body(run: Path) -> None:
     old = sha256_hex(BODY_A)
 
     def pages(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-        return [{**r, "sha256": sha256_hex(forged), "body": forged, "size": len(forged)} if r["sha256"] == old else r for r in rows]
+        return [
+            {**r, "sha256": sha256_hex(forged), "body": forged, "size": len(forged)} if r["sha256"] == old else r for r in rows
+        ]
 
     _rewrite(run, "wiki_pages", pages)
     for part in sorted((run / "wiki_requests").glob("part-*.parquet")):

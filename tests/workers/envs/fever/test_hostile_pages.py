@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import pytest
 
-from tests.workers.envs.fever import hostile
-from tests.workers.envs.fever.hostile import DEADLINE_S, MiB, PAGE, SLACK_S
-from workers.envs.fever import BENCHMARK
 from schemas.records import WikiPageRecord, WikiRequestRecord
+from tests.workers.envs.fever import hostile
+from tests.workers.envs.fever.hostile import DEADLINE_S, PAGE, SLACK_S, MiB
+from workers.envs.fever import BENCHMARK
 
 
 @pytest.mark.parametrize("attack", [hostile.attack_drip, hostile.attack_drip_headers])
@@ -60,7 +60,9 @@ def test_the_size_cap_and_the_deadline_are_fever_options(claims_dir):
     policy = env.source.policy  # type: ignore[attr-defined]
     assert (policy.max_page_bytes, policy.deadline_s) == (1000, 5.0)
     assert (make("fever/1001", data_dir=str(claims_dir)).source.policy.max_page_bytes) == 5 * MiB  # type: ignore[attr-defined]
-    with pytest.raises(ValueError, match=r"^wikipedia_max_page_bytes must be a positive number of bytes \(default 5242880\), got 0$"):
+    with pytest.raises(
+        ValueError, match=r"^wikipedia_max_page_bytes must be a positive number of bytes \(default 5242880\), got 0$"
+    ):
         make("fever/1001", data_dir=str(claims_dir), wikipedia_max_page_bytes=0)
     with pytest.raises(ValueError, match=r"^wikipedia_deadline_s must be a number of seconds above 0 \(default 60\), got -1$"):
         make("fever/1001", data_dir=str(claims_dir), wikipedia_deadline_s=-1)

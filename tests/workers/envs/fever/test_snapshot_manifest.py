@@ -13,7 +13,7 @@ import pytest
 from pipeline.cli import main
 from schemas.parts import RUN_FILE
 from tests.workers.envs.fever import tampering
-from tests.workers.envs.fever.tampering import A, B, BASE, BODY_A, BODY_B
+from tests.workers.envs.fever.tampering import BASE, BODY_A, BODY_B, A, B
 from workers.envs.fever.manifest import MANIFEST_FILE, RUN_KEY
 from workers.envs.fever.pages import Snapshot
 
