@@ -27,6 +27,7 @@ import socket
 import ssl
 import threading
 import time
+import urllib.request
 import zlib
 from dataclasses import dataclass
 from functools import cache
@@ -138,6 +139,24 @@ class _Decoder:
             raise TooLarge(f"the decoded answer passes {self.cap} bytes")
 
 
+def _connection(scheme: str, host: str, port: int, timeout: float) -> tuple[http.client.HTTPConnection, str]:
+    """The connection for one request and what comes before the path on its request line: direct,
+    or through the proxy the environment names (``https_proxy``/``http_proxy``, ``no_proxy``, as
+    ``requests`` honoured them): a CONNECT tunnel for https, an absolute URL for http."""
+    proxy = None if urllib.request.proxy_bypass(host) else urllib.request.getproxies().get(scheme)
+    if proxy:
+        p = urlsplit(proxy if "://" in proxy else f"http://{proxy}")
+        p_host, p_port = p.hostname or "", p.port or 8080
+        if scheme == "https":
+            tunnel = http.client.HTTPSConnection(p_host, p_port, timeout=timeout, context=_tls())
+            tunnel.set_tunnel(host, port)
+            return tunnel, ""
+        return http.client.HTTPConnection(p_host, p_port, timeout=timeout), f"http://{host}:{port}"
+    if scheme == "https":
+        return http.client.HTTPSConnection(host, port, timeout=timeout, context=_tls()), ""
+    return http.client.HTTPConnection(host, port, timeout=timeout), ""
+
+
 def _bound(conn: http.client.HTTPConnection, deadline: float, read_timeout: float, fired: threading.Event) -> None:
     """The next socket read waits at most what is left of the deadline (and ``read_timeout``)."""
     left = deadline - time.monotonic()
@@ -159,11 +178,7 @@ def get_once(
     if left <= 0:
         raise DeadlinePassed
     timeout = min(read_timeout, left)
-    conn: http.client.HTTPConnection
-    if scheme == "https":
-        conn = http.client.HTTPSConnection(host, port, timeout=timeout, context=_tls())
-    else:
-        conn = http.client.HTTPConnection(host, port, timeout=timeout)
+    conn, target = _connection(scheme, host, port, timeout)
     fired = threading.Event()
 
     def cut() -> None:  # the watchdog: wakes a read blocked on a server that drips
@@ -180,7 +195,7 @@ def get_once(
     watchdog.start()
     try:
         path = (parts.path or "/") + (f"?{parts.query}" if parts.query else "")
-        conn.request("GET", path, headers={**headers, "Accept-Encoding": "gzip, deflate", "Connection": "close"})
+        conn.request("GET", target + path, headers={**headers, "Accept-Encoding": "gzip, deflate", "Connection": "close"})
         _bound(conn, deadline, read_timeout, fired)
         response = conn.getresponse()
         _bound(conn, deadline, read_timeout, fired)

@@ -99,3 +99,13 @@ def test_a_same_host_redirect_is_served_and_each_hop_is_rate_limited():
     assert request.final_url.endswith("/wiki/Article") and request.url.endswith("search=Hop")
     # one token at 2/s and a clock that stands still: the second hop waits for its own slot
     assert hostile.same_host_hops_wait(2.0) == [0.5]
+
+
+def test_the_proxy_the_environment_names_is_used_as_requests_used_it(monkeypatch):
+    """http.client does not read the proxy variables; the fetch does (an http proxy gets the absolute URL)."""
+    with hostile.servers(proxy=({}, "127.0.0.1", 0)) as s:
+        monkeypatch.setenv("http_proxy", s["proxy"].base_url)
+        monkeypatch.setenv("no_proxy", "")
+        source = hostile.LiveSource(None, limiter=hostile.RecordingLimiter(), policy=hostile.RetryPolicy())
+        assert source.fetch("http://wiki.invalid/w/index.php?search=Anything") == PAGE.decode()
+        assert s["proxy"].hits == ["http://wiki.invalid:80/w/index.php?search=Anything"]
