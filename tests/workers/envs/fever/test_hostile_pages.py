@@ -4,12 +4,16 @@ configured origin, each hop rate-limited. Real loopback servers (:mod:`.hostile`
 
 from __future__ import annotations
 
+import gzip
+import zlib
+
 import pytest
 
 from schemas.records import WikiPageRecord, WikiRequestRecord
 from tests.workers.envs.fever import hostile
 from tests.workers.envs.fever.hostile import DEADLINE_S, PAGE, SLACK_S, MiB
 from workers.envs.fever import BENCHMARK
+from workers.envs.fever.fetch import TooLarge, _Decoder
 
 
 @pytest.mark.parametrize("attack", [hostile.attack_drip, hostile.attack_drip_headers])
@@ -109,3 +113,23 @@ def test_the_proxy_the_environment_names_is_used_as_requests_used_it(monkeypatch
         source = hostile.LiveSource(None, limiter=hostile.RecordingLimiter(), policy=hostile.RetryPolicy())
         assert source.fetch("http://wiki.invalid/w/index.php?search=Anything") == PAGE.decode()
         assert s["proxy"].hits == ["http://wiki.invalid:80/w/index.php?search=Anything"]
+
+
+@pytest.mark.parametrize(
+    ("encoding", "encode"),
+    [
+        ("gzip", lambda b: gzip.compress(b[:10]) + gzip.compress(b[10:])),  # two members
+        ("deflate", zlib.compress),  # zlib-wrapped
+        ("deflate", lambda b: zlib.compress(b, wbits=-zlib.MAX_WBITS)),  # raw, as some servers send it
+        ("identity", lambda b: b),
+    ],
+)
+def test_bodies_are_decoded_as_requests_decoded_them(encoding, encode):
+    out = bytearray()
+    decoder = _Decoder(encoding, 1000, out)
+    data = encode(PAGE)
+    for i in range(0, len(data), 7):  # chunk by chunk, as they come off the socket
+        decoder.feed(data[i : i + 7])
+    assert bytes(out) == PAGE
+    with pytest.raises(TooLarge, match=f"^the decoded answer passes {len(PAGE) - 1} bytes$"):
+        _Decoder(encoding, len(PAGE) - 1, bytearray()).feed(data)
