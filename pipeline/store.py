@@ -58,7 +58,10 @@ class RunIdentity:
     wiki_manifest_sha256: str | None = None
 
     def to_json(self) -> str:
-        return json.dumps(self.__dict__, indent=2, sort_keys=True)
+        """The file's text; ``wiki_manifest_sha256`` only when set, so a run that recorded no
+        Wikipedia page keeps the run.json an earlier recap reads."""
+        fields = {k: v for k, v in self.__dict__.items() if not (k == "wiki_manifest_sha256" and v is None)}
+        return json.dumps(fields, indent=2, sort_keys=True)
 
 
 class RunStore:

@@ -93,3 +93,12 @@ def test_recap_run_on_a_tampered_snapshot_exits_2_in_one_line_before_any_episode
     full = head + (tampering.load(run) or "")  # the refusal, shortened to the one-line limit in the middle
     assert err[0].startswith(head) and full != head and all(piece in full for piece in err[0].split("..."))
     assert not (tmp_path / "out").exists()  # nothing written, no episode, no model call
+
+
+def test_run_json_names_the_digest_only_when_a_run_recorded_pages():
+    from pipeline.store import RunIdentity
+
+    plain = RunIdentity(run_id="r", run="x", created_at=1.0)
+    assert "wiki_manifest_sha256" not in json.loads(plain.to_json())  # what an earlier recap reads
+    sealed = RunIdentity(run_id="r", run="x", created_at=1.0, wiki_manifest_sha256="ab" * 32)
+    assert RunIdentity(**json.loads(sealed.to_json())) == sealed
