@@ -102,3 +102,36 @@ def test_run_json_names_the_digest_only_when_a_run_recorded_pages():
     assert "wiki_manifest_sha256" not in json.loads(plain.to_json())  # what an earlier recap reads
     sealed = RunIdentity(run_id="r", run="x", created_at=1.0, wiki_manifest_sha256="ab" * 32)
     assert RunIdentity(**json.loads(sealed.to_json())) == sealed
+
+
+def test_a_run_seals_its_pages_when_it_ends_and_a_tampered_copy_is_refused(ray_address, tmp_path, claims_dir, standin, capsys):
+    """The driver's part: a live FEVER sweep (in-process executor) ends with the manifest and its
+    digest in run.json; the folder serves as a snapshot; one changed encoding and it is refused."""
+    from pipeline.driver import Driver, prepare
+    from pipeline.gateway_backend import make_backend
+    from pipeline.spec import parse_spec
+
+    def sweep(out: Path, wiki: str) -> str:
+        options = f'data_dir: "{claims_dir}", wikipedia_url: "{standin.base_url}"{wiki}'
+        return (
+            f"run: {out.name}\noutput: {out}\nmodels: [{{model: offline/expert}}]\nmethods: [{{method: react}}]\n"
+            f"environments: [{{benchmark: fever, tasks: [all], options: {{{options}}}}}]\nworkers: 1\n"
+        )
+
+    live = tmp_path / "live"
+    text = sweep(live, "")
+    spec = parse_spec(text, "sweep.yaml")
+    assert Driver(prepare(spec, text), make_backend(spec), progress="off", executor="in-process").run().exit_code() == 0
+    manifest = json.loads((live / MANIFEST_FILE).read_text())
+    assert json.loads((live / RUN_FILE).read_text())[RUN_KEY] == manifest["digest"]
+    # one search per claim and Mercury's disambiguation page's [Mercury]: every request row sealed
+    assert len(manifest["entries"]) == len(standin.requests) == 4
+    assert len(Snapshot(live)) == 4
+
+    tampering._rewrite(live, "wiki_requests", lambda rows: [{**rows[0], "encoding": "cp1252"}, *rows[1:]])
+    replay = tmp_path / "replay.yaml"
+    replay.write_text(sweep(tmp_path / "replay", f', wikipedia: "snapshot:{live}"'))
+    code = main(["run", str(replay), "--progress", "off"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "does not match its sealed page manifest" in err[0], err
+    assert not (tmp_path / "replay").exists() and len(standin.requests) == 4
