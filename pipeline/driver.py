@@ -55,6 +55,7 @@ from __future__ import annotations
 import shutil
 import time
 import uuid
+from dataclasses import replace
 from typing import Any, Literal
 
 from pipeline.attempts import Hooks
@@ -84,7 +85,9 @@ from pipeline.sink_channel import SinkChannel
 from pipeline.stopping import DEFAULT_GRACE_S, StopRequests
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
 from pipeline.worker_pool import InProcessWorkerPool, RayWorkerPool, WorkerPool
+from schemas.parts import RUN_FILE
 from schemas.records import EpisodeRecord
+from workers.envs.fever.pages import seal_run_folder
 from workers.envs.registry import get_benchmark
 from workers.episode_worker import EpisodeRunner, worker_actor
 from workers.sandbox.base import NODE_RESOURCE
@@ -204,6 +207,18 @@ class Driver(SessionLoop):
                 "(another driver ran there); run the command again"
             )
 
+    def _seal_wiki_pages(self, store: RunStore, ident: RunIdentity) -> None:
+        """With every row written: the manifest of the Wikipedia pages the run recorded, its digest
+        in run.json, which a ``snapshot:`` source of this folder must match (issue 35 item 10,
+        workers/envs/fever/manifest.py). A table that cannot be read seals nothing (the digest is
+        cleared, so the folder is refused as a snapshot rather than served unchecked)."""
+        try:
+            digest = seal_run_folder(store.path)
+        except Exception:
+            digest = None
+        if digest != ident.wiki_manifest_sha256:
+            store.write_text(RUN_FILE, replace(ident, wiki_manifest_sha256=digest).to_json() + "\n")
+
     def _make_pool(self, factory: Any) -> WorkerPool:
         import ray  # lazy: importing this module (prepare, the CLI's checks) must not load Ray
 
@@ -289,6 +304,7 @@ class Driver(SessionLoop):
                     self.channel.close()
                 except Exception:
                     pass
+                self._seal_wiki_pages(store, ident)
             try:
                 self.backend.close()
             except Exception:

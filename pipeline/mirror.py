@@ -19,7 +19,7 @@ import pyarrow.fs as pafs
 
 PUSH_EVERY_S = 60.0
 #: files that change after they are written (re-uploaded on every push)
-MUTABLE = ("run.json", "plan.json", "spec.yaml", "gateway/ledger.jsonl")
+MUTABLE = ("run.json", "plan.json", "spec.yaml", "gateway/ledger.jsonl", "wiki_manifest.json")
 
 
 def mirror_dir(uri: str) -> Path:

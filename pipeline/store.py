@@ -47,15 +47,21 @@ SPEC_FILE = "spec.yaml"
 @dataclass(frozen=True)
 class RunIdentity:
     """The content of run.json: which run owns the folder (``run`` is the spec's name, ``run_id`` unique per
-    folder) and the schema version its rows were written under."""
+    folder) and the schema version its rows were written under; ``wiki_manifest_sha256``: the
+    digest of the manifest over the Wikipedia pages the run recorded, written when a session ends
+    (workers/envs/fever/manifest.py; None: no page recorded, or a run.json of an earlier recap)."""
 
     run_id: str
     run: str
     created_at: float
     schema_version: int = SCHEMA_VERSION
+    wiki_manifest_sha256: str | None = None
 
     def to_json(self) -> str:
-        return json.dumps(self.__dict__, indent=2, sort_keys=True)
+        """The file's text; ``wiki_manifest_sha256`` only when set, so a run that recorded no
+        Wikipedia page keeps the run.json an earlier recap reads."""
+        fields = {k: v for k, v in self.__dict__.items() if not (k == "wiki_manifest_sha256" and v is None)}
+        return json.dumps(fields, indent=2, sort_keys=True)
 
 
 class RunStore:

@@ -35,7 +35,9 @@ SANDBOX_INFRA_KIND = "sandbox"
 WIKI_ERROR: Final = "wiki_error"
 #: the kind (first word of the error) of a ``wiki_error`` row that is infrastructure: the site
 #: refused or timed out after the retries. A snapshot miss, an unreadable answer or a
-#: disambiguation loop would fail the same way again, so they are outcomes like ``env_error``.
+#: disambiguation loop would fail the same way again, so they are outcomes like ``env_error``; so
+#: are an answer past its deadline (``timeout``: a server dripping its answer drips it again), past
+#: the size cap (``too_large``) or redirected off the configured site (``redirect``), issue 35.
 WIKI_INFRA_KIND = "unavailable"
 #: how the driver's row for a unit it gave up on begins
 GAVE_UP_PREFIX = "gave up after"

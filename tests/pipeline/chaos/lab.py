@@ -31,6 +31,7 @@ The scenarios (``--only NAME``; the functions live in ``tests/pipeline/chaos/MOD
     unreadable guards   HTTP 200s nobody can read against a small run cap, over a run and 2 resumes
     lock      guards    synchronised threads and processes racing for the driver lock: 1 winner
     userfiles user_files  files a user hands us (--from, instances file, patches, selectors): one line, exit 2
+    wiki      wiki      FEVER's Wikipedia: dripping, huge and gzip-bomb pages, off-origin redirects, tampered snapshots
 
     python -m tests.pipeline.chaos.lab                          # every scenario (about 6 minutes on 2 cores)
     python -m tests.pipeline.chaos.lab --only worker gateway    # some of them
@@ -80,6 +81,7 @@ SCENARIOS: dict[str, tuple] = {
     "unreadable": ("guards", "unreadable_attacks", False),
     "lock": ("guards", "lock_race", False),
     "userfiles": ("user_files", "userfiles", False),
+    "wiki": ("wiki", "wiki", False),
 }
 
 

@@ -8,6 +8,10 @@ Options of :meth:`FeverBenchmark.make`:
 - ``wikipedia_rate``: requests per second per host for the whole run (default 2.0, at most
   :data:`.ratelimit.MAX_RATE`), shared by every worker of a Ray run through the run's
   :class:`.politeness.WikiPoliteness` actor, by the process's environments elsewhere.
+- ``wikipedia_deadline_s``: seconds one live answer may take, retries and redirects included
+  (default 60; past it the episode ends ``wiki_error``, kind ``timeout``).
+- ``wikipedia_max_page_bytes``: the most decoded bytes one live answer may have (default 5 MiB;
+  past it ``wiki_error``, kind ``too_large``, and nothing is stored).
 - ``max_steps``: actions per episode (default 10, the paper's cap).
 - ``verdict_only``: the method gives only a verdict (CoT, Standard; the pipeline sets it per
   method, :meth:`FeverBenchmark.options_for_agent`): the rules ask for a one-action plan.
@@ -25,6 +29,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -42,7 +47,18 @@ from .env import DEFAULT_MAX_STEPS, FeverEnvironment
 from .pages import PageStore, RunRecords, Snapshot, snapshot_key
 from .ratelimit import DEFAULT_BURST, DEFAULT_RATE, POLITENESS_VAR, RateLimiter, check_rate, shared_limiter
 from .replay import replay_fever_file
-from .wiki import DEFAULT_WIKIPEDIA_URL, LiveSource, SnapshotSource, WikiSource
+from .wiki import (
+    DEFAULT_DEADLINE_S,
+    DEFAULT_MAX_PAGE_BYTES,
+    DEFAULT_POLICY,
+    DEFAULT_WIKIPEDIA_URL,
+    LiveSource,
+    RetryPolicy,
+    SnapshotSource,
+    WikiSource,
+    check_deadline,
+    check_max_page_bytes,
+)
 
 LIVE = "live"
 SNAPSHOT_PREFIX = "snapshot:"
@@ -84,14 +100,19 @@ def _snapshot(folder: Path, files: tuple[tuple[str, int, int], ...]) -> Snapshot
 
 
 def wiki_source(
-    wikipedia: str = LIVE, *, page_store: PageStore | None = None, limiter: RateLimiter | None = None, rate: float = DEFAULT_RATE
+    wikipedia: str = LIVE,
+    *,
+    page_store: PageStore | None = None,
+    limiter: RateLimiter | None = None,
+    rate: float = DEFAULT_RATE,
+    policy: RetryPolicy = DEFAULT_POLICY,
 ) -> WikiSource:
     """The source of search answers for a ``wikipedia`` setting (a snapshot is loaded once per
     process for as long as its table files are unchanged: names, sizes, mtimes); live answers wait
     for ``limiter``, by default the run's shared one at ``rate`` (:func:`run_limiter`)."""
     folder = snapshot_dir(wikipedia)
     if folder is None:
-        return LiveSource(page_store, limiter=limiter if limiter is not None else run_limiter(rate))
+        return LiveSource(page_store, limiter=limiter if limiter is not None else run_limiter(rate), policy=policy)
     resolved = folder.resolve()
     return SnapshotSource(_snapshot(resolved, snapshot_key(resolved)))
 
@@ -155,6 +176,8 @@ class FeverBenchmark(Benchmark):
         wikipedia_url: str = DEFAULT_WIKIPEDIA_URL,
         wikipedia: str = LIVE,
         wikipedia_rate: float = DEFAULT_RATE,
+        wikipedia_deadline_s: float = DEFAULT_DEADLINE_S,
+        wikipedia_max_page_bytes: int = DEFAULT_MAX_PAGE_BYTES,
         max_steps: int = DEFAULT_MAX_STEPS,
         step_multiplier: float | None = None,
         seed: int = 0,
@@ -168,18 +191,23 @@ class FeverBenchmark(Benchmark):
         if unknown:
             raise ValueError(
                 f"unknown FEVER option(s) {', '.join(sorted(unknown))}; accepted: data_dir, wikipedia_url, "
-                "wikipedia, wikipedia_rate, max_steps, verdict_only, sample_seed, step_multiplier, seed"
+                "wikipedia, wikipedia_rate, wikipedia_deadline_s, wikipedia_max_page_bytes, max_steps, verdict_only, sample_seed, step_multiplier, seed"
             )
         check_sample_seed(sample_seed)  # it chose the instances; nothing in an episode reads it
         base = check_wikipedia_url(wikipedia_url)
         rate = check_rate(wikipedia_rate)
+        policy = replace(
+            DEFAULT_POLICY,
+            deadline_s=check_deadline(wikipedia_deadline_s),
+            max_page_bytes=check_max_page_bytes(wikipedia_max_page_bytes),
+        )
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
         if not isinstance(verdict_only, bool):
             raise ValueError(f"verdict_only must be true or false, got {verdict_only!r}")
         records = RunRecords() if page_store is None else None
         store = records.store if records is not None else page_store
-        source = wiki_source(wikipedia, page_store=store, limiter=limiter, rate=rate)
+        source = wiki_source(wikipedia, page_store=store, limiter=limiter, rate=rate, policy=policy)
         claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
         env = FeverEnvironment(
             find_claim(claims, instance_id),

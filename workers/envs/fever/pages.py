@@ -6,7 +6,9 @@ HTTP status, when it was fetched, the body and the text encoding it was decoded 
 :class:`PageStore` receives them as they are read (a run folder writes them as its ``wiki_pages``
 Parquet table, :func:`write_pages`); :class:`Snapshot` reads such tables back so that
 ``wikipedia: snapshot:DIR`` answers every request from them, and a request they do not hold is an
-error rather than a live fetch.
+error rather than a live fetch. A snapshot is served only when it matches its sealed manifest
+(:mod:`.manifest`: a hash per request row over every field served, the run's digest in
+``run.json``); :func:`seal_run_folder` writes it when a run ends, :func:`write_pages` beside its file.
 """
 
 from __future__ import annotations
@@ -22,8 +24,12 @@ from typing import Any, Protocol
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from schemas.parts import read_table
+from schemas.parts import RUN_FILE, read_run_file, read_table
 from schemas.records import WikiPageRecord, WikiRequestRecord
+
+from .manifest import MANIFEST_FILE, RUN_KEY, Entry, SnapshotError, manifest_path, record_sha256, verify, write_manifest
+
+__all__ = ["SnapshotError"]  # defined with the manifest it guards; importers reach it here too
 
 #: the table name of the bodies in a run folder, and the file name :func:`write_pages` uses
 TABLE = "wiki_pages"
@@ -60,6 +66,14 @@ class PageRecord:
     body: bytes
     encoding: str
     final_url: str = ""
+
+    def record_sha256(self) -> str:
+        """The row hash (:func:`.manifest.record_sha256`) over every field served of this answer."""
+        return record_sha256(self.url, self.status, self.encoding, self.final_url, self.fetched_at, self.sha256)
+
+    def entry(self) -> Entry:
+        """This answer's manifest entry: (URL, row hash)."""
+        return (self.url, self.record_sha256())
 
     def text(self) -> str:
         """The body as text, decoded as the HTTP client decoded it (``requests``' ``Response.text``:
@@ -115,11 +129,19 @@ def write_pages(records: Iterable[PageRecord], path: str | Path) -> Path:
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(table, out)
+    root = _pages_root(out)
+    write_manifest(root, [r.entry() for r in _page_file_records(root, checked=False)])  # bodies are checked on loading
     return out
 
 
-class SnapshotError(ValueError):
-    """A snapshot folder that holds no ``wiki_pages`` table, or a row whose body is not its sha256."""
+def _pages_root(file: Path) -> Path:
+    """The snapshot a :func:`write_pages` file belongs to: ``DIR`` for ``DIR/wiki_pages.parquet``
+    and ``DIR/wiki_pages/*.parquet``, else the file itself."""
+    if file.name == f"{TABLE}.parquet":
+        return file.parent
+    if file.parent.name == TABLE:
+        return file.parent.parent
+    return file
 
 
 def _checked(record: PageRecord, where: object) -> PageRecord:
@@ -128,14 +150,14 @@ def _checked(record: PageRecord, where: object) -> PageRecord:
     return record
 
 
-def _page_file_records(folder: Path) -> Iterator[PageRecord]:
+def _page_file_records(folder: Path, *, checked: bool = True) -> Iterator[PageRecord]:
     """The records of :func:`write_pages` files (one table holding URLs and bodies)."""
     files = _table_files(folder)
     if not files:
         raise SnapshotError(f"{str(folder)!r} holds no {TABLE}.parquet nor {TABLE}/*.parquet")
     for file in files:
         for row in pq.read_table(file, schema=SCHEMA).to_pylist():
-            yield _checked(PageRecord(**row), file)
+            yield _checked(PageRecord(**row), file) if checked else PageRecord(**row)
 
 
 def _run_folder_records(run_dir: Path) -> Iterator[PageRecord]:
@@ -173,13 +195,31 @@ def _table_files(folder: Path) -> list[Path]:
     return ([direct] if direct.is_file() else []) + nested
 
 
+def seal_run_folder(run_dir: Path) -> str | None:
+    """Write the manifest of ``run_dir``'s ``wiki_requests`` rows (every row's URL and row hash) and
+    return its digest, for run.json (:data:`.manifest.RUN_KEY`); None when the run read no page.
+    Called by the driver when a session ends (pipeline/driver.py). SnapshotError when a part of
+    the table cannot be read (nothing is sealed then)."""
+    requests, bad = read_table(run_dir, REQUESTS_TABLE)
+    if bad:
+        raise SnapshotError(f"{str(run_dir)!r}: a {REQUESTS_TABLE} part cannot be read ({bad[0]}); nothing sealed")
+    if requests.num_rows == 0:
+        return None
+    entries = [
+        (r["url"], record_sha256(r["url"], r["status"], r["encoding"], r["final_url"], r["fetched_at"], r["sha256"]))
+        for r in requests.select(["url", "status", "encoding", "final_url", "fetched_at", "sha256"]).to_pylist()
+    ]
+    return write_manifest(run_dir, entries)
+
+
 def snapshot_key(folder: Path) -> tuple[tuple[str, int, int], ...]:
-    """What a snapshot of ``folder`` was read from: each table file's path, size and mtime.
+    """What a snapshot of ``folder`` was read from: each table file's path, size and mtime, and
+    those of its manifest and run.json (a run that ends seals again).
 
     Why not the folder's mtime: a run still writing adds part files inside ``wiki_pages/`` and
     ``wiki_requests/``, which leaves the run folder's own mtime as it was; a cache keyed on it
     would keep answering from the parts it first saw."""
-    files: list[Path] = [folder] if folder.is_file() else []
+    files: list[Path] = [folder, manifest_path(folder)] if folder.is_file() else [folder / RUN_FILE, folder / MANIFEST_FILE]
     for table in (TABLE, REQUESTS_TABLE):
         if (folder / f"{table}.parquet").is_file():
             files.append(folder / f"{table}.parquet")
@@ -200,15 +240,20 @@ class Snapshot:
     ``wiki_pages`` tables: each request joined to its body by sha256), or from
     ``DIR/wiki_pages.parquet`` and/or ``DIR/wiki_pages/*.parquet`` written by :func:`write_pages`
     (or one such Parquet file). When a URL was read more than once the first answer read is kept.
-    Every body is checked against its sha256 on loading."""
+    Every body is checked against its sha256 on loading, and the rows against the sealed manifest
+    (:func:`.manifest.verify`): SnapshotError, one line, for any difference or no manifest."""
 
     def __init__(self, folder: str | Path) -> None:
         self.folder = Path(folder).expanduser()
         self._by_url: dict[str, PageRecord] = {}
-        if (self.folder / REQUESTS_TABLE).is_dir():
-            records: Iterable[PageRecord] = _run_folder_records(self.folder)
+        run_folder = (self.folder / REQUESTS_TABLE).is_dir()
+        if run_folder:
+            records = list(_run_folder_records(self.folder))
+            sealed = (read_run_file(self.folder) or {}).get(RUN_KEY)
         else:
-            records = _page_file_records(self.folder)
+            records = list(_page_file_records(self.folder))
+            sealed = None
+        verify(self.folder, [r.entry() for r in records], sealed if isinstance(sealed, str) else None, run_folder=run_folder)
         for record in records:
             self._by_url.setdefault(record.url, record)
 

@@ -13,7 +13,8 @@ from pipeline.cli import main
 from schemas.parts import RUN_FILE, PartWriter
 from schemas.records import WikiPageRecord, WikiRequestRecord
 from workers.envs.fever.benchmark import wiki_source
-from workers.envs.fever.pages import sha256_hex
+from workers.envs.fever.manifest import RUN_KEY
+from workers.envs.fever.pages import SnapshotError, seal_run_folder, sha256_hex
 from workers.envs.fever.wiki import SnapshotSource, WikiError
 
 BODY = b"<html>a page</html>"
@@ -55,13 +56,25 @@ def test_wiki_pages_holds_each_body_once_per_run(tmp_path, capsys):
     assert capsys.readouterr().out == "n\n3\n"
 
 
+def seal(run: Path) -> None:
+    """What the driver does when a session ends: the manifest, its digest in run.json."""
+    data = json.loads((run / RUN_FILE).read_text())
+    data[RUN_KEY] = seal_run_folder(run)
+    (run / RUN_FILE).write_text(json.dumps(data))
+
+
 def test_the_snapshot_cache_sees_parts_written_after_it_was_loaded(tmp_path):
     run = _run_folder(tmp_path / "run", "r")
     PartWriter(run, "w1").write_records("r", [_page(BODY), _request("http://w/1", BODY, "e1")])
+    seal(run)
     first = wiki_source(f"snapshot:{run}")
     assert isinstance(first, SnapshotSource) and first.fetch("http://w/1") == BODY.decode()
-    # a worker of the same run writes more parts; the table folders' own mtimes need not change
+    # a later session of the same run writes more parts (the table folders' own mtimes need not
+    # change): refused until that session ends and seals them
     PartWriter(run, "w2").write_records("r", [_page(OTHER), _request("http://w/2", OTHER, "e2")])
+    with pytest.raises(SnapshotError, match="a row for 'http://w/2' is not in it"):
+        wiki_source(f"snapshot:{run}")
+    seal(run)
     again = wiki_source(f"snapshot:{run}")
     assert again.fetch("http://w/2") == OTHER.decode()
     assert wiki_source(f"snapshot:{run}").snapshot is again.snapshot  # unchanged parts: the cached one

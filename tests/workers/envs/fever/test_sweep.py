@@ -157,6 +157,10 @@ def test_live_sweep_records_pages_and_snapshot_replays_them(paper_claims, ray_ad
 
     check_report(live)
 
+    # the session sealed what it recorded: the manifest's digest in run.json (a snapshot must match it)
+    sealed = json.loads((live / "run.json").read_text())["wiki_manifest_sha256"]
+    assert sealed == json.loads((live / "wiki_manifest.json").read_text())["digest"]
+
     replay = tmp_path / "replay"
     run_sweep(replay, sweep(replay, f'wikipedia_url: {base}, wikipedia: "snapshot:{live}"'))
     assert len(server.requests) == 8  # the stopped server got nothing more (a request would fail the episodes)
