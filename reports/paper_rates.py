@@ -96,10 +96,14 @@ def main_table(cells: Cells) -> Table | str:
 def fever_sample_cell(cells: Cells, c: Cell) -> tuple[Cell, str | None]:
     """A FEVER arm's cell over the sample behind its method's paper number
     (:data:`reports.paper.FEVER_SAMPLE_SEED`) and why the paper's number may not stand beside it
-    (None: it may); the arm's whole cell with the reason when that sample cannot be told or was not run."""
+    (None: it may); the arm's whole cell with the reason when that sample cannot be told or was not run.
+    A reason that no sample can undo (a test double, another model, profile or window) comes first."""
     seed = paper.FEVER_SAMPLE_SEED.get(c["method"])
+    whole = paper.mismatch(paper.PROTOCOLS["main"], arm_protocol(c))
     if seed is None:
-        return c, paper.mismatch(paper.PROTOCOLS["main"], arm_protocol(c))
+        return c, whole
+    if whole is not None and not whole.endswith(f"the paper ran {paper.FEVER_CLAIMS}"):
+        return c, whole  # a test double, another model, profile or window: no sample makes it the paper's number
     scoped = [
         s
         for s in cells.select(scope=f"fever_seed{seed}", level="split", benchmark="fever", split=c["split"])
