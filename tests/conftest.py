@@ -110,3 +110,16 @@ def docker_ready() -> str:
     except Exception as e:
         pytest.fail(f"building {DEFAULT_IMAGE} failed: {e} (RECAP_SKIP_DOCKER=1 skips docker tests)", pytrace=False)
     return DEFAULT_IMAGE
+
+
+@pytest.fixture(scope="session")
+def bwrap_ready() -> None:
+    """(Local sandbox tests) bubblewrap confines commands here; a test that needs it FAILS without
+    it (scripts/test.sh installs it where it can), RECAP_SKIP_BWRAP=1 is the explicit opt-out."""
+    if os.environ.get("RECAP_SKIP_BWRAP") == "1":
+        pytest.skip("RECAP_SKIP_BWRAP=1: bubblewrap sandbox tests skipped")
+    from workers.sandbox import bwrap
+
+    why = bwrap.probe()
+    if why is not None:
+        pytest.fail(f"the local sandbox tests need bubblewrap: {why} (RECAP_SKIP_BWRAP=1 skips them)", pytrace=False)
