@@ -165,7 +165,7 @@ class Sandbox(ABC):
         """Run ``command`` with ``bash -c`` in ``workdir`` (timeout: the limit's unless given)."""
 
     @abstractmethod
-    def read_file(self, path: str, *, max_bytes: int | None = None) -> bytes:
+    def read_file(self, path: str) -> bytes:
         """A file's bytes; ``path`` relative to ``workdir`` or absolute inside the sandbox.
         Raises FileNotFoundError / IsADirectoryError like the OS."""
 

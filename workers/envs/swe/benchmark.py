@@ -5,7 +5,7 @@ Options of :meth:`SweBenchmark.make` (and of a sweep's ``environments[].options`
 - ``instances_file`` (required): the JSONL file of SWE-bench records (:mod:`.instances`); its stem
   is the episodes' split;
 - ``sandbox``: ``docker`` (default: a container of a locally built image, no network) or ``local``
-  (commands run on this host as this user in a temporary folder: no isolation, so only when asked);
+  (a temporary folder on this host, each command under bubblewrap: only when asked);
 - ``sandbox_trust``: ``isolated`` (default) or ``none``. A ``local`` sandbox confines each command
   with bubblewrap (:mod:`workers.sandbox.bwrap`); where bubblewrap is missing or does not work,
   the sweep is refused in preflight unless it says ``none``: the model's commands then run on this
