@@ -64,3 +64,25 @@ def test_a_bad_sandbox_trust_is_one_line(tmp_path, monkeypatch, capsys) -> None:
     assert code == 2 and len(err) == 1
     assert "sandbox_trust must be 'isolated' (a local sandbox confines commands with bubblewrap) or 'none'" in err[0]
     assert err[0].endswith("got 'maybe'")
+
+
+def test_the_sweeps_trust_reaches_the_episodes_sandbox(tmp_path, monkeypatch) -> None:
+    """make() -> the environment -> its sandbox at reset: under ``none`` without bubblewrap the
+    episode's sandbox is the unconfined fallback, and says so; the default refuses at make()."""
+    from workers.envs.swe.benchmark import BENCHMARK
+    from workers.sandbox import SandboxError, bwrap
+    from workers.sandbox.local_sandbox import WARNING
+
+    monkeypatch.setattr(bwrap, "probe", lambda: "bubblewrap (bwrap) is not installed")
+    fixtures = make_fixtures(tmp_path / "fx", ("format",))
+    options = {"instances_file": str(fixtures.tasks_file), "sandbox": "local"}
+    (iid,) = BENCHMARK.list_instances_for("all", options)
+    with pytest.raises(SandboxError, match="sandbox_trust: none"):
+        BENCHMARK.make(iid, **options)
+    env = BENCHMARK.make(iid, **options, sandbox_trust="none")
+    try:
+        env.reset()
+        box = env._sandbox  # type: ignore[attr-defined]
+        assert box.warning == WARNING and box.trust == "none" and "bwrap" not in box.confinement
+    finally:
+        env.close()
