@@ -40,6 +40,10 @@ from pathlib import Path
 
 #: the host folders every command sees read-only (when they exist): programs, libraries, config
 SYSTEM_DIRS = ("/usr", "/bin", "/sbin", "/lib", "/lib32", "/lib64", "/libx32", "/etc")
+#: secrets under ``/etc`` hidden from the command (a root command inside owns root's files):
+#: files read as an unreadable device, folders as an empty tmpfs
+MASKED_FILES = ("/etc/shadow", "/etc/gshadow", "/etc/shadow-", "/etc/gshadow-", "/etc/sudoers", "/etc/.pwd.lock")
+MASKED_DIRS = ("/etc/ssh", "/etc/ssl/private", "/etc/sudoers.d")
 
 
 def bwrap_path() -> str | None:
@@ -84,6 +88,8 @@ def system_binds(path_dirs: Sequence[str]) -> list[str]:
         elif os.path.isdir(d):
             out += ["--ro-bind", d, d]
             bound.append(d)
+    out += [x for f in MASKED_FILES if os.path.isfile(f) for x in ("--ro-bind", "/dev/null", f)]
+    out += [x for d in MASKED_DIRS if os.path.isdir(d) and not os.path.islink(d) for x in ("--tmpfs", d)]
     for d in path_dirs:
         if not d.startswith("/") or not os.path.isdir(d):
             continue

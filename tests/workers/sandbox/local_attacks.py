@@ -136,8 +136,13 @@ def ptrace_host(sb: LocalSandbox, host: Host) -> tuple[bool, str]:
 
 
 def host_files(sb: LocalSandbox, host: Host) -> tuple[bool, str]:
-    out = _out(sb, f"cat {host.secret_file} 2>&1; touch /usr/.recap-attack /etc/.recap-attack 2>&1; echo rc=$?")
+    out = _out(
+        sb,
+        f"cat {host.secret_file} 2>&1; touch /usr/.recap-attack /etc/.recap-attack 2>&1; echo rc=$?; "
+        "head -c 64 /etc/shadow 2>&1 | grep -c '^root:'",
+    )
     held = host.secret not in out and "rc=0" not in out and not Path("/usr/.recap-attack").exists()
+    held = held and out.endswith("\n0")  # the host's /etc/shadow is not readable
     return held, out.replace("\n", " | ")[:160]
 
 
@@ -149,7 +154,7 @@ ESCAPES: dict[str, Attack] = {
     "mount": mount_tmpfs,
     "chroot": chroot_out,
     "ptrace/strace/gdb of a host pid": ptrace_host,
-    "read a host file / write the system": host_files,
+    "read a host file or /etc/shadow, write the system": host_files,
 }
 
 
