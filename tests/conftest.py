@@ -20,6 +20,14 @@ os.environ.setdefault("ALFWORLD_DATA", str(SHARED_DATA / "alfworld"))
 # workers/agents registers mini_swe (recap/ registers the six built-in methods itself)
 import workers.agents  # noqa: E402,F401
 
+if os.environ.get("RECAP_SKIP_BWRAP") == "1":
+    # the explicit opt-out of the bubblewrap tests (scripts/test.sh): the other tests that open a
+    # local sandbox in this process run it as a sweep with `sandbox_trust: none` would (bubblewrap
+    # still confines them where it works)
+    import workers.sandbox.local_sandbox as _local_sandbox
+
+    _local_sandbox.DEFAULT_TRUST = "none"
+
 
 @pytest.fixture(scope="session")
 def ray_address() -> Iterator[str]:

@@ -24,7 +24,7 @@ from workers.sandbox.cleanup import remove_labelled
 from workers.sandbox.repo_copy import check_repo
 
 
-def check_ready(kind: SandboxKind | str, image: str, *, trust: str = "isolated") -> None:
+def check_ready(kind: SandboxKind | str, image: str, *, trust: str | None = None) -> None:
     """SandboxError (one line) unless a sandbox of ``kind`` can start here: for ``docker`` the
     daemon answers and ``image`` exists (checked before a sweep runs: a missing image is refused
     in preflight, not found by an episode); for ``local`` bubblewrap works, unless ``trust`` is
@@ -43,10 +43,10 @@ def check_ready(kind: SandboxKind | str, image: str, *, trust: str = "isolated")
         check_image(image)
 
 
-def open_sandbox(kind: SandboxKind | str, spec: SandboxSpec, *, trust: str = "isolated") -> Sandbox:
+def open_sandbox(kind: SandboxKind | str, spec: SandboxSpec, *, trust: str | None = None) -> Sandbox:
     """Start a sandbox of ``kind`` for ``spec``; SandboxError (one line) when it cannot.
     ``trust``: the sweep's ``sandbox_trust`` (``none`` lets a local sandbox run unconfined
-    where bubblewrap does not work)."""
+    where bubblewrap does not work; None: ``isolated``)."""
     if kind not in SANDBOX_KINDS:
         raise SandboxError(f"unknown sandbox kind {kind!r} (known: {', '.join(SANDBOX_KINDS)})")
     if spec.repo_path is None and kind != "docker":

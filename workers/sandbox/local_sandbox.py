@@ -51,6 +51,9 @@ from workers.sandbox.repo_copy import clone_at
 #: bubblewrap or is refused; ``none``: the sweep accepts commands that are not isolated
 SandboxTrust = Literal["isolated", "none"]
 TRUST_LEVELS: tuple[SandboxTrust, ...] = ("isolated", "none")
+#: the trust a sandbox gets when none is given (the test suite's RECAP_SKIP_BWRAP=1 sets ``none``,
+#: tests/conftest.py; nothing else changes it)
+DEFAULT_TRUST: SandboxTrust = "isolated"
 
 WARNING_BWRAP = (
     "the local sandbox confines commands with bubblewrap (new namespaces, no capabilities, the host's "
@@ -70,10 +73,11 @@ WATCH_EVERY_S = 0.25
 _UNSHARE_PROBE: dict[tuple[str, ...], bool] = {}
 
 
-def refusal(trust: str) -> str | None:
-    """Why a local sandbox cannot open under ``trust`` (None: it can): bubblewrap does not work
-    here and the sweep did not say ``sandbox_trust: none``. One line, naming both fixes."""
-    if trust == "none":
+def refusal(trust: str | None = None) -> str | None:
+    """Why a local sandbox cannot open under ``trust`` (None: :data:`DEFAULT_TRUST`; the answer
+    None: it can): bubblewrap does not work here and the sweep did not say ``sandbox_trust: none``.
+    One line, naming both fixes."""
+    if (trust or DEFAULT_TRUST) == "none":
         return None
     why = bwrap.probe()
     if why is None:
@@ -138,7 +142,8 @@ class LocalSandbox(Sandbox):
 
     kind: SandboxKind = "local"
 
-    def __init__(self, spec: SandboxSpec, *, trust: SandboxTrust | str = "isolated") -> None:
+    def __init__(self, spec: SandboxSpec, *, trust: SandboxTrust | str | None = None) -> None:
+        trust = trust or DEFAULT_TRUST
         if trust not in TRUST_LEVELS:
             raise SandboxError(f"sandbox_trust must be one of {', '.join(TRUST_LEVELS)}, got {trust!r}")
         if spec.repo_path is None:  # the repository is inside a Docker image: nothing to clone here

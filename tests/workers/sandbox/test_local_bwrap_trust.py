@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from workers.envs.swe.examples import make_fixtures
+from workers.sandbox import local_sandbox
 
 SPEC = """run: trust
 output: {out}
@@ -36,6 +37,7 @@ def _run(
 
     monkeypatch.setattr(run_command, "_execute", never)
     monkeypatch.setattr(bwrap, "probe", lambda: "bubblewrap (bwrap) is not installed")
+    monkeypatch.setattr(local_sandbox, "DEFAULT_TRUST", "isolated")  # as a sweep has it (RECAP_SKIP_BWRAP aside)
     fixtures = make_fixtures(tmp_path / "fx", ("format",))
     spec = tmp_path / "sweep.yaml"
     spec.write_text(SPEC.format(out=tmp_path / "out", tasks=fixtures.tasks_file, extra=extra))
@@ -74,6 +76,7 @@ def test_the_sweeps_trust_reaches_the_episodes_sandbox(tmp_path, monkeypatch) ->
     from workers.sandbox.local_sandbox import WARNING
 
     monkeypatch.setattr(bwrap, "probe", lambda: "bubblewrap (bwrap) is not installed")
+    monkeypatch.setattr(local_sandbox, "DEFAULT_TRUST", "isolated")
     fixtures = make_fixtures(tmp_path / "fx", ("format",))
     options = {"instances_file": str(fixtures.tasks_file), "sandbox": "local"}
     (iid,) = BENCHMARK.list_instances_for("all", options)

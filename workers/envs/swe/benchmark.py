@@ -120,7 +120,7 @@ def _positive(name: str, value: Any, kind: type) -> Any:
     return kind(value)
 
 
-def default_open_sandbox(kind: str, trust: str = "isolated") -> OpenSandbox:
+def default_open_sandbox(kind: str, trust: str | None = None) -> OpenSandbox:
     """:func:`workers.sandbox.open_sandbox` bound to ``kind`` and the sweep's ``sandbox_trust``."""
     return partial(open_sandbox, kind, trust=trust)
 
@@ -195,8 +195,8 @@ class SweBenchmark(Benchmark):
                 f"sandbox must be 'docker' or 'local' ('local' runs the model's commands on this host as this user: "
                 f"it is not isolation), got {kind!r}"
             )
-        trust = options.get("sandbox_trust", "isolated")
-        if trust not in TRUST_LEVELS:
+        trust = options.get("sandbox_trust")
+        if trust is not None and trust not in TRUST_LEVELS:
             raise ValueError(
                 f"sandbox_trust must be 'isolated' (a local sandbox confines commands with bubblewrap) or 'none' "
                 f"(a local sandbox may run them unconfined on this host), got {trust!r}"
