@@ -35,7 +35,7 @@ fi
 # it. Installed from the distribution where root with apt-get can; RECAP_SKIP_BWRAP=1 is the
 # explicit opt-out (the bubblewrap tests are then skipped).
 if [ "${RECAP_SKIP_BWRAP:-}" = 1 ]; then
-  echo "RECAP_SKIP_BWRAP=1: the bubblewrap sandbox tests are skipped" >&2
+  echo "RECAP_SKIP_BWRAP=1: the bubblewrap sandbox tests are skipped (other local-sandbox tests run it with sandbox_trust: none)" >&2
 elif ! command -v bwrap >/dev/null 2>&1; then
   if [ "$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then
     echo "error: no bubblewrap (bwrap), and it cannot be installed here (needs root and apt-get)." >&2

@@ -14,7 +14,8 @@ temporary root, and that root is bounded as a whole:
   its pages are memory (swappable), taken only as files are written;
 * elsewhere, a watchdog measures the root (bytes and entries) four times a second while a
   command runs and kills the command when it is over; ``RLIMIT_FSIZE`` caps any single file at
-  the limit between two looks.
+  what was left of the limit when the command started. A reactive bound: what a command writes
+  in many files between two looks gets through before it is stopped (and reported).
 
 bubblewrap's own ``--size`` tmpfs is not used for ``/tmp``: the shell session's state file lives
 in ``$TMPDIR`` and must outlive the command (:mod:`workers.sandbox.session`).

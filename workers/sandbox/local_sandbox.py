@@ -195,6 +195,7 @@ class LocalSandbox(Sandbox):
             self._prefix = ["unshare", *flags] if _unshare_works(flags) else []
         self.env = {"PATH": host_path, "HOME": home, "LANG": "C.UTF-8", "TMPDIR": tmp, **spec.env}
         isolated = self.bwrap or bool(self._prefix)
+        self._used = disk_bound.used_bytes(self.root, self.tmpfs)
         self.confinement: tuple[str, ...] = tuple(
             x
             for x, on in (
@@ -238,7 +239,8 @@ class LocalSandbox(Sandbox):
                 f.write(str(os.getpid()))
         for res, value in (
             (resource.RLIMIT_AS, lim.memory_bytes),
-            (resource.RLIMIT_FSIZE, lim.disk_bytes),
+            # no single file past what is left of the limit (as measured after the last command)
+            (resource.RLIMIT_FSIZE, max(lim.disk_bytes - self._used, 1 << 16)),
             (resource.RLIMIT_NPROC, lim.pids),
         ):
             try:
@@ -321,7 +323,7 @@ class LocalSandbox(Sandbox):
             self._register(None)
         exit_code: int | None = None if timed_out or over else (rc if rc >= 0 else 128 - rc)
         output = bytes(kept).decode("utf-8", errors="replace")
-        used = disk_bound.used_bytes(self.root, self.tmpfs)
+        used = self._used = disk_bound.used_bytes(self.root, self.tmpfs)
         if over or used > lim.disk_bytes:
             exit_code = None
             output += (
