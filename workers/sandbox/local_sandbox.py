@@ -151,6 +151,10 @@ class LocalSandbox(Sandbox):
         refused = refusal(trust)
         if refused is not None:
             raise SandboxError(refused)
+        wd = os.path.normpath(spec.workdir)
+        taken = ("/proc", "/dev", "/tmp", "/var/tmp", HOME_INSIDE, *bwrap.SYSTEM_DIRS)
+        if not wd.startswith("/") or wd == "/" or any(wd == t or wd.startswith(t + "/") or t.startswith(wd + "/") for t in taken):
+            raise SandboxError(f"a local sandbox's workdir must be a folder of its own (like /repo), got {spec.workdir!r}")
         self.spec = spec
         self.limits = spec.limits
         self.trust = trust

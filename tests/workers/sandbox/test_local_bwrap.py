@@ -165,3 +165,9 @@ def test_without_bubblewrap_local_is_refused_unless_trust_none(
         assert isinstance(sb, LocalSandbox)
         assert sb.warning == WARNING and "bwrap" not in sb.confinement
         assert sb.run("cat a.txt").output == "hello\n"
+
+
+@pytest.mark.parametrize("workdir", ["/", "/tmp", "/usr/src", "/home", "relative", "/etc"])
+def test_a_workdir_over_the_sandboxes_own_folders_is_refused(repo: Repo, labels: dict[str, str], workdir: str) -> None:
+    with pytest.raises(SandboxError, match="^a local sandbox's workdir must be a folder of its own"):
+        open_sandbox("local", SandboxSpec(str(repo.path), repo.commit, labels=labels, workdir=workdir))
