@@ -130,7 +130,9 @@ def test_read_file_and_read_lines_bounds(sandbox: LocalSandbox) -> None:
     assert (s.data, s.total_lines, s.total_bytes) == (b"", 2, 4)
 
 
-def test_committed_symlinks_stay_symlinks(tmp_path: Path, labels: dict[str, str]) -> None:
+def test_committed_symlinks_stay_symlinks(tmp_path: Path, labels: dict[str, str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Even where the host's git says ``core.symlinks = false`` (the clone would write files
+    holding the targets' paths, which the sandbox could not tell from content)."""
     p = tmp_path / "linked"
     p.mkdir()
     git("init", "-q", cwd=p)
@@ -139,6 +141,8 @@ def test_committed_symlinks_stay_symlinks(tmp_path: Path, labels: dict[str, str]
     (p / "host").symlink_to("/etc/passwd")
     git("add", ".", cwd=p)
     git("commit", "-qm", "links", cwd=p)
+    (tmp_path / "gitconfig").write_text("[core]\n\tsymlinks = false\n")
+    monkeypatch.setenv("GIT_CONFIG_GLOBAL", str(tmp_path / "gitconfig"))
     with open_sandbox("local", SandboxSpec(str(p), git("rev-parse", "HEAD", cwd=p), labels=labels)) as sb:
         assert sb.run("readlink rel; readlink host").output == "target.txt\n/etc/passwd\n"
         assert sb.read_file("rel") == b"t\n"
