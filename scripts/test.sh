@@ -30,6 +30,29 @@ elif ! has_chromium; then
   fi
   rm -f "$log"
 fi
+# The local sandbox confines each command with bubblewrap (workers/sandbox/bwrap.py); its tests
+# (tests/workers/sandbox/test_local_bwrap*.py, and every test opening a local sandbox) fail without
+# it. Installed from the distribution where root with apt-get can; RECAP_SKIP_BWRAP=1 is the
+# explicit opt-out (the bubblewrap tests are then skipped).
+if [ "${RECAP_SKIP_BWRAP:-}" = 1 ]; then
+  echo "RECAP_SKIP_BWRAP=1: the bubblewrap sandbox tests are skipped (other local-sandbox tests run it with sandbox_trust: none)" >&2
+elif ! command -v bwrap >/dev/null 2>&1; then
+  if [ "$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then
+    echo "error: no bubblewrap (bwrap), and it cannot be installed here (needs root and apt-get)." >&2
+    echo "  install it (sudo apt-get install -y bubblewrap) or set RECAP_SKIP_BWRAP=1 to skip its tests" >&2
+    exit 1
+  fi
+  echo "installing bubblewrap (apt) for the local sandbox"
+  log=$(mktemp)
+  if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq bubblewrap; } >"$log" 2>&1 || ! command -v bwrap >/dev/null 2>&1; then
+    tail -n 20 "$log" >&2
+    echo "error: apt-get could not install bubblewrap (output above)." >&2
+    echo "  fix the package source, or set RECAP_SKIP_BWRAP=1 to skip its tests" >&2
+    rm -f "$log"
+    exit 1
+  fi
+  rm -f "$log"
+fi
 export LITELLM_LOCAL_MODEL_COST_MAP=True
 export RAY_USAGE_STATS_ENABLED=0
 marker="not slow and not realmodel and not docker"

@@ -20,6 +20,14 @@ os.environ.setdefault("ALFWORLD_DATA", str(SHARED_DATA / "alfworld"))
 # workers/agents registers mini_swe (recap/ registers the six built-in methods itself)
 import workers.agents  # noqa: E402,F401
 
+if os.environ.get("RECAP_SKIP_BWRAP") == "1":
+    # the explicit opt-out of the bubblewrap tests (scripts/test.sh): the other tests that open a
+    # local sandbox in this process run it as a sweep with `sandbox_trust: none` would (bubblewrap
+    # still confines them where it works)
+    import workers.sandbox.local_sandbox as _local_sandbox
+
+    _local_sandbox.DEFAULT_TRUST = "none"
+
 
 @pytest.fixture(scope="session")
 def ray_address() -> Iterator[str]:
@@ -110,3 +118,16 @@ def docker_ready() -> str:
     except Exception as e:
         pytest.fail(f"building {DEFAULT_IMAGE} failed: {e} (RECAP_SKIP_DOCKER=1 skips docker tests)", pytrace=False)
     return DEFAULT_IMAGE
+
+
+@pytest.fixture(scope="session")
+def bwrap_ready() -> None:
+    """(Local sandbox tests) bubblewrap confines commands here; a test that needs it FAILS without
+    it (scripts/test.sh installs it where it can), RECAP_SKIP_BWRAP=1 is the explicit opt-out."""
+    if os.environ.get("RECAP_SKIP_BWRAP") == "1":
+        pytest.skip("RECAP_SKIP_BWRAP=1: bubblewrap sandbox tests skipped")
+    from workers.sandbox import bwrap
+
+    why = bwrap.probe()
+    if why is not None:
+        pytest.fail(f"the local sandbox tests need bubblewrap: {why} (RECAP_SKIP_BWRAP=1 skips them)", pytrace=False)

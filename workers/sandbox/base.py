@@ -125,6 +125,34 @@ class SandboxSpec:
     workdir: str = "/repo"
 
 
+# -- TEMPORARY copy of the file interface (issue 35 items 2 and 4): sbx-docker's base.py holds the
+# definitive one; the integrator keeps theirs.
+
+
+class OutsideRepository(PermissionError):
+    """A path that leaves the sandbox's repository once every symlink in it is resolved."""
+
+
+class FileTooLarge(OSError):
+    """A file bigger than the bytes a caller would read of it."""
+
+    def __init__(self, path: str, size: int, limit: int) -> None:
+        super().__init__(f"{path} is {size} bytes, over the {limit}-byte limit")
+        self.path = path
+        self.size = size
+        self.limit = limit
+
+
+@dataclass(frozen=True)
+class FileSlice:
+    """Some lines of a file, and the whole file's size."""
+
+    data: bytes
+    total_lines: int
+    total_bytes: int
+    truncated: bool
+
+
 class Sandbox(ABC):
     """One repository copy where commands run under :class:`SandboxLimits`."""
 
@@ -140,6 +168,10 @@ class Sandbox(ABC):
     def read_file(self, path: str) -> bytes:
         """A file's bytes; ``path`` relative to ``workdir`` or absolute inside the sandbox.
         Raises FileNotFoundError / IsADirectoryError like the OS."""
+
+    def read_lines(self, path: str, first: int, last: int | None, max_bytes: int) -> FileSlice:
+        """Lines ``first``..``last`` of a file, at most ``max_bytes`` (TEMPORARY: sbx-docker's base.py defines it)."""
+        raise NotImplementedError
 
     @abstractmethod
     def write_file(self, path: str, data: bytes) -> None:

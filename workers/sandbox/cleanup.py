@@ -3,19 +3,19 @@
 A worker killed mid-episode never reaches ``Sandbox.close``; everything it started carries the
 sandbox labels (:data:`workers.sandbox.base.LABEL_RUN` and the others), so the driver removes by
 label: every container carrying them, and every local sandbox registered with them
-(:mod:`workers.sandbox.registry`: its running process group, its pids cgroup, its temporary root).
+(:mod:`workers.sandbox.registry`: its running process group, its pids cgroup, its temporary root
+and the tmpfs mounted there).
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import shutil
 import signal
 from collections.abc import Mapping
 
 from workers.sandbox import registry
-from workers.sandbox.local_sandbox import kill_cgroup
+from workers.sandbox.local_sandbox import kill_cgroup, remove_root
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +67,7 @@ def _remove_local(labels: Mapping[str, str]) -> int:
         kill_cgroup(entry.get("cgroup"))
         root = entry.get("root")
         if isinstance(root, str) and os.path.basename(root).startswith("recap-sandbox-local-"):
-            shutil.rmtree(root, ignore_errors=True)
+            remove_root(root)  # its tmpfs unmounted first, when it is one
         registry.remove_entry(sandbox_id)
         n += 1
     return n

@@ -1,21 +1,32 @@
-"""The local sandbox: a temporary folder and a process group on the host. It is NOT isolation.
+"""The local sandbox: a repository copy on the host, each command confined by bubblewrap.
 
 For machines without Docker, asked for by name (``sandbox: local``). The repository is cloned at
-``base_commit`` into a temporary root; each command is ``bash -c`` in a new session with a
-scrubbed environment (``PATH``, ``LANG``, a temporary ``HOME`` and ``TMPDIR``, and ``spec.env``:
-no host variable such as an API key). What binds, where the host allows it:
+``base_commit`` into a temporary root; each command is ``bash -c`` with a scrubbed environment
+(``PATH``, ``LANG``, ``HOME``, ``TMPDIR`` and ``spec.env``: no host variable such as an API key).
 
-* ``unshare --pid --fork --mount-proc`` (and ``--net`` unless ``limits.network``): the command is
-  PID 1 of its own pid namespace, so when it ends or is killed every process it started dies with
-  it (daemons included), and without network it sees only a loopback that is down;
-* a pids cgroup (``/sys/fs/cgroup/pids``, when writable) with ``pids.max = limits.pids``: a fork
-  bomb stops there, even as root (``RLIMIT_NPROC`` does not bind root; it is set too);
-* ``RLIMIT_AS`` (memory per process) and ``RLIMIT_FSIZE`` (any single file) from the limits; the
-  repository folder's size is measured after each command.
+Confinement (issue 35 item 1; :mod:`workers.sandbox.bwrap`): each command runs under bubblewrap
+with every namespace new (the network too unless ``limits.network``), every capability dropped,
+a fresh ``/proc``, a minimal ``/dev``, the host's system folders read-only, and as the only
+writable places the sandbox's own folders: the repository at ``spec.workdir`` (``/repo``, as in a
+container), ``/tmp``, ``/var/tmp`` and ``$HOME``. So ``umount``, ``mount``, ``chroot``,
+``nsenter`` into a host namespace, ptrace of a host process and reading another process's
+``/proc/<pid>/environ`` all fail: the host's processes are not in the command's world.
 
-What does not: the commands run as the worker's user on the host's file system; they can read
-and write anything that user can (``rm -rf /`` would be the host's). :attr:`LocalSandbox.warning`
-says so, and :attr:`LocalSandbox.confinement` lists what was actually applied.
+Where bubblewrap is missing or does not work, the sandbox is refused (:class:`SandboxError`
+naming the fix) unless the sweep says ``sandbox_trust: none``: then the former, weaker confinement
+runs (``unshare --pid --fork --mount-proc`` and ``--net``, which a root command can undo; the
+commands see and can change the host's files as the worker's user), and :attr:`LocalSandbox.warning`
+says so. Kept in both: a pids cgroup (``/sys/fs/cgroup/pids``, when writable: a fork bomb stops at
+``limits.pids``, even as root), ``RLIMIT_AS``/``RLIMIT_FSIZE``/``RLIMIT_NPROC``, the timeout
+(process group and pid namespace killed), the output cap, the registry entry for cleanup.
+
+Disk (issue 35 item 3; :mod:`workers.sandbox.disk_bound`): the repository, ``/tmp``,
+``/var/tmp`` and ``$HOME`` are folders of one root, bounded as a whole: a size-limited tmpfs
+where the worker can mount one, else a watchdog; measured after each command and reported.
+
+Files (items 2 and 4; :mod:`workers.sandbox.repo_paths`): the worker reads and writes the host's
+copy, so every path is resolved as the sandbox sees it, symlinks included, and refused
+(:class:`OutsideRepository`) when any component leaves the repository; reads are bounded.
 """
 
 from __future__ import annotations
@@ -30,17 +41,51 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Literal
 
-from workers.sandbox import registry
-from workers.sandbox.base import CommandResult, Sandbox, SandboxError, SandboxKind, SandboxSpec
+from workers.sandbox import bwrap, disk_bound, registry, repo_paths
+from workers.sandbox.base import CommandResult, FileSlice, Sandbox, SandboxError, SandboxKind, SandboxSpec
 from workers.sandbox.repo_copy import clone_at
 
+#: ``sandbox_trust``: ``isolated`` (default): a local sandbox confines its commands with
+#: bubblewrap or is refused; ``none``: the sweep accepts commands that are not isolated
+SandboxTrust = Literal["isolated", "none"]
+TRUST_LEVELS: tuple[SandboxTrust, ...] = ("isolated", "none")
+#: the trust a sandbox gets when none is given (the test suite's RECAP_SKIP_BWRAP=1 sets ``none``,
+#: tests/conftest.py; nothing else changes it)
+DEFAULT_TRUST: SandboxTrust = "isolated"
+
+WARNING_BWRAP = (
+    "the local sandbox confines commands with bubblewrap (new namespaces, no capabilities, the host's "
+    "system folders read-only, only the sandbox's own folders writable); it shares the host's kernel, "
+    "so `sandbox: docker` remains the stronger choice"
+)
 WARNING = (
-    "the local sandbox is NOT isolation: commands run on the host as this user and can read, "
-    "change or delete anything it can; use `sandbox: docker` for untrusted commands"
+    "the local sandbox is NOT isolation here (sandbox_trust: none, no working bubblewrap): commands run "
+    "on the host as this user and can read, change or delete anything it can; use `sandbox: docker` "
+    "or install bubblewrap for untrusted commands"
 )
 PIDS_CGROUP_ROOT = Path("/sys/fs/cgroup/pids")
+#: the sandbox's home folder as its commands see it (under bubblewrap)
+HOME_INSIDE = "/home/sandbox"
+#: seconds between two looks of the disk watchdog (no tmpfs bound)
+WATCH_EVERY_S = 0.25
 _UNSHARE_PROBE: dict[tuple[str, ...], bool] = {}
+
+
+def refusal(trust: str | None = None) -> str | None:
+    """Why a local sandbox cannot open under ``trust`` (None: :data:`DEFAULT_TRUST`; the answer
+    None: it can): bubblewrap does not work here and the sweep did not say ``sandbox_trust: none``.
+    One line, naming both fixes."""
+    if (trust or DEFAULT_TRUST) == "none":
+        return None
+    why = bwrap.probe()
+    if why is None:
+        return None
+    return (
+        f"sandbox: local confines the model's commands with bubblewrap, and {why}: install it "
+        "(apt-get install bubblewrap) or set the swe option sandbox_trust: none to run them unconfined on this host"
+    )
 
 
 def _unshare_works(flags: tuple[str, ...]) -> bool:
@@ -57,14 +102,7 @@ def _unshare_works(flags: tuple[str, ...]) -> bool:
 
 def dir_bytes(root: Path) -> int:
     """Bytes of the regular files under ``root`` (links not followed), like ``du -sb`` roughly."""
-    total = 0
-    for dirpath, _dirs, files in os.walk(root):
-        for name in files:
-            try:
-                total += os.lstat(os.path.join(dirpath, name)).st_size
-            except OSError:
-                pass
-    return total
+    return disk_bound.tree_usage(root)[0]
 
 
 def kill_cgroup(cgroup: str | None) -> None:
@@ -91,58 +129,89 @@ def kill_cgroup(cgroup: str | None) -> None:
         pass
 
 
+def remove_root(root: str | Path) -> None:
+    """Remove a local sandbox's temporary root: unmount its tmpfs (when it is one), then the folder."""
+    p = Path(root)
+    disk_bound.unmount(p)
+    shutil.rmtree(p, ignore_errors=True)
+
+
 class LocalSandbox(Sandbox):
-    """A temporary clone and a process group per command; NOT isolation (see :data:`WARNING`)."""
+    """A temporary clone, each command under bubblewrap (see the module docstring); with
+    ``trust="none"`` and no working bubblewrap, NOT isolation (see :data:`WARNING`)."""
 
     kind: SandboxKind = "local"
-    warning: str = WARNING
 
-    def __init__(self, spec: SandboxSpec) -> None:
+    def __init__(self, spec: SandboxSpec, *, trust: SandboxTrust | str | None = None) -> None:
+        trust = trust or DEFAULT_TRUST
+        if trust not in TRUST_LEVELS:
+            raise SandboxError(f"sandbox_trust must be one of {', '.join(TRUST_LEVELS)}, got {trust!r}")
+        if spec.repo_path is None:  # the repository is inside a Docker image: nothing to clone here
+            raise SandboxError("this repository is inside a Docker image (repo_path None): only a docker sandbox can open it")
+        refused = refusal(trust)
+        if refused is not None:
+            raise SandboxError(refused)
+        wd = os.path.normpath(spec.workdir)
+        taken = ("/proc", "/dev", "/tmp", "/var/tmp", HOME_INSIDE, *bwrap.SYSTEM_DIRS)
+        if not wd.startswith("/") or wd == "/" or any(wd == t or wd.startswith(t + "/") or t.startswith(wd + "/") for t in taken):
+            raise SandboxError(f"a local sandbox's workdir must be a folder of its own (like /repo), got {spec.workdir!r}")
         self.spec = spec
         self.limits = spec.limits
+        self.trust = trust
         self.id = f"local-{secrets.token_hex(6)}"
         self._closed = False
         self._lock = threading.Lock()
-        if spec.repo_path is None:  # the repository is inside a Docker image: nothing to clone here
-            raise SandboxError("this repository is inside a Docker image (repo_path None): only a docker sandbox can open it")
+        self.bwrap = bwrap.probe() is None
+        self.warning = WARNING_BWRAP if self.bwrap else WARNING
+        lim = spec.limits
         self.root = Path(tempfile.mkdtemp(prefix="recap-sandbox-local-"))
-        self.repo = self.root / spec.workdir.strip("/")
-        self.workdir = str(self.repo)
-        self.home = self.root / "home"
         self._cgroup: str | None = None
         self._register(None)
         try:
-            self.home.mkdir()
-            (self.root / "tmp").mkdir()
+            self.tmpfs = disk_bound.can_mount() and disk_bound.mount_tmpfs(
+                self.root, disk_bound.tmpfs_size(lim.disk_bytes), disk_bound.tmpfs_inodes(lim.disk_bytes)
+            )
+            self.repo = self.root / "repo"
+            self.home = self.root / "home"
+            self.tmp = self.root / "tmp"
+            self.var_tmp = self.root / "vartmp"
+            for d in (self.home, self.tmp, self.var_tmp):
+                d.mkdir()
             self.base_commit = clone_at(spec.repo_path, spec.base_commit, self.repo)
             self._cgroup = self._make_cgroup()
             self._register(None)
+            (self.home / ".gitconfig").write_text(
+                "[user]\n\tname = recap-eval sandbox\n\temail = sandbox@recap-eval.invalid\n[safe]\n\tdirectory = *\n"
+            )
         except BaseException:
             self.close()
             raise
-        lim = spec.limits
-        flags = ("--pid", "--fork", "--mount-proc", "--kill-child") + (() if lim.network else ("--net",))
-        self._prefix: list[str] = ["unshare", *flags] if _unshare_works(flags) else []
+        host_path = os.environ.get("PATH", "/usr/local/bin:/usr/bin:/bin")
+        if self.bwrap:
+            self.workdir = spec.workdir
+            home, tmp = HOME_INSIDE, "/tmp"
+            self._binds = bwrap.system_binds(host_path.split(":"))
+            self._prefix: list[str] = []
+        else:
+            self.workdir = str(self.repo)
+            home, tmp = str(self.home), str(self.tmp)
+            flags = ("--pid", "--fork", "--mount-proc", "--kill-child") + (() if lim.network else ("--net",))
+            self._prefix = ["unshare", *flags] if _unshare_works(flags) else []
+        self.env = {"PATH": host_path, "HOME": home, "LANG": "C.UTF-8", "TMPDIR": tmp, **spec.env}
+        isolated = self.bwrap or bool(self._prefix)
+        self._used = disk_bound.used_bytes(self.root, self.tmpfs)
         self.confinement: tuple[str, ...] = tuple(
             x
             for x, on in (
-                ("pid-namespace", bool(self._prefix)),
-                ("no-network", bool(self._prefix) and not lim.network),
+                ("bwrap", self.bwrap),
+                ("pid-namespace", isolated),
+                ("no-network", isolated and not lim.network),
                 ("pids-cgroup", self._cgroup is not None),
                 ("rlimits", True),
+                ("disk-tmpfs", self.tmpfs),
             )
             if on
         )
-        (self.home / ".gitconfig").write_text(
-            "[user]\n\tname = recap-eval sandbox\n\temail = sandbox@recap-eval.invalid\n[safe]\n\tdirectory = *\n"
-        )
-        self.env = {
-            "PATH": os.environ.get("PATH", "/usr/local/bin:/usr/bin:/bin"),
-            "HOME": str(self.home),
-            "LANG": "C.UTF-8",
-            "TMPDIR": str(self.root / "tmp"),
-            **spec.env,
-        }
 
     # -- bookkeeping -------------------------------------------------------------------
 
@@ -174,7 +243,8 @@ class LocalSandbox(Sandbox):
                 f.write(str(os.getpid()))
         for res, value in (
             (resource.RLIMIT_AS, lim.memory_bytes),
-            (resource.RLIMIT_FSIZE, lim.disk_bytes),
+            # no single file past what is left of the limit (as measured after the last command)
+            (resource.RLIMIT_FSIZE, max(lim.disk_bytes - self._used, 1 << 16)),
             (resource.RLIMIT_NPROC, lim.pids),
         ):
             try:
@@ -182,11 +252,24 @@ class LocalSandbox(Sandbox):
             except (ValueError, OSError):
                 pass
 
+    def argv(self, command: str) -> list[str]:
+        """What runs one command: bubblewrap's argv, or the unconfined fallback's."""
+        if self.bwrap:
+            return bwrap.command_argv(
+                command,
+                binds=self._binds,
+                writable={self.workdir: self.repo, "/tmp": self.tmp, "/var/tmp": self.var_tmp, HOME_INSIDE: self.home},
+                workdir=self.workdir,
+                env=self.env,
+                network=self.limits.network,
+            )
+        return [*self._prefix, "bash", "-c", command]
+
     # -- commands ----------------------------------------------------------------------
 
     def run(self, command: str, *, timeout_s: float | None = None) -> CommandResult:
-        """Run ``command`` with ``bash -c`` in the repository folder; on timeout the command's
-        process group (and pid namespace) is killed."""
+        """Run ``command`` with ``bash -c`` in the repository folder; on timeout (or a disk
+        overrun the watchdog sees) the command's process group and pid namespace are killed."""
         if self._closed:
             raise SandboxError("the sandbox is closed")
         lim = self.limits
@@ -195,7 +278,7 @@ class LocalSandbox(Sandbox):
         with self._lock:
             t0 = time.monotonic()
             proc = subprocess.Popen(
-                [*self._prefix, "bash", "-c", command],
+                self.argv(command),
                 cwd=self.repo,
                 env=self.env,
                 stdin=subprocess.DEVNULL,
@@ -220,27 +303,50 @@ class LocalSandbox(Sandbox):
 
             reader = threading.Thread(target=read, daemon=True)
             reader.start()
+            over: list[int] = []
+            stop = threading.Event()
+            watcher = None
+            if not self.tmpfs:  # no kernel bound on the root: look at it while the command runs
+                watcher = threading.Thread(target=self._watch_disk, args=(proc.pid, stop, over), daemon=True)
+                watcher.start()
             timed_out = False
             try:
                 rc = proc.wait(timeout=tmo)
             except subprocess.TimeoutExpired:
-                timed_out = True
+                timed_out = not over
+            stop.set()
             self._kill_group(proc.pid)
-            if timed_out:
-                rc = proc.wait()
+            rc = proc.wait()
+            if watcher is not None:
+                watcher.join(timeout=5)
             kill_cgroup_procs(self._cgroup)
             reader.join(timeout=5)
             if reader.is_alive() and proc.stdout is not None:  # a stray outside the group holds the pipe
                 proc.stdout.close()
             duration = time.monotonic() - t0
             self._register(None)
-        exit_code: int | None = None if timed_out else (rc if rc >= 0 else 128 - rc)
+        exit_code: int | None = None if timed_out or over else (rc if rc >= 0 else 128 - rc)
         output = bytes(kept).decode("utf-8", errors="replace")
-        used = dir_bytes(self.repo)
-        if used > lim.disk_bytes:
+        used = self._used = disk_bound.used_bytes(self.root, self.tmpfs)
+        if over or used > lim.disk_bytes:
             exit_code = None
-            output += f"\n[sandbox: the repository folder is {used} bytes, over the {lim.disk_bytes}-byte disk limit]"
+            output += (
+                f"\n[sandbox: the sandbox's files (repository, /tmp, /var/tmp, $HOME) are {max([used, *over])} bytes, "
+                f"over the {lim.disk_bytes}-byte disk limit]"
+            )
         return CommandResult(exit_code, output, seen[0], duration, timed_out=timed_out, truncated=seen[0] > cap)
+
+    def _watch_disk(self, pgid: int, stop: threading.Event, over: list[int]) -> None:
+        """Kill the command when the root holds more than the disk limit in bytes, or more
+        entries than a tmpfs of that size would allow."""
+        lim = self.limits.disk_bytes
+        while not stop.wait(WATCH_EVERY_S):
+            used, entries = disk_bound.tree_usage(self.root)
+            if used > lim or entries > disk_bound.tmpfs_inodes(lim):
+                over.append(used)
+                self._kill_group(pgid)
+                kill_cgroup_procs(self._cgroup)
+                return
 
     @staticmethod
     def _kill_group(pgid: int) -> None:
@@ -252,23 +358,36 @@ class LocalSandbox(Sandbox):
     # -- files ---------------------------------------------------------------------------
 
     def _path(self, path: str) -> Path:
-        return self.repo / path  # an absolute path replaces the base: it is the host's (not isolation)
+        """The host path of ``path`` as the sandbox sees it; OutsideRepository when it leaves
+        the repository (symlinks resolved inside the sandbox's view)."""
+        if self._closed:
+            raise SandboxError("the sandbox is closed")
+        return repo_paths.resolve(self.workdir, self.repo, path)
 
-    def read_file(self, path: str) -> bytes:
-        """A file's bytes; relative paths are under the repository folder."""
-        return self._path(path).read_bytes()
+    def read_file(self, path: str, *, max_bytes: int | None = None) -> bytes:
+        """A file's bytes; FileTooLarge (nothing read) when it is bigger than ``max_bytes``."""
+        return repo_paths.read_bounded(self._path(path), path, max_bytes)
+
+    def read_lines(self, path: str, first: int, last: int | None, max_bytes: int) -> FileSlice:
+        """Lines ``first``..``last`` of a file (bounded memory: :func:`repo_paths.read_lines`)."""
+        return repo_paths.read_lines(self._path(path), path, first, last, max_bytes)
 
     def write_file(self, path: str, data: bytes) -> None:
-        """Create or replace a file (its folders created)."""
+        """Create or replace a file (its folders created); the file's size is bounded by the
+        disk limit like a command's write."""
         p = self._path(path)
+        if len(data) > self.limits.disk_bytes:
+            raise OSError(27, f"{path}: {len(data)} bytes is over the {self.limits.disk_bytes}-byte disk limit")
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_bytes(data)
+        fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
 
     def close(self) -> None:
-        """Kill what is left, remove the temporary root and the cgroup; safe to call twice."""
+        """Kill what is left, remove the temporary root (its tmpfs unmounted) and the cgroup; safe to call twice."""
         self._closed = True
-        kill_cgroup(self._cgroup)
-        shutil.rmtree(self.root, ignore_errors=True)
+        kill_cgroup(getattr(self, "_cgroup", None))
+        remove_root(self.root)
         registry.remove_entry(self.id)
 
 

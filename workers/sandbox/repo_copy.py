@@ -33,8 +33,13 @@ def clone_at(repo_path: str, base_commit: str, dest: Path) -> str:
     """Clone ``repo_path`` into ``dest`` (which must not exist) and check out ``base_commit``
     (detached). Returns the commit's full hash."""
     commit = check_repo(repo_path, base_commit)
-    # --no-local: objects copied, never hard-linked to the host's repository
-    r = _git("clone", "--quiet", "--no-local", "--no-checkout", str(Path(repo_path).resolve()), str(dest))
+    # --no-local: objects copied, never hard-linked to the host's repository; core.symlinks: a
+    # committed symlink stays a symlink (never a file holding its target's path, whatever the
+    # host's git config says), and the sandbox resolves it inside its own view (repo_paths)
+    r = _git(
+        "-c", "core.symlinks=true", "clone", "--quiet", "--no-local", "--no-checkout",
+        "--config", "core.symlinks=true", str(Path(repo_path).resolve()), str(dest),
+    )  # fmt: skip
     if r.returncode != 0:
         raise SandboxError(f"git clone of {repo_path} failed: {r.stderr.strip().splitlines()[-1:]}")
     if _git("cat-file", "-e", f"{commit}^{{commit}}", cwd=dest).returncode != 0:

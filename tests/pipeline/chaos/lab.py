@@ -32,6 +32,7 @@ The scenarios (``--only NAME``; the functions live in ``tests/pipeline/chaos/MOD
     lock      guards    synchronised threads and processes racing for the driver lock: 1 winner
     userfiles user_files  files a user hands us (--from, instances file, patches, selectors): one line, exit 2
     wiki      wiki      FEVER's Wikipedia: dripping, huge and gzip-bomb pages, off-origin redirects, tampered snapshots
+    sandbox_local sandbox_local  escapes, disk overruns, symlinks and a 19 MB view against a local sandbox
 
     python -m tests.pipeline.chaos.lab                          # every scenario (about 6 minutes on 2 cores)
     python -m tests.pipeline.chaos.lab --only worker gateway    # some of them
@@ -82,6 +83,7 @@ SCENARIOS: dict[str, tuple] = {
     "lock": ("guards", "lock_race", False),
     "userfiles": ("user_files", "userfiles", False),
     "wiki": ("wiki", "wiki", False),
+    "sandbox_local": ("sandbox_local", "sandbox_local", False),
 }
 
 

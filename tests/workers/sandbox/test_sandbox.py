@@ -136,14 +136,16 @@ def test_close_is_idempotent_and_refuses_later_use(open_kind: Open) -> None:
         sb.run("true")
 
 
-def test_local_sandbox_says_it_is_not_isolation(repo: Repo, labels: dict[str, str]) -> None:
+def test_local_sandbox_says_what_confines_it(repo: Repo, labels: dict[str, str]) -> None:
+    """Under bubblewrap the warning names it; the unconfined fallback (sandbox_trust: none) says
+    it is NOT isolation; the temporary root goes with close."""
     from workers.sandbox import SandboxSpec, open_sandbox
-    from workers.sandbox.local_sandbox import LocalSandbox
+    from workers.sandbox.local_sandbox import WARNING, WARNING_BWRAP, LocalSandbox
 
     with open_sandbox("local", SandboxSpec(str(repo.path), repo.commit, labels=labels)) as sb:
         assert isinstance(sb, LocalSandbox)
-        assert "NOT isolation" in sb.warning
-        assert "NOT isolation" in (LocalSandbox.__doc__ or "")
+        assert sb.warning == (WARNING_BWRAP if "bwrap" in sb.confinement else WARNING)
+        assert "NOT isolation" in WARNING and "bubblewrap" in WARNING_BWRAP
         root = Path(sb.root)
         assert root.is_dir()
     assert not root.exists()

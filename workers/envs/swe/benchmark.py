@@ -5,7 +5,11 @@ Options of :meth:`SweBenchmark.make` (and of a sweep's ``environments[].options`
 - ``instances_file`` (required): the JSONL file of SWE-bench records (:mod:`.instances`); its stem
   is the episodes' split;
 - ``sandbox``: ``docker`` (default: a container of a locally built image, no network) or ``local``
-  (commands run on this host as this user in a temporary folder: no isolation, so only when asked);
+  (a temporary folder on this host, each command under bubblewrap: only when asked);
+- ``sandbox_trust``: ``isolated`` (default) or ``none``. A ``local`` sandbox confines each command
+  with bubblewrap (:mod:`workers.sandbox.bwrap`); where bubblewrap is missing or does not work,
+  the sweep is refused in preflight unless it says ``none``: the model's commands then run on this
+  host as this user, able to read, change or delete what it can (no isolation at all);
 - ``image``: the docker image (built locally; no registry is reached);
 - ``network``: network inside the sandbox (default false);
 - ``command_timeout_s``, ``output_bytes``, ``max_commands``, ``wall_time_s``: the episode's limits
@@ -37,6 +41,7 @@ from recap.env import Environment, UnknownInstanceError
 from workers.envs.registry import Benchmark
 from workers.sandbox import LABEL_EPISODE, LABEL_RUN, LABEL_WORKER, check_ready, open_sandbox, remove_labelled
 from workers.sandbox.base import SANDBOX_KINDS, SandboxLimits, SandboxSpec
+from workers.sandbox.local_sandbox import TRUST_LEVELS
 
 from .env import DEFAULT_TOTAL_OUTPUT_BYTES, OpenSandbox, SweEnvironment
 from .grading import DEFAULT_GRADING, check_grading
@@ -68,6 +73,7 @@ _LIMIT_OPTIONS = ("command_timeout_s", "output_bytes", "max_commands", "wall_tim
 ACCEPTED = (
     INSTANCES_FILE,
     "sandbox",
+    "sandbox_trust",
     "image",
     "network",
     *_LIMIT_OPTIONS,
@@ -114,9 +120,9 @@ def _positive(name: str, value: Any, kind: type) -> Any:
     return kind(value)
 
 
-def default_open_sandbox(kind: str) -> OpenSandbox:
-    """:func:`workers.sandbox.open_sandbox` bound to ``kind``."""
-    return partial(open_sandbox, kind)
+def default_open_sandbox(kind: str, trust: str | None = None) -> OpenSandbox:
+    """:func:`workers.sandbox.open_sandbox` bound to ``kind`` and the sweep's ``sandbox_trust``."""
+    return partial(open_sandbox, kind, trust=trust)
 
 
 class SweBenchmark(Benchmark):
@@ -203,6 +209,12 @@ class SweBenchmark(Benchmark):
                 f"sandbox must be 'docker' or 'local' ('local' runs the model's commands on this host as this user: "
                 f"it is not isolation), got {kind!r}"
             )
+        trust = options.get("sandbox_trust")
+        if trust is not None and trust not in TRUST_LEVELS:
+            raise ValueError(
+                f"sandbox_trust must be 'isolated' (a local sandbox confines commands with bubblewrap) or 'none' "
+                f"(a local sandbox may run them unconfined on this host), got {trust!r}"
+            )
         image = options.get("image", SandboxSpec.image)
         if not isinstance(image, str) or not image.strip():
             raise ValueError(f"image must be a docker image name, got {image!r}")
@@ -230,14 +242,14 @@ class SweBenchmark(Benchmark):
         if opener is None:
             # the daemon and the image, checked when the environment is made: a sweep's preflight
             # refuses a missing image before any episode (or any money) starts
-            check_ready(kind, image)
+            check_ready(kind, image, trust=trust)
         wanted = instance_id.partition("/")[2]
         inst = next((i for i in insts if i.instance_id == wanted), None)
         if inst is None:
             raise UnknownInstanceError(f"no SWE-bench record {wanted!r} in {path}")
         return SweEnvironment(
             inst,
-            opener if opener is not None else default_open_sandbox(kind),
+            opener if opener is not None else default_open_sandbox(kind, trust),
             split=path.stem or "custom",
             limits=limits,
             image=image,

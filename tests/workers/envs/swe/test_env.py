@@ -236,7 +236,7 @@ def test_benchmark_lists_by_file_repository_and_id(fixtures: Fixtures) -> None:
         ({"max_timeouts_in_row": 0}, "max_timeouts_in_row must be a positive integer, got 0"),
         (
             {"colour": 1},
-            "unknown swe option(s) colour; accepted: instances_file, sandbox, image, network, command_timeout_s, output_bytes, max_commands, wall_time_s, total_output_bytes, max_timeouts_in_row, eval_timeout_s, grading, step_multiplier, seed",
+            "unknown swe option(s) colour; accepted: instances_file, sandbox, sandbox_trust, image, network, command_timeout_s, output_bytes, max_commands, wall_time_s, total_output_bytes, max_timeouts_in_row, eval_timeout_s, grading, step_multiplier, seed",
         ),
     ],
 )
