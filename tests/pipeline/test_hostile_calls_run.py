@@ -13,6 +13,9 @@ sweep (ReCAP's tool-call mode, a local sandbox) - issue 35 item 6:
 
 from __future__ import annotations
 
+import contextlib
+import io
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -76,38 +79,85 @@ def q(out: Path, sql: str) -> list[tuple]:
     return con.execute(sql).fetchall()
 
 
-@pytest.mark.slow  # a Ray run with a sandboxed coding episode: about a minute on a small machine
-def test_deeply_nested_arguments_are_the_models_invalid_calls_and_resume_pays_nothing(
-    ray_address, tmp_path, capsys, monkeypatch, fake_server
-):
-    monkeypatch.setenv(KEY_ENV, "not-a-secret")
-    server = fake_server(fault_rates={"deepargs": 1.0})
-    out, spec_file = hostile_sweep(tmp_path, server)
-    assert main(["run", str(spec_file), "--progress", "off"]) == 0, capsys.readouterr().out
-    capsys.readouterr()
-    sent = len(server.log)
-    assert sent == CALLS and {(c.status, c.mode) for c in server.log} == {(200, "deepargs")}
+@dataclass(frozen=True)
+class RunAndResume:
+    """What ``recap run`` and then ``recap resume`` of a hostile sweep left (the chaos lab reads it too)."""
 
-    (episode,) = q(out, "select end_reason, error, llm_calls, cost_usd from episodes")
-    assert episode[:3] == ("call_cap", f"{CALLS} LLM calls (cap {CALLS})", CALLS)
-    deep = "[" * DEEP_LEVELS + "]" * DEEP_LEVELS
-    kept = deep[:MAX_ARGUMENTS_CHARS] + f" [cut: {len(deep)} characters in all]"
-    rows = q(
+    run_exit: int
+    resume_exit: int
+    #: requests the provider answered by the end of the run, and by the end of the resume
+    sent: int
+    sent_after_resume: int
+    #: the episode rows: (end_reason, error, llm_calls, cost_usd)
+    episodes: list[tuple]
+    #: the tool_calls rows: (index, step_index, name, arguments, valid, error, has a message, exit_code)
+    tool_calls: list[tuple]
+    #: (status, error_kind) of each llm_calls row, and their cost
+    calls: list[tuple]
+    calls_cost_usd: float
+    spent_pico: int
+    reserved_pico: int
+    spent_after_resume_pico: int
+    bill_pico: int
+
+
+def run_and_resume(tmp_path: Path, server: FakeServer, name: str = "hostile") -> RunAndResume:
+    """``recap run`` of a one-unit hostile sweep, then ``recap resume`` of its folder (in-process,
+    on the Ray this process joined)."""
+    out, spec_file = hostile_sweep(tmp_path, server, name)
+    with contextlib.redirect_stdout(io.StringIO()):
+        run_exit = main(["run", str(spec_file), "--progress", "off"])
+    sent = len(server.log)
+    ledger = journal_spend((out / JOURNAL_NAME).read_bytes())
+    episodes = q(out, "select end_reason, error, llm_calls, cost_usd from episodes")
+    tool_calls = q(
         out,
         'select "index", step_index, name, arguments, valid, error, message_seq is not null, exit_code '
         'from tool_calls order by "index"',
     )
-    error = f"arguments nest {DEEP_LEVELS} levels deep (at most 64 are read)"
-    assert rows == [(i, i, "bash", kept, False, error, True, None) for i in range(CALLS)]
-    assert q(out, "select status, error_kind from llm_calls") == [("ok", None)] * CALLS
-    # what was paid is counted: the episode's cost is its calls', the ledger's, within the cap
-    ledger = journal_spend((out / JOURNAL_NAME).read_bytes())
-    (calls_cost,) = q(out, "select sum(cost_usd) from llm_calls")[0]
-    assert episode[3] == pytest.approx(calls_cost, abs=1e-12) == pytest.approx(ledger.spent_usd, abs=1e-12)
-    assert 0 < bill_pico(server) <= ledger.spent_pico <= usd_to_pico(CAP_USD) and ledger.reserved_pico == 0
+    calls = q(out, "select status, error_kind from llm_calls order by call_index")
+    (calls_cost,) = q(out, "select coalesce(sum(cost_usd), 0) from llm_calls")[0]
+    with contextlib.redirect_stdout(io.StringIO()):
+        resume_exit = main(["resume", str(out), "--progress", "off"])
+    return RunAndResume(
+        run_exit=run_exit,
+        resume_exit=resume_exit,
+        sent=sent,
+        sent_after_resume=len(server.log),
+        episodes=episodes,
+        tool_calls=tool_calls,
+        calls=calls,
+        calls_cost_usd=calls_cost,
+        spent_pico=ledger.spent_pico,
+        reserved_pico=ledger.reserved_pico,
+        spent_after_resume_pico=journal_spend((out / JOURNAL_NAME).read_bytes()).spent_pico,
+        bill_pico=bill_pico(server),
+    )
 
+
+def expected_deep_rows() -> list[tuple]:
+    """The tool_calls rows of the deep-arguments sweep: one invalid call per reply, cut to the bound."""
+    deep = "[" * DEEP_LEVELS + "]" * DEEP_LEVELS
+    kept = deep[:MAX_ARGUMENTS_CHARS] + f" [cut: {len(deep)} characters in all]"
+    error = f"arguments nest {DEEP_LEVELS} levels deep (at most 64 are read)"
+    return [(i, i, "bash", kept, False, error, True, None) for i in range(CALLS)]
+
+
+@pytest.mark.slow  # a Ray run with a sandboxed coding episode: about a minute on a small machine
+def test_deeply_nested_arguments_are_the_models_invalid_calls_and_resume_pays_nothing(
+    ray_address, tmp_path, monkeypatch, fake_server
+):
+    monkeypatch.setenv(KEY_ENV, "not-a-secret")
+    server = fake_server(fault_rates={"deepargs": 1.0})
+    r = run_and_resume(tmp_path, server)
+    assert r.run_exit == 0 and r.sent == CALLS
+    assert {(c.status, c.mode) for c in server.log} == {(200, "deepargs")}
+    (episode,) = r.episodes
+    assert episode[:3] == ("call_cap", f"{CALLS} LLM calls (cap {CALLS})", CALLS)
+    assert r.tool_calls == expected_deep_rows()
+    assert r.calls == [("ok", None)] * CALLS
+    # what was paid is counted: the episode's cost is its calls', the ledger's, within the cap
+    assert episode[3] == pytest.approx(r.calls_cost_usd, abs=1e-12) == pytest.approx(r.spent_pico / 1e12, abs=1e-12)
+    assert 0 < r.bill_pico <= r.spent_pico <= usd_to_pico(CAP_USD) and r.reserved_pico == 0
     # a resume has nothing to do: the unit is done, nothing is sent or paid again
-    assert main(["resume", str(out), "--progress", "off"]) == 0
-    assert len(server.log) == sent
-    assert q(out, "select count(*) from episodes") == [(1,)]
-    assert journal_spend((out / JOURNAL_NAME).read_bytes()).spent_pico == ledger.spent_pico
+    assert r.resume_exit == 0 and r.sent_after_resume == r.sent and r.spent_after_resume_pico == r.spent_pico

@@ -61,6 +61,8 @@ def hostile_calls(mode: str, calls: list[dict[str, Any]]) -> list[dict[str, Any]
     elif mode == "nocalls":
         calls = []
     return calls
+
+
 FAULT_MODES = (
     "429",
     "500",

@@ -289,7 +289,13 @@ class FakeServer:
                 completion_tokens = min(completion_tokens, int(req.max_tokens))
             content = TEXT_WITH_CALLS if req.mode == "textandcalls" else None
             return _Reply(
-                content or "", "tool_calls", n_choices * completion_tokens, n_choices, calls, content_with_calls=content, hostile=True
+                content or "",
+                "tool_calls",
+                n_choices * completion_tokens,
+                n_choices,
+                calls,
+                content_with_calls=content,
+                hostile=True,
             )
         if calls:
             completion_tokens = n_choices * sum(
@@ -307,7 +313,13 @@ class FakeServer:
             return []
         named = choice.get("function", {}).get("name") if isinstance(choice, dict) else None
         hostile = req.mode in HOSTILE_CALL_MODES
-        mode = "toolcall" if hostile else req.mode if req.mode in TOOL_MODES else ("toolcall" if choice == "required" or named else None)
+        mode = (
+            "toolcall"
+            if hostile
+            else req.mode
+            if req.mode in TOOL_MODES
+            else ("toolcall" if choice == "required" or named else None)
+        )
         if mode is None:
             return []
         first = next((t for t in tools if t.get("name") == named), tools[0])
