@@ -186,7 +186,9 @@ _UNREADABLE_REPLY_MARKERS = (
 
 class UnusableReply(Exception):
     """An HTTP 200 answer that holds no reply we can use: no choice (``choices`` empty or null), a
-    choice without a message, or a message whose content is null with no tool calls.
+    choice without a message, or a message whose content is null with no tool calls (unless its
+    finish reason is ``tool_calls``: the model said it called tools and called none, an empty reply
+    that is its own, :func:`workers.llm.calling.unusable_reason`).
 
     Why an exception and not an empty reply: handed on as ``""``, the agent read it as the
     model's own failure (a JSON failure no resume retries), although the provider failed - and
