@@ -163,7 +163,7 @@ class History:
                 content=message.content,
                 node_id=node_id,
                 pinned=pinned,
-                tool_call_id=message.tool_call_id,
+                tool_call_id=None if message.tool_call_id is None else cut(message.tool_call_id, MAX_NAME_CHARS),
                 tool_calls=json.dumps([_bounded(c) for c in calls]) if calls else None,
             )
         )

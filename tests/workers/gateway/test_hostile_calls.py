@@ -27,7 +27,7 @@ from recap.recap_agent import ReCAPAgent
 from recap.row_bounds import MAX_ARGUMENTS_CHARS, MAX_NAME_CHARS
 from recap.runtime import NOT_RUN
 from schemas.labels import infra_failure
-from schemas.records import CallRecord, ToolCallRecord
+from schemas.records import CallRecord, MessageRecord, StepRecord, ToolCallRecord
 from tests.recap.toy_repo import TOOLS, ToyRepo
 from tests.workers.gateway.test_hostile_provider import config, spend_until_refused, table, true_bill_pico
 from workers.gateway.core import DeploymentGateway
@@ -211,4 +211,12 @@ def test_an_episode_records_every_hostile_call_bounded_and_goes_on(fake_server, 
     assert [c.cost_usd for c in calls] == [c.cost_usd for c in billed] and len(calls) == result.llm_calls
     assert all(c.cost_usd > 0 for c in calls) and result.cost_usd == pytest.approx(sum(c.cost_usd for c in calls), abs=1e-12)
     assert [c.status for c in calls][:1] == ["error" if mode == "deepbody" else "ok"]
-    assert all(len(r.arguments) <= MAX_ARGUMENTS_CHARS + 40 for r in rows if isinstance(r, ToolCallRecord))
+    # no row holds more of what the model wrote than the bounds (the cut notes apart)
+    bound = MAX_ARGUMENTS_CHARS + 2 * MAX_NAME_CHARS + 200
+    for r in rows:
+        if isinstance(r, ToolCallRecord):
+            assert len(r.arguments) + len(r.name) + len(r.call_id or "") <= bound
+        if isinstance(r, StepRecord):
+            assert len(r.action) <= MAX_ARGUMENTS_CHARS + 40
+        if isinstance(r, MessageRecord) and r.role != "user":  # the prompts hold only our text and observations
+            assert len(r.tool_calls or "") <= bound and len(r.tool_call_id or "") <= MAX_NAME_CHARS + 40
