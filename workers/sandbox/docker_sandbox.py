@@ -31,9 +31,7 @@ it is killed, and if even that cannot run, the container is restarted (its files
 from __future__ import annotations
 
 import concurrent.futures
-import io
 import logging
-import posixpath
 import secrets
 import tarfile
 import tempfile
@@ -42,7 +40,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, NoReturn
 
-from workers.sandbox.base import CommandResult, Sandbox, SandboxError, SandboxKind, SandboxSpec
+from workers.sandbox.base import CommandResult, FileSlice, Sandbox, SandboxError, SandboxKind, SandboxSpec
+from workers.sandbox.docker_files import FILE_OP, check_path, exec_with_stdin, parse_lines, parse_read, raise_for
 from workers.sandbox.repo_copy import clone_at
 from workers.sandbox.wrapper import WRAPPER, parse
 
@@ -331,59 +330,48 @@ class DockerSandbox(Sandbox):
 
     # -- files --------------------------------------------------------------------------
 
-    def _abs(self, path: str) -> str:
-        return posixpath.normpath(posixpath.join(self.workdir, path))
-
-    def read_file(self, path: str) -> bytes:
-        """A file's bytes (symbolic links followed)."""
+    def _file_op(self, op: str, path: str, *args: str, data: bytes | None = None) -> tuple[int, bytes]:
+        """Run :data:`~workers.sandbox.docker_files.FILE_OP` in the container (resolving ``path``
+        there, see :mod:`workers.sandbox.docker_files`); (exit status, stdout)."""
         import docker.errors
 
         self._live()
-        target = self._abs(path)
-        for _ in range(16):
-            try:
-                stream, _stat = self._container.get_archive(target)
-                data = b"".join(stream)  # read here: a daemon that fails mid-stream is the service too
-            except docker.errors.NotFound:
-                if not self._running():  # the container, not the file, is missing
-                    raise SandboxError("the sandbox container is gone", service=True) from None
-                raise FileNotFoundError(2, "No such file or directory", path) from None
-            except Exception as e:  # an API error, or the daemon gone
-                self._service_failed(e)
-            with tarfile.open(fileobj=io.BytesIO(data)) as tar:
-                member = tar.next()
-                if member is None:
-                    raise FileNotFoundError(2, "No such file or directory", path)
-                if member.isdir():
-                    raise IsADirectoryError(21, "Is a directory", path)
-                if member.issym():
-                    target = posixpath.normpath(posixpath.join(posixpath.dirname(target), member.linkname))
-                    continue
-                f = tar.extractfile(member)
-                if f is None:
-                    raise OSError(f"not a regular file: {path}")
-                return f.read()
-        raise OSError(40, "Too many levels of symbolic links", path)
+        check_path(path)
+        argv = ["bash", "-c", FILE_OP, "file-op", op, self.workdir, path, *args]
+        try:
+            if data is None:
+                code, out = self._container.exec_run(argv, stdout=True, stderr=False)
+            else:
+                code, out = exec_with_stdin(self._client.api, self._container.id, argv, data)
+        except docker.errors.NotFound:
+            raise SandboxError("the sandbox container is gone", service=True) from None
+        except Exception as e:  # an API error, or the daemon gone
+            self._service_failed(e)
+        if code in (126, 127, -1, None):  # bash or coreutils missing, or the exec never ended
+            raise SandboxError(f"the sandbox cannot run its file operations (exit {code}): {bytes(out or b'')[-200:]!r}")
+        return int(code), bytes(out or b"")
+
+    def read_file(self, path: str, *, max_bytes: int | None = None) -> bytes:
+        """A file's bytes, resolved in the container (:mod:`workers.sandbox.docker_files`);
+        :class:`~workers.sandbox.base.FileTooLarge` past ``max_bytes`` (nothing read)."""
+        code, out = self._file_op("read", path, str(-1 if max_bytes is None else max_bytes))
+        raise_for(code, out, path, max_bytes=max_bytes)
+        return parse_read(out, path)
+
+    def read_lines(self, path: str, first: int, last: int | None, max_bytes: int) -> FileSlice:
+        """Lines ``first``..``last`` cut to ``max_bytes``, counted and cut in the container: only
+        the slice reaches the worker."""
+        if first < 1 or (last is not None and last < first) or max_bytes < 0:
+            raise ValueError(f"read_lines: bad range {first}..{last} or max_bytes {max_bytes}")
+        code, out = self._file_op("lines", path, str(first), str(0 if last is None else last), str(max_bytes))
+        raise_for(code, out, path)
+        return parse_lines(out, path, max_bytes)
 
     def write_file(self, path: str, data: bytes) -> None:
-        """Create or replace a file (mode 0644, its folders created)."""
-        self._live()
-        target = self._abs(path)
-        buf = io.BytesIO()
-        with tarfile.open(fileobj=buf, mode="w") as tar:
-            info = tarfile.TarInfo(target.lstrip("/"))
-            info.size = len(data)
-            info.mode = 0o644
-            info.mtime = int(time.time())
-            tar.addfile(info, io.BytesIO(data))
-        try:
-            ok = self._container.put_archive("/", buf.getvalue())
-        except Exception as e:
-            if not self._running():  # the container is gone: not a file the agent can fix
-                raise SandboxError("the sandbox container is gone", service=True) from None
-            raise OSError(f"cannot write {path}: {str(e)[:200]}") from None
-        if not ok:
-            raise OSError(f"cannot write {path}")
+        """Create or replace a file at the path resolved in the container (its folders created,
+        an existing file's mode kept, a new one 0644), its bytes sent on the exec's stdin."""
+        code, out = self._file_op("write", path, data=data)
+        raise_for(code, out, path)
 
     # -- end ----------------------------------------------------------------------------
 
