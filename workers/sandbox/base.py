@@ -122,6 +122,9 @@ class SandboxLimits:
     wall_time_s: float = 3600.0
     #: bytes the repository folder may grow to
     disk_bytes: int = 1 << 30
+    #: bytes each scratch folder a program may write to (``/tmp``, ``/var/tmp``, ``$HOME``) may
+    #: hold (issue 35 item 3: every writable place is bounded, not only the repository)
+    scratch_bytes: int = 256 << 20
     memory_bytes: int = 2 << 30
     #: processes at once (a fork bomb stops here)
     pids: int = 256

@@ -16,11 +16,14 @@ the repository itself (``spec.repo_path`` None: the SWE-bench harness's images, 
 nothing copied: git gets its user there, and the repository's HEAD must be ``spec.base_commit`` or
 the harness's own commit on top of it (:func:`image_commit`).
 
-Disk: overlay2 on this host has no size quota, and a tmpfs work folder cannot receive
-``put_archive`` (Docker copies under the mount, moby#22020) and would hold the repository in
-memory. So the repository folder is measured with ``du`` every second while a command runs (it is
-killed when over ``limits.disk_bytes``) and after each command (reported in the result), and
-``ulimit -f`` caps single files; see :mod:`workers.sandbox.wrapper`.
+Disk: every writable place is bounded (:mod:`workers.sandbox.docker_disk`): a quota on the
+writable layer where the storage driver has one, else a read-only root filesystem with the
+repository folder and the scratch folders (``/tmp``, ``/var/tmp``, ``$HOME``, ``/run``) as
+size-limited tmpfs mounts, the repository streamed in with ``tar`` on an exec's stdin. The
+repository folder is also measured with ``du`` every second while a command runs (it is killed
+when over ``limits.disk_bytes``) and after each command (reported in the result), and ``ulimit
+-f`` caps single files; see :mod:`workers.sandbox.wrapper`. Files are read and written by a
+script in the container that resolves every path there (:mod:`workers.sandbox.docker_files`).
 
 Commands: ``bash -c`` through the wrapper (``timeout -s KILL`` inside, output cut inside, strays
 killed after each command), plus a host-side guard: when the exec has not returned a few seconds
@@ -32,15 +35,17 @@ from __future__ import annotations
 
 import concurrent.futures
 import logging
+import posixpath
 import secrets
 import tarfile
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, NoReturn
 
 from workers.sandbox.base import CommandResult, FileSlice, Sandbox, SandboxError, SandboxKind, SandboxSpec
+from workers.sandbox.docker_disk import image_tree, populate, quota_size, storage_quota_supported, tmpfs_mounts
 from workers.sandbox.docker_files import FILE_OP, check_path, exec_with_stdin, parse_lines, parse_read, raise_for
 from workers.sandbox.repo_copy import clone_at
 from workers.sandbox.wrapper import WRAPPER, parse
@@ -139,13 +144,22 @@ class DockerSandbox(Sandbox):
         check_image(spec.image, self._client)
         lim = spec.limits
         env = {**BASE_ENV, **spec.env}
+        quota = storage_quota_supported(self._client, spec.image)
+        #: how the writable places are bounded (:mod:`workers.sandbox.docker_disk`)
+        self.disk_bound = "storage-quota" if quota else "read-only+tmpfs"
+        home = env.get("HOME", BASE_ENV["HOME"])
+        bound: dict[str, Any] = (
+            {"storage_opt": {"size": quota_size(lim)}}
+            if quota
+            else {"read_only": True, "tmpfs": tmpfs_mounts(lim, spec.workdir, home)}
+        )
         with tempfile.TemporaryDirectory(prefix="recap-sandbox-clone-") as tmp:
             tar_path: Path | None = None
             if spec.repo_path is not None:  # else the image holds the repository at workdir
                 clone = Path(tmp) / "repo"
                 self.base_commit = clone_at(spec.repo_path, spec.base_commit, clone)
                 tar_path = Path(tmp) / "repo.tar"
-                _tar_tree(clone, spec.workdir.strip("/"), tar_path)
+                _tar_tree(clone, posixpath.basename(spec.workdir.rstrip("/")), tar_path)
             try:
                 self._container = self._client.containers.run(
                     spec.image,
@@ -163,11 +177,16 @@ class DockerSandbox(Sandbox):
                     security_opt=["no-new-privileges"],
                     working_dir="/",
                     hostname="sandbox",
+                    **bound,
                 )
                 if tar_path is not None:
-                    with open(tar_path, "rb") as f:
-                        if not self._container.put_archive("/", f):
-                            raise SandboxError("copying the repository into the container failed", service=True)
+                    populate(self._client, self._container, spec.workdir, _file_chunks(tar_path))
+                elif not quota:  # the tmpfs hides the image's repository: copy it in from the image
+                    helper, stream = image_tree(self._client, spec.image, spec.workdir, spec.labels)
+                    try:
+                        populate(self._client, self._container, spec.workdir, stream)
+                    finally:
+                        helper.remove(force=True)
             except docker.errors.DockerException as e:
                 self.close()
                 raise SandboxError(
@@ -389,6 +408,13 @@ class DockerSandbox(Sandbox):
             pass
         except Exception as e:  # the daemon is gone: the run's next session removes what is left
             log.warning("the sandbox container %s could not be removed: %s", c.id[:12], str(e).splitlines()[0][:200])
+
+
+def _file_chunks(path: Path, size: int = 1 << 20) -> Iterator[bytes]:
+    """``path``'s bytes, ``size`` at a time (a repository's tar is never whole in the worker)."""
+    with open(path, "rb") as f:
+        while chunk := f.read(size):
+            yield chunk
 
 
 def _tar_tree(src: Path, arcname: str, dest: Path) -> None:
