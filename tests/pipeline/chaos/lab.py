@@ -30,6 +30,7 @@ The scenarios (``--only NAME``; the functions live in ``tests/pipeline/chaos/MOD
     caps      guards    a lying provider (usage, n choices, cost figure) against a small run cap
     unreadable guards   HTTP 200s nobody can read against a small run cap, over a run and 2 resumes
     lock      guards    synchronised threads and processes racing for the driver lock: 1 winner
+    sandbox_docker sandbox_docker  a model's tool calls against a docker sandbox: symlink escapes, hostile paths, a 19 MB view, disk past each bound
 
     python -m tests.pipeline.chaos.lab                          # every scenario (about 6 minutes on 2 cores)
     python -m tests.pipeline.chaos.lab --only worker gateway    # some of them
@@ -78,6 +79,7 @@ SCENARIOS: dict[str, tuple] = {
     "caps": ("guards", "cap_attacks", False),
     "unreadable": ("guards", "unreadable_attacks", False),
     "lock": ("guards", "lock_race", False),
+    "sandbox_docker": ("sandbox_docker", "sandbox_docker", False),
 }
 
 

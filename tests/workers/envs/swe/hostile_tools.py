@@ -91,7 +91,9 @@ def _refused(env: SweEnvironment, name: str, expected: str, **args: Any) -> tupl
 
 
 def view_link_to_a_container_file(env: SweEnvironment) -> tuple[bool, str]:
-    return _refused(env, "view", "view: {root}/passwd leads outside the repository {root} (through a symbolic link)", path="passwd")
+    return _refused(
+        env, "view", "view: {root}/passwd leads outside the repository {root} (through a symbolic link)", path="passwd"
+    )
 
 
 def view_through_a_linked_folder(env: SweEnvironment) -> tuple[bool, str]:
@@ -164,7 +166,11 @@ def path_too_long(env: SweEnvironment) -> tuple[bool, str]:
     path = "a/" * 3000 + "x.py"
     shown = path[:120] + "..."
     return _refused(
-        env, "create", f"create: the path is {len(path)} bytes long, over the 4096-byte limit ({shown!r})", path=path, file_text="x"
+        env,
+        "create",
+        f"create: the path is {len(path)} bytes long, over the 4096-byte limit ({shown!r})",
+        path=path,
+        file_text="x",
     )
 
 
@@ -176,7 +182,11 @@ def view_a_fifo(env: SweEnvironment) -> tuple[bool, str]:
 def edit_a_fifo(env: SweEnvironment) -> tuple[bool, str]:
     _sh(env, "mkfifo pipe2")
     return _refused(
-        env, "str_replace", "str_replace: {root}/pipe2 is not a regular file (a fifo, a device or a socket)", path="pipe2", old_str="a"
+        env,
+        "str_replace",
+        "str_replace: {root}/pipe2 is not a regular file (a fifo, a device or a socket)",
+        path="pipe2",
+        old_str="a",
     )
 
 
