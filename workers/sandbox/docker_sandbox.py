@@ -229,12 +229,18 @@ class DockerSandbox(Sandbox):
         return str(self._container.id) if self._container is not None else ""
 
     def _keeper_pid(self) -> str:
-        """PID 1's child (``sleep infinity``): the wrapper never kills it."""
-        try:
-            code, out = self._container.exec_run(["cat", "/proc/1/task/1/children"])
-        except Exception as e:  # an API error, or the daemon gone
-            self._service_failed(e)
-        return out.decode().split()[0] if code == 0 and out.split() else "0"
+        """PID 1's child (``sleep infinity``): the wrapper never kills it. Asked again for a moment
+        while the init has not started it yet (just after the container starts): a keeper of "0"
+        would let the first command's sweep kill it, and the container with it."""
+        for _ in range(100):
+            try:
+                code, out = self._container.exec_run(["cat", "/proc/1/task/1/children"])
+            except Exception as e:  # an API error, or the daemon gone
+                self._service_failed(e)
+            if code == 0 and out.split():
+                return str(out.decode().split()[0])
+            time.sleep(0.05)
+        return "0"
 
     def _service_failed(self, exc: Exception) -> NoReturn:
         """Raise the SandboxError (``service``) for a Docker API failure under an open sandbox:
