@@ -138,6 +138,21 @@ def links_stay_links(env: SweEnvironment) -> tuple[bool, str]:
     return out == want, repr(out)
 
 
+def undo_a_create_after_its_folder_became_a_link_out(env: SweEnvironment) -> tuple[bool, str]:
+    """undo_edit of a created file removes it only inside the repository: a folder on the way
+    swapped for a link out of it since then is refused, the file it now points at kept."""
+    _call(env, "create", path="made/keep.py", file_text="x = 1\n")
+    _sh(env, "rm -rf made && ln -s /tmp made && echo precious > /tmp/keep.py")
+    held, detail = _refused(
+        env,
+        "undo_edit",
+        "undo_edit: {root}/made/keep.py leads outside the repository {root} (through a symbolic link)",
+        path="made/keep.py",
+    )
+    kept = _sh(env, "cat /tmp/keep.py")
+    return held and kept == "precious\n", f"{detail}; /tmp/keep.py holds {kept!r}"
+
+
 # -- item 5: tools never raise ----------------------------------------------------------------
 
 
@@ -271,6 +286,7 @@ TOOL_ATTACKS: dict[str, Attack] = {
     "symlink: create through a linked folder": create_through_a_linked_folder,
     "symlink: str_replace through a link": str_replace_through_a_link,
     "symlink: links copied as links": links_stay_links,
+    "symlink: undo a create through a folder swapped for a link": undo_a_create_after_its_folder_became_a_link_out,
     "dangling link out: create": create_through_a_dangling_link_out,
     "dangling link in: create lands inside": create_through_a_dangling_link_in,
     "path with a NUL byte": path_with_a_nul_byte,
