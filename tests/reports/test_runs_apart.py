@@ -5,11 +5,13 @@ label, in the calls view, @wasted_spend and the spend tables as in attempts and 
 
 from __future__ import annotations
 
+import dataclasses
 import http.client
 from pathlib import Path
 
 import pytest
 
+from reports.build import ReportOptions, build_report
 from reports.views import named_query, open_runs, run_query
 from reports.webview.compare import compare
 from reports.webview.search import SearchIndex
@@ -27,6 +29,7 @@ from tests.doubles.known_run import (
     RUN_A_RUN,
     RUN_A_STEPS,
     SYNC,
+    call,
     episode,
 )
 
@@ -178,3 +181,86 @@ def test_arm_compare_uses_every_run(tmp_path):
     con = open_runs(runs)
     (row,) = named_query(con, "paired_methods").dicts()
     assert (row["arm_a"], row["arm_b"], row["pairs"], row["a_successes"], row["b_successes"]) == ("react", "recap", 8, 2, 6)
+
+
+def test_recap_sql_on_three_runs_counts_every_run(three):
+    """The issue's command: ``recap sql A B C "select run_id, count(*) from terminal group by 1"``."""
+    import contextlib
+    import io
+    import json
+
+    from pipeline.cli.sql import sql_main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        rc = sql_main([*map(str, three), "select run_id, count(*) AS n from terminal group by 1 order by 1", "--json"])
+    assert (rc, json.loads(out.getvalue())) == (0, [{"run_id": f"r{i}", "n": 18} for i in (1, 2, 3)])
+
+
+# -- item 5: one name for a model -----------------------------------------------------------------
+
+NAMES = ("expert-noisy", "expert-calm")
+
+
+def _named_model_run(run_dir: Path) -> Path:
+    """Two sweep entries on one model string (``offline/expert``, a test double) named
+    ``expert-noisy`` and ``expert-calm``: each ran recap on one unit, with one call each (the
+    noisy one also a failed call) - as the pipeline writes them: episodes.model the name,
+    llm_calls.model the model string, llm_calls.model_name the name."""
+    rows: list = []
+    for i, name in enumerate(NAMES):
+        eid = f"{name}-e"
+        ep = episode(
+            eid,
+            "recap",
+            RECAP,
+            "scripted",
+            SYNC,
+            "t2",
+            "i2",
+            42,
+            "success" if i else "agent_done",
+            cost=1.0 + i,
+            prompt=10,
+            cached=0,
+            completion=1,
+            calls=1,
+            steps=1,
+            test_double=True,
+        )
+        rows.append(dataclasses.replace(ep, unit_id=f"u-{name}", model=name, provider_model="offline/expert"))
+        c = call(eid, 0, "task", (0, 1), model="offline/expert", prompt=10, completion=1, cost=0.5 + i, test_double=True)
+        rows.append(dataclasses.replace(c, model_name=name))
+        if not i:
+            bad = call(eid, 1, "task", (0, 1), status="error", error_kind="server_error", cost=0.25, test_double=True)
+            rows.append(dataclasses.replace(bad, model_name=name))
+    return write_copy(run_dir, "named", rows)
+
+
+def test_one_name_per_model_in_every_view(tmp_path):
+    run = _named_model_run(tmp_path / "named")
+    con = open_runs([run])
+    want = {f"{n} (test double)" for n in NAMES}
+    for view in ("attempts", "terminal", "calls", "episode_modes"):
+        assert {r[0] for r in run_query(con, f"SELECT DISTINCT model_label FROM {view}").rows} == want, view
+    # a failed call without a model string is still named by its sweep name
+    assert run_query(con, "SELECT model_label, count(*) FROM calls GROUP BY 1 ORDER BY 1").rows == [
+        ("expert-calm (test double)", 1),
+        ("expert-noisy (test double)", 2),
+    ]
+    assert {(r["model_label"], r["calls"], r["cost_usd"]) for r in named_query(con, "wasted_spend").dicts()} == {
+        ("expert-calm (test double)", 1, 1.5),
+        ("expert-noisy (test double)", 2, 0.75),
+    }
+    assert [(r["model_label"], r["calls"], r["failed_calls"]) for r in named_query(con, "spend_by_model").dicts()] == [
+        ("expert-calm (test double)", 1, 0),
+        ("expert-noisy (test double)", 2, 1),
+    ]
+    for query in ("failure_modes", "costs", "success_by_model"):
+        assert {r["model_label"] for r in named_query(con, query).dicts()} == want, query
+    # the report's spend tables say the same names
+    report = build_report([run], ReportOptions(formats=("md",)))
+    spend = [t for s in report.sections for t in s.tables if t.source in ("spend_by_model", "wasted_spend")]
+    assert len(spend) == 2
+    for t in spend:
+        assert {r["model_label"] for r in t.rows} == want, t.source
