@@ -93,6 +93,15 @@ def test_three_runs_with_the_same_unit_ids_count_three_times(three):
     assert {
         (r["model_label"], r["arm"]): (r["calls"], r["superseded_cost"]) for r in named_query(together, "wasted_spend").dicts()
     } == {k: (3 * c, 3 * s) for k, (c, s) in wasted.items()}
+    for query, side in (
+        ("paper_pairs", ("scope", "model_label", "arm_label", "ref_label", "benchmark", "split", "level", "task")),
+        ("success_by_ablation", ("model_label", "method", "env_split", "window_size", "ablation")),
+    ):
+        one_pairs = {tuple(r[k] for k in side): r["pairs"] for r in named_query(one, query).dicts()}
+        assert any(one_pairs.values()), query
+        assert {tuple(r[k] for k in side): r["pairs"] for r in named_query(together, query).dicts()} == {
+            k: None if v is None else 3 * v for k, v in one_pairs.items()
+        }, query
     # @coverage and @runs: each run its own units
     assert [r["units"] for r in named_query(together, "runs").dicts()] == [18, 18, 18]
 
