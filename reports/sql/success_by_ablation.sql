@@ -6,12 +6,33 @@
 -- McNemar test when every instance ran one seed). original_only / variant_only are the discordant
 -- pairs; paired_instances the instances they ran; p_value is NULL without paired units. instances and deff (the design effect of several
 -- seeds per instance, instance_deff) say how the 95% interval was widened.
+-- A unit is (run, unit id): a variant and the original that ran one key in several runs pair run by
+-- run; the rest pair latest with latest, as in paired_methods.sql.
 WITH per_unit AS (
-  SELECT model_label, method, coalesce(profile, '') AS pr, env_split, coalesce(window_size, -1) AS w, ablation,
+  SELECT run_id, model_label, method, coalesce(profile, '') AS pr, env_split, coalesce(window_size, -1) AS w, ablation,
     benchmark, split, task, instance_id, sampling_seed,
-    arg_max(success, ended_at) AS success
+    arg_max(success, ended_at) AS success,
+    max(ended_at) AS ended_at
   FROM outcomes
   GROUP BY ALL
+), sides AS (
+  -- each unit once per ablation it is compared with (a variant with the original, the original
+  -- with each variant), marked when that ablation ran the same key in the same run
+  SELECT u.*, o.ablation AS other, s.run_id IS NOT NULL AS shared
+  FROM per_unit u
+  JOIN (SELECT DISTINCT model_label, method, pr, env_split, w, benchmark, split, task, instance_id, sampling_seed, ablation FROM per_unit) o
+    ON o.model_label = u.model_label AND o.method = u.method AND o.pr = u.pr AND o.env_split = u.env_split AND o.w = u.w
+   AND o.benchmark = u.benchmark AND o.split = u.split AND o.task = u.task AND o.instance_id = u.instance_id
+   AND o.sampling_seed = u.sampling_seed AND o.ablation <> u.ablation AND 'original' IN (o.ablation, u.ablation)
+  LEFT JOIN per_unit s
+    ON s.run_id = u.run_id AND s.ablation = o.ablation AND s.model_label = u.model_label AND s.method = u.method
+   AND s.pr = u.pr AND s.env_split = u.env_split AND s.w = u.w AND s.benchmark = u.benchmark AND s.split = u.split
+   AND s.task = u.task AND s.instance_id = u.instance_id AND s.sampling_seed = u.sampling_seed
+), ranked AS (
+  SELECT *, row_number() OVER (
+    PARTITION BY model_label, method, pr, env_split, w, benchmark, split, task, instance_id, sampling_seed, ablation, other
+    ORDER BY shared DESC, CASE WHEN shared THEN run_id END DESC, ended_at DESC, run_id DESC) AS rep
+  FROM sides
 ), rates AS (
   SELECT model_label, method, profile, env_split, window_size, ablation,
     count(*) AS episodes,
@@ -27,9 +48,10 @@ WITH per_unit AS (
     count(*) FILTER (WHERE v.success AND NOT o.success) AS variant_only,
     count(DISTINCT instance_key(v.benchmark, v.split, v.task, v.instance_id)) AS paired_instances,
     clustered_mcnemar_p(list(pair_obs(v.benchmark, v.split, v.task, v.instance_id, o.success, v.success))) AS p_value
-  FROM per_unit v
-  JOIN per_unit o
+  FROM ranked v
+  JOIN ranked o
     ON o.ablation = 'original' AND v.ablation <> 'original'
+   AND o.other = v.ablation AND v.other = 'original' AND o.rep = v.rep
    AND o.model_label = v.model_label AND o.method = v.method AND o.pr = v.pr AND o.env_split = v.env_split AND o.w = v.w
    AND o.benchmark = v.benchmark AND o.split = v.split
    AND o.task = v.task AND o.instance_id = v.instance_id AND o.sampling_seed = v.sampling_seed

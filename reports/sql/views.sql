@@ -20,9 +20,10 @@
 --   infra_kind   the infrastructure failure the row records (infra_failure_kind), else NULL.
 --   finished     the attempt finished on its own merits: not cut by a cap (budget_exhausted)
 --                and not an infrastructure failure. env_error / llm_error outcomes finish.
---   is_latest    the latest attempt of its unit (highest attempt; ties: latest ended_at, run_id,
---                episode_id). A unit id is the same across runs, so a unit re-run in a later run
---                counts once.
+--   is_latest    the latest attempt of its unit (highest attempt; ties: latest ended_at,
+--                episode_id). A unit is (run_id, unit_id): runs read together that share unit
+--                ids (the same sweep run twice) are separate units each, never one another's
+--                attempts (a resumed run keeps its run_id, so its retries stay attempts).
 --   is_unit_row  the row the unit is counted by, the rule of recap status: its latest finished
 --                attempt, else its latest attempt.
 CREATE VIEW attempts AS
@@ -49,10 +50,10 @@ SELECT s.* EXCLUDE (_windows_here),
     || CASE WHEN max(s._windows_here) OVER (PARTITION BY s.label) > 1
             THEN ' ctx ' || coalesce(CAST(s.window_size AS VARCHAR), '?') ELSE '' END AS arm,
   row_number() OVER (
-    PARTITION BY s.unit_id ORDER BY s.attempt DESC, s.ended_at DESC, s.run_id DESC, s.episode_id DESC
+    PARTITION BY s.run_id, s.unit_id ORDER BY s.attempt DESC, s.ended_at DESC, s.episode_id DESC
   ) = 1 AS is_latest,
   row_number() OVER (
-    PARTITION BY s.unit_id ORDER BY s.finished DESC, s.attempt DESC, s.ended_at DESC, s.run_id DESC, s.episode_id DESC
+    PARTITION BY s.run_id, s.unit_id ORDER BY s.finished DESC, s.attempt DESC, s.ended_at DESC, s.episode_id DESC
   ) = 1 AS is_unit_row
 FROM marked s;
 
@@ -76,13 +77,18 @@ SELECT * FROM terminal WHERE state = 'finished';
 --   latest_attempt  TRUE/FALSE for the call's attempt; NULL when the attempt has no episode row
 --                   (an attempt lost with its worker).
 --   episode_success the success of the call's attempt (NULL without an episode row).
---   model_label     the call's model (the episode's when the call failed and has none), labelled.
+--   model_label     the model's name in the sweep, labelled like attempts.model_label: the call's
+--                   model_name (its label, else its model string), else its episode's model, else
+--                   (a call outside a sweep) its provider model string. Never the provider string
+--                   when a name is known: two labels on one model string stay two models, named
+--                   as in every other view.
 CREATE VIEW calls AS
 SELECT c.*,
   a.unit_id, a.method, a.arm, a.env_split, a.task,
   a.is_latest AS latest_attempt,
   a.success AS episode_success,
-  model_label(coalesce(nullif(c.model, ''), a.model), c.test_double OR coalesce(a.test_double, false)) AS model_label,
+  model_label(coalesce(nullif(c.model_name, ''), nullif(a.model, ''), nullif(c.model, '')),
+    c.test_double OR coalesce(a.test_double, false)) AS model_label,
   len(c.window_seqs) AS window_len,
   c.prompt_tokens + c.completion_tokens AS total_tokens
 FROM llm_calls c

@@ -38,14 +38,14 @@ class Comparison:
 
 
 def _side_sql(kind: str, columns: set[str]) -> str:
-    """Per-unit outcomes of one side. Two runs: each run's own counted row of each unit (its
-    latest finished attempt, else its latest), paired on the unit's arm, model and instance (the
-    terminal view keeps one run per unit, so it cannot pair two runs). Two arms: the rows the
-    report's paired table counts (terminal, finished), paired like reports/sql/paired_methods.sql
-    on model, split, task, instance and seed."""
+    """Per-unit outcomes of one side, one row per unit - a unit is (run, unit id), so runs read
+    together that share unit ids each count their own units. Two runs: each run's counted row of
+    each unit (its latest finished attempt, else its latest: ``is_unit_row``), grouped by arm and
+    model. Two arms: the rows the report's paired table counts (terminal, finished) of every run,
+    grouped by model, like reports/sql/paired_methods.sql."""
     cols = (
         "SELECT {side} AS side, {grp} AS grp, env_split, task, instance_id, sampling_seed, run_id, episode_id, success, "
-        "cost_usd, end_reason, mode FROM _episode_list "
+        "cost_usd, end_reason, mode, ended_at FROM _episode_list "
     )
     finished_first = "finished DESC, " if "finished" in columns else ""
     if kind == "run":
@@ -55,24 +55,35 @@ def _side_sql(kind: str, columns: set[str]) -> str:
             "ended_at DESC, episode_id DESC) = 1"
         )
     counted = "is_unit_row" if "is_unit_row" in columns else "is_latest"
-    # several runs may hold the same (arm, model, instance, seed): the latest row counts, as in paired_methods.sql
-    return (
-        cols.format(side="arm", grp="model_label")
-        + f"WHERE {counted}"
-        + (" AND finished" if "finished" in columns else "")
-        + " QUALIFY row_number() OVER (PARTITION BY arm, model_label, env_split, task, instance_id, sampling_seed "
-        "ORDER BY ended_at DESC, run_id DESC, episode_id DESC) = 1"
-    )
+    return cols.format(side="arm", grp="model_label") + f"WHERE {counted}" + (" AND finished" if "finished" in columns else "")
 
 
-#: one row per pair: the two sides' episodes of one unit (grp, split, task, instance, seed)
-_PAIRS_SQL = """
-    WITH s AS ({sides}), x AS (SELECT * FROM s WHERE side = $a), y AS (SELECT * FROM s WHERE side = $b)
+#: the pair's key: a unit of one group (arm and model, or model) on one instance and seed
+_KEY = ("grp", "env_split", "task", "instance_id", "sampling_seed")
+_SAME_KEY = " AND ".join(f"o.{k} = u.{k}" for k in _KEY)
+
+#: one row per pair: the two sides' units of one key. A key both sides ran in one run pairs within
+#: that run (shared, run by run: four runs of both arms give four pairs); a side's other units of
+#: the key pair with the other side's leftovers, latest with latest (rep), as two single runs pair.
+_PAIRS_SQL = (
+    """
+    WITH s AS ({sides}), x0 AS (SELECT * FROM s WHERE side = $a), y0 AS (SELECT * FROM s WHERE side = $b),
+    x AS (SELECT u.*, EXISTS (SELECT 1 FROM y0 o WHERE o.run_id = u.run_id AND """
+    + _SAME_KEY
+    + """) AS shared FROM x0 u),
+    y AS (SELECT u.*, EXISTS (SELECT 1 FROM x0 o WHERE o.run_id = u.run_id AND """
+    + _SAME_KEY
+    + """) AS shared FROM y0 u),
+    xr AS (SELECT *, row_number() OVER (PARTITION BY {key} ORDER BY {rank}) AS rep FROM x),
+    yr AS (SELECT *, row_number() OVER (PARTITION BY {key} ORDER BY {rank}) AS rep FROM y)
     SELECT x.grp, x.env_split, x.task, x.instance_id, x.sampling_seed,
       x.run_id AS a_run, x.episode_id AS a_episode, x.success AS a_success, x.cost_usd AS a_cost, coalesce(x.mode, x.end_reason) AS a_mode,
       y.run_id AS b_run, y.episode_id AS b_episode, y.success AS b_success, y.cost_usd AS b_cost, coalesce(y.mode, y.end_reason) AS b_mode
-    FROM x JOIN y ON x.grp = y.grp AND x.env_split = y.env_split AND x.task = y.task AND x.instance_id = y.instance_id AND x.sampling_seed = y.sampling_seed
-    ORDER BY x.grp, x.env_split, x.task, x.instance_id, x.sampling_seed"""
+    FROM xr x JOIN yr y ON x.grp = y.grp AND x.env_split = y.env_split AND x.task = y.task AND x.instance_id = y.instance_id
+      AND x.sampling_seed = y.sampling_seed AND x.rep = y.rep
+    ORDER BY x.grp, x.env_split, x.task, x.instance_id, x.sampling_seed, x.rep"""
+)
+_RANK = "shared DESC, CASE WHEN shared THEN run_id END DESC, ended_at DESC, run_id DESC, episode_id DESC"
 
 
 def _check_sides(snap: Snapshot, kind: str, a: str, b: str) -> None:
@@ -139,7 +150,8 @@ def compare(snap: Snapshot, kind: str, a: str, b: str) -> Comparison:
     for an unknown kind, an unknown side or the same side twice."""
     t0 = time.perf_counter()
     _check_sides(snap, kind, a, b)
-    pairs = snap.query(_PAIRS_SQL.format(sides=_side_sql(kind, snap.columns)), {"a": a, "b": b}).dicts()
+    sql = _PAIRS_SQL.format(sides=_side_sql(kind, snap.columns), key=", ".join(_KEY), rank=_RANK)
+    pairs = snap.query(sql, {"a": a, "b": b}).dicts()
     # the unit of the tests: one instance of one group (arm and model, or model) and split
     inst = [(p["grp"], p["env_split"], p["task"], p["instance_id"]) for p in pairs]
     per_task = _per_task(pairs)

@@ -616,22 +616,23 @@ def test_two_runs_together(run_a, run_b):
         (r["model_label"], r["arm"], r["env_split"]): (r["successes"], r["episodes"])
         for r in named_query(con, "success_by_split").dicts()
     }
-    # run B re-runs react t6/42 (same unit, attempt 2: success) and adds recap with a 128 window,
-    # so recap arms carry their window size
+    # run B re-runs react t6/42 (same unit id, attempt 2: success) and adds recap with a 128 window,
+    # so recap arms carry their window size. A unit is (run, unit id): run B's row does not replace
+    # run A's failure (another run, not another attempt), both count
     assert rows == {
         ("gpt-4o", "react", ALF): (0, 1),
         ("gpt-4o", "recap ctx 64", ALF): (1, 1),
         (TD, "react", ALF): (0, 1),
         (TD, "recap ctx 64", ALF): (1, 2),
-        ("gpt-4o", "react", SYNC): (2, 5),
+        ("gpt-4o", "react", SYNC): (2, 6),
         ("gpt-4o", "recap ctx 64", SYNC): (4, 5),
         ("gpt-4o", "recap ctx 128", SYNC): (1, 1),
         ("gpt-4o", "recap[level_3]", SYNC): (1, 2),
     }
     assert run_query(
-        con, "SELECT run_id, episode_id FROM terminal WHERE unit_id LIKE 'react-dflt-gpt-4o-sync-t6-i6-42'"
-    ).rows == [("runB", "B-react-t6-42-a2")]
-    assert named_query(con, "overview").rows[0][:6] == (2, 2, 21, 19, 18, 10)
+        con, "SELECT run_id, episode_id, is_latest FROM attempts WHERE unit_id LIKE 'react-dflt-gpt-4o-sync-t6-i6-42' ORDER BY 1"
+    ).rows == [("runA", "A-react-t6-42", True), ("runB", "B-react-t6-42-a2", True)]
+    assert named_query(con, "overview").rows[0][:6] == (2, 2, 21, 20, 19, 10)
     con.close()
 
 

@@ -278,7 +278,8 @@ def test_sql_csv_json_and_named_queries(run_a, run_b):
     rc, out, _ = _run(
         sql_main, [str(run_a), str(run_b), "SELECT run_id, count(*) AS n FROM terminal GROUP BY run_id ORDER BY run_id", "--json"]
     )
-    assert (rc, json.loads(out)) == (0, [{"run_id": "runA", "n": 17}, {"run_id": "runB", "n": 2}])
+    # a unit is (run, unit id): run B re-running one of run A's unit ids takes none of run A's 18 units
+    assert (rc, json.loads(out)) == (0, [{"run_id": "runA", "n": 18}, {"run_id": "runB", "n": 2}])
     rc, out, _ = _run(sql_main, [str(run_a), "@overview", "--json"])
     assert json.loads(out)[0]["units"] == 18
 

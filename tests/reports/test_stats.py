@@ -383,12 +383,13 @@ def test_paired_methods_query_tests_per_instance():
     for j, (inst, a, b) in enumerate(_pairs_6x3()):
         seed = j % 3
         for arm, ok, cost in (("a", a, 1.0), ("b", b, 1.0 - SIX_BY_THREE_COST[j])):
-            rows.append(("m", "robotouille/synchronous", arm, "robotouille", "synchronous", "t6", inst, seed, ok, cost, 1.0))
+            rows.append(("r", "m", "robotouille/synchronous", arm, "robotouille", "synchronous", "t6", inst, seed, ok, cost, 1.0))
+    # one run (a unit is (run, unit id): the query pairs within a run first)
     c.execute(
-        "CREATE TABLE outcomes (model_label VARCHAR, env_split VARCHAR, arm VARCHAR, benchmark VARCHAR, split VARCHAR, "
+        "CREATE TABLE outcomes (run_id VARCHAR, model_label VARCHAR, env_split VARCHAR, arm VARCHAR, benchmark VARCHAR, split VARCHAR, "
         "task VARCHAR, instance_id VARCHAR, sampling_seed BIGINT, success BOOLEAN, cost_usd DOUBLE, ended_at DOUBLE)"
     )
-    c.executemany("INSERT INTO outcomes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
+    c.executemany("INSERT INTO outcomes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
     cur = c.execute(load_sql("paired_methods"))
     names = [d[0] for d in cur.description]
     (row,) = [dict(zip(names, r)) for r in cur.fetchall()]
