@@ -113,7 +113,9 @@ def test_only_header_lines_decide_and_every_other_block_is_kept_byte_for_byte() 
         "diff --git a/pkg/new.py b/pkg/new.py\nnew file mode 100644\nindex 0000000..3333333\n--- /dev/null\n"
         "+++ b/pkg/new.py\n@@ -0,0 +1 @@\n+X = 1\r\n"
     )
-    tracked_binary = "diff --git a/logo.png b/logo.png\nindex 4444444..5555555 100644\nBinary files a/logo.png and b/logo.png differ\n"
+    tracked_binary = (
+        "diff --git a/logo.png b/logo.png\nindex 4444444..5555555 100644\nBinary files a/logo.png and b/logo.png differ\n"
+    )
     text_in_cache = (
         "diff --git a/pkg/__pycache__/notes.txt b/pkg/__pycache__/notes.txt\nnew file mode 100644\n"
         "index 0000000..6666666\n--- /dev/null\n+++ b/pkg/__pycache__/notes.txt\n@@ -0,0 +1 @@\n+cache\n"
