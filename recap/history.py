@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from recap.llm import ChatMessage, ToolCall
+from recap.row_bounds import MAX_ARGUMENTS_CHARS, MAX_NAME_CHARS, cut
 from schemas.records import MessageRecord
 
 WindowMode = Literal["pair", "block", "prompt"]
@@ -162,8 +163,8 @@ class History:
                 content=message.content,
                 node_id=node_id,
                 pinned=pinned,
-                tool_call_id=message.tool_call_id,
-                tool_calls=json.dumps([{"id": c.id, "name": c.name, "arguments": c.arguments} for c in calls]) if calls else None,
+                tool_call_id=None if message.tool_call_id is None else cut(message.tool_call_id, MAX_NAME_CHARS),
+                tool_calls=json.dumps([_bounded(c) for c in calls]) if calls else None,
             )
         )
         return seq
@@ -231,3 +232,13 @@ class History:
     @property
     def live_count(self) -> int:
         return len(self._live)
+
+
+def _bounded(call: ToolCall) -> dict[str, str]:
+    """A call as the ``messages`` row keeps it: each field cut to its bound (the history itself
+    keeps, and sends, the whole call)."""
+    return {
+        "id": cut(call.id, MAX_NAME_CHARS),
+        "name": cut(call.name, MAX_NAME_CHARS),
+        "arguments": cut(call.arguments, MAX_ARGUMENTS_CHARS),
+    }

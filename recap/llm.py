@@ -76,10 +76,18 @@ class ToolCall:
 
     @classmethod
     def parse(cls, id: str, name: str, arguments: str) -> ToolCall:
-        """A call with ``arguments`` parsed: an object, or a parse error."""
+        """A call with ``arguments`` parsed: an object, or a parse error. A call that names no
+        function (a provider's null ``function``) and arguments nested deeper than
+        :data:`MAX_ARGUMENT_DEPTH` are parse errors too: the JSON reader is never handed a
+        nesting that would exhaust Python's recursion limit (a model can write 200,000 brackets)."""
+        if not name:
+            return cls(id, name, arguments, None, "the call names no function")
+        depth = json_depth(arguments)
+        if depth > MAX_ARGUMENT_DEPTH:
+            return cls(id, name, arguments, None, f"arguments nest {depth} levels deep (at most {MAX_ARGUMENT_DEPTH} are read)")
         try:
             value = json.loads(arguments) if arguments.strip() else {}
-        except ValueError as exc:
+        except (ValueError, RecursionError) as exc:
             return cls(id, name, arguments, None, f"arguments are not valid JSON: {exc}")
         if not isinstance(value, dict):
             return cls(id, name, arguments, None, f"arguments are not a JSON object but {type(value).__name__}")
@@ -88,6 +96,52 @@ class ToolCall:
     def as_dict(self) -> dict[str, Any]:
         """The call as an assistant message carries it on the wire (OpenAI shape)."""
         return {"id": self.id, "type": "function", "function": {"name": self.name, "arguments": self.arguments}}
+
+
+#: how deep a call's arguments may nest to be read (a tool's arguments are a flat object of
+#: strings and numbers; Python's JSON reader recurses once per level and fails near 1,000)
+MAX_ARGUMENT_DEPTH = 64
+
+
+def json_depth(text: str) -> int:
+    """The deepest nesting of ``[`` / ``{`` in ``text`` outside JSON strings, in one pass without
+    recursion (for text that is not JSON, the depth its brackets reach). Below
+    :data:`MAX_ARGUMENT_DEPTH` it may answer the number of opening brackets instead (a bound of
+    the depth that needs no pass over the text)."""
+    opening = text.count("[") + text.count("{")
+    if opening <= MAX_ARGUMENT_DEPTH:  # the common case, without a pass in Python
+        return opening
+    depth = deepest = 0
+    in_string = escaped = False
+    for ch in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == '"':
+                in_string = False
+        elif ch == '"':
+            in_string = True
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth = max(0, depth - 1)
+    return deepest
+
+
+def distinct_ids(calls: tuple[ToolCall, ...]) -> tuple[ToolCall, ...]:
+    """A reply's calls with every call whose id repeats an earlier call's id made invalid (not
+    run: a tool result could not say which of them it answers); the first keeps its id."""
+    seen: set[str] = set()
+    out = []
+    for c in calls:
+        if c.id in seen:
+            c = ToolCall(c.id, c.name, c.arguments, None, "the call's id repeats an earlier call of the same reply")
+        seen.add(c.id)
+        out.append(c)
+    return tuple(out)
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from recap.env import EnvError, Environment, InvalidActionError, Reset, Step, ag
 from recap.history import History
 from recap.jsonreply import ReplyFormatError, parse_json_object
 from recap.llm import LLMClient, LLMError, LLMRequest, LLMResponse, ToolCall, ToolDef
+from recap.row_bounds import MAX_ARGUMENTS_CHARS, MAX_NAME_CHARS, cut
 from schemas import kinds
 from schemas.kinds import EndReason, LLMErrorKind
 from schemas.outcomes import BudgetRefusal, EpisodeResult
@@ -168,6 +169,9 @@ class Conversation:
             )
         )
         self.usage = usage if usage is not None else Usage()
+        #: records a tool call that was never run (its reply was repaired): the episode's
+        #: :meth:`EnvDriver.record_not_run`, set by :class:`Episode`
+        self.record_not_run: Callable[[ToolCall, int | None, int], None] | None = None
 
     def fork(
         self, *, expected_format: str | None = None, style: str | None = None, reply_fields: tuple[str, ...] | None = None
@@ -291,6 +295,9 @@ class Conversation:
                 obj = {} if calls and not response.text.strip() else decode(response.text)
                 return parse(obj), calls, seq
             except ReplyFormatError as exc:
+                for call in calls:  # every call the reply made is in tool_calls, run or not
+                    if self.record_not_run is not None:
+                        self.record_not_run(call, node_id, seq)
                 if repairs >= self.config.max_json_repairs:
                     raise EpisodeEnd("json_failures", str(exc)) from None
                 repairs += 1
@@ -512,7 +519,7 @@ class EnvDriver:
         problem = call.parse_error
         if problem is None and call.name not in names:
             problem = f"there is no tool named {call.name!r}; the tools are: {', '.join(names)}"
-        action = f"{call.name} {call.arguments}"
+        action = cut(f"{call.name} {call.arguments}", MAX_ARGUMENTS_CHARS)
         if problem is not None or call.args is None:
             self.invalid += 1
             observation = f"error: {problem}"
@@ -531,6 +538,14 @@ class EnvDriver:
             self.invalid += 1
         self._record_tool(call.name, call.arguments, step, node_id, call, message_seq)
         return self._took(action, valid, step, node_id)
+
+    def record_not_run(self, call: ToolCall, node_id: int | None, message_seq: int) -> None:
+        """The ``tool_calls`` row of a call that was never run because its reply could not be used
+        (repaired, or past the repair budget): invalid, its error :data:`NOT_RUN`, ``step_index``
+        the index the episode's next ``steps`` row takes (no step was taken)."""
+        self.invalid += 1
+        step = Step(NOT_RUN, None, False, False, {"error": NOT_RUN})
+        self._record_tool(call.name, call.arguments, step, node_id, call, message_seq)
 
     def submit_at_limit(self, end: EpisodeEnd) -> EpisodeEnd:
         """How the episode ends when ``end`` is a limit (:func:`is_limit`): the environment hands
@@ -591,10 +606,10 @@ class EnvDriver:
                 episode_id=self.episode_id,
                 index=self.tool_calls,
                 step_index=self.attempts if step_index is None else step_index,
-                name=name,
-                arguments=arguments,
+                name=cut(name, MAX_NAME_CHARS),
+                arguments=cut(arguments, MAX_ARGUMENTS_CHARS),
                 valid=error is None,
-                call_id=call.id if call is not None else None,
+                call_id=cut(call.id, MAX_NAME_CHARS) if call is not None else None,
                 message_seq=message_seq,
                 node_id=node_id,
                 error=None if error is None else str(error),
@@ -632,6 +647,10 @@ class Episode:
     env: Environment
     emit: Emit
     extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.conv.record_not_run is None:
+            self.conv.record_not_run = self.driver.record_not_run
 
     def result(self, end: EpisodeEnd, max_depth: int = 0) -> EpisodeResult:
         u = self.conv.usage

@@ -42,6 +42,8 @@ InfraEndReason = Literal["infra_error"]
 RowEndReason = Literal[EndReason, InfraEndReason]
 
 #: the classes a failed model call is sorted into (``llm_calls.error_kind``, ``LLMError.kind``)
+#: ``invalid_reply``: the provider answered HTTP 200 with the model's reply, which no JSON reader
+#: can read (nested deeper than Python's recursion limit): the model's failure, not infrastructure
 LLMErrorKind = Literal[
     "rate_limit",
     "timeout",
@@ -50,6 +52,7 @@ LLMErrorKind = Literal[
     "bad_request",
     "auth",
     "budget",
+    "invalid_reply",
 ]
 LLM_ERROR_KINDS: tuple[str, ...] = get_args(LLMErrorKind)
 

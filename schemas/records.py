@@ -161,7 +161,10 @@ class ToolCallRecord:
     written as text). ``valid`` False: the call never ran as asked (arguments that are not JSON,
     an unknown tool, a call the tool refused), ``error`` says why. ``exit_code`` is None when no
     process ran or it was killed (``timed_out``); ``output_bytes`` is the output's size before the
-    cap shown to the model.
+    cap shown to the model. Every call a reply made has its row, run or not (a call of a reply that
+    was repaired: ``error`` says it was not run). Model-written fields are bounded
+    (:mod:`recap.row_bounds`): ``arguments`` at 65,536 characters, ``name`` and ``call_id`` at 256,
+    a longer one cut with `` [cut: N characters in all]`` after the part kept.
     """
 
     table: ClassVar[str] = "tool_calls"

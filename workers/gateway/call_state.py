@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from recap.llm import LLMRequest, LLMResponse, ToolCall
+from recap.llm import LLMRequest, LLMResponse, ToolCall, distinct_ids
 from workers.llm.accounting import Settlement, Sizing
 from workers.llm.errors import Classified
 
@@ -74,5 +74,8 @@ def calls_as_result(calls: tuple[ToolCall, ...]) -> dict[str, Any]:
 
 
 def calls_of_result(result: Mapping[str, Any]) -> tuple[ToolCall, ...]:
-    """The tool calls a recorded result holds, re-parsed (none for a plain reply)."""
-    return tuple(ToolCall.parse(str(c["id"]), str(c["name"]), str(c["arguments"])) for c in result.get("tool_calls") or ())
+    """The tool calls a recorded result holds, re-parsed as the reply's were (none for a plain
+    reply): a replay from the ledger or the cache marks the same calls invalid."""
+    return distinct_ids(
+        tuple(ToolCall.parse(str(c["id"]), str(c["name"]), str(c["arguments"])) for c in result.get("tool_calls") or ())
+    )

@@ -18,7 +18,12 @@ One call (:meth:`DeploymentGateway.complete`):
    message, null content - :func:`workers.llm.errors.unreadable_reply`) has its reservation
    charged at worst case; the unusable 200 is a retryable ``server_error``, so a call that never
    gets a usable reply fails as one (its episode ends ``infra_error``, which a resume retries,
-   under the same caps: the charges are in the ledger journal). After ``max_usage_rejections``
+   under the same caps: the charges are in the ledger journal). A 200 whose tool calls are
+   hostile is the model's reply, never a ``server_error``: the calls come back as the model made
+   them, those that cannot run marked invalid (:mod:`workers.llm.tool_call_guard`,
+   :meth:`recap.llm.ToolCall.parse`), and a body nested past any JSON reader fails the call as
+   ``invalid_reply`` (charged at its reservation, not retried: the episode ends ``llm_error``,
+   which no resume re-runs). After ``max_usage_rejections``
    replies whose usage was impossible, the deployment's further calls are refused
    (``LLMError("budget")`` with a ``usage`` refusal: the driver stops that model's units). The budget keeps this deployment's
    reservations, spend and cap under its name (``deployment_name``), never under the model

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from recap.llm import ToolCall
+from recap.llm import ToolCall, distinct_ids
 from workers.llm.errors import UnusableReply, install_log_scrubber, redact_known
 from workers.llm.litellm_setup import get_litellm
 from workers.llm.offline.wire import OFFLINE_METADATA_KEY
@@ -121,6 +121,8 @@ def unusable_reason(response: Any) -> str | None:
     if message is None:
         return "the provider answered HTTP 200 with a choice that has no message"
     if getattr(message, "content", None) is None and not getattr(message, "tool_calls", None):
+        if getattr(choices[0], "finish_reason", None) == "tool_calls":
+            return None  # the model said it called tools and called none: its (empty) reply
         return "the provider answered HTTP 200 with a message whose content is null (and no tool calls)"
     return None
 
@@ -175,8 +177,11 @@ def parse_response(response: Any) -> Attempt:
 
 def read_tool_calls(raw: Any) -> tuple[ToolCall, ...]:
     """A message's tool calls (litellm's OpenAI shape: objects or dicts with ``id`` and a
-    ``function`` holding ``name`` and ``arguments``) as :class:`ToolCall` items. Arguments that are
-    not a string (some providers send the object) are kept as their JSON text."""
+    ``function`` holding ``name`` and ``arguments``) as :class:`ToolCall` items, every call the
+    reply made, usable or not (each is answered and recorded). Arguments that are not a string
+    (some providers send the object) are kept as their JSON text; a null ``function`` is a call
+    with no name (invalid, :meth:`ToolCall.parse`); a call whose id repeats an earlier one's is
+    invalid (:func:`recap.llm.distinct_ids`)."""
     calls = []
     for i, item in enumerate(raw or ()):
         function = _field(item, "function")
@@ -185,10 +190,13 @@ def read_tool_calls(raw: Any) -> tuple[ToolCall, ...]:
         if arguments is None:
             arguments = ""
         elif not isinstance(arguments, str):
-            arguments = json.dumps(arguments)
+            try:
+                arguments = json.dumps(arguments)
+            except (TypeError, ValueError, RecursionError):
+                arguments = str(arguments)
         call_id = _field(item, "id") or f"call_{i}"
         calls.append(ToolCall.parse(str(call_id), "" if name is None else str(name), arguments))
-    return tuple(calls)
+    return distinct_ids(tuple(calls))
 
 
 def _field(item: Any, name: str) -> Any:
@@ -204,7 +212,7 @@ def redacted_calls(calls: tuple[ToolCall, ...], secrets: list[str]) -> tuple[Too
     for c in calls:
         arguments = redact_known(c.arguments, secrets)
         out.append(c if arguments == c.arguments else ToolCall.parse(c.id, c.name, arguments))
-    return tuple(out)
+    return distinct_ids(tuple(out))
 
 
 def _cache_writes(usage: Any, details: Any) -> Any:

@@ -186,7 +186,9 @@ _UNREADABLE_REPLY_MARKERS = (
 
 class UnusableReply(Exception):
     """An HTTP 200 answer that holds no reply we can use: no choice (``choices`` empty or null), a
-    choice without a message, or a message whose content is null with no tool calls.
+    choice without a message, or a message whose content is null with no tool calls (unless its
+    finish reason is ``tool_calls``: the model said it called tools and called none, an empty reply
+    that is its own, :func:`workers.llm.calling.unusable_reason`).
 
     Why an exception and not an empty reply: handed on as ``""``, the agent read it as the
     model's own failure (a JSON failure no resume retries), although the provider failed - and
@@ -231,6 +233,23 @@ def unreadable_reply(exc: BaseException) -> bool:
     return False
 
 
+def too_deep_reply(exc: BaseException) -> bool:
+    """Did an HTTP 200 reply arrive that nests deeper than Python's JSON reader goes?
+
+    The OpenAI SDK decodes the body with ``json.loads``, which recurses once per level: a reply
+    whose tool-call arguments are a JSON object nested 200,000 levels deep raises
+    ``RecursionError`` there, and litellm reports it as a 500 (``OpenAIError`` raised from the
+    ``RecursionError``). No HTTP status error is in such a chain: the provider answered 200, with
+    what the model wrote."""
+    chain = _chain(exc)
+    for link in chain:
+        if type(link).__name__ == "HTTPStatusError" and type(link).__module__.startswith("httpx"):
+            return False
+        if type(link).__module__.startswith("openai") and isinstance(getattr(link, "body", None), dict):
+            return False
+    return any(isinstance(link, RecursionError) for link in chain)
+
+
 def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classified:
     """The error class of an exception raised by one litellm call."""
     litellm = import_litellm()
@@ -239,6 +258,11 @@ def classify(exc: BaseException, secrets: Iterable[str | None] = ()) -> Classifi
     status = getattr(exc, "status_code", None)
     status = status if isinstance(status, int) else None
     kind: LLMErrorKind | None
+    if too_deep_reply(exc):
+        # the model's reply, unreadable for its nesting: its failure (never retried, never a
+        # resume's), charged at the reservation like any reply that arrived and was not used
+        detail = "the provider's HTTP 200 reply nests deeper than a JSON reader goes (the model's reply, not used)"
+        return Classified("invalid_reply", f"{detail}; {message}"[:MAX_MESSAGE_CHARS], None, 200, maybe_billed=True)
     if isinstance(exc, litellm.ContextWindowExceededError):
         kind = "context_length"
     elif isinstance(exc, litellm.RateLimitError):

@@ -30,5 +30,9 @@ def get_litellm() -> Any:
             from workers.llm.offline.provider import register_offline_provider
 
             register_offline_provider(litellm)
+            # a reply's tool calls are read whatever the model wrote in them (never a 500)
+            from workers.llm.tool_call_guard import install
+
+            install(litellm)
             _ready = litellm
     return _ready

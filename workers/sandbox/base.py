@@ -53,6 +53,42 @@ class SandboxError(RuntimeError):
         self.service = service
 
 
+class OutsideRepository(PermissionError):
+    """A path that leaves the sandbox's repository once every symlink in it is resolved.
+
+    The file operations of a sandbox (:meth:`Sandbox.read_file`, :meth:`Sandbox.read_lines`,
+    :meth:`Sandbox.write_file`) resolve a path *inside* the sandbox, every component including the
+    last (a dangling final link resolved to where a write would land); a committed link to
+    ``/etc/passwd`` or a folder linked to ``/`` is refused with this, never followed (issue 35
+    item 2). A PermissionError, so code that refuses unreadable files refuses these too."""
+
+
+class FileTooLarge(OSError):
+    """A file bigger than the ``max_bytes`` a read allowed; nothing of it was read (issue 35 item 4:
+    a tool's reads stay bounded in the worker)."""
+
+    def __init__(self, path: str, size: int, limit: int) -> None:
+        super().__init__(f"{path} is {size} bytes, over the {limit}-byte limit of this read")
+        self.path = path
+        self.size = size
+        self.limit = limit
+
+
+@dataclass(frozen=True)
+class FileSlice:
+    """Lines of a file as :meth:`Sandbox.read_lines` returns them, read in the sandbox: only
+    ``data`` crosses into the worker, never the rest of the file."""
+
+    #: lines first..last (1-based, inclusive), joined with their newlines, cut to max_bytes
+    data: bytes
+    #: lines in the whole file (a final newline ends the last line, adds none)
+    total_lines: int
+    #: the file's size
+    total_bytes: int
+    #: data was cut at max_bytes
+    truncated: bool
+
+
 class SandboxUnavailable(EnvError):
     """The episode's sandbox service failed (:attr:`SandboxError.service`): the row's error starts
     with ``sandbox:``, which the pipeline reads as infrastructure (``infra_error``, run again by
@@ -86,6 +122,9 @@ class SandboxLimits:
     wall_time_s: float = 3600.0
     #: bytes the repository folder may grow to
     disk_bytes: int = 1 << 30
+    #: bytes each scratch folder a program may write to (``/tmp``, ``/var/tmp``, ``$HOME``) may
+    #: hold (issue 35 item 3: every writable place is bounded, not only the repository)
+    scratch_bytes: int = 256 << 20
     memory_bytes: int = 2 << 30
     #: processes at once (a fork bomb stops here)
     pids: int = 256
@@ -125,34 +164,6 @@ class SandboxSpec:
     workdir: str = "/repo"
 
 
-# -- TEMPORARY copy of the file interface (issue 35 items 2 and 4): sbx-docker's base.py holds the
-# definitive one; the integrator keeps theirs.
-
-
-class OutsideRepository(PermissionError):
-    """A path that leaves the sandbox's repository once every symlink in it is resolved."""
-
-
-class FileTooLarge(OSError):
-    """A file bigger than the bytes a caller would read of it."""
-
-    def __init__(self, path: str, size: int, limit: int) -> None:
-        super().__init__(f"{path} is {size} bytes, over the {limit}-byte limit")
-        self.path = path
-        self.size = size
-        self.limit = limit
-
-
-@dataclass(frozen=True)
-class FileSlice:
-    """Some lines of a file, and the whole file's size."""
-
-    data: bytes
-    total_lines: int
-    total_bytes: int
-    truncated: bool
-
-
 class Sandbox(ABC):
     """One repository copy where commands run under :class:`SandboxLimits`."""
 
@@ -165,17 +176,25 @@ class Sandbox(ABC):
         """Run ``command`` with ``bash -c`` in ``workdir`` (timeout: the limit's unless given)."""
 
     @abstractmethod
-    def read_file(self, path: str) -> bytes:
-        """A file's bytes; ``path`` relative to ``workdir`` or absolute inside the sandbox.
-        Raises FileNotFoundError / IsADirectoryError like the OS."""
+    def read_file(self, path: str, *, max_bytes: int | None = None) -> bytes:
+        """A file's bytes; ``path`` relative to ``workdir`` or absolute inside the sandbox, resolved
+        inside the sandbox (every symbolic link in it, the last included). Raises
+        :class:`OutsideRepository` when it leaves the repository, FileNotFoundError /
+        IsADirectoryError like the OS, :class:`FileTooLarge` (nothing read) when the file is
+        bigger than ``max_bytes``."""
 
+    @abstractmethod
     def read_lines(self, path: str, first: int, last: int | None, max_bytes: int) -> FileSlice:
-        """Lines ``first``..``last`` of a file, at most ``max_bytes`` (TEMPORARY: sbx-docker's base.py defines it)."""
-        raise NotImplementedError
+        """Lines ``first``..``last`` (1-based, inclusive; ``last`` None: to the end) of a file,
+        cut to ``max_bytes``, with the file's line count and size. Bounded: only what it returns
+        is read into the worker (the counting happens in the sandbox). Paths and errors as
+        :meth:`read_file`."""
 
     @abstractmethod
     def write_file(self, path: str, data: bytes) -> None:
-        """Create or replace a file (its folder is created)."""
+        """Create or replace a file (its folder is created); the path is resolved as for
+        :meth:`read_file` (:class:`OutsideRepository` when it, or a link on the way, leaves the
+        repository) and written at the resolved place."""
 
     @abstractmethod
     def close(self) -> None:

@@ -16,11 +16,14 @@ the repository itself (``spec.repo_path`` None: the SWE-bench harness's images, 
 nothing copied: git gets its user there, and the repository's HEAD must be ``spec.base_commit`` or
 the harness's own commit on top of it (:func:`image_commit`).
 
-Disk: overlay2 on this host has no size quota, and a tmpfs work folder cannot receive
-``put_archive`` (Docker copies under the mount, moby#22020) and would hold the repository in
-memory. So the repository folder is measured with ``du`` every second while a command runs (it is
-killed when over ``limits.disk_bytes``) and after each command (reported in the result), and
-``ulimit -f`` caps single files; see :mod:`workers.sandbox.wrapper`.
+Disk: every writable place is bounded (:mod:`workers.sandbox.docker_disk`): a quota on the
+writable layer where the storage driver has one, else a read-only root filesystem with the
+repository folder and the scratch folders (``/tmp``, ``/var/tmp``, ``$HOME``, ``/run``) as
+size-limited tmpfs mounts, the repository streamed in with ``tar`` on an exec's stdin. The
+repository folder is also measured with ``du`` every second while a command runs (it is killed
+when over ``limits.disk_bytes``) and after each command (reported in the result), and ``ulimit
+-f`` caps single files; see :mod:`workers.sandbox.wrapper`. Files are read and written by a
+script in the container that resolves every path there (:mod:`workers.sandbox.docker_files`).
 
 Commands: ``bash -c`` through the wrapper (``timeout -s KILL`` inside, output cut inside, strays
 killed after each command), plus a host-side guard: when the exec has not returned a few seconds
@@ -31,18 +34,19 @@ it is killed, and if even that cannot run, the container is restarted (its files
 from __future__ import annotations
 
 import concurrent.futures
-import io
 import logging
 import posixpath
 import secrets
 import tarfile
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, NoReturn
 
-from workers.sandbox.base import CommandResult, Sandbox, SandboxError, SandboxKind, SandboxSpec
+from workers.sandbox.base import CommandResult, FileSlice, Sandbox, SandboxError, SandboxKind, SandboxSpec
+from workers.sandbox.docker_disk import image_tree, populate, quota_size, storage_quota_supported, tmpfs_mounts
+from workers.sandbox.docker_files import FILE_OP, check_path, exec_with_stdin, parse_lines, parse_read, raise_for
 from workers.sandbox.repo_copy import clone_at
 from workers.sandbox.wrapper import WRAPPER, parse
 
@@ -140,13 +144,22 @@ class DockerSandbox(Sandbox):
         check_image(spec.image, self._client)
         lim = spec.limits
         env = {**BASE_ENV, **spec.env}
+        quota = storage_quota_supported(self._client, spec.image)
+        #: how the writable places are bounded (:mod:`workers.sandbox.docker_disk`)
+        self.disk_bound = "storage-quota" if quota else "read-only+tmpfs"
+        home = env.get("HOME", BASE_ENV["HOME"])
+        bound: dict[str, Any] = (
+            {"storage_opt": {"size": quota_size(lim)}}
+            if quota
+            else {"read_only": True, "tmpfs": tmpfs_mounts(lim, spec.workdir, home)}
+        )
         with tempfile.TemporaryDirectory(prefix="recap-sandbox-clone-") as tmp:
             tar_path: Path | None = None
             if spec.repo_path is not None:  # else the image holds the repository at workdir
                 clone = Path(tmp) / "repo"
                 self.base_commit = clone_at(spec.repo_path, spec.base_commit, clone)
                 tar_path = Path(tmp) / "repo.tar"
-                _tar_tree(clone, spec.workdir.strip("/"), tar_path)
+                _tar_tree(clone, posixpath.basename(spec.workdir.rstrip("/")), tar_path)
             try:
                 self._container = self._client.containers.run(
                     spec.image,
@@ -164,11 +177,16 @@ class DockerSandbox(Sandbox):
                     security_opt=["no-new-privileges"],
                     working_dir="/",
                     hostname="sandbox",
+                    **bound,
                 )
                 if tar_path is not None:
-                    with open(tar_path, "rb") as f:
-                        if not self._container.put_archive("/", f):
-                            raise SandboxError("copying the repository into the container failed", service=True)
+                    populate(self._client, self._container, spec.workdir, _file_chunks(tar_path))
+                elif not quota:  # the tmpfs hides the image's repository: copy it in from the image
+                    helper, stream = image_tree(self._client, spec.image, spec.workdir, spec.labels)
+                    try:
+                        populate(self._client, self._container, spec.workdir, stream)
+                    finally:
+                        helper.remove(force=True)
             except docker.errors.DockerException as e:
                 self.close()
                 raise SandboxError(
@@ -211,12 +229,18 @@ class DockerSandbox(Sandbox):
         return str(self._container.id) if self._container is not None else ""
 
     def _keeper_pid(self) -> str:
-        """PID 1's child (``sleep infinity``): the wrapper never kills it."""
-        try:
-            code, out = self._container.exec_run(["cat", "/proc/1/task/1/children"])
-        except Exception as e:  # an API error, or the daemon gone
-            self._service_failed(e)
-        return out.decode().split()[0] if code == 0 and out.split() else "0"
+        """PID 1's child (``sleep infinity``): the wrapper never kills it. Asked again for a moment
+        while the init has not started it yet (just after the container starts): a keeper of "0"
+        would let the first command's sweep kill it, and the container with it."""
+        for _ in range(100):
+            try:
+                code, out = self._container.exec_run(["cat", "/proc/1/task/1/children"])
+            except Exception as e:  # an API error, or the daemon gone
+                self._service_failed(e)
+            if code == 0 and out.split():
+                return str(out.decode().split()[0])
+            time.sleep(0.05)
+        return "0"
 
     def _service_failed(self, exc: Exception) -> NoReturn:
         """Raise the SandboxError (``service``) for a Docker API failure under an open sandbox:
@@ -331,59 +355,48 @@ class DockerSandbox(Sandbox):
 
     # -- files --------------------------------------------------------------------------
 
-    def _abs(self, path: str) -> str:
-        return posixpath.normpath(posixpath.join(self.workdir, path))
-
-    def read_file(self, path: str) -> bytes:
-        """A file's bytes (symbolic links followed)."""
+    def _file_op(self, op: str, path: str, *args: str, data: bytes | None = None) -> tuple[int, bytes]:
+        """Run :data:`~workers.sandbox.docker_files.FILE_OP` in the container (resolving ``path``
+        there, see :mod:`workers.sandbox.docker_files`); (exit status, stdout)."""
         import docker.errors
 
         self._live()
-        target = self._abs(path)
-        for _ in range(16):
-            try:
-                stream, _stat = self._container.get_archive(target)
-                data = b"".join(stream)  # read here: a daemon that fails mid-stream is the service too
-            except docker.errors.NotFound:
-                if not self._running():  # the container, not the file, is missing
-                    raise SandboxError("the sandbox container is gone", service=True) from None
-                raise FileNotFoundError(2, "No such file or directory", path) from None
-            except Exception as e:  # an API error, or the daemon gone
-                self._service_failed(e)
-            with tarfile.open(fileobj=io.BytesIO(data)) as tar:
-                member = tar.next()
-                if member is None:
-                    raise FileNotFoundError(2, "No such file or directory", path)
-                if member.isdir():
-                    raise IsADirectoryError(21, "Is a directory", path)
-                if member.issym():
-                    target = posixpath.normpath(posixpath.join(posixpath.dirname(target), member.linkname))
-                    continue
-                f = tar.extractfile(member)
-                if f is None:
-                    raise OSError(f"not a regular file: {path}")
-                return f.read()
-        raise OSError(40, "Too many levels of symbolic links", path)
+        check_path(path)
+        argv = ["bash", "-c", FILE_OP, "file-op", op, self.workdir, path, *args]
+        try:
+            if data is None:
+                code, out = self._container.exec_run(argv, stdout=True, stderr=False)
+            else:
+                code, out = exec_with_stdin(self._client.api, self._container.id, argv, data)
+        except docker.errors.NotFound:
+            raise SandboxError("the sandbox container is gone", service=True) from None
+        except Exception as e:  # an API error, or the daemon gone
+            self._service_failed(e)
+        if code in (126, 127, -1, None):  # bash or coreutils missing, or the exec never ended
+            raise SandboxError(f"the sandbox cannot run its file operations (exit {code}): {bytes(out or b'')[-200:]!r}")
+        return int(code), bytes(out or b"")
+
+    def read_file(self, path: str, *, max_bytes: int | None = None) -> bytes:
+        """A file's bytes, resolved in the container (:mod:`workers.sandbox.docker_files`);
+        :class:`~workers.sandbox.base.FileTooLarge` past ``max_bytes`` (nothing read)."""
+        code, out = self._file_op("read", path, str(-1 if max_bytes is None else max_bytes))
+        raise_for(code, out, path, max_bytes=max_bytes)
+        return parse_read(out, path)
+
+    def read_lines(self, path: str, first: int, last: int | None, max_bytes: int) -> FileSlice:
+        """Lines ``first``..``last`` cut to ``max_bytes``, counted and cut in the container: only
+        the slice reaches the worker."""
+        if first < 1 or (last is not None and last < first) or max_bytes < 0:
+            raise ValueError(f"read_lines: bad range {first}..{last} or max_bytes {max_bytes}")
+        code, out = self._file_op("lines", path, str(first), str(0 if last is None else last), str(max_bytes))
+        raise_for(code, out, path)
+        return parse_lines(out, path, max_bytes)
 
     def write_file(self, path: str, data: bytes) -> None:
-        """Create or replace a file (mode 0644, its folders created)."""
-        self._live()
-        target = self._abs(path)
-        buf = io.BytesIO()
-        with tarfile.open(fileobj=buf, mode="w") as tar:
-            info = tarfile.TarInfo(target.lstrip("/"))
-            info.size = len(data)
-            info.mode = 0o644
-            info.mtime = int(time.time())
-            tar.addfile(info, io.BytesIO(data))
-        try:
-            ok = self._container.put_archive("/", buf.getvalue())
-        except Exception as e:
-            if not self._running():  # the container is gone: not a file the agent can fix
-                raise SandboxError("the sandbox container is gone", service=True) from None
-            raise OSError(f"cannot write {path}: {str(e)[:200]}") from None
-        if not ok:
-            raise OSError(f"cannot write {path}")
+        """Create or replace a file at the path resolved in the container (its folders created,
+        an existing file's mode kept, a new one 0644), its bytes sent on the exec's stdin."""
+        code, out = self._file_op("write", path, data=data)
+        raise_for(code, out, path)
 
     # -- end ----------------------------------------------------------------------------
 
@@ -401,6 +414,13 @@ class DockerSandbox(Sandbox):
             pass
         except Exception as e:  # the daemon is gone: the run's next session removes what is left
             log.warning("the sandbox container %s could not be removed: %s", c.id[:12], str(e).splitlines()[0][:200])
+
+
+def _file_chunks(path: Path, size: int = 1 << 20) -> Iterator[bytes]:
+    """``path``'s bytes, ``size`` at a time (a repository's tar is never whole in the worker)."""
+    with open(path, "rb") as f:
+        while chunk := f.read(size):
+            yield chunk
 
 
 def _tar_tree(src: Path, arcname: str, dest: Path) -> None:

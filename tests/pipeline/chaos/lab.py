@@ -33,6 +33,8 @@ The scenarios (``--only NAME``; the functions live in ``tests/pipeline/chaos/MOD
     userfiles user_files  files a user hands us (--from, instances file, patches, selectors): one line, exit 2
     wiki      wiki      FEVER's Wikipedia: dripping, huge and gzip-bomb pages, off-origin redirects, tampered snapshots
     sandbox_local sandbox_local  escapes, disk overruns, symlinks and a 19 MB view against a local sandbox
+    hostilecalls hostile_calls  a provider's hostile tool calls (200,000-deep, 5 MB, repeated ids, ...): the model's, recorded, charged, capped
+    sandbox_docker sandbox_docker  a model's tool calls against a docker sandbox: symlink escapes, hostile paths, a 19 MB view, disk past each bound
 
     python -m tests.pipeline.chaos.lab                          # every scenario (about 6 minutes on 2 cores)
     python -m tests.pipeline.chaos.lab --only worker gateway    # some of them
@@ -84,6 +86,8 @@ SCENARIOS: dict[str, tuple] = {
     "userfiles": ("user_files", "userfiles", False),
     "wiki": ("wiki", "wiki", False),
     "sandbox_local": ("sandbox_local", "sandbox_local", False),
+    "hostilecalls": ("hostile_calls", "hostile_calls", False),
+    "sandbox_docker": ("sandbox_docker", "sandbox_docker", False),
 }
 
 

@@ -173,7 +173,8 @@ def test_wrapper_trailer_cannot_be_forged_by_output() -> None:
 
 
 class _DaemonFailsMidStream:
-    """A container whose file archive breaks off mid-stream (the daemon failing while it sends)."""
+    """A container whose file read breaks off mid-stream (the daemon failing while it sends the
+    exec's output: the file operations run in the container, workers.sandbox.docker_files)."""
 
     status = "running"
     id = "c0ffee"
@@ -181,14 +182,10 @@ class _DaemonFailsMidStream:
     def reload(self) -> None:
         pass
 
-    def get_archive(self, path: str):
+    def exec_run(self, cmd: list[str], **kw: object) -> tuple[int, bytes]:
         import requests
 
-        def chunks():
-            yield b"partial"
-            raise requests.exceptions.ChunkedEncodingError("Connection broken: IncompleteRead")
-
-        return chunks(), {}
+        raise requests.exceptions.ChunkedEncodingError("Connection broken: IncompleteRead")
 
 
 def test_a_daemon_failing_mid_stream_is_the_service_not_a_missing_file() -> None:

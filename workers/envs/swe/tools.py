@@ -11,12 +11,21 @@ step lives in the environment, :mod:`.env`). Descriptions are our own words and 
 
 A refused call (unknown tool, an argument missing, unknown or of the wrong type, a path outside the
 repository, ``old_str`` found zero or several times) is an observation that says why plus
-``info["error"]``; nothing here raises for what a model wrote. A broken sandbox raises
-:class:`~workers.sandbox.base.SandboxError`.
+``info["error"]``; nothing here raises for what a model wrote (issue 35 item 5): a path that leaves
+the repository through a symbolic link (the sandbox resolves it inside, :class:`OutsideRepository`),
+a dangling link, a NUL byte, a path too long, a fifo or a device, a file without read permission,
+text that is not Unicode, a file too large for the editor - each is a refusal naming the path, and
+the episode goes on. A broken sandbox raises :class:`~workers.sandbox.base.SandboxError`.
+
+Bounded reads (issue 35 item 4): ``view`` asks the sandbox for the lines it shows, at most the
+output cap (:meth:`~workers.sandbox.base.Sandbox.read_lines`), never the whole file; the editor's
+changes need the whole file, read only up to :data:`EDIT_MAX_BYTES` (a larger file is refused:
+"too large for the editor; use bash").
 """
 
 from __future__ import annotations
 
+import errno
 import posixpath
 import shlex
 import time
@@ -25,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from recap.llm import ToolDef
-from workers.sandbox.base import CommandResult, Sandbox, SandboxLimits
+from workers.sandbox.base import CommandResult, FileTooLarge, OutsideRepository, Sandbox, SandboxLimits
 from workers.sandbox.session import ShellSession
 
 BASH = "bash"
@@ -38,6 +47,14 @@ SUBMIT = "submit"
 TOOL_NAMES = (BASH, VIEW, STR_REPLACE, CREATE, INSERT, UNDO_EDIT, SUBMIT)
 #: lines shown around an edit so the model sees its result
 SNIPPET_LINES = 4
+#: the largest file str_replace, insert and undo_edit read whole into the worker (bytes); larger
+#: files are refused ("too large for the editor; use bash"): source files are far smaller
+EDIT_MAX_BYTES = 4_000_000
+#: the longest path a tool takes (bytes; Linux's PATH_MAX)
+PATH_MAX_BYTES = 4096
+#: the longest command the bash tool runs (bytes): one argument of a process may hold 128 KiB
+#: (MAX_ARG_STRLEN), and the sandbox wraps the command; longer scripts go into a file first
+COMMAND_MAX_BYTES = 64 * 1024
 
 
 def tool_defs(workdir: str, limits: SandboxLimits) -> tuple[ToolDef, ...]:
@@ -203,6 +220,8 @@ def check_args(tool: ToolDef, args: Mapping[str, Any] | None) -> str | None:
             return f"{tool.name}: unknown argument {name!r} (accepted: {accepted})"
         schema = props[name]
         kind = schema["type"]
+        if isinstance(value, str) and not _encodable(value):
+            return f"{tool.name}: argument {name!r} is not valid Unicode (it holds a lone surrogate)"
         if isinstance(value, bool) or not isinstance(value, _JSON_TYPES[kind]):
             return f"{tool.name}: argument {name!r} must be a{'n' if kind[0] in 'aeio' else ''} {kind}, got {_json_type(value)}"
         if isinstance(value, list):
@@ -213,6 +232,14 @@ def check_args(tool: ToolDef, args: Mapping[str, Any] | None) -> str | None:
             if (lo is not None and len(value) < lo) or (hi is not None and len(value) > hi):
                 return f"{tool.name}: argument {name!r} must have {lo} items, got {len(value)}"
     return None
+
+
+def _encodable(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _json_type(value: Any) -> str:
@@ -237,6 +264,49 @@ def repo_relative(workdir: str, path: str) -> str | None:
         return None
     rel = full[len(root.rstrip("/")) + 1 :]
     return rel
+
+
+def bad_path(tool: str, path: str) -> ToolOutcome | None:
+    """The refusal of a path no file can have (a NUL byte, longer than :data:`PATH_MAX_BYTES`), or None."""
+    if "\x00" in path:
+        return refused(f"{tool}: the path {_short(path)!r} contains a NUL byte")
+    size = len(path.encode("utf-8", errors="surrogatepass"))
+    if size > PATH_MAX_BYTES:
+        return refused(f"{tool}: the path is {size} bytes long, over the {PATH_MAX_BYTES}-byte limit ({_short(path)!r})")
+    return None
+
+
+def _short(path: str, keep: int = 120) -> str:
+    """``path`` for a message: at most ``keep`` characters, the cut said."""
+    return path if len(path) <= keep else path[:keep] + "..."
+
+
+def file_refusal(tool: str, shown: str, workdir: str, exc: Exception, *, writing: bool = False) -> ToolOutcome:
+    """The refusal for a file operation the model's path or file made fail (``exc``), naming the path."""
+    if isinstance(exc, OutsideRepository):
+        return refused(f"{tool}: {shown} leads outside the repository {workdir} (through a symbolic link)")
+    if isinstance(exc, FileTooLarge):
+        return refused(f"{tool}: {shown} is {exc.size} bytes, too large for the editor (at most {exc.limit} bytes); use bash")
+    if isinstance(exc, FileNotFoundError):
+        return refused(f"{tool}: {shown} does not exist")
+    if isinstance(exc, IsADirectoryError):
+        return refused(f"{tool}: {shown} is a directory")
+    if isinstance(exc, NotADirectoryError):
+        return refused(f"{tool}: {shown}: a folder on the way is a file")
+    if isinstance(exc, PermissionError):
+        return refused(f"{tool}: {shown} cannot be {'written' if writing else 'read'} (permission denied)")
+    if isinstance(exc, OSError) and exc.errno == errno.ELOOP:
+        return refused(f"{tool}: {shown}: too many levels of symbolic links")
+    if isinstance(exc, OSError) and exc.errno == errno.EINVAL:
+        return refused(f"{tool}: {shown} is not a regular file (a fifo, a device or a socket)")
+    if isinstance(exc, OSError):
+        return refused(f"{tool}: {shown} cannot be {'written' if writing else 'read'}: {exc.strerror or exc}")
+    return refused(f"{tool}: {shown}: {exc}")
+
+
+#: what a file operation raises for the model's path or file (a broken sandbox is a SandboxError,
+#: never one of these)
+FILE_ERRORS = (OSError, ValueError)
 
 
 def shown_path(workdir: str, rel: str) -> str:
@@ -277,6 +347,14 @@ def run_bash(sandbox: Sandbox, limits: SandboxLimits, command: str, session: She
     folder (a text action, as mini-SWE-agent runs each command in its own subprocess)."""
     if not command.strip():
         return refused("bash: the command is empty")
+    if "\x00" in command:
+        return refused("bash: the command contains a NUL byte")
+    size = len(command.encode("utf-8", errors="surrogatepass"))
+    if size > COMMAND_MAX_BYTES:
+        return refused(
+            f"bash: the command is {size} bytes, over the {COMMAND_MAX_BYTES}-byte limit; "
+            "write a long script to a file with create, then run it"
+        )
     if session is None:
         res = sandbox.run(command, timeout_s=limits.command_timeout_s)
         observation = command_observation(res, limits, limits.command_timeout_s)
@@ -296,26 +374,36 @@ def run_bash(sandbox: Sandbox, limits: SandboxLimits, command: str, session: She
 
 
 def _read_text(sandbox: Sandbox, rel: str, shown: str, *, tool: str) -> str | ToolOutcome:
-    """A file's text, or ``tool``'s refusal saying why it cannot be had (missing, a folder, not UTF-8)."""
+    """A file's text (at most :data:`EDIT_MAX_BYTES`), or ``tool``'s refusal saying why it cannot
+    be had (outside the repository, missing, a folder, too large, not UTF-8...)."""
     try:
-        data = sandbox.read_file(rel)
-    except FileNotFoundError:
-        return refused(f"{tool}: {shown} does not exist")
-    except IsADirectoryError:
-        return refused(f"{tool}: {shown} is a directory")
-    except PermissionError:
-        return refused(f"{tool}: {shown} cannot be read (permission denied)")
+        data = sandbox.read_file(rel, max_bytes=EDIT_MAX_BYTES)
+    except FILE_ERRORS as exc:
+        return file_refusal(tool, shown, sandbox.workdir, exc)
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:
         return refused(f"{tool}: {shown} is not a UTF-8 text file")
 
 
-def _finish(out: ToolOutcome, limits: SandboxLimits, started: float) -> ToolOutcome:
-    """``out`` with its output cut to the cap (and the cut said), timed, sized."""
+def _write(sandbox: Sandbox, rel: str, shown: str, data: bytes, *, tool: str) -> ToolOutcome | None:
+    """Write ``data``; None when written, else ``tool``'s refusal naming the path."""
+    try:
+        sandbox.write_file(rel, data)
+    except FILE_ERRORS as exc:
+        return file_refusal(tool, shown, sandbox.workdir, exc, writing=True)
+    return None
+
+
+def _finish(out: ToolOutcome, limits: SandboxLimits, started: float, *, more: bool = False) -> ToolOutcome:
+    """``out`` with its output cut to the cap (and the cut said), timed, sized. ``more``: the
+    observation is itself a cut of a longer text (a view of a file read only up to the cap), whose
+    whole size is not known: the cut is said without it."""
     size = len(out.observation.encode("utf-8"))
     text, cut = cap_text(out.observation, limits.output_bytes)
-    if cut:
+    if more:
+        text += f"\n[output cut: the first {limits.output_bytes} bytes are shown; view a smaller view_range to see the rest]"
+    elif cut:
         text += f"\n[output cut: the first {limits.output_bytes} of {size} bytes are shown]"
     out.observation = text
     out.output_bytes = size
@@ -324,14 +412,19 @@ def _finish(out: ToolOutcome, limits: SandboxLimits, started: float) -> ToolOutc
 
 
 def run_view(sandbox: Sandbox, limits: SandboxLimits, path: str, view_range: list[int] | None) -> ToolOutcome:
-    """A file numbered (``view_range`` lines only) or a folder's listing two levels deep."""
+    """A file numbered (``view_range`` lines only) or a folder's listing two levels deep. The
+    sandbox reads the lines asked, at most the output cap of them (numbering only lengthens them,
+    so the observation is never short of the cap): the rest of the file never reaches the worker."""
     started = time.monotonic()
+    if (bad := bad_path("view", path)) is not None:
+        return bad
     rel = repo_relative(sandbox.workdir, path)
     if rel is None:
         return refused(f"view: {path} is outside the repository {sandbox.workdir}")
     shown = shown_path(sandbox.workdir, rel)
+    first, last = (1, None) if view_range is None else (view_range[0], None if view_range[1] == -1 else view_range[1])
     try:
-        data = sandbox.read_file(rel)
+        part = sandbox.read_lines(rel, max(first, 1), None if last is None or last < first else last, limits.output_bytes)
     except IsADirectoryError:
         if view_range is not None:
             return refused(f"view: view_range is for files, and {shown} is a directory")
@@ -340,29 +433,33 @@ def run_view(sandbox: Sandbox, limits: SandboxLimits, path: str, view_range: lis
             return refused(f"view: cannot list {shown}: {res.output.strip()}")
         head = f"Files and directories in {shown}, up to 2 levels deep (hidden ones left out):\n"
         return _finish(ToolOutcome(observation=head + res.output.rstrip("\n"), exit_code=0), limits, started)
-    except FileNotFoundError:
-        return refused(f"view: {shown} does not exist")
-    except PermissionError:
-        return refused(f"view: {shown} cannot be read (permission denied)")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        return refused(f"view: {shown} is not a UTF-8 text file")
-    lines = text.split("\n")
-    if lines and lines[-1] == "":
-        lines.pop()
-    first, last = 1, len(lines)
+    except FILE_ERRORS as exc:
+        return file_refusal("view", shown, sandbox.workdir, exc)
+    n = part.total_lines
     if view_range is not None:
-        first, last = view_range
-        if not 1 <= first <= max(len(lines), 1):
-            return refused(f"view: view_range starts at line {first}, but {shown} has {len(lines)} lines")
-        if last == -1:
-            last = len(lines)
-        elif not first <= last <= len(lines):
-            return refused(f"view: view_range ends at line {last}; it must be -1 or between {first} and {len(lines)}")
-    body = numbered(lines[first - 1 : last], first)
-    head = f"{shown} (lines {first}-{last} of {len(lines)}):\n" if view_range is not None else f"{shown}:\n"
-    return _finish(ToolOutcome(observation=head + body, exit_code=0), limits, started)
+        if not 1 <= first <= max(n, 1):
+            return refused(f"view: view_range starts at line {first}, but {shown} has {n} lines")
+        if last is None:
+            last = n
+        elif not first <= last <= n:
+            return refused(f"view: view_range ends at line {last}; it must be -1 or between {first} and {n}")
+    text = _utf8(part.data, cut=part.truncated)
+    if text is None:
+        return refused(f"view: {shown} is not a UTF-8 text file")
+    body = numbered(_lines(text), first)
+    head = f"{shown} (lines {first}-{last} of {n}):\n" if view_range is not None else f"{shown}:\n"
+    return _finish(ToolOutcome(observation=head + body, exit_code=0), limits, started, more=part.truncated)
+
+
+def _utf8(data: bytes, *, cut: bool) -> str | None:
+    """``data`` decoded, or None when it is not UTF-8; a character ``cut`` in two at the end (the
+    sandbox cut the lines at a byte count) is left out."""
+    for drop in range(4 if cut else 1):
+        try:
+            return data[: len(data) - drop].decode("utf-8")
+        except UnicodeDecodeError:
+            continue
+    return None
 
 
 def _snippet(text: str, start_line: int, n_lines: int) -> str:
@@ -399,6 +496,8 @@ def run_str_replace(
 ) -> ToolOutcome:
     """Replace the one occurrence of ``old_str``; refused when it occurs zero or several times."""
     started = time.monotonic()
+    if (bad := bad_path("str_replace", path)) is not None:
+        return bad
     rel = repo_relative(sandbox.workdir, path)
     if rel is None:
         return refused(f"str_replace: {path} is outside the repository {sandbox.workdir}")
@@ -424,7 +523,8 @@ def run_str_replace(
             "include more surrounding lines so it occurs once"
         )
     new_text = text[:first_at] + new_str + text[first_at + len(old_str) :]
-    sandbox.write_file(rel, new_text.encode("utf-8"))
+    if (failed := _write(sandbox, rel, shown, new_text.encode("utf-8"), tool="str_replace")) is not None:
+        return failed
     if history is not None:
         history.record(rel, text)
     line = text.count("\n", 0, first_at) + 1
@@ -438,14 +538,27 @@ def run_create(
 ) -> ToolOutcome:
     """Write a new file; refused when the path exists."""
     started = time.monotonic()
+    if (bad := bad_path("create", path)) is not None:
+        return bad
     rel = repo_relative(sandbox.workdir, path)
     if rel is None or rel == ".":
         return refused(f"create: {path} is outside the repository {sandbox.workdir}")
     shown = shown_path(sandbox.workdir, rel)
+    try:  # resolved in the sandbox first: a link out of the repository is refused before anything is asked of it
+        sandbox.read_lines(rel, 1, 1, 0)
+    except FileNotFoundError:
+        pass
+    except IsADirectoryError:
+        return refused(f"create: {shown} already exists; use str_replace to change it")
+    except FILE_ERRORS as exc:
+        return file_refusal("create", shown, sandbox.workdir, exc, writing=True)
+    else:
+        return refused(f"create: {shown} already exists; use str_replace to change it")
     exists = sandbox.run(f"test -e {shlex.quote(shown)} || test -L {shlex.quote(shown)}")
     if exists.exit_code == 0:
         return refused(f"create: {shown} already exists; use str_replace to change it")
-    sandbox.write_file(rel, file_text.encode("utf-8"))
+    if (failed := _write(sandbox, rel, shown, file_text.encode("utf-8"), tool="create")) is not None:
+        return failed
     if history is not None:
         history.record(rel, None)
     n = len(file_text.split("\n")) - (1 if file_text.endswith("\n") else 0)
@@ -467,6 +580,8 @@ def run_insert(
     editor does (tools/edit_anthropic/bin/str_replace_editor:594-630); refused for a line outside
     0..the file's line count."""
     started = time.monotonic()
+    if (bad := bad_path("insert", path)) is not None:
+        return bad
     rel = repo_relative(sandbox.workdir, path)
     if rel is None:
         return refused(f"insert: {path} is outside the repository {sandbox.workdir}")
@@ -480,7 +595,8 @@ def run_insert(
     added = _lines(new_str) or [""]
     ends = text.endswith("\n") or not text
     new_text = "\n".join(lines[:insert_line] + added + lines[insert_line:]) + ("\n" if ends else "")
-    sandbox.write_file(rel, new_text.encode("utf-8"))
+    if (failed := _write(sandbox, rel, shown, new_text.encode("utf-8"), tool="insert")) is not None:
+        return failed
     if history is not None:
         history.record(rel, text)
     snippet = _snippet(new_text, insert_line + 1, len(added))
@@ -488,11 +604,21 @@ def run_insert(
     return _finish(ToolOutcome(observation=obs, exit_code=0), limits, started)
 
 
+#: removes a file at its path resolved in the sandbox, only when that stays in the repository
+#: (exit 3 otherwise); the link itself when the path ends in one
+REMOVE_INSIDE = (
+    'root=$(realpath -e -- {root}) && r=$(realpath -m -s -- {path}) && d=$(realpath -m -- "${{r%/*}}") '
+    '&& case "$d/" in "$root"/*) rm -f -- "$d/${{r##*/}}" ;; *) exit 3 ;; esac'
+)
+
+
 def run_undo_edit(sandbox: Sandbox, limits: SandboxLimits, path: str, history: EditHistory) -> ToolOutcome:
     """Put the file back as it was before the editor's last change to it (remove a file the
     editor created); refused when the editor has not changed it (the release: "no edit history",
     str_replace_editor:632-639)."""
     started = time.monotonic()
+    if (bad := bad_path("undo_edit", path)) is not None:
+        return bad
     rel = repo_relative(sandbox.workdir, path)
     if rel is None:
         return refused(f"undo_edit: {path} is outside the repository {sandbox.workdir}")
@@ -501,13 +627,21 @@ def run_undo_edit(sandbox: Sandbox, limits: SandboxLimits, path: str, history: E
     if not had:
         return refused(f"undo_edit: no change made with the editor to {shown} is left to undo")
     if before is None:
-        res = sandbox.run(f"rm -f -- {shlex.quote(shown)}")
+        # removed at the path resolved in the sandbox, and only inside the repository (a folder
+        # on the way may have become a link out of it since the file was created)
+        res = sandbox.run(REMOVE_INSIDE.format(root=shlex.quote(sandbox.workdir), path=shlex.quote(shown)))
+        if res.exit_code == 3:
+            history.record(rel, before)
+            return refused(f"undo_edit: {shown} leads outside the repository {sandbox.workdir} (through a symbolic link)")
         if res.exit_code != 0:
+            history.record(rel, before)
             return refused(f"undo_edit: cannot remove {shown}: {res.output.strip()}")
         return _finish(
             ToolOutcome(observation=f"Undid the creation of {shown}: the file is removed.", exit_code=0), limits, started
         )
-    sandbox.write_file(rel, before.encode("utf-8"))
+    if (failed := _write(sandbox, rel, shown, before.encode("utf-8"), tool="undo_edit")) is not None:
+        history.record(rel, before)
+        return failed
     body = numbered(_lines(before), 1)
     obs = f"Undid the last change to {shown}. It now reads:\n{body}"
     return _finish(ToolOutcome(observation=obs, exit_code=0), limits, started)

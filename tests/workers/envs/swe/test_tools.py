@@ -84,8 +84,11 @@ def test_view_file_range_and_folder(swe_env: Callable[..., SweEnvironment]) -> N
     lines = ["from units import CM_PER_INCH", "", "", "def inches_to_cm(x):", "    return x * CM_PER_INCH", "", ""]
     lines += ["def cm_to_inches(x):", "    return x * CM_PER_INCH"]
     full = f"{small.workdir}/convert.py:\n" + "\n".join(f"{n:6}\t{line}" for n, line in enumerate(lines, start=1))
-    assert obs == full[:40] + f"\n[output cut: the first 40 of {len(full)} bytes are shown]"
-    assert info["output_bytes"] == len(full)
+    # the sandbox read only the first 40 bytes of the file (issue 35 item 4): the whole size is not known
+    assert obs == full[:40] + "\n[output cut: the first 40 bytes are shown; view a smaller view_range to see the rest]"
+    read = "\n".join(lines)[:40].split("\n")
+    formed = f"{small.workdir}/convert.py:\n" + "\n".join(f"{n:6}\t{line}" for n, line in enumerate(read, start=1))
+    assert info["output_bytes"] == len(formed)
 
 
 def test_str_replace_and_create(env: SweEnvironment) -> None:

@@ -27,6 +27,10 @@ HTTP exchange through litellm's own client, without a paid provider. The server:
   reply text repeats the API key the request carried), ``negusage`` / ``zerousage`` /
   ``hugeusage`` / ``fracusage`` / ``nousage`` / ``negcached`` (the usage block reports negative, zero,
   huge, non-integer or no token counts, or negative cached tokens; the reply itself is normal);
+  the hostile tool-call modes of :data:`HOSTILE_CALL_MODES` (to a request with tools: arguments
+  nested 200,000 deep as a string or inside the body, 5 MB of arguments, repeated call ids, a null
+  function, content beside the calls, finish ``tool_calls`` with no call, arguments as an object,
+  a 1 MB call id);
   ``usage_override`` and these modes name the cache counts ``cached_tokens`` (reads) and
   ``cache_write_tokens`` (writes), reported in the rule's own fields;
 - replies with a fixed, configurable text (truncated at ``max_tokens``, finish_reason length),
@@ -41,13 +45,14 @@ Run standalone: ``python -m workers.llm.offline.fake_server --port 0 --rpm 60 --
 """
 
 from workers.llm.offline.fake_server.config import FakeCall, FakeServerConfig, window_maxima
-from workers.llm.offline.fake_server.faults import DEFAULT_REPLY, FAULT_MODES, UNREADABLE_MODES
+from workers.llm.offline.fake_server.faults import DEFAULT_REPLY, FAULT_MODES, HOSTILE_CALL_MODES, UNREADABLE_MODES
 from workers.llm.offline.fake_server.server import HOST, FakeServer
 
 __all__ = [
     "DEFAULT_REPLY",
     "FAULT_MODES",
     "HOST",
+    "HOSTILE_CALL_MODES",
     "UNREADABLE_MODES",
     "FakeCall",
     "FakeServer",

@@ -3,6 +3,7 @@ in-message directive (``FAKE:<mode>[*N]``) that asks for one."""
 
 from __future__ import annotations
 
+import json
 import re
 from typing import Any
 
@@ -13,6 +14,55 @@ DEFAULT_REPLY = '{"think": "fake server reply", "action": "wait"}'
 #: cut JSON, ``textinstead`` the plain text reply even when ``tool_choice`` requires a call.
 #: Without a directive, ``tool_choice`` "required" or a named tool gets ``toolcall``.
 TOOL_MODES = ("toolcall", "paralleltools", "badargs", "textinstead")
+#: a hostile provider's tool calls (issue 35 item 6), each an HTTP 200 with the model's reply to a
+#: request that offers tools: ``deepargs`` arguments nested :data:`DEEP_LEVELS` levels deep (a JSON
+#: string, as OpenAI sends them), ``deepbody`` the same nesting as an object inside the body (no
+#: JSON reader of the client gets through it), ``bigargs`` :data:`BIG_ARGS_BYTES` of arguments,
+#: ``dupids`` two calls under one id, ``nullfunc`` a call whose ``function`` is null,
+#: ``textandcalls`` content and a call together, ``nocalls`` finish reason ``tool_calls`` with no
+#: call and null content, ``objargs`` arguments as an object instead of a string, ``bigid`` a call id
+#: of :data:`BIG_ID_BYTES`. The completion tokens reported are the reply's, at most ``max_tokens``.
+HOSTILE_CALL_MODES = ("deepargs", "deepbody", "bigargs", "dupids", "nullfunc", "textandcalls", "nocalls", "objargs", "bigid")
+DEEP_LEVELS = 200_000
+BIG_ARGS_BYTES = 5_000_000
+BIG_ID_BYTES = 1_000_000
+#: the content of ``textandcalls``
+TEXT_WITH_CALLS = "Let me look at the files first."
+#: stands for the deep object in ``deepbody``'s payload until the body is written
+DEEP_PLACEHOLDER = "__FAKE_DEEP_OBJECT__"
+
+
+def deep_object_text(levels: int = DEEP_LEVELS) -> str:
+    """A JSON object nested ``levels`` deep, as text (``json.dumps`` itself cannot write one)."""
+    return '{"a": ' * levels + "1" + "}" * levels
+
+
+def hostile_calls(mode: str, calls: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The calls of a hostile mode, made from the well-formed ones the server would send."""
+    first = calls[0]
+    function = first["function"]
+    if mode == "deepargs":
+        function["arguments"] = "[" * DEEP_LEVELS + "]" * DEEP_LEVELS
+    elif mode == "deepbody":
+        function["arguments"] = DEEP_PLACEHOLDER
+    elif mode == "bigargs":
+        args = json.loads(function["arguments"])
+        key = next((k for k, v in args.items() if isinstance(v, str)), "text")
+        args[key] = "x" * BIG_ARGS_BYTES
+        function["arguments"] = json.dumps(args)
+    elif mode == "dupids":
+        calls = [first, {**first, "function": dict(function)}]
+    elif mode == "nullfunc":
+        first["function"] = None
+    elif mode == "objargs":
+        function["arguments"] = json.loads(function["arguments"])
+    elif mode == "bigid":
+        first["id"] = "i" * BIG_ID_BYTES
+    elif mode == "nocalls":
+        calls = []
+    return calls
+
+
 FAULT_MODES = (
     "429",
     "500",
@@ -40,6 +90,7 @@ FAULT_MODES = (
     "nomessage",
     "nullcontent",
     *TOOL_MODES,
+    *HOSTILE_CALL_MODES,
 )
 #: modes answering HTTP 200 with a reply no client can use: a body that is not JSON (``notjson``,
 #: ``html``; ``malformed`` cut mid-JSON, ``empty``), or a chat completion without a usable choice

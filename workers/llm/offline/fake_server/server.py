@@ -17,12 +17,17 @@ from aiohttp import web
 from workers.llm.offline.fake_server.config import FakeCall, FakeServerConfig
 from workers.llm.offline.fake_server.faults import (
     CHOICE_FAULTS,
+    DEEP_PLACEHOLDER,
     DIRECTIVE,
+    HOSTILE_CALL_MODES,
     NOT_JSON_BODIES,
+    TEXT_WITH_CALLS,
     TOOL_MODES,
     UNREADABLE_MODES,
     USAGE_FAULTS,
+    deep_object_text,
     error_body,
+    hostile_calls,
     placeholder_args,
 )
 from workers.llm.prompt_cache import PromptCache, normalize, usage_fields
@@ -277,6 +282,21 @@ class FakeServer:
             text = f"your key is {req.key} and {req.key}"
             completion_tokens = estimate_text_tokens(text) * n_choices
         calls = self._tool_calls(req)
+        if req.mode in HOSTILE_CALL_MODES and (calls or req.mode == "nocalls"):
+            written = json.dumps(calls)  # what the model generated, at most max_tokens of it
+            completion_tokens = estimate_text_tokens(written)
+            if req.max_tokens is not None:
+                completion_tokens = min(completion_tokens, int(req.max_tokens))
+            content = TEXT_WITH_CALLS if req.mode == "textandcalls" else None
+            return _Reply(
+                content or "",
+                "tool_calls",
+                n_choices * completion_tokens,
+                n_choices,
+                calls,
+                content_with_calls=content,
+                hostile=True,
+            )
         if calls:
             completion_tokens = n_choices * sum(
                 estimate_text_tokens(c["function"]["name"] + c["function"]["arguments"]) for c in calls
@@ -292,7 +312,14 @@ class FakeServer:
         if not tools or choice == "none" or req.mode == "textinstead":
             return []
         named = choice.get("function", {}).get("name") if isinstance(choice, dict) else None
-        mode = req.mode if req.mode in TOOL_MODES else ("toolcall" if choice == "required" or named else None)
+        hostile = req.mode in HOSTILE_CALL_MODES
+        mode = (
+            "toolcall"
+            if hostile
+            else req.mode
+            if req.mode in TOOL_MODES
+            else ("toolcall" if choice == "required" or named else None)
+        )
         if mode is None:
             return []
         first = next((t for t in tools if t.get("name") == named), tools[0])
@@ -309,7 +336,7 @@ class FakeServer:
                     "function": {"name": str(tool.get("name")), "arguments": arguments},
                 }
             )
-        return calls
+        return hostile_calls(req.mode, calls) if hostile else calls
 
     def _rate_limited(self, req: _Request, admitted: int) -> web.Response | None:
         """A 429 with Retry-After when the request does not fit the windows (or its mode asks for one)."""
@@ -381,7 +408,7 @@ class FakeServer:
         rule = self.config.rule_for(req.model)
         outcome = self.cache_for(req.model).serve(req.model, req.seen, req.now + self._clock_offset, reply=reply.text)
         cached, written = outcome.cached_tokens, outcome.cache_write_tokens
-        named = (*USAGE_FAULTS, *UNREADABLE_MODES, *TOOL_MODES, "echokey", "textplain")
+        named = (*USAGE_FAULTS, *UNREADABLE_MODES, *TOOL_MODES, *HOSTILE_CALL_MODES, "echokey", "textplain")
         # a call forced by tool_choice (no directive) is logged as ``toolcall``
         logged = req.mode if req.mode in named else ("toolcall" if reply.tool_calls else "ok")
         self._record(
@@ -401,6 +428,9 @@ class FakeServer:
             payload["choices"] = CHOICE_FAULTS[req.mode](payload["choices"])
         if req.mode == "textplain":
             return web.Response(text=json.dumps(payload), status=200, content_type="text/plain")
+        if req.mode == "deepbody":  # the arguments object nested deeper than json.dumps writes
+            body = json.dumps(payload).replace(json.dumps(DEEP_PLACEHOLDER), deep_object_text())
+            return web.Response(text=body, status=200, content_type="application/json")
         return web.json_response(payload)
 
     def _usage(self, req: _Request, reply: _Reply, rule: str, cached: int, written: int) -> dict[str, Any]:
@@ -454,9 +484,12 @@ class _Reply:
     n_choices: int
     #: tool calls in the OpenAI shape (the content is then null)
     tool_calls: list[dict[str, Any]] = field(default_factory=list)
+    #: a hostile mode's content beside its calls (``textandcalls``); ``nocalls``: None with no calls
+    content_with_calls: str | None = None
+    hostile: bool = False
 
     def message(self) -> dict[str, Any]:
         """The assistant message of one choice."""
-        if self.tool_calls:
-            return {"role": "assistant", "content": None, "tool_calls": self.tool_calls}
+        if self.tool_calls or self.hostile:
+            return {"role": "assistant", "content": self.content_with_calls, "tool_calls": self.tool_calls}
         return {"role": "assistant", "content": self.text}
