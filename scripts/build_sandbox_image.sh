@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Builds the coding sandbox's Docker image (recap-eval/sandbox:py311) from the Debian mirror with
-# debootstrap + docker import (no registry needed). Idempotent: does nothing if the image exists.
+# Builds the coding sandbox's Docker image (recap-eval/sandbox:py311: Python 3.11, pytest, git, GNU
+# patch) from the Debian mirror with debootstrap + docker import (no registry needed). Idempotent:
+# does nothing if the image exists and was built from the current recipe (its label
+# org.recap-eval.sandbox.recipe); one built from an older recipe is rebuilt.
 #   bash scripts/build_sandbox_image.sh [--tag TAG] [--force]
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -10,8 +10,10 @@ from reports.sections.common import Query, row_order, series_label, unique
 
 MODE_NOTE = (
     "One mode per episode, first match wins: success; model_error:<kind> (LLM error, kind of the "
-    "last failed call); json_failures, truncated (a reply cut at the output cap), budget_exhausted, "
-    "episode_limit, env_error; then for step "
+    "last failed call); for a coding episode whose submission was judged not resolved, the "
+    "evaluation's reason (tests_failed, patch_failed, patch_refused, no_patch, timeout), "
+    "autosubmitted:<reason> when a limit handed the diff in; json_failures, truncated (a reply cut "
+    "at the output cap), budget_exhausted, episode_limit, env_error; then for step "
     "cap, call cap and agent-declared done: invalid_action_loop (>= 3 invalid attempts in a row, "
     "or one invalid action tried >= 3 times), repeated_action_loop (a cycle of 1-3 identical "
     "(action, observation) steps repeated >= 3 times back to back over >= 4 steps); then "

@@ -209,18 +209,30 @@ GROUP BY run_id, episode_id;
 --   success                     end_reason success, or autosubmitted with success (the diff handed in at a limit resolved)
 --   infra_error:<kind>          an infrastructure failure (infra_kind: auth, worker_lost ...)
 --   model_error:<kind>          end_reason llm_error; kind = error_kind of the episode's last failed call
+--   <evaluation reason>         a coding episode that submitted and was judged not resolved (end_reason
+--                               agent_done): its evaluations row's reason - tests_failed, patch_failed,
+--                               patch_refused (it wrote outside the repository), no_patch (an empty
+--                               diff), timeout (the tests ran past the evaluation's limit) - before the
+--                               loop detectors: what failed is the verdict, not how the agent got there
+--   autosubmitted:<reason>      a limit ended it and the diff handed in there was judged not resolved
+--                               (the evaluation's reason; error: the limit); plain autosubmitted
+--                               where no evaluations row says why
 --   json_failures | truncated | budget_exhausted | episode_limit | env_error    those end reasons
 --                               (truncated: a reply cut at the output cap, never counted as a JSON failure)
---   autosubmitted               a limit ended it and the diff handed in there did not resolve (error: the limit)
 --   invalid_action_loop         step_cap / call_cap / agent_done with invalid_loop
 --   repeated_action_loop        step_cap / call_cap / agent_done with repeated_loop
---   agent_done_early            agent_done (the agent declared the task finished; it was not)
+--   agent_done_early            agent_done without an evaluation (the agent declared the task finished; it was not)
 --   step_cap | call_cap         those end reasons
 --   other:<end_reason>          anything else
 CREATE VIEW episode_modes AS
 WITH last_error AS (
   SELECT run_id, episode_id, arg_max(error_kind, call_index) AS last_error_kind
   FROM llm_calls WHERE status = 'error'
+  GROUP BY run_id, episode_id
+), verdict AS (
+  -- one row per judged episode (the evaluations table's rule), kept to one here whatever it holds
+  SELECT run_id, episode_id, min(reason) FILTER (WHERE NOT resolved) AS failed_reason
+  FROM evaluations
   GROUP BY run_id, episode_id
 )
 SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.label, t.ablation, t.env_split,
@@ -235,6 +247,8 @@ SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.labe
     WHEN t.end_reason = 'success' OR (t.end_reason = 'autosubmitted' AND t.success) THEN 'success'
     WHEN t.infra_kind IS NOT NULL THEN 'infra_error:' || t.infra_kind
     WHEN t.end_reason = 'llm_error' THEN 'model_error:' || coalesce(le.last_error_kind, 'unknown')
+    WHEN t.end_reason = 'agent_done' AND v.failed_reason IS NOT NULL THEN v.failed_reason
+    WHEN t.end_reason = 'autosubmitted' AND v.failed_reason IS NOT NULL THEN 'autosubmitted:' || v.failed_reason
     WHEN t.end_reason IN ('json_failures', 'truncated', 'budget_exhausted', 'episode_limit', 'env_error', 'wiki_error', 'autosubmitted') THEN t.end_reason
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.invalid_loop, false) THEN 'invalid_action_loop'
     WHEN t.end_reason IN ('step_cap', 'call_cap', 'agent_done') AND coalesce(p.repeated_loop, false) THEN 'repeated_action_loop'
@@ -244,7 +258,8 @@ SELECT t.run_id, t.episode_id, t.unit_id, t.model_label, t.arm, t.method, t.labe
   END AS mode
 FROM terminal t
 LEFT JOIN step_patterns p ON p.run_id = t.run_id AND p.episode_id = t.episode_id
-LEFT JOIN last_error le ON le.run_id = t.run_id AND le.episode_id = t.episode_id;
+LEFT JOIN last_error le ON le.run_id = t.run_id AND le.episode_id = t.episode_id
+LEFT JOIN verdict v ON v.run_id = t.run_id AND v.episode_id = t.episode_id;
 
 -- failures: the finished units that did not succeed.
 CREATE VIEW failures AS

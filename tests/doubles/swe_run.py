@@ -18,10 +18,11 @@ once (224 and 198 resolved: the paper's 44.8 and 39.6), one tool call each, ever
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from schemas.parts import PartWriter
-from schemas.records import EpisodeRecord, EvaluationRecord, RunRecord, ToolCallRecord
+from schemas.records import EpisodeRecord, EvaluationRecord, RunRecord, StepRecord, ToolCallRecord
 
 RUN_ID = "runS"
 MODEL = "gpt-4.1"
@@ -133,16 +134,26 @@ def episodes(full: bool = False) -> list[tuple[str, str, Episode, float]]:
     ]
 
 
-def write_swe_run(run_dir: Path, *, full: bool = False) -> Path:
-    """The run folder (run.json, plan.json and one part per table)."""
+def write_swe_run(
+    run_dir: Path,
+    *,
+    full: bool = False,
+    extra: Sequence[tuple[str, str, Episode, float]] = (),
+    steps: Mapping[str, Sequence[tuple[str, str]]] | None = None,
+) -> Path:
+    """The run folder (run.json, plan.json and one part per table); ``extra`` episodes (as
+    :func:`episodes` gives them) after the others; ``steps``: by episode id, its steps' (action,
+    observation), all valid."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     records: list[object] = []
     units = []
-    for bench, split, ep, temperature in episodes(full):
+    for bench, split, ep, temperature in [*episodes(full), *extra]:
         rec = _episode(bench, split, ep, temperature)
         records.append(rec)
         records.extend(_tool_calls(rec.episode_id, ep[4]))
+        for i, (action, observation) in enumerate((steps or {}).get(rec.episode_id, ())):
+            records.append(StepRecord(rec.episode_id, i, i + 1, action, True, observation, False, False))
         if ep[6] is not None:
             records.append(_evaluation(rec.episode_id, rec.instance_id, ep[6]))
         units.append(

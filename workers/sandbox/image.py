@@ -1,13 +1,23 @@
 """The sandbox image, built on this machine: no registry is needed (none is reachable here).
 
 ``debootstrap --variant=minbase`` writes a Debian root file system (Python 3.11, pytest, git,
-ca-certificates) from the Debian mirror into a temporary folder; the apt caches, lists,
+GNU patch, ca-certificates) from the Debian mirror into a temporary folder; the apt caches, lists,
 documentation, manual pages and locales are removed (they are most of a minbase tree's size and
 nothing in an episode reads them), and the tree is tarred and ``docker import``-ed under ``tag``.
 A plain ``docker build`` would need a base image from a registry; ``import`` needs none.
 
-:func:`build_image` is idempotent (it does nothing when the tag exists) and serialised by a lock
-file, so that test sessions or workers started at once build it once.
+:func:`build_image` is idempotent (it does nothing when the tag exists and was built from this
+recipe) and serialised by a lock file, so that test sessions or workers started at once build it
+once. The image carries its recipe's hash (label :data:`RECIPE_LABEL`: suite, packages, trimmed
+paths, image settings); an image of the tag built from another recipe (an older package list, or
+none recorded) is rebuilt, so a machine never keeps evaluating in an image that lacks a program
+the evaluation needs.
+
+``patch`` is in the image because the evaluation applies a diff as the SWE-bench harness does:
+``git apply`` first, GNU ``patch --batch --fuzz=5 -p1 -i`` when git refuses
+(swebench/harness/run_evaluation.py:64-68 ``GIT_APPLY_CMDS``; :mod:`workers.envs.swe.evaluate`).
+Without it a diff that ``patch`` applies and git refuses was resolved in the local sandbox and
+``patch_failed`` in Docker (issue 36 item 3).
 
     bash scripts/build_sandbox_image.sh            # or: python -m workers.sandbox.image
 """
@@ -16,6 +26,8 @@ from __future__ import annotations
 
 import argparse
 import fcntl
+import hashlib
+import json
 import os
 import shutil
 import subprocess
@@ -30,7 +42,9 @@ from typing import Any
 DEFAULT_IMAGE = "recap-eval/sandbox:py311"
 DEFAULT_SUITE = "bookworm"  # Debian 12: python3 is 3.11, the tag's "py311"
 DEFAULT_MIRROR = "http://deb.debian.org/debian"
-DEFAULT_PACKAGES: tuple[str, ...] = ("python3", "python-is-python3", "python3-pytest", "git", "ca-certificates")
+DEFAULT_PACKAGES: tuple[str, ...] = ("python3", "python-is-python3", "python3-pytest", "git", "patch", "ca-certificates")
+#: the image label that holds the hash of the recipe it was built from (:func:`recipe_hash`)
+RECIPE_LABEL = "org.recap-eval.sandbox.recipe"
 BUILD_COMMAND = "bash scripts/build_sandbox_image.sh"
 
 #: what the import sets (an imported tree has no image configuration of its own)
@@ -83,6 +97,25 @@ def image_exists(tag: str = DEFAULT_IMAGE) -> bool:
     return True
 
 
+def image_recipe(tag: str = DEFAULT_IMAGE) -> str | None:
+    """The recipe hash ``tag`` was built from (its :data:`RECIPE_LABEL`), "" for an image without
+    one (built before the label, or not by us), None when the daemon has no ``tag``."""
+    import docker.errors
+
+    try:
+        labels = _client().images.get(tag).attrs.get("Config", {}).get("Labels") or {}
+    except docker.errors.ImageNotFound:
+        return None
+    return str(labels.get(RECIPE_LABEL, ""))
+
+
+def recipe_hash(suite: str = DEFAULT_SUITE, packages: Sequence[str] = DEFAULT_PACKAGES) -> str:
+    """A short hash of what an image is built from: the suite, the packages, the trimmed paths and
+    the image settings (the mirror is where it comes from, not what it is: not in it)."""
+    recipe = {"suite": suite, "packages": sorted(packages), "trim": list(_TRIM), "changes": list(IMAGE_CHANGES)}
+    return hashlib.sha256(json.dumps(recipe, sort_keys=True).encode("utf-8")).hexdigest()[:16]
+
+
 def image_size(tag: str = DEFAULT_IMAGE) -> int:
     """The image's size in bytes as the daemon reports it."""
     return int(_client().images.get(tag).attrs.get("Size", 0))
@@ -112,13 +145,15 @@ def _trim(root: Path) -> None:
         shutil.rmtree(cache, ignore_errors=True)
 
 
-def _import(root: Path, tag: str) -> None:
+def _import(root: Path, tag: str, recipe: str) -> None:
     repository, _, version = tag.rpartition(":")
     if not repository or "/" in version:
         repository, version = tag, "latest"
     with tempfile.NamedTemporaryFile(suffix=".tar", dir=root.parent) as tar:
         subprocess.run(["tar", "--numeric-owner", "-C", str(root), "-cf", tar.name, "."], check=True)
-        _client().api.import_image_from_file(tar.name, repository=repository, tag=version, changes=list(IMAGE_CHANGES))
+        _client().api.import_image_from_file(
+            tar.name, repository=repository, tag=version, changes=[*IMAGE_CHANGES, f"LABEL {RECIPE_LABEL}={recipe}"]
+        )
 
 
 def build_image(
@@ -130,19 +165,20 @@ def build_image(
     force: bool = False,
     log: bool = False,
 ) -> BuildResult:
-    """Build ``tag`` unless it exists (``force`` rebuilds). Needs root (debootstrap) and the
-    Debian mirror; takes a few minutes the first time."""
+    """Build ``tag`` unless it exists built from this recipe (:func:`recipe_hash`; ``force``
+    rebuilds). Needs root (debootstrap) and the Debian mirror; takes a few minutes."""
     t0 = time.monotonic()
+    recipe = recipe_hash(suite, packages)
     _LOCK.touch(exist_ok=True)
     with open(_LOCK) as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # a second builder waits here, then finds the image
-        if not force and image_exists(tag):
+        if not force and image_recipe(tag) == recipe:
             return BuildResult(tag, False, time.monotonic() - t0, image_size(tag))
         with tempfile.TemporaryDirectory(prefix="recap-sandbox-image-") as tmp:
             root = Path(tmp) / "root"
             _debootstrap(root, suite, mirror, packages, log)
             _trim(root)
-            _import(root, tag)
+            _import(root, tag, recipe)
     return BuildResult(tag, True, time.monotonic() - t0, image_size(tag))
 
 
@@ -162,7 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as e:  # one line, not a traceback
         print(f"error: {e}", file=sys.stderr)
         return 1
-    what = "built" if res.built else "already present"
+    what = "built" if res.built else "already present (same recipe)"
     print(f"{res.tag}: {what} ({res.size_bytes / 1e6:.0f} MB, {res.seconds:.0f} s)")
     return 0
 

@@ -6,7 +6,8 @@ model acts through tool calls on a container holding the repository, with no lis
 demonstration, and ends by submitting, which reviews first as the release's ``review_on_submit_m``
 does (swebench-recap/tools/review_on_submit_m/bin/submit:36-42: the first submit shows the review
 message with the diff, the next one submits). The submission is the repository's diff against the
-base commit, new files included (bin/submit:24: ``git add -A && git diff --cached``), judged by
+base commit, new files included (bin/submit:24: ``git add -A && git diff --cached``) less the
+byte-code and binary blocks no ``git apply`` applies (:mod:`.submission_diff`), judged by
 :func:`.evaluate.evaluate` on a clean copy.
 
 Two ways to act:
@@ -52,6 +53,7 @@ from .expert import parse_patch, replacements
 from .grading import DEFAULT_GRADING, Grading
 from .instances import SweInstance
 from .rules import goal_text, review_text, rules_text
+from .submission_diff import without_build_files
 
 #: mini-SWE-agent's submit line: a command whose output's first line is this hands in the diff
 SUBMIT_SENTINEL = "COMPLETE_TASK_AND_SUBMIT_FINAL_OUTPUT"
@@ -270,11 +272,18 @@ class SweEnvironment(Environment):
     # -- submission ------------------------------------------------------------------------------
     def current_diff(self) -> str:
         """The repository's changes against the base commit, new files included (it stages everything)."""
+        return self._diff_against(self.instance.base_commit)
+
+    def _diff_against(self, base: str) -> str:
+        """The changes against ``base`` (a commit or tree) as they are handed in: ``git add -A && git
+        diff --cached`` (bin/submit:24) less the binary blocks and byte-code files no ``git apply``
+        applies (:func:`.submission_diff.without_build_files`), so that one diff gets one verdict
+        whether the evaluation's sandbox has GNU ``patch`` or not."""
         box = self._box()
-        res = box.run(f"git add -A && git diff --cached {self.instance.base_commit} > {SUBMISSION_FILE}")
+        res = box.run(f"git add -A && git diff --cached {base} > {SUBMISSION_FILE}")
         if res.exit_code != 0:
             raise SandboxError(f"git diff failed in the sandbox: {res.output.strip()[:300]}")
-        return box.read_file(SUBMISSION_FILE).decode("utf-8", errors="replace")
+        return without_build_files(box.read_file(SUBMISSION_FILE).decode("utf-8", errors="replace")).diff
 
     def _submit(self, *, review: bool, started: float, spent: T.ToolOutcome | None = None) -> Step:
         if review and self._submit_stage == 0:

@@ -24,11 +24,10 @@ from dataclasses import replace
 from typing import Any
 
 from recap.env import EnvError, Reset
-from workers.envs.swe.env import SUBMISSION_FILE, SweEnvironment
+from workers.envs.swe.env import SweEnvironment
 from workers.envs.swe.evaluate import MISSING, Evaluation, evaluate, refused_evaluation
 from workers.envs.swe.grading import OfficialGrade, parser_name
 from workers.envs.swe.harness_script import HarnessScriptError, eval_script
-from workers.sandbox.base import SandboxError
 from workers.sandbox.docker_sandbox import BASE_ENV
 
 from .harness_eval import HARNESS_GRADING, harness_evaluation, harness_run_id, namespace_for, run_harness
@@ -65,12 +64,9 @@ class VerifiedEnvironment(SweEnvironment):
         return first
 
     def current_diff(self) -> str:
-        """The changes against the image's starting state, new files included."""
-        box = self._box()
-        res = box.run(f"git add -A && git diff --cached {self._start_tree} > {SUBMISSION_FILE}")
-        if res.exit_code != 0:
-            raise SandboxError(f"git diff failed in the sandbox: {res.output.strip()[:300]}")
-        return box.read_file(SUBMISSION_FILE).decode("utf-8", errors="replace")
+        """The changes against the image's starting state, new files included, taken as a user's
+        task's are (:meth:`~workers.envs.swe.env.SweEnvironment._diff_against`)."""
+        return self._diff_against(self._start_tree)
 
     def _evaluate(self, diff: str) -> Evaluation:
         """The harness's evaluation of ``diff`` under every grading, bounded by ``eval_timeout_s``:
