@@ -20,10 +20,12 @@ import random
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import Any
 
 from pipeline.errors import SpecError
 from pipeline.spec import EnvSpec, SweepSpec
+from recap import methods
 from recap.config import ConfigError
 from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
 from schemas.labels import ablation_of_config
@@ -75,6 +77,12 @@ class Unit:
         return self.instance_id.split("/", 1)[0]
 
     @property
+    def recorded_config(self) -> str:
+        """The settings its episode rows record: ``method_config`` as the episode applies it
+        (:meth:`recap.config.AgentConfig.recorded_json`: the window applied, null for none)."""
+        return recorded_config(self.method, self.method_config)
+
+    @property
     def ablation_name(self) -> str | None:
         """The ablation the episode rows name (:func:`resolve_ablation`)."""
         return resolve_ablation(self.ablation, self.method_config)
@@ -123,6 +131,17 @@ class Unit:
             "env_options": dict(self.id_options),
             **({"earlier_id": True} if self.earlier_id else {}),
         }
+
+
+@lru_cache(maxsize=256)
+def recorded_config(method: str, method_config: str) -> str:
+    """:meth:`recap.config.AgentConfig.recorded_json` of a unit's resolved settings; the settings
+    as given when this process cannot read them (a method registered elsewhere)."""
+    try:
+        _, config_cls = methods.method_classes(method)
+        return config_cls.from_json(method_config).recorded_json()
+    except (ConfigError, KeyError, TypeError, ValueError):
+        return method_config
 
 
 def resolve_ablation(ablation: str | None, method_config: str) -> str | None:
