@@ -463,9 +463,16 @@ def earlier_id_options(spec: SweepSpec | None) -> Mapping[str, Mapping[str, Any]
         per_entry = [identity_options(get_benchmark(e.benchmark).declared_options(), e.options) for e in spec.environments]
         if not any(per_entry):
             return defaultdict(dict)
+        # an option it gave that is refused now (FEVER's ineffective ``seed``) chose nothing: left out
+        envs = [
+            e.model_copy(
+                update={"options": {k: v for k, v in e.options.items() if k in get_benchmark(e.benchmark).declared_options()}}
+            )
+            for e in spec.environments
+        ]
         return {
             inst: identity_options(get_benchmark(inst.split("/", 1)[0]).declared_options(), o)
-            for inst, o in resolve_instances(spec.environments)
+            for inst, o in resolve_instances(envs)
         }
     except (SpecError, UnknownInstanceError, ImportError, AttributeError):
         return None

@@ -310,3 +310,17 @@ def test_an_old_run_whose_options_changed_replans_as_changed_and_one_whose_optio
     assert str(err.value).startswith(
         "2 unit(s) of this run ran with environment options it no longer sets (first: swe/"
     ) and "(sandbox: local)" in str(err.value)
+
+
+def test_an_old_run_whose_spec_gave_an_option_refused_now_keeps_its_units_once_the_option_is_dropped(tmp_path, tasks):
+    """``seed`` had no effect on swe and is refused now: the stored spec.yaml that still has it
+    says what the units ran with all the same."""
+    out = tmp_path / "run"
+    text = _swe(out, tasks, ", sandbox: local")
+    _planned(out, text)
+    _as_written_before(out)
+    store = RunStore(str(out))
+    store.write_text(SPEC_FILE, text.replace("sandbox: local", "sandbox: local, seed: 3"))
+    p = prepare(parse_spec(text, "sweep.yaml"), text, check_keys=False)
+    assert p.diff is not None and p.diff.describe() == "0 new, 2 unchanged, 0 changed"
+    assert all(u.earlier_id for u in p.plan.units)
