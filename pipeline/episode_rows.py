@@ -109,7 +109,7 @@ def _unit_fields(unit: Unit, attempt: int) -> _UnitColumns:
         instance_id=unit.instance_id,
         sampling_seed=unit.sampling_seed,
         method=unit.method,
-        method_config=unit.method_config,
+        method_config=unit.recorded_config,
         model=unit.model_label,
         step_multiplier=unit.step_multiplier,
         label=unit.method_label,

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pipeline.errors import SpecError
 from pipeline.preflight import preflight
 from pipeline.resume import check_journal
-from pipeline.spec import SweepSpec
-from pipeline.store import PLAN_FILE, RunIdentity, RunStore
-from pipeline.units import Plan, PlanDiff, diff_plans, expand
+from pipeline.spec import SweepSpec, parse_spec
+from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
+from pipeline.units import Plan, PlanDiff, diff_plans, expand, keep_earlier_ids
 
 
 @dataclass
@@ -40,5 +41,19 @@ def prepare(spec: SweepSpec, spec_text: str, *, check_keys: bool = True) -> Prep
     if ident is not None:
         # a corrupt ledger journal, or an old one whose spend this sweep cannot split: one line now
         check_journal(store, {m.name: m.model for m in spec.models})
-    diff = diff_plans(store.read_json(PLAN_FILE), plan) if ident is not None else None
+    diff = None
+    if ident is not None:
+        old = store.read_json(PLAN_FILE)
+        plan = keep_earlier_ids(plan, old, stored_spec(store))
+        diff = diff_plans(old, plan)
     return Prepared(spec, spec_text, plan, store, ident, diff)
+
+
+def stored_spec(store: RunStore) -> SweepSpec | None:
+    """The spec.yaml a run folder holds (the last session's), or None when it has none or it does
+    not read: what a run written before environment options were in the unit id ran with."""
+    try:
+        text = store.read_text(SPEC_FILE)
+        return parse_spec(text, SPEC_FILE) if text is not None else None
+    except (SpecError, OSError, ValueError):
+        return None

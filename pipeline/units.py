@@ -3,8 +3,11 @@
 Each unit has a stable content hash, ``unit_id``: the hash of everything that can change what an
 episode *does* — the instance, the method name and its fully resolved settings (profile,
 ablation, per-episode limits included), the model string and its params, the sampling seed and the step
-multiplier. Transport settings (retries, rpm/tpm, concurrency, worker counts, caps, prices,
-API base and key) are left out, so raising a rate limit or a cap never invalidates finished
+multiplier, and the environment options that change what an episode does (each benchmark declares
+its options' kinds, :mod:`workers.envs.options`; only those away from their declared default enter,
+so the units of a sweep that sets none keep the ids they always had). Transport settings (retries, rpm/tpm, concurrency, worker counts, caps, prices,
+API base and key) and the environment options that only change how an episode is run (data
+folders, request rates) are left out, so raising a rate limit or a cap never invalidates finished
 work. A unit's *key* (instance, method label, model label, sampling seed) is its human identity: a key
 whose hash changed between two versions of a sweep file is a *changed* unit.
 """
@@ -16,15 +19,18 @@ import json
 import random
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import Any
 
 from pipeline.errors import SpecError
 from pipeline.spec import EnvSpec, SweepSpec
+from recap import methods
 from recap.config import ConfigError
 from recap.env import DataNotFoundError, EnvError, UnknownInstanceError
 from schemas.labels import ablation_of_config
 from schemas.outcomes import UnitWork
+from workers.envs.options import identity_options, undeclared_problem
 from workers.envs.registry import Benchmark, get_benchmark, place_of, split_id
 from workers.episode_worker import build_agent
 from workers.llm.offline.knobs import hashed_options
@@ -57,11 +63,24 @@ class Unit:
     sampling_seed: int
     step_multiplier: float
     env_options: Mapping[str, Any] = field(default_factory=dict)
+    #: the part of ``env_options`` in the unit id (:func:`workers.envs.options.identity_options`)
+    id_options: Mapping[str, Any] = field(default_factory=dict)
+    #: the id without ``id_options`` (the only id before environment options were hashed)
+    plain_id: str = ""
+    #: ``unit_id`` is ``plain_id`` although ``id_options`` is not empty: kept for a run written
+    #: before options were hashed, whose episodes ran with these options (:func:`keep_earlier_ids`)
+    earlier_id: bool = False
 
     @property
     def benchmark(self) -> str:
         """The benchmark name: the instance id up to its first ``/``."""
         return self.instance_id.split("/", 1)[0]
+
+    @property
+    def recorded_config(self) -> str:
+        """The settings its episode rows record: ``method_config`` as the episode applies it
+        (:meth:`recap.config.AgentConfig.recorded_json`: the window applied, null for none)."""
+        return recorded_config(self.method, self.method_config)
 
     @property
     def ablation_name(self) -> str | None:
@@ -109,7 +128,20 @@ class Unit:
             "benchmark": bench,
             "split": split,
             "task": task,
+            "env_options": dict(self.id_options),
+            **({"earlier_id": True} if self.earlier_id else {}),
         }
+
+
+@lru_cache(maxsize=256)
+def recorded_config(method: str, method_config: str) -> str:
+    """:meth:`recap.config.AgentConfig.recorded_json` of a unit's resolved settings; the settings
+    as given when this process cannot read them (a method registered elsewhere)."""
+    try:
+        _, config_cls = methods.method_classes(method)
+        return config_cls.from_json(method_config).recorded_json()
+    except (ConfigError, KeyError, TypeError, ValueError):
+        return method_config
 
 
 def resolve_ablation(ablation: str | None, method_config: str) -> str | None:
@@ -132,10 +164,14 @@ def unit_hash(
     params: Mapping[str, Any],
     sampling_seed: int,
     step_multiplier: float,
+    env_options: Mapping[str, Any] | None = None,
 ) -> str:
     """The ``unit_id``: 16 hex digits of a sha256 over what changes what an episode does (see the module
     docstring); ``HASH_VERSION`` is inside, so a new hashing never collides with an old one. The sampling
-    seed is hashed under its old name ``seed``: unit ids stay those of runs written before the rename."""
+    seed is hashed under its old name ``seed``: unit ids stay those of runs written before the rename.
+    ``env_options`` (the environment options in the id, :func:`workers.envs.options.identity_options`)
+    is hashed under ``env`` only when there are any: the units of a sweep that sets none keep the ids
+    of runs written before options were hashed."""
     content = {
         "v": HASH_VERSION,
         "instance": instance_id,
@@ -146,6 +182,8 @@ def unit_hash(
         "seed": sampling_seed,
         "step_multiplier": float(step_multiplier),
     }
+    if env_options:
+        content["env"] = dict(env_options)
     return hashlib.sha256(_canonical(content).encode()).hexdigest()[:16]
 
 
@@ -187,6 +225,9 @@ def resolve_instances(envs: Sequence[EnvSpec]) -> list[tuple[str, dict[str, Any]
             raise SpecError(f"{where}: {exc}") from None
         except (ImportError, AttributeError) as exc:
             raise SpecError(f"{where}: benchmark {env.benchmark!r} is not available here ({exc})") from None
+        problem = undeclared_problem(env.benchmark, bench.declared_options(), env.options)
+        if problem is not None:
+            raise SpecError(f"{where}: {problem}")
         ids: list[str] = []
         for sel in env.tasks:
             try:
@@ -272,6 +313,7 @@ def expand(spec: SweepSpec) -> Plan:
         benchmark = inst.split("/", 1)[0]
         if benchmark not in methods_by_benchmark:
             methods_by_benchmark[benchmark] = resolve_methods(spec, benchmark)
+        id_options = identity_options(get_benchmark(benchmark).declared_options(), options)
         for i, (m, settings, resolved) in enumerate(methods_by_benchmark[benchmark]):
             cfg = with_release_digest(spec, m, inst, resolved, release) if m.prompts == "release" else resolved
             multiplier = step_multiplier_for(spec, i, inst, multipliers[i])
@@ -285,6 +327,20 @@ def expand(spec: SweepSpec) -> Plan:
                         params={**model.params, **({"options": hashed_options(model.options)} if model.options else {})},
                         sampling_seed=sampling_seed,
                         step_multiplier=multiplier,
+                        env_options=id_options,
+                    )
+                    plain = (
+                        uid
+                        if not id_options
+                        else unit_hash(
+                            instance_id=inst,
+                            method=m.method,
+                            method_config=cfg,
+                            model=model.model,
+                            params={**model.params, **({"options": hashed_options(model.options)} if model.options else {})},
+                            sampling_seed=sampling_seed,
+                            step_multiplier=multiplier,
+                        )
                     )
                     u = Unit(
                         uid,
@@ -301,6 +357,8 @@ def expand(spec: SweepSpec) -> Plan:
                         sampling_seed,
                         multiplier,
                         options,
+                        id_options,
+                        plain,
                     )
                     if uid in seen:
                         raise SpecError(
@@ -392,6 +450,82 @@ def with_release_digest(
             raise SpecError(f"{where}: {exc} (use prompts: ours there)") from None
         cache[key] = json.dumps({**values, "prompts": f"release:{text.digest}"}, sort_keys=True)
     return cache[key]
+
+
+# --------------------------------------------------------------------------------------------
+def earlier_id_options(spec: SweepSpec | None) -> Mapping[str, Mapping[str, Any]] | None:
+    """The environment options in the id (:func:`workers.envs.options.identity_options`) of each
+    instance of ``spec``, a run folder's stored spec; None when it cannot be read here (a benchmark
+    or its data is gone). Instances are listed only when some entry has such an option."""
+    if spec is None:
+        return None
+    try:
+        per_entry = [identity_options(get_benchmark(e.benchmark).declared_options(), e.options) for e in spec.environments]
+        if not any(per_entry):
+            return defaultdict(dict)
+        # an option it gave that is refused now (FEVER's ineffective ``seed``) chose nothing: left out
+        envs = [
+            e.model_copy(
+                update={"options": {k: v for k, v in e.options.items() if k in get_benchmark(e.benchmark).declared_options()}}
+            )
+            for e in spec.environments
+        ]
+        return {
+            inst: identity_options(get_benchmark(inst.split("/", 1)[0]).declared_options(), o)
+            for inst, o in resolve_instances(envs)
+        }
+    except (SpecError, UnknownInstanceError, ImportError, AttributeError):
+        return None
+
+
+def keep_earlier_ids(plan: Plan, old: Mapping[str, Any] | None, earlier_spec: SweepSpec | None) -> Plan:
+    """``plan`` with the ids of a run written before environment options were in the unit id.
+
+    Such a run's units have their ``plain_id`` (no options hashed), whatever options they ran
+    with. A unit whose stored id is its ``plain_id`` and that ran with the options it has now
+    (the stored plan's ``env_options``; for a plan.json written before those were kept, the stored
+    spec.yaml's, ``earlier_spec``) keeps that id: its finished episodes stay finished. Ran with
+    other options, it gets its new id and is ``changed``. One case cannot be told apart by id: a
+    unit that ran with options that are now removed (its plain id is its new id too); that is
+    refused (SpecError, one line) rather than its episodes taken as done."""
+    old_units = {u["key"]: u for u in (old or {}).get("units", []) if isinstance(u, Mapping) and isinstance(u.get("key"), str)}
+    if not old_units:
+        return plan
+    from_spec: Mapping[str, Mapping[str, Any]] | None = None
+    spec_read = False
+
+    def ran_with(prev: Mapping[str, Any], instance_id: str) -> Mapping[str, Any] | None:
+        nonlocal from_spec, spec_read
+        if isinstance(prev.get("env_options"), Mapping):
+            return prev["env_options"]
+        if not spec_read:
+            from_spec, spec_read = earlier_id_options(earlier_spec), True
+        return None if from_spec is None else from_spec.get(instance_id, {})
+
+    units: list[Unit] = []
+    removed: list[str] = []
+    for u in plan.units:
+        prev = old_units.get(u.key)
+        prev_id = prev.get("unit_id") if prev is not None else None
+        if prev is None or not u.plain_id or prev_id != u.plain_id:
+            units.append(u)
+            continue
+        ran = ran_with(prev, u.instance_id)
+        if prev_id == u.unit_id:  # no options in its id now
+            if ran:
+                removed.append(f"{u.key} ({', '.join(f'{k}: {v}' for k, v in sorted(ran.items()))})")
+            units.append(u)
+        elif ran is not None and dict(ran) == dict(u.id_options):
+            units.append(replace(u, unit_id=u.plain_id, earlier_id=True))
+        else:
+            units.append(u)
+    if removed:
+        raise SpecError(
+            f"{len(removed)} unit(s) of this run ran with environment options it no longer sets (first: {removed[0]}), "
+            "and were planned before options were in the unit id: their episodes would be taken as done. "
+            "Set the options again, or start a new run (another output:)"
+        )
+    return Plan(plan.spec, units)
 
 
 # --------------------------------------------------------------------------------------------

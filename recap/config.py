@@ -204,6 +204,22 @@ class AgentConfig:
     def history_counts_pins(self) -> bool:
         return self.window_counts_pins
 
+    def applied_window(self) -> int | None:
+        """The window the episode's history applies, in messages, or None for no window: the
+        whole history (ReAct/Act's ``history: all``, a window at the largest allowed setting, a
+        bound no episode reaches: ReCAP as swebench-recap ran it)."""
+        k = self.history_window()
+        return None if k >= SETTING_BOUNDS["window"][1] else k
+
+    def recorded_json(self) -> str:
+        """The settings as the episode applies them, for its rows (``method_config``): :meth:`to_json`
+        with ``window`` the one applied (:meth:`applied_window`; ``null`` for no window), not the
+        setting that another one overrides (Act's whole history under ``history: all``). The
+        unit's hash keeps covering :meth:`to_json`: the ids of planned units do not change."""
+        values = json.loads(self.to_json())
+        values["window"] = self.applied_window()
+        return json.dumps(values, sort_keys=True)
+
     def history_keep(self) -> int:
         """Windowed messages at the head of the history that trimming never drops (ReAct's
         released Robotouille window keeps its first reply); 0 for every other method."""

@@ -13,8 +13,10 @@ temporary folder and registered by one line):
 * ``workers/envs/<name>/`` - its own package: the :class:`recap.env.Environment` (reset, step,
   rules, demonstration, expert_plan for the offline expert), a ``benchmark.py`` with a
   :class:`workers.envs.registry.Benchmark` subclass exposed as ``BENCHMARK`` (``list_instances``,
-  ``make``, and only the hooks it needs: ``options_for_agent`` for per-method ``make()``
-  options; ``data_folders`` when it reads a data folder, so ``recap data list/check/fetch`` and
+  ``make``, and only the hooks it needs: ``declared_options`` for the options a sweep may give
+  it, each changing what an episode does (in the unit id) or how it is run (not), any other
+  refused (:mod:`workers.envs.options`; declaring nothing, it takes none); ``options_for_agent``
+  for per-method ``make()`` options; ``data_folders`` when it reads a data folder, so ``recap data list/check/fetch`` and
   the Ray workers' environment follow; ``canonical_id`` when two spellings of an id name one
   instance; ``place`` when a row's split/task follow from the id where the environment did not
   report them; ``profile_settings`` / ``release_prompt_settings``

@@ -30,6 +30,8 @@ Example::
       - benchmark: robotouille
         tasks: [synchronous/6, asynchronous]   # selectors given to the benchmark
         limit: 2                              # first N instances per selector
+        options: {data_dir: ~/robotouille}    # the benchmark's declared options only (others are refused);
+                                              # those that change what an episode does are in the unit id
       - benchmark: blocksworld
         instances: [blocksworld/3@1]
     sampling_seeds: [0]               # each sampling seed is its own unit (old name: seeds)

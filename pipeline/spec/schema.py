@@ -256,7 +256,7 @@ class MethodSpec(StrictModel):
 
 class EnvSpec(StrictModel):
     """One ``environments:`` entry: a benchmark and which of its instances to run (selectors,
-    explicit ids, a per-selector limit), plus make() options that are not part of a unit's identity."""
+    explicit ids, a per-selector limit), plus the make() options the benchmark declares."""
 
     benchmark: Name
     #: selectors handed to the benchmark's list_instances (split, task, task type...)
@@ -265,7 +265,9 @@ class EnvSpec(StrictModel):
     instances: list[Selector] = Field(default_factory=list, max_length=INSTANCES_MAX)
     #: at most this many instances per selector (in the benchmark's fixed order)
     limit: Annotated[int, NOT_BOOL, Bounded("environments[].limit")] | None = None
-    #: options for the benchmark's make() (data_dir ...); not part of the unit hash. Path
+    #: options for the benchmark's make() (data_dir ...): only those it declares
+    #: (:mod:`workers.envs.options`); those that change what an episode does are part of the unit
+    #: hash (when not their default), those that change how it is run are not. Path
     #: options (data_dir, *_dir) are resolved here (~ expanded, made absolute).
     options: dict[str, Any] = Field(default_factory=dict)
 

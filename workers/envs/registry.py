@@ -30,6 +30,7 @@ from recap.config import AgentConfig, BenchmarkProtocol
 from recap.env import DataNotFoundError, Environment, UnknownInstanceError
 from recap.registry import Registry
 from workers.envs.data_sources import DataFolder
+from workers.envs.options import EnvOption
 
 __all__ = [
     "BENCHMARKS",
@@ -88,6 +89,13 @@ class Benchmark(BenchmarkProtocol, ABC):
         """A fresh environment for ``instance_id`` (options: step_multiplier, data_dir...)."""
 
     # -- hooks ----------------------------------------------------------------------------------
+    def declared_options(self) -> Mapping[str, EnvOption]:
+        """The options a sweep's ``environments[].options`` may give this benchmark, each with its
+        kind (:mod:`workers.envs.options`: what an episode does, part of the unit id, or how it is
+        run, not) and its default. Any other option is refused before anything runs. Default:
+        none (a benchmark that declares nothing takes no option from a sweep)."""
+        return {}
+
     def list_instances_for(self, selector: str | None, options: Mapping[str, Any]) -> list[str]:
         """:meth:`list_instances` for an environment entry whose ``make()`` options are
         ``options`` (a sweep's ``options: {data_dir: ...}`` lists that folder's instances).

@@ -47,6 +47,7 @@ from workers.envs.alfworld.observation import check_show_valid_actions
 from workers.envs.alfworld.task_types import SHORT_NAMES, TASK_TYPES
 from workers.envs.alfworld.wording import DEFAULT_VERSION, check_version
 from workers.envs.data_sources import DataFolder
+from workers.envs.options import EnvOption, episode, run
 from workers.envs.registry import Benchmark, DataNotFoundError, UnknownInstanceError
 
 DEFAULT_MAX_STEPS = 50
@@ -56,6 +57,18 @@ SHOW_VALID_ACTIONS = "show_valid_actions"
 DEMO_VALID_ACTIONS = "demo_valid_actions"
 #: agent styles whose ALFWorld observations list the valid actions (see show_valid_actions_for)
 STYLES_SHOWING_VALID_ACTIONS = frozenset({"recap"})
+
+#: the options a sweep may give (:mod:`workers.envs.options`). What an episode does: the game-file
+#: version, the step cap, the valid actions shown (their default is the method's). How it is
+#: run: where the games are read from
+ALFWORLD_OPTIONS: Mapping[str, EnvOption] = {
+    "data_dir": run(),
+    "data_dir_2_1_2": run(),
+    "version": episode(DEFAULT_VERSION),
+    "max_steps": episode(DEFAULT_MAX_STEPS),
+    SHOW_VALID_ACTIONS: episode(),
+    DEMO_VALID_ACTIONS: episode(),
+}
 
 
 def show_valid_actions_for(style: str) -> bool:
@@ -82,6 +95,10 @@ class AlfworldBenchmark(Benchmark):
 
     def __init__(self, data_dir: str | os.PathLike[str] | None = None):
         self.data_dir = data_dir
+
+    def declared_options(self) -> Mapping[str, EnvOption]:
+        """:data:`ALFWORLD_OPTIONS`."""
+        return ALFWORLD_OPTIONS
 
     def options_for_agent(self, style: str, config: AgentConfig | None = None) -> dict[str, Any]:
         """make() options an agent style runs with unless a sweep sets them (the pipeline asks):

@@ -37,6 +37,7 @@ from typing import Any
 from recap.config import AgentConfig
 from recap.env import Environment
 from workers.envs.data_sources import DataFolder
+from workers.envs.options import EnvOption, episode, run
 from workers.envs.registry import Benchmark, RunService
 
 from . import protocol
@@ -62,6 +63,26 @@ from .wiki import (
 
 LIVE = "live"
 SNAPSHOT_PREFIX = "snapshot:"
+
+
+#: the options a sweep may give (:mod:`workers.envs.options`). What an episode does: the Wikipedia
+#: source (server or snapshot), the step cap (its default is the method's: ReCAP released has
+#: its safety bound, :func:`.protocol.env_options`), a verdict-only plan. How it is run: where the
+#: claims are read from, the request rate and the limits of one live answer (past them the
+#: episode ends ``wiki_error``, which a resume retries), and ``sample_seed``, which picks the
+#: instances of the ``paper`` selector (their ids already say which claims run; one claim's
+#: episode is the same whichever sample holds it)
+FEVER_OPTIONS: Mapping[str, EnvOption] = {
+    "data_dir": run(),
+    "wikipedia_url": episode(DEFAULT_WIKIPEDIA_URL),
+    "wikipedia": episode(LIVE),
+    "wikipedia_rate": run(),
+    "wikipedia_deadline_s": run(),
+    "wikipedia_max_page_bytes": run(),
+    "max_steps": episode(),
+    "verdict_only": episode(),
+    "sample_seed": run(),
+}
 
 
 def check_wikipedia_url(url: Any) -> str:
@@ -121,6 +142,10 @@ class FeverBenchmark(Benchmark):
     """FEVER's registry entry: claims from ``paper_dev.jsonl``, observations from Wikipedia or a snapshot."""
 
     name = BENCHMARK_NAME
+
+    def declared_options(self) -> Mapping[str, EnvOption]:
+        """:data:`FEVER_OPTIONS`."""
+        return FEVER_OPTIONS
 
     def run_services(self) -> tuple[RunService, ...]:
         """One Wikipedia politeness actor per run, shared by every worker (:func:`run_limiter` finds it)."""

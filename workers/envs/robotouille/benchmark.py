@@ -15,6 +15,7 @@ from typing import Any
 from recap.config import AgentConfig
 from recap.env import Demonstration, Environment
 from workers.envs.data_sources import DataFolder
+from workers.envs.options import EnvOption, episode, run
 from workers.envs.registry import Benchmark
 
 from . import catalog, protocol
@@ -26,6 +27,9 @@ from .env import RobotouilleEnv
 from .replay import replay_file
 
 ENGINES = ("ours", "real")
+#: the options a sweep may give (:mod:`workers.envs.options`): the engine changes what an
+#: episode does, the data folder only where the instances are read from
+ROBOTOUILLE_OPTIONS: Mapping[str, EnvOption] = {"data_dir": run(), "engine": episode("ours")}
 #: step cap of the demonstration kitchen (it is in no benchmark list, so has no optimal count)
 DEMO_MAX_STEPS = 100
 
@@ -35,6 +39,10 @@ class RobotouilleBenchmark(Benchmark):
     folder (``engine="real"``: on the upstream package, when installed)."""
 
     name = catalog.BENCHMARK_NAME
+
+    def declared_options(self) -> Mapping[str, EnvOption]:
+        """:data:`ROBOTOUILLE_OPTIONS`."""
+        return ROBOTOUILLE_OPTIONS
 
     def replay_file(self, path: str, options: Mapping[str, object]) -> tuple[bool, str]:
         """A trajectory the real engine recorded, replayed on ours (:mod:`.replay`); it takes no options."""

@@ -38,6 +38,7 @@ from typing import Any
 
 from recap.config import CODING_PROFILE, SETTING_BOUNDS, AgentConfig, ReCAPConfig
 from recap.env import Environment, UnknownInstanceError
+from workers.envs.options import EnvOption, episode, run
 from workers.envs.registry import Benchmark
 from workers.sandbox import LABEL_EPISODE, LABEL_RUN, LABEL_WORKER, check_ready, open_sandbox, remove_labelled
 from workers.sandbox.base import SANDBOX_KINDS, SandboxLimits, SandboxSpec
@@ -88,6 +89,26 @@ ACCEPTED = (
 )
 
 
+_LIMIT_DEFAULTS = SandboxLimits()
+#: the options a sweep may give (:mod:`workers.envs.options`). What an episode does: the sandbox
+#: kind and image, its network, every limit, the grading. How it is run: where the records are
+#: read from (as a data folder) and ``sandbox_trust``, a permission (to run commands unconfined
+#: where bubblewrap does not work), not a setting: where bubblewrap works, commands are confined
+#: whatever it says
+SWE_OPTIONS: Mapping[str, EnvOption] = {
+    INSTANCES_FILE: run(),
+    "sandbox": episode("docker"),
+    "sandbox_trust": run(),
+    "image": episode(SandboxSpec.image),
+    "network": episode(_LIMIT_DEFAULTS.network),
+    **{k: episode(getattr(_LIMIT_DEFAULTS, k)) for k in _LIMIT_OPTIONS},
+    "total_output_bytes": episode(DEFAULT_TOTAL_OUTPUT_BYTES),
+    "max_timeouts_in_row": episode(None),
+    "eval_timeout_s": episode(None),
+    "grading": episode(DEFAULT_GRADING),
+}
+
+
 def _file_key(path: str | os.PathLike[str]) -> tuple[str, int, int]:
     p = Path(path).expanduser().resolve()
     try:
@@ -130,6 +151,10 @@ class SweBenchmark(Benchmark):
 
     name = BENCHMARK_NAME
     sandboxed = True
+
+    def declared_options(self) -> Mapping[str, EnvOption]:
+        """:data:`SWE_OPTIONS`."""
+        return SWE_OPTIONS
 
     def owner_options(self, run_id: str, worker_id: str, episode_id: str) -> dict[str, Any]:
         """The sandbox's labels: the run, the worker and the episode that own it."""

@@ -38,6 +38,7 @@ from typing import Any
 from recap.config import AgentConfig
 from recap.env import Environment, UnknownInstanceError
 from workers.envs.data_sources import DataFolder
+from workers.envs.options import EnvOption, episode, run
 from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
 from workers.envs.swe.env import DEFAULT_TOTAL_OUTPUT_BYTES
 from workers.envs.swe.grading import GRADINGS, Grading, check_grading
@@ -51,7 +52,7 @@ from .env import BENCHMARK_NAME, VerifiedEnvironment
 from .harness_eval import HARNESS_GRADING, remove_harness_containers
 from .images import how_to_get, image_of, local_images, missing_images
 from .release_container import OPTIONS as CONTAINER_OPTIONS
-from .release_container import ReleaseEnvironment, agent_options, missing_image, release_of
+from .release_container import RELEASE_IMAGE, ReleaseEnvironment, agent_options, missing_image, release_of
 
 #: the grading modes here: the coding env's three, and the harness's own full evaluation
 VERIFIED_GRADINGS: tuple[Grading, ...] = (*GRADINGS, HARNESS_GRADING)
@@ -75,6 +76,29 @@ ACCEPTED = (
     "sandbox_labels",
     "open_sandbox",
 )
+_LIMIT_DEFAULTS = SandboxLimits()
+#: the options a sweep may give (:mod:`workers.envs.options`). What an episode does: the sandbox,
+#: its network, the limits, the grading, the container and the release's image; those whose
+#: default is the method's set-up (:func:`.release_container.agent_options`: the container, the
+#: network, ReCAP's released tool limits) declare no default, so given at all they are in the id.
+#: How it is run: where the records and the repositories (``repo_mirror``, the same commits) come from
+VERIFIED_OPTIONS: Mapping[str, EnvOption] = {
+    "data_dir": run(),
+    "sandbox": episode("docker"),
+    "network": episode(),
+    "command_timeout_s": episode(),
+    "output_bytes": episode(_LIMIT_DEFAULTS.output_bytes),
+    "max_commands": episode(_LIMIT_DEFAULTS.max_commands),
+    "wall_time_s": episode(),
+    "disk_bytes": episode(DEFAULT_DISK_BYTES),
+    "total_output_bytes": episode(DEFAULT_TOTAL_OUTPUT_BYTES),
+    "max_timeouts_in_row": episode(),
+    "eval_timeout_s": episode(None),
+    "grading": episode(VERIFIED_DEFAULT_GRADING),
+    "container": episode(),
+    "release_image": episode(RELEASE_IMAGE),
+    "repo_mirror": run(),
+}
 LOCAL_REFUSAL = (
     "swe-verified runs in the SWE-bench harness's per-instance Docker images (the repository and its "
     "environment are in the image): sandbox 'local' cannot run it; use sandbox: docker"
@@ -135,6 +159,10 @@ class VerifiedBenchmark(SweBenchmark):
     """SWE-bench Verified's registry entry (see the module docstring)."""
 
     name = BENCHMARK_NAME
+
+    def declared_options(self) -> Mapping[str, EnvOption]:
+        """:data:`VERIFIED_OPTIONS`."""
+        return VERIFIED_OPTIONS
 
     def data_folders(self) -> Mapping[str, DataFolder]:
         """The stored dataset (``swebench-verified``)."""
