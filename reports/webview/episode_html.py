@@ -10,6 +10,7 @@ from reports.observations import observation_change
 from reports.toolcalls import message_calls, totals
 from reports.viewer import ranges
 from reports.webview.episodes import Episode
+from reports.webview.evaluation_html import evaluation_html
 from reports.webview.layout import episode_url, esc, layout, num, url, usd
 from reports.webview.snapshot import Snapshot
 
@@ -57,6 +58,7 @@ def episode_page(snap: Snapshot, ep: Episode, hit: int | None = None) -> str:
     ]
     if m.get("error"):
         parts.append(f'<p class="error">{esc(m["error"])}</p>')
+    parts.extend(evaluation_html(ev) for ev in ep.evaluations)  # a coding episode's verdict, before its tree
     parts.append(
         f'<section id="tree"><h2>Context tree ({len(ep.nodes)} nodes) '
         '<button type="button" id="expand-all">expand all</button> <button type="button" id="collapse-all">collapse all</button></h2>'
