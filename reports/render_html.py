@@ -161,7 +161,9 @@ def _episode_link(episode_id: str, in_viewer: bool) -> str:
     return f'<span class="ep-link" data-episode="{escape(episode_id)}">{inner}</span>'
 
 
-def _cell(kind: str, value: object, viewer: set[str]) -> str:
+def _cell(kind: str, value: object, viewer: set[str], key: str = "", names: dict[str, str] | None = None) -> str:
+    if key == "run_id" and names and str(value) in names:  # a run by its name, its id on hover
+        return f'<span class="run" title="{escape(str(value))}">{escape(names[str(value)])}</span>'
     if kind == "list" and isinstance(value, list):
         # every episode id is a link: to the report's own viewer when the episode is in it, and to
         # `recap view` when one runs (VIEWER_LINKS); plain text otherwise
@@ -169,14 +171,14 @@ def _cell(kind: str, value: object, viewer: set[str]) -> str:
     return escape(format_value(kind, value))
 
 
-def table_html(t: Table, viewer: set[str]) -> str:
+def table_html(t: Table, viewer: set[str], names: dict[str, str] | None = None) -> str:
     """One table as HTML: its title and note, then the table (tagged with its SQL source); episode ids in
-    ``viewer`` link to the page's own viewer."""
+    ``viewer`` link to the page's own viewer; a run id is shown as the run's name (``names``)."""
     head = "".join(f"<th>{escape(c.header)}</th>" for c in t.columns)
     body = []
     for row in t.rows:
         cells = "".join(
-            f'<td class="{"num" if c.kind not in ("text", "list") else ""}">{_cell(c.kind, row.get(c.key), viewer)}</td>'
+            f'<td class="{"num" if c.kind not in ("text", "list") else ""}">{_cell(c.kind, row.get(c.key), viewer, c.key, names)}</td>'
             for c in t.columns
         )
         body.append(f"<tr>{cells}</tr>")
@@ -244,7 +246,7 @@ def render_html(report: Report) -> str:
                 f"{(' — ' + escape(p.note)) if p.note else ''}</figcaption></figure>"
             )
         for t in s.tables:
-            parts.append(table_html(t, viewer))
+            parts.append(table_html(t, viewer, report.run_names))
         parts.append("</details></section>" if folded else "</section>")
     if report.viewer_html:
         parts.append(report.viewer_html)
