@@ -102,12 +102,19 @@ def build_tree(episode: dict[str, Any], nodes: list[dict[str, Any]], steps: list
     return root_tree
 
 
-def tool_call_lines(rows: list[dict[str, Any]], messages: list[dict[str, Any]]) -> list[Text]:
+def tool_call_lines(
+    rows: list[dict[str, Any]], messages: list[dict[str, Any]], steps: list[dict[str, Any]] | None = None
+) -> list[Text]:
     """An episode's tool calls as lines: the summary, then in message order each assistant message's
     calls (``#seq assistant call NAME ARGUMENTS [id]``, its text first when it wrote any) and each tool
     result (``#seq tool [id] (OUTCOME) first line``), then calls no message made (commands written as
     text: ``step N command NAME ARGUMENTS: OUTCOME``). [] when the episode made none. Every model-written
-    string is plain text (never markup) on one line."""
+    string is plain text (never markup) on one line.
+
+    A tool result's first line is its output's: the observation of the call's step (``steps``) when the
+    episode has it, since a method may wrap the output in a prompt (ReCAP's tool message opens with
+    ``Latest observation:``, recap/recap_tool_prompts.py ``action_taken_prompt``); else the message's."""
+    observation = {s["index"]: s["observation"] for s in steps or []}
     rows = sorted(rows, key=lambda r: r["index"])
     msgs = sorted(
         (m for m in messages if m.get("tool_calls") is not None or m.get("tool_call_id") is not None), key=lambda m: m["seq"]
@@ -136,11 +143,14 @@ def tool_call_lines(rows: list[dict[str, Any]], messages: list[dict[str, Any]]) 
         row = by_call.get((answers.get(seq), cid))
         result = outcome(row) if row is not None else "not recorded"
         bad = row is None or not row["valid"] or row["timed_out"]
+        shown = m.get("content")
+        if row is not None and row.get("step_index") in observation:
+            shown = observation[row["step_index"]]
         out.append(
             Text.assemble(
                 f"  #{seq} {m['role']} [{one_line(cid)}] (",
                 (one_line(result), "red" if bad else "green"),
-                f") {one_line(_first_line(m.get('content')))}",
+                f") {one_line(_first_line(shown))}",
             )
         )
     for r in rows:
@@ -187,7 +197,7 @@ def show_main(run_dir: str, ref: str, console: Console) -> int:
     nodes = nodes_t.filter(pc.equal(nodes_t["episode_id"], eid)).to_pylist() if nodes_t.num_rows else []
     steps = steps_t.filter(pc.equal(steps_t["episode_id"], eid)).to_pylist() if steps_t.num_rows else []
     console.print(build_tree(ep, nodes, steps))
-    for line in tool_call_lines(_episode_rows(store, "tool_calls", eid), _tool_messages(store, eid)):
+    for line in tool_call_lines(_episode_rows(store, "tool_calls", eid), _tool_messages(store, eid), steps):
         console.print(line)
     if ep.get("error"):
         console.print(f"[dim]end: {escape(str(ep['end_reason']))}: {escape(_first_line(ep['error'], 300))}[/dim]")

@@ -19,6 +19,7 @@ from reports.render_csv import result_csv
 from reports.render_html import render_html
 from reports.render_md import render_md
 from reports.render_tex import tex_tables
+from reports.run_names import run_names
 from reports.viewer import DEFAULT_EPISODES, build_viewer, select_episodes
 from reports.views import ReportError, Result, materialize, open_runs_checked
 
@@ -78,9 +79,10 @@ def build_report(run_dirs: Sequence[str | Path], options: ReportOptions = Report
             secs += ([coding] if coding is not None else []) + [paper]
         viewer_html = build_viewer(con, ids, results) if ids else ""
         dirs = [str(r[0]) for r in con.execute("SELECT run_dir FROM run_dirs").fetchall()]
+        names = run_names(con.execute("SELECT run_dir, run_json_id FROM run_dirs").fetchall())
     finally:
         con.close()
-    return Report(options.title, dirs, skipped, secs, results, viewer_html, ids)
+    return Report(options.title, dirs, skipped, secs, results, viewer_html, ids, names)
 
 
 def _write(path: Path, text: str) -> None:

@@ -77,6 +77,8 @@ class Report:
     results: dict[str, Result]
     viewer_html: str = ""
     viewer_episodes: list[str] = field(default_factory=list)
+    #: run_id -> the run's name (run.json's ``run``), which the HTML tables show for a run id (issue 36 item 8)
+    run_names: dict[str, str] = field(default_factory=dict)
 
 
 # -- formatting ---------------------------------------------------------------------------------

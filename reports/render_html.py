@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from html import escape
 
-from reports.model import Report, Table, format_value
+from reports.model import Report, Section, Table, format_value
 from reports.ports import VIEWER_PORT
 from reports.viewer import anchor
 
@@ -19,6 +19,7 @@ CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#222;background:#fafafa}
 main{max-width:1200px;margin:0 auto;padding:1rem 1.5rem 4rem}
 h1{font-size:1.6rem}h2{border-bottom:2px solid #4e79a7;padding-bottom:.2rem;margin-top:2.5rem}
+details.folded>summary{cursor:pointer}details.folded>summary h2{display:inline-block;margin-right:.5rem}
 h3{margin-top:1.6rem}nav ul{display:flex;flex-wrap:wrap;gap:.4rem 1.2rem;list-style:none;padding:0}
 .intro,.note{color:#555;font-size:.9rem;max-width:70rem}
 .scroll{overflow-x:auto}
@@ -160,7 +161,9 @@ def _episode_link(episode_id: str, in_viewer: bool) -> str:
     return f'<span class="ep-link" data-episode="{escape(episode_id)}">{inner}</span>'
 
 
-def _cell(kind: str, value: object, viewer: set[str]) -> str:
+def _cell(kind: str, value: object, viewer: set[str], key: str = "", names: dict[str, str] | None = None) -> str:
+    if key == "run_id" and names and str(value) in names:  # a run by its name, its id on hover
+        return f'<span class="run" title="{escape(str(value))}">{escape(names[str(value)])}</span>'
     if kind == "list" and isinstance(value, list):
         # every episode id is a link: to the report's own viewer when the episode is in it, and to
         # `recap view` when one runs (VIEWER_LINKS); plain text otherwise
@@ -168,14 +171,14 @@ def _cell(kind: str, value: object, viewer: set[str]) -> str:
     return escape(format_value(kind, value))
 
 
-def table_html(t: Table, viewer: set[str]) -> str:
+def table_html(t: Table, viewer: set[str], names: dict[str, str] | None = None) -> str:
     """One table as HTML: its title and note, then the table (tagged with its SQL source); episode ids in
-    ``viewer`` link to the page's own viewer."""
+    ``viewer`` link to the page's own viewer; a run id is shown as the run's name (``names``)."""
     head = "".join(f"<th>{escape(c.header)}</th>" for c in t.columns)
     body = []
     for row in t.rows:
         cells = "".join(
-            f'<td class="{"num" if c.kind not in ("text", "list") else ""}">{_cell(c.kind, row.get(c.key), viewer)}</td>'
+            f'<td class="{"num" if c.kind not in ("text", "list") else ""}">{_cell(c.kind, row.get(c.key), viewer, c.key, names)}</td>'
             for c in t.columns
         )
         body.append(f"<tr>{cells}</tr>")
@@ -188,10 +191,25 @@ def table_html(t: Table, viewer: set[str]) -> str:
     )
 
 
+#: sections the HTML page opens with, in this order (issue 36 item 12: the results before a screen of metadata)
+FIRST_SECTIONS = ("paper", "success")
+#: sections the HTML page folds (closed ``<details>``): what the report covers, not what the runs found
+FOLDED_SECTIONS = ("overview",)
+
+
+def html_order(sections: list[Section]) -> list[Section]:
+    """The sections as the HTML page shows them: :data:`FIRST_SECTIONS` first, then the others in the
+    report's order (the text formats keep the report's order)."""
+    first = [s for k in FIRST_SECTIONS for s in sections if s.key == k]
+    return first + [s for s in sections if s not in first]
+
+
 def render_html(report: Report) -> str:
-    """The whole report as one self-contained HTML page (no external files or network)."""
+    """The whole report as one self-contained HTML page (no external files or network): the paper's tables
+    and the success rates first, the overview (what the report covers, the runs) folded after them."""
     viewer = set(report.viewer_episodes)
-    nav = "".join(f'<li><a href="#s-{s.key}">{escape(s.title)}</a></li>' for s in report.sections)
+    ordered = html_order(list(report.sections))
+    nav = "".join(f'<li><a href="#s-{s.key}">{escape(s.title)}</a></li>' for s in ordered)
     if report.viewer_html:
         nav += '<li><a href="#viewer">Episode viewer</a></li>'
     parts = [
@@ -210,8 +228,16 @@ def render_html(report: Report) -> str:
             + "</ul></div>"
         )
     parts.append(f"<nav><ul>{nav}</ul></nav>")
-    for s in report.sections:
-        parts.append(f'<section id="s-{s.key}"><h2>{escape(s.title)}</h2>')
+    for s in ordered:
+        folded = s.key in FOLDED_SECTIONS
+        parts.append(
+            f'<section id="s-{s.key}">'
+            + (
+                f'<details class="folded"><summary><h2>{escape(s.title)}</h2></summary>'
+                if folded
+                else f"<h2>{escape(s.title)}</h2>"
+            )
+        )
         if s.intro:
             parts.append(f'<p class="intro">{escape(s.intro)}</p>')
         for p in s.plots:
@@ -220,8 +246,8 @@ def render_html(report: Report) -> str:
                 f"{(' — ' + escape(p.note)) if p.note else ''}</figcaption></figure>"
             )
         for t in s.tables:
-            parts.append(table_html(t, viewer))
-        parts.append("</section>")
+            parts.append(table_html(t, viewer, report.run_names))
+        parts.append("</details></section>" if folded else "</section>")
     if report.viewer_html:
         parts.append(report.viewer_html)
     parts.append(f"</main><script>{SCRIPT}</script><script>{VIEWER_LINKS}</script></body></html>")

@@ -6,6 +6,7 @@ from reports.model import format_value
 from reports.stat_notes import mcnemar_note, permutation_note
 from reports.webview.compare import Comparison
 from reports.webview.layout import episode_url, esc, layout, usd
+from reports.webview.names import run_names
 from reports.webview.snapshot import Snapshot
 
 #: discordant pairs listed on the compare page (a run of 10,000 episodes has thousands)
@@ -21,19 +22,25 @@ def compare_tests_note(cmp: Comparison) -> str:
 def compare_page(snap: Snapshot, choices: dict[str, list[str]], cmp: Comparison | None, kind: str, a: str, b: str) -> str:
     """The compare page: the two choice forms and, once a comparison ``cmp`` is made, its totals, per-task table
     and discordant pairs (at most MAX_DISCORDANT)."""
-    body = ["<h1>Compare</h1>", _forms(choices, kind, a, b), _NOTE]
+    names = run_names(snap)
+    body = ["<h1>Compare</h1>", _forms(choices, kind, a, b, names), _NOTE]
     if cmp is not None:
-        body.append(_result(cmp))
+        body.append(_result(cmp, names if kind == "run" else {}))
     return layout("Compare", "".join(body), page="/compare", snap=snap)
 
 
-def _forms(choices: dict[str, list[str]], kind: str, a: str, b: str) -> str:
-    """The two choice forms (two runs, two arms); the sides chosen are selected in the form of ``kind``."""
+def _forms(choices: dict[str, list[str]], kind: str, a: str, b: str, names: dict[str, str]) -> str:
+    """The two choice forms (two runs, by name: ``names``; two arms); the sides chosen are selected in the form
+    of ``kind``."""
     forms = []
     for k, title in (("run", "two runs"), ("arm", "two arms (methods)")):
 
         def sel(name: str, chosen: str, k: str = k) -> str:
-            opts = "".join(f"<option{' selected' if kind == k and v == chosen else ''}>{esc(v)}</option>" for v in choices[k])
+            opts = "".join(
+                f'<option value="{esc(v)}"{" selected" if kind == k and v == chosen else ""}>'
+                f"{esc(names.get(v, v) if k == 'run' else v)}</option>"
+                for v in choices[k]
+            )
             return f'<select name="{name}"><option value="">choose</option>{opts}</select>'
 
         forms.append(
@@ -50,12 +57,13 @@ _NOTE = (
 )
 
 
-def _result(cmp: Comparison) -> str:
-    """A comparison: its tests note, totals, per-task table and discordant pairs (at most MAX_DISCORDANT)."""
+def _result(cmp: Comparison, names: dict[str, str]) -> str:
+    """A comparison: its tests note, totals, per-task table and discordant pairs (at most MAX_DISCORDANT); the
+    sides of a comparison of two runs are named by ``names``."""
     body = []
     body.append(f'<p class="note" id="tests">{esc(compare_tests_note(cmp))}</p>')
     body.append(
-        f'<section id="result" data-pairs="{cmp.pairs}" data-ms="{cmp.elapsed_ms:.1f}"><h2>{esc(cmp.a)} (A) vs {esc(cmp.b)} (B)</h2>'
+        f'<section id="result" data-pairs="{cmp.pairs}" data-ms="{cmp.elapsed_ms:.1f}"><h2>{esc(names.get(cmp.a, cmp.a))} (A) vs {esc(names.get(cmp.b, cmp.b))} (B)</h2>'
         '<table class="data" id="summary"><thead><tr><th>pairs</th><th>A successes</th><th>B successes</th><th>only A</th>'
         "<th>only B</th><th>McNemar p</th><th>mean cost A−B</th><th>cost p</th></tr></thead><tbody>"
         f'<tr><td class="num">{cmp.pairs}</td><td class="num">{cmp.a_successes}</td><td class="num">{cmp.b_successes}</td>'

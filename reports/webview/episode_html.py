@@ -10,6 +10,7 @@ from reports.observations import observation_change
 from reports.toolcalls import message_calls, totals
 from reports.viewer import ranges
 from reports.webview.episodes import Episode
+from reports.webview.evaluation_html import evaluation_html
 from reports.webview.layout import episode_url, esc, layout, num, url, usd
 from reports.webview.snapshot import Snapshot
 
@@ -57,10 +58,11 @@ def episode_page(snap: Snapshot, ep: Episode, hit: int | None = None) -> str:
     ]
     if m.get("error"):
         parts.append(f'<p class="error">{esc(m["error"])}</p>')
+    parts.extend(evaluation_html(ev) for ev in ep.evaluations)  # a coding episode's verdict, before its tree
     parts.append(
         f'<section id="tree"><h2>Context tree ({len(ep.nodes)} nodes) '
         '<button type="button" id="expand-all">expand all</button> <button type="button" id="collapse-all">collapse all</button></h2>'
-        + (tree_html(ep.nodes, ep.steps) if ep.nodes else "<p>No task tree (this method keeps none).</p>")
+        + (tree_html(ep.nodes, ep.steps, ep.calls) if ep.nodes else "<p>No task tree (this method keeps none).</p>")
         + "</section>"
     )
     parts.append(f'<section id="steps"><h2>Actions and observations ({len(ep.steps)})</h2>{steps_html(ep.steps)}</section>')
@@ -80,9 +82,12 @@ def episode_page(snap: Snapshot, ep: Episode, hit: int | None = None) -> str:
     return layout(f"Episode {eid}", "".join(parts), page="/episode", snap=snap)
 
 
-def tree_html(nodes: list[dict[str, Any]], steps: list[dict[str, Any]]) -> str:
-    """The context tree as nested ``<details>``: each node's versions (think and subtasks, and the call that made
-    them) and, for a leaf, the action it ran."""
+def tree_html(nodes: list[dict[str, Any]], steps: list[dict[str, Any]], calls: list[dict[str, Any]] | None = None) -> str:
+    """The context tree as nested ``<details>``, each node read top down on one screen (issue 36 item 9): its
+    summary line (a leaf's action, whether it was valid and what its observation changed, on that line), its
+    latest version (think and subtasks, one line each, and the call that made it), then its children; the
+    node's timeline (call -> version -> action -> observation, in order) folded below the latest version, so
+    that a root refined 29 times shows one version, not 29, before its first child."""
     ids = {n["node_id"] for n in nodes}
     children: dict[int | None, list[dict[str, Any]]] = defaultdict(list)
     for n in nodes:
@@ -90,30 +95,57 @@ def tree_html(nodes: list[dict[str, Any]], steps: list[dict[str, Any]]) -> str:
     for v in children.values():
         v.sort(key=lambda n: (n["child_index"], n["node_id"]))
     step_at = {s["index"]: s for s in steps}
+    change_at, prev = {}, None
+    for s in steps:
+        change_at[s["index"]] = observation_change(prev, s["observation"])
+        prev = s["observation"]
+    purpose = {c["call_index"]: c["purpose"] for c in calls or []}
+
+    def made_by(v: dict[str, Any]) -> str:
+        if v["call_index"] is None:
+            return "shortcut"
+        p = purpose.get(v["call_index"])
+        return f"call {v['call_index']}" + (f" ({p})" if p else "")
+
+    def version_li(v: dict[str, Any], cls: str) -> str:
+        think = f'<div class="think">{esc(v["think"])}</div>' if v["think"] else ""
+        subs = "".join(f'<li title="{esc(s)}">{esc(s)}</li>' for s in v["subtasks"])
+        return (
+            f'<li class="{cls}" data-version="{v["version"]}"><span class="tag">{made_by(v)} → v{v["version"]}</span>'
+            f'{think}<ol class="subtasks">{subs}</ol></li>'
+        )
+
+    def action_html(n: dict[str, Any]) -> str:
+        if n["step_index"] is None or n["step_index"] not in step_at:
+            return ""
+        s = step_at[n["step_index"]]
+        return (
+            f'<span class="action">→ step {s["index"]} '
+            + ("" if s["action"] == n["task"] else f"<code>{esc(s['action'])}</code> ")
+            + f"{'ok' if s['valid'] else '<span class=invalid>invalid</span>'} → "
+            f'<span class="obs">{esc(change_at.get(s["index"], ""))}</span></span>'
+        )
 
     def render(n: dict[str, Any]) -> str:
-        versions = []
-        for v in n["versions"] or []:
-            src = f"call {v['call_index']}" if v["call_index"] is not None else "shortcut"
-            think = f'<div class="think">{esc(v["think"])}</div>' if v["think"] else ""
-            subs = "".join(f"<li>{esc(s)}</li>" for s in v["subtasks"])
-            versions.append(
-                f'<li class="version" data-version="{v["version"]}"><span class="tag">v{v["version"]} · {src}</span>'
-                f'{think}<ol class="subtasks">{subs}</ol></li>'
-            )
-        action = ""
-        if n["step_index"] is not None and n["step_index"] in step_at:
-            s = step_at[n["step_index"]]
-            action = (
-                f'<p class="action">action <code>{esc(s["action"])}</code> '
-                f"{'ok' if s['valid'] else '<span class=invalid>invalid</span>'} (step {s['index']})</p>"
+        versions = list(n["versions"] or [])
+        latest = version_li(versions[-1], "version latest") if versions else ""
+        leaf_shortcut = len(versions) == 1 and versions[0]["call_index"] is None and versions[0]["subtasks"] == [n["task"]]
+        history = ""
+        if len(versions) > 1:
+            calls_made = [v["call_index"] for v in versions if v["call_index"] is not None]
+            span = f", calls {calls_made[0]}–{calls_made[-1]}" if len(calls_made) > 1 else ""
+            history = (
+                f'<details class="history"><summary>timeline: {len(versions)} versions{span}</summary>'
+                f'<ol class="versions">{"".join(version_li(v, "version") for v in versions)}</ol></details>'
             )
         kids = "".join(render(c) for c in children.get(n["node_id"], []))
         return (
             f'<li><details class="node {esc(n["status"])}" data-node="{n["node_id"]}"{" open" if n["depth"] == 0 else ""}>'
-            f'<summary><span class="ntitle">#{n["node_id"]} {esc(n["task"])}</span> <span class="tag">{esc(n["kind"])} · '
-            f"{esc(n['status'])} · depth {n['depth']} · {len(n['versions'] or [])} version(s)</span></summary>"
-            f'<ol class="versions">{"".join(versions)}</ol>{action}'
+            f'<summary><span class="ntitle" title="{esc(n["task"])}">#{n["node_id"]} {esc(n["task"])}</span> '
+            f'<span class="tag">{esc(n["kind"])} · {esc(n["status"])} · depth {n["depth"]} · {len(versions)} version(s)</span>'
+            f"{action_html(n)}</summary>"
+            + ("" if leaf_shortcut else f'<ol class="versions latest">{latest}</ol>')
+            + history
             + (f'<ul class="tree">{kids}</ul>' if kids else "")
             + "</details></li>"
         )

@@ -99,6 +99,8 @@ class Episode:
     elapsed_ms: float
     #: the ``tool_calls`` rows, in the order they were made ([] for a run without any)
     tool_calls: list[dict[str, Any]] = field(default_factory=list)
+    #: the ``evaluations`` row of a judged coding episode ([] for any other)
+    evaluations: list[dict[str, Any]] = field(default_factory=list)
 
 
 def find_episode(snap: Snapshot, episode_id: str, run_id: str | None) -> tuple[str, str]:
@@ -141,6 +143,7 @@ def episode(snap: Snapshot, run_id: str, episode_id: str) -> Episode:
         with_tool_fields(mine("viewer_messages"), mine("viewer_message_tools")),
         0.0,
         mine("viewer_tool_calls"),
+        mine("viewer_evaluations"),
     )
     out.elapsed_ms = (time.perf_counter() - t0) * 1000
     return out

@@ -8,31 +8,32 @@ from typing import Any
 from reports.webview.episodes import EpisodePage
 from reports.webview.layout import episode_url, esc, layout, num, url, usd
 from reports.webview.listquery import MAX_QUERY_CHARS, PAGE_SIZES, SORTABLE, ListQuery
+from reports.webview.names import run_names, short_episode
 from reports.webview.snapshot import FILTERS, Snapshot
 
+#: the list's columns, the outcome first (issue 36 item 8: at 1400 px a researcher sees what happened before
+#: which episode it was). Split and task are not columns: the instance id repeats them (both stay filters);
+#: nor is the arm's label, which the method column shows (``arm`` is the label).
 _HEADERS = (
+    ("success", "success"),
+    ("end_reason", "end"),
+    ("mode", "mode"),
+    ("steps", "steps"),
+    ("llm_calls", "calls"),
+    ("cost_usd", "cost"),
     ("episode_id", "episode"),
     ("run_id", "run"),
     ("model_label", "model"),
     ("arm", "method"),
-    ("label", "label"),
-    ("env_split", "split"),
-    ("task", "task"),
     ("instance_id", "instance"),
-    ("sampling_seed", "sampling seed"),
+    ("sampling_seed", "seed"),
     ("attempt", "attempt"),
-    ("end_reason", "end"),
-    ("mode", "mode"),
-    ("success", "success"),
-    ("steps", "steps"),
-    ("llm_calls", "calls"),
-    ("cost_usd", "cost"),
 )
 
 
-def _filter_form(snap: Snapshot, lq: ListQuery) -> str:
-    """The filter form: one select per filter the runs have, the message search, latest-only and the page size
-    (the sort carried in hidden fields)."""
+def _filter_form(snap: Snapshot, lq: ListQuery, names: dict[str, str]) -> str:
+    """The filter form: one select per filter the runs have (a run by its name, ``names``), the message search,
+    latest-only and the page size (the sort carried in hidden fields)."""
     selects = []
     for param, _col in FILTERS:
         if param not in snap.options:
@@ -40,7 +41,8 @@ def _filter_form(snap: Snapshot, lq: ListQuery) -> str:
         opts = snap.options[param] if param != "success" else ["true", "false"]
         chosen = lq.filters.get(param, "")
         vals = [str(v).lower() if isinstance(v, bool) else str(v) for v in opts]
-        items = "".join(f'<option value="{esc(v)}"{" selected" if v == chosen else ""}>{esc(v)}</option>' for v in vals)
+        shown = (lambda v: names.get(v, v)) if param == "run" else (lambda v: v)
+        items = "".join(f'<option value="{esc(v)}"{" selected" if v == chosen else ""}>{esc(shown(v))}</option>' for v in vals)
         selects.append(
             f'<label>{esc(param.replace("_", " "))} <select name="{param}" class="filter"><option value="">any</option>{items}</select></label>'
         )
@@ -77,20 +79,26 @@ def _head(cols: list[tuple[str, str]], lq: ListQuery, state: dict[str, Any]) -> 
     return head
 
 
-def _cell(k: str, r: dict[str, Any], lq: ListQuery) -> str:
-    """One cell of an episode row: the id links to the episode (at its first search hit), success is a badge."""
+def _cell(k: str, r: dict[str, Any], lq: ListQuery, names: dict[str, str]) -> str:
+    """One cell of an episode row: the id (shortened, whole in its title) links to the episode (at its first
+    search hit), the run is its name, success is a badge."""
     v = r.get(k)
     if k == "episode_id":
         extra = {"hit": r["first_hit"]} if lq.q and r.get("first_hit") is not None else {}
         return (
-            f'<td><a class="ep" href="{esc(episode_url(r["run_id"], str(v), **extra))}">{esc(v)}</a>'
+            f'<td class="id"><a class="ep" href="{esc(episode_url(r["run_id"], str(v), **extra))}" '
+            f'data-episode="{esc(v)}" title="{esc(v)}">{esc(short_episode(str(v)))}</a>'
             + ("" if r.get("is_latest", True) else ' <span class="tag">superseded</span>')
             + "</td>"
         )
+    if k == "run_id":
+        return f'<td title="{esc(v)}">{esc(names.get(str(v), v))}</td>'
     if k == "success":
         return f'<td><span class="badge {"ok" if v else "fail"}">{"yes" if v else "no"}</span></td>'
     if k == "cost_usd":
         return f'<td class="num">{usd(v)}</td>'
+    if k == "instance_id":
+        return f'<td class="long">{esc(v if v is not None else "–")}</td>'
     if isinstance(v, (int, float)) and not isinstance(v, bool):
         return f'<td class="num">{num(v)}</td>'
     return f"<td>{esc(v if v is not None else '–')}</td>"
@@ -116,12 +124,13 @@ def episodes_page(snap: Snapshot, page: EpisodePage) -> str:
     lq = page.query
     state = {**lq.filters, "q": lq.q, "per": lq.per if lq.per != 50 else None, "latest": "1" if lq.latest else None}
     sort_state = {"sort": lq.sort if lq.sort != "episode_id" else None, "dir": "desc" if lq.desc else None}
-    form = _filter_form(snap, lq)
+    names = run_names(snap)
+    form = _filter_form(snap, lq, names)
     cols = [(k, h) for k, h in _HEADERS if k in snap.columns]
     head = _head(cols, lq, state)
     body_rows = []
     for r in page.rows:
-        cells = [_cell(k, r, lq) for k, _ in cols]
+        cells = [_cell(k, r, lq, names) for k, _ in cols]
         if lq.q:
             cells.append(f'<td class="num">{num(r["hits"])}</td>')
         body_rows.append(f'<tr data-episode="{esc(r["episode_id"])}" data-run="{esc(r["run_id"])}">{"".join(cells)}</tr>')

@@ -317,3 +317,16 @@ def test_format_table_cuts_wide_cells():
         "y" + " " * 59 + " | 1.23457",
         "(2 rows)",
     ]
+
+
+def test_html_report_opens_with_the_papers_tables_and_success_rates(report_dir):
+    """Issue 36 item 12: the HTML page opens with the paper's tables and the success rates; the overview (what
+    the report covers, the runs) comes after them, folded; the markdown keeps the report's order."""
+    html = (report_dir / "report.html").read_text()
+    order = re.findall(r'<section id="s-([a-z]+)">', html)
+    assert order[:3] == ["paper", "success", "overview"]
+    assert re.findall(r'<li><a href="#s-([a-z]+)">', html)[: len(order)] == order  # the contents list, in page order
+    assert re.search(r'<section id="s-overview"><details class="folded"><summary><h2>Overview</h2></summary>', html)
+    assert '<section id="s-paper"><h2>' in html and '<section id="s-success"><h2>' in html  # not folded
+    md = (report_dir / "report.md").read_text()
+    assert md.index("## Overview") < md.index("## Success rates") < md.index("## The paper's tables")

@@ -301,3 +301,26 @@ def test_a_version_4_run_is_continued_and_old_and_new_messages_read_as_one_table
         assert run_query(con, q).rows == [(11, 1, 1, 1)]
     finally:
         con.close()
+
+
+def test_recap_show_previews_a_tool_result_by_its_output_not_the_prompt_around_it():
+    """Issue 36 item 7: ReCAP's tool message wraps the command's output in its prompt (``Latest observation:``
+    first); ``recap show`` previews the output: the first line of the call's step's observation."""
+    from pipeline.show import tool_call_lines
+    from recap.recap_tool_prompts import action_taken_prompt
+
+    output = "\n3 passed in 0.12s\nok"
+    content = action_taken_prompt(observation=output, task="Fix add", subtasks=["run the tests"])
+    assert content.splitlines()[0] != "3 passed in 0.12s"  # the template's first line is not the output's
+    calls = json.dumps([{"id": "c1", "type": "function", "function": {"name": "bash", "arguments": '{"command": "pytest"}'}}])
+    messages = [
+        {"seq": 4, "role": "assistant", "tool_calls": calls, "tool_call_id": None, "content": ""},
+        {"seq": 5, "role": "tool", "tool_calls": None, "tool_call_id": "c1", "content": content},
+    ]
+    row = {
+        "index": 0, "step_index": 2, "call_id": "c1", "message_seq": 4, "name": "bash", "arguments": '{"command": "pytest"}',
+        "valid": True, "error": "", "exit_code": 0, "duration_s": 0.5, "output_bytes": 24, "timed_out": False,
+    }  # fmt: skip
+    steps = [{"index": 2, "observation": output}]
+    lines = [t.plain for t in tool_call_lines([row], messages, steps)]
+    assert lines[-1] == "  #5 tool [c1] (exit 0 · 0.50 s · 24 bytes) 3 passed in 0.12s"

@@ -56,3 +56,35 @@ def table(run_dirs, name: str) -> list[dict]:
         for f in sorted((Path(d) / name).glob("part-*.parquet")):
             rows.extend(pq.read_table(f).to_pylist())
     return rows
+
+
+LONG_SWEEP = """run: view-long
+output: {out}
+models:
+  - model: offline/expert
+    label: expert
+    options: {{seed: 3}}
+methods:
+  - method: recap
+environments:
+  - benchmark: robotouille
+    tasks: [asynchronous/9]
+    limit: 1
+seeds: [0]
+workers: 1
+"""
+
+
+@pytest.fixture(scope="session")
+def long_run(ray_address: str, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One ReCAP episode of about 100 calls (issue 36 item 9's page): offline/expert on Robotouille's longest
+    asynchronous task, written by ``recap run``'s driver like the runs above (a few seconds more)."""
+    from pipeline.driver import Driver, prepare
+    from pipeline.gateway_backend import make_backend
+    from pipeline.spec import parse_spec
+
+    folder = tmp_path_factory.mktemp("view_long") / "long"
+    text = LONG_SWEEP.format(out=folder)
+    spec = parse_spec(text, "sweep.yaml")
+    assert Driver(prepare(spec, text), make_backend(spec), progress="off").run().exit_code() == 0
+    return folder

@@ -115,7 +115,7 @@ def test_episode_tree_and_call_window(viewer, browser, real_runs, tmp_path):
     mine = {n["node_id"]: n for n in nodes if n["episode_id"] == eid}
     # open it from the list, as a user would
     browser.goto(viewer.url + "episodes?method=recap")
-    browser.eval(f"Array.from(document.querySelectorAll('a.ep')).find(a => a.textContent === {json.dumps(eid)}).click()")
+    browser.eval(f"Array.from(document.querySelectorAll('a.ep')).find(a => a.dataset.episode === {json.dumps(eid)}).click()")
     browser.wait_ready(viewer.url + "episode?")
     assert browser.eval("document.getElementById('episode').dataset.episode") == eid
     shot_ok(browser, tmp_path / "episode.png")
@@ -125,13 +125,31 @@ def test_episode_tree_and_call_window(viewer, browser, real_runs, tmp_path):
     assert closed == sum(1 for n in mine.values() if n["depth"] > 0) and closed > 0
     browser.eval("document.getElementById('expand-all').click()")
     assert browser.eval("document.querySelectorAll('#tree details.node:not([open])').length") == 0
-    # every version of every node, with its subtasks, in order
+    # each node's latest version on show (a leaf that is its own action shows none), every version of a
+    # refined node, with its subtasks, in order, in its folded timeline
     shown = browser.eval(
         "Object.fromEntries(Array.from(document.querySelectorAll('#tree details.node')).map(d => [d.dataset.node, "
-        "Array.from(d.querySelector(':scope > ol.versions').children).map(v => "
-        "Array.from(v.querySelectorAll('ol.subtasks > li')).map(li => li.textContent))]))"
+        "[Array.from(d.querySelectorAll(':scope > ol.versions.latest > li')).map(v => "
+        "Array.from(v.querySelectorAll('ol.subtasks > li')).map(li => li.textContent)), "
+        "Array.from(d.querySelectorAll(':scope > details.history > ol.versions > li')).map(v => "
+        "Array.from(v.querySelectorAll('ol.subtasks > li')).map(li => li.textContent))]]))"
     )
-    assert shown == {str(k): [list(v["subtasks"]) for v in n["versions"]] for k, n in mine.items()}
+
+    def own_action(n: dict) -> bool:
+        return (
+            len(n["versions"]) == 1
+            and n["versions"][0]["call_index"] is None
+            and list(n["versions"][0]["subtasks"]) == [n["task"]]
+        )
+
+    assert shown == {
+        str(k): [
+            [] if own_action(n) else [list(n["versions"][-1]["subtasks"])],
+            [list(v["subtasks"]) for v in n["versions"]] if len(n["versions"]) > 1 else [],
+        ]
+        for k, n in mine.items()
+    }
+    assert browser.eval("document.querySelectorAll('#tree details.history[open]').length") == 0
 
     # the call with the longest window: its exact messages, in window order
     calls = [c for c in table(real_runs, "llm_calls") if c["episode_id"] == eid]
@@ -223,4 +241,115 @@ def test_report_episode_ids_link_to_the_viewer(viewer, browser, real_runs, tmp_p
     # served by the viewer itself (Runs page -> report): the links use its origin
     browser.goto(viewer.url + "report?run=" + run_id(a_dir), "data-report-ready")
     browser.wait_for(f"document.body.getAttribute('data-viewer') === '{viewer.url}'")
+    no_errors(browser)
+
+
+#: where the screenshots of issue 36's "Must show" are copied for the integrator (outside the repository), when set
+SHOTS_ENV = "RECAP_VIEW_SHOTS"
+
+
+def keep_shot(path: Path) -> None:
+    """Copy a screenshot to the folder $RECAP_VIEW_SHOTS names (nothing when unset)."""
+    import os
+
+    if os.environ.get(SHOTS_ENV):
+        dest = Path(os.environ[SHOTS_ENV])
+        dest.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, dest / path.name)
+
+
+@pytest.fixture(scope="module")
+def wide_browser():
+    b = Browser(CHROMIUM, width=1400, height=900)
+    yield b
+    b.close()
+
+
+@pytest.fixture(scope="module")
+def long_viewer(real_runs, long_run):
+    server, thread = serve([*real_runs, long_run], 0, poll_s=0)
+    yield server
+    stop(server, thread)
+
+
+OUTCOME = ("success", "end", "mode", "steps", "calls", "cost")
+
+
+def test_episode_list_outcome_inside_1400px(long_viewer, wide_browser, real_runs, long_run, tmp_path):
+    """Issue 36 item 8: at 1400 px the outcome columns (success, end, mode, steps, calls, cost) come first and
+    every cell of them lies inside the viewport, with a 100-call Robotouille episode's long instance id in the
+    list; runs are named, not hex ids, in the list and its run filter."""
+    browser = wide_browser
+    browser.goto(long_viewer.url + "episodes")
+    heads = browser.eval(
+        "Array.from(document.querySelectorAll('#episodes thead th')).map(t => t.textContent.replace(/ [▲▼]$/, ''))"
+    )
+    assert tuple(heads[: len(OUTCOME)]) == OUTCOME
+    right = browser.eval(
+        f"Math.max(...Array.from(document.querySelectorAll('#episodes tr')).map(r => "
+        f"r.cells[{len(OUTCOME) - 1}].getBoundingClientRect().right))"
+    )
+    assert 0 < right <= 1400
+    assert browser.eval("document.documentElement.scrollWidth") <= 1400  # nothing at all off-screen to the right
+    names = {run_id(d): f"view-{d.name}" for d in (*real_runs, long_run)}
+    runs_shown = browser.eval(
+        "Array.from(document.querySelectorAll('#episodes tbody tr[data-episode]')).map(r => "
+        "[r.dataset.run, r.cells[Array.from(document.querySelectorAll('#episodes thead th')).findIndex(t => t.textContent === 'run')].textContent])"
+    )
+    assert runs_shown and all(name == names[rid] for rid, name in runs_shown)
+    options = browser.eval(
+        "Array.from(document.querySelectorAll('select[name=run] option')).slice(1).map(o => [o.value, o.textContent])"
+    )
+    assert sorted(options) == sorted([rid, n] for rid, n in names.items())
+    path = tmp_path / "episodes-1400px.png"
+    browser.eval("window.scrollTo(0, 0)")
+    img = read_png(browser.screenshot(path))
+    assert img[:2] == (1400, 900)
+    keep_shot(path)
+    no_errors(browser)
+
+
+def test_long_recap_episode_one_screen_per_subtree(long_viewer, wide_browser, long_run, tmp_path):
+    """Issue 36 item 9: a ReCAP episode of about 100 calls; each node shows its latest version and its children,
+    its older versions folded into its timeline, so that every subtree under the root, opened whole, fits one
+    900 px screen; the root's timeline lists every version in call order."""
+    browser = wide_browser
+    (ep,) = table([long_run], "episodes")
+    assert ep["method"] == "recap" and ep["llm_calls"] >= 90
+    nodes = {n["node_id"]: n for n in table([long_run], "tree_nodes")}
+    root = next(n for n in nodes.values() if n["parent_id"] is None)
+    assert len(root["versions"]) > 1
+    browser.goto(long_viewer.url + f"episode?run={run_id(long_run)}&id={ep['episode_id']}")
+    browser.eval("document.getElementById('expand-all').click()")
+    heights = browser.eval(
+        "Array.from(document.querySelectorAll('#tree ul.root > li > details.node > ul.tree > li > details.node'))"
+        ".map(d => [d.dataset.node, d.getBoundingClientRect().height])"
+    )
+    assert sorted(int(k) for k, _ in heights) == sorted(k for k, n in nodes.items() if n["parent_id"] == root["node_id"])
+    assert all(0 < h <= 900 for _, h in heights), heights
+    # the root: its latest version, then its first child straight after (one version, not every one)
+    latest = browser.eval(
+        "Array.from(document.querySelectorAll('#tree ul.root > li > details.node > ol.versions.latest > li')).map(v => v.dataset.version)"
+    )
+    assert latest == [str(root["versions"][-1]["version"])]
+    timeline = browser.eval(
+        "Array.from(document.querySelectorAll('#tree ul.root > li > details.node > details.history > ol.versions > li'))"
+        ".map(v => v.querySelector('.tag').textContent)"
+    )
+    purpose = {c["call_index"]: c["purpose"] for c in table([long_run], "llm_calls")}
+    assert timeline == [
+        (f"call {v['call_index']} ({purpose[v['call_index']]})" if v["call_index"] is not None else "shortcut")
+        + f" → v{v['version']}"
+        for v in root["versions"]
+    ]
+    first_child = browser.eval(
+        "document.querySelector('#tree ul.root > li > details.node > ul.tree > li').getBoundingClientRect().top"
+    )
+    tree_top = browser.eval("document.getElementById('tree').getBoundingClientRect().top")
+    assert first_child - tree_top < 300  # the root's 5+ versions no longer stand between it and its first child
+    browser.eval("document.getElementById('tree').scrollIntoView()")
+    path = tmp_path / "recap-100-calls-1400px.png"
+    img = read_png(browser.screenshot(path))
+    assert img[:2] == (1400, 900)
+    keep_shot(path)
     no_errors(browser)
