@@ -42,7 +42,10 @@ def dsb(docker_ready: str, repo: Repo, labels: dict[str, str]) -> Iterator[Sandb
 def test_container_is_labelled_without_network_and_limited(dsb: Sandbox, labels: dict[str, str]) -> None:
     (c,) = _containers(labels)
     attrs = c.attrs  # type: ignore[attr-defined]
-    assert attrs["Config"]["Labels"] == labels
+    import docker as sdk
+
+    image_labels = sdk.from_env().images.get(attrs["Config"]["Image"]).labels or {}
+    assert attrs["Config"]["Labels"] == {**image_labels, **labels}  # ours on top of what the image carries (its recipe)
     hc = attrs["HostConfig"]
     lim = SandboxLimits()
     assert (hc["NetworkMode"], hc["Memory"], hc["PidsLimit"]) == ("none", lim.memory_bytes, lim.pids)
