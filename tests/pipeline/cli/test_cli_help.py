@@ -26,6 +26,7 @@ PATHS = [
     ("env", "list"),
     ("env", "play"),
     ("env", "replay"),
+    ("env", "standin"),
 ]
 
 
