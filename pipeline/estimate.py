@@ -23,13 +23,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from rich.markup import escape
-from rich.table import Table
 
 from pipeline.spec import SweepSpec
 from pipeline.summary import model_label
+from pipeline.tables import Col, print_fitted
 from pipeline.units import Plan
 from recap.agent import Agent
 from recap.methods import METHODS, method_classes
+from recap.plural import count
 from workers.envs.registry import get_benchmark, make_env
 from workers.llm.pricing import PriceError, resolve_price
 
@@ -192,9 +193,15 @@ def render(plan: Plan, groups: list[GroupEstimate], needs: Sequence[str], consol
     whether the run cap fits the cost range, and what a run still needs on this machine
     (``needs``: images, a daemon; ``recap run`` refuses until they are here)."""
 
-    t = Table(title=escape(f"estimate for run {plan.spec.run}: {len(plan.units)} units"))
-    for col in ("method", "model", "units", "calls", "tokens", "cost $"):
-        t.add_column(col, justify="left" if col in ("method", "model") else "right")
+    cols = (
+        Col("method", "left"),
+        Col("model", "left"),
+        Col("units", drop=3),
+        Col("calls", drop=2),
+        Col("tokens", drop=1),
+        Col("cost $", drop=4),
+    )
+    rows: list[list[str]] = []
     total_cost = Range()
     unknown = False
     for g in groups:
@@ -203,19 +210,19 @@ def render(plan: Plan, groups: list[GroupEstimate], needs: Sequence[str], consol
             total_cost.add(g.cost.low, g.cost.high)
         else:
             unknown = True
-        t.add_row(
-            escape(g.method),
-            escape(model_label(g.model, g.test_double)),
-            str(g.units),
-            f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
-            f"{g.tokens.low:,.0f} - {g.tokens.high:,.0f}",
-            cost,
+        rows.append(
+            [
+                g.method,
+                model_label(g.model, g.test_double),
+                str(g.units),
+                f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
+                f"{g.tokens.low:,.0f} - {g.tokens.high:,.0f}",
+                cost,
+            ]
         )
-    console.print(t)
+    print_fitted(console, f"estimate for run {plan.spec.run}: {count(len(plan.units), 'unit')}", cols, rows)
     calls = sum(g.calls.low for g in groups), sum(g.calls.high for g in groups)
-    line = (
-        f"total: {len(plan.units)} units, {calls[0]:,.0f} - {calls[1]:,.0f} calls, ${total_cost.low:.2f} - ${total_cost.high:.2f}"
-    )
+    line = f"total: {count(len(plan.units), 'unit')}, {calls[0]:,.0f} - {calls[1]:,.0f} calls, ${total_cost.low:.2f} - ${total_cost.high:.2f}"
     if unknown:
         line += " (plus models without a price)"
     console.print(line)
