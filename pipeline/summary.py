@@ -30,6 +30,7 @@ from rich.markup import escape
 from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue, run_spend
 from pipeline.store import PLAN_FILE, RunStore
 from pipeline.tables import Col, print_fitted
+from recap.plural import count
 from schemas.parts import BadPart, inspect_parts, read_parts
 
 TEST_DOUBLE_LABEL = " (test double)"
@@ -118,7 +119,7 @@ class StatusReport:
             return None
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.failed_kinds.items()))
         return (
-            f"{self.failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
+            f"{count(self.failed, 'unit')} ended in an infrastructure failure ({kinds}); fix the cause, "
             f"then retry them with: recap resume {self.location}"
         )
 

@@ -25,8 +25,8 @@ def plural(n: float, noun: str, many: str | None = None) -> str:
 
 
 def count(n: int, noun: str, many: str | None = None) -> str:
-    """``"1 file"``, ``"2 files"``, ``"1,234 episodes"``: ``n`` (thousands separated) and its noun.
+    """``"1 file"``, ``"2 files"``, ``"1234 episodes"``: ``n`` and its noun.
     A noun phrase (``"instance image"``) takes its plural on its last word."""
     head, _, last = noun.rpartition(" ")
     word = plural(n, last, many)
-    return f"{n:,} {head + ' ' if head else ''}{word}"
+    return f"{n} {head + ' ' if head else ''}{word}"

@@ -16,6 +16,7 @@ from typing import TextIO
 from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError
 from pipeline.cli.locations import Resolver, local_run_dir, run_folders
 from pipeline.errors import one_line
+from recap.plural import count
 from reports.build import FORMATS, ReportOptions, build_report, parse_formats, write_report
 from reports.output_folder import OutputFolderError, check_report_folder
 from reports.viewer import DEFAULT_EPISODES
@@ -119,7 +120,7 @@ def report_main(
         return 1
     for line in skipped:
         print(f"warning: {line}", file=err)
-    print(f"wrote {len(written)} files to {out_dir} ({', '.join(formats)})", file=out)
+    print(f"wrote {count(len(written), 'file')} to {out_dir} ({', '.join(formats)})", file=out)
     for name in ("report.html", "report.md"):
         if (out_dir / name).exists() and name.split(".")[1] in formats:
             print(f"  {out_dir / name}", file=out)

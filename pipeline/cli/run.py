@@ -227,24 +227,28 @@ def _execute(prepared: Prepared, args: argparse.Namespace, command: str, backend
             styled(
                 # the spend figure is the summary's above (the ledger journal's), not the one
                 # of the moment the cap stopped the run: calls in flight settled after it
-                f"stopped: {summary.stopped} (spent {report.spend_line}); {summary.not_started} units not started, "
-                f"{summary.budget_stopped} episodes ended budget_exhausted this session",
+                f"stopped: {summary.stopped} (spent {report.spend_line}); {count(summary.not_started, 'unit')} not started, "
+                f"{count(summary.budget_stopped, 'episode')} ended budget_exhausted this session",
                 "yellow",
             )
         )
         out.print(plain(f"continue with a higher cap: recap resume {location} --run-cap <USD>"))
     if summary.interrupted:
-        cut = f" ({summary.cut} episodes in flight were cut and run again on resume)" if summary.cut else ""
+        cut = (
+            f" ({count(summary.cut, 'episode')} in flight {'was' if summary.cut == 1 else 'were'} cut and run again on resume)"
+            if summary.cut
+            else ""
+        )
         out.print(styled(f"interrupted{cut}; continue with: recap resume {location}", "yellow"))
     if summary.retried_errors:
         out.print(
             plain(
-                f"--retry errors: {summary.retried_errors} units that had ended in env_error or llm_error "
+                f"--retry errors: {count(summary.retried_errors, 'unit')} that had ended in env_error or llm_error "
                 "were queued again (their earlier rows are kept)"
             )
         )
     if summary.abandoned:
-        text = f"{summary.abandoned} units gave up after {prepared.spec.max_attempts} failed attempts (see the events table)"
+        text = f"{count(summary.abandoned, 'unit')} gave up after {prepared.spec.max_attempts} failed attempts (see the events table)"
         out.print(styled(text, "red"))
     out.print(plain(f"run folder: {location}   report: recap report {location}"))
     return summary.exit_code()
