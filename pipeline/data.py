@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from recap.plural import count
 from workers.envs import data_paths
 from workers.envs.data_sources import DataFolder, Group
 from workers.envs.registry import data_folders
@@ -137,7 +138,7 @@ class CheckResult:
 
     def line(self) -> str:
         where = f"{self.folder} ({self.source})" if self.source else str(self.folder)
-        head = f"{self.bench.name}: {where}: {self.checked} files checked: "
+        head = f"{self.bench.name}: {where}: {count(self.checked, 'file')} checked: "
         n_missing = sum(self.missing.values())
         optional = ""
         if self.optional_missing:

@@ -39,6 +39,7 @@ from pipeline.data import (
     write_manifest,
 )
 from pipeline.errors import one_line
+from recap.plural import count
 from workers.envs import data_paths
 from workers.envs.data_sources import DataFolder, Source, is_url
 
@@ -142,7 +143,7 @@ def _git_archive(source: Source, mirror: str | None, paths: list[str], downloads
         git_dir = found
     _git(
         ["--git-dir", str(git_dir), "archive", "--format=tar.gz", "-o", str(target), source.ref, "--", *paths],
-        f"read {len(paths)} files at {source.ref[:12]} from {location}",
+        f"read {count(len(paths), 'file')} at {source.ref[:12]} from {location}",
     )
     return target, f"{location}@{source.ref[:12]}"
 
@@ -252,7 +253,7 @@ def _generate(bench: DataFolder, generate: Callable[[Path], list[str]], data: Pa
     except Exception as exc:  # any failure of the generator is a failed fetch with one line, not a traceback
         raise DataError(f"cannot generate the {bench.title} instances: {one_line(exc) or type(exc).__name__}") from None
     if written != expected:
-        raise DataError(f"the generator wrote {len(written)} files, expected {len(expected)}")
+        raise DataError(f"the generator wrote {count(len(written), 'file')}, expected {len(expected)}")
     got = {}
     for rel in sorted(expected):
         got[rel] = sha256_file(data / rel)
@@ -302,7 +303,7 @@ def fetch_one(
             raise DataError(f"{dest} exists and is not a folder")
         result = check_folder(bench, dest, only=lambda g: g.fetchable)
         if result.ok:
-            print(f"{bench.name}: {dest} is already there and verifies ({result.checked} files)", file=out)
+            print(f"{bench.name}: {dest} is already there and verifies ({count(result.checked, 'file')})", file=out)
             return
         raise DataError(
             f"{dest} exists and does not verify ({sum(result.missing.values())} missing, "
@@ -329,7 +330,7 @@ def fetch_one(
                     folder.rmdir()
                 except OSError:
                     break
-    print(f"{bench.name}: {dest}: {len(got)} files fetched and verified", file=out)
+    print(f"{bench.name}: {dest}: {count(len(got), 'file')} fetched and verified", file=out)
     if bench.after_fetch:
         print(f"{bench.name}: note: {bench.after_fetch}", file=out)
     _note_precedence(bench, dest, out)
@@ -342,7 +343,7 @@ def _fetch_loaded(bench: DataFolder, dest: Path, from_file: str | None, subset: 
         got = _stage_loaded(bench, from_file, subset, Path(tmp), out)
         if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
             if dest.is_dir() and _same_as(dest, got):
-                print(f"{bench.name}: {dest} is already there and holds the same records ({len(got)} files)", file=out)
+                print(f"{bench.name}: {dest} is already there and holds the same records ({count(len(got), 'file')})", file=out)
                 return
             raise DataError(f"{dest} exists and holds other files; remove it or pass another --dest")
         created = [p for p in [dest.parent, *dest.parent.parents] if not p.exists()]
@@ -365,7 +366,7 @@ def _fetch_loaded(bench: DataFolder, dest: Path, from_file: str | None, subset: 
                         folder.rmdir()
                     except OSError:
                         break
-    print(f"{bench.name}: {dest}: {len(got)} files stored and verified", file=out)
+    print(f"{bench.name}: {dest}: {count(len(got), 'file')} stored and verified", file=out)
     if bench.after_fetch:
         print(f"{bench.name}: note: {bench.after_fetch}", file=out)
     _note_precedence(bench, dest, out)

@@ -18,18 +18,20 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from rich.markup import escape
-from rich.table import Table
 
 from pipeline.spec import SweepSpec
 from pipeline.summary import model_label
+from pipeline.tables import Col, print_fitted
 from pipeline.units import Plan
 from recap.agent import Agent
 from recap.methods import METHODS, method_classes
-from workers.envs.registry import make_env
+from recap.plural import count
+from workers.envs.registry import get_benchmark, make_env
 from workers.llm.pricing import PriceError, resolve_price
 
 COMPLETION_TOKENS = (60, 250)
@@ -54,18 +56,26 @@ class InstanceShape:
 
 
 def measure_instance(instance_id: str, step_multiplier: float, options: dict[str, Any]) -> InstanceShape:
-    """Build ``instance_id`` once and measure its :class:`InstanceShape` (4 characters per token).
-    Any failure (data missing, an optional package absent) gives default figures with
-    ``measured=False``, so one instance never fails the estimate."""
+    """The :class:`InstanceShape` of ``instance_id`` (4 characters per token): from the figures its
+    benchmark gives without playing it (:meth:`~workers.envs.registry.Benchmark.estimate_figures`:
+    ALFWorld's games take seconds each to build, a coding task would open a container), else by
+    making and resetting it once. Any failure (data missing, an optional package absent) gives
+    default figures with ``measured=False``, so one instance never fails the estimate."""
     try:
+        figures = get_benchmark(instance_id.split("/", 1)[0]).estimate_figures(instance_id, options)
+        if figures is not None:
+            rules, obs = _tokens(figures.rules), max(1, (figures.observation_chars + 3) // 4)
+            demo = 3 * (rules + obs) if figures.demonstration else 0
+            optimal = figures.optimal_steps or DEFAULT_OPTIMAL
+            return InstanceShape(optimal, figures.max_steps, rules + obs + demo + 200, obs, True)
         env = make_env(instance_id, step_multiplier=step_multiplier, **options)
         try:
             r = env.reset()
-            rules = env.rules()
+            rules_text = env.rules()
             optimal = env.optimal_steps or DEFAULT_OPTIMAL
             obs = _tokens(r.observation)
-            demo = 3 * (_tokens(rules) + obs) if env.demonstration() is not None else 0
-            return InstanceShape(optimal, env.max_steps, _tokens(rules) + obs + demo + 200, obs, True)
+            demo = 3 * (_tokens(rules_text) + obs) if env.demonstration() is not None else 0
+            return InstanceShape(optimal, env.max_steps, _tokens(rules_text) + obs + demo + 200, obs, True)
         finally:
             env.close()
     except Exception:
@@ -125,6 +135,11 @@ def _prompt_total(calls: float, shape: InstanceShape, window: int) -> float:
     return calls * shape.pinned_tokens + per_msg * (ramp * ramp + full * window)
 
 
+def instances_to_measure(plan: Plan) -> int:
+    """How many (instance, step multiplier) pairs :func:`estimate` measures: the progress line's count."""
+    return len({(u.instance_id, float(u.step_multiplier)) for u in plan.units})
+
+
 def estimate(plan: Plan) -> list[GroupEstimate]:
     """One :class:`GroupEstimate` per (method label, model label) of the plan, in the order first
     seen. Calls come from the method's call shape and the instance's steps, clipped to
@@ -173,13 +188,20 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
     return list(groups.values())
 
 
-def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
-    """Print the estimate on ``console`` (a rich Console): one row per group, the run's totals, and
-    whether the run cap fits the cost range."""
+def render(plan: Plan, groups: list[GroupEstimate], needs: Sequence[str], console: Any) -> None:
+    """Print the estimate on ``console`` (a rich Console): one row per group, the run's totals,
+    whether the run cap fits the cost range, and what a run still needs on this machine
+    (``needs``: images, a daemon; ``recap run`` refuses until they are here)."""
 
-    t = Table(title=escape(f"estimate for run {plan.spec.run}: {len(plan.units)} units"))
-    for col in ("method", "model", "units", "calls", "tokens", "cost $"):
-        t.add_column(col, justify="left" if col in ("method", "model") else "right")
+    cols = (
+        Col("method", "left"),
+        Col("model", "left"),
+        Col("units", drop=3),
+        Col("calls", drop=2),
+        Col("tokens", drop=1),
+        Col("cost $", drop=4),
+    )
+    rows: list[list[str]] = []
     total_cost = Range()
     unknown = False
     for g in groups:
@@ -188,19 +210,19 @@ def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
             total_cost.add(g.cost.low, g.cost.high)
         else:
             unknown = True
-        t.add_row(
-            escape(g.method),
-            escape(model_label(g.model, g.test_double)),
-            str(g.units),
-            f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
-            f"{g.tokens.low:,.0f} - {g.tokens.high:,.0f}",
-            cost,
+        rows.append(
+            [
+                g.method,
+                model_label(g.model, g.test_double),
+                str(g.units),
+                f"{g.calls.low:,.0f} - {g.calls.high:,.0f}",
+                f"{g.tokens.low:,.0f} - {g.tokens.high:,.0f}",
+                cost,
+            ]
         )
-    console.print(t)
+    print_fitted(console, f"estimate for run {plan.spec.run}: {count(len(plan.units), 'unit')}", cols, rows)
     calls = sum(g.calls.low for g in groups), sum(g.calls.high for g in groups)
-    line = (
-        f"total: {len(plan.units)} units, {calls[0]:,.0f} - {calls[1]:,.0f} calls, ${total_cost.low:.2f} - ${total_cost.high:.2f}"
-    )
+    line = f"total: {count(len(plan.units), 'unit')}, {calls[0]:,.0f} - {calls[1]:,.0f} calls, ${total_cost.low:.2f} - ${total_cost.high:.2f}"
     if unknown:
         line += " (plus models without a price)"
     console.print(line)
@@ -208,3 +230,7 @@ def render(plan: Plan, groups: list[GroupEstimate], console: Any) -> None:
     if cap is not None:
         verdict = "fits" if total_cost.high <= cap else ("may be reached" if total_cost.low <= cap else "will be reached")
         console.print(f"run cap ${cap:.2f}: {verdict}")
+    if needs:  # one per line, never wrapped: each is a phrase to read (and grep) whole
+        console.print("a run still needs (recap run refuses until then):", soft_wrap=True)
+        for need in needs:
+            console.print(escape(f"  - {need}"), soft_wrap=True)

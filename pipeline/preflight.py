@@ -264,22 +264,36 @@ def _local_folder(output: str) -> Path | None:
     return None if "://" in output else Path(output)
 
 
-def check_benchmarks(plan: Plan) -> None:
+def check_benchmarks(plan: Plan, needs: list[str] | None = None) -> set[tuple[str, str]]:
     """Each benchmark's own check of all its instances at once (:meth:`Benchmark.preflight`), per
-    ``environments[]`` entry (its options); SpecError (one line) naming the entry otherwise."""
+    ``environments[]`` entry (its options); SpecError (one line) naming the entry otherwise.
+
+    With ``needs`` (``recap estimate``), what an entry still needs on this machine
+    (:meth:`Benchmark.run_needs`: images, a daemon) is added to it, prefixed with the entry,
+    instead of refusing; returns the (benchmark, canonical options) of those entries, whose
+    environments cannot be opened here."""
     groups: dict[tuple[str, str], list[Unit]] = {}
     for u in plan.units:
         groups.setdefault((u.benchmark, _canonical(u.env_options)), []).append(u)
     run_folder = _local_folder(plan.spec.output)
-    for (bench, _), units in groups.items():
+    lacking: set[tuple[str, str]] = set()
+    for (bench, canon), units in groups.items():
         ids = list(dict.fromkeys(u.instance_id for u in units))
         benchmark, options = registry.get_benchmark(bench), dict(units[0].env_options or {})
+        if needs is not None:
+            missing = benchmark.run_needs(ids, options)
+            if missing:
+                where = f"environments[{_env_index(plan.spec, bench, units[0].env_options)}] ({bench})"
+                needs.extend(f"{where}: {m}" for m in missing)
+                lacking.add((bench, canon))
+                continue
         refusal = benchmark.preflight(ids, options)
         if refusal is None and run_folder is not None:
             refusal = benchmark.refuses_run_folder(options, run_folder)
         if refusal is not None:
             head = f"environments[{_env_index(plan.spec, bench, units[0].env_options)}] ({bench}): "
             raise SpecError(_fit(head, refusal))
+    return lacking
 
 
 @dataclass
@@ -348,7 +362,7 @@ def _check_agents(spec: SweepSpec, env: Environment, probe: _EnvProbe) -> None:
             raise SpecError(_fit(head, _reason(exc))) from None
 
 
-def check_plan(plan: Plan) -> None:
+def check_plan(plan: Plan, needs: list[str] | None = None) -> None:
     """Every unit of ``plan`` can start its episode, checked without a model call, before
     anything is written: raises :class:`~pipeline.errors.SpecError` (one line) otherwise.
 
@@ -364,10 +378,16 @@ def check_plan(plan: Plan) -> None:
 
     Why: a unit that cannot start would otherwise fail at run time on every attempt, be stored
     as ``env_error``, count as done and show up in the report as a 0 % method.
+
+    ``needs`` (``recap estimate``): what this machine still lacks for a run (images, a daemon:
+    :meth:`~workers.envs.registry.Benchmark.run_needs`) is appended to it instead of refused, and
+    the environments that need it are not opened (they cannot be, here).
     """
     check_output_caps(plan)
-    check_benchmarks(plan)
+    lacking = check_benchmarks(plan, needs)
     for probe in _env_probes(plan):
+        if (probe.unit.benchmark, _canonical(probe.unit.env_options)) in lacking:
+            continue
         env = _open_env(plan.spec, probe)
         try:
             _check_agents(plan.spec, env, probe)

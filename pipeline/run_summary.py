@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from recap.plural import count
+
 #: exit status of a session in which a unit ended in an infrastructure failure
 EXIT_INFRA = 4
 #: exit status of a session that left work undone (a cap stopped it)
@@ -60,7 +62,7 @@ class RunSummary:
             return None
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.infra_kinds.items()))
         return (
-            f"{self.infra_failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
+            f"{count(self.infra_failed, 'unit')} ended in an infrastructure failure ({kinds}); fix the cause, "
             f"then retry them with: recap resume {self.location}"
         )
 

@@ -26,6 +26,7 @@ from pipeline.stopping import StopRequests
 from pipeline.store import RunIdentity
 from pipeline.summary import TEST_DOUBLE_LABEL
 from pipeline.units import order_units
+from recap.plural import count
 from schemas.records import EpisodeRecord, RunRecord
 
 
@@ -280,8 +281,8 @@ class SessionLoop(AttemptHandling):
             self.channel.write_direct([])  # the last events
             raise PipelineError(
                 f"the sink actor was lost ({self.channel.lost}); the session stopped: "
-                f"{self.summary.finished_now} episodes finished this session are written, "
-                f"{self.summary.not_started} units were not finished; continue with: recap resume {self.p.store.location}"
+                f"{count(self.summary.finished_now, 'episode')} finished this session {'is' if self.summary.finished_now == 1 else 'are'} written, "
+                f"{count(self.summary.not_started, 'unit')} {'was' if self.summary.not_started == 1 else 'were'} not finished; continue with: recap resume {self.p.store.location}"
             )
         return self.summary
 
@@ -299,7 +300,7 @@ class SessionLoop(AttemptHandling):
         )
         if running:
             view.note(
-                f"recap: stopping: no new units; waiting up to {self.stop_grace_s:g}s for the {running} episodes in flight "
+                f"recap: stopping: no new units; waiting up to {self.stop_grace_s:g}s for the {count(running, 'episode')} in flight "
                 "to finish (Ctrl-C again to stop now)"
             )
 
@@ -312,7 +313,7 @@ class SessionLoop(AttemptHandling):
         running = self.pool.in_flight()
         self._event("interrupted", severity="warning", mode=reason, running=running, pending=len(self.queue))
         view.note(
-            f"recap: stopping now: {running} episodes in flight are cut"
+            f"recap: stopping now: {count(running, 'episode')} in flight {'is' if running == 1 else 'are'} cut"
             + (" (the grace period is over)" if reason == "grace_expired" else "")
             + "; the calls they made stay recorded and the resume runs them again"
         )

@@ -22,14 +22,15 @@ from __future__ import annotations
 
 from collections import defaultdict
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import pyarrow as pa
 from rich.markup import escape
-from rich.table import Table
 
 from pipeline.resume import ERROR_END_REASONS, infra_failure, journal_issue, run_spend
 from pipeline.store import PLAN_FILE, RunStore
+from pipeline.tables import Col, print_fitted
+from recap.plural import count
 from schemas.parts import BadPart, inspect_parts, read_parts
 
 TEST_DOUBLE_LABEL = " (test double)"
@@ -118,7 +119,7 @@ class StatusReport:
             return None
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.failed_kinds.items()))
         return (
-            f"{self.failed} units ended in an infrastructure failure ({kinds}); fix the cause, "
+            f"{count(self.failed, 'unit')} ended in an infrastructure failure ({kinds}); fix the cause, "
             f"then retry them with: recap resume {self.location}"
         )
 
@@ -256,38 +257,40 @@ def collect(store: RunStore) -> StatusReport:
 
 def render(report: StatusReport, console: Any) -> None:
     """The summary table plus totals (rich)."""
-    t = Table(title=escape(f"run {report.run} ({report.run_id}) - {report.location}"))
-    columns: tuple[tuple[str, Literal["left", "right"]], ...] = (
-        ("arm", "left"),
-        ("model", "left"),
-        ("planned", "right"),
-        ("done", "right"),
-        ("success", "right"),
-        ("capped", "right"),
-        ("gave up", "right"),
-        ("not started", "right"),
-        ("avg steps", "right"),
-        ("avg calls", "right"),
-        ("cost $", "right"),
+    # left out first when the terminal is narrow: the rarer counts, then the averages (the arm,
+    # its model, done and success stay)
+    cols = (
+        Col("arm", "left"),
+        Col("model", "left"),
+        Col("planned", drop=6),
+        Col("done", drop=9),
+        Col("success", drop=10),
+        Col("capped", drop=2),
+        Col("gave up", drop=3),
+        Col("not started", drop=5),
+        Col("avg steps", drop=1),
+        Col("avg calls", drop=4),
+        Col("cost $", drop=8),
     )
-    for col, just in columns:
-        t.add_column(col, justify=just)
+    rows = []
     for g in report.groups:
         rate = f"{g.success}/{g.done} ({100 * g.success / g.done:.0f}%)" if g.done else "-"
-        t.add_row(
-            escape(g.method),
-            escape(model_label(g.model, g.test_double)),
-            str(g.planned),
-            str(g.done),
-            rate,
-            str(g.budget_stopped),
-            str(g.failed),
-            str(g.not_started),
-            f"{g.steps / g.done:.1f}" if g.done else "-",
-            f"{g.calls / g.done:.1f}" if g.done else "-",
-            f"{g.cost_usd:.4f}",
+        rows.append(
+            [
+                g.method,
+                model_label(g.model, g.test_double),
+                str(g.planned),
+                str(g.done),
+                rate,
+                str(g.budget_stopped),
+                str(g.failed),
+                str(g.not_started),
+                f"{g.steps / g.done:.1f}" if g.done else "-",
+                f"{g.calls / g.done:.1f}" if g.done else "-",
+                f"{g.cost_usd:.4f}",
+            ]
         )
-    console.print(t)
+    print_fitted(console, f"run {report.run} ({report.run_id}) - {report.location}", cols, rows)
     failed = f"{report.failed} failed on infrastructure, " if report.failed else ""
     console.print(
         f"units {report.completed}/{report.total} done, {report.success} succeeded, "

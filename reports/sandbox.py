@@ -247,13 +247,13 @@ def _say_limit(watch: _Watch, err: TextIO) -> None:
     limits, status = watch.limits, watch.status
     if watch.limit_hit == "memory":
         err.write(
-            f"error: memory limit {limits.memory_text} hit: the query was stopped at {_mb(watch.peak)} of resident memory; "
+            f"recap: error: sql: memory limit {limits.memory_text} hit: the query was stopped at {_mb(watch.peak)} of resident memory; "
             "raise it with --memory-limit, or select fewer rows or smaller values\n"
         )
     elif watch.limit_hit == "time":
-        err.write(f"error: time limit {limits.timeout_s:g}s hit: the query was stopped; raise it with --timeout\n")
+        err.write(f"recap: error: sql: time limit {limits.timeout_s:g}s hit: the query was stopped; raise it with --timeout\n")
     elif status is not None and status < 0:
-        err.write(f"error: the query process died ({signal.Signals(-status).name}); try a smaller query\n")
+        err.write(f"recap: error: sql: the query process died ({signal.Signals(-status).name}); try a smaller query\n")
 
 
 def _feed(dst: Any, payload: bytes) -> None:
@@ -319,21 +319,21 @@ def child_main(ready_fd: int, argv: Sequence[str] = ()) -> int:
             found = re.search(r"Out of Memory Error: [^()]*(\([^()]*\))?", text)
             detail = found.group(0).strip() if found else "Out of Memory Error"
             print(
-                f"error: memory limit {limit_text} hit ({detail}); "
+                f"recap: error: sql: memory limit {limit_text} hit ({detail}); "
                 "raise it with --memory-limit, or select fewer rows or smaller values",
                 file=sys.stderr,
             )
         else:
-            print(f"error: {text}", file=sys.stderr)
+            print(f"recap: error: sql: {text}", file=sys.stderr)
         return 2
     except MemoryError:
         print(
-            f"error: memory limit {limit_text} hit while building the result; raise it with --memory-limit, "
+            f"recap: error: sql: memory limit {limit_text} hit while building the result; raise it with --memory-limit, "
             "or select fewer rows or smaller values",
             file=sys.stderr,
         )
         return 2
     except Exception as exc:  # noqa: BLE001 - one line, never a traceback
-        print(" ".join(f"error: {type(exc).__name__}: {exc}".split())[:500], file=sys.stderr)
+        print(" ".join(f"recap: error: sql: {type(exc).__name__}: {exc}".split())[:500], file=sys.stderr)
         return 2
     return 0

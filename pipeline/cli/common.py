@@ -53,6 +53,15 @@ class UsageError(Exception):
     """Bad command line of a :class:`CommandParser` command: one line on stderr, exit 2."""
 
 
+def error_line(command: str, message: object) -> str:
+    """The one format of every ``recap`` error: ``recap: error: COMMAND: MESSAGE`` on one line
+    (``message`` a :class:`UsageError` too: its ``recap CMD:`` prefix, if any, is not repeated)."""
+    text = str(message)
+    for prefix in (f"recap {command}: ", f"{command}: "):
+        text = text.removeprefix(prefix)
+    return one_line(f"recap: error: {command}: {text}")
+
+
 class HelpExit(Exception):
     """``--help`` (or argparse's own exit) was given: the help is printed, the main returns ``status``."""
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import os
 import sys
 from collections.abc import Callable
 
@@ -23,9 +24,14 @@ def styled(text: str, style: str) -> Text:
 
 
 def console(stderr: bool = False, *, markup: bool = True) -> Console:
-    """A rich console; wide when writing to a file or pipe so tables keep one line per row."""
+    """A rich console: the terminal's width; ``$COLUMNS`` when set, else 200 when writing to a file
+    or pipe, so tables keep one line per row (and fit a width the caller asks for)."""
     stream = sys.stderr if stderr else sys.stdout
-    width = None if getattr(stream, "isatty", lambda: False)() else 200
+    columns = os.environ.get("COLUMNS", "")
+    if getattr(stream, "isatty", lambda: False)():
+        width = None
+    else:
+        width = int(columns) if columns.isdigit() and int(columns) > 0 else 200
     return Console(file=stream, highlight=False, width=width, markup=markup)
 
 

@@ -115,14 +115,18 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 
 
-def cmd_list(benches: list[DataFolder], data_dir: str | None, out: TextIO) -> list[str]:
+def cmd_list(benches: list[DataFolder], data_dir: str | None, out: TextIO, optional: frozenset[str] = frozenset()) -> list[str]:
     """``recap data list``: print every place each benchmark's folder is looked for, marking the one
-    used. Returns one failure line per benchmark without a folder (empty: all found)."""
+    used. Returns one failure line per benchmark without a folder (empty: all found), except for the
+    ``optional`` ones (``list all`` shows the folders asked for by name too, whose absence fails
+    nothing: ``swebench-verified``, the release's prompts)."""
     failures = []
     for bench in benches:
         rungs, used = search(bench, data_dir)
         if used is not None:
             print(f"{bench.name}: {describe(used)}", file=out)
+        elif bench.name in optional:
+            print(f"{bench.name}: not found (needed only by the sweeps that use it: recap data fetch {bench.name})", file=out)
         else:
             failures.append(f"{bench.name}: {not_found(bench, rungs)}")
             print(f"{bench.name}: not found", file=out)
@@ -339,8 +343,11 @@ def _run(args: argparse.Namespace, stdout: TextIO) -> list[str]:
     benches = [b for b in by_name.values() if b.in_all] if args.bench == "all" else [by_name[args.bench]]
     if getattr(args, "data_dir", None) is not None and args.bench == "all":
         raise UsageError("--data-dir names one benchmark's folder: give BENCH too")
-    if args.action == "list":
-        return cmd_list(benches, args.data_dir, stdout)
+    if args.action == "list":  # every folder, the ones asked for by name too (their absence fails nothing)
+        if args.bench != "all":
+            return cmd_list(benches, args.data_dir, stdout)
+        optional = frozenset(n for n, b in by_name.items() if not b.in_all)
+        return cmd_list(list(by_name.values()), args.data_dir, stdout, optional)
     if args.action == "check":
         return cmd_check(benches, args.data_dir, stdout)
     return cmd_fetch(benches, args.dest, args.mirror, stdout, args.from_file, args.subset)

@@ -7,12 +7,15 @@
   are the environment's (FEVER: ``wikipedia_url``, ``wikipedia``, ``data_dir``);
 * ``env replay TRAJECTORY.json`` - re-run a recorded Robotouille trajectory on our engine, or a
   FEVER trajectory (``"benchmark": "fever"``, :mod:`workers.envs.fever.replay`) on our FEVER
-  environment, and say whether every observation is identical (exit 0 only then).
+  environment, and say whether every observation is identical (exit 0 only then);
+* ``env standin fever [--port N]`` - serve the benchmark's offline stand-in (FEVER: Wikipedia
+  pages in the real layout) until Ctrl-C or SIGTERM.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
@@ -22,13 +25,14 @@ from typing import TextIO
 from pipeline.cli.common import OneLineParser, finite_positive
 from pipeline.errors import PipelineError
 from recap.env import DataNotFoundError, EnvError, InvalidActionError, UnknownInstanceError, agent_action
-from workers.envs.registry import get_benchmark, make_env, replay_trajectory_file
+from workers.envs.registry import benchmark_names, get_benchmark, make_env, replay_trajectory_file
 
 _EPILOG = """\
 examples:
   recap env list blocksworld 4
   recap env play blocksworld/3@1
   recap env replay trajectory.json
+  recap env standin fever --port 8080
 
 No model is involved. Each action's options and examples: recap env ACTION --help.
 """
@@ -86,7 +90,7 @@ def add_parser(sub: argparse._SubParsersAction[OneLineParser], name: str, help: 
         epilog=_LIST_EPILOG,
         description="The instance ids of a benchmark that a sweep file can name.",
     )
-    el.add_argument("bench", help="blocksworld, robotouille, alfworld or fever")
+    el.add_argument("bench", help=f"one of {', '.join(benchmark_names())}")
     el.add_argument(
         "selector", nargs="?", help="only the ids it selects: a size (blocksworld), a split or task (robotouille, alfworld)"
     )
@@ -116,6 +120,39 @@ def add_parser(sub: argparse._SubParsersAction[OneLineParser], name: str, help: 
     )
     er.add_argument("trajectory", help="the recorded trajectory (JSON)")
     _add_option_argument(er)
+    es = esub.add_parser(
+        "standin",
+        help="serve a benchmark's offline stand-in server until stopped (fever: Wikipedia)",
+        epilog=_STANDIN_EPILOG,
+        description="Serve a benchmark's stand-in server on 127.0.0.1 until Ctrl-C or SIGTERM (fever: a few\n"
+        "Wikipedia pages in the real site's layout), to try its sweeps without the network.",
+    )
+    es.add_argument("bench", choices=sorted(STANDINS), help="the benchmark (" + ", ".join(sorted(STANDINS)) + ")")
+    es.add_argument("--port", type=int, default=8080, help="the port on 127.0.0.1 (default 8080; 0: a free one)")
+
+
+#: benchmark -> its stand-in's ``serve(port)`` (``module:function``), imported when asked for
+STANDINS = {"fever": "workers.envs.fever.standin:serve"}
+
+_STANDIN_EPILOG = """\
+examples:
+  recap env standin fever --port 8080
+  recap env play fever/168966 --option wikipedia_url=http://127.0.0.1:8080
+
+exit status: 0 stopped by Ctrl-C or SIGTERM; 2 the port cannot be used
+"""
+
+
+def standin_main(bench: str, port: int) -> int:
+    """``recap env standin BENCH --port N``: serve the stand-in until stopped; 0 then."""
+    module, _, name = STANDINS[bench].partition(":")
+    serve = getattr(importlib.import_module(module), name)
+    if not 0 <= port <= 65535:
+        raise PipelineError(f"--port must be 0..65535, got {port}")
+    try:
+        return int(serve(port))
+    except OSError as exc:
+        raise PipelineError(f"cannot listen on 127.0.0.1:{port}: {exc.strerror or exc}") from None
 
 
 def _add_option_argument(parser: argparse.ArgumentParser) -> None:
@@ -149,6 +186,8 @@ def execute(args: argparse.Namespace, command: str) -> int:
         return list_main(args.bench, "all" if args.all else args.selector, sys.stdout)
     if args.env_cmd == "play":
         return play_main(args.instance_id, sys.stdin, sys.stdout, args.step_multiplier, dict(args.option))
+    if args.env_cmd == "standin":
+        return standin_main(args.bench, args.port)
     return replay_main(args.trajectory, sys.stdout, dict(args.option))
 
 

@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
-from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError
+from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError, error_line
 from pipeline.cli.locations import Resolver, local_run_dir, run_folders
-from pipeline.errors import one_line
+from recap.plural import count
 from reports.build import FORMATS, ReportOptions, build_report, parse_formats, write_report
 from reports.output_folder import OutputFolderError, check_report_folder
 from reports.viewer import DEFAULT_EPISODES
@@ -106,20 +106,22 @@ def report_main(
     except HelpExit as exc:
         return exc.status
     except UsageError as exc:
-        print(one_line(str(exc)), file=err)
+        print(error_line("report", exc), file=err)
         return EXIT_USAGE
     except (RunDirError, OutputFolderError) as exc:
-        print(f"error: {exc}", file=err)
+        print(error_line("report", exc), file=err)
         return EXIT_USAGE
     except ReportError as exc:
-        print(f"error: {exc}", file=err)
+        print(error_line("report", exc), file=err)
         return 1
     except OSError as exc:
-        print(one_line(f"error: cannot write the report: {exc.strerror or type(exc).__name__}: {exc.filename or ''}"), file=err)
+        print(
+            error_line("report", f"cannot write the report: {exc.strerror or type(exc).__name__}: {exc.filename or ''}"), file=err
+        )
         return 1
     for line in skipped:
         print(f"warning: {line}", file=err)
-    print(f"wrote {len(written)} files to {out_dir} ({', '.join(formats)})", file=out)
+    print(f"wrote {count(len(written), 'file')} to {out_dir} ({', '.join(formats)})", file=out)
     for name in ("report.html", "report.md"):
         if (out_dir / name).exists() and name.split(".")[1] in formats:
             print(f"  {out_dir / name}", file=out)

@@ -27,6 +27,8 @@ from pipeline.spec import SweepSpec, check_ray_address_reachable, load_spec, par
 from pipeline.stopping import DEFAULT_GRACE_S
 from pipeline.store import RUN_FILE, SPEC_FILE, RunStore
 from pipeline.summary import collect, model_label, render
+from pipeline.tables import Col, print_fitted
+from recap.plural import count
 
 _RUN_EXIT = """\
 exit status:
@@ -156,10 +158,37 @@ def execute(args: argparse.Namespace, command: str) -> int:
     return cmd_run(args, command) if args.cmd == "run" else cmd_resume(args, command)
 
 
+def plan_rows(prepared: Prepared) -> list[list[str]]:
+    """The plan per arm (method x model) and benchmark, in plan order: units, and how many are new,
+    unchanged and changed against the run folder's stored plan (a fresh folder: all new)."""
+    diff = prepared.diff
+    state = {} if diff is None else {**dict.fromkeys(diff.unchanged, "unchanged"), **dict.fromkeys(diff.changed, "changed")}
+    counts: dict[tuple[str, str, str], dict[str, int]] = {}
+    for u in prepared.plan.units:
+        c = counts.setdefault((u.method_label, u.model_label, u.benchmark), {"units": 0, "new": 0, "unchanged": 0, "changed": 0})
+        c["units"] += 1
+        c[state.get(u.key, "new")] += 1
+    doubles = {m.name for m in prepared.spec.models if m.test_double}
+    return [
+        [arm, model_label(model, model in doubles), bench, *(str(c[k]) for k in ("units", "new", "unchanged", "changed"))]
+        for (arm, model, bench), c in counts.items()
+    ]
+
+
 def _print_plan(prepared: Prepared, out: Console) -> None:
     plan = prepared.plan
     models = ", ".join(model_label(m.name, m.test_double) for m in plan.spec.models)
-    out.print(plain(f"run {plan.spec.run}: {len(plan.units)} units -> {prepared.store.location}  (models: {models})"))
+    out.print(plain(f"run {plan.spec.run}: {count(len(plan.units), 'unit')} -> {prepared.store.location}  (models: {models})"))
+    cols = (
+        Col("arm", "left"),
+        Col("model", "left"),
+        Col("benchmark", "left"),
+        Col("units", drop=1),
+        Col("new", drop=4),
+        Col("unchanged", drop=2),
+        Col("changed", drop=3),
+    )
+    print_fitted(out, f"plan of run {plan.spec.run}", cols, plan_rows(prepared))
     if prepared.diff is not None:
         d = prepared.diff
         out.print(plain(f"changes since the last start: {d.describe()}"))
@@ -198,24 +227,28 @@ def _execute(prepared: Prepared, args: argparse.Namespace, command: str, backend
             styled(
                 # the spend figure is the summary's above (the ledger journal's), not the one
                 # of the moment the cap stopped the run: calls in flight settled after it
-                f"stopped: {summary.stopped} (spent {report.spend_line}); {summary.not_started} units not started, "
-                f"{summary.budget_stopped} episodes ended budget_exhausted this session",
+                f"stopped: {summary.stopped} (spent {report.spend_line}); {count(summary.not_started, 'unit')} not started, "
+                f"{count(summary.budget_stopped, 'episode')} ended budget_exhausted this session",
                 "yellow",
             )
         )
         out.print(plain(f"continue with a higher cap: recap resume {location} --run-cap <USD>"))
     if summary.interrupted:
-        cut = f" ({summary.cut} episodes in flight were cut and run again on resume)" if summary.cut else ""
+        cut = (
+            f" ({count(summary.cut, 'episode')} in flight {'was' if summary.cut == 1 else 'were'} cut and run again on resume)"
+            if summary.cut
+            else ""
+        )
         out.print(styled(f"interrupted{cut}; continue with: recap resume {location}", "yellow"))
     if summary.retried_errors:
         out.print(
             plain(
-                f"--retry errors: {summary.retried_errors} units that had ended in env_error or llm_error "
+                f"--retry errors: {count(summary.retried_errors, 'unit')} that had ended in env_error or llm_error "
                 "were queued again (their earlier rows are kept)"
             )
         )
     if summary.abandoned:
-        text = f"{summary.abandoned} units gave up after {prepared.spec.max_attempts} failed attempts (see the events table)"
+        text = f"{count(summary.abandoned, 'unit')} gave up after {prepared.spec.max_attempts} failed attempts (see the events table)"
         out.print(styled(text, "red"))
     out.print(plain(f"run folder: {location}   report: recap report {location}"))
     return summary.exit_code()

@@ -29,7 +29,7 @@ from typing import TextIO
 
 import duckdb
 
-from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError, seconds
+from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError, error_line, seconds
 from pipeline.cli.locations import Resolver, local_run_dir, run_folders
 from pipeline.errors import one_line
 from reports.sandbox import DEFAULT_MEMORY, DEFAULT_TIMEOUT_S, Limits, parse_size, run_limited
@@ -194,13 +194,13 @@ def sql_main(
     except HelpExit as exc:
         return exc.status
     except UsageError as exc:
-        print(one_line(str(exc)), file=err)
+        print(error_line("sql", exc), file=err)
         return EXIT_USAGE
     except ReportError as exc:
-        print(f"error: {exc}", file=err)
+        print(error_line("sql", exc), file=err)
         return EXIT_USAGE
     except Exception as exc:  # noqa: BLE001 - the contract is one line and status 2, never a traceback
-        print(one_line(f"error: {type(exc).__name__}: {_strip_context(str(exc))}"), file=err)
+        print(error_line("sql", f"{type(exc).__name__}: {_strip_context(str(exc))}"), file=err)
         return EXIT_USAGE
 
 

@@ -10,8 +10,7 @@ import sys
 from collections.abc import Sequence
 from typing import TextIO
 
-from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError
-from pipeline.errors import one_line
+from pipeline.cli.common import EXIT_USAGE, CommandParser, HelpExit, UsageError, error_line
 from reports.ports import VIEWER_PORT
 from reports.views import ReportError
 from reports.webview.data import Catalog
@@ -76,10 +75,10 @@ def _start(argv: Sequence[str], out: TextIO, err: TextIO) -> ViewServer | int:
     except HelpExit as exc:
         return exc.status
     except UsageError as exc:
-        print(one_line(str(exc)), file=err)
+        print(error_line("view", exc), file=err)
         return EXIT_USAGE
     except ReportError as exc:
-        print(f"recap: error: view: {exc}", file=err)
+        print(error_line("view", exc), file=err)
         return EXIT_USAGE
     except OSError as exc:
         print(f"recap: error: view: cannot listen on {HOST}:{port}: {exc.strerror or exc}", file=err)

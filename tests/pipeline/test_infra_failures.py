@@ -151,7 +151,7 @@ def test_exit_status_of_a_session_with_infrastructure_failures():
     )
     assert s.exit_code() == EXIT_INFRA == 4
     assert s.retry_hint() == (
-        "1 units ended in an infrastructure failure (server_error 1); fix the cause, then retry them with: recap resume /r"
+        "1 unit ended in an infrastructure failure (server_error 1); fix the cause, then retry them with: recap resume /r"
     )
     s.interrupted = True
     assert s.exit_code() == 130

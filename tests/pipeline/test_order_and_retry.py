@@ -563,7 +563,7 @@ max_attempts: 2
     summary = Driver(prepared, backend, progress="off", hooks=Hooks(on_dispatch=kill_target)).run()
     assert (summary.abandoned, summary.infra_failed, summary.infra_kinds, summary.finished_now) == (1, 1, {"worker_lost": 1}, 1)
     assert summary.exit_code() == EXIT_INFRA == 4
-    assert "1 units ended in an infrastructure failure (worker_lost 1)" in summary.retry_hint()
+    assert "1 unit ended in an infrastructure failure (worker_lost 1)" in summary.retry_hint()
     assert load_state(RunStore(out)).infra_failed == {target: "worker_lost"}
     report = collect(RunStore(out))
     assert (report.completed, report.failed, report.failed_kinds) == (1, 1, {"worker_lost": 1})
@@ -572,7 +572,7 @@ max_attempts: 2
     status = capsys.readouterr().out
     assert "1 failed on infrastructure" in status
     assert (
-        f"1 units ended in an infrastructure failure (worker_lost 1); fix the cause, then retry them with: recap resume {out}"
+        f"1 unit ended in an infrastructure failure (worker_lost 1); fix the cause, then retry them with: recap resume {out}"
         in status
     )
 

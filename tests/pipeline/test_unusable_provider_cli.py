@@ -163,7 +163,7 @@ def test_a_200_without_a_usable_choice_ends_the_unit_infra_error_and_resume_retr
     server = fake_server(fault_rates={"nullcontent": 0.5, "nochoices": 1.0})
     out, spec_file = _sweep(tmp_path, "nochoices", MODEL.format(label="empty", url=server.base_url, max_tokens=32), 1)
     assert main(["run", str(spec_file), "--progress", "off"]) == EXIT_INFRA
-    assert "1 units ended in an infrastructure failure (server_error 1)" in capsys.readouterr().out
+    assert "1 unit ended in an infrastructure failure (server_error 1)" in capsys.readouterr().out
     assert main(["resume", str(out), "--progress", "off"]) == EXIT_INFRA
     rows = q(out, "select attempt, end_reason, split_part(error, ':', 1) from episodes order by attempt")
     assert rows == [(1, "infra_error", "server_error"), (2, "infra_error", "server_error")]

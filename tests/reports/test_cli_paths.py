@@ -66,38 +66,41 @@ def test_a_uri_in_a_query_file_is_a_query(run, tmp_path, capsys):
     [
         (
             ["http://example.org/run", "SELECT 1"],
-            f"error: http://example.org/run is not a run folder: unknown URI scheme 'http' (a local folder or {SCHEMES})",
+            f"recap: error: sql: http://example.org/run is not a run folder: unknown URI scheme 'http' (a local folder or {SCHEMES})",
         ),
         (
             ["ftp://h/r", "SELECT 1"],
-            f"error: ftp://h/r is not a run folder: unknown URI scheme 'ftp' (a local folder or {SCHEMES})",
+            f"recap: error: sql: ftp://h/r is not a run folder: unknown URI scheme 'ftp' (a local folder or {SCHEMES})",
         ),
-        (["SELECT 1", "{run}"], "recap sql: 'SELECT 1' is not a folder; the query comes last: recap sql RUN_DIR ... QUERY"),
+        (
+            ["SELECT 1", "{run}"],
+            "recap: error: sql: 'SELECT 1' is not a folder; the query comes last: recap sql RUN_DIR ... QUERY",
+        ),
         (
             ["{run}", "{run}"],
-            "recap sql: the last argument is the query, but {run} is a folder; add the QUERY after the run folders",
+            "recap: error: sql: the last argument is the query, but {run} is a folder; add the QUERY after the run folders",
         ),
-        (["{run}/nope", "SELECT 1"], "error: run folder {run}/nope does not exist or is not a folder"),
-        (["{run}/episodes", "SELECT 1"], "error: {run}/episodes is not a run folder (no run.json)"),
+        (["{run}/nope", "SELECT 1"], "recap: error: sql: run folder {run}/nope does not exist or is not a folder"),
+        (["{run}/episodes", "SELECT 1"], "recap: error: sql: {run}/episodes is not a run folder (no run.json)"),
         (
             ["{run}", "SELECT 1", "--memory-limit", "1GiB", "--timeout", "0"],
-            "recap sql: argument --timeout: must be a finite number of seconds > 0, got '0'",
+            "recap: error: sql: argument --timeout: must be a finite number of seconds > 0, got '0'",
         ),
         (
             ["{run}", "SELECT 1", "--timeout", "inf"],
-            "recap sql: argument --timeout: must be a finite number of seconds > 0, got 'inf'",
+            "recap: error: sql: argument --timeout: must be a finite number of seconds > 0, got 'inf'",
         ),
         (
             ["{run}", "SELECT 1", "--memory-limit", "100MB"],
-            "recap sql: argument --memory-limit: 100MB is too small; at least 256MB",
+            "recap: error: sql: argument --memory-limit: 100MB is too small; at least 256MB",
         ),
         (
             ["{run}", "SELECT 1", "--memory-limit", "2"],
-            "recap sql: argument --memory-limit: invalid size '2': a unit is needed, e.g. 2MB or 2GB",
+            "recap: error: sql: argument --memory-limit: invalid size '2': a unit is needed, e.g. 2MB or 2GB",
         ),
         (
             ["{run}", "SELECT 1", "--memory-limit", "2 parsecs"],
-            "recap sql: argument --memory-limit: invalid size '2 parsecs'; give a number and a unit, e.g. 2GB, 512MB or 1.5GiB",
+            "recap: error: sql: argument --memory-limit: invalid size '2 parsecs'; give a number and a unit, e.g. 2GB, 512MB or 1.5GiB",
         ),
     ],
 )
@@ -131,12 +134,12 @@ def test_report_refuses_a_folder_without_run_json_and_writes_nothing(tmp_path, c
     folder = _folder_with_files(tmp_path / "notarun")
     before = _snapshot(folder)
     rc, out, err = _cli(["report", str(folder)], capsys)
-    assert (rc, out, err) == (2, "", f"error: {folder} is not a run folder (no run.json)\n")
+    assert (rc, out, err) == (2, "", f"recap: error: report: {folder} is not a run folder (no run.json)\n")
     assert _snapshot(folder) == before
     empty = tmp_path / "empty"
     empty.mkdir()
     rc, out, err = _cli(["report", str(empty), "--format", "md"], capsys)
-    assert (rc, out, err) == (2, "", f"error: {empty} is not a run folder (no run.json)\n")
+    assert (rc, out, err) == (2, "", f"recap: error: report: {empty} is not a run folder (no run.json)\n")
     assert list(empty.iterdir()) == []
 
 
@@ -146,19 +149,19 @@ def test_report_refuses_an_output_folder_with_other_files(run, tmp_path, capsys)
     rc, out, err = _cli(["report", str(run), "--out", str(folder), "--format", "md"], capsys)
     assert (rc, out) == (2, "")
     assert err == (
-        f"error: output folder {folder} holds files a report did not write (such as {folder / 'episodes'}); "
+        f"recap: error: report: output folder {folder} holds files a report did not write (such as {folder / 'episodes'}); "
         "give a new or empty folder with --out\n"
     )
     assert _snapshot(folder) == before
     # the run folder itself, and a file
     run_before = _snapshot(run)
     rc, _, err = _cli(["report", str(run), "--out", str(run), "--format", "md"], capsys)
-    assert rc == 2 and err.startswith(f"error: output folder {run} holds files a report did not write (such as ")
+    assert rc == 2 and err.startswith(f"recap: error: report: output folder {run} holds files a report did not write (such as ")
     rc, _, err = _cli(["report", str(run), "--out", str(run / "run.json"), "--format", "md"], capsys)
-    assert (rc, err) == (2, f"error: output folder {run / 'run.json'} is not a folder\n")
+    assert (rc, err) == (2, f"recap: error: report: output folder {run / 'run.json'} is not a folder\n")
     assert _snapshot(run) == run_before
     rc, _, err = _cli(["report", str(run), "--out", "s3://bucket/report"], capsys)
-    assert (rc, err) == (2, "recap report: --out must be a local folder, got s3://bucket/report\n")
+    assert (rc, err) == (2, "recap: error: report: --out must be a local folder, got s3://bucket/report\n")
 
 
 def test_report_refuses_a_report_folder_with_a_stranger_inside(run, tmp_path, capsys):
@@ -173,7 +176,7 @@ def test_report_refuses_a_report_folder_with_a_stranger_inside(run, tmp_path, ca
     rc, out, err = _cli(["report", str(run), "--out", str(out_dir), "--format", "md,tex"], capsys)
     assert (rc, out) == (2, "")
     assert err.startswith(
-        f"error: output folder {out_dir} holds files a report did not write (such as {out_dir / 'csv' / 'notes.txt'})"
+        f"recap: error: report: output folder {out_dir} holds files a report did not write (such as {out_dir / 'csv' / 'notes.txt'})"
     )
     assert _snapshot(out_dir) == before and list(target.iterdir()) == []
     (out_dir / "csv" / "notes.txt").unlink()

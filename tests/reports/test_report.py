@@ -210,22 +210,22 @@ def test_viewer_cuts_long_texts():
 def test_report_errors(run_a, run_b, tmp_path):
     assert _run(report_main, [str(run_a), "--out", str(tmp_path), "--episodes", "nope,A-recap-t2-42"])[::2] == (
         1,
-        "error: unknown episode id(s) for the viewer: nope\n",
+        "recap: error: report: unknown episode id(s) for the viewer: nope\n",
     )
     assert _run(report_main, [str(run_a), "--out", str(tmp_path), "--format", "md,pdf"])[::2] == (
         1,
-        "error: unknown report format(s) pdf; choose from md, html, tex, csv\n",
+        "recap: error: report: unknown report format(s) pdf; choose from md, html, tex, csv\n",
     )
     assert _run(report_main, [str(run_a), str(run_b)])[::2] == (
         1,
-        "error: --out is required when reporting several run folders\n",
+        "recap: error: report: --out is required when reporting several run folders\n",
     )
     assert _run(report_main, [str(tmp_path / "missing")])[::2] == (
         2,
-        f"error: run folder {tmp_path / 'missing'} does not exist or is not a folder\n",
+        f"recap: error: report: run folder {tmp_path / 'missing'} does not exist or is not a folder\n",
     )
     rc, _, err = _run(report_main, ["--format"])
-    assert rc == 2 and err.startswith("recap report: ")
+    assert rc == 2 and err.startswith("recap: error: report: ")
 
 
 def test_report_over_a_run_with_a_corrupt_part(run_a, tmp_path):
@@ -297,14 +297,18 @@ def test_sql_refuses_writes_and_bad_input(run_a, tmp_path):
     assert (rc, out, err) == (
         2,
         "",
-        "error: refused DROP statement: reports are read-only (allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)\n",
+        "recap: error: sql: refused DROP statement: reports are read-only (allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)\n",
     )
     rc, _, err = _run(sql_main, [str(run_a), "SELECT * FROM nosuchtable"])
-    assert rc == 2 and err.startswith("error: query failed: Catalog Error: Table with name nosuchtable does not exist!")
+    assert rc == 2 and err.startswith(
+        "recap: error: sql: query failed: Catalog Error: Table with name nosuchtable does not exist!"
+    )
     assert len(err.splitlines()) == 1
-    assert _run(sql_main, [str(run_a)])[::2] == (2, "recap sql: give at least one RUN_DIR and a QUERY\n")
+    assert _run(sql_main, [str(run_a)])[::2] == (2, "recap: error: sql: give at least one RUN_DIR and a QUERY\n")
     assert _run(sql_main, [str(run_a), "@nosuch"])[0] == 2
-    assert _run(sql_main, [str(run_a), "--file", str(tmp_path / "none.sql")])[2].startswith("error: cannot read query file")
+    assert _run(sql_main, [str(run_a), "--file", str(tmp_path / "none.sql")])[2].startswith(
+        "recap: error: sql: cannot read query file"
+    )
     assert _run(sql_main, [str(run_a), "SELECT 1", "--csv", "--json"])[0] == 2
 
 

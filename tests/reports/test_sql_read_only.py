@@ -137,7 +137,7 @@ def test_attack_through_recap_sql_changes_nothing(name, run, capsys):
     rc, out, err = _cli(["sql", str(run), _fill(ATTACKS[name], run)], capsys)
     assert _snapshot(run) == before, name
     assert (rc, out) == (2, ""), (name, rc, out, err)
-    assert len(err.splitlines()) == 1 and err.startswith("error: "), err
+    assert len(err.splitlines()) == 1 and err.startswith("recap: error: sql: "), err
 
 
 @pytest.mark.parametrize("name", list(ATTACKS))
@@ -149,7 +149,7 @@ def test_attack_from_a_query_file_changes_nothing(name, run, tmp_path, capsys):
     out, err = capsys.readouterr()
     assert _snapshot(run) == before, name
     assert (rc, out) == (2, ""), (name, rc, out, err)
-    assert len(err.splitlines()) == 1 and err.startswith("error: "), err
+    assert len(err.splitlines()) == 1 and err.startswith("recap: error: sql: "), err
 
 
 @pytest.mark.parametrize("name", list(ATTACKS))
@@ -263,7 +263,7 @@ def test_attack_in_a_real_process(run):
     assert _snapshot(run) == before
     assert (proc.returncode, proc.stdout) == (2, "")
     assert proc.stderr.splitlines() == [
-        "error: refused EXPLAIN of a COPY statement: reports are read-only "
+        "recap: error: sql: refused EXPLAIN of a COPY statement: reports are read-only "
         "(allowed: SELECT, WITH, DESCRIBE, SHOW, SUMMARIZE, EXPLAIN, read-only PRAGMA)"
     ]
 
@@ -292,15 +292,17 @@ def test_a_query_file_that_is_not_sql_is_one_line_exit_2_never_echoed(content, r
     q.write_bytes(content)
     rc, out, err = _cli(["sql", str(run), "--file", str(q)], capsys)
     assert (rc, out) == (2, "")
-    assert len(err.splitlines()) == 1 and err.startswith(f"error: query file {q} "), err
+    assert len(err.splitlines()) == 1 and err.startswith(f"recap: error: sql: query file {q} "), err
     assert SECRET not in err and "DO-NOT" not in err and "api_key" not in err
 
 
 def test_query_file_errors(run, tmp_path, capsys):
     cases = {
-        str(tmp_path / "missing.sql"): f"error: cannot read query file {tmp_path / 'missing.sql'}: No such file or directory",
-        str(tmp_path): f"error: cannot read query file {tmp_path}: Is a directory",
-        "/dev/zero": "error: query file /dev/zero is larger than 1024 KiB; is it a query?",
+        str(
+            tmp_path / "missing.sql"
+        ): f"recap: error: sql: cannot read query file {tmp_path / 'missing.sql'}: No such file or directory",
+        str(tmp_path): f"recap: error: sql: cannot read query file {tmp_path}: Is a directory",
+        "/dev/zero": "recap: error: sql: query file /dev/zero is larger than 1024 KiB; is it a query?",
     }
     for path, line in cases.items():
         rc, out, err = _cli(["sql", str(run), "--file", path], capsys)
@@ -308,21 +310,24 @@ def test_query_file_errors(run, tmp_path, capsys):
     bad = tmp_path / "typo.sql"
     bad.write_text("SELECT count(*)\nFROM episodes\nWHER 1\n")
     rc, out, err = _cli(["sql", str(run), "--file", str(bad)], capsys)
-    assert (rc, out, err) == (2, "", f"error: query file {bad} is not valid SQL (syntax error on line 3)\n")
+    assert (rc, out, err) == (2, "", f"recap: error: sql: query file {bad} is not valid SQL (syntax error on line 3)\n")
 
 
 @pytest.mark.parametrize(
     "argv,start",
     [
-        (["SELEC 1"], "error: cannot parse query: Parser Error: syntax error"),
-        (["SELECT *\nFROM nosuch\nWHERE 1"], "error: query failed: Catalog Error: Table with name nosuch does not exist!"),
-        (["SELECT 1 +"], "error: cannot parse query: "),
-        ([""], "error: empty query"),
-        (["-- nothing"], "error: empty query"),
-        (["@nosuch"], "error: no report query named 'nosuch'"),
-        (["DROP VIEW episodes"], "error: refused DROP statement"),
-        (["SELECT 1", "--max-rows", "x"], "recap sql: argument --max-rows: invalid int value"),
-        (["SELECT 1/0::int, 'a'::int"], "error: query failed: Conversion Error"),
+        (["SELEC 1"], "recap: error: sql: cannot parse query: Parser Error: syntax error"),
+        (
+            ["SELECT *\nFROM nosuch\nWHERE 1"],
+            "recap: error: sql: query failed: Catalog Error: Table with name nosuch does not exist!",
+        ),
+        (["SELECT 1 +"], "recap: error: sql: cannot parse query: "),
+        ([""], "recap: error: sql: empty query"),
+        (["-- nothing"], "recap: error: sql: empty query"),
+        (["@nosuch"], "recap: error: sql: no report query named 'nosuch'"),
+        (["DROP VIEW episodes"], "recap: error: sql: refused DROP statement"),
+        (["SELECT 1", "--max-rows", "x"], "recap: error: sql: argument --max-rows: invalid int value"),
+        (["SELECT 1/0::int, 'a'::int"], "recap: error: sql: query failed: Conversion Error"),
     ],
 )
 def test_sql_errors_are_one_line_exit_2(argv, start, run, capsys):
@@ -412,8 +417,8 @@ def recap_measured(argv: list[str]) -> tuple[int, str, str, int]:
     return rc, out, err, peak
 
 
-MEMORY_LINE = f"error: memory limit {ATTACK_MEMORY} hit"
-TIME_LINE = f"error: time limit {ATTACK_TIMEOUT_S}s hit: the query was stopped; raise it with --timeout\n"
+MEMORY_LINE = f"recap: error: sql: memory limit {ATTACK_MEMORY} hit"
+TIME_LINE = f"recap: error: sql: time limit {ATTACK_TIMEOUT_S}s hit: the query was stopped; raise it with --timeout\n"
 
 
 @pytest.mark.parametrize("name", list(MEMORY_ATTACKS))

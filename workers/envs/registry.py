@@ -37,6 +37,7 @@ __all__ = [
     "DataNotFoundError",
     "UnknownInstanceError",
     "Benchmark",
+    "EstimateFigures",
     "RunService",
     "register_benchmark",
     "unregister_benchmark",
@@ -63,6 +64,19 @@ class RunService:
     name: str
     env_var: str
     actor: str
+
+
+@dataclass(frozen=True)
+class EstimateFigures:
+    """What ``recap estimate`` needs of one instance, known without playing it: its optimal steps
+    (None: unknown), its step cap, its rules text and about how many characters its first
+    observation has, and whether methods show it a demonstration."""
+
+    optimal_steps: int | None
+    max_steps: int
+    rules: str
+    observation_chars: int
+    demonstration: bool
 
 
 class Benchmark(BenchmarkProtocol, ABC):
@@ -119,6 +133,21 @@ class Benchmark(BenchmarkProtocol, ABC):
         options) cannot run here, in one line, or None; checked before anything runs, in one
         go for all of them (SWE-bench Verified: one ``docker images`` listing for every
         instance's image). Default: nothing to check beyond opening one environment."""
+        return None
+
+    def run_needs(self, instance_ids: Sequence[str], options: Mapping[str, Any]) -> list[str]:
+        """What a run of ``instance_ids`` (one ``environments[]`` entry, with its ``make()``
+        options) still needs on this machine and does not have, one short phrase each (SWE-bench
+        Verified: its images, the Docker daemon); empty when nothing is missing, or when the
+        entry is refused for a reason of the sweep file's own (:meth:`preflight` says that one).
+        ``recap estimate`` lists these and prices the plan anyway; :meth:`preflight` refuses a
+        run for them. Default: nothing beyond the data folder."""
+        return []
+
+    def estimate_figures(self, instance_id: str, options: Mapping[str, Any]) -> EstimateFigures | None:
+        """The figures ``recap estimate`` needs of ``instance_id`` when opening and resetting it
+        costs too much to do for every instance of a sweep (ALFWorld: seconds per game), or None:
+        the estimate opens it and measures. Default: None."""
         return None
 
     def refuses_run_folder(self, options: Mapping[str, Any], run_folder: Path) -> str | None:

@@ -117,7 +117,7 @@ def sql_attacks(lab: Lab, units: int = 4) -> ScenarioResult:
             res.check(f"{name}: exit 2", rc == 2, f"exit {rc}: {stderr.strip()[:200]}")
             res.check(
                 f"{name}: one error line on stderr, nothing on stdout",
-                stdout == "" and len(stderr.splitlines()) == 1 and stderr.startswith("error: "),
+                stdout == "" and len(stderr.splitlines()) == 1 and stderr.startswith("recap: error: sql: "),
                 f"stdout {stdout[:80]!r}, stderr {stderr[:200]!r}",
             )
             res.check(f"{name}: 0 bytes changed", not changed, f"{n} bytes in {changed[:3]}")
@@ -170,7 +170,7 @@ def sql_resource_attacks(lab: Lab, units: int = 4) -> ScenarioResult:
         except Exception as exc:  # a crash is not a stop
             rc, stdout, stderr, peak = None, "", f"{type(exc).__name__}: {exc}", 0
         peak_all = max(peak_all, peak)
-        want = f"error: {limit} limit {ATTACK_MEMORY if limit == 'memory' else f'{ATTACK_TIMEOUT_S}s'} hit"
+        want = f"recap: error: sql: {limit} limit {ATTACK_MEMORY if limit == 'memory' else f'{ATTACK_TIMEOUT_S}s'} hit"
         res.check(f"{name}: exit 2", rc == 2, f"exit {rc}: {stderr.strip()[:200]}")
         res.check(
             f"{name}: one line naming the {limit} limit, nothing on stdout",

@@ -26,6 +26,7 @@ PATHS = [
     ("env", "list"),
     ("env", "play"),
     ("env", "replay"),
+    ("env", "standin"),
 ]
 
 
@@ -128,10 +129,10 @@ def test_no_arguments_is_one_usage_line_and_a_hint(capsys):
         (["env"], "recap: error: env: the following arguments are required: ACTION"),
         (["env", "play", "blocksworld/3@1", "--step-multiplier", "nan"], "recap: error: env play: argument --step-multiplier"),
         (["show", "runs/x"], "recap: error: show: the following arguments are required: episode"),
-        (["sql", "--max-rows"], "recap sql: argument --max-rows: expected one argument"),
-        (["sql", "--csv", "--json", "runs/x", "SELECT 1"], "recap sql: argument --json: not allowed with argument --csv"),
-        (["report", "--format"], "recap report: argument --format: expected one argument"),
-        (["report"], "recap report: the following arguments are required: RUN_DIR"),
+        (["sql", "--max-rows"], "recap: error: sql: argument --max-rows: expected one argument"),
+        (["sql", "--csv", "--json", "runs/x", "SELECT 1"], "recap: error: sql: argument --json: not allowed with argument --csv"),
+        (["report", "--format"], "recap: error: report: argument --format: expected one argument"),
+        (["report"], "recap: error: report: the following arguments are required: RUN_DIR"),
     ],
 )
 def test_usage_errors_stay_one_line_exit_2(argv, start, capsys):

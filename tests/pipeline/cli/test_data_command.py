@@ -199,7 +199,7 @@ def test_check_the_shared_data(monkeypatch):
         f"robotouille: {ROB.resolve()} ($ROBOTOUILLE_DATA): 300 files checked: OK",
         f"alfworld: {ALF.resolve()} ($ALFWORLD_DATA): 404 files checked: OK",
         f"alfworld-2.1.2: {ALF212.resolve()} (next to ALFWorld): 134 files checked: OK",
-        f"fever: {FEVER.resolve()} ($FEVER_DATA): 1 files checked: OK",
+        f"fever: {FEVER.resolve()} ($FEVER_DATA): 1 file checked: OK",
     ]
 
 
@@ -298,7 +298,7 @@ def test_fetch_everything_from_a_mirror_folder_then_check(isolated, mirror, tmp_
     code, out, err = run("fetch", "--mirror", str(mirror), "--dest", str(dest))
     assert (code, err) == (0, ""), err
     assert sorted(p.name for p in dest.iterdir()) == ["alfworld", "alfworld-2.1.2", "fever", "robotouille"]
-    assert f"fever: {dest / 'fever'}: 1 files fetched and verified" in out
+    assert f"fever: {dest / 'fever'}: 1 file fetched and verified" in out
     # 88 downloaded + 206 generated (202 instances, a summary.json and a README.md per folder)
     assert f"robotouille: {dest / 'robotouille'}: 294 files fetched and verified" in out
     assert f"alfworld: {dest / 'alfworld'}: 404 files fetched and verified" in out
@@ -517,5 +517,5 @@ def test_fetch_fever_verifies_the_claims_digest(isolated, tmp_path):
     assert not (tmp_path / "d1" / "fever").exists()
     code, out, err = run("fetch", "fever", "--mirror", good.as_uri())
     assert (code, err) == (0, ""), err
-    assert f"fever: {isolated['cache'] / 'fever'}: 1 files fetched and verified" in out
+    assert f"fever: {isolated['cache'] / 'fever'}: 1 file fetched and verified" in out
     assert fever_claims.resolve_data_dir() == (isolated["cache"] / "fever").resolve()

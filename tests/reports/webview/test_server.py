@@ -195,7 +195,7 @@ def test_view_command_errors(tmp_path, capsys):
     assert view_main([str(tmp_path / "missing")]) == 2
     assert capsys.readouterr().err == f"recap: error: view: run folder {tmp_path / 'missing'} does not exist or is not a folder\n"
     assert view_main(["--port", "70000", str(tmp_path)]) == 2
-    assert capsys.readouterr().err == "recap view: --port must be between 0 and 65535\n"
+    assert capsys.readouterr().err == "recap: error: view: --port must be between 0 and 65535\n"
 
 
 def test_pages_render(viewer):

@@ -2,7 +2,9 @@
 
 Options of :meth:`FeverBenchmark.make`:
 - ``data_dir``: the folder holding ``paper_dev.jsonl``; default by the shared rule (``$FEVER_DATA``...).
-- ``wikipedia_url``: the base URL searched as ``<base>/w/index.php?search=...``; default the real site.
+- ``wikipedia_url``: the base URL searched as ``<base>/w/index.php?search=...``; default the real site,
+  or under ``wikipedia: snapshot:DIR`` the one the snapshot's run read (its recorded request URLs,
+  :func:`snapshot_base_url`), so a replay need not repeat it.
 - ``wikipedia``: ``live`` (default) reads that server; ``snapshot:DIR`` answers only from the
   ``wiki_pages`` table(s) in DIR (a run folder) and never reaches a server.
 - ``wikipedia_rate``: requests per second per host for the whole run (default 2.0, at most
@@ -138,6 +140,21 @@ def wiki_source(
     return SnapshotSource(_snapshot(resolved, snapshot_key(resolved)))
 
 
+def snapshot_base_url(snapshot: Snapshot) -> str:
+    """The ``wikipedia_url`` a snapshot was recorded from (its request URLs, checked against its
+    sealed manifest when it loaded): what a replay searches when it does not name one. ValueError
+    (one line) when it holds no request, or requests to several servers (then name one)."""
+    servers = snapshot.servers()
+    if len(servers) == 1:
+        return servers[0]
+    if not servers:
+        raise ValueError(f"the snapshot {str(snapshot.folder)!r} holds no search request; give wikipedia_url")
+    raise ValueError(
+        f"the snapshot {str(snapshot.folder)!r} holds pages of {len(servers)} servers ({', '.join(servers)}); "
+        "give wikipedia_url to say which one the episodes search"
+    )
+
+
 class FeverBenchmark(Benchmark):
     """FEVER's registry entry: claims from ``paper_dev.jsonl``, observations from Wikipedia or a snapshot."""
 
@@ -198,7 +215,7 @@ class FeverBenchmark(Benchmark):
         instance_id: str,
         *,
         data_dir: str | os.PathLike[str] | None = None,
-        wikipedia_url: str = DEFAULT_WIKIPEDIA_URL,
+        wikipedia_url: str | None = None,
         wikipedia: str = LIVE,
         wikipedia_rate: float = DEFAULT_RATE,
         wikipedia_deadline_s: float = DEFAULT_DEADLINE_S,
@@ -219,7 +236,7 @@ class FeverBenchmark(Benchmark):
                 "wikipedia, wikipedia_rate, wikipedia_deadline_s, wikipedia_max_page_bytes, max_steps, verdict_only, sample_seed, step_multiplier, seed"
             )
         check_sample_seed(sample_seed)  # it chose the instances; nothing in an episode reads it
-        base = check_wikipedia_url(wikipedia_url)
+        base = check_wikipedia_url(wikipedia_url) if wikipedia_url is not None else None
         rate = check_rate(wikipedia_rate)
         policy = replace(
             DEFAULT_POLICY,
@@ -233,6 +250,8 @@ class FeverBenchmark(Benchmark):
         records = RunRecords() if page_store is None else None
         store = records.store if records is not None else page_store
         source = wiki_source(wikipedia, page_store=store, limiter=limiter, rate=rate, policy=policy)
+        if base is None:
+            base = snapshot_base_url(source.snapshot) if isinstance(source, SnapshotSource) else DEFAULT_WIKIPEDIA_URL
         claims = load_claims(resolve_data_dir(data_dir if data_dir is not None else self.data_dir))
         env = FeverEnvironment(
             find_claim(claims, instance_id),

@@ -264,6 +264,18 @@ class Snapshot:
     def __len__(self) -> int:
         return len(self._by_url)
 
+    def servers(self) -> list[str]:
+        """The base URLs its requests were made to (``<base>/w/index.php?search=...`` or
+        ``<base>/wiki/...``: ``http://127.0.0.1:8080``, ``https://en.wikipedia.org``), sorted: the
+        ``wikipedia_url`` the recording run used, read from its sealed rows."""
+        bases = set()
+        for url in self._by_url:
+            for marker in ("/w/index.php", "/wiki/"):
+                if marker in url:
+                    bases.add(url.split(marker, 1)[0])
+                    break
+        return sorted(bases)
+
 
 class RunRecords:
     """The page records of one environment, handed to the episode worker as table rows.

@@ -1,7 +1,9 @@
 """A test double: a loopback stand-in for Wikipedia's ``/w/index.php?search=`` answering HTML shaped like the real site's.
 
-Not used by any run: it lives here (not under tests/) so that bench/fever.py can serve pages without
-importing the tests. No machine here reaches Wikipedia, so the tests serve pages in its layout: an article (found
+Not used by any run unless asked: it lives here (not under tests/) so that bench/fever.py can serve
+pages without importing the tests, and ``recap env standin fever --port N`` (or ``python -m
+workers.envs.fever.standin --port N``) serves it until stopped (:func:`serve`), for trying FEVER
+sweeps offline with ``wikipedia_url: http://127.0.0.1:N``. No machine here reaches Wikipedia, so the tests serve pages in its layout: an article (found
 directly or through a redirect to ``/wiki/Title``), a list of search results, a disambiguation
 page whose ``[entity]`` search gives results, the "no such page" search answer, 429 with
 Retry-After, 500 and a slow answer. Every request is counted, so snapshot tests can show zero.
@@ -9,10 +11,14 @@ Retry-After, 500 and a slow answer. Every request is counted, so snapshot tests 
 
 from __future__ import annotations
 
+import argparse
+import signal
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import TextIO
 from urllib.parse import parse_qs, urlsplit
 
 HEAD = (
@@ -170,7 +176,8 @@ class StandIn:
             self._served[key] = n + 1
         return answers[min(n, len(answers) - 1)]
 
-    def start(self) -> StandIn:
+    def start(self, port: int = 0) -> StandIn:
+        """Serve on 127.0.0.1:``port`` (0: a free port) from a background thread."""
         outer = self
 
         class Handler(BaseHTTPRequestHandler):
@@ -197,7 +204,7 @@ class StandIn:
             def log_message(self, format: str, *args: object) -> None:
                 pass
 
-        self._server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self._server = ThreadingHTTPServer(("127.0.0.1", port), Handler)
         self._server.daemon_threads = True
         self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True)
         self._thread.start()
@@ -208,3 +215,38 @@ class StandIn:
             self._server.shutdown()
             self._server.server_close()
             self._server = None
+
+
+def serve(port: int, out: TextIO | None = None, ready: threading.Event | None = None) -> int:
+    """Serve the stand-in on 127.0.0.1:``port`` until SIGINT or SIGTERM, saying where on ``out``
+    (stdout) first and setting ``ready`` then; 0 when stopped. The searches it answers are
+    :func:`default_routes`' (any other is "no such page"). OSError when the port is taken."""
+    out = out or sys.stdout
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    server = StandIn().start(port)
+    try:
+        print(f"FEVER Wikipedia stand-in on {server.base_url} (set wikipedia_url: {server.base_url})", file=out)
+        print(f"answers: {', '.join(sorted(server.routes))}; other searches: no such page", file=out)
+        print("stop with Ctrl-C (SIGINT) or SIGTERM", file=out, flush=True)
+        if ready is not None:
+            ready.set()
+        while not stop.wait(0.2):
+            pass
+        print(f"stopped after {len(server.requests)} request{'s' if len(server.requests) != 1 else ''}", file=out, flush=True)
+        return 0
+    finally:
+        server.stop()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m workers.envs.fever.standin [--port N]``: :func:`serve` (``recap env standin fever`` is the same)."""
+    parser = argparse.ArgumentParser(prog="python -m workers.envs.fever.standin", description=serve.__doc__)
+    parser.add_argument("--port", type=int, default=8080, help="the port on 127.0.0.1 (default 8080; 0: a free one)")
+    return serve(parser.parse_args(argv).port)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

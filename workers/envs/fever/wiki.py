@@ -18,6 +18,7 @@ pages only.
 from __future__ import annotations
 
 import email.utils
+import functools
 import math
 import platform
 import time
@@ -66,8 +67,11 @@ class WikiError(EnvError):
         self.kind = kind
 
 
+@functools.cache
 def user_agent() -> str:
-    """``recap-eval/<version> (<project url>; FEVER evaluation) Python-http.client/<version>``: says who asks and why."""
+    """``recap-eval/<version> (<project url>; FEVER evaluation) Python-http.client/<version>``: says who asks and why.
+    Computed once per process: reading the installed version's metadata takes milliseconds, and a
+    sweep's preflight and estimate make an environment per claim."""
     try:
         version = metadata.version("recap-eval")
     except metadata.PackageNotFoundError:

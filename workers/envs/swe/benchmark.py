@@ -39,7 +39,7 @@ from typing import Any
 from recap.config import CODING_PROFILE, SETTING_BOUNDS, AgentConfig, ReCAPConfig
 from recap.env import Environment, UnknownInstanceError
 from workers.envs.options import EnvOption, episode, run
-from workers.envs.registry import Benchmark
+from workers.envs.registry import Benchmark, EstimateFigures
 from workers.sandbox import LABEL_EPISODE, LABEL_RUN, LABEL_WORKER, check_ready, open_sandbox, remove_labelled
 from workers.sandbox.base import SANDBOX_KINDS, SandboxLimits, SandboxSpec
 from workers.sandbox.local_sandbox import TRUST_LEVELS
@@ -219,6 +219,18 @@ class SweBenchmark(Benchmark):
         if bench != BENCHMARK_NAME or not rest or any(c.isspace() for c in rest):
             raise UnknownInstanceError(f"a SWE-bench instance id looks like swe/<instance_id>, got {instance_id!r}")
         return instance_id
+
+    def estimate_figures(self, instance_id: str, options: Mapping[str, Any]) -> EstimateFigures:
+        """The estimate's figures from the environment made with a sandbox opener that is never
+        called: a sandbox per instance (SWE-bench Verified: a container of its image) is not
+        opened to price a sweep, and the daemon and images are not needed (``run_needs`` lists
+        them). The first observation is the issue text; the cap is ``max_commands``."""
+
+        def never(*_a: Any, **_k: Any) -> Any:
+            raise AssertionError("recap estimate opens no sandbox")
+
+        env: Any = self.make(instance_id, **{**options, "open_sandbox": never})
+        return EstimateFigures(None, env.max_steps, env.rules(), len(env.instance.problem_statement), False)
 
     def make(self, instance_id: str, **options: Any) -> Environment:
         """A fresh environment for ``swe/<instance_id>`` (no sandbox is opened before reset);

@@ -37,6 +37,7 @@ from typing import Any
 
 from recap.config import AgentConfig
 from recap.env import Environment, UnknownInstanceError
+from recap.plural import count
 from workers.envs.data_sources import DataFolder
 from workers.envs.options import EnvOption, episode, run
 from workers.envs.swe.benchmark import SweBenchmark, default_open_sandbox
@@ -54,6 +55,11 @@ from .images import how_to_get, image_of, local_images, missing_images
 from .release_container import OPTIONS as CONTAINER_OPTIONS
 from .release_container import RELEASE_IMAGE, ReleaseEnvironment, agent_options, missing_image, release_of
 
+#: how to get the instances' images (`recap data check` lists which are here)
+IMAGES_HINT = (
+    "pull them (docker pull swebench/sweb.eval.x86_64.<id>:latest) or build them with the SWE-bench harness "
+    "(python -m swebench.harness.prepare_images)"
+)
 #: the grading modes here: the coding env's three, and the harness's own full evaluation
 VERIFIED_GRADINGS: tuple[Grading, ...] = (*GRADINGS, HARNESS_GRADING)
 #: the default: the harness's own evaluation decides, as for a leaderboard submission
@@ -227,12 +233,38 @@ class VerifiedBenchmark(SweBenchmark):
         names = [i.partition("/")[2] for i in instance_ids]
         missing = missing_images(names, present)
         if missing:
-            return (
-                f"{len(missing)} of {len(names)} instances have no image here (first: {missing[0]}); pull them "
-                "(docker pull swebench/sweb.eval.x86_64.<id>:latest) or build them with the SWE-bench harness "
-                "(python -m swebench.harness.prepare_images)"
-            )
+            return f"{len(missing)} of {len(names)} instances have no image here (first: {missing[0]}); {IMAGES_HINT}"
         return None
+
+    def run_needs(self, instance_ids: Sequence[str], options: Mapping[str, Any]) -> list[str]:
+        """What :meth:`preflight` would refuse a run for that is about this machine, not the sweep
+        file: the Docker daemon when it cannot be reached (then every image is counted as still
+        needed: none can be listed), else the instances' images and the release container's image
+        that are not here. Empty when the options themselves are refused (``preflight`` says why)."""
+        if options.get("sandbox", "docker") == "local" or options.get("open_sandbox") is not None:
+            return []
+        try:
+            release = release_of(options)
+        except ValueError:
+            return []
+        names = [i.partition("/")[2] for i in instance_ids]
+        try:
+            present = local_images()
+        except SandboxError:
+            needs = [
+                "the Docker daemon (unreachable: start it, `sudo systemctl start docker` or `sudo dockerd &`)",
+                f"{count(len(names), 'instance image')} (not checked without the daemon; {IMAGES_HINT})",
+            ]
+            if release is not None:
+                needs.append(f"the release container's image {release.image} (not checked)")
+            return needs
+        needs = []
+        missing = missing_images(names, present)
+        if missing:
+            needs.append(f"{count(len(missing), 'instance image')} of {len(names)} ({IMAGES_HINT}; first: {missing[0]})")
+        if release is not None and missing_image(release, present) is not None:
+            needs.append(f"the release container's image {release.image} (docker pull {release.image})")
+        return needs
 
     def make(self, instance_id: str, **options: Any) -> Environment:
         """A fresh environment for ``swe-verified/<instance_id>`` in its image (opened at reset)."""
