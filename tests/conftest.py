@@ -15,6 +15,12 @@ os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 os.environ.setdefault("ROBOTOUILLE_DATA", str(SHARED_DATA / "robotouille"))
 os.environ.setdefault("ALFWORLD_DATA", str(SHARED_DATA / "alfworld"))
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # pytest-xdist's workers start with COLUMNS=80 and LINES=24 of their own; the CLI fits its
+    # tables to $COLUMNS, so a test would see another width under -n than alone. Tests that care
+    # set COLUMNS themselves (monkeypatch).
+    for _name in ("COLUMNS", "LINES"):
+        os.environ.pop(_name, None)
 
 # the full method registry in every test process, as the CLI and the episode workers have it:
 # workers/agents registers mini_swe (recap/ registers the six built-in methods itself)

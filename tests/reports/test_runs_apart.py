@@ -138,7 +138,7 @@ def test_viewer_marks_superseded_within_a_run(tmp_path):
         pages = {path: _get(server, path) for path in ("/episodes", "/episode?run=r1&id=e1", "/episode?run=r2&id=e2")}
     finally:
         stop(server, thread)
-    assert pages["/episodes"].count('data-episode="') == 2 and "superseded" not in pages["/episodes"]
+    assert pages["/episodes"].count('<tr data-episode="') == 2 and "superseded" not in pages["/episodes"]
     assert "superseded" not in pages["/episode?run=r1&id=e1"] and "superseded" not in pages["/episode?run=r2&id=e2"]
     # a later attempt of the same unit in the same run does supersede it
     r3 = write_copy(
