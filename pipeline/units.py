@@ -319,7 +319,7 @@ def expand(spec: SweepSpec) -> Plan:
             multiplier = step_multiplier_for(spec, i, inst, multipliers[i])
             for model in spec.models:
                 for sampling_seed in spec.sampling_seeds:
-                    uid = unit_hash(
+                    keys = dict(
                         instance_id=inst,
                         method=m.method,
                         method_config=cfg,
@@ -327,21 +327,9 @@ def expand(spec: SweepSpec) -> Plan:
                         params={**model.params, **({"options": hashed_options(model.options)} if model.options else {})},
                         sampling_seed=sampling_seed,
                         step_multiplier=multiplier,
-                        env_options=id_options,
                     )
-                    plain = (
-                        uid
-                        if not id_options
-                        else unit_hash(
-                            instance_id=inst,
-                            method=m.method,
-                            method_config=cfg,
-                            model=model.model,
-                            params={**model.params, **({"options": hashed_options(model.options)} if model.options else {})},
-                            sampling_seed=sampling_seed,
-                            step_multiplier=multiplier,
-                        )
-                    )
+                    uid = unit_hash(**keys, env_options=id_options)
+                    plain = uid if not id_options else unit_hash(**keys)
                     u = Unit(
                         uid,
                         inst,

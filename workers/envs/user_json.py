@@ -73,3 +73,25 @@ def lines(f: IO[bytes], max_bytes: int = MAX_LINE_BYTES) -> Iterator[tuple[int, 
         if len(line) > max_bytes and not (len(line) == max_bytes + 1 and line.endswith(b"\n")):
             raise LineTooLong(number, max_bytes)
         yield number, line.rstrip(b"\r\n")
+
+
+def records(f: IO[bytes], name: str, max_bytes: int = MAX_LINE_BYTES) -> Iterator[tuple[int, Any]]:
+    """``(line number, value)`` of each non-blank line of the JSONL stream ``f`` named ``name``,
+    read as consumed (:func:`lines`) and parsed with the depth bound (:func:`loads`); every refusal
+    is a one-line ValueError ``name:LINE: what is wrong`` (not UTF-8, not JSON, too deep, too long)."""
+    try:
+        for number, line in lines(f, max_bytes):
+            if not line.strip():
+                continue
+            try:
+                text = line.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise ValueError(f"{name}:{number}: cannot be read as UTF-8 text ({exc.reason} at byte {exc.start})") from None
+            try:
+                yield number, loads(text)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"{name}:{number}: not valid JSON ({exc.msg} at column {exc.colno})") from None
+            except ValueError as exc:
+                raise ValueError(f"{name}:{number}: {exc}") from None
+    except LineTooLong as exc:
+        raise ValueError(f"{name}:{exc.number}: {exc}") from None

@@ -206,24 +206,7 @@ def _records(file: Path) -> Iterator[tuple[int, Any]]:
     except OSError as exc:
         raise ValueError(f"{file}: cannot be read ({exc.strerror or exc})") from None
     with f:
-        try:
-            for lineno, line in user_json.lines(f):
-                if not line.strip():
-                    continue
-                where = f"{file}:{lineno}"
-                try:
-                    text = line.decode("utf-8")
-                except UnicodeDecodeError as exc:
-                    raise ValueError(f"{where}: cannot be read as UTF-8 text ({exc.reason} at byte {exc.start})") from None
-                try:
-                    raw = user_json.loads(text)
-                except json.JSONDecodeError as exc:
-                    raise ValueError(f"{where}: not valid JSON ({exc.msg} at column {exc.colno})") from None
-                except ValueError as exc:
-                    raise ValueError(f"{where}: {exc}") from None
-                yield lineno, raw
-        except user_json.LineTooLong as exc:
-            raise ValueError(f"{file}:{exc.number}: {exc}") from None
+        yield from user_json.records(f, str(file))
 
 
 def load_instances(path: str | Path) -> list[SweInstance]:

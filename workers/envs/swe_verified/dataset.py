@@ -192,25 +192,10 @@ def _jsonl_rows(f: IO[bytes], name: str) -> Iterator[tuple[str, Any]]:
     """``(name:LINE, record)`` of each non-blank line of ``f``, read a line at a time
     (:mod:`workers.envs.user_json`: a line's size and nesting bounded); RecordsError ``name:LINE: ...``."""
     try:
-        for lineno, line in user_json.lines(f):
-            if not line.strip():
-                continue
-            where = f"{name}:{lineno}"
-            try:
-                text = line.decode("utf-8")
-            except UnicodeDecodeError as exc:
-                raise RecordsError(
-                    f"{where}: not UTF-8 text ({exc.reason} at byte {exc.start}); a copy is JSONL or Parquet"
-                ) from None
-            try:
-                raw = user_json.loads(text)
-            except json.JSONDecodeError as exc:
-                raise RecordsError(f"{where}: not valid JSON ({exc.msg} at column {exc.colno})") from None
-            except ValueError as exc:
-                raise RecordsError(f"{where}: {exc}") from None
-            yield where, raw
-    except user_json.LineTooLong as exc:
-        raise RecordsError(f"{name}:{exc.number}: {exc}") from None
+        for lineno, raw in user_json.records(f, name):
+            yield f"{name}:{lineno}", raw
+    except ValueError as exc:
+        raise RecordsError(str(exc)) from None
 
 
 #: rows of a Parquet copy decoded at a time
