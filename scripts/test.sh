@@ -11,48 +11,38 @@ bash scripts/setup_venv.sh "alfworld,test,swe" || exit 1
 # the distribution's headless Chromium; nothing is downloaded at run time. Without a Chromium
 # that test fails; RECAP_SKIP_BROWSER=1 is the explicit opt-out (the test is then skipped).
 has_chromium() { command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || command -v google-chrome >/dev/null 2>&1; }
-if [ "${RECAP_SKIP_BROWSER:-}" = 1 ]; then
-  echo "RECAP_SKIP_BROWSER=1: the headless-browser check of the HTML report is skipped" >&2
-elif ! has_chromium; then
+has_bwrap() { command -v bwrap >/dev/null 2>&1; }
+# need PACKAGE CHECK SKIP_VAR WHAT: install the distribution's PACKAGE (apt, as root) unless CHECK
+# passes or SKIP_VAR=1 says to skip the tests that need it; otherwise fail with the two ways out.
+need() {
+  local package=$1 check=$2 skip=$3 what=$4 log
+  if [ "${!skip:-}" = 1 ]; then
+    echo "$skip=1: skipping $what" >&2
+    return 0
+  fi
+  "$check" && return 0
   if [ "$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then
-    echo "error: no Chromium, and it cannot be installed here (needs root and apt-get)." >&2
-    echo "  install it (sudo apt-get install -y chromium) or set RECAP_SKIP_BROWSER=1 to skip the browser check" >&2
+    echo "error: no $package, and it cannot be installed here (needs root and apt-get)." >&2
+    echo "  install it (sudo apt-get install -y $package) or set $skip=1 to skip $what" >&2
     exit 1
   fi
-  echo "installing chromium (apt) for the report's headless-browser test"
+  echo "installing $package (apt) for $what"
   log=$(mktemp)
-  if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } >"$log" 2>&1 || ! has_chromium; then
+  if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$package"; } >"$log" 2>&1 || ! "$check"; then
     tail -n 20 "$log" >&2
-    echo "error: apt-get could not install chromium (output above)." >&2
-    echo "  fix the package source, or set RECAP_SKIP_BROWSER=1 to skip the browser check" >&2
+    echo "error: apt-get could not install $package (output above)." >&2
+    echo "  fix the package source, or set $skip=1 to skip $what" >&2
     rm -f "$log"
     exit 1
   fi
   rm -f "$log"
-fi
+}
+need chromium has_chromium RECAP_SKIP_BROWSER "the report's headless-browser check"
 # The local sandbox confines each command with bubblewrap (workers/sandbox/bwrap.py); its tests
 # (tests/workers/sandbox/test_local_bwrap*.py, and every test opening a local sandbox) fail without
-# it. Installed from the distribution where root with apt-get can; RECAP_SKIP_BWRAP=1 is the
-# explicit opt-out (the bubblewrap tests are then skipped).
-if [ "${RECAP_SKIP_BWRAP:-}" = 1 ]; then
-  echo "RECAP_SKIP_BWRAP=1: the bubblewrap sandbox tests are skipped (other local-sandbox tests run it with sandbox_trust: none)" >&2
-elif ! command -v bwrap >/dev/null 2>&1; then
-  if [ "$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then
-    echo "error: no bubblewrap (bwrap), and it cannot be installed here (needs root and apt-get)." >&2
-    echo "  install it (sudo apt-get install -y bubblewrap) or set RECAP_SKIP_BWRAP=1 to skip its tests" >&2
-    exit 1
-  fi
-  echo "installing bubblewrap (apt) for the local sandbox"
-  log=$(mktemp)
-  if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq bubblewrap; } >"$log" 2>&1 || ! command -v bwrap >/dev/null 2>&1; then
-    tail -n 20 "$log" >&2
-    echo "error: apt-get could not install bubblewrap (output above)." >&2
-    echo "  fix the package source, or set RECAP_SKIP_BWRAP=1 to skip its tests" >&2
-    rm -f "$log"
-    exit 1
-  fi
-  rm -f "$log"
-fi
+# it. RECAP_SKIP_BWRAP=1 is the explicit opt-out (the bubblewrap tests are then skipped; the other
+# local-sandbox tests run it with sandbox_trust: none).
+need bubblewrap has_bwrap RECAP_SKIP_BWRAP "the bubblewrap sandbox tests"
 export LITELLM_LOCAL_MODEL_COST_MAP=True
 export RAY_USAGE_STATS_ENABLED=0
 marker="not slow and not realmodel and not docker"
