@@ -43,6 +43,7 @@ from typing import Any
 from schemas.outcomes import BudgetRefusal
 from workers.gateway.entries import NAME_FIELD, KeyMap
 from workers.gateway.journal import Journal
+from workers.gateway.recorded import RecordedResults
 from workers.llm.pricing import pico_to_usd, usd_to_pico
 
 JOURNAL_NAME = "gateway/ledger.jsonl"
@@ -80,8 +81,10 @@ class BudgetLedger:
         self.open: dict[int, tuple[str, str, int, str]] = {}
         self.reserved = 0
         self.reserved_by_model: dict[str, int] = defaultdict(int)
-        self.results: dict[str, dict[str, Any]] = {}
-        self.cache: dict[str, dict[str, Any]] = {}
+        #: call_key -> recorded response, fingerprint -> cached response: on disk, filled from the
+        #: journal on restore (workers/gateway/recorded.py: a dict grew with every call of the run)
+        self.results = RecordedResults()
+        self.cache = RecordedResults()
         self.refusals = 0
         self.overruns = 0
         self.late_settles = 0
@@ -96,6 +99,8 @@ class BudgetLedger:
             self.restored_orphans = self._restore()
         except BaseException:
             self._journal.close()  # a refused journal must not stay locked
+            self.results.close()
+            self.cache.close()
             raise
 
     # ---- restore ----
@@ -322,6 +327,8 @@ class BudgetLedger:
     def close(self) -> None:
         with self._lock:
             self._journal.close()
+            self.results.close()
+            self.cache.close()
 
 
 class LocalBudget:
