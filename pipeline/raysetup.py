@@ -48,6 +48,24 @@ def runtime_env() -> dict[str, Any]:
     return {"env_vars": env_vars}
 
 
+#: Ray's internal settings for a cluster started here (``ray.init(_system_config=...)``: Ray hands
+#: them to the GCS and the raylet on their command lines, and every worker reads them from there).
+#: Why: by default every task and actor call of the run (one gateway call, two budget calls and
+#: a sink batch per model call) is reported by its worker once a second and kept in the GCS, up
+#: to 100,000 tasks, for the dashboard's task pages and ``ray.util.state`` - which recap-eval
+#: never reads: over a 12,000-call soak the GCS grew 43 -> 170 MB (bench/soak.py) and every process
+#: spent CPU on the reports. ``task_events_report_interval_ms: 0`` turns the reporting off in
+#: every worker; the GCS's own cap is lowered too, for anything that still reports (a driver of
+#: another Ray version joining). Metrics (Prometheus figures the dashboard agent collects from
+#: every process) go the same way: nobody here scrapes them.
+SYSTEM_CONFIG: dict[str, Any] = {
+    "task_events_report_interval_ms": 0,
+    "task_events_max_num_task_in_gcs": 1000,
+    "task_events_max_num_profile_events_per_task": 0,
+    "enable_timeline": False,
+    "enable_metrics_collection": False,
+}
+
 #: the temp folder of the local cluster this process started (None: none, or joined one)
 _owned: Path | None = None
 
@@ -89,6 +107,7 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
                     object_store_memory=ray_spec.object_store_mb * 1024 * 1024,
                     resources={NODE_RESOURCE: ray_spec.sandboxes_per_node} if ray_spec.sandboxes_per_node else None,
                     _temp_dir=str(folder),
+                    _system_config=SYSTEM_CONFIG,
                     **common,
                 )
         except BaseException:

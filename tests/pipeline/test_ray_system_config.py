@@ -1,0 +1,73 @@
+"""A local Ray started by ``init_ray`` keeps no task events or metrics (pipeline/raysetup.py).
+
+Asserted on what the cluster applied, not on our dict: the settings the GCS was started with
+(its ``--config_list`` command-line argument, base64 JSON; the raylet and the workers take
+theirs from the GCS) and the values a worker process of the cluster reads from Ray's own config. Without them the GCS kept every
+task and actor call of a run for the dashboard (43 -> 170 MB over a 12,000-call soak).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+
+import pytest
+
+WANTED = {
+    "task_events_report_interval_ms": 0,
+    "task_events_max_num_task_in_gcs": 1000,
+    "enable_timeline": False,
+    "enable_metrics_collection": False,
+}
+
+
+def _gcs_command_line(session_dir: str) -> list[str]:
+    """The command line of this cluster's GCS."""
+    found = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as fh:
+                argv = fh.read().decode(errors="replace").split("\0")
+        except OSError:
+            continue
+        if os.path.basename(argv[0]) == "gcs_server" and f"--session-dir={session_dir}" in argv:
+            found.append(argv)
+    assert len(found) == 1, found
+    return found[0]
+
+
+def _config_list(argv: list[str]) -> dict:
+    (arg,) = [a for a in argv if a.startswith("--config_list=")]
+    return json.loads(base64.b64decode(arg.split("=", 1)[1]))
+
+
+@pytest.mark.usefixtures("ray_address")
+def test_the_gcs_starts_without_task_events_or_metrics():
+    import ray
+
+    from pipeline import raysetup
+
+    if raysetup._owned is None:
+        pytest.skip("Ray was started outside init_ray in this process")
+    session_dir = ray._private.worker._global_node.get_session_dir_path()
+    applied = _config_list(_gcs_command_line(session_dir))
+    assert {k: applied.get(k) for k in WANTED} == WANTED
+
+
+@pytest.mark.usefixtures("ray_address")
+def test_a_worker_reads_the_limits_from_the_cluster():
+    import ray
+
+    from pipeline import raysetup
+
+    if raysetup._owned is None:
+        pytest.skip("Ray was started outside init_ray in this process")
+
+    @ray.remote(num_cpus=0)
+    def applied() -> tuple[int, bool]:
+        from ray._raylet import Config
+
+        return Config.task_events_max_num_task_in_gcs(), Config.enable_timeline()
+
+    assert ray.get(applied.remote(), timeout=60) == (1000, False)
