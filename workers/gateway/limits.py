@@ -57,6 +57,10 @@ class SlidingWindow:
         self.anchor = anchor
         self._entries: list[_Entry] = []
         self.total = 0
+        #: without a limit nothing asks for room (``wait_s`` returns at once), so ``add`` prunes
+        #: once the entries have doubled since the last prune (amortised O(1) a call): else a
+        #: window of an unlimited deployment (no ``tpm``, say) kept every entry of the run
+        self._prune_at = 64
 
     def _prune(self, now: float) -> None:
         cutoff = now - self.span_s
@@ -85,6 +89,9 @@ class SlidingWindow:
         e = _Entry(now, amount, now if self.anchor == "admission" else None)
         self._entries.append(e)
         self.total += amount
+        if self.limit is None and len(self._entries) >= self._prune_at:
+            self._prune(now)
+            self._prune_at = max(64, 2 * len(self._entries))
         return e
 
     def finish(self, entry: _Entry, now: float, amount: int | None = None) -> None:

@@ -105,3 +105,30 @@ def test_rpm_window_paces_admissions():
         assert times[6] >= 1.09
 
     asyncio.run(run())
+
+
+def test_a_window_without_a_limit_keeps_only_its_span():
+    """Nothing asks an unlimited window for room, so it must drop what left its span on its own:
+    it kept every entry of the run (the gateway's memory grew with every call, and ``finish``
+    scanned them all)."""
+    w = SlidingWindow(limit=None, span_s=1.0)
+    for i in range(10_000):  # 100 calls a second for 100 s
+        w.finish(w.add(3, now=i / 100), now=i / 100)
+    assert len(w._entries) < 300
+    assert w.usage(now=99.99) == (100, 300)  # the responses of the last second: t = 99.00 .. 99.99
+
+
+def test_an_unlimited_deployment_keeps_a_bounded_window():
+    now = [0.0]
+
+    async def run():
+        ac = _controller(rpm=None, tpm=None, window_s=1.0, clock=lambda: now[0])
+        for i in range(5_000):
+            now[0] = i / 50
+            ac.release(await ac.acquire(120), "ok", actual_tokens=100)
+        return ac
+
+    ac = asyncio.run(run())
+    assert len(ac.requests._entries) < 200 and len(ac.tokens._entries) < 200
+    stats = ac.stats()
+    assert (stats["window_requests"], stats["window_tokens"]) == (50, 5000)  # the last second: 50 calls of 100 tokens
