@@ -50,7 +50,9 @@ def test_the_gcs_starts_without_task_events_or_metrics():
 
     if raysetup._owned is None:
         pytest.skip("Ray was started outside init_ray in this process")
-    session_dir = ray._private.worker._global_node.get_session_dir_path()
+    node = ray._private.worker._global_node
+    assert node is not None
+    session_dir = node.get_session_dir_path()
     applied = _config_list(_gcs_command_line(session_dir))
     assert {k: applied.get(k) for k in WANTED} == WANTED
 
@@ -66,7 +68,7 @@ def test_a_worker_reads_the_limits_from_the_cluster():
 
     @ray.remote(num_cpus=0)
     def applied() -> tuple[int, bool]:
-        from ray._raylet import Config
+        from ray._raylet import Config  # type: ignore[attr-defined]  # Ray's compiled module: no stubs for it
 
         return Config.task_events_max_num_task_in_gcs(), Config.enable_timeline()
 
