@@ -26,7 +26,8 @@ N-th episode's end to the last one's, as in ``bench/pipeline.py``):
   call answered in it; sampled every 0.5 s and interpolated to the window's ends;
 - peak PSS: the most the child's process tree held at once (sum over its processes, sampled
   every 0.5 s from this parent process, so the sampling costs neither side's CPU figure);
-- written MB: what the side left on disk.
+- written MB: what the side left on disk (recap: its run folder; Inspect: its log folder and its
+  data and cache folders, pointed there; Ray's session logs under /tmp/ray are not counted).
 
 Inspect AI runs from a virtual environment of its own: every Inspect release that the registry
 holds clashes with this project's litellm pins (0.3.259 and later need openai >= 3.1 at run time,
@@ -74,7 +75,7 @@ SAMPLE_EVERY_S = 0.5
 CHILD_TIMEOUT_S = 900
 #: Inspect's first user message and each later observation, in characters: sized so a call
 #: carries about the prompt tokens of recap's ReAct-on-blocksworld call (``prompt tok`` shows both)
-INSPECT_PROMPT_CHARS = 6000
+INSPECT_PROMPT_CHARS = 4300
 INSPECT_OBSERVATION_CHARS = 120
 _FILLER = "You are in a room with a table and a stack of blocks; the red block is on the blue block. "
 
@@ -265,11 +266,20 @@ def measure(side: str, n: int, rounds: int, python: str) -> dict[str, Any]:
     server, url = start_server()
     try:
         with tempfile.TemporaryDirectory(prefix=f"vs-inspect-{side}-") as tmp:
-            result_file = Path(tmp) / "result.json"
+            result_file, log_file = Path(tmp) / "result.json", Path(tmp) / "child.log"
+            env = dict(os.environ)
+            if side == "inspect":  # what Inspect keeps in the user's data and cache folders (its trace
+                # log, the running samples' buffer) lands in the run folder, counted with its log
+                env["XDG_DATA_HOME"] = str(Path(tmp) / "run" / "xdg-data")
+                env["XDG_CACHE_HOME"] = str(Path(tmp) / "run" / "xdg-cache")
+            log = log_file.open("w")
             child = subprocess.Popen(
                 [python, __file__, "--child", side, "--n", str(n), "--rounds", str(rounds), "--url", url]
                 + ["--tmp", str(Path(tmp) / "run"), "--result", str(result_file)],
                 cwd=ROOT,
+                env=env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
                 start_new_session=True,
             )
             sampler = TreeSampler(child.pid)
@@ -281,8 +291,10 @@ def measure(side: str, n: int, rounds: int, python: str) -> dict[str, Any]:
                 child.wait()
                 rc = -9
             sampler.stop()
+            log.close()
             if rc != 0 or not result_file.exists():
-                return {"side": side, "n": n, "status": f"failed (exit {rc})"}
+                lines = [line for line in log_file.read_text(errors="replace").splitlines() if line.strip()]
+                return {"side": side, "n": n, "status": f"failed (exit {rc}): {lines[-1] if lines else 'no output'}"}
             result = json.loads(result_file.read_text())
         prompt_tokens = server_prompt_tokens(url)
     finally:
@@ -344,6 +356,8 @@ def main() -> None:
     if args.child:
         child_main(args)
         return
+    if args.rounds < 2 or min(args.concurrency) < 1:
+        sys.exit("vs_inspect: --rounds must be at least 2 (the first round is warm-up) and --concurrency at least 1")
     sides = [args.only] if args.only else list(SIDES)
     inspect_python = args.inspect_python or os.environ.get("RECAP_INSPECT_PYTHON") or str(INSPECT_PYTHON)
     if "inspect" in sides:
@@ -353,8 +367,6 @@ def main() -> None:
                 f"vs_inspect: no Inspect AI at {inspect_python}: python3.11 -m venv .venv-inspect && "
                 ".venv-inspect/bin/pip install -r bench/requirements-inspect.txt (or --inspect-python PATH, or --only recap)"
             )
-    if args.rounds < 2 or min(args.concurrency) < 1:
-        sys.exit("vs_inspect: --rounds must be at least 2 (the first round is warm-up) and --concurrency at least 1")
     if "inspect" in sides:
         print(f"inspect side: {inspect_python} ({versions})")
     print(
@@ -370,7 +382,7 @@ def main() -> None:
     print(
         "ideal = in flight x 60 s / (calls x latency); CPU ms/call and peak PSS: the side's whole process tree\n"
         "(recap: driver + Ray cluster + actors; inspect: its one process); prompt tok = mean prompt tokens per call\n"
-        "counted by the server; written MB: recap's run folder (Parquet + manifests) vs Inspect's .eval log"
+        "counted by the server; written MB: recap's run folder (Parquet + manifests) vs Inspect's .eval log and trace"
     )
 
 
