@@ -29,8 +29,8 @@ N-th episode's end to the last one's, as in ``bench/pipeline.py``):
 - written MB: what the side left on disk (recap: its run folder; Inspect: its log folder and its
   data and cache folders, pointed there; Ray's session logs under /tmp/ray are not counted).
 
-Inspect AI runs from a virtual environment of its own: every Inspect release that the registry
-holds clashes with this project's litellm pins (0.3.259 and later need openai >= 3.1 at run time,
+Inspect AI runs from a virtual environment of its own: every Inspect release checked (0.3.160 to
+0.3.285, the newest here) clashes with our litellm pins (0.3.259 and later need openai >= 3.1 at run time,
 litellm 1.106 needs openai < 3; 0.3.258 and earlier cap fsspec at 2025.9.0, whose s3fs needs a
 botocore older than litellm's boto3 >= 1.43.117), and only the Inspect child process needs it::
 
