@@ -34,5 +34,9 @@ def get_litellm() -> Any:
             from workers.llm.tool_call_guard import install
 
             install(litellm)
+            # the OpenAI SDK's per-message type walk, a no-op for plain-JSON chat requests, skipped
+            from workers.llm import sdk_fast_path
+
+            sdk_fast_path.install()
             _ready = litellm
     return _ready
