@@ -38,5 +38,9 @@ def get_litellm() -> Any:
             from workers.llm import sdk_fast_path
 
             sdk_fast_path.install()
+            # "model not mapped" remembered like a found model (litellm prices every reply)
+            from workers.llm import model_info_cache
+
+            model_info_cache.install(litellm)
             _ready = litellm
     return _ready
