@@ -81,8 +81,8 @@ def install(litellm: Any) -> bool:
     global _installed
     if _installed:
         return True
-    utils = getattr(litellm, "utils", None)
-    cost_calculator = getattr(litellm, "cost_calculator", None)
+    utils: Any = getattr(litellm, "utils", None)
+    cost_calculator: Any = getattr(litellm, "cost_calculator", None)
     generation = getattr(utils, "get_model_cost_mutation_generation", None)
     info = getattr(utils, "_cached_get_model_info", None)
     helper = getattr(utils, "cached_get_model_info_helper", None)

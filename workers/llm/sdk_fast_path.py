@@ -48,7 +48,7 @@ def is_plain_json(value: Any) -> bool:
     return True
 
 
-def _declares_transform(hint: Any, property_info: type) -> bool:
+def _declares_transform(hint: Any, property_info: Any) -> bool:
     """True when a type hint carries a ``PropertyInfo`` with an alias or a format (anywhere in
     its ``Annotated``/``Union``/``List`` arguments)."""
     todo = [hint]
@@ -139,7 +139,7 @@ def install() -> bool:
     )
     if original is None or original_sync is None or None in types or chat_params_need_transform():
         return False
-    module.async_maybe_transform = make_fast_transform(original, types)  # type: ignore[attr-defined]
-    module.maybe_transform = make_fast_transform_sync(original_sync, types)  # type: ignore[attr-defined]
+    module.async_maybe_transform = make_fast_transform(original, types)
+    module.maybe_transform = make_fast_transform_sync(original_sync, types)
     _installed = True
     return True
