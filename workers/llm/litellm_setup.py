@@ -42,5 +42,9 @@ def get_litellm() -> Any:
             from workers.llm import model_info_cache
 
             model_info_cache.install(litellm)
+            # no success-logging task per call while no callback or cache listens
+            from workers.llm import success_logging
+
+            success_logging.install(litellm)
             _ready = litellm
     return _ready
