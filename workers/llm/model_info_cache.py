@@ -96,5 +96,8 @@ def install(litellm: Any) -> bool:
     utils._cached_get_model_info_helper = wrapped_helper
     if getattr(cost_calculator, "cached_get_model_info_helper", None) is helper:
         cost_calculator.cached_get_model_info_helper = wrapped_helper
+    public = getattr(utils, "get_model_info", None)
+    if public is not None and getattr(public, "cache_clear", None) == info.cache_clear:
+        public.cache_clear = wrapped_info.cache_clear  # litellm.get_model_info.cache_clear() clears ours too
     _installed = True
     return True

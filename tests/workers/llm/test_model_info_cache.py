@@ -16,6 +16,11 @@ def test_installed_on_both_lookups() -> None:
     assert model_info_cache.install(litellm) is True
     assert isinstance(litellm.utils._cached_get_model_info, model_info_cache.NegativeCache)
     assert litellm.cost_calculator.cached_get_model_info_helper is litellm.utils.cached_get_model_info_helper
+    with pytest.raises(Exception, match="no-such-model-for-clear"):
+        litellm.get_model_info("openai/no-such-model-for-clear")
+    assert litellm.utils._cached_get_model_info.misses
+    litellm.get_model_info.cache_clear()  # litellm's public clear empties the remembered misses too
+    assert not litellm.utils._cached_get_model_info.misses
 
 
 def test_unknown_model_raises_the_same_without_searching_again() -> None:
