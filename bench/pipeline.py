@@ -9,6 +9,13 @@ stop at the quota's.
 
     python bench/pipeline.py                               # 1 2 4 8 16 workers + quota run
     python bench/pipeline.py --workers 1 4 --rounds 3 --quota-check 0
+    python bench/pipeline.py --scale                        # 8 32 64 workers, 2 rounds, no quota run
+
+CPU ms/call sums the CPU seconds of every process of the run (driver with the fake server, Ray's
+own processes, gateway, sink, budget, episode workers: ``bench/procstats.py``) between the end of
+the first round and the last result, divided by the calls the fake server answered in that span;
+gw added ms is the median of the gateway's recorded call latency minus the server's fixed latency
+(what admission, the budget, litellm and the records add to a call).
 
 Prints a table; figures only, nothing asserted.
 """
@@ -50,9 +57,8 @@ workers: {workers}
 """
 
 
-def run_one(url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp: Path) -> dict:
+def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp: Path) -> dict:
     tmp.mkdir(parents=True, exist_ok=True)
-    import ray
 
     from pipeline.driver import Driver, Hooks, prepare
     from pipeline.gateway_backend import make_backend
@@ -65,18 +71,21 @@ def run_one(url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp:
     prepared = prepare(spec, text)
     n_units = workers * rounds
     prepared.plan.units = prepared.plan.units[:n_units]
-    actors: dict[str, object] = {}
-    rss: dict[str, int] = {}
+    from bench.procstats import cpu_delta, snapshot
+
+    # CPU and memory are read from /proc at two moments (no Ray call per result: those would be
+    # counted as the pipeline's CPU): when the first round (the cold starts) is done, and at
+    # the last result, before the driver tears the actors down
+    marks: dict[str, tuple] = {}
+    results = [0]
 
     def on_dispatch(unit, attempt, actor):
-        actors[str(actor._actor_id)] = actor
+        pass
 
     def on_result(unit, attempt, out_):
-        for key, actor in actors.items():
-            try:
-                rss[key] = max(rss.get(key, 0), ray.get(actor.memory.remote(), timeout=10))
-            except Exception:
-                pass
+        results[0] += 1
+        if results[0] == workers or results[0] == n_units:
+            marks["end" if "start" in marks else "start"] = (snapshot(), server.arrivals, time.monotonic())
 
     t0 = time.monotonic()
     summary = Driver(prepared, make_backend(spec), progress="off", hooks=Hooks(on_dispatch, on_result)).run()
@@ -91,6 +100,16 @@ def run_one(url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp:
     calls = sum(eps.column("llm_calls").to_pylist()) * n_measured / eps.num_rows
     lat, _ = RunStore(out).read_table("llm_calls", ["latency_s"])
     gw_latency = statistics.median(lat.column("latency_s").to_pylist()) if lat.num_rows else float("nan")
+    cpu_ms = rss_mb = float("nan")
+    cpu_roles: dict[str, float] = {}
+    if "end" in marks:
+        (snap0, arr0, _), (snap1, arr1, _) = marks["start"], marks["end"]
+        cpu_roles = cpu_delta(snap0, snap1)
+        measured_calls = max(arr1 - arr0, 1)
+        cpu_ms = sum(cpu_roles.values()) * 1000 / measured_calls
+        cpu_roles = {role: s * 1000 / measured_calls for role, s in cpu_roles.items()}
+        worker_rss = [max(s.rss, snap0[pid].rss if pid in snap0 else 0) for pid, s in snap1.items() if s.role == "episode worker"]
+        rss_mb = statistics.median(worker_rss) / 2**20 if worker_rss else float("nan")
     return {
         "workers": workers,
         "episodes": eps.num_rows,
@@ -101,8 +120,11 @@ def run_one(url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp:
         "calls_per_s": calls / span,
         "calls_per_episode": calls / max(n_measured, 1),
         "gw_ms": gw_latency * 1000,
+        "gw_added_ms": (gw_latency - LATENCY) * 1000,
+        "cpu_ms": cpu_ms,
+        "cpu_roles": cpu_roles,
         "call_ms": span * workers / max(calls, 1) * 1000,
-        "rss_mb": statistics.median(rss.values()) / 2**20 if rss else float("nan"),
+        "rss_mb": rss_mb,
         "reasons": sorted(set(eps.column("end_reason").to_pylist())),
     }
 
@@ -144,8 +166,15 @@ def sink_rows_per_second(n_rows: int, tmp: Path, via_ray: bool) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4, 8, 16])
-    ap.add_argument("--rounds", type=int, default=4, help="episodes per worker in each measurement (the first is warm-up)")
+    ap.add_argument("--workers", type=int, nargs="+", default=None, help="worker counts (default 1 2 4 8 16; --scale: 8 32 64)")
+    ap.add_argument(
+        "--rounds",
+        type=int,
+        default=None,
+        help="episodes per worker in each measurement (the first is warm-up; default 4, --scale: 2)",
+    )
+    ap.add_argument("--scale", action="store_true", help="the scale series of issue 37: 8 32 64 workers, 2 rounds, no quota run")
+    ap.add_argument("--by-role", action="store_true", help="also print CPU ms per call of each process role")
     ap.add_argument("--rpm", type=int, default=0, help="gateway quota per window for the scaling series (0: none)")
     ap.add_argument("--window-s", type=float, default=10.0, help="quota window in seconds")
     ap.add_argument(
@@ -158,6 +187,12 @@ def main() -> None:
     ap.add_argument("--num-cpus", type=int, default=None)
     ap.add_argument("--sink-rows", type=int, default=100_000)
     args = ap.parse_args()
+    if args.workers is None:
+        args.workers = [8, 32, 64] if args.scale else [1, 2, 4, 8, 16]
+    if args.rounds is None:
+        args.rounds = 2 if args.scale else 4
+    if args.scale and "--quota-check" not in sys.argv:
+        args.quota_check = 0
 
     import ray
 
@@ -176,7 +211,7 @@ def main() -> None:
     )
     print(
         f"{'workers':>7} {'quota/s':>7} {'episodes':>8} {'ep/min':>8} {'ideal':>8} {'vs ideal':>8} {'vs linear':>9} "
-        f"{'calls/s':>8} {'gw ms':>6} {'call ms':>7} {'worker RSS MB':>13}"
+        f"{'calls/s':>8} {'gw ms':>6} {'gw added ms':>11} {'CPU ms/call':>11} {'call ms':>7} {'worker RSS MB':>13}"
     )
     base = None
     runs = [(w, args.rpm) for w in args.workers]
@@ -184,7 +219,7 @@ def main() -> None:
         runs.append((max(args.workers), args.quota_check))
     with tempfile.TemporaryDirectory(prefix="recap-bench-") as tmp:
         for i, (w, rpm) in enumerate(runs):
-            r = run_one(url, w, args.rounds, rpm, args.window_s, Path(tmp) / str(i))
+            r = run_one(server, url, w, args.rounds, rpm, args.window_s, Path(tmp) / str(i))
             quota = rpm / args.window_s if rpm else None
             ideal = w * 60 / (CALLS * LATENCY)
             if quota:
@@ -195,9 +230,12 @@ def main() -> None:
             print(
                 f"{w:>7} {(f'{quota:.0f}' if quota else '-'):>7} {r['episodes']:>8} {r['eps_per_min']:>8.1f} {ideal:>8.1f} "
                 f"{r['eps_per_min'] / ideal:>8.0%} {linear} {r['calls_per_s']:>8.1f} {r['gw_ms']:>6.0f} "
-                f"{r['call_ms']:>7.0f} {r['rss_mb']:>13.0f}  {','.join(r['reasons'])}",
+                f"{r['gw_added_ms']:>11.1f} {r['cpu_ms']:>11.1f} {r['call_ms']:>7.0f} {r['rss_mb']:>13.0f}  {','.join(r['reasons'])}",
                 flush=True,
             )
+            if args.by_role and r["cpu_roles"]:
+                roles = sorted(r["cpu_roles"].items(), key=lambda kv: -kv[1])
+                print("        CPU ms/call by role: " + ", ".join(f"{k} {v:.1f}" for k, v in roles if v >= 0.05), flush=True)
         local = sink_rows_per_second(args.sink_rows, Path(tmp), via_ray=False)
         remote = sink_rows_per_second(args.sink_rows, Path(tmp), via_ray=True)
     print(
@@ -206,7 +244,9 @@ def main() -> None:
     )
     print(
         "ideal = workers x 60 s / (calls x latency), or the quota's rate when lower; vs linear = ep/min relative to\n"
-        "1 worker x workers; gw ms = median call latency inside the gateway; call ms = wall time per call in a worker"
+        "1 worker x workers; gw ms = median call latency inside the gateway; gw added ms = gw ms minus the server's\n"
+        "latency; CPU ms/call = CPU of all the run's processes over the measured span / calls the server answered in it;\n"
+        "call ms = wall time per call in a worker; worker RSS = median over the episode workers (from /proc)"
     )
     server.stop_thread()
     ray.shutdown()

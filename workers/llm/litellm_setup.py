@@ -34,5 +34,17 @@ def get_litellm() -> Any:
             from workers.llm.tool_call_guard import install
 
             install(litellm)
+            # the OpenAI SDK's per-message type walk, a no-op for plain-JSON chat requests, skipped
+            from workers.llm import sdk_fast_path
+
+            sdk_fast_path.install()
+            # "model not mapped" remembered like a found model (litellm prices every reply)
+            from workers.llm import model_info_cache
+
+            model_info_cache.install(litellm)
+            # no success-logging task per call while no callback or cache listens
+            from workers.llm import success_logging
+
+            success_logging.install(litellm)
             _ready = litellm
     return _ready

@@ -21,6 +21,8 @@ import hashlib
 import json
 import math
 import os
+import threading
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -130,19 +132,67 @@ def _encoding_for(model: str) -> Any:
     return tiktoken.get_encoding(name)
 
 
+class EncodedLengths:
+    """Token counts of texts under one encoding, remembered by content digest (a bounded LRU).
+
+    Why: agents re-send their conversation on every call (ReCAP re-sends long prefixes), so
+    without memory a call's count encodes every earlier message again and an episode's counting
+    grows with the square of its length. A message is counted once; later calls look its
+    count up by a 128-bit BLAKE2 digest of its text (no text is kept). Texts shorter than
+    :attr:`min_chars` are encoded directly (cheaper than the digest)."""
+
+    def __init__(self, encoding: Any, *, max_entries: int = 8192, min_chars: int = 256):
+        self.encoding = encoding
+        self.max_entries = max_entries
+        self.min_chars = min_chars
+        self._counts: OrderedDict[bytes, int] = OrderedDict()
+        self._lock = threading.Lock()  # the direct client may count from several threads
+        self.hits = 0
+
+    def __call__(self, text: str) -> int:
+        if len(text) < self.min_chars:
+            return len(self.encoding.encode(text, disallowed_special=()))
+        key = hashlib.blake2b(text.encode("utf-8", "surrogatepass"), digest_size=16).digest()
+        with self._lock:
+            n = self._counts.get(key)
+            if n is not None:
+                self._counts.move_to_end(key)
+                self.hits += 1
+                return n
+        n = len(self.encoding.encode(text, disallowed_special=()))
+        with self._lock:
+            self._counts[key] = n
+            if len(self._counts) > self.max_entries:
+                self._counts.popitem(last=False)
+        return n
+
+
+@lru_cache(maxsize=64)
+def _lengths_for(model: str) -> EncodedLengths | None:
+    """The memoised counter of a model's encoding (one per encoding object), or None."""
+    enc = _encoding_for(model)
+    return None if enc is None else _lengths_of(enc)
+
+
+@lru_cache(maxsize=8)
+def _lengths_of(enc: Any) -> EncodedLengths:
+    return EncodedLengths(enc)
+
+
 def count_prompt_tokens(
     model: str, messages: Sequence[Mapping[str, Any]], tools: Sequence[Mapping[str, Any]] | None = None
 ) -> TokenCount:
-    """Prompt tokens of a chat request (its messages and tool definitions), counted offline."""
-    enc = _encoding_for(model)
-    if enc is None:
+    """Prompt tokens of a chat request (its messages and tool definitions), counted offline
+    (each message's text through :class:`EncodedLengths`: the same count, once per text)."""
+    lengths = _lengths_for(model)
+    if lengths is None:
         return TokenCount(estimate_prompt_tokens(messages, tools), "estimate")
     n = REPLY_PRIMING_TOKENS
     for m in messages:
-        n += TOKENS_PER_MESSAGE + len(enc.encode(_content(m), disallowed_special=()))
-        n += len(enc.encode(str(m.get("role", "")), disallowed_special=()))
+        n += TOKENS_PER_MESSAGE + lengths(_content(m))
+        n += lengths(str(m.get("role", "")))
     if tools:
-        n += len(enc.encode(tools_text(tools), disallowed_special=())) + TOKENS_PER_TOOL * len(tools)
+        n += lengths(tools_text(tools)) + TOKENS_PER_TOOL * len(tools)
     return TokenCount(n, "tokenizer")
 
 

@@ -101,3 +101,58 @@ def test_cache_counts_beyond_the_prompt_are_clamped_in_the_price():
 def test_price_flags_must_be_booleans():
     with pytest.raises(PriceError, match="explicit_cache must be true or false, got 'no'"):
         PriceTable({}).with_overrides({"m": {"input": 1.0, "output": 1.0, "explicit_cache": "no"}})
+
+
+def _uncached_count(model: str, messages: list[dict], tools: list[dict] | None = None) -> int:
+    """The count as it was made before the per-text memory: every text encoded on every call."""
+    from workers.llm.tokens import REPLY_PRIMING_TOKENS, TOKENS_PER_MESSAGE, TOKENS_PER_TOOL, _content, _encoding_for, tools_text
+
+    enc = _encoding_for(model)
+    n = REPLY_PRIMING_TOKENS
+    for m in messages:
+        n += TOKENS_PER_MESSAGE + len(enc.encode(_content(m), disallowed_special=()))
+        n += len(enc.encode(str(m.get("role", "")), disallowed_special=()))
+    if tools:
+        n += len(enc.encode(tools_text(tools), disallowed_special=())) + TOKENS_PER_TOOL * len(tools)
+    return n
+
+
+def test_remembered_counts_equal_fresh_counts_over_a_growing_conversation() -> None:
+    """A ReAct-like episode re-sends its whole conversation each call: the memoised count of
+    every call equals the count with every text encoded afresh, and the re-sent texts are hits."""
+    from workers.llm.tokens import _lengths_for
+
+    model = "openai/gpt-4o"
+    lengths = _lengths_for(model)
+    assert lengths is not None
+    system = "You act in a kitchen; answer with one action per turn. " * 20  # long: memoised
+    messages: list[dict] = [{"role": "system", "content": system}]
+    tools = [{"type": "function", "function": {"name": "act", "parameters": {"type": "object", "properties": {}}}}]
+    hits0 = lengths.hits
+    for i in range(6):
+        messages.append({"role": "user", "content": f"Observation {i}: " + "the pot is on the stove, the onion is cut. " * 8})
+        counted = count_prompt_tokens(model, messages, tools if i % 2 else None)
+        assert counted.source == "tokenizer"
+        assert counted.tokens == _uncached_count(model, messages, tools if i % 2 else None)
+        messages.append(
+            {
+                "role": "assistant",
+                "content": None,
+                "tool_calls": [{"id": f"c{i}", "type": "function", "function": {"name": "act", "arguments": '{"a": "stir"}'}}],
+            }
+        )
+        messages.append({"role": "tool", "tool_call_id": f"c{i}", "content": "done ✓ " * 60})
+    assert lengths.hits - hits0 >= 15  # the system prompt and the earlier observations, re-sent
+
+
+def test_remembered_counts_are_bounded_and_exact_after_eviction() -> None:
+    from workers.llm.tokens import EncodedLengths, _encoding_for
+
+    enc = _encoding_for("openai/gpt-4o")
+    lengths = EncodedLengths(enc, max_entries=3, min_chars=1)
+    texts = [f"text number {i} " * (i + 1) for i in range(8)]
+    for t in texts + texts[::-1]:
+        assert lengths(t) == len(enc.encode(t, disallowed_special=()))
+    assert len(lengths._counts) == 3
+    short = EncodedLengths(enc)  # below min_chars: encoded directly, nothing remembered
+    assert short("hi") == len(enc.encode("hi")) and not short._counts

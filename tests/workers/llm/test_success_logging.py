@@ -1,0 +1,76 @@
+"""litellm's per-call success-logging task runs only when something listens
+(:mod:`workers.llm.success_logging`): a call through the fake server with no callback builds no
+payload, and a registered callback still gets the call's success event with its usage."""
+
+from __future__ import annotations
+
+import asyncio
+
+from workers.llm import success_logging
+from workers.llm.litellm_setup import get_litellm
+
+litellm = get_litellm()
+
+
+def _call(url: str) -> object:
+    return asyncio.run(
+        litellm.acompletion(
+            model="openai/fake-gpt",
+            api_base=url,
+            api_key="k",
+            messages=[{"role": "user", "content": "hello"}],
+            max_tokens=20,
+            num_retries=0,
+            max_retries=0,
+        )
+    )
+
+
+def test_no_task_without_listeners_and_events_with_one(fake_server, monkeypatch) -> None:
+    from litellm.integrations.custom_logger import CustomLogger
+    from litellm.litellm_core_utils import litellm_logging
+
+    assert success_logging.install(litellm) is True
+    assert success_logging.nobody_listens(litellm)
+    built: list[object] = []
+    real = litellm_logging.Logging.async_success_handler
+
+    async def spy(self, *args, **kwargs):
+        built.append(self)
+        return await real(self, *args, **kwargs)
+
+    monkeypatch.setattr(litellm_logging.Logging, "async_success_handler", spy)
+    server = fake_server()
+    resp = _call(server.base_url)
+    assert resp.choices[0].message.content  # the call itself is unchanged
+    assert resp._hidden_params.get("litellm_call_id")  # and its hidden params are set
+    assert built == []  # nobody listens: no payload task
+
+    events: list[dict] = []
+
+    class Listener(CustomLogger):
+        async def async_log_success_event(self, kwargs, response_obj, start_time, end_time):
+            events.append(kwargs.get("standard_logging_object") or {})
+
+    listener = Listener()
+    monkeypatch.setattr(litellm, "callbacks", [listener])
+    assert not success_logging.nobody_listens(litellm)
+
+    async def call_and_drain() -> None:
+        await litellm.acompletion(
+            model="openai/fake-gpt",
+            api_base=server.base_url,
+            api_key="k",
+            messages=[{"role": "user", "content": "hello again"}],
+            max_tokens=20,
+            num_retries=0,
+            max_retries=0,
+        )
+        for _ in range(50):  # the logging task runs after the call returns
+            if events:
+                return
+            await asyncio.sleep(0.05)
+
+    asyncio.run(call_and_drain())
+    assert len(built) == 1
+    assert len(events) == 1 and events[0].get("total_tokens", 0) > 0

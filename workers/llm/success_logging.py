@@ -1,0 +1,50 @@
+"""No litellm success-logging task per call when nothing listens to it.
+
+Why: after every successful async call litellm schedules a task that builds its "standard
+logging payload" (a copy of the messages with base64 cut out, metadata, usage, cost, tags) and
+hands it to the registered success callbacks and its response cache. We register none and use no
+litellm cache (our records are the ``llm_calls`` rows the gateway writes; the reply's cost is
+set on the response before that task runs), so the payload is built for nobody: profiled through
+the gateway at 16 workers it was the largest single litellm frame (issue 37).
+
+:func:`install` wraps litellm's scheduler (``litellm.utils._schedule_async_success_logging``):
+while every success-callback list is empty and ``litellm.cache`` is None the task is not
+created; as soon as anything registers a callback or a cache, litellm's own scheduler runs
+again, unchanged.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+#: litellm's lists of success listeners (any of them non-empty: the task must run)
+LISTENER_LISTS = ("callbacks", "success_callback", "_async_success_callback", "service_callback")
+_installed = False
+
+
+def nobody_listens(litellm: Any) -> bool:
+    """True when no success callback of any kind is registered and no litellm cache is set."""
+    if getattr(litellm, "cache", None) is not None:
+        return False
+    return not any(getattr(litellm, name, None) for name in LISTENER_LISTS)
+
+
+def install(litellm: Any) -> bool:
+    """Wrap litellm's success-logging scheduler (once per process); False when its layout differs."""
+    global _installed
+    if _installed:
+        return True
+    utils = getattr(litellm, "utils", None)
+    original = getattr(utils, "_schedule_async_success_logging", None)
+    if original is None or not callable(original):
+        return False
+
+    def _schedule_async_success_logging(*args: Any, **kwargs: Any) -> None:
+        if nobody_listens(litellm):
+            return None
+        return original(*args, **kwargs)
+
+    _schedule_async_success_logging.__wrapped__ = original  # type: ignore[attr-defined]
+    utils._schedule_async_success_logging = _schedule_async_success_logging  # type: ignore[union-attr]
+    _installed = True
+    return True
