@@ -44,6 +44,8 @@ WARM_FRACTION = 0.10
 #: (imports, first connections) and the last stops before the drain (fewer episodes than workers)
 FIRST_QUARTER = (0.02, 0.25)
 LAST_QUARTER = (0.75, 0.98)
+#: the run's own actors (bench/procstats.py roles), gone once the driver has stopped
+ACTOR_ROLES = ("gateway", "quota", "budget", "sink", "episode worker")
 
 
 @dataclass
@@ -135,7 +137,12 @@ class Sampler(threading.Thread):
 
 def report(series: Series, total: int) -> None:
     samples = series.samples
-    warm, end = sample_at(samples, WARM_FRACTION * total), series.end or samples[-1]
+    warm = sample_at(samples, WARM_FRACTION * total)
+    # the end figure: taken as the last round started; or, for a run cut short, the last sample
+    # in which every process of the warm one was still there (after the driver stops, they go)
+    actors = [(r, n) for r, (n, _) in warm.pss.items() if r in ACTOR_ROLES]
+    alive = [s for s in samples if s.t >= warm.t and all(s.pss.get(r, (0, 0))[0] >= n for r, n in actors)]
+    end = series.end or (alive[-1] if alive else samples[-1])
     print(
         f"\nper role: PSS MB after warm-up ({WARM_FRACTION:.0%} of the calls, t={warm.t:.0f} s) and at the end (t={end.t:.0f} s)"
     )
