@@ -14,6 +14,11 @@ of the first quarter of the calls against the last.
     python bench/soak.py                                   # 100,000 calls, 16 workers
     python bench/soak.py --calls 12000 --workers 8 --interval 10
 
+What it found (issue 37; fixed): the GCS kept every task and actor call for the dashboard
+(pipeline/raysetup.py SYSTEM_CONFIG), the budget ledger kept every recorded response in a dict
+(workers/gateway/recorded.py), the gateway's admission windows kept every entry when the
+deployment has no rpm/tpm limit (workers/gateway/limits.py).
+
 Figures only, nothing asserted. The fake server runs in a thread of this process (its
 per-call log is emptied at every sample, so the driver's figure is the driver's own).
 """
