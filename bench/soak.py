@@ -17,7 +17,8 @@ of the first quarter of the calls against the last.
 What it found (issue 37; fixed): the GCS kept every task and actor call for the dashboard
 (pipeline/raysetup.py SYSTEM_CONFIG), the budget ledger kept every recorded response in a dict
 (workers/gateway/recorded.py), the gateway's admission windows kept every entry when the
-deployment has no rpm/tpm limit (workers/gateway/limits.py).
+deployment has no rpm/tpm limit (workers/gateway/limits.py), and glibc's per-thread malloc
+arenas left the threaded actors' freed memory fragmented (MALLOC_ARENA_MAX in raysetup.py).
 
 Figures only, nothing asserted. The fake server runs in a thread of this process (its
 per-call log is emptied at every sample, so the driver's figure is the driver's own).
