@@ -14,6 +14,12 @@ of the first quarter of the calls against the last.
     python bench/soak.py                                   # 100,000 calls, 16 workers
     python bench/soak.py --calls 12000 --workers 8 --interval 10
 
+What it found (issue 37; fixed): the GCS kept every task and actor call for the dashboard
+(pipeline/raysetup.py SYSTEM_CONFIG), the budget ledger kept every recorded response in a dict
+(workers/gateway/recorded.py), the gateway's admission windows kept every entry when the
+deployment has no rpm/tpm limit (workers/gateway/limits.py), and glibc's per-thread malloc
+arenas left the threaded actors' freed memory fragmented (MALLOC_ARENA_MAX in raysetup.py).
+
 Figures only, nothing asserted. The fake server runs in a thread of this process (its
 per-call log is emptied at every sample, so the driver's figure is the driver's own).
 """
@@ -44,6 +50,8 @@ WARM_FRACTION = 0.10
 #: (imports, first connections) and the last stops before the drain (fewer episodes than workers)
 FIRST_QUARTER = (0.02, 0.25)
 LAST_QUARTER = (0.75, 0.98)
+#: the run's own actors (bench/procstats.py roles), gone once the driver has stopped
+ACTOR_ROLES = ("gateway", "quota", "budget", "sink", "episode worker")
 
 
 @dataclass
@@ -135,7 +143,12 @@ class Sampler(threading.Thread):
 
 def report(series: Series, total: int) -> None:
     samples = series.samples
-    warm, end = sample_at(samples, WARM_FRACTION * total), series.end or samples[-1]
+    warm = sample_at(samples, WARM_FRACTION * total)
+    # the end figure: taken as the last round started; or, for a run cut short, the last sample
+    # in which every process of the warm one was still there (after the driver stops, they go)
+    actors = [(r, n) for r, (n, _) in warm.pss.items() if r in ACTOR_ROLES]
+    alive = [s for s in samples if s.t >= warm.t and all(s.pss.get(r, (0, 0))[0] >= n for r, n in actors)]
+    end = series.end or (alive[-1] if alive else samples[-1])
     print(
         f"\nper role: PSS MB after warm-up ({WARM_FRACTION:.0%} of the calls, t={warm.t:.0f} s) and at the end (t={end.t:.0f} s)"
     )

@@ -73,3 +73,21 @@ def test_a_worker_reads_the_limits_from_the_cluster():
         return Config.task_events_max_num_task_in_gcs(), Config.enable_timeline()
 
     assert ray.get(applied.remote(), timeout=60) == (1000, False)
+
+
+@pytest.mark.usefixtures("ray_address")
+def test_workers_start_with_few_malloc_arenas():
+    """glibc reads MALLOC_ARENA_MAX once, at the start: it must be in the environment the worker
+    process was started with (/proc/self/environ), not only set later in os.environ."""
+    import ray
+
+    from pipeline.raysetup import MALLOC_ARENAS, runtime_env
+
+    @ray.remote(num_cpus=0, runtime_env=runtime_env())
+    def start_environment() -> str | None:
+        with open("/proc/self/environ", "rb") as fh:
+            pairs = dict(item.split(b"=", 1) for item in fh.read().split(b"\0") if b"=" in item)
+        value = pairs.get(b"MALLOC_ARENA_MAX")
+        return None if value is None else value.decode()
+
+    assert ray.get(start_environment.remote(), timeout=120) == MALLOC_ARENAS
