@@ -93,7 +93,14 @@ def main() -> None:
 
     from pipeline.raysetup import init_ray
     from pipeline.spec import RaySpec
-    from pipeline.worker_pool import episodes_per_process
+
+    try:
+        from pipeline.worker_pool import episodes_per_process
+    except ImportError:  # a checkout from before ray.episodes_per_process: one episode per process
+
+        def episodes_per_process(workers: int, cpus: float, asked: int | None) -> int:
+            return 1
+
     from workers.llm.offline.fake_server import FakeServer, FakeServerConfig
 
     plain_sweep = pipeline_bench.sweep_text
@@ -109,7 +116,14 @@ def main() -> None:
     os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
     server = FakeServer(FakeServerConfig(latency_s=pipeline_bench.LATENCY))
     url = server.start_in_thread()
-    init_ray(RaySpec(num_cpus=args.num_cpus))
+    for tries_left in (2, 1, 0):  # a loaded machine: Ray gives its raylet 30 s to register, then gives up
+        try:
+            init_ray(RaySpec(num_cpus=args.num_cpus))
+            break
+        except Exception as exc:
+            if not tries_left or "timed out during startup" not in str(exc):
+                raise
+            ray.shutdown()
     cpus = ray.cluster_resources().get("CPU", 0)
     print(
         f"host CPUs {os.cpu_count()}, Ray CPUs {cpus:.0f}; fake server latency {pipeline_bench.LATENCY * 1000:.0f} ms; "

@@ -86,10 +86,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-if TYPE_CHECKING:
-    from workers.gateway.actors import BudgetActor, GatewayActor, RunGateways
+if TYPE_CHECKING:  # the Ray-backed names (actors, client) stay Any to a type checker, as Ray's classes are
     from workers.gateway.blocking import BlockingGateway
-    from workers.gateway.client import GatewayClient
     from workers.gateway.core import DeploymentGateway
     from workers.gateway.ledger import BudgetLedger, LocalBudget
     from workers.llm.pricing import Price, PriceError, PriceTable, require_prices
