@@ -84,7 +84,7 @@ from pipeline.session import SessionLoop
 from pipeline.sink_channel import SinkChannel
 from pipeline.stopping import DEFAULT_GRACE_S, StopRequests
 from pipeline.store import PLAN_FILE, SPEC_FILE, RunIdentity, RunStore
-from pipeline.worker_pool import InProcessWorkerPool, RayWorkerPool, WorkerPool
+from pipeline.worker_pool import InProcessWorkerPool, RayWorkerPool, WorkerPool, episodes_per_process
 from schemas.parts import RUN_FILE
 from schemas.records import EpisodeRecord
 from workers.envs.fever.pages import seal_run_folder
@@ -241,7 +241,10 @@ class Driver(SessionLoop):
             runtime_env=self.services.worker_runtime_env(),
             resources=self.worker_resources,
         )
-        return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session)
+        # a sandboxed worker holds its node's sandbox slot: one episode per process there
+        asked = 1 if self.worker_resources else self.spec.ray.episodes_per_process
+        per_process = episodes_per_process(self.spec.workers, ray.cluster_resources().get("CPU", 1), asked)
+        return RayWorkerPool(worker_cls, self.run_id, self.channel.actor, factory, session=self.session, per_process=per_process)
 
     def _sandbox_resources(self) -> dict[str, float] | None:
         """``{recap_sandbox: 1}`` per episode worker when the sweep bounds sandboxes per node and

@@ -18,7 +18,6 @@ from __future__ import annotations
 import logging
 import os
 import uuid
-from dataclasses import dataclass
 from typing import Any
 
 from pipeline.backend import RateStats, Spend
@@ -27,6 +26,7 @@ from pipeline.errors import PipelineError
 from pipeline.preflight import key_variables
 from pipeline.raysetup import runtime_env
 from pipeline.spec import SweepSpec
+from workers.episode_worker import ClientTable
 
 log = logging.getLogger(__name__)
 
@@ -46,15 +46,9 @@ def provider_models(spec: SweepSpec) -> dict[str, str]:
     return {m.name: m.model for m in spec.models}
 
 
-@dataclass
-class GatewayFactory:
-    """Picklable: the workers get one GatewayClient (an actor handle) per sweep model label."""
-
-    clients: dict[str, Any]
-    writes_llm_calls: bool = True
-
-    def client(self, model: str) -> Any:
-        return self.clients[model]
+#: the factory the workers get: one GatewayClient (an actor handle) per sweep model label; defined
+#: in the worker's own module, so a worker unpickling it imports nothing of the pipeline
+GatewayFactory = ClientTable
 
 
 class GatewayBackend:

@@ -109,7 +109,7 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
         folder = local_cluster.claim(run)
         local_cluster.watch(folder)  # stops the cluster if this process dies without shutting it down
         try:
-            with _loopback_node():
+            with _loopback_node(), _lean_head(not ray_spec.dashboard):
                 ray.init(
                     num_cpus=ray_spec.num_cpus or os.cpu_count() or 2,
                     include_dashboard=ray_spec.dashboard,
@@ -182,3 +182,54 @@ def _loopback_node() -> Iterator[None]:
         yield
     finally:
         ray_constants.ENABLE_RAY_CLUSTER = before
+
+
+@contextmanager
+def _lean_head(lean: bool) -> Iterator[None]:
+    """Start a local Ray without the processes a sweep never reads, unless the sweep asks for the
+    dashboard (``ray: {dashboard: true}``): no dashboard (API server) process, the dashboard
+    agent in its minimal form, no log monitor and no autoscaler monitor.
+
+    Why: ``include_dashboard=False`` still starts the API server (the dashboard process with its
+    usage-stats module), the dashboard agent with its HTTP server, metrics and event modules, the
+    log monitor (it forwards workers' output to drivers: ours set ``log_to_driver=False``) and the
+    autoscaler monitor (a local node never scales): ~240 MB PSS together, a third of a run's
+    fixed memory (issue 37, item 3). ``ray start`` has switches for the monitors
+    (``--no-monitor``, ``--include-log-monitor``); ``ray.init`` passes none of them, nor one to
+    leave the agent out (its maintainers keep it for runtime environments and metrics,
+    ray-project/ray#19420). So, for the start only, this sets the two monitor switches on the
+    node's parameters, skips the API server, and has Ray choose its minimal agent - what a
+    ``pip install ray`` without ``[default]`` runs - by reporting the dashboard's optional
+    dependencies missing (``ray._private.utils.get_dashboard_dependency_error``, read while
+    ``ray.init`` builds the agent's command line). What a sweep uses stays: the GCS, the raylet,
+    the workers and the runtime-environment agent (the workers' env_vars). Another Ray layout
+    (a private name gone): the default start."""
+    if not lean:
+        yield
+        return
+    try:  # lazy: Ray loads only where a session uses it
+        from ray._private import node as ray_node
+        from ray._private import parameter as ray_parameter
+        from ray._private import utils as ray_utils
+
+        params_init = ray_parameter.RayParams.__init__
+        start_api_server = ray_node.Node.start_api_server
+        dependency_error = ray_utils.get_dashboard_dependency_error
+    except (ImportError, AttributeError):
+        yield
+        return
+
+    def lean_params(self: Any, *args: Any, **kwargs: Any) -> None:
+        params_init(self, *args, **kwargs)
+        self.include_log_monitor = False
+        self.no_monitor = True
+
+    ray_parameter.RayParams.__init__ = lean_params  # type: ignore[method-assign]
+    ray_node.Node.start_api_server = lambda self, **_: None  # type: ignore[method-assign]
+    ray_utils.get_dashboard_dependency_error = lambda: ImportError("the dashboard is off (ray: {dashboard: false})")
+    try:
+        yield
+    finally:
+        ray_parameter.RayParams.__init__ = params_init  # type: ignore[method-assign]
+        ray_node.Node.start_api_server = start_api_server  # type: ignore[method-assign]
+        ray_utils.get_dashboard_dependency_error = dependency_error

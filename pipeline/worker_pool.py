@@ -3,8 +3,11 @@
 Why an interface: the session (:mod:`pipeline.driver`) decides *what* runs - which unit, which
 attempt, when to retry or give up - and must not care *where*. Two pools implement it:
 
-* :class:`RayWorkerPool` - one Ray actor per worker (the production path): a worker process
-  that dies is told apart from a task that failed on another actor, and replaced;
+* :class:`RayWorkerPool` - episode workers in Ray actors (the production path): one per
+  process, or several per process when many are in flight (``ray.episodes_per_process``: a
+  Ray worker process alone costs ~50 MB, so hundreds of episodes in flight share fewer
+  processes, each episode on its own thread with its own environment and agent); a worker
+  process that dies is told apart from a task that failed on another actor, and replaced;
 * :class:`InProcessWorkerPool` - threads in the driver's process, each with its own
   :class:`workers.episode_worker.EpisodeRunner`: no actor start-up, breakpoints work, and the
   session logic is testable without a cluster. Its workers cannot die on their own.
@@ -36,11 +39,36 @@ FailureKind = Literal["worker_lost", "task_raised", "elsewhere"]
 
 @dataclass
 class Slot:
-    """One worker: its id, its handle (an actor, or the in-process runner) and units played."""
+    """One worker: its id, its handle (an actor, or the in-process runner) and units played.
+
+    ``host`` is the id of the process that hosts it in a Ray pool (the first worker id of that
+    actor); several slots share a host, and its handle, when a process plays several episodes
+    at once."""
 
     worker_id: str
     handle: Any
     units: int = 0
+    host: str = ""
+
+
+#: episode processes per CPU of the cluster before ``episodes_per_process`` "auto" puts several
+#: episodes in one process: up to this many processes per CPU a sweep keeps one episode per process
+PROCESSES_PER_CPU = 4
+
+
+def episodes_per_process(workers: int, cpus: float, asked: int | None) -> int:
+    """How many episodes one worker process hosts at once: what the sweep asked for
+    (``ray.episodes_per_process``), else (None, "auto") one while the workers fit in
+    :data:`PROCESSES_PER_CPU` processes per CPU, and beyond that as many as spread the
+    workers over that many processes (2 CPUs: 8 workers one each, 32 four, 256 thirty-two).
+
+    Why: a Ray worker process costs ~50 MB before it plays anything, so 256 episodes in 256
+    processes need 13+ GB; the episodes spend their time waiting on the model, and a few
+    processes per CPU keep the CPUs as busy as hundreds would."""
+    if asked is not None:
+        return max(1, asked)
+    processes = max(1, int(max(cpus, 1) * PROCESSES_PER_CPU))
+    return max(1, -(-workers // processes))
 
 
 @dataclass
@@ -132,35 +160,74 @@ class _SlotBook:
         return slot
 
 
-class RayWorkerPool(_SlotBook):
-    """Episode workers as Ray actors (:func:`workers.episode_worker.worker_actor`)."""
+@dataclass
+class _Host:
+    """One episode worker process (a Ray actor) and the slots it plays: at most ``capacity`` at once."""
 
-    def __init__(self, worker_cls: Any, run_id: str, sink: Any, factory: Any, *, session: str) -> None:
+    host_id: str
+    handle: Any
+    capacity: int
+    slots: list[Slot] = field(default_factory=list)
+    dead: bool = False
+
+
+class RayWorkerPool(_SlotBook):
+    """Episode workers as Ray actors (:func:`workers.episode_worker.worker_actor`), ``per_process``
+    slots to an actor: each slot is a worker to the session (one attempt at a time, its own id,
+    environment and agent), the actor plays its slots' attempts on threads at once.
+
+    A process that dies takes every slot it hosted: each attempt it had in flight comes back
+    ``worker_lost`` (the session retries each and asks :meth:`add_worker` for one worker per
+    attempt lost); its idle slots go with it and are replaced here at once, so the pool keeps
+    its size. New slots fill the room left on living processes before a new process starts."""
+
+    def __init__(self, worker_cls: Any, run_id: str, sink: Any, factory: Any, *, session: str, per_process: int = 1) -> None:
         super().__init__(session, "w")
         self.worker_cls = worker_cls
         self.run_id = run_id
         self.sink = sink
         self.factory = factory
+        self.per_process = max(1, per_process)
+        self.hosts: dict[str, _Host] = {}
+
+    def _start_host(self, host_id: str) -> _Host:
+        cls = self.worker_cls
+        if self.per_process > 1:  # one thread per slot, and room for pid/memory/node while they run
+            cls = cls.options(max_concurrency=self.per_process + 3)
+        host = _Host(host_id, cls.remote(host_id, self.run_id, self.sink, self.factory), self.per_process)
+        self.hosts[host_id] = host
+        return host
 
     def _new_slot(self) -> Slot:
         wid = self._next_id()
-        return Slot(wid, self.worker_cls.remote(wid, self.run_id, self.sink, self.factory))
+        host = next((h for h in self.hosts.values() if not h.dead and len(h.slots) < h.capacity), None)
+        if host is None:
+            host = self._start_host(wid)
+        slot = Slot(wid, host.handle, host=host.host_id)
+        host.slots.append(slot)
+        return slot
 
     def start(self, n: int) -> dict[str, str]:
-        """Start ``n`` actors and wait (up to 300 s) until each reports its node; PipelineError when they cannot start."""
+        """Start ``n`` workers (``ceil(n / per_process)`` actors) and wait (up to 300 s) until each actor
+        reports its node; PipelineError when they cannot start."""
         import ray  # lazy: Ray loads only where a session uses it
 
         self.slots = [self._new_slot() for _ in range(n)]
+        hosts = list(dict.fromkeys(s.host for s in self.slots))
         try:
-            nodes = ray.get([s.handle.node.remote() for s in self.slots], timeout=300)
+            nodes = dict(zip(hosts, ray.get([self.hosts[h].handle.node.remote() for h in hosts], timeout=300)))
         except Exception as exc:
             raise PipelineError(f"episode workers failed to start: {str(exc).splitlines()[0]}") from None
         self.idle = list(self.slots)
-        return {s.worker_id: node for s, node in zip(self.slots, nodes)}
+        return {s.worker_id: nodes[s.host] for s in self.slots}
 
     def submit(self, pending: Pending) -> Slot:
         slot = self.idle.pop()
-        ref = slot.handle.run_unit.remote(pending.unit.work(), pending.attempt)
+        work = pending.unit.work()
+        if slot.worker_id == slot.host:  # the actor's own slot
+            ref = slot.handle.run_unit.remote(work, pending.attempt)
+        else:
+            ref = slot.handle.run_unit.remote(work, pending.attempt, slot.worker_id)
         log.debug("unit %s attempt %d -> worker %s", pending.unit.unit_id, pending.attempt, slot.worker_id)
         self._inflight[ref] = (slot, pending, time.time())
         return slot
@@ -191,10 +258,39 @@ class RayWorkerPool(_SlotBook):
             mine = None
         return not (dead and mine and dead != mine)
 
+    def _host_lost(self, host: _Host) -> None:
+        """A worker process died: kill what is left of it, drop every slot it hosted, and replace
+        those that were idle (the session replaces the others, one per attempt lost)."""
+        import ray  # lazy: Ray loads only where a session uses it
+
+        host.dead = True
+        try:
+            ray.kill(host.handle)
+        except Exception:
+            pass
+        idle = [s for s in host.slots if s in self.idle]
+        self.idle = [s for s in self.idle if s.host != host.host_id]
+        self.slots = [s for s in self.slots if s.host != host.host_id]
+        for _ in idle:
+            self.add_worker()
+
+    def _idle_again(self, slot: Slot) -> None:
+        """A slot whose attempt came back takes work again, or, its process gone meanwhile (a
+        sibling slot's attempt saw it die), is replaced by a new one."""
+        host = self.hosts.get(slot.host)
+        if host is not None and host.dead:
+            self.add_worker()
+        else:
+            self.idle.append(slot)
+
+    def release(self, fin: Finished) -> None:
+        """Return a finished attempt's worker to the idle ones (a new one if its process died)."""
+        self._idle_again(fin.slot)
+
     def collect(self, key: Any) -> Finished:
         """The attempt behind ``key``: an actor error is ``worker_lost`` only when that actor is dead (it is
-        killed and dropped from the pool), else ``elsewhere``; a task that raised is ``task_raised`` and its
-        worker stays."""
+        killed and its slots dropped from the pool), else ``elsewhere``; a task that raised is ``task_raised``
+        and its worker stays."""
         import ray  # lazy: Ray loads only where a session uses it
         from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError, RayTaskError, WorkerCrashedError
 
@@ -211,30 +307,28 @@ class RayWorkerPool(_SlotBook):
             log.warning(
                 "worker %s died running unit %s attempt %d: %s", slot.worker_id, pending.unit.unit_id, pending.attempt, fin.error
             )
-            try:
-                ray.kill(slot.handle)
-            except Exception:
-                pass
-            self.slots.remove(slot)
+            host = self.hosts.get(slot.host)
+            if host is not None and not host.dead:
+                self._host_lost(host)
             return fin
         except RayTaskError as exc:
             fin.failure, fin.error = "task_raised", str(exc).splitlines()[-1][:1000]
             log.warning(
                 "unit %s attempt %d raised in worker %s: %s", pending.unit.unit_id, pending.attempt, slot.worker_id, fin.error
             )
-            self.idle.append(slot)
+            self._idle_again(slot)
             return fin
         slot.units += 1
-        self.idle.append(slot)
+        self._idle_again(slot)
         return fin
 
     def shutdown(self) -> None:
         """Kill every actor (errors ignored: an actor may already be gone)."""
         import ray  # lazy: Ray loads only where a session uses it
 
-        for slot in self.slots:
+        for host in self.hosts.values():
             try:
-                ray.kill(slot.handle)
+                ray.kill(host.handle)
             except Exception:
                 pass
         self.idle = []

@@ -10,33 +10,47 @@ from __future__ import annotations
 import dataclasses
 import functools
 import typing
-from typing import Any
-
-import pyarrow as pa
+from collections.abc import Iterator, Mapping
+from typing import TYPE_CHECKING, Any
 
 from schemas.records import ALL_RECORD_TYPES, SCHEMA_VERSION, NodeVersion
 
-_NODE_VERSION = pa.struct(
-    [
-        pa.field("version", pa.int32(), nullable=False),
-        pa.field("think", pa.string()),
-        pa.field("subtasks", pa.list_(pa.string()), nullable=False),
-        pa.field("call_index", pa.int32()),
-        pa.field("message_seq", pa.int64()),
-    ]
-)
+if TYPE_CHECKING:
+    import pyarrow as pa
 
-_SCALARS: dict[Any, pa.DataType] = {
-    str: pa.string(),
-    int: pa.int64(),
-    float: pa.float64(),
-    bool: pa.bool_(),
-    bytes: pa.binary(),
-}
+
+@functools.cache
+def _pa() -> Any:
+    """pyarrow, imported on first use. Why lazily: an episode worker only turns records into plain
+    rows (:func:`record_to_row`) and never builds a schema; importing pyarrow (and numpy with it)
+    there would cost every worker process ~30 MB for nothing (issue 37, item 3)."""
+    import pyarrow
+
+    return pyarrow
+
+
+@functools.cache
+def _node_version() -> pa.DataType:
+    pa = _pa()
+    return pa.struct(
+        [
+            pa.field("version", pa.int32(), nullable=False),
+            pa.field("think", pa.string()),
+            pa.field("subtasks", pa.list_(pa.string()), nullable=False),
+            pa.field("call_index", pa.int32()),
+            pa.field("message_seq", pa.int64()),
+        ]
+    )
+
+
+def _scalar(annotation: Any) -> pa.DataType | None:
+    pa = _pa()
+    return {str: pa.string(), int: pa.int64(), float: pa.float64(), bool: pa.bool_(), bytes: pa.binary()}.get(annotation)
 
 
 def _arrow_type(annotation: Any) -> tuple[pa.DataType, bool]:
     """Map a resolved annotation to (Arrow type, nullable)."""
+    pa = _pa()
     origin = typing.get_origin(annotation)
     args = typing.get_args(annotation)
     if origin is typing.Union or (origin is not None and str(origin) == "<class 'types.UnionType'>"):
@@ -46,12 +60,13 @@ def _arrow_type(annotation: Any) -> tuple[pa.DataType, bool]:
     if origin is tuple:
         item = args[0]
         if item is NodeVersion:
-            return pa.list_(_NODE_VERSION), False
+            return pa.list_(_node_version()), False
         return pa.list_(_arrow_type(item)[0]), False
     if origin is typing.Literal and args and all(isinstance(a, str) for a in args):
         return pa.string(), False  # a closed vocabulary (schemas.kinds) is stored as its string
-    if annotation in _SCALARS:
-        return _SCALARS[annotation], False
+    scalar = _scalar(annotation) if isinstance(annotation, type) else None
+    if scalar is not None:
+        return scalar, False
     raise TypeError(f"no Arrow type for {annotation!r}")
 
 
@@ -61,6 +76,7 @@ def _table_name(record_type: type) -> str:
 
 
 def _schema_for(record_type: type) -> pa.Schema:
+    pa = _pa()
     hints = typing.get_type_hints(record_type)
     fields = [pa.field("run_id", pa.string(), nullable=False)]
     for f in dataclasses.fields(record_type):
@@ -69,7 +85,27 @@ def _schema_for(record_type: type) -> pa.Schema:
     return pa.schema(fields, metadata={b"recap_eval_schema_version": str(SCHEMA_VERSION).encode()})
 
 
-TABLES: dict[str, pa.Schema] = {_table_name(rt): _schema_for(rt) for rt in ALL_RECORD_TYPES}
+class _Schemas(Mapping[str, "pa.Schema"]):
+    """Table name -> Arrow schema, each built (and pyarrow imported) on first access; the names
+    alone (``list(TABLES)``, ``in``) need no pyarrow."""
+
+    def __init__(self, record_types: typing.Iterable[type]) -> None:
+        self._types = {_table_name(rt): rt for rt in record_types}
+        self._built: dict[str, pa.Schema] = {}
+
+    def __getitem__(self, table: str) -> pa.Schema:
+        if table not in self._built:
+            self._built[table] = _schema_for(self._types[table])  # KeyError for an unknown table
+        return self._built[table]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._types)
+
+    def __len__(self) -> int:
+        return len(self._types)
+
+
+TABLES: Mapping[str, pa.Schema] = _Schemas(ALL_RECORD_TYPES)
 #: tables whose rows are content-addressed and may be written more than once (two workers reading
 #: the same page), by the columns naming one row (a record type's ``unique_by``): readers that
 #: count rows see one per key
@@ -146,4 +182,4 @@ def rows_to_table(table: str, rows: list[dict[str, Any]]) -> pa.Table:
     """Rows of ``table`` (dicts of its columns, ``run_id`` included) as an Arrow table with the
     table's pinned schema, so every part file of it has the same column types; pyarrow raises on a
     value that does not fit its column."""
-    return pa.Table.from_pylist(rows, schema=arrow_schema(table))
+    return _pa().Table.from_pylist(rows, schema=arrow_schema(table))

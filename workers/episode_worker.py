@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import threading
 import time
 import traceback
 from collections.abc import Callable, Mapping
@@ -97,6 +98,23 @@ class ClientFactory(Protocol):
     writes_llm_calls: bool
 
     def client(self, model: str) -> LLMClient: ...
+
+
+@dataclasses.dataclass
+class ClientTable:
+    """The picklable :class:`ClientFactory` the driver hands its workers: one client per sweep
+    model label (a ``GatewayClient``: an actor handle).
+
+    Why here and not beside the backend that fills it (:mod:`pipeline.gateway_backend`): a worker
+    unpickles its factory, and unpickling imports the class's module; this module is loaded in
+    every worker anyway, the pipeline's would drag the sweep-spec parser, pydantic, pyarrow and
+    numpy into each worker process (issue 37, item 3)."""
+
+    clients: dict[str, LLMClient]
+    writes_llm_calls: bool = True
+
+    def client(self, model: str) -> LLMClient:
+        return self.clients[model]
 
 
 class ClientError(RuntimeError):
@@ -386,20 +404,30 @@ def _env_error(exc: Exception) -> EpisodeResult:
 # the Ray actor
 # --------------------------------------------------------------------------------------------
 class _EpisodeWorker:
+    """One episode worker process: its own slot ``worker_id`` and, when the pool puts several
+    episodes in one process (``ray.episodes_per_process``), more slots named by the driver at
+    their first unit. Each slot has its own :class:`EpisodeRunner` (its agents, its clients'
+    cache) and plays one unit at a time; Ray runs the slots' ``run_unit`` calls on threads of
+    this process at once (the actor's ``max_concurrency``), so episodes share nothing but the
+    process: each builds its own environment and uses its own agent."""
+
     def __init__(self, worker_id: str, run_id: str, sink: Any, factory: ClientFactory, batch_rows: int = 500) -> None:
         import ray  # Ray only inside the actor: the rest of the module runs without a cluster
 
         configure_from_env()
 
         self._sink = sink
-        self.runner = EpisodeRunner(
-            worker_id,
+        self._make = lambda wid: EpisodeRunner(
+            wid,
             run_id,
             factory,
             send=lambda rows: sink.add.remote(rows),
             wait=lambda ref: ray.get(ref),
             batch_rows=batch_rows,
         )
+        self.runner = self._make(worker_id)
+        self.runners: dict[str, EpisodeRunner] = {worker_id: self.runner}
+        self._lock = threading.Lock()
 
     def pid(self) -> int:
         return os.getpid()
@@ -416,8 +444,17 @@ class _EpisodeWorker:
         """Resident set size of this worker process, in bytes."""
         return _resident_bytes()
 
-    def run_unit(self, unit: UnitWork, attempt: int) -> EpisodeOutcome:
-        return self.runner.run_unit(unit, attempt)
+    def _runner(self, slot: str | None) -> EpisodeRunner:
+        if slot is None:
+            return self.runner
+        with self._lock:  # slots start on different threads
+            if slot not in self.runners:
+                self.runners[slot] = self._make(slot)
+            return self.runners[slot]
+
+    def run_unit(self, unit: UnitWork, attempt: int, slot: str | None = None) -> EpisodeOutcome:
+        """Play one attempt on slot ``slot`` (None: this process's own)."""
+        return self._runner(slot).run_unit(unit, attempt)
 
 
 def worker_actor(
@@ -426,8 +463,9 @@ def worker_actor(
     """The Ray actor class with the given resource shape.
 
     ``max_restarts=0``: the driver replaces dead workers itself, so that it can count attempts
-    and record the loss. ``max_concurrency`` > 1 only so that ``pid``/``memory`` answer while a
-    unit runs; the driver never sends a worker two units at once."""
+    and record the loss. ``max_concurrency`` > 1 so that ``pid``/``memory`` answer while a unit
+    runs; the driver never sends a slot two units at once, and raises it (``.options``) for an
+    actor that hosts several slots (:class:`pipeline.worker_pool.RayWorkerPool`)."""
     import ray  # Ray only here and in the actor (module docstring)
 
     options: dict[str, Any] = {"num_cpus": num_cpus, "max_restarts": 0, "max_concurrency": 4}

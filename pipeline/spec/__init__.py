@@ -57,7 +57,7 @@ Hardening (every rule fails as one line before any model call or write):
   tpm 1..10**11, concurrency 1..10000, retries 0..100, window_s 0.1 s..a day, timeout_s 0.1..900 s
   (the gateway's total time per call), max_usage_rejections 1..1000, limits.llm_calls 1..10**6, limits.tokens 1..10**10,
   limits.usd 10**-6..10**6, environment limit 1..10**5, ray.num_cpus 1..4096,
-  ray.object_store_mb 64..1048576, ray.worker_cpus 0.001..1024; caps 0..10**6 USD, prices
+  ray.object_store_mb 64..1048576, ray.worker_cpus 0.001..1024, ray.episodes_per_process 1..1024; caps 0..10**6 USD, prices
   0..10**4 USD per million tokens, step_multiplier 0.1..1000 (the sweep's, a method's and
   each value of a method's step_multipliers). Generation ``params`` have theirs
   in :data:`workers.llm.providers.NUMERIC_PARAMS` (max_tokens 1..262144 and at most the model's

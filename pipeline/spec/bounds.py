@@ -97,6 +97,7 @@ NUMBER_BOUNDS: dict[str, Bound] = {
     "ray.object_store_mb": Bound(OBJECT_STORE_MB_MIN, OBJECT_STORE_MB_MAX),
     "ray.worker_cpus": Bound(WORKER_CPUS_MIN, WORKER_CPUS_MAX),
     "ray.sandboxes_per_node": Bound(1, WORKERS_MAX),
+    "ray.episodes_per_process": Bound(1, WORKERS_MAX),
     "sampling_seeds[]": Bound(0, SEED_MAX),
     "step_multiplier": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),
     "methods[].step_multiplier": Bound(STEP_MULTIPLIER_MIN, STEP_MULTIPLIER_MAX),

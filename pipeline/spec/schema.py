@@ -317,6 +317,12 @@ class RaySpec(StrictModel):
     #: node resource ``recap_sandbox`` = N; the nodes of an existing cluster must declare it
     #: themselves (``ray start --resources '{"recap_sandbox": N}'``, cluster.yaml)
     sandboxes_per_node: Annotated[int, NOT_BOOL, Bounded("ray.sandboxes_per_node")] | None = None
+    #: episodes one worker process plays at once, each on its own thread with its own environment
+    #: and agent (a Ray worker process costs ~50 MB before it plays anything). None ("auto"): one
+    #: while the workers fit in 4 processes per CPU, more beyond (2 CPUs: 32 workers, 4 per
+    #: process; :func:`pipeline.worker_pool.episodes_per_process`). Always one for a sandboxed
+    #: benchmark with ray.sandboxes_per_node (a worker holds its node's sandbox slot)
+    episodes_per_process: Annotated[int, NOT_BOOL, Bounded("ray.episodes_per_process")] | None = None
 
 
 class SweepSpec(StrictModel):

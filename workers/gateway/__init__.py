@@ -84,13 +84,14 @@ Guarantees
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from workers.gateway.blocking import BlockingGateway
-from workers.gateway.core import DeploymentGateway
-from workers.gateway.ledger import BudgetLedger, LocalBudget
-from workers.llm.pricing import Price, PriceError, PriceTable, require_prices
-from workers.llm.providers import DeploymentConfig, DeploymentConfigError
+if TYPE_CHECKING:  # the Ray-backed names (actors, client) stay Any to a type checker, as Ray's classes are
+    from workers.gateway.blocking import BlockingGateway
+    from workers.gateway.core import DeploymentGateway
+    from workers.gateway.ledger import BudgetLedger, LocalBudget
+    from workers.llm.pricing import Price, PriceError, PriceTable, require_prices
+    from workers.llm.providers import DeploymentConfig, DeploymentConfigError
 
 __all__ = [
     "BlockingGateway",
@@ -109,11 +110,31 @@ __all__ = [
     "require_prices",
 ]
 
-_RAY_NAMES = {"BudgetActor": "actors", "GatewayActor": "actors", "RunGateways": "actors", "GatewayClient": "client"}
+#: public name -> the module that defines it. Every name is imported on first use: an episode
+#: worker unpickles a ``GatewayClient`` (which imports this package) and needs nothing else of
+#: the gateway; the core, the ledger, the price table and the provider configs would cost each
+#: worker process pydantic, yaml and more (issue 37, item 3). The Ray-backed names also keep
+#: the core usable without Ray.
+_MODULE_OF = {
+    "BudgetActor": "workers.gateway.actors",
+    "GatewayActor": "workers.gateway.actors",
+    "RunGateways": "workers.gateway.actors",
+    "GatewayClient": "workers.gateway.client",
+    "BlockingGateway": "workers.gateway.blocking",
+    "DeploymentGateway": "workers.gateway.core",
+    "BudgetLedger": "workers.gateway.ledger",
+    "LocalBudget": "workers.gateway.ledger",
+    "Price": "workers.llm.pricing",
+    "PriceError": "workers.llm.pricing",
+    "PriceTable": "workers.llm.pricing",
+    "require_prices": "workers.llm.pricing",
+    "DeploymentConfig": "workers.llm.providers",
+    "DeploymentConfigError": "workers.llm.providers",
+}
 
 
 def __getattr__(name: str) -> Any:
-    """Ray-backed names are imported on first use, so the core works without Ray."""
-    if name in _RAY_NAMES:
-        return getattr(importlib.import_module(f"workers.gateway.{_RAY_NAMES[name]}"), name)
+    """A public name, imported from its module on first use (see :data:`_MODULE_OF`)."""
+    if name in _MODULE_OF:
+        return getattr(importlib.import_module(_MODULE_OF[name]), name)
     raise AttributeError(f"module 'workers.gateway' has no attribute {name!r}")
