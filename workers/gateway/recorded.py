@@ -36,6 +36,8 @@ class RecordedResults:
         self._db.execute("PRAGMA synchronous=OFF")
         self._db.execute("CREATE TABLE recorded (key TEXT PRIMARY KEY, result TEXT NOT NULL) WITHOUT ROWID")
         self._pending = 0
+        #: kept here, not counted in SQL: ``len`` (the ledger's stats) must answer after close too
+        self._count = 0
 
     def __contains__(self, key: object) -> bool:
         return self._db.execute("SELECT 1 FROM recorded WHERE key = ?", (key,)).fetchone() is not None
@@ -49,15 +51,17 @@ class RecordedResults:
     def __setitem__(self, key: str, result: dict[str, Any]) -> None:
         if not self._pending:
             self._db.execute("BEGIN")
-        self._db.execute(
-            "INSERT OR REPLACE INTO recorded VALUES (?, ?)", (key, json.dumps(result, separators=(",", ":"), ensure_ascii=False))
-        )
+        text = json.dumps(result, separators=(",", ":"), ensure_ascii=False)
+        if self._db.execute("INSERT OR IGNORE INTO recorded VALUES (?, ?)", (key, text)).rowcount == 1:
+            self._count += 1
+        else:
+            self._db.execute("UPDATE recorded SET result = ? WHERE key = ?", (text, key))
         self._pending += 1
         if self._pending >= COMMIT_EVERY:
             self._commit()
 
     def __len__(self) -> int:
-        return int(self._db.execute("SELECT COUNT(*) FROM recorded").fetchone()[0])
+        return self._count
 
     def _commit(self) -> None:
         if self._pending:
@@ -65,6 +69,6 @@ class RecordedResults:
             self._pending = 0
 
     def close(self) -> None:
-        """Drop the database (SQLite deletes its file)."""
+        """Drop the database (SQLite deletes its file); ``len`` still answers."""
         self._commit()
         self._db.close()

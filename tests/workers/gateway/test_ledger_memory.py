@@ -85,4 +85,6 @@ def test_recorded_results_map():
         assert exc.args == ("b",)
     else:
         raise AssertionError("a missing key must raise KeyError")
+    rec["b"] = {"text": "z"}
     rec.close()
+    assert len(rec) == 2  # the ledger's stats() reads it after close (the run's last stats)
