@@ -153,9 +153,10 @@ class LeaseLedger(BudgetLedger):
     docstring). Leases and the calls reported in them are ordinary ``reserve`` / ``settle``
     journal entries, so a journal with leases replays with the plain ledger too."""
 
-    def __init__(self, *args: Any, shards: int = 1, lease_calls: int = 16, **kwargs: Any):
+    def __init__(self, *args: Any, shards: int | Mapping[str, int] = 1, lease_calls: int = 16, **kwargs: Any):
         super().__init__(*args, **kwargs)
-        self.shards = max(1, shards)
+        #: shards per deployment (an int: every deployment), which sizes each one's leases
+        self.shards = shards
         self.lease_calls = lease_calls
         self.leases_granted = 0
         self.leases_short = 0
@@ -178,7 +179,8 @@ class LeaseLedger(BudgetLedger):
         room = self._headroom(name)
         if room is None:
             return want
-        grant = min(want, room // (4 * self.shards))
+        n = self.shards if isinstance(self.shards, int) else self.shards.get(name, 1)
+        grant = min(want, room // (4 * max(1, n)))
         return grant if grant >= worst and grant > 0 else 0
 
     def _new_lease(self, name: str, owner: str, pico: int) -> int:
