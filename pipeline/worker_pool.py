@@ -141,10 +141,17 @@ class RayWorkerPool(_SlotBook):
         self.run_id = run_id
         self.sink = sink
         self.factory = factory
+        self._made = itertools.count()
 
     def _new_slot(self) -> Slot:
         wid = self._next_id()
-        return Slot(wid, self.worker_cls.remote(wid, self.run_id, self.sink, self.factory))
+        return Slot(wid, self.worker_cls.remote(wid, self.run_id, self.sink, self._factory_for(next(self._made))))
+
+    def _factory_for(self, index: int) -> Any:
+        """The client factory of the ``index``-th worker started: a factory that spreads workers
+        over gateway shards (``for_worker``, round robin) gives each its own; others are shared."""
+        for_worker = getattr(self.factory, "for_worker", None)
+        return for_worker(index) if for_worker is not None else self.factory
 
     def start(self, n: int) -> dict[str, str]:
         """Start ``n`` actors and wait (up to 300 s) until each reports its node; PipelineError when they cannot start."""

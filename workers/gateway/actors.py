@@ -187,17 +187,16 @@ class QuotaActor(LocalQuota):
     ):
         configure_from_env()
         sharded = [c for c in configs if shards.get(c.deployment_name, 1) > 1]
-        super().__init__(
-            LeaseLedger(
-                run_dir,
-                run_cap_usd=run_cap_usd,
-                model_caps_usd=model_caps_usd,
-                provider_models={c.deployment_name: c.model for c in configs},
-                shards=dict(shards),
-            ),
-            QuotaBook(pool_spec(sharded), lease_s=min((lease_s_for(c.window_s) for c in sharded), default=10.0)),
-            group_commit=group_commit,
+        ledger = LeaseLedger(
+            run_dir,
+            run_cap_usd=run_cap_usd,
+            model_caps_usd=model_caps_usd,
+            provider_models={c.deployment_name: c.model for c in configs},
+            shards=dict(shards),
         )
+        lease_s = min((lease_s_for(c.window_s) for c in sharded), default=10.0)
+        book = QuotaBook(pool_spec(sharded), lease_s=lease_s, restarted=ledger.orphaned_leases > 0)
+        super().__init__(ledger, book, group_commit=group_commit)
         _ledger_restored_event(run_dir, self.ledger)
 
     @ray.method(concurrency_group=CONTROL)

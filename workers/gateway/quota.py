@@ -85,7 +85,9 @@ class QuotaBook:
     """The RPM/TPM shares of every sharded deployment (see the module docstring).
 
     ``deployments``: name -> (rpm, tpm, window span in seconds, drain seconds after a lapsed
-    lease). ``lease_s``: how long a grant is valid without a renewal."""
+    lease). ``lease_s``: how long a grant is valid without a renewal. ``restarted``: an earlier
+    authority of this run died holding leases (the ledger found them open): the shares it had
+    granted are unknown, so the whole quota drains as a lapsed share would before any grant."""
 
     def __init__(
         self,
@@ -93,10 +95,15 @@ class QuotaBook:
         *,
         lease_s: float = 10.0,
         clock: Callable[[], float] = time.monotonic,
+        restarted: bool = False,
     ):
         self.lease_s = lease_s
         self._clock = clock
         self.pools = {name: _Pool(rpm, tpm, span, drain) for name, (rpm, tpm, span, drain) in deployments.items()}
+        if restarted:  # an earlier authority died with shares out: all of them may still be in use
+            now = clock()
+            for pool in self.pools.values():
+                pool.draining.append((now + lease_s + pool.drain_s, pool.rpm or 0, pool.tpm or 0))
 
     def _expire(self, pool: _Pool, now: float) -> None:
         for shard, share in list(pool.shards.items()):
@@ -152,6 +159,14 @@ class LeaseLedger(BudgetLedger):
     """A :class:`BudgetLedger` that also grants dollar leases to gateway shards (see the module
     docstring). Leases and the calls reported in them are ordinary ``reserve`` / ``settle``
     journal entries, so a journal with leases replays with the plain ledger too."""
+
+    #: leases a dead authority left open, charged in full when this one replayed the journal
+    orphaned_leases = 0
+
+    def _write_settle(self, rid: int, pico: int, status: str, **extra: Any) -> None:
+        if status == "orphaned" and self.open[rid][0].startswith(LEASE_KEY):
+            self.orphaned_leases += 1
+        super()._write_settle(rid, pico, status, **extra)
 
     def __init__(self, *args: Any, shards: int | Mapping[str, int] = 1, lease_calls: int = 16, **kwargs: Any):
         super().__init__(*args, **kwargs)

@@ -303,3 +303,18 @@ def test_four_shards_under_load_fill_the_rpm_quota_and_never_pass_it(fake_server
     steady = [t for t in times if times[0] + window <= t < times[0] + 3 * window]
     assert len(steady) >= 0.85 * q * 2  # ideal: 2 x q x window / (window + pad + latency), about 0.97 x 2q
     assert total == len(server.log)
+
+
+def test_a_restarted_authority_holds_the_whole_quota_until_the_old_shares_drained(tmp_path):
+    led = LeaseLedger(tmp_path, run_cap_usd=1.0)
+    led.report(None, "m", "m#s0:a", [], 0, 10**9)
+    led.close()  # died with a lease out (and window shares it granted, which no journal keeps)
+    again = LeaseLedger(tmp_path, run_cap_usd=1.0)
+    assert again.orphaned_leases == 1
+    clock = Clock()
+    book = QuotaBook({"m": (40, None, 1.0, 5.0)}, lease_s=2.0, clock=clock, restarted=again.orphaned_leases > 0)
+    assert book.lease("m", "s0", (0, 0), (10, 0))["requests"] == 0
+    clock.t += 6.9
+    assert book.lease("m", "s0", (0, 0), (10, 0))["requests"] == 0
+    clock.t += 0.2
+    assert book.lease("m", "s0", (0, 0), (10, 0))["requests"] == 10
