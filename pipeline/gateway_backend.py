@@ -87,8 +87,7 @@ class GatewayBackend:
         self._closed = False
 
     def start(self, *, run_dir: str, run_id: str, runtime_env: dict[str, Any] | None = None, node_id: str | None = None) -> None:
-        from workers.gateway import BudgetActor, GatewayActor, GatewayClient  # lazy: the actors module loads Ray
-        from workers.gateway.actors import QuotaActor
+        from workers.gateway import BudgetActor, GatewayActor, GatewayClient, QuotaActor  # lazy: the actors module loads Ray
 
         # a killed gateway or budget actor is restarted by Ray (same arguments: the ledger is
         # replayed from the run folder's journal) and the calls it had in flight are sent to

@@ -38,7 +38,7 @@ from typing import Any
 from schemas.outcomes import BudgetRefusal
 from workers.gateway.core import DeploymentGateway
 from workers.gateway.ledger import EpisodeBudget
-from workers.gateway.limits import AdmissionController, AdmissionError
+from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
 from workers.gateway.quota import chunk, fair_share
 from workers.llm.pricing import PriceTable
 from workers.llm.providers import DeploymentConfig
@@ -105,7 +105,7 @@ class ShardAdmission(AdmissionController):
                 f"request needs {tokens} tokens (prompt + max output), more than the deployment's TPM limit {self.quota_tpm}"
             )
 
-    async def acquire(self, tokens: int):  # type: ignore[no-untyped-def]
+    async def acquire(self, tokens: int) -> Ticket:
         self._check_size(tokens)
         self._used = True
         if self._renewer is None and self.valid_until != float("inf"):
@@ -422,11 +422,12 @@ class ShardGateway(DeploymentGateway):
             rate_limit_default_wait_s=config.rate_limit_default_wait_s,
             anchor=config.window_anchor,
         )
+        self.leased = LeasedBudget(quota, name, tag)
         super().__init__(
             config,
             run_dir=run_dir,
             run_id=run_id,
-            budget=LeasedBudget(quota, name, tag),
+            budget=self.leased,
             prices=prices,
             admission=admission,
         )
@@ -438,5 +439,5 @@ class ShardGateway(DeploymentGateway):
 
     def stats(self) -> dict[str, Any]:
         out = super().stats()
-        out["lease_counts"] = dict(self.budget.counts)
+        out["lease_counts"] = dict(self.leased.counts)
         return out
