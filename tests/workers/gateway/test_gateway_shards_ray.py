@@ -23,6 +23,7 @@ def ray_session(ray_address):
     yield
 
 
+@pytest.mark.slow  # six gateway actors start (each imports litellm): ~30 s on 2 quiet cores
 def test_four_ray_shards_share_the_quota_and_the_cap_and_a_killed_shards_lease_is_charged(ray_session, fake_server, run_dir):
     q, window = 20, 1.0
     server = fake_server(rpm=q, window_s=window, latency_s=0.05)  # answers 429 past the quota
