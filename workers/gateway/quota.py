@@ -16,8 +16,10 @@ and lowers its own limit before telling the authority, so given-back share is fr
 share is granted for ``lease_s``; a shard renews it well before. A shard that stops renewing (it
 died, or lost the authority) stops admitting at its own expiry, and its share *drains*: it
 becomes free ``drain_s`` after the authority's expiry (the window span, plus the longest attempt,
-plus a margin), when every request it admitted has left every window. A shard that closes hands
-its share back to drain for one window span.
+plus a margin), when every request it admitted has left every window. A live shard whose renewal
+merely came late takes its draining share back (it admitted nothing meanwhile); shard names are
+per incarnation, so a restarted shard never takes its dead predecessor's. A shard that closes
+hands its share back to drain for one window span.
 
 Dollar leases (:class:`LeaseLedger`). A lease is a reservation in the run's ledger journal, owned
 by the shard (``<deployment>#s<k>:<instance>``), for a slice of the headroom under the run cap and
@@ -54,6 +56,10 @@ LEASE_KEY = "lease:"
 LeasedCall = tuple[str, int, str, Any, Any, Any]
 
 
+#: the owner of a draining share nobody may take back (a closed shard, a dead authority's grants)
+_CLOSED_TAG = "closed:"
+
+
 @dataclass
 class _Share:
     """What one shard holds of one deployment's quota."""
@@ -72,8 +78,8 @@ class _Pool:
     span_s: float
     drain_s: float
     shards: dict[str, _Share] = field(default_factory=dict)
-    #: (free at, requests, tokens): shares of shards that expired or closed
-    draining: list[tuple[float, int, int]] = field(default_factory=list)
+    #: (free at, requests, tokens, shard): shares of shards that lapsed or closed
+    draining: list[tuple[float, int, int, str]] = field(default_factory=list)
 
     def held(self) -> tuple[int, int]:
         req = sum(s.requests for s in self.shards.values()) + sum(d[1] for d in self.draining)
@@ -103,29 +109,35 @@ class QuotaBook:
         if restarted:  # an earlier authority died with shares out: all of them may still be in use
             now = clock()
             for pool in self.pools.values():
-                pool.draining.append((now + lease_s + pool.drain_s, pool.rpm or 0, pool.tpm or 0))
+                pool.draining.append((now + lease_s + pool.drain_s, pool.rpm or 0, pool.tpm or 0, _CLOSED_TAG))
 
     def _expire(self, pool: _Pool, now: float) -> None:
         for shard, share in list(pool.shards.items()):
             if share.expires < now:  # lapsed: the shard admits nothing more under it
                 del pool.shards[shard]
-                pool.draining.append((share.expires + pool.drain_s, share.requests, share.tokens))
+                pool.draining.append((share.expires + pool.drain_s, share.requests, share.tokens, shard))
         pool.draining = [d for d in pool.draining if d[0] > now]
 
     def lease(self, deployment: str, shard: str, give: tuple[int, int], want: tuple[int, int]) -> dict[str, Any]:
         """Renew ``shard``'s share: take back ``give`` (requests, tokens) - slack the shard has
         already removed from its own limit - and grant up to ``want`` more out of what is free.
-        Returns the shard's whole share and how long it is valid. A shard whose lease lapsed
-        starts again from nothing (its old share drains; its ``give`` is already in there)."""
+        Returns the shard's whole share and how long it is valid. A shard whose lease lapsed takes
+        back its share while it drains (``shard`` names one incarnation), else starts from nothing."""
         pool = self.pools[deployment]
         now = self._clock()
         self._expire(pool, now)
         share = pool.shards.get(shard)
         if share is None:
             share = pool.shards[shard] = _Share()
-        else:
-            share.requests -= min(max(0, give[0]), share.requests)
-            share.tokens -= min(max(0, give[1]), share.tokens)
+            # a live shard whose lease lapsed (a renewal came late): it admitted nothing since,
+            # and its window never held more than that share, so the share is its own again
+            mine = [d for d in pool.draining if d[3] == shard]
+            if mine:
+                pool.draining = [d for d in pool.draining if d[3] != shard]
+                share.requests = sum(d[1] for d in mine)
+                share.tokens = sum(d[2] for d in mine)
+        share.requests -= min(max(0, give[0]), share.requests)
+        share.tokens -= min(max(0, give[1]), share.tokens)
         held_req, held_tok = pool.held()
         if pool.rpm is not None:
             share.requests += max(0, min(want[0], pool.rpm - held_req))
@@ -139,7 +151,7 @@ class QuotaBook:
         pool = self.pools[deployment]
         share = pool.shards.pop(shard, None)
         if share is not None:
-            pool.draining.append((self._clock() + pool.span_s, share.requests, share.tokens))
+            pool.draining.append((self._clock() + pool.span_s, share.requests, share.tokens, _CLOSED_TAG + shard))
 
     def stats(self, deployment: str) -> dict[str, Any]:
         pool = self.pools[deployment]
@@ -305,8 +317,10 @@ def drain_s(span_s: float, attempt_timeout_s: float, margin_s: float = 10.0) -> 
 
 
 def lease_s_for(window_s: float) -> float:
-    """A grant's validity: a fraction of the window (renewed three times per validity)."""
-    return min(10.0, max(0.5, window_s / 2))
+    """A grant's validity (renewed three times per validity): half the window, between 5 and
+    30 s. Long enough that a renewal delayed by a busy machine does not lapse the share (a lapsed
+    share drains for a whole ``drain_s``); it only bounds how long a dead shard's share is held."""
+    return min(30.0, max(5.0, window_s / 2))
 
 
 class LocalQuota(LocalBudget):

@@ -412,7 +412,7 @@ class ShardGateway(DeploymentGateway):
         admission = ShardAdmission(
             quota,
             name,
-            tag,
+            f"{tag}:{uuid.uuid4().hex[:8]}",  # per incarnation: a restart never takes its predecessor's share
             shards,
             rpm=config.rpm,
             tpm=config.tpm,

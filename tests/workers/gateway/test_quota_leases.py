@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import random
-import time
 
 import pytest
 
@@ -13,7 +12,7 @@ from recap.llm import LLMError
 from schemas.parts import read_table
 from tests.doubles.llm_requests import make_request
 from workers.gateway.ledger import BudgetLedger
-from workers.gateway.quota import LeaseLedger, LocalQuota, QuotaBook, pool_spec
+from workers.gateway.quota import LeaseLedger, LocalQuota, QuotaBook, lease_s_for, pool_spec
 from workers.gateway.shard import LeasedBudget, ShardGateway, shard_tag
 from workers.llm.offline.fake_server import window_maxima
 from workers.llm.pricing import default_prices, usd_to_pico
@@ -70,6 +69,17 @@ def test_a_lapsed_share_drains_before_anyone_else_gets_it():
     assert book.stats("m")["held_requests"] == 100
     clock.t += 1.01
     assert book.lease("m", "s3", (0, 0), (60, 0))["requests"] == 50
+
+
+def test_a_live_shard_renewing_late_takes_its_share_back_a_new_incarnation_does_not():
+    clock = Clock()
+    book = QuotaBook({"m": (40, None, 1.0, 5.0)}, lease_s=2.0, clock=clock)
+    book.lease("m", "s0:one", (0, 0), (20, 0))
+    book.lease("m", "s1:one", (0, 0), (20, 0))
+    clock.t += 3.0  # both lapsed (a blocked event loop; a dead process)
+    assert book.lease("m", "s0:one", (5, 0), (0, 0))["requests"] == 15  # late, alive: its own share, minus what it gives
+    assert book.lease("m", "s1:two", (0, 0), (20, 0))["requests"] == 5  # the restart gets only what is free
+    assert book.stats("m")["held_requests"] == 40  # s1:one's 20 still drain
 
 
 def test_the_shares_never_sum_past_the_quota_whatever_the_order():
@@ -233,7 +243,7 @@ def _config(server, **kw) -> DeploymentConfig:
 def _shards(cfg: DeploymentConfig, run_dir, n: int, run_cap_usd: float | None = None) -> tuple[LocalQuota, list[ShardGateway]]:
     quota = LocalQuota(
         LeaseLedger(run_dir, run_cap_usd=run_cap_usd, shards=n, provider_models={cfg.deployment_name: cfg.model}),
-        QuotaBook(pool_spec([cfg]), lease_s=1.0),
+        QuotaBook(pool_spec([cfg]), lease_s=lease_s_for(cfg.window_s)),
         owned=False,
     )
     return quota, [ShardGateway(cfg, index=k, shards=n, quota=quota, run_dir=run_dir) for k in range(n)]
@@ -274,35 +284,46 @@ def test_fifty_concurrent_callers_on_four_shards_never_spend_past_the_cap(fake_s
 
 
 def test_four_shards_under_load_fill_the_rpm_quota_and_never_pass_it(fake_server, run_dir):
-    q, window = 30, 2.0
+    """Three shards busy, one idle after its first call: the idle one's share moves to the busy
+    ones, every window stays within the quota, and the quota is reached."""
+    q, window = 32, 1.0
     server = fake_server(rpm=q, window_s=window)  # answers 429 past the quota
     cfg = _config(server, rpm=q, window_s=window, window_pad_s=0.05)
     quota, gws = _shards(cfg, run_dir, 4)
-    run_for = 3 * window
+    name = cfg.deployment_name
+    busy_held: list[int] = []
 
-    async def caller(c: int, stop: float) -> int:
-        done = 0
-        while time.monotonic() < stop:
-            await gws[c % 4].complete(make_request(c * 1000 + done, f"caller {c} call {done}"))
-            done += 1
-        return done
+    async def caller(c: int, n: int) -> None:
+        for k in range(n):
+            await gws[c % 3].complete(make_request(c * 1000 + k, f"caller {c} call {k}"))
 
-    async def go() -> int:
-        stop = time.monotonic() + run_for
-        counts = await asyncio.gather(*[caller(c, stop) for c in range(40)])
+    async def watch(done: asyncio.Event) -> None:
+        while not done.is_set():
+            shares = quota.book.stats(name)["shards"]
+            busy_held.append(sum(shares.get(gws[k].shard_admission.shard, (0, 0))[0] for k in range(3)))
+            await asyncio.sleep(0.05)
+
+    async def go() -> None:
+        await gws[3].complete(make_request(99_999, "the idle shard's only call"))  # it takes its share
+        done = asyncio.Event()
+        watcher = asyncio.create_task(watch(done))
+        await asyncio.gather(*[caller(c, 4) for c in range(39)])  # 156 calls: about 5 windows' worth
+        done.set()
+        await watcher
         for gw in gws:
             await gw.aclose()
-        return sum(counts)
 
-    total = asyncio.run(go())
+    asyncio.run(go())
     assert {c.status for c in server.log} == {200}  # not one 429
-    max_requests, _ = window_maxima(server.log, window)
-    assert max_requests <= q
-    # the quota was used: each span of window_s + pad admits q (the rest is latency and start-up)
-    times = sorted(c.t for c in server.log)
-    steady = [t for t in times if times[0] + window <= t < times[0] + 3 * window]
-    assert len(steady) >= 0.85 * q * 2  # ideal: 2 x q x window / (window + pad + latency), about 0.97 x 2q
-    assert total == len(server.log)
+    most = window_maxima(server.log, window)[0]
+    assert most <= q  # never passed
+    # no share stranded: the idle shard handed its share back and the busy ones held the whole quota
+    assert max(busy_held) == q
+    # and used it: some window held more than the three busy shards' equal parts (3/4 of the quota)
+    # could give; a loaded machine delays calls, so the bound is kept below the ideal q
+    times = sorted(c.t for c in server.log)[1:]  # the busy callers' calls (the idle shard's came first)
+    print(f"busiest window {most} of {q}; {(len(times) - q) / (times[-1] - times[0]):.1f} calls/s after the first burst")
+    assert most > 0.75 * q
 
 
 def test_a_restarted_authority_holds_the_whole_quota_until_the_old_shares_drained(tmp_path):
