@@ -213,7 +213,7 @@ class LeaseLedger(BudgetLedger):
     def _new_lease(self, name: str, owner: str, pico: int) -> int:
         rid = self._next_rid
         self._next_rid += 1
-        key = f"{LEASE_KEY}{owner}:{rid}"
+        key = f"{LEASE_KEY}{rid}"  # no '#': a lease names no episode (workers.gateway.entries.episode_of)
         self._journal.append(
             {"op": "reserve", "rid": rid, "key": key, NAME_FIELD: name, "pico": pico, "owner": owner, "t": time.time()},
             sync=self.durable_reservations,

@@ -339,3 +339,13 @@ def test_a_restarted_authority_holds_the_whole_quota_until_the_old_shares_draine
     assert book.lease("m", "s0", (0, 0), (10, 0))["requests"] == 0
     clock.t += 0.2
     assert book.lease("m", "s0", (0, 0), (10, 0))["requests"] == 10
+
+
+def test_leases_name_no_episode_in_the_journal(tmp_path):
+    from workers.gateway.entries import episode_ids
+
+    led = LeaseLedger(tmp_path, run_cap_usd=1.0)
+    lease = led.report(None, "m", "m#s0:a", [], 0, 10**9)
+    led.report(lease["lease"], "m", "m#s0:a", [("ep-7#3", 10**8, "ok", {"text": "x"}, None, None)])
+    led.close()
+    assert episode_ids((tmp_path / "gateway" / "ledger.jsonl").read_bytes()) == {"ep-7"}
