@@ -3,6 +3,7 @@
     .venv/bin/python bench/gateway.py            # both parts (about 2 minutes)
     .venv/bin/python bench/gateway.py --no-ray   # skip the Ray-actor overhead figure
     .venv/bin/python bench/gateway.py --skip-quota --calls 400   # overhead only (about 75 s)
+    .venv/bin/python bench/gateway.py --shards 1 4 --callers 32  # gateway shards: 1 vs 4 on Ray
 
 Part 1 - utilisation. A fake provider (``python -m workers.llm.offline.fake_server``, own process)
 enforces RPM or TPM over a scaled window (``--window-s``, default 5 s for 60 s); 32 callers
@@ -412,6 +413,83 @@ def fsync_p50(folder: Path) -> float:
     return pct(times, 0.5)
 
 
+def shards_run(counts: list[int], callers: int, calls: int, latency_ms: float) -> None:
+    """Gateway shards on Ray: ``callers`` concurrent callers (spread over the shards round robin,
+    as episode workers are) through 1 vs N shards of one deployment with an RPM quota and a run
+    cap far above the load (so the leases and shares are taken and renewed, never binding);
+    calls/s and the latency the gateway adds over a direct litellm call."""
+    import statistics
+
+    import ray
+
+    from workers.gateway.actors import RunGateways
+
+    server = ServerProcess("--latency-s", str(latency_ms / 1000))
+    lit = get_litellm()
+    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    cfg = DeploymentConfig(
+        model=MODEL, api_base=server.url, rpm=10**6, window_s=60, max_concurrency=max(16, callers), params={"max_tokens": 50}
+    )
+    text = "Where is the onion? " * 10
+
+    async def direct_p50() -> float:
+        xs = []
+        for i in range(-10, 60):
+            t = time.perf_counter()
+            await lit.acompletion(
+                model=MODEL,
+                api_base=server.url,
+                api_key="no-key",
+                max_tokens=50,
+                messages=[{"role": "user", "content": f"{i} {text}"}],
+            )
+            if i >= 0:
+                xs.append(time.perf_counter() - t)
+        return pct(xs, 0.5)
+
+    base = asyncio.run(direct_p50())
+    print(f"  direct litellm p50 {base:6.2f} ms (server latency {latency_ms:g} ms)")
+    for n in counts:
+        run_dir = Path(tempfile.mkdtemp(prefix="bench-shards-"))
+        gws = RunGateways([cfg], run_dir, "bench", run_cap_usd=1000.0, budget="shared", shards=n)
+        clients = [gws.client(MODEL, worker=c) for c in range(callers)]
+        counter = iter(range(10**9))
+
+        async def caller(c: int, lat: list[float], k: int) -> None:
+            for _ in range(k):
+                req = request(next(counter), f"{c} {text}")
+                t = time.perf_counter()
+                await clients[c].acomplete(req)
+                lat.append(time.perf_counter() - t)
+
+        async def rounds() -> tuple[list[float], list[float]]:
+            await asyncio.gather(*[caller(c, [], 3) for c in range(callers)])  # warm-up: leases taken
+            lat: list[float] = []
+            rates = []
+            for _ in range(3):
+                t0 = time.perf_counter()
+                await asyncio.gather(*[caller(c, lat, max(1, calls // callers)) for c in range(callers)])
+                rates.append(callers * max(1, calls // callers) / (time.perf_counter() - t0))
+            return lat, rates
+
+        lat, rates = asyncio.run(rounds())
+        stats = gws.stats()
+        gws.close()
+        per = stats[cfg.deployment_name]
+        leases = [s.get("lease_counts", {}) for s in per.get("shards", [per])]
+        local = sum(x.get("local", 0) for x in leases)
+        remote = sum(x.get("remote", 0) for x in leases)
+        asks = sum(x.get("asks", 0) for x in leases)
+        extra = f"   reserved from a lease {local}, at the quota actor {remote}, lease asks {asks}" if n > 1 else ""
+        print(
+            f"  {n} shard(s)  calls/s median {statistics.median(rates):7.1f}   latency p50 {pct(lat, 0.5):6.2f} ms "
+            f"p95 {pct(lat, 0.95):6.2f} ms   gw-added p50 {pct(lat, 0.5) - base:+6.2f} ms{extra}"
+        )
+    ray.shutdown()
+    server.close()
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--window-s", type=float, default=5.0)
@@ -421,7 +499,15 @@ def main() -> None:
     p.add_argument("--concurrent", type=int, default=8, help="callers of the concurrent overhead part (1: skip it)")
     p.add_argument("--no-ray", action="store_true")
     p.add_argument("--skip-quota", action="store_true")
+    p.add_argument(
+        "--shards", type=int, nargs="*", help="only the shards figure: 1 vs N gateway shards on Ray (e.g. --shards 1 4)"
+    )
+    p.add_argument("--shard-latency-ms", type=float, default=0.0, help="the fake server's latency in the shards figure")
     args = p.parse_args()
+    if args.shards:
+        print(f"[3] gateway shards: {args.callers} callers round robin over the shards, {args.calls} calls per round, 3 rounds")
+        shards_run(args.shards, args.callers, args.calls, args.shard_latency_ms)
+        return
     print(
         f"[1] quota utilisation, {args.callers} concurrent callers, window {args.window_s:g}s "
         f"(scaled from 60 s), {args.windows} windows measured"

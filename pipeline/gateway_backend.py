@@ -2,7 +2,10 @@
 
 One ``BudgetActor`` per run (the dollar caps, journalled under ``RUN_DIR/gateway/``) and one
 ``GatewayActor`` per model of the sweep (rate limits, retries, the ``llm_calls`` rows). Both
-write into the run folder, so they are pinned to the driver's node. Each sweep model entry
+write into the run folder, so they are pinned to the driver's node. A model with
+``gateway_shards: N`` gets N gateway actors, and the budget actor is then a ``QuotaActor``,
+which also leases each shard its part of the model's rpm/tpm quota and of the caps
+(:mod:`workers.gateway.quota`); episode workers take the shards round robin. Each sweep model entry
 becomes a :class:`workers.llm.providers.DeploymentConfig` (:data:`pipeline.spec.DEPLOYMENT_FIELDS`,
 the one mapping); building those configs validates params and test-double options, so a bad
 entry fails before anything is written.
@@ -46,7 +49,7 @@ def provider_models(spec: SweepSpec) -> dict[str, str]:
     return {m.name: m.model for m in spec.models}
 
 
-#: the factory the workers get: one GatewayClient (an actor handle) per sweep model label; defined
+#: the factory the workers get: one GatewayClient (an actor handle) per sweep model label, a list of them for a model with gateway shards; defined
 #: in the worker's own module, so a worker unpickling it imports nothing of the pipeline
 GatewayFactory = ClientTable
 
@@ -62,12 +65,15 @@ class GatewayBackend:
         self.configs = {m.name: deployment_config(m, f"models[{i}]") for i, m in enumerate(spec.models)}
         self.caps = model_caps(spec)
         self.budget: Any = None
-        self.actors: dict[str, Any] = {}
+        #: gateway shards per model label (``models[].gateway_shards``, default 1)
+        self.shards = {m.name: m.gateway_shards or 1 for m in spec.models}
+        self.actors: dict[str, Any] = {}  # label -> its (first) gateway actor
+        self.shard_actors: dict[str, list[Any]] = {}  # label -> every shard's actor
         self.clients: dict[str, Any] = {}
         self._closed = False
 
     def start(self, *, run_dir: str, run_id: str, runtime_env: dict[str, Any] | None = None, node_id: str | None = None) -> None:
-        from workers.gateway import BudgetActor, GatewayActor, GatewayClient  # lazy: the actors module loads Ray
+        from workers.gateway import BudgetActor, GatewayActor, GatewayClient, QuotaActor  # lazy: the actors module loads Ray
 
         # a killed gateway or budget actor is restarted by Ray (same arguments: the ledger is
         # replayed from the run folder's journal) and the calls it had in flight are sent to
@@ -81,14 +87,27 @@ class GatewayBackend:
         # named, so that the gateways find it by name: a handle among an actor's arguments makes
         # Ray warn at every start that a restart depends on the object store
         budget_name = f"recap-budget-{run_id}-{uuid.uuid4().hex[:8]}"
-        self.budget = BudgetActor.options(name=budget_name, **opts).remote(
-            str(run_dir), self.spec.run_cap_usd, self.caps, provider_models=provider_models(self.spec)
-        )
+        if any(n > 1 for n in self.shards.values()):  # the budget authority also leases the shards' quota and caps
+            self.budget = QuotaActor.options(name=budget_name, **opts).remote(
+                str(run_dir), list(self.configs.values()), self.shards, self.spec.run_cap_usd, self.caps
+            )
+        else:
+            self.budget = BudgetActor.options(name=budget_name, **opts).remote(
+                str(run_dir), self.spec.run_cap_usd, self.caps, provider_models=provider_models(self.spec)
+            )
         keys = self._api_keys()
         for label, cfg in self.configs.items():
-            actor = GatewayActor.options(**opts).remote(cfg, str(run_dir), run_id, budget_name, secret_env=keys)
-            self.actors[label] = actor
-            self.clients[label] = GatewayClient(actor, deployment=cfg.deployment_name)
+            n = self.shards[label]
+            group = [
+                GatewayActor.options(**opts).remote(
+                    cfg, str(run_dir), run_id, budget_name, secret_env=keys, shard=(k, n) if n > 1 else None
+                )
+                for k in range(n)
+            ]
+            self.actors[label] = group[0]
+            self.shard_actors[label] = group
+            clients = [GatewayClient(a, deployment=cfg.deployment_name) for a in group]
+            self.clients[label] = clients if n > 1 else clients[0]
 
     def _runtime_env(self) -> dict[str, Any]:
         """The job's environment (data folders, offline litellm) for the gateway actors."""
@@ -124,8 +143,15 @@ class GatewayBackend:
     def rate_stats(self) -> dict[str, RateStats]:
         import ray  # lazy: Ray loads only where a session uses it
 
+        from workers.gateway.actors import merged_shard_stats  # lazy: the actors module loads Ray
+
         out: dict[str, RateStats] = {}
-        stats = ray.get([a.stats.remote() for a in self.actors.values()], timeout=5)
+        groups = {label: self.shard_actors.get(label, [a]) for label, a in self.actors.items()}
+        flat = ray.get([a.stats.remote() for group in groups.values() for a in group], timeout=5)
+        stats = []
+        for group in groups.values():
+            per, flat = flat[: len(group)], flat[len(group) :]
+            stats.append(per[0] if len(per) == 1 else merged_shard_stats(per))
         for (label, cfg), s in zip(self.configs.items(), stats):
             per_min = 60.0 / cfg.window_s
             out[label] = RateStats(
@@ -152,7 +178,11 @@ class GatewayBackend:
             return
         self._closed = True
         # each gateway on its own: one that fails to close must not keep the others' rows unwritten
-        closing = {label: a.close.remote() for label, a in self.actors.items()}
+        closing = {
+            f"{label} (shard {k})" if len(group) > 1 else label: a.close.remote()
+            for label, group in self.shard_actors.items()
+            for k, a in enumerate(group)
+        }
         failed: list[str] = []
         for label, ref in closing.items():
             try:
@@ -171,7 +201,8 @@ class GatewayBackend:
             self.flush()
         except Exception as exc:  # closing goes on (the actors are killed below); the cause is logged
             log.warning("closing the model gateways: %s: %s", type(exc).__name__, exc)
-        for a in list(self.actors.values()) + ([self.budget] if self.budget is not None else []):
+        every = [a for group in self.shard_actors.values() for a in group]
+        for a in every + ([self.budget] if self.budget is not None else []):
             try:
                 ray.kill(a)
             except Exception:

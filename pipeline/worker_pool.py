@@ -189,12 +189,14 @@ class RayWorkerPool(_SlotBook):
         self.factory = factory
         self.per_process = max(1, per_process)
         self.hosts: dict[str, _Host] = {}
+        self._made = itertools.count()
 
     def _start_host(self, host_id: str) -> _Host:
         cls = self.worker_cls
         if self.per_process > 1:  # one thread per slot, and room for pid/memory/node while they run
             cls = cls.options(max_concurrency=self.per_process + 3)
-        host = _Host(host_id, cls.remote(host_id, self.run_id, self.sink, self.factory), self.per_process)
+        factory = self._factory_for(next(self._made))
+        host = _Host(host_id, cls.remote(host_id, self.run_id, self.sink, factory), self.per_process)
         self.hosts[host_id] = host
         return host
 
@@ -206,6 +208,13 @@ class RayWorkerPool(_SlotBook):
         slot = Slot(wid, host.handle, host=host.host_id)
         host.slots.append(slot)
         return slot
+
+    def _factory_for(self, index: int) -> Any:
+        """The client factory of the ``index``-th worker process started: a factory that spreads
+        workers over gateway shards (``for_worker``, round robin by process) gives each its own;
+        others are shared. The slots of one process share its shard."""
+        for_worker = getattr(self.factory, "for_worker", None)
+        return for_worker(index) if for_worker is not None else self.factory
 
     def start(self, n: int) -> dict[str, str]:
         """Start ``n`` workers (``ceil(n / per_process)`` actors) and wait (up to 300 s) until each actor

@@ -108,13 +108,21 @@ class ClientTable:
     Why here and not beside the backend that fills it (:mod:`pipeline.gateway_backend`): a worker
     unpickles its factory, and unpickling imports the class's module; this module is loaded in
     every worker anyway, the pipeline's would drag the sweep-spec parser, pydantic, pyarrow and
-    numpy into each worker process (issue 37, item 3)."""
+    numpy into each worker process (issue 37, item 3).
 
-    clients: dict[str, LLMClient]
+    A model with gateway shards has a list of clients, one per shard: the worker given index
+    ``worker`` (the pool's :meth:`for_worker`) takes shard ``worker % shards`` (issue 37, item 2)."""
+
+    clients: dict[str, Any]
     writes_llm_calls: bool = True
+    worker: int = 0
+
+    def for_worker(self, index: int) -> ClientTable:
+        return dataclasses.replace(self, worker=index)
 
     def client(self, model: str) -> LLMClient:
-        return self.clients[model]
+        chosen = self.clients[model]
+        return chosen[self.worker % len(chosen)] if isinstance(chosen, list) else chosen
 
 
 class ClientError(RuntimeError):

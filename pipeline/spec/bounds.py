@@ -33,6 +33,8 @@ ATTEMPTS_MAX = 100
 RPM_MAX = 10**7
 TPM_MAX = 10**11
 CONCURRENCY_MAX = 10_000
+#: gateway actors per model (each a process: a few suffice for a 10K-RPM quota)
+GATEWAY_SHARDS_MAX = 64
 RETRIES_MAX = 100
 SECONDS_MAX = 86_400.0
 #: the shortest quota window and attempt timeout: below it a quota or a timeout means nothing
@@ -84,6 +86,7 @@ NUMBER_BOUNDS: dict[str, Bound] = {
     "models[].retries": Bound(0, RETRIES_MAX),
     "models[].timeout_s": Bound(SECONDS_MIN, TIMEOUT_MAX),
     "models[].max_usage_rejections": Bound(1, 1000),
+    "models[].gateway_shards": Bound(1, GATEWAY_SHARDS_MAX),
     "models[].prices.input": Bound(0, PRICE_MAX),
     "models[].prices.output": Bound(0, PRICE_MAX),
     "models[].prices.cached_input": Bound(0, PRICE_MAX),

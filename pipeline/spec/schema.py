@@ -84,8 +84,8 @@ DEPLOYMENT_FIELDS: dict[str, str] = {
     "max_usage_rejections": "max_usage_rejections",
 }
 #: model entry fields the gateway's deployment does not carry (the ledger takes the caps; the
-#: preflight reads the key-name override)
-SPEC_ONLY_FIELDS = frozenset({"cap_usd", "api_key_env_is_credential"})
+#: preflight reads the key-name override; the backend starts the gateway shards)
+SPEC_ONLY_FIELDS = frozenset({"cap_usd", "api_key_env_is_credential", "gateway_shards"})
 
 
 class ModelSpec(StrictModel):
@@ -119,6 +119,10 @@ class ModelSpec(StrictModel):
     api_key_env_is_credential: bool = False
     api_key_env: Annotated[str, Field(max_length=NAME_MAX)] | None = None
     cap_usd: Annotated[float, NOT_BOOL, Bounded("models[].cap_usd")] | None = None
+    #: gateway actors for this model (default 1): more than one share its rpm/tpm quota and the
+    #: dollar caps through leases from one quota actor (:mod:`workers.gateway.quota`); episode
+    #: workers take them round robin. For a quota one gateway process cannot keep up with.
+    gateway_shards: Annotated[int, NOT_BOOL, Bounded("models[].gateway_shards")] | None = None
 
     @property
     def name(self) -> str:

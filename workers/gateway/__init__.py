@@ -15,7 +15,9 @@ Configuration (built by the pipeline from the sweep spec)::
     require_prices(models, overrides)      # PriceError naming every model without a price
 
 On Ray (one GatewayActor per deployment; one BudgetActor per run, or - budget="local", the
-default for a single deployment - the ledger inside the one GatewayActor)::
+default for a single deployment - the ledger inside the one GatewayActor; with shards=N, N
+GatewayActors per deployment and a QuotaActor in place of the BudgetActor, see
+:mod:`workers.gateway.quota`)::
 
     gws = RunGateways(configs, run_dir, run_id, run_cap_usd=50.0, model_caps_usd={"openai/gpt-4o": 40},
                       budget="auto")           # "shared" | "local" | "auto" | a BudgetActor handle
@@ -23,7 +25,9 @@ default for a single deployment - the ledger inside the one GatewayActor)::
     # else model[@api_base][#key_env]), never by a model string two deployments may share
     # or by hand: BudgetActor.remote(run_dir, run_cap_usd, model_caps_usd, provider_models=...)
     #             GatewayActor.remote(config, run_dir, run_id, budget_actor)
+    # RunGateways(..., shards=4): four gateway shards per deployment sharing its quota and the caps
     client = gws.client("openai/gpt-4o")   # GatewayClient, a recap.llm.LLMClient (picklable)
+    client = gws.client("openai/gpt-4o", worker=3)   # with shards: worker i -> shard i % N
     resp = client.complete(request)        # LLMResponse, or raises LLMError(kind)
     client.stats(); client.pause(); client.resume(); client.set_limits(rpm=..., tpm=..., max_concurrency=...)
     gws.stats(); gws.close()               # close flushes llm_calls rows and the journal
@@ -56,6 +60,9 @@ Guarantees
   worst case and leaves a ``usage_rejected`` event. The journal ``RUN_DIR/gateway/ledger.jsonl`` is
   fsync'd, so a killed gateway/ledger restarted from the run folder continues from the exact
   spend (open reservations of the dead process are charged at worst case).
+- Shards: N gateway shards of a deployment hold shares of its RPM/TPM quota and dollar leases
+  from one QuotaActor; the shares never sum past the quota and the leases are ledger reservations,
+  so both guarantees above hold across shards; a dead shard's lease is charged in full.
 - Idempotency: a repeated ``request.call_key`` returns the recorded response
   (``served_from="ledger"``, cost 0), across restarts too. With ``cache=True`` identical
   requests (model, params, messages) are served from the ledger (``"cache"``, cost 0).
@@ -104,6 +111,7 @@ __all__ = [
     "GatewayClient",
     "LocalBudget",
     "Price",
+    "QuotaActor",
     "PriceError",
     "PriceTable",
     "RunGateways",
@@ -118,6 +126,7 @@ __all__ = [
 _MODULE_OF = {
     "BudgetActor": "workers.gateway.actors",
     "GatewayActor": "workers.gateway.actors",
+    "QuotaActor": "workers.gateway.actors",
     "RunGateways": "workers.gateway.actors",
     "GatewayClient": "workers.gateway.client",
     "BlockingGateway": "workers.gateway.blocking",

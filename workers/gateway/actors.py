@@ -36,6 +36,8 @@ from workers.gateway.call_log import run_id_of  # noqa: E402
 from workers.gateway.client import GatewayClient  # noqa: E402
 from workers.gateway.core import DeploymentGateway  # noqa: E402
 from workers.gateway.ledger import BudgetLedger, EpisodeBudget, LocalBudget  # noqa: E402
+from workers.gateway.quota import LeaseLedger, LocalQuota, QuotaBook, lease_s_for, pool_spec  # noqa: E402
+from workers.gateway.shard import ShardGateway  # noqa: E402
 from workers.llm.errors import scrub  # noqa: E402
 from workers.llm.providers import DeploymentConfig  # noqa: E402
 from workers.log_setup import configure_from_env  # noqa: E402
@@ -168,11 +170,70 @@ class RemoteBudget:
 
 
 @ray.remote(num_cpus=0, concurrency_groups={CONTROL: 2})
+class QuotaActor(LocalQuota):
+    """The run's budget authority when a deployment runs gateway shards: the ``BudgetActor``'s
+    protocol (one journal writer per run folder) plus the shards' window shares and dollar
+    leases (:mod:`workers.gateway.quota`). ``configs``: every deployment of the run (the sharded
+    ones' RPM/TPM quotas live here); ``shards``: deployment name -> its number of shards."""
+
+    def __init__(
+        self,
+        run_dir: str,
+        configs: Sequence[DeploymentConfig],
+        shards: Mapping[str, int],
+        run_cap_usd: float | None = None,
+        model_caps_usd: Mapping[str, float] | None = None,
+        group_commit: bool = True,
+    ):
+        configure_from_env()
+        sharded = [c for c in configs if shards.get(c.deployment_name, 1) > 1]
+        ledger = LeaseLedger(
+            run_dir,
+            run_cap_usd=run_cap_usd,
+            model_caps_usd=model_caps_usd,
+            provider_models={c.deployment_name: c.model for c in configs},
+            shards=dict(shards),
+        )
+        lease_s = min((lease_s_for(c.window_s) for c in sharded), default=10.0)
+        book = QuotaBook(pool_spec(sharded), lease_s=lease_s, restarted=ledger.orphaned_leases > 0)
+        super().__init__(ledger, book, group_commit=group_commit)
+        _ledger_restored_event(run_dir, self.ledger)
+
+    @ray.method(concurrency_group=CONTROL)
+    async def stats(self) -> dict[str, Any]:  # type: ignore[override]  # async over Ray: callers await the handle
+        return self.ledger.stats()
+
+    @ray.method(concurrency_group=CONTROL)
+    async def set_caps(self, run_cap_usd: float | None = None, model_caps_usd: Mapping[str, float] | None = None) -> None:
+        self.ledger.set_caps(run_cap_usd, model_caps_usd)
+
+
+class RemoteQuota(RemoteBudget):
+    """The async face of a ``QuotaActor`` handle, as a gateway shard expects it."""
+
+    async def report(
+        self, lease: int | None, name: str, owner: str, calls: Sequence[tuple], give: int = 0, want_worst: int = 0
+    ) -> Any:
+        return await self.handle.report.remote(lease, name, owner, list(calls), give, want_worst)
+
+    async def window_lease(self, deployment: str, shard: str, give: tuple[int, int], want: tuple[int, int]) -> Any:
+        return await self.handle.window_lease.remote(deployment, shard, give, want)
+
+    async def window_release(self, deployment: str, shard: str) -> None:
+        await self.handle.window_release.remote(deployment, shard)
+
+    async def recorded_keys(self) -> Any:
+        return await self.handle.recorded_keys.remote()
+
+
+@ray.remote(num_cpus=0, concurrency_groups={CONTROL: 2})
 class GatewayActor:
     """Hosts one :class:`DeploymentGateway`; ``budget`` is the run's ``BudgetActor`` - a handle,
     or the name of a named one - (or None: the gateway keeps its own ledger in the run folder,
     for a single-deployment run). ``secret_env``: API keys set in this actor's process only.
-    ``group_commit``: for the own ledger, see :class:`LocalBudget` (False only for benches)."""
+    ``group_commit``: for the own ledger, see :class:`LocalBudget` (False only for benches).
+    ``shard``: (index, number of shards) when this actor is one shard of its deployment; then
+    ``budget`` is the run's ``QuotaActor`` (:class:`workers.gateway.shard.ShardGateway`)."""
 
     def __init__(
         self,
@@ -184,6 +245,7 @@ class GatewayActor:
         model_caps_usd: Mapping[str, float] | None = None,
         secret_env: SecretEnv | None = None,
         group_commit: bool = True,
+        shard: tuple[int, int] | None = None,
     ):
         configure_from_env()
         if secret_env is not None:  # the API keys, for this actor process only
@@ -192,6 +254,12 @@ class GatewayActor:
             budget = ray.get_actor(budget)  # restarts this actor without an object-store argument
 
         cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
+        self.core: DeploymentGateway
+        if shard is not None:  # shard (index, of n): its quota and budget are leases from the QuotaActor
+            self.core = ShardGateway(
+                cfg, index=shard[0], shards=shard[1], quota=RemoteQuota(budget), run_dir=run_dir, run_id=run_id
+            )
+            return
         if budget is None:  # the gateway keeps the run's ledger itself
             own = BudgetLedger(
                 run_dir, run_cap_usd=run_cap_usd, model_caps_usd=model_caps_usd, provider_models={cfg.deployment_name: cfg.model}
@@ -258,10 +326,15 @@ class RunGateways:
     several deployments: caps are per run); ``"local"`` - the single deployment's
     GatewayActor keeps the ledger itself (no extra round trips per call); ``"auto"`` (default)
     - local for one deployment, shared otherwise; or an existing BudgetActor handle.
-    ``client(name)`` gives the :class:`GatewayClient` of a deployment (by deployment name or
-    model, when the model has one deployment). ``model_caps_usd`` is keyed by deployment name,
-    as the ledger keeps spend. ``group_commit``: see :class:`LocalBudget`
-    (False only for the bench's before figures).
+    ``shards``: gateway shards per deployment (an int for all, or name -> int; default 1). A
+    deployment with more than one runs that many GatewayActors, sharing its quota and the caps
+    through leases from a ``QuotaActor``, which then is the run's budget authority in place of the
+    BudgetActor (:mod:`workers.gateway.quota`); with 1 everywhere nothing changes.
+    ``client(name, worker=i)`` gives the :class:`GatewayClient` of a deployment (by deployment
+    name or model, when the model has one deployment); worker ``i`` gets shard ``i % shards``
+    (round robin; without ``worker``, successive clients take the shards in turn).
+    ``model_caps_usd`` is keyed by deployment name, as the ledger keeps spend. ``group_commit``:
+    see :class:`LocalBudget` (False only for the bench's before figures).
     """
 
     def __init__(
@@ -273,6 +346,7 @@ class RunGateways:
         model_caps_usd: Mapping[str, float] | None = None,
         budget: Any = "auto",
         group_commit: bool = True,
+        shards: int | Mapping[str, int] = 1,
     ):
         self.run_dir = str(run_dir)
         self.run_id = run_id
@@ -280,6 +354,24 @@ class RunGateways:
         names = [c.deployment_name for c in self.configs]
         if len(set(names)) != len(names):
             raise ValueError(f"two deployments share a name: {sorted(names)}")
+        self.n_shards = {n: (shards if isinstance(shards, int) else int(shards.get(n, 1))) for n in names}
+        if any(k < 1 for k in self.n_shards.values()):
+            raise ValueError(f"gateway shards must be at least 1: {self.n_shards}")
+        self._turn = 0
+        self.shards: dict[str, list[Any]] = {}
+        if any(k > 1 for k in self.n_shards.values()):
+            if budget not in ("auto", "shared"):
+                raise ValueError("gateway shards need the run's QuotaActor as the budget (budget='auto' or 'shared')")
+            self.budget = QuotaActor.remote(
+                self.run_dir, self.configs, self.n_shards, run_cap_usd, model_caps_usd, group_commit=group_commit
+            )
+            for c in self.configs:
+                n = self.n_shards[c.deployment_name]
+                self.shards[c.deployment_name] = [
+                    GatewayActor.remote(c, self.run_dir, run_id, self.budget, shard=(k, n) if n > 1 else None) for k in range(n)
+                ]
+            self.actors = {name: group[0] for name, group in self.shards.items()}
+            return
         if budget == "auto":
             budget = "local" if len(self.configs) == 1 else "shared"
         if budget == "local":
@@ -291,25 +383,38 @@ class RunGateways:
                     self.configs[0], self.run_dir, run_id, None, run_cap_usd, model_caps_usd, group_commit=group_commit
                 )
             }
-            return
-        providers = {c.deployment_name: c.model for c in self.configs}
-        self.budget = (
-            BudgetActor.remote(self.run_dir, run_cap_usd, model_caps_usd, group_commit=group_commit, provider_models=providers)
-            if budget == "shared"
-            else budget
-        )
-        self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget) for c in self.configs}
+        else:
+            providers = {c.deployment_name: c.model for c in self.configs}
+            self.budget = (
+                BudgetActor.remote(
+                    self.run_dir, run_cap_usd, model_caps_usd, group_commit=group_commit, provider_models=providers
+                )
+                if budget == "shared"
+                else budget
+            )
+            self.actors = {c.deployment_name: GatewayActor.remote(c, self.run_dir, run_id, self.budget) for c in self.configs}
+        self.shards = {name: [a] for name, a in self.actors.items()}
 
-    def client(self, name: str) -> Any:
+    def _name(self, name: str) -> str:
         if name in self.actors:
-            return GatewayClient(self.actors[name], deployment=name)
+            return name
         matches = [c.deployment_name for c in self.configs if c.model == name]
         if len(matches) != 1:
             raise KeyError(f"no single deployment named or serving {name!r}; deployments: {sorted(self.actors)}")
-        return GatewayClient(self.actors[matches[0]], deployment=matches[0])
+        return matches[0]
+
+    def client(self, name: str, worker: int | None = None) -> Any:
+        dep = self._name(name)
+        group = self.shards[dep]
+        if worker is None:
+            worker, self._turn = self._turn, self._turn + 1
+        return GatewayClient(group[worker % len(group)], deployment=dep)
 
     def stats(self) -> dict[str, Any]:
-        out = {name: ray.get(a.stats.remote()) for name, a in self.actors.items()}
+        out: dict[str, Any] = {}
+        for name, group in self.shards.items():
+            per = ray.get([a.stats.remote() for a in group])
+            out[name] = per[0] if len(per) == 1 else merged_shard_stats(per)
         if self.budget is not None:
             out["budget"] = ray.get(self.budget.stats.remote())
         else:
@@ -321,6 +426,23 @@ class RunGateways:
 
     def close(self) -> None:
         """Flush every gateway's rows and close the ledger journal."""
-        ray.get([a.close.remote() for a in self.actors.values()])
+        ray.get([a.close.remote() for group in self.shards.values() for a in group])
         if self.budget is not None:
             ray.get(self.budget.close.remote())
+
+
+def merged_shard_stats(per: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """One deployment's figures over its shards: the counters summed, the quota (``rpm``,
+    ``tpm``: the deployment's) as any shard reports it, each shard's own figures under ``shards``."""
+    out: dict[str, Any] = dict(per[0])
+    for key in ("window_requests", "window_tokens", "inflight", "active", "waiting", "rows_written", "rows_pending", "spent_usd"):
+        out[key] = sum(p.get(key) or 0 for p in per)
+    paused = [p["paused_until"] for p in per if p.get("paused_until")]
+    out["paused_until"] = max(paused) if paused else None
+    calls: dict[str, int] = {}
+    for p in per:
+        for k, v in p.get("calls", {}).items():
+            calls[k] = calls.get(k, 0) + v
+    out["calls"] = calls
+    out["shards"] = list(per)
+    return out

@@ -111,6 +111,7 @@ class DeploymentGateway(CallRecorder):
         call_log: CallLog | None = None,
         durable_reservations: bool = True,
         clock: Callable[[], float] = time.monotonic,
+        admission: AdmissionController | None = None,
     ):
         get_litellm()  # import now (seconds), not inside the first call
         self.config = config
@@ -134,7 +135,8 @@ class DeploymentGateway(CallRecorder):
                 )
             )
         )
-        self.admission = AdmissionController(
+        # a gateway shard brings its own (its share of a quota held elsewhere: workers.gateway.shard)
+        self.admission = admission or AdmissionController(
             rpm=config.rpm,
             tpm=config.tpm,
             window_s=config.window_s,

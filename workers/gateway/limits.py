@@ -188,12 +188,16 @@ class AdmissionController:
         except TimeoutError:
             pass
 
-    async def acquire(self, tokens: int) -> Ticket:
-        """Wait for a concurrency slot, the end of any Retry-After pause and window room."""
+    def _check_size(self, tokens: int) -> None:
+        """A request bigger than the token window can never be admitted."""
         if self.tokens.limit is not None and tokens > self.tokens.limit:
             raise AdmissionError(
                 f"request needs {tokens} tokens (prompt + max output), more than the deployment's TPM limit {self.tokens.limit}"
             )
+
+    async def acquire(self, tokens: int) -> Ticket:
+        """Wait for a concurrency slot, the end of any Retry-After pause and window room."""
+        self._check_size(tokens)
         await self._enter()
         try:
             async with self._window_lock:
