@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+from collections.abc import Iterator
 from typing import Any
 
 #: rows written per transaction (a commit to a temporary database writes pages, never fsyncs)
@@ -59,6 +60,10 @@ class RecordedResults:
         self._pending += 1
         if self._pending >= COMMIT_EVERY:
             self._commit()
+
+    def __iter__(self) -> Iterator[str]:
+        """The keys, in key order (a starting gateway shard asks which calls are recorded)."""
+        return iter([row[0] for row in self._db.execute("SELECT key FROM recorded ORDER BY key")])
 
     def __len__(self) -> int:
         return self._count

@@ -86,5 +86,6 @@ def test_recorded_results_map():
     else:
         raise AssertionError("a missing key must raise KeyError")
     rec["b"] = {"text": "z"}
+    assert list(rec) == ["a", "b"]
     rec.close()
     assert len(rec) == 2  # the ledger's stats() reads it after close (the run's last stats)
