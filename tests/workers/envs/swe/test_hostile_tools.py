@@ -39,6 +39,8 @@ def test_a_hostile_tool_call_is_refused_and_the_episode_goes_on(env: SweEnvironm
     assert held, detail
 
 
+# measures the growth of /var/lib/docker as a whole: no other container may write beside it
+@pytest.mark.host_load
 def test_every_writable_place_of_a_container_is_bounded(tmp_path: Path, docker_ready: str) -> None:
     results = H.disk_writes_to_every_place(tmp_path)
     assert list(results) == [f"disk: 75 MB to {p}" for p in H.PLACES] + ["disk: /var/lib/docker growth"]
