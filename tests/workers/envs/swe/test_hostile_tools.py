@@ -15,7 +15,8 @@ from tests.workers.envs.swe import hostile_tools as H
 from workers.envs.swe.env import SweEnvironment
 from workers.sandbox import LABEL_RUN, remove_labelled
 
-pytestmark = pytest.mark.docker
+# one xdist worker for the module: its one episode (a container) serves every attack
+pytestmark = [pytest.mark.docker, pytest.mark.xdist_group("swe_hostile_tools")]
 
 
 @pytest.fixture(scope="module")
