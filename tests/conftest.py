@@ -60,15 +60,25 @@ def ray_address() -> Iterator[str]:
 SHARED_RUNS = ("pipeline_run", "real_runs")
 
 
+#: the xdist group of the Docker tests that run a sweep on Ray: scripts/test.sh runs the Docker tests
+#: in two processes, and one Ray cluster for them is enough (a second one, started beside Docker
+#: containers, only adds a cluster's start-up and background load)
+DOCKER_RAY_GROUP = "docker_ray"
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist reads the groups into the test ids
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Put each test that reads a shared run into that run's xdist group (no effect without xdist)."""
+    """Put each test that reads a shared run into that run's xdist group, and each Docker test on
+    Ray without a group of its own into :data:`DOCKER_RAY_GROUP` (no effect without xdist)."""
     for item in items:
         names = getattr(item, "fixturenames", ())
         for name in SHARED_RUNS:
             if name in names:
                 item.add_marker(pytest.mark.xdist_group(name))
                 break
+        else:
+            if "ray_address" in names and item.get_closest_marker("docker") and not item.get_closest_marker("xdist_group"):
+                item.add_marker(pytest.mark.xdist_group(DOCKER_RAY_GROUP))
 
 
 @pytest.fixture(autouse=True)
