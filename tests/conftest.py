@@ -48,7 +48,16 @@ def ray_address() -> Iterator[str]:
     from pipeline.spec import RaySpec
 
     # one sandbox slot per node (ray.sandboxes_per_node): a coding sweep that asks for the bound runs one worker here
-    started = init_ray(RaySpec(num_cpus=2, sandboxes_per_node=1))
+    spec = RaySpec(num_cpus=2, sandboxes_per_node=1)
+    try:
+        started = init_ray(spec)
+    except Exception as exc:
+        # Ray gives its raylet 30 s to register (ray/_private/node.py); on a machine loaded by other
+        # work (the Docker tests beside it under scripts/test.sh's two processes) it can miss that
+        # once. init_ray has stopped what it started: start again, once.
+        if "timed out during startup" not in str(exc):
+            raise
+        started = init_ray(spec)
     yield ray.get_runtime_context().gcs_address
     if started:
         shutdown_ray()
@@ -60,15 +69,25 @@ def ray_address() -> Iterator[str]:
 SHARED_RUNS = ("pipeline_run", "real_runs")
 
 
+#: the xdist group of the Docker tests that run a sweep on Ray: scripts/test.sh runs the Docker tests
+#: in two processes, and one Ray cluster for them is enough (a second one, started beside Docker
+#: containers, only adds a cluster's start-up and background load)
+DOCKER_RAY_GROUP = "docker_ray"
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist reads the groups into the test ids
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Put each test that reads a shared run into that run's xdist group (no effect without xdist)."""
+    """Put each test that reads a shared run into that run's xdist group, and each Docker test on
+    Ray without a group of its own into :data:`DOCKER_RAY_GROUP` (no effect without xdist)."""
     for item in items:
         names = getattr(item, "fixturenames", ())
         for name in SHARED_RUNS:
             if name in names:
                 item.add_marker(pytest.mark.xdist_group(name))
                 break
+        else:
+            if "ray_address" in names and item.get_closest_marker("docker") and not item.get_closest_marker("xdist_group"):
+                item.add_marker(pytest.mark.xdist_group(DOCKER_RAY_GROUP))
 
 
 @pytest.fixture(autouse=True)

@@ -44,6 +44,7 @@ def test_output_cap_cuts_exactly_and_counts_everything(open_kind: Open) -> None:
     assert (r.output, r.output_bytes, r.truncated) == ("0123456789", 10, False)
 
 
+@pytest.mark.host_load
 @pytest.mark.parametrize("command", ["sleep 1000", "yes > /dev/null", "bash -c 'trap \"\" TERM INT; sleep 1000'"])
 def test_timeout_kills_the_command_and_the_next_one_works(open_kind: Open, command: str) -> None:
     sb = open_kind()
@@ -53,6 +54,7 @@ def test_timeout_kills_the_command_and_the_next_one_works(open_kind: Open, comma
     assert (sb.run("echo ok").exit_code, sb.run("echo ok").output) == (0, "ok\n")
 
 
+@pytest.mark.host_load
 def test_nothing_outlives_its_command(open_kind: Open) -> None:
     sb = open_kind()
     r = sb.run("sleep 1000 & setsid sleep 999 & echo started")
@@ -61,6 +63,7 @@ def test_nothing_outlives_its_command(open_kind: Open) -> None:
     assert r.output == "0\n"
 
 
+@pytest.mark.host_load
 def test_fork_bomb_is_stopped_and_the_sandbox_still_answers(open_kind: Open) -> None:
     sb = open_kind(pids=64)
     if sb.kind == "local" and not {"pids-cgroup", "pid-namespace"} <= set(getattr(sb, "confinement", ())):
@@ -118,6 +121,7 @@ def test_git_diff_shows_an_edit_and_commits_work(open_kind: Open) -> None:
     assert (r.exit_code, r.output) == (0, "recap-eval sandbox <sandbox@recap-eval.invalid>|edit\n")
 
 
+@pytest.mark.host_load
 def test_disk_limit_is_reported(open_kind: Open) -> None:
     sb = open_kind(disk_bytes=1_000_000)
     r = sb.run("head -c 3000000 /dev/zero > big.bin; echo done")

@@ -15,7 +15,8 @@ from tests.workers.envs.swe import hostile_tools as H
 from workers.envs.swe.env import SweEnvironment
 from workers.sandbox import LABEL_RUN, remove_labelled
 
-pytestmark = pytest.mark.docker
+# one xdist worker for the module: its one episode (a container) serves every attack
+pytestmark = [pytest.mark.docker, pytest.mark.xdist_group("swe_hostile_tools")]
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +40,8 @@ def test_a_hostile_tool_call_is_refused_and_the_episode_goes_on(env: SweEnvironm
     assert held, detail
 
 
+# measures the growth of /var/lib/docker as a whole: no other container may write beside it
+@pytest.mark.host_load
 def test_every_writable_place_of_a_container_is_bounded(tmp_path: Path, docker_ready: str) -> None:
     results = H.disk_writes_to_every_place(tmp_path)
     assert list(results) == [f"disk: 75 MB to {p}" for p in H.PLACES] + ["disk: /var/lib/docker growth"]

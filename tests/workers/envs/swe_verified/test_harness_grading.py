@@ -124,6 +124,11 @@ def test_the_django_runner_refuses_pytest_ids(tmp_path: Path) -> None:
     assert done.returncode == 2 and "unrecognized arguments: -rA" in done.stderr
 
 
+#: one xdist worker for the tests of ``shaped`` (when the slow suite runs under RECAP_TEST_WORKERS): it
+#: tags its images under fixed names and removes them when the module ends
+SHAPED = pytest.mark.xdist_group("swe_verified_shaped")
+
+
 @pytest.fixture(scope="module")
 def shaped(docker_ready: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Built]]:
     """The two repositories in images under the harness's published names, their records stored
@@ -148,6 +153,7 @@ def _env(built: Built, **options: object) -> VerifiedEnvironment:
     return env
 
 
+@SHAPED
 @pytest.mark.docker
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", MODES)
@@ -182,6 +188,7 @@ def test_every_grading_resolves_the_gold_patch_and_not_one_that_leaves_the_bug(s
     assert wrong.failing_tests() == list(f2p)
 
 
+@SHAPED
 @pytest.mark.docker
 @pytest.mark.slow
 def test_an_episode_is_graded_by_the_harness_by_default(shaped) -> None:
@@ -210,6 +217,7 @@ def test_an_episode_is_graded_by_the_harness_by_default(shaped) -> None:
 HANG = "def sign(x):\n    while True:\n        pass\n"
 
 
+@SHAPED
 @pytest.mark.docker
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["both", "harness"])

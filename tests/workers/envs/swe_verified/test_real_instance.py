@@ -28,6 +28,12 @@ from workers.envs.swe_verified import images
 from . import real_instance as R
 from .conftest import write_jsonl
 
+#: one xdist worker for the whole module (scripts/test.sh runs the Docker tests in two processes):
+#: its image is tagged under the harness's name while the module runs and untagged after it, so a
+#: second worker's copy of the module would untag it under the first one's tests. The group is the
+#: one of the other Docker tests on Ray (tests/conftest.py): its last test runs a sweep
+pytestmark = pytest.mark.xdist_group("docker_ray")
+
 MODES = ("both", "ours", "official", "harness")
 #: the change that leaves the bug: a comment line before the function the gold patch fixes
 NOT_A_FIX = (
