@@ -183,7 +183,8 @@ def check_prices(spec: SweepSpec) -> None:
     for i, m in enumerate(spec.models):
         if spec.run_cap_usd is None and m.cap_usd is None:
             continue
-        overrides = {m.model: m.prices.model_dump()} if m.prices is not None else None
+        prices = m.token_prices()
+        overrides = {m.model: prices} if prices is not None else None
         try:
             require_prices([m.model], overrides)
         except PriceError as exc:
