@@ -24,6 +24,7 @@ from unittest import mock
 
 from pipeline.deployments import deployment_config
 from pipeline.errors import PreflightError, SpecError
+from pipeline.serving.checks import check_serving
 from pipeline.spec import OFFLINE_PREFIX, ModelSpec, SweepSpec
 from pipeline.units import Plan, Unit, stratum
 from recap.agent import Agent, DemonstrationError
@@ -197,6 +198,7 @@ def preflight(spec: SweepSpec) -> None:
     SpecError or PreflightError on the first failure."""
     check_models(spec)
     check_prices(spec)
+    check_serving(spec)
     check_keys(spec)
 
 
