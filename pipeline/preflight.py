@@ -52,7 +52,7 @@ def _litellm_missing_keys(m: ModelSpec) -> list[str]:
 def key_variables(m: ModelSpec) -> list[str]:
     """Names of the environment variables holding a real model's credentials: ``api_key_env``,
     else the ones litellm expects for the provider (asked with an empty environment)."""
-    if m.test_double:
+    if m.test_double or m.serve is not None:  # a served model's route is the sweep's own: no key
         return []
     if m.api_key_env:
         return [m.api_key_env]
@@ -68,7 +68,7 @@ def check_keys(spec: SweepSpec) -> None:
     """Every real model's API key is set (its ``api_key_env``, else the variables litellm expects); test doubles
     need none. Raises PreflightError."""
     for i, m in enumerate(spec.models):
-        if m.test_double:
+        if m.test_double or m.serve is not None:
             continue
         if m.api_key_env:
             if not os.environ.get(m.api_key_env):
