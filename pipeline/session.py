@@ -254,10 +254,10 @@ class SessionLoop(AttemptHandling):
     def _close_session(self, t_start: float) -> RunSummary:
         """The session's counts, its last rows and events, the gateway's flush; a lost sink is an error."""
         assert self.pool is not None and self.channel is not None
+        self._stop_serving()  # before the spend is read: its last replica time is part of it
         stop, spend = self.stop, self.spend_seen
         lost = self.channel.lost
         self.leftovers.remove()  # what the episodes cut by a stop (their workers killed) left
-        self._stop_serving()
         cut = self.pool.in_flight() if (stop.graceful or lost is not None) else 0
         # a stop asked for while the last episodes finished left nothing to resume
         interrupted = stop.graceful and (len(self.queue) + cut > 0)

@@ -106,7 +106,7 @@ class ServeCost:
                 engine=s.plan.engine,
                 replicas=s.plan.replicas,
                 gpus_per_replica=s.plan.gpus,
-                held_s=round(c.held_s, 3),
+                held_s=c.held_s,
                 replica_hours=replica_hours,
                 gpu_hours=replica_hours * s.plan.gpus,
                 usd=c.usd,
