@@ -60,8 +60,9 @@ class PriceSpec(StrictModel):
     output: Annotated[float, NOT_BOOL, Bounded("models[].prices.output")] | None = None
     cached_input: Annotated[float, NOT_BOOL, Bounded("models[].prices.cached_input")] | None = None
     cache_write: Annotated[float, NOT_BOOL, Bounded("models[].prices.cache_write")] | None = None
-    gpu_hour: Annotated[float, NOT_BOOL, Bounded("models[].prices.gpu_hour")] | None = None
-    replica_hour: Annotated[float, NOT_BOOL, Bounded("models[].prices.replica_hour")] | None = None
+    #: (left out of ``model_dump``: the token price table never sees the hourly prices)
+    gpu_hour: Annotated[float, NOT_BOOL, Bounded("models[].prices.gpu_hour")] | None = Field(default=None, exclude=True)
+    replica_hour: Annotated[float, NOT_BOOL, Bounded("models[].prices.replica_hour")] | None = Field(default=None, exclude=True)
 
     @model_validator(mode="after")
     def _one_kind(self) -> PriceSpec:
@@ -83,7 +84,7 @@ class PriceSpec(StrictModel):
         """The per-token prices as the price table takes them (None for an hourly price)."""
         if self.hourly:
             return None
-        return self.model_dump(exclude={"gpu_hour", "replica_hour"})
+        return self.model_dump()
 
 
 #: The one mapping between a sweep model entry and the gateway's deployment
