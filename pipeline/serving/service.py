@@ -87,8 +87,9 @@ def _http_port() -> int:
     import ray  # lazy: as above
     from ray.serve._private.constants import SERVE_CONTROLLER_NAME, SERVE_NAMESPACE
 
-    controller = ray.get_actor(SERVE_CONTROLLER_NAME, namespace=SERVE_NAMESPACE)
-    return int(ray.get(controller.get_http_config.remote()).port)
+    controller: Any = ray.get_actor(SERVE_CONTROLLER_NAME, namespace=SERVE_NAMESPACE)
+    config: Any = ray.get(controller.get_http_config.remote())
+    return int(config.port)
 
 
 def serve_apps() -> dict[str, Any]:

@@ -117,14 +117,11 @@ def deployment(
     """The bound Serve application of one GGUF model."""
     from ray import serve  # lazy: Serve loads only where a sweep serves a model
 
-    return (
-        serve.deployment(LlamaCppServer, name=name)
-        .options(
-            num_replicas=replicas,
-            max_ongoing_requests=max_in_flight,
-            ray_actor_options={"num_cpus": cpus, "num_gpus": gpus},
-            health_check_period_s=5.0,
-            health_check_timeout_s=30.0,
-        )
-        .bind(served_name, gguf, dict(engine_args), gpus)
-    )
+    return serve.deployment(
+        name=name,
+        num_replicas=replicas,
+        max_ongoing_requests=max_in_flight,
+        ray_actor_options={"num_cpus": cpus, "num_gpus": gpus},
+        health_check_period_s=5.0,
+        health_check_timeout_s=30.0,
+    )(LlamaCppServer).bind(served_name, gguf, dict(engine_args), gpus)

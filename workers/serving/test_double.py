@@ -108,11 +108,11 @@ def deployment(model: str, engine_args: Mapping[str, Any], *, name: str, replica
     """The bound Serve application of the test double (``serve.run`` starts it)."""
     from ray import serve  # lazy: Serve loads only where a sweep serves a model
 
-    dep = serve.deployment(TestDoubleServer, name=name)
-    return dep.options(
+    return serve.deployment(
+        name=name,
         num_replicas=replicas,
         max_ongoing_requests=max_in_flight,
         ray_actor_options={"num_cpus": cpus, "num_gpus": 0},
         health_check_period_s=1.0,
         health_check_timeout_s=10.0,
-    ).bind(model, dict(engine_args))
+    )(TestDoubleServer).bind(model, dict(engine_args))

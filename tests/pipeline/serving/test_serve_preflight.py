@@ -190,7 +190,9 @@ def test_the_cli_refuses_a_served_model_whose_engine_is_missing_in_one_line_and_
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         f"{sweep}: models[0] (openai/qwen): serve.engine vllm is not installed here (no module vllm; pip install 'ray[llm]' vllm)"
-    ] or (len(err) == 1 and err[0].endswith("serve.engine vllm is not installed here (no module vllm; pip install 'ray[llm]' vllm)"))
+    ] or (
+        len(err) == 1 and err[0].endswith("serve.engine vllm is not installed here (no module vllm; pip install 'ray[llm]' vllm)")
+    )
     assert not out.exists()
 
 
@@ -198,8 +200,14 @@ def test_the_cli_refuses_a_served_model_whose_engine_is_missing_in_one_line_and_
 @pytest.mark.parametrize(
     ("model", "message"),
     [
-        ("{model: openai/q, serve: {weights: Org/q}}", "models[0]: serve.engine: name the engine (vllm, sglang, llama.cpp, test-double)"),
-        ("{model: openai/q, serve: {engine: vllm}}", "models[0]: serve.weights: give the weights vllm serves (a hub id or a local path)"),
+        (
+            "{model: openai/q, serve: {weights: Org/q}}",
+            "models[0]: serve.engine: name the engine (vllm, sglang, llama.cpp, test-double)",
+        ),
+        (
+            "{model: openai/q, serve: {engine: vllm}}",
+            "models[0]: serve.weights: give the weights vllm serves (a hub id or a local path)",
+        ),
         (
             "{model: offline/expert, serve: {engine: vllm, weights: Org/q}}",
             "models[0]: serve.engine vllm serves open weights; 'offline/expert' is a test double (engine: test-double)",
@@ -208,20 +216,32 @@ def test_the_cli_refuses_a_served_model_whose_engine_is_missing_in_one_line_and_
             "{model: offline/replay, api_base: /r, serve: {}}",
             "models[0]: serve: the sweep serves this model itself; leave api_base out",
         ),
-        ("{model: offline/replay, serve: {}}", "models[0]: serve.engine test-double serves offline/expert or offline/random, not 'offline/replay'"),
-        ("{model: offline/expert, serve: {engine: tgi}}", "models[0].serve.engine: Input should be 'vllm', 'sglang', 'llama.cpp' or 'test-double'"),
+        (
+            "{model: offline/replay, serve: {}}",
+            "models[0]: serve.engine test-double serves offline/expert or offline/random, not 'offline/replay'",
+        ),
+        (
+            "{model: offline/expert, serve: {engine: tgi}}",
+            "models[0].serve.engine: Input should be 'vllm', 'sglang', 'llama.cpp' or 'test-double'",
+        ),
         ("{model: offline/expert, serve: {replicas: 0}}", "models[0].serve.replicas: 0 is out of range [1, 256]"),
         ("{model: offline/expert, serve: {replica: 2}}", "models[0].serve.replica: unknown field"),
         (
             "{model: offline/expert, serve: {}, prices: {input: 1, output: 2}}",
             "models[0]: a served model is priced by the hour: prices: {gpu_hour: X} or {replica_hour: X}",
         ),
-        ("{model: offline/expert, prices: {gpu_hour: 1}}", "models[0]: prices.gpu_hour / replica_hour are for a model the sweep serves (give serve:)"),
+        (
+            "{model: offline/expert, prices: {gpu_hour: 1}}",
+            "models[0]: prices.gpu_hour / replica_hour are for a model the sweep serves (give serve:)",
+        ),
         (
             "{model: offline/expert, serve: {}, prices: {gpu_hour: 1, replica_hour: 1}}",
             "models[0].prices: give gpu_hour or replica_hour, not both",
         ),
-        ("{model: offline/expert, prices: {input: 1}}", "models[0].prices: give input and output (USD per million tokens), or gpu_hour / replica_hour for a served model"),
+        (
+            "{model: offline/expert, prices: {input: 1}}",
+            "models[0].prices: give input and output (USD per million tokens), or gpu_hour / replica_hour for a served model",
+        ),
     ],
 )
 def test_the_serve_section_is_checked_in_one_line(tmp_path, model, message):

@@ -92,7 +92,9 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     # every unit done once (a lost replica is not the episode's failure), every episode a success
     assert q("select attempt, end_reason, count(*) from episodes group by 1, 2") == [(1, "success", 3)]
     # the calls went over HTTP to the served test double, labelled one, at the replicas' concurrency
-    assert q("select distinct model, model_name, test_double, status from llm_calls") == [("offline/expert", "served-expert", True, "ok")]
+    assert q("select distinct model, model_name, test_double, status from llm_calls") == [
+        ("offline/expert", "served-expert", True, "ok")
+    ]
     started = [json.loads(d) for (d,) in q("select detail from events where kind = 'serve_started'")]
     assert [(s["model"], s["engine"], s["replicas"], s["max_in_flight"], s["test_double"]) for s in started] == [
         ("served-expert", "test-double", 2, 2, True)
@@ -118,7 +120,9 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     charged = [e for e in journal if e["op"] == "settle" and e["rid"] in serve_keys]
     assert len(charged) == len(serve_keys) >= 1 and all(e["name"] == "served-expert" for e in charged)
     assert sum(e["pico"] for e in charged) / PICO == pytest.approx(cost["usd"], abs=1e-9)
-    assert summary.spend_usd == pytest.approx(cost["usd"], abs=1e-6)  # (the ledger reports micro-dollars) the tokens of a served model cost nothing more
+    assert summary.spend_usd == pytest.approx(
+        cost["usd"], abs=1e-6
+    )  # (the ledger reports micro-dollars) the tokens of a served model cost nothing more
     assert q("select sum(cost_usd) from llm_calls") == [(0.0,)]
     # attributed to the calls by their tokens: the shares add up to the serving cost
     shares = q(attribution_sql("served-expert"))
