@@ -94,12 +94,15 @@ class ServeCost:
 
     def close(self, tokens: dict[str, int] | None = None) -> None:
         """The last charge (serving stopped now) and one ``serve_cost`` event per model: its
-        replica- and GPU-hours, dollars, and dollars per token of its calls (``tokens``)."""
+        replica- and GPU-hours and dollars (and, given its calls' ``tokens``, dollars per token)."""
         self.charge()
         for label, s in self.served.items():
             c = self.charged[label]
             replica_hours = s.plan.replicas * c.held_s / 3600.0
-            n = (tokens or {}).get(label, 0)
+            per_token: dict[str, Any] = {}
+            if tokens is not None:
+                n = tokens.get(label, 0)
+                per_token = {"tokens": n, "usd_per_token": (c.usd / n) if n else None}
             self.event(
                 "serve_cost",
                 model=label,
@@ -111,8 +114,7 @@ class ServeCost:
                 gpu_hours=replica_hours * s.plan.gpus,
                 usd=c.usd,
                 usd_per_replica_hour=s.plan.usd_per_replica_hour,
-                tokens=n,
-                usd_per_token=(c.usd / n) if n else None,
+                **per_token,
             )
 
 
