@@ -80,6 +80,9 @@ from pipeline.run_summary import EXIT_INFRA as EXIT_INFRA
 from pipeline.run_summary import EXIT_INTERRUPTED as EXIT_INTERRUPTED
 from pipeline.run_summary import EXIT_WORK_REMAINS as EXIT_WORK_REMAINS
 from pipeline.run_summary import RunSummary
+from pipeline.serving.checks import check_cluster
+from pipeline.serving.cost import ServeCost
+from pipeline.serving.service import ServedModels
 from pipeline.session import SessionLoop
 from pipeline.sink_channel import SinkChannel
 from pipeline.stopping import DEFAULT_GRACE_S, StopRequests
@@ -142,6 +145,9 @@ class Driver(SessionLoop):
         self.pool: WorkerPool | None = None
         self.channel: SinkChannel | None = None
         self.services: RunServices | None = None
+        #: the models the sweep serves itself (models[].serve) and what they cost (pipeline.serving)
+        self.serving: ServedModels | None = None
+        self.serve_cost: ServeCost | None = None
         #: the cluster's sandbox slots (ray.sandboxes_per_node on a coding sweep); None: unbounded
         self.sandbox_slots: int | None = None
         #: the resources each episode worker asks for (the sandbox slot of a bounded coding sweep)
@@ -284,12 +290,23 @@ class Driver(SessionLoop):
             # a cluster that cannot host the sweep's worker actors is refused before any actor starts
             if self.executor == "ray":
                 self.worker_resources = self._sandbox_resources()
+            # a cluster without the GPUs/CPUs of the served models' replicas: refused before anything starts
+            self.serving = ServedModels(spec, self.run_id, self._event)
+            if self.serving.plans:
+                check_cluster(spec, ray.cluster_resources(), spec.workers)
             node_id = ray.get_runtime_context().get_node_id()
             self.channel.start(node_id)
             if recovered is not None and recovered.rows:
                 self._event("sink_log_recovered", severity="warning", rows=recovered.rows)
+            # served models: deployed and ready before the gateway is pointed at them
+            self.serving.start()
+            if self.serving.served:
+                self.backend.serve_at(self.serving.deployment_updates())  # type: ignore[attr-defined]
             self.backend.start(run_dir=str(store.path), run_id=self.run_id, runtime_env=None, node_id=node_id)
             self.backend.set_run_cap(spec.run_cap_usd)
+            if self.serving.served:
+                budget = self.backend.budget  # type: ignore[attr-defined]
+                self.serve_cost = ServeCost(self.run_id, self.serving.served, budget, self._event, self.caps.stop_run)
             self.pool = self._make_pool(self.backend.factory())
             summary = self._session(state, ident, t_start)
             summary.recovered_rows = recovered.rows if recovered is not None else 0
@@ -316,6 +333,8 @@ class Driver(SessionLoop):
                 self.pool.shutdown()
             if self.services is not None:
                 self.services.close()
+            if self.serving is not None:
+                self.serving.close()  # already down after a clean end; here after a failure
             self.channel.kill()
             if started_ray:
                 shutdown_ray()

@@ -121,7 +121,7 @@ def call_shape(method: str) -> tuple[bool, tuple[float, float]]:
 def _price(spec: SweepSpec, model_label: str) -> Any:
     m = spec.model(model_label)
     try:
-        return resolve_price(m.model, m.prices.model_dump() if m.prices else None)
+        return resolve_price(m.model, m.token_prices())
     except PriceError:
         return None
 

@@ -72,6 +72,12 @@ class GatewayBackend:
         self.clients: dict[str, Any] = {}
         self._closed = False
 
+    def serve_at(self, updates: dict[str, dict[str, Any]]) -> None:
+        """Point the served models' deployments at their Serve routes (``api_base``) with their
+        replicas' share of calls (``max_concurrency``): :mod:`pipeline.serving.service`."""
+        for label, fields in updates.items():
+            self.configs[label] = self.configs[label].model_copy(update=fields)
+
     def start(self, *, run_dir: str, run_id: str, runtime_env: dict[str, Any] | None = None, node_id: str | None = None) -> None:
         from workers.gateway import BudgetActor, GatewayActor, GatewayClient, QuotaActor  # lazy: the actors module loads Ray
 

@@ -24,6 +24,7 @@ from unittest import mock
 
 from pipeline.deployments import deployment_config
 from pipeline.errors import PreflightError, SpecError
+from pipeline.serving.checks import check_serving
 from pipeline.spec import OFFLINE_PREFIX, ModelSpec, SweepSpec
 from pipeline.units import Plan, Unit, stratum
 from recap.agent import Agent, DemonstrationError
@@ -51,7 +52,7 @@ def _litellm_missing_keys(m: ModelSpec) -> list[str]:
 def key_variables(m: ModelSpec) -> list[str]:
     """Names of the environment variables holding a real model's credentials: ``api_key_env``,
     else the ones litellm expects for the provider (asked with an empty environment)."""
-    if m.test_double:
+    if m.test_double or m.serve is not None:  # a served model's route is the sweep's own: no key
         return []
     if m.api_key_env:
         return [m.api_key_env]
@@ -67,7 +68,7 @@ def check_keys(spec: SweepSpec) -> None:
     """Every real model's API key is set (its ``api_key_env``, else the variables litellm expects); test doubles
     need none. Raises PreflightError."""
     for i, m in enumerate(spec.models):
-        if m.test_double:
+        if m.test_double or m.serve is not None:
             continue
         if m.api_key_env:
             if not os.environ.get(m.api_key_env):
@@ -183,7 +184,8 @@ def check_prices(spec: SweepSpec) -> None:
     for i, m in enumerate(spec.models):
         if spec.run_cap_usd is None and m.cap_usd is None:
             continue
-        overrides = {m.model: m.prices.model_dump()} if m.prices is not None else None
+        prices = m.token_prices()
+        overrides = {m.model: prices} if prices is not None else None
         try:
             require_prices([m.model], overrides)
         except PriceError as exc:
@@ -196,6 +198,7 @@ def preflight(spec: SweepSpec) -> None:
     SpecError or PreflightError on the first failure."""
     check_models(spec)
     check_prices(spec)
+    check_serving(spec)
     check_keys(spec)
 
 

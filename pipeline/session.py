@@ -20,6 +20,8 @@ from pipeline.progress import ProgressView, Snapshot
 from pipeline.provenance import git_revision, package_versions
 from pipeline.resume import RunState, UnitQueue, is_final
 from pipeline.run_summary import RunSummary
+from pipeline.serving.cost import ServeCost
+from pipeline.serving.service import ServedModels
 from pipeline.sink_channel import SinkLost
 from pipeline.spec import text_hash
 from pipeline.stopping import StopRequests
@@ -39,6 +41,8 @@ class SessionLoop(AttemptHandling):
     stop: StopRequests
     stop_grace_s: float
     _last_push: float
+    serving: ServedModels | None
+    serve_cost: ServeCost | None
 
     def _dispatch(self) -> None:
         assert self.pool is not None and self.channel is not None
@@ -237,6 +241,9 @@ class SessionLoop(AttemptHandling):
     def _tick(self, view: ProgressView) -> None:
         """Twice a second: spend against the caps, events to the sink, the view, the mirror."""
         assert self.channel is not None
+        serve_cost = getattr(self, "serve_cost", None)
+        if serve_cost is not None:
+            serve_cost.tick()  # the served models' replica time, charged as it accrues
         self.spend_seen = self.backend.spend()
         self.caps.check(self.spend_seen)
         self._ship_events()
@@ -247,6 +254,7 @@ class SessionLoop(AttemptHandling):
     def _close_session(self, t_start: float) -> RunSummary:
         """The session's counts, its last rows and events, the gateway's flush; a lost sink is an error."""
         assert self.pool is not None and self.channel is not None
+        self._stop_serving()  # before the spend is read: its last replica time is part of it
         stop, spend = self.stop, self.spend_seen
         lost = self.channel.lost
         self.leftovers.remove()  # what the episodes cut by a stop (their workers killed) left
@@ -285,6 +293,16 @@ class SessionLoop(AttemptHandling):
                 f"{count(self.summary.not_started, 'unit')} {'was' if self.summary.not_started == 1 else 'were'} not finished; continue with: recap resume {self.p.store.location}"
             )
         return self.summary
+
+    def _stop_serving(self) -> None:
+        """No episode is running: the served models go down and their last replica time is charged
+        (before the ledger closes), with the spend the session reports."""
+        serving, serve_cost = getattr(self, "serving", None), getattr(self, "serve_cost", None)
+        if serving is not None:
+            serving.close()
+        if serve_cost is not None:
+            serve_cost.close()
+            self.spend_seen = self.backend.spend()
 
     def _stop_requested(self, view: ProgressView) -> None:
         """The first SIGINT/SIGTERM: nothing new starts; say how long the episodes in flight get."""

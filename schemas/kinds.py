@@ -89,6 +89,11 @@ EventKind = Literal[
     "sink_lost",
     "sink_log_recovered",
     "leftovers_removed",
+    # the models the sweep serves itself (pipeline.serving)
+    "serve_started",
+    "serve_stopped",
+    "serve_cost",
+    "serve_leftover_removed",
     # the gateway and its budget ledger
     "retry",
     "call_failed",

@@ -54,6 +54,9 @@ OBJECT_STORE_MB_MAX = 1 << 20
 WORKER_CPUS_MIN = 0.001
 WORKER_CPUS_MAX = 1024.0
 LIST_MAX = 100
+#: served models (models[].serve): replicas of one model, GPUs of one replica (tensor parallel)
+SERVE_REPLICAS_MAX = 256
+SERVE_GPUS_MAX = 64
 SAMPLING_SEEDS_MAX = 10_000
 SELECTORS_MAX = 1000
 INSTANCES_MAX = 10_000
@@ -92,6 +95,13 @@ NUMBER_BOUNDS: dict[str, Bound] = {
     "models[].prices.cached_input": Bound(0, PRICE_MAX),
     "models[].prices.cache_write": Bound(0, PRICE_MAX),
     "models[].cap_usd": Bound(0, USD_MAX),
+    "models[].prices.gpu_hour": Bound(0, PRICE_MAX),
+    "models[].prices.replica_hour": Bound(0, PRICE_MAX),
+    "models[].serve.replicas": Bound(1, SERVE_REPLICAS_MAX),
+    "models[].serve.gpus_per_replica": Bound(0, SERVE_GPUS_MAX),
+    "models[].serve.cpus_per_replica": Bound(WORKER_CPUS_MIN, WORKER_CPUS_MAX),
+    "models[].serve.max_in_flight": Bound(1, CONCURRENCY_MAX),
+    "models[].serve.ready_timeout_s": Bound(1, SECONDS_MAX),
     "environments[].limit": Bound(1, LIMIT_MAX),
     "limits.llm_calls": Bound(1, LLM_CALLS_MAX),
     "limits.tokens": Bound(1, TOKENS_MAX),

@@ -44,6 +44,7 @@ from pipeline.spec.fields import (
     path_option,
     printable,
 )
+from pipeline.spec.serving import ENGINES, TEST_DOUBLE_ENGINE, ServeSpec
 
 #: the sweep file's old name of ``sampling_seeds`` (still read; see :class:`SweepSpec`)
 OLD_SEEDS_KEY = "seeds"
@@ -51,12 +52,39 @@ OLD_SEEDS_KEY = "seeds"
 
 class PriceSpec(StrictModel):
     """USD per million tokens; ``cached_input`` (cache reads) and ``cache_write`` (tokens written
-    to an explicit-breakpoint cache, Anthropic style) default to ``input``."""
+    to an explicit-breakpoint cache, Anthropic style) default to ``input``. A served model
+    (``serve:``) is priced by the hour it holds its replicas instead: ``gpu_hour`` (per GPU) or
+    ``replica_hour`` (per replica, for replicas without a GPU); its tokens cost nothing more."""
 
-    input: Annotated[float, NOT_BOOL, Bounded("models[].prices.input")]
-    output: Annotated[float, NOT_BOOL, Bounded("models[].prices.output")]
+    input: Annotated[float, NOT_BOOL, Bounded("models[].prices.input")] | None = None
+    output: Annotated[float, NOT_BOOL, Bounded("models[].prices.output")] | None = None
     cached_input: Annotated[float, NOT_BOOL, Bounded("models[].prices.cached_input")] | None = None
     cache_write: Annotated[float, NOT_BOOL, Bounded("models[].prices.cache_write")] | None = None
+    #: (left out of ``model_dump``: the token price table never sees the hourly prices)
+    gpu_hour: Annotated[float, NOT_BOOL, Bounded("models[].prices.gpu_hour")] | None = Field(default=None, exclude=True)
+    replica_hour: Annotated[float, NOT_BOOL, Bounded("models[].prices.replica_hour")] | None = Field(default=None, exclude=True)
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> PriceSpec:
+        hourly = self.gpu_hour is not None or self.replica_hour is not None
+        tokens = self.input is not None or self.output is not None
+        if hourly and (tokens or self.cached_input is not None or self.cache_write is not None):
+            raise ValueError("give token prices (input, output) or an hourly price (gpu_hour or replica_hour), not both")
+        if self.gpu_hour is not None and self.replica_hour is not None:
+            raise ValueError("give gpu_hour or replica_hour, not both")
+        if not hourly and (self.input is None or self.output is None):
+            raise ValueError("give input and output (USD per million tokens), or gpu_hour / replica_hour for a served model")
+        return self
+
+    @property
+    def hourly(self) -> bool:
+        return self.gpu_hour is not None or self.replica_hour is not None
+
+    def token_prices(self) -> dict[str, Any] | None:
+        """The per-token prices as the price table takes them (None for an hourly price)."""
+        if self.hourly:
+            return None
+        return self.model_dump()
 
 
 #: The one mapping between a sweep model entry and the gateway's deployment
@@ -84,8 +112,9 @@ DEPLOYMENT_FIELDS: dict[str, str] = {
     "max_usage_rejections": "max_usage_rejections",
 }
 #: model entry fields the gateway's deployment does not carry (the ledger takes the caps; the
-#: preflight reads the key-name override; the backend starts the gateway shards)
-SPEC_ONLY_FIELDS = frozenset({"cap_usd", "api_key_env_is_credential", "gateway_shards"})
+#: preflight reads the key-name override; the backend starts the gateway shards; the session
+#: deploys a served model)
+SPEC_ONLY_FIELDS = frozenset({"cap_usd", "api_key_env_is_credential", "gateway_shards", "serve"})
 
 
 class ModelSpec(StrictModel):
@@ -123,10 +152,19 @@ class ModelSpec(StrictModel):
     #: dollar caps through leases from one quota actor (:mod:`workers.gateway.quota`); episode
     #: workers take them round robin. For a quota one gateway process cannot keep up with.
     gateway_shards: Annotated[int, NOT_BOOL, Bounded("models[].gateway_shards")] | None = None
+    #: deployed by the sweep on its Ray cluster (:mod:`pipeline.spec.serving`, :mod:`pipeline.serving`)
+    serve: ServeSpec | None = None
 
     @property
     def name(self) -> str:
         return self.label or self.model
+
+    def token_prices(self) -> dict[str, Any] | None:
+        """Per-million-token prices for the price table: the entry's own, ``0`` for a served model
+        (its replica-hours are what it costs), None to use the table's."""
+        if self.serve is not None:
+            return {"input": 0.0, "output": 0.0}
+        return self.prices.token_prices() if self.prices is not None else None
 
     @property
     def test_double(self) -> bool:
@@ -142,8 +180,8 @@ class ModelSpec(StrictModel):
                 value = self.name
             elif spec_field == "retries" and value is not None:
                 value = value + 1
-            elif spec_field == "prices" and value is not None:
-                value = value.model_dump()
+            elif spec_field == "prices":
+                value = self.token_prices()
             elif isinstance(value, dict):
                 value = dict(value)
             if value is not None:
@@ -177,6 +215,30 @@ class ModelSpec(StrictModel):
     def _credential_override(self) -> ModelSpec:
         if self.api_key_env_is_credential and not self.api_key_env:
             raise ValueError("api_key_env_is_credential: true needs api_key_env (the variable it vouches for)")
+        return self
+
+    @model_validator(mode="after")
+    def _served(self) -> ModelSpec:
+        """A served model's endpoint is the sweep's own (no ``api_base``), its engine is known,
+        a real engine has weights and a test double stays one (``offline/``)."""
+        if self.serve is None:
+            if self.prices is not None and self.prices.hourly:
+                raise ValueError("prices.gpu_hour / replica_hour are for a model the sweep serves (give serve:)")
+            return self
+        if self.api_base is not None:
+            raise ValueError("serve: the sweep serves this model itself; leave api_base out")
+        if self.prices is not None and not self.prices.hourly:
+            raise ValueError("a served model is priced by the hour: prices: {gpu_hour: X} or {replica_hour: X}")
+        engine = self.serve.engine_for(self.model, OFFLINE_PREFIX)
+        if not engine:
+            raise ValueError(f"serve.engine: name the engine ({', '.join(ENGINES)})")
+        if engine == TEST_DOUBLE_ENGINE:
+            if self.model not in (OFFLINE_PREFIX + "expert", OFFLINE_PREFIX + "random"):
+                raise ValueError(f"serve.engine test-double serves offline/expert or offline/random, not {self.model!r}")
+        elif self.test_double:
+            raise ValueError(f"serve.engine {engine} serves open weights; {self.model!r} is a test double (engine: test-double)")
+        elif not self.serve.weights:
+            raise ValueError(f"serve.weights: give the weights {engine} serves (a hub id or a local path)")
         return self
 
     @field_validator("api_base")

@@ -16,7 +16,8 @@ from pydantic import AliasChoices, BaseModel
 from pipeline.spec import SweepSpec, load_spec
 
 REPO = Path(__file__).resolve().parents[3]
-EXAMPLES = sorted((REPO / "examples").rglob("*.yaml"))
+#: every sweep file of examples/ (the Ray cluster launcher files beside them, cluster*.yaml, are not sweeps)
+EXAMPLES = sorted(p for p in (REPO / "examples").rglob("*.yaml") if not p.name.startswith("cluster"))
 
 
 def _models(annotation: Any) -> Iterator[type[BaseModel]]:

@@ -117,7 +117,10 @@ def _set(data: dict[str, Any], path: str, value: Any) -> str:
         if last:
             node[part] = value
         else:
-            if part == "prices":
+            if part == "prices" and parts[i + 1] in ("gpu_hour", "replica_hour"):
+                node.setdefault("serve", {})  # an hourly price is a served model's
+                node.setdefault(part, {})
+            elif part == "prices":
                 node.setdefault(part, {"input": 1, "output": 1})
             node = node.setdefault(part, [] if parts[i + 1] == "[]" else {})
     return shown

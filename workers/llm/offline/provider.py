@@ -17,6 +17,7 @@ from workers.llm.offline.expert import expert_reply
 from workers.llm.offline.expert_tools import BASH_BLOCK, ToolAnswer, bash_plan, render_bash_block, tool_reply
 from workers.llm.offline.knobs import MALFORMED_JSON, Knobs, OfflineOptionsError, draw
 from workers.llm.offline.random_model import random_reply
+from workers.llm.offline.remote import RemoteError, forward, is_served, request_body
 from workers.llm.offline.replay import ReplayError, replay_index
 from workers.llm.offline.transcript import is_transcript, transcript_index
 from workers.llm.offline.wire import OFFLINE_METADATA_KEY
@@ -125,6 +126,11 @@ def _make_provider_class() -> type:
                 )
             except (ReplayError, OfflineOptionsError, ValueError) as exc:
                 raise CustomLLMError(status_code=400, message=str(exc)) from None
+            prompt = estimate_prompt_tokens(msgs)
+            completion = estimate_text_tokens(answer.text + "".join(c["name"] + c["arguments"] for c in answer.tool_calls))
+            return self._respond(model, model_response, answer, prompt, completion)
+
+        def _respond(self, model: str, model_response: Any, answer: ToolAnswer, prompt: int, completion: int) -> Any:
             text = answer.text
             message = model_response.choices[0].message
             message.content = text
@@ -138,8 +144,6 @@ def _make_provider_class() -> type:
                 ]
                 model_response.choices[0].finish_reason = "tool_calls"
             model_response.model = f"{PROVIDER}/{model}"
-            prompt = estimate_prompt_tokens(msgs)
-            completion = estimate_text_tokens(text + "".join(c["name"] + c["arguments"] for c in answer.tool_calls))
             model_response.usage = Usage(prompt_tokens=prompt, completion_tokens=completion, total_tokens=prompt + completion)
             return model_response
 
@@ -165,7 +169,19 @@ def _make_provider_class() -> type:
             return self._fill(model, messages, api_base, model_response, litellm_params, optional_params)
 
         async def acompletion(self, *args, **kwargs):  # the same answer, awaited (litellm's async path)
+            if is_served(kwargs.get("api_base")):  # a served copy (serve: {engine: test-double}): over HTTP
+                return await self._served(**kwargs)
             return self.completion(*args, **kwargs)
+
+        async def _served(
+            self, *, model, messages, api_base, model_response, optional_params, litellm_params=None, timeout=None, **_
+        ):
+            body = request_body(model, messages, (litellm_params or {}).get("metadata"), optional_params)
+            try:
+                got = await forward(api_base, body, timeout if isinstance(timeout, (int, float)) else None)
+            except RemoteError as exc:
+                raise CustomLLMError(status_code=exc.status_code, message=exc.message) from None
+            return self._respond(model, model_response, got.answer, got.prompt_tokens, got.completion_tokens)
 
     return OfflineProvider
 

@@ -1,0 +1,12 @@
+"""The models a sweep serves itself on its Ray cluster (``models[].serve``), with Ray Serve.
+
+- :mod:`pipeline.serving.checks`: preflight (engine installed, weights present, the cluster's
+  GPUs and CPUs enough for the replicas), each refusal one line before anything starts;
+- :mod:`pipeline.serving.engines`: the Serve application of each engine;
+- :mod:`pipeline.serving.service`: started as a run service before the first unit, ready when
+  every replica answers, named to the gateway as an OpenAI-compatible ``api_base`` with
+  ``replicas x max_in_flight`` calls outstanding, stopped at the end of the session, on
+  Ctrl-C, and by the next session of the run when a killed driver left it;
+- :mod:`pipeline.serving.cost`: the replica-hours held, charged to the run's ledger as they
+  accrue and attributed to the model's calls by their tokens.
+"""

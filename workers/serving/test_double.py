@@ -1,0 +1,118 @@
+"""TEST DOUBLE engine (``serve: {engine: test-double}``): a Ray Serve deployment answering OpenAI
+chat completions the way the ``offline/`` test doubles answer.
+
+Why: a served model's whole path - deployed by the sweep, replicas placed by Serve, the gateway
+calling the route over HTTP, a replica killed mid-run and replaced, the replica-hours charged -
+must be tested without weights or a GPU. The answer itself is the in-process test double's
+(:func:`workers.llm.offline.provider.offline_reply`): the offline provider forwards the call's
+hints in the request body (:mod:`workers.llm.offline.remote`) and this deployment answers with
+the same text, tool calls and estimated usage, so ReAct and ReCAP episodes succeed on it. The
+model string stays ``offline/expert`` (or ``offline/random``), so every record and the CLI
+label it a test double.
+
+``engine_args``: ``latency_s`` (seconds each answer waits, so that calls are in flight when a
+test kills a replica). Nothing else is accepted (:data:`ENGINE_ARGS`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import time
+import uuid
+from collections.abc import Mapping
+from typing import Any
+
+from workers.llm.offline.provider import offline_reply
+from workers.llm.offline.wire import OFFLINE_METADATA_KEY
+from workers.llm.tokens import estimate_prompt_tokens, estimate_text_tokens
+
+#: the engine arguments the test double takes
+ENGINE_ARGS = ("latency_s",)
+#: what a replica answers on ``GET <route>/health``
+HEALTHY = {"status": "ok"}
+
+
+def chat_answer(body: Mapping[str, Any]) -> dict[str, Any]:
+    """The OpenAI chat-completion answer to one request body (the test double's reply, its
+    tool calls and the chars/4 usage estimate the in-process provider reports)."""
+    model = str(body.get("model") or "expert").removeprefix("offline/")
+    messages = [{"role": str(m.get("role")), "content": str(m.get("content") or "")} for m in body.get("messages") or []]
+    tools = tuple(
+        str(t["function"]["name"])
+        for t in body.get("tools") or ()
+        if isinstance(t, Mapping) and isinstance(t.get("function"), Mapping)
+    )
+    stop = body.get("stop")
+    stops = () if stop is None else ((stop,) if isinstance(stop, str) else tuple(str(s) for s in stop))
+    metadata = {OFFLINE_METADATA_KEY: body.get(OFFLINE_METADATA_KEY) or {}}
+    answer = offline_reply(model, messages, metadata, None, tools, stops)
+    message: dict[str, Any] = {"role": "assistant", "content": answer.text}
+    finish = "stop"
+    if answer.tool_calls:
+        message["tool_calls"] = [
+            {"id": c["id"], "type": "function", "function": {"name": c["name"], "arguments": c["arguments"]}}
+            for c in answer.tool_calls
+        ]
+        finish = "tool_calls"
+    prompt = estimate_prompt_tokens(messages)
+    completion = estimate_text_tokens(answer.text + "".join(c["name"] + c["arguments"] for c in answer.tool_calls))
+    return {
+        "id": f"chatcmpl-{uuid.uuid4().hex[:12]}",
+        "object": "chat.completion",
+        "created": int(time.time()),
+        "model": f"offline/{model}",
+        "choices": [{"index": 0, "message": message, "finish_reason": finish}],
+        "usage": {"prompt_tokens": prompt, "completion_tokens": completion, "total_tokens": prompt + completion},
+        # which replica answered (tests check the calls were spread, and which one to kill)
+        "system_fingerprint": f"replica-{os.getpid()}",
+    }
+
+
+class TestDoubleServer:
+    """The deployment's class (wrapped by ``serve.deployment`` in :func:`deployment`): routes
+    ``POST .../v1/chat/completions``, ``GET .../v1/models`` and ``GET .../health``."""
+
+    __test__ = False  # not a pytest class
+
+    def __init__(self, model: str, engine_args: Mapping[str, Any] | None = None) -> None:
+        self.model = model
+        self.latency_s = float((engine_args or {}).get("latency_s", 0.0))
+
+    async def __call__(self, request: Any) -> Any:
+        from starlette.responses import JSONResponse  # lazy: Serve's web stack loads in the replica
+
+        path = request.url.path.rstrip("/")
+        if request.method == "GET" and path.endswith("/health"):
+            return JSONResponse(HEALTHY)
+        if request.method == "GET" and path.endswith("/v1/models"):
+            return JSONResponse({"object": "list", "data": [{"id": self.model, "object": "model"}]})
+        if request.method != "POST" or not path.endswith("/chat/completions"):
+            return JSONResponse({"error": {"message": f"no route {request.method} {path}", "type": "not_found"}}, status_code=404)
+        try:
+            body = await request.json()
+        except ValueError:
+            return JSONResponse({"error": {"message": "the body is not JSON", "type": "invalid_request_error"}}, status_code=400)
+        if self.latency_s:
+            await asyncio.sleep(self.latency_s)
+        try:
+            return JSONResponse(chat_answer(body))
+        except ValueError as exc:
+            return JSONResponse({"error": {"message": str(exc), "type": "invalid_request_error"}}, status_code=400)
+
+    def check_health(self) -> None:
+        """Serve's per-replica health check: a replica that can answer is healthy."""
+
+
+def deployment(model: str, engine_args: Mapping[str, Any], *, name: str, replicas: int, max_in_flight: int, cpus: float) -> Any:
+    """The bound Serve application of the test double (``serve.run`` starts it)."""
+    from ray import serve  # lazy: Serve loads only where a sweep serves a model
+
+    return serve.deployment(
+        name=name,
+        num_replicas=replicas,
+        max_ongoing_requests=max_in_flight,
+        ray_actor_options={"num_cpus": cpus, "num_gpus": 0},
+        health_check_period_s=1.0,
+        health_check_timeout_s=10.0,
+    )(TestDoubleServer).bind(model, dict(engine_args))
