@@ -137,7 +137,7 @@ def main() -> None:
         for i, n in enumerate(args.n):
             k = episodes_per_process(n, cpus, args.episodes_per_process)
             with Sampler() as sampler:
-                r = pipeline_bench.run_one(url, n, 1, 0, 10.0, Path(tmp) / str(i))
+                r = pipeline_bench.run_one(server, url, n, 1, 0, 10.0, Path(tmp) / str(i))
             roles = sampler.peak
             procs, ep_pss = roles.get("episode worker", (0, 0))
             fixed = sum(roles[role][1] for role in fixed_roles(roles))
