@@ -11,6 +11,7 @@ import pytest
 from recap.llm import LLMError
 from schemas.parts import read_table
 from tests.doubles.llm_requests import make_request
+from tests.workers.gateway.test_gateway_http import config
 from workers.gateway.ledger import BudgetLedger
 from workers.gateway.quota import LeaseLedger, LocalQuota, QuotaBook, lease_s_for, pool_spec
 from workers.gateway.shard import LeasedBudget, ShardGateway, shard_tag
@@ -224,20 +225,8 @@ def test_four_shards_never_commit_past_the_cap_and_settle_exactly(tmp_path, kill
 
 
 def _config(server, **kw) -> DeploymentConfig:
-    args = dict(
-        model=MODEL,
-        api_base=server.base_url,
-        window_s=2.0,
-        window_pad_s=0.1,
-        max_concurrency=48,
-        max_attempts=3,
-        backoff_initial_s=0.01,
-        backoff_max_s=0.05,
-        attempt_timeout_s=5.0,
-        params={"max_tokens": 20},
-    )
-    args.update(kw)
-    return DeploymentConfig(**args)
+    """test_gateway_http's deployment of the fake server, with room for four shards' callers."""
+    return config(server, **{"max_concurrency": 48, **kw})
 
 
 def _shards(cfg: DeploymentConfig, run_dir, n: int, run_cap_usd: float | None = None) -> tuple[LocalQuota, list[ShardGateway]]:
