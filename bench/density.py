@@ -3,7 +3,7 @@
 Every episode is ReAct on a blocksworld instance against the fake OpenAI server answering after
 200 ms, 10 calls per episode, through the real driver, episode workers, gateway and sink: the
 sweep and the run are ``bench/pipeline.py``'s (``sweep_text``, ``run_one``), with N workers and
-one round, the model's concurrency raised to N (so the gateway never queues the N episodes'
+one round, the model's concurrency at least N (``sweep_text``: the gateway never queues the N episodes'
 calls) and ``ray.episodes_per_process`` as asked (default: auto). While the run goes, the
 driver's process tree is sampled (``bench/procstats.py``); the figures are those of the sample
 with the most episode-worker memory:
@@ -103,15 +103,8 @@ def main() -> None:
 
     from workers.llm.offline.fake_server import FakeServer, FakeServerConfig
 
-    plain_sweep = pipeline_bench.sweep_text
-
-    def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float) -> str:
-        text = plain_sweep(out, url, workers, units, rpm, window_s).replace("concurrency: 64", f"concurrency: {workers}")
-        if args.episodes_per_process is not None:
-            text += f"ray: {{episodes_per_process: {args.episodes_per_process}}}\n"
-        return text
-
-    pipeline_bench.sweep_text = sweep_text  # run_one builds its sweep with it
+    # packing asked on the command line goes into the sweep; otherwise the auto rule decides
+    extra = "" if args.episodes_per_process is None else f"ray: {{episodes_per_process: {args.episodes_per_process}}}\n"
 
     os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
     server = FakeServer(FakeServerConfig(latency_s=pipeline_bench.LATENCY))
@@ -137,7 +130,7 @@ def main() -> None:
         for i, n in enumerate(args.n):
             k = episodes_per_process(n, cpus, args.episodes_per_process)
             with Sampler() as sampler:
-                r = pipeline_bench.run_one(server, url, n, 1, 0, 10.0, Path(tmp) / str(i))
+                r = pipeline_bench.run_one(server, url, n, 1, 0, 10.0, Path(tmp) / str(i), extra)
             roles = sampler.peak
             procs, ep_pss = roles.get("episode worker", (0, 0))
             fixed = sum(roles[role][1] for role in fixed_roles(roles))

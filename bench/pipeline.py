@@ -39,7 +39,9 @@ CALLS = 10
 LATENCY = 0.2
 
 
-def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float) -> str:
+def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float, extra: str = "") -> str:
+    """The bench's sweep: ``workers`` episodes in flight, the model's concurrency at least that (so the
+    gateway never queues them), ``extra`` YAML appended (another bench's own options)."""
     seeds = list(range((units + 8) // 9))
     quota = f"\n    rpm: {rpm}\n    window_s: {window_s}" if rpm else ""
     return f"""run: bench-{workers}
@@ -48,16 +50,16 @@ models:
   - model: openai/fake-gpt
     api_base: {url}
     api_key_env: RECAP_BENCH_KEY
-    concurrency: 64{quota}
+    concurrency: {max(64, workers)}{quota}
 methods: [{{method: react}}]
 environments: [{{benchmark: blocksworld, tasks: ["3", "4", "5"]}}]
 seeds: {seeds}
 limits: {{llm_calls: {CALLS}}}
 workers: {workers}
-"""
+{extra}"""
 
 
-def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp: Path) -> dict:
+def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp: Path, extra: str = "") -> dict:
     tmp.mkdir(parents=True, exist_ok=True)
 
     from pipeline.driver import Driver, Hooks, prepare
@@ -66,7 +68,7 @@ def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: flo
     from pipeline.store import RunStore
 
     out = tmp / f"w{workers}"
-    text = sweep_text(out, url, workers, max(workers * rounds, 4), rpm, window_s)
+    text = sweep_text(out, url, workers, max(workers * rounds, 4), rpm, window_s, extra)
     spec = parse_spec(text)
     prepared = prepare(spec, text)
     n_units = workers * rounds

@@ -6,7 +6,7 @@ latency_s=0.2))`` in a process of its own, so neither side's figures hold the se
 
 - recap: ``bench/pipeline.py``'s ``run_one`` - the real driver, episode workers, gateway and sink
   in a local Ray cluster started by the child - with ReAct on blocksworld, ``limits: {llm_calls:
-  10}`` and ``workers: N`` (the model's ``concurrency`` raised to N, which ``sweep_text`` fixes at 64);
+  10}`` and ``workers: N`` (``sweep_text`` raises the model's ``concurrency`` to N beyond 64);
   it writes the run's Parquet tables (episodes, messages, llm_calls, ...) and its manifests.
 - inspect: Inspect AI's own ``eval()`` of a Task of N x rounds samples whose solver calls
   ``generate()`` 10 times (a 10-turn conversation: the sample's prompt, then one user observation
@@ -47,7 +47,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import signal
 import statistics
 import subprocess
@@ -101,14 +100,6 @@ def child_recap(url: str, n: int, rounds: int, tmp: Path) -> dict[str, Any]:
     from pipeline.spec import RaySpec
     from pipeline.store import RunStore
 
-    plain_text = pipeline_bench.sweep_text
-
-    def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float) -> str:
-        # N episodes in flight need N calls in flight: the model's concurrency at least N
-        text = plain_text(out, url, workers, units, rpm, window_s)
-        return re.sub(r"(\n\s*concurrency:) *(\d+)", lambda m: f"{m.group(1)} {max(int(m.group(2)), workers)}", text)
-
-    pipeline_bench.sweep_text = sweep_text  # run_one looks it up at call time
     os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
     for attempt in range(3):  # Ray gives its raylet 30 s to register: a busy machine may need another go
         try:
