@@ -27,7 +27,7 @@ from pipeline.backend import RateStats, Spend
 from pipeline.deployments import deployment_config
 from pipeline.errors import PipelineError
 from pipeline.preflight import key_variables
-from pipeline.raysetup import runtime_env
+from pipeline.raysetup import actor_runtime_env
 from pipeline.spec import SweepSpec
 from workers.episode_worker import ClientTable
 
@@ -84,7 +84,10 @@ class GatewayBackend:
         # a killed gateway or budget actor is restarted by Ray (same arguments: the ledger is
         # replayed from the run folder's journal) and the calls it had in flight are sent to
         # the new incarnation, so a crash of either costs a few seconds, not the episodes
-        opts: dict[str, Any] = {"runtime_env": self._runtime_env(), "max_restarts": -1, "max_task_retries": TASK_RETRIES}
+        opts: dict[str, Any] = {"max_restarts": -1, "max_task_retries": TASK_RETRIES}
+        env = self._runtime_env()
+        if env is not None:
+            opts["runtime_env"] = env
         if node_id is not None:
             # lazy: Ray loads only where a session uses it
             from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
@@ -115,9 +118,10 @@ class GatewayBackend:
             clients = [GatewayClient(a, deployment=cfg.deployment_name) for a in group]
             self.clients[label] = clients if n > 1 else clients[0]
 
-    def _runtime_env(self) -> dict[str, Any]:
-        """The job's environment (data folders, offline litellm) for the gateway actors."""
-        return {"env_vars": dict(runtime_env()["env_vars"])}
+    def _runtime_env(self) -> dict[str, Any] | None:
+        """The job's environment (data folders, offline litellm) for the gateway actors (None: the
+        local cluster's workers have it already, :func:`pipeline.raysetup.actor_runtime_env`)."""
+        return actor_runtime_env()
 
     def _api_keys(self) -> Any:
         """The API keys the sweep's models need, read from the driver's environment.

@@ -58,6 +58,41 @@ def runtime_env() -> dict[str, Any]:
     return {"env_vars": env_vars}
 
 
+def actor_runtime_env(extra: dict[str, str] | None = None) -> dict[str, Any] | None:
+    """The ``runtime_env`` to start a run's actors with: None when the local cluster this process
+    started already gives its workers exactly :func:`runtime_env`'s variables and ``extra`` adds
+    none, else :func:`runtime_env` with ``extra``.
+
+    Why None where it can be: Ray starts a worker whose job or actor has a runtime environment
+    through ``setup_worker.py`` - a second Python that imports Ray (about 1 s of CPU) and then
+    execs the worker - and only a worker without one directly (the raylet drops that step for an
+    empty environment: ``ray/_private/services.py``, "later erasing them if needed"). A cluster
+    started here has the variables in its raylet's environment (:func:`init_ray`), which every
+    worker inherits; a cluster joined with ``--address`` is somebody else's, so its workers get
+    the variables the usual way. A variable changed since the start (a test pointing a data
+    folder elsewhere) sends the whole environment again."""
+    env_vars = {**runtime_env()["env_vars"], **(extra or {})}
+    if _started_env is not None and env_vars == _started_env:
+        return None
+    return {"env_vars": env_vars}
+
+
+@contextmanager
+def _worker_environment(env_vars: dict[str, str]) -> Iterator[None]:
+    """``env_vars`` in this process's environment while ``ray.init`` starts the local cluster's
+    processes (they copy it: the raylet then starts every worker with it), restored after."""
+    before = {name: os.environ.get(name) for name in env_vars}
+    os.environ.update(env_vars)
+    try:
+        yield
+    finally:
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 #: Ray's internal settings for a cluster started here (``ray.init(_system_config=...)``: Ray hands
 #: them to the GCS and the raylet on their command lines, and every worker reads them from there).
 #: Why: by default every task and actor call of the run (one gateway call, two budget calls and
@@ -78,6 +113,8 @@ SYSTEM_CONFIG: dict[str, Any] = {
 
 #: the temp folder of the local cluster this process started (None: none, or joined one)
 _owned: Path | None = None
+#: the worker variables that cluster's raylet was started with (:func:`actor_runtime_env`)
+_started_env: dict[str, str] | None = None
 
 
 def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") -> bool:
@@ -85,7 +122,7 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
     must shut it down, with :func:`shutdown_ray`); an already initialised Ray (tests share one)
     is reused as is. A local cluster gets its own temp folder, recording this process as its
     owner and ``run`` (the run folder) for the message of whoever cleans up after a crash."""
-    global _owned
+    global _owned, _started_env
     import ray  # lazy: Ray loads only where a session uses it
 
     os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
@@ -94,22 +131,24 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
         return False
     address = address or ray_spec.address
     common: dict[str, Any] = {
-        "runtime_env": runtime_env(),
         "log_to_driver": False,
         "configure_logging": True,
         "logging_level": "error",
     }
-    if address:
+    if address:  # somebody's cluster: its workers get the variables as the job's runtime_env
         if _is_loopback(address):  # a local Ray started on the loopback (ours, or ray start --node-ip-address 127.0.0.1)
             with _loopback_node():
-                ray.init(address=address, **common)
+                ray.init(address=address, runtime_env=runtime_env(), **common)
         else:
-            ray.init(address=address, **common)
+            ray.init(address=address, runtime_env=runtime_env(), **common)
     else:
         folder = local_cluster.claim(run)
         local_cluster.watch(folder)  # stops the cluster if this process dies without shutting it down
+        # the workers' variables in the raylet's own environment, no job runtime_env: every worker
+        # then starts without Ray's setup_worker step (actor_runtime_env)
+        env_vars = runtime_env()["env_vars"]
         try:
-            with _loopback_node(), _lean_head(not ray_spec.dashboard):
+            with _loopback_node(), _lean_head(not ray_spec.dashboard), _worker_environment(env_vars):
                 ray.init(
                     num_cpus=ray_spec.num_cpus or os.cpu_count() or 2,
                     include_dashboard=ray_spec.dashboard,
@@ -124,18 +163,18 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
             ray.shutdown()
             local_cluster.release(folder)
             raise
-        _owned = folder
+        _owned, _started_env = folder, dict(env_vars)
     return True
 
 
 def shutdown_ray() -> None:
     """``ray.shutdown()``; for a local cluster this process started, also stop any of its
     processes still there and mark its owner record ended (:func:`pipeline.local_cluster.release`)."""
-    global _owned
+    global _owned, _started_env
     import ray  # lazy: Ray loads only where a session uses it
 
     ray.shutdown()
-    folder, _owned = _owned, None
+    folder, _owned, _started_env = _owned, None, None
     if folder is not None:
         local_cluster.release(folder)
 

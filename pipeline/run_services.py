@@ -14,7 +14,7 @@ import uuid
 from typing import Any
 
 from pipeline.gateway_backend import TASK_RETRIES
-from pipeline.raysetup import runtime_env
+from pipeline.raysetup import actor_runtime_env
 from pipeline.spec import SweepSpec
 from workers.envs.registry import RunService, get_benchmark
 
@@ -60,11 +60,12 @@ class RunServices:
         return {service.env_var: name for service, name, _ in self.started}
 
     def worker_runtime_env(self) -> dict[str, Any] | None:
-        """The episode workers' ``runtime_env`` (the job's variables and the actors' names); None
-        when nothing was started (the workers keep the job's own)."""
+        """The episode workers' ``runtime_env``: the job's variables and the started actors' names
+        (:func:`pipeline.raysetup.actor_runtime_env`: None when nothing was started and the local
+        cluster's workers have the variables already)."""
         if not self.started:
-            return None
-        return {"env_vars": {**runtime_env()["env_vars"], **self.names()}}
+            return actor_runtime_env()
+        return actor_runtime_env(self.names())
 
     def close(self) -> None:
         """End the actors (the run is over; a later session starts its own)."""

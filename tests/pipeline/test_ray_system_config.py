@@ -91,3 +91,29 @@ def test_workers_start_with_few_malloc_arenas():
         return None if value is None else value.decode()
 
     assert ray.get(start_environment.remote(), timeout=120) == MALLOC_ARENAS
+
+
+@pytest.mark.usefixtures("ray_address")
+def test_a_cluster_started_here_gives_its_workers_the_variables_without_a_runtime_env(monkeypatch):
+    """The session's cluster was started by init_ray: its raylet has the workers' variables, so a
+    run's actors need no runtime_env (Ray would start each through setup_worker.py, a second
+    Python importing Ray); a variable changed since the start sends the whole environment again."""
+    import ray
+
+    from pipeline.raysetup import actor_runtime_env, runtime_env
+
+    assert actor_runtime_env() is None
+    wanted = runtime_env()["env_vars"]
+
+    @ray.remote(num_cpus=0)
+    def start_environment(names: list[str]) -> dict[str, str | None]:
+        with open("/proc/self/environ", "rb") as fh:
+            pairs = dict(item.split(b"=", 1) for item in fh.read().split(b"\0") if b"=" in item)
+        return {name: (pairs[name.encode()].decode() if name.encode() in pairs else None) for name in names}
+
+    assert ray.get(start_environment.remote(sorted(wanted)), timeout=120) == wanted
+    monkeypatch.setenv("ROBOTOUILLE_DATA", "/elsewhere/robotouille")
+    assert actor_runtime_env() == {"env_vars": {**wanted, "ROBOTOUILLE_DATA": "/elsewhere/robotouille"}}
+    monkeypatch.undo()
+    assert actor_runtime_env() is None
+    assert actor_runtime_env({"RECAP_SERVICE": "svc-1"}) == {"env_vars": {**wanted, "RECAP_SERVICE": "svc-1"}}
