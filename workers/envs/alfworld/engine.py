@@ -20,6 +20,7 @@ from typing import Any
 
 from recap.env import EnvError
 from workers.envs.alfworld.games import DATA_ENV
+from workers.envs.alfworld.translations import TRANSLATIONS
 
 INSTALL_HINT = "pip install 'recap-eval[alfworld]' (alfworld==0.4.2, textworld 1.7.0)"
 
@@ -49,6 +50,7 @@ def open_game(game_file: Path, primary: Path, max_steps: int) -> Any:
     """
     tw_gym, EnvInfos, AlfredDemangler, AlfredInfos = _import_engine(primary)
     PLANNER_POOL.install()
+    TRANSLATIONS.install()  # a game's PDDL translated once per process, not four times per reset
     infos = EnvInfos(won=True, admissible_commands=True, extras=["gamefile"])
     with _REGISTRY_LOCK:
         env_id = tw_gym.register_game(
