@@ -153,6 +153,8 @@ def schema_problem(table: str, found: pa.Schema) -> str | None:
     the rule is skipped and named, never cast, so a number stored as text is not counted by one
     reader and refused by another.
     """
+    import pyarrow as pa
+
     expected = arrow_schema(table)
     version = part_version(found)
     stored = stored_names(table, found.names, version)  # a column renamed since: its old name
