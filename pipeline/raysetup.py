@@ -25,6 +25,7 @@ from workers.envs.data_paths import CACHE_ENV
 from workers.envs.registry import data_env_vars
 from workers.log_setup import LEVEL_VAR
 from workers.sandbox.base import NODE_RESOURCE
+from workers.worker_setup import HOOK as WORKER_SETUP_HOOK
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
@@ -48,14 +49,16 @@ MALLOC_ARENAS = os.environ.get(MALLOC_ARENAS_VAR) or "2"
 
 def runtime_env() -> dict[str, Any]:
     """The Ray ``runtime_env`` for every worker: litellm offline, no usage stats, few malloc arenas,
-    the data and log-level variables forwarded, the project root on PYTHONPATH."""
+    the data and log-level variables forwarded, the project root on PYTHONPATH, and
+    :mod:`workers.worker_setup` run first in each worker process (no pyarrow, numpy or pydantic
+    loaded by Ray into a process that does not use them)."""
     env_vars = {"LITELLM_LOCAL_MODEL_COST_MAP": "True", "RAY_USAGE_STATS_ENABLED": "0", MALLOC_ARENAS_VAR: MALLOC_ARENAS}
     for name in forwarded_vars():
         if os.environ.get(name):
             env_vars[name] = os.environ[name]
     path = [str(PROJECT_ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
     env_vars["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(path))
-    return {"env_vars": env_vars}
+    return {"env_vars": env_vars, "worker_process_setup_hook": WORKER_SETUP_HOOK}
 
 
 def actor_runtime_env(extra: dict[str, str] | None = None) -> dict[str, Any] | None:

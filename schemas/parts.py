@@ -16,17 +16,23 @@ from __future__ import annotations
 
 import json
 import os
+import sys
+import threading
 import uuid
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
-
-import pyarrow as pa
-import pyarrow.parquet as pq
+from typing import TYPE_CHECKING, Any
 
 from schemas.tables import TABLES, arrow_schema, record_to_row
 from schemas.versions import missing_fillable, part_version, stored_names, upgrade
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+# pyarrow (and numpy with it) is imported by the functions that read or write a part, not with
+# this module: a process that only names part files or holds a handle to the sink (an episode
+# worker: Ray loads the sink's class to deserialise its handle) never loads it (issue 37, item 3).
 
 #: the run folder's identity file: written once by the pipeline when the run starts
 RUN_FILE = "run.json"
@@ -43,6 +49,37 @@ def read_run_file(run_dir: Path | str) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
+_no_pandas_lock = threading.Lock()
+
+
+def arrow_without_pandas() -> None:
+    """Have pyarrow build arrays from Python rows without importing pandas, in a process that
+    has not imported pandas itself.
+
+    Why: pyarrow's ``pa.array`` (under ``Table.from_pylist``) asks its pandas shim whether a
+    value is a pandas object, and the shim's first question imports pandas (~40 MB, ~300
+    modules) - into the sink and every gateway, which only write Python rows (issue 37, item 3).
+    The shim asks once per process and remembers the answer; with ``pandas`` blocked for that
+    one question it answers "no pandas" (pyarrow's own path when pandas is not installed), so
+    rows are converted exactly as before. Nothing here passes pandas objects to pyarrow; an
+    explicit ``to_pandas``/``from_pandas`` later still imports pandas (the shim retries then).
+    A process that already holds pandas is left as it is."""
+    if "pandas" in sys.modules:
+        return
+    import pyarrow as pa
+
+    with _no_pandas_lock:
+        if "pandas" in sys.modules:
+            return
+        sys.modules["pandas"] = None  # type: ignore[assignment]  # import pandas -> ImportError
+        try:
+            pa.lib._pandas_api.have_pandas  # noqa: B018  # the shim's one import attempt, answered "none"
+        except Exception:  # another pyarrow layout: pandas may load on the first write, as before
+            pass
+        finally:
+            del sys.modules["pandas"]
+
+
 @dataclass
 class PartWriter:
     """Writes batches of rows of any table as atomic part files under ``run_dir``."""
@@ -53,12 +90,16 @@ class PartWriter:
 
     def __post_init__(self) -> None:
         self.run_dir = Path(self.run_dir)
+        arrow_without_pandas()
 
     def write_rows(self, table: str, rows: Sequence[dict[str, Any]]) -> Path | None:
         """Write ``rows`` as one new part file of ``table`` (temp name, fsync, rename); returns its path, or None
         when there are no rows (no empty parts)."""
         if not rows:
             return None
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
         data = pa.Table.from_pylist(list(rows), schema=arrow_schema(table))
         folder = self.run_dir / table
         folder.mkdir(parents=True, exist_ok=True)
@@ -112,6 +153,8 @@ def schema_problem(table: str, found: pa.Schema) -> str | None:
     the rule is skipped and named, never cast, so a number stored as text is not counted by one
     reader and refused by another.
     """
+    import pyarrow as pa
+
     expected = arrow_schema(table)
     version = part_version(found)
     stored = stored_names(table, found.names, version)  # a column renamed since: its old name
@@ -152,6 +195,8 @@ def inspect_parts(
     ``open_file`` opens a path of a remote file system (``fs.open_input_file``); local paths
     are read directly.
     """
+    import pyarrow.parquet as pq
+
     good: list[Any] = []
     bad: list[BadPart] = []
     for p in paths:
@@ -179,6 +224,8 @@ def read_parts(
 ) -> tuple[pa.Table, list[BadPart]]:
     """The rows of the good part files among ``paths`` (optionally a few columns) and the bad
     ones (see :func:`inspect_parts`); an empty table with the schema when none is good."""
+    import pyarrow as pa
+
     full = arrow_schema(table)
     schema = pa.schema([full.field(c) for c in columns]) if columns is not None else full
     good, bad = inspect_parts(paths, table, open_file)
@@ -201,6 +248,8 @@ def read_parts(
 def read_part(source: Any, table: str) -> pa.Table:
     """Every row of one good part file, in the table's current schema: a part of an earlier
     schema version is mapped (:func:`schemas.versions.upgrade`)."""
+    import pyarrow.parquet as pq
+
     full = arrow_schema(table)
     found = pq.read_schema(source)
     if all(name in found.names for name in full.names):

@@ -75,13 +75,14 @@ is nullable) is filled with that default (null); a part missing any other column
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
-
-import pyarrow as pa
+from typing import TYPE_CHECKING, Any
 
 from schemas.labels import INFRA_ERROR, ablation_of_config, infra_failure, parse_default_label, place_of
 from schemas.records import SCHEMA_VERSION
 from schemas.tables import arrow_schema, record_type
+
+if TYPE_CHECKING:  # imported where a table is mapped (upgrade): see schemas/parts.py
+    import pyarrow as pa
 
 VERSION_KEY = b"recap_eval_schema_version"
 
@@ -162,6 +163,8 @@ def missing_fillable(table: str, missing: list[str], version: int | None) -> boo
 
 def upgrade(table: str, data: pa.Table, version: int) -> pa.Table:
     """The rows of a part of ``version`` as the current schema has them (see the module doc)."""
+    import pyarrow as pa
+
     schema = arrow_schema(table)
     renamed = {old: new for new, old in renamed_since(table, version).items() if old in data.column_names}
     if renamed:

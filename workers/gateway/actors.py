@@ -23,7 +23,7 @@ import time
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 
@@ -34,13 +34,17 @@ from schemas.parts import PartWriter  # noqa: E402
 from schemas.records import EventRecord  # noqa: E402
 from workers.gateway.call_log import run_id_of  # noqa: E402
 from workers.gateway.client import GatewayClient  # noqa: E402
-from workers.gateway.core import DeploymentGateway  # noqa: E402
 from workers.gateway.ledger import BudgetLedger, EpisodeBudget, LocalBudget  # noqa: E402
 from workers.gateway.quota import LeaseLedger, LocalQuota, QuotaBook, lease_s_for, pool_spec  # noqa: E402
-from workers.gateway.shard import ShardGateway  # noqa: E402
 from workers.llm.errors import scrub  # noqa: E402
-from workers.llm.providers import DeploymentConfig  # noqa: E402
 from workers.log_setup import configure_from_env  # noqa: E402
+
+if TYPE_CHECKING:
+    # imported by GatewayActor.__init__, not with this module: Ray imports this module wherever a
+    # handle to one of its actors is deserialised (every episode worker, the budget actor), and
+    # the gateway's core brings litellm's call path, pydantic and pyarrow (issue 37, item 3)
+    from workers.gateway.core import DeploymentGateway
+    from workers.llm.providers import DeploymentConfig
 
 CONTROL = "control"
 
@@ -252,6 +256,10 @@ class GatewayActor:
             secret_env.apply()
         if isinstance(budget, str):  # a named BudgetActor: no handle among the arguments, so Ray
             budget = ray.get_actor(budget)  # restarts this actor without an object-store argument
+
+        from workers.gateway.core import DeploymentGateway
+        from workers.gateway.shard import ShardGateway
+        from workers.llm.providers import DeploymentConfig
 
         cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
         self.core: DeploymentGateway
