@@ -37,7 +37,7 @@ from workers.gateway.client import GatewayClient  # noqa: E402
 from workers.gateway.core import DeploymentGateway  # noqa: E402
 from workers.gateway.ledger import BudgetLedger, EpisodeBudget, LocalBudget  # noqa: E402
 from workers.gateway.quota import LeaseLedger, LocalQuota, QuotaBook, lease_s_for, pool_spec  # noqa: E402
-from workers.gateway.shard import ShardGateway  # noqa: E402
+from workers.gateway.shard import LeasedBudget, ShardGateway  # noqa: E402
 from workers.llm.errors import scrub  # noqa: E402
 from workers.llm.providers import DeploymentConfig  # noqa: E402
 from workers.log_setup import configure_from_env  # noqa: E402
@@ -174,7 +174,11 @@ class QuotaActor(LocalQuota):
     """The run's budget authority when a deployment runs gateway shards: the ``BudgetActor``'s
     protocol (one journal writer per run folder) plus the shards' window shares and dollar
     leases (:mod:`workers.gateway.quota`). ``configs``: every deployment of the run (the sharded
-    ones' RPM/TPM quotas live here); ``shards``: deployment name -> its number of shards."""
+    ones' RPM/TPM quotas live here); ``shards``: deployment name -> its number of shards;
+    ``lease_calls``: worst cases per dollar grant (:class:`workers.gateway.quota.LeaseLedger`);
+    ``provider_models``: see :class:`workers.gateway.ledger.BudgetLedger` (default: the configs').
+    Also the authority of a pipeline run's unsharded gateways (``GatewayActor(leased=True)``):
+    they spend dollar leases too, their RPM/TPM windows stay their own."""
 
     def __init__(
         self,
@@ -184,6 +188,8 @@ class QuotaActor(LocalQuota):
         run_cap_usd: float | None = None,
         model_caps_usd: Mapping[str, float] | None = None,
         group_commit: bool = True,
+        lease_calls: int = 16,
+        provider_models: Mapping[str, str] | None = None,
     ):
         configure_from_env()
         sharded = [c for c in configs if shards.get(c.deployment_name, 1) > 1]
@@ -191,8 +197,11 @@ class QuotaActor(LocalQuota):
             run_dir,
             run_cap_usd=run_cap_usd,
             model_caps_usd=model_caps_usd,
-            provider_models={c.deployment_name: c.model for c in configs},
+            provider_models=dict(provider_models)
+            if provider_models is not None
+            else {c.deployment_name: c.model for c in configs},
             shards=dict(shards),
+            lease_calls=lease_calls,
         )
         lease_s = min((lease_s_for(c.window_s) for c in sharded), default=10.0)
         book = QuotaBook(pool_spec(sharded), lease_s=lease_s, restarted=ledger.orphaned_leases > 0)
@@ -201,7 +210,7 @@ class QuotaActor(LocalQuota):
 
     @ray.method(concurrency_group=CONTROL)
     async def stats(self) -> dict[str, Any]:  # type: ignore[override]  # async over Ray: callers await the handle
-        return self.ledger.stats()
+        return {**self.ledger.stats(), "requests": dict(self.requests), **self.ledger.lease_stats()}
 
     @ray.method(concurrency_group=CONTROL)
     async def set_caps(self, run_cap_usd: float | None = None, model_caps_usd: Mapping[str, float] | None = None) -> None:
@@ -233,7 +242,11 @@ class GatewayActor:
     for a single-deployment run). ``secret_env``: API keys set in this actor's process only.
     ``group_commit``: for the own ledger, see :class:`LocalBudget` (False only for benches).
     ``shard``: (index, number of shards) when this actor is one shard of its deployment; then
-    ``budget`` is the run's ``QuotaActor`` (:class:`workers.gateway.shard.ShardGateway`)."""
+    ``budget`` is the run's ``QuotaActor`` (:class:`workers.gateway.shard.ShardGateway`).
+    ``leased``: the deployment's only gateway, whose ``budget`` is the run's ``QuotaActor``: it
+    spends a dollar lease (:class:`workers.gateway.shard.LeasedBudget`, at most ``keep_worst``
+    worst cases unused) and reports its calls in batches instead of two round trips per call;
+    its RPM/TPM window is its own, as without a lease."""
 
     def __init__(
         self,
@@ -246,6 +259,8 @@ class GatewayActor:
         secret_env: SecretEnv | None = None,
         group_commit: bool = True,
         shard: tuple[int, int] | None = None,
+        leased: bool = False,
+        keep_worst: int = 4,
     ):
         configure_from_env()
         if secret_env is not None:  # the API keys, for this actor process only
@@ -259,6 +274,11 @@ class GatewayActor:
             self.core = ShardGateway(
                 cfg, index=shard[0], shards=shard[1], quota=RemoteQuota(budget), run_dir=run_dir, run_id=run_id
             )
+            return
+        if leased:  # the run's QuotaActor grants this gateway dollar leases; the window is its own
+            name = cfg.deployment_name
+            leased_budget = LeasedBudget(RemoteQuota(budget), name, name, keep_worst=keep_worst)
+            self.core = DeploymentGateway(cfg, run_dir=Path(run_dir), run_id=run_id, budget=leased_budget)
             return
         if budget is None:  # the gateway keeps the run's ledger itself
             own = BudgetLedger(
@@ -298,6 +318,16 @@ class GatewayActor:
     @ray.method(concurrency_group=CONTROL)
     async def stats(self) -> dict[str, Any]:
         return await self._on_core_loop(self.core.stats)
+
+    @ray.method(concurrency_group=CONTROL)
+    async def report_spend(self) -> None:
+        """Report the calls settled under a dollar lease so far (the authority's spend is then
+        exact); nothing to do for a gateway that settles each call at the authority."""
+        report = getattr(self.core.budget, "report_now", None)
+        loop = self.core.loop
+        if report is None or loop is None or not loop.is_running():
+            return
+        await asyncio.wrap_future(asyncio.run_coroutine_threadsafe(report(), loop))
 
     @ray.method(concurrency_group=CONTROL)
     async def budget_stats(self) -> dict[str, Any]:
