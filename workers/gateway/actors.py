@@ -1,4 +1,6 @@
-"""Thin Ray wrappers: one async ``GatewayActor`` per deployment, one ``BudgetActor`` per run.
+"""Thin Ray wrappers: one async ``GatewayActor`` per deployment, one budget authority per run
+(a ``BudgetActor``, or a ``QuotaActor`` whose gateways spend dollar leases: what a pipeline run
+starts, :mod:`pipeline.gateway_backend`).
 
 Why thin: all behaviour lives in :class:`workers.gateway.core.DeploymentGateway` and
 :class:`workers.gateway.ledger.BudgetLedger`, tested without Ray. The actors only host them.
