@@ -1,4 +1,6 @@
-"""Thin Ray wrappers: one async ``GatewayActor`` per deployment, one ``BudgetActor`` per run.
+"""Thin Ray wrappers: one async ``GatewayActor`` per deployment, one budget authority per run
+(a ``BudgetActor``, or a ``QuotaActor`` whose gateways spend dollar leases: what a pipeline run
+starts, :mod:`pipeline.gateway_backend`).
 
 Why thin: all behaviour lives in :class:`workers.gateway.core.DeploymentGateway` and
 :class:`workers.gateway.ledger.BudgetLedger`, tested without Ray. The actors only host them.
@@ -178,7 +180,11 @@ class QuotaActor(LocalQuota):
     """The run's budget authority when a deployment runs gateway shards: the ``BudgetActor``'s
     protocol (one journal writer per run folder) plus the shards' window shares and dollar
     leases (:mod:`workers.gateway.quota`). ``configs``: every deployment of the run (the sharded
-    ones' RPM/TPM quotas live here); ``shards``: deployment name -> its number of shards."""
+    ones' RPM/TPM quotas live here); ``shards``: deployment name -> its number of shards;
+    ``lease_calls``: worst cases per dollar grant (:class:`workers.gateway.quota.LeaseLedger`);
+    ``provider_models``: see :class:`workers.gateway.ledger.BudgetLedger` (default: the configs').
+    Also the authority of a pipeline run's unsharded gateways (``GatewayActor(leased=True)``):
+    they spend dollar leases too, their RPM/TPM windows stay their own."""
 
     def __init__(
         self,
@@ -188,6 +194,8 @@ class QuotaActor(LocalQuota):
         run_cap_usd: float | None = None,
         model_caps_usd: Mapping[str, float] | None = None,
         group_commit: bool = True,
+        lease_calls: int = 16,
+        provider_models: Mapping[str, str] | None = None,
     ):
         configure_from_env()
         sharded = [c for c in configs if shards.get(c.deployment_name, 1) > 1]
@@ -195,8 +203,11 @@ class QuotaActor(LocalQuota):
             run_dir,
             run_cap_usd=run_cap_usd,
             model_caps_usd=model_caps_usd,
-            provider_models={c.deployment_name: c.model for c in configs},
+            provider_models=dict(provider_models)
+            if provider_models is not None
+            else {c.deployment_name: c.model for c in configs},
             shards=dict(shards),
+            lease_calls=lease_calls,
         )
         lease_s = min((lease_s_for(c.window_s) for c in sharded), default=10.0)
         book = QuotaBook(pool_spec(sharded), lease_s=lease_s, restarted=ledger.orphaned_leases > 0)
@@ -205,7 +216,7 @@ class QuotaActor(LocalQuota):
 
     @ray.method(concurrency_group=CONTROL)
     async def stats(self) -> dict[str, Any]:  # type: ignore[override]  # async over Ray: callers await the handle
-        return self.ledger.stats()
+        return {**self.ledger.stats(), "requests": dict(self.requests), **self.ledger.lease_stats()}
 
     @ray.method(concurrency_group=CONTROL)
     async def set_caps(self, run_cap_usd: float | None = None, model_caps_usd: Mapping[str, float] | None = None) -> None:
@@ -237,7 +248,11 @@ class GatewayActor:
     for a single-deployment run). ``secret_env``: API keys set in this actor's process only.
     ``group_commit``: for the own ledger, see :class:`LocalBudget` (False only for benches).
     ``shard``: (index, number of shards) when this actor is one shard of its deployment; then
-    ``budget`` is the run's ``QuotaActor`` (:class:`workers.gateway.shard.ShardGateway`)."""
+    ``budget`` is the run's ``QuotaActor`` (:class:`workers.gateway.shard.ShardGateway`).
+    ``leased``: the deployment's only gateway, whose ``budget`` is the run's ``QuotaActor``: it
+    spends a dollar lease (:class:`workers.gateway.shard.LeasedBudget`, at most ``keep_worst``
+    worst cases unused) and reports its calls in batches instead of two round trips per call;
+    its RPM/TPM window is its own, as without a lease."""
 
     def __init__(
         self,
@@ -250,6 +265,8 @@ class GatewayActor:
         secret_env: SecretEnv | None = None,
         group_commit: bool = True,
         shard: tuple[int, int] | None = None,
+        leased: bool = False,
+        keep_worst: int = 4,
     ):
         configure_from_env()
         if secret_env is not None:  # the API keys, for this actor process only
@@ -258,7 +275,7 @@ class GatewayActor:
             budget = ray.get_actor(budget)  # restarts this actor without an object-store argument
 
         from workers.gateway.core import DeploymentGateway
-        from workers.gateway.shard import ShardGateway
+        from workers.gateway.shard import LeasedBudget, ShardGateway
         from workers.llm.providers import DeploymentConfig
 
         cfg = config if isinstance(config, DeploymentConfig) else DeploymentConfig(**config)
@@ -267,6 +284,11 @@ class GatewayActor:
             self.core = ShardGateway(
                 cfg, index=shard[0], shards=shard[1], quota=RemoteQuota(budget), run_dir=run_dir, run_id=run_id
             )
+            return
+        if leased:  # the run's QuotaActor grants this gateway dollar leases; the window is its own
+            name = cfg.deployment_name
+            leased_budget = LeasedBudget(RemoteQuota(budget), name, name, keep_worst=keep_worst)
+            self.core = DeploymentGateway(cfg, run_dir=Path(run_dir), run_id=run_id, budget=leased_budget)
             return
         if budget is None:  # the gateway keeps the run's ledger itself
             own = BudgetLedger(
@@ -306,6 +328,16 @@ class GatewayActor:
     @ray.method(concurrency_group=CONTROL)
     async def stats(self) -> dict[str, Any]:
         return await self._on_core_loop(self.core.stats)
+
+    @ray.method(concurrency_group=CONTROL)
+    async def report_spend(self) -> None:
+        """Report the calls settled under a dollar lease so far (the authority's spend is then
+        exact); nothing to do for a gateway that settles each call at the authority."""
+        report = getattr(self.core.budget, "report_now", None)
+        loop = self.core.loop
+        if report is None or loop is None or not loop.is_running():
+            return
+        await asyncio.wrap_future(asyncio.run_coroutine_threadsafe(report(), loop))
 
     @ray.method(concurrency_group=CONTROL)
     async def budget_stats(self) -> dict[str, Any]:

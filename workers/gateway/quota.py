@@ -331,10 +331,30 @@ class LocalQuota(LocalBudget):
         super().__init__(ledger, owned=owned, group_commit=group_commit)
         self.ledger: LeaseLedger = ledger
         self.book = book
+        #: request-path calls served, by method: what the gateways cost this authority (a
+        #: gateway that spends a lease makes ``report``s, not a ``begin`` and a ``settle`` per call)
+        self.requests: dict[str, int] = dict.fromkeys(("begin", "reserve", "settle", "charge_worst", "report"), 0)
+
+    async def begin(self, *args: Any, **kwargs: Any) -> Mapping[str, Any]:
+        self.requests["begin"] += 1
+        return await super().begin(*args, **kwargs)
+
+    async def reserve(self, *args: Any, **kwargs: Any) -> Mapping[str, Any]:
+        self.requests["reserve"] += 1
+        return await super().reserve(*args, **kwargs)
+
+    async def settle(self, *args: Any, **kwargs: Any) -> None:
+        self.requests["settle"] += 1
+        await super().settle(*args, **kwargs)
+
+    async def charge_worst(self, rid: int) -> int:
+        self.requests["charge_worst"] += 1
+        return await super().charge_worst(rid)
 
     async def report(
         self, lease: int | None, name: str, owner: str, calls: Sequence[LeasedCall], give: int = 0, want_worst: int = 0
     ) -> dict[str, Any]:
+        self.requests["report"] += 1
         return self.ledger.report(lease, name, owner, calls, give, want_worst)
 
     async def window_lease(self, deployment: str, shard: str, give: tuple[int, int], want: tuple[int, int]) -> dict[str, Any]:

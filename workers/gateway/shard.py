@@ -218,15 +218,33 @@ class ShardAdmission(AdmissionController):
 class LeasedBudget:
     """The budget protocol a gateway core expects, served out of a dollar lease (module docstring).
 
-    ``tag``: :func:`shard_tag`; reservations and leases are owned by ``<tag>:<instance>``."""
+    ``tag``: :func:`shard_tag` (or the deployment's name for the single gateway of a pipeline
+    run); reservations and leases are owned by ``<tag>:<instance>``.
 
-    def __init__(self, quota: Any, deployment: str, tag: str, *, report_s: float = 0.5, report_calls: int = 64):
+    ``keep_worst`` (None: a shard's behaviour, the lease grows with the calls in flight and goes
+    back only when idle): the unused part of the lease is kept within that many worst cases -
+    each report hands back the rest and tops it up when it fell below one worst case, and an ask
+    for more hands back what was left - so that a crash charges (the lease in full) at most
+    that much beyond the worst cases of the calls in flight, and a call refused at the
+    authority near a cap sees the same headroom a gateway without a lease would."""
+
+    def __init__(
+        self,
+        quota: Any,
+        deployment: str,
+        tag: str,
+        *,
+        report_s: float = 0.5,
+        report_calls: int = 64,
+        keep_worst: int | None = None,
+    ):
         self.quota = quota
         self.deployment = deployment
         self.tag = tag
         self.owner = f"{tag}:{uuid.uuid4().hex[:8]}"
         self.report_s = report_s
         self.report_calls = report_calls
+        self.keep_worst = keep_worst
         self.lease: int | None = None
         #: pico-USD of the lease neither reserved nor spent by a call in flight
         self.avail = 0
@@ -308,8 +326,16 @@ class LeasedBudget:
         self.pending.append((key, int(cost_pico), status, result, cache_key, litellm_cost_usd))
         if status == "ok" and result is not None:
             self._recent[key] = result
-        if len(self.pending) >= self.report_calls:
+        if len(self.pending) >= self.report_calls or self._over_keep(2):
             self._kick.set()
+
+    def _over_keep(self, factor: int = 1) -> bool:
+        """The unused lease is more than ``factor`` x ``keep_worst`` worst cases (never, without a keep)."""
+        return self.keep_worst is not None and self._sized > 0 and self.avail > factor * self.keep_worst * self._sized
+
+    def _low(self) -> bool:
+        """Less than one worst case left unused, with a keep: the next report asks for more before a call must."""
+        return self.keep_worst is not None and self._sized > 0 and self.avail < self._sized
 
     async def charge_worst(self, rid: Any) -> int:
         if not isinstance(rid, str):
@@ -347,20 +373,31 @@ class LeasedBudget:
             self._short = False
             idle = not self._used
             self._used = False
-            if self.pending or (idle and self.avail > 0):
+            trim = not idle and self._over_keep()
+            top_up = not idle and self._low()
+            if self.pending or (idle and self.avail > 0) or trim or top_up:
                 try:
-                    await self._report(give_all=idle)
+                    await self._report(give_all=idle, want_worst=self._sized if top_up else 0, trim=trim)
                 except Exception as exc:  # the authority is away: the calls stay pending
                     log.warning("shard %s could not report to the quota authority: %s: %s", self.tag, type(exc).__name__, exc)
 
-    async def _report(self, *, want_worst: int = 0, give_all: bool = False) -> None:
+    async def report_now(self) -> None:
+        """Report the calls settled so far (the spend the authority shows is then exact)."""
+        if self.pending:
+            await self._report()
+
+    async def _report(self, *, want_worst: int = 0, give_all: bool = False, trim: bool = False) -> None:
         async with self._lock:
             if want_worst > 0 and self.avail >= want_worst:
                 return  # a concurrent report already brought enough
             calls, self.pending = self.pending, []
             if self.lease is None and not calls and want_worst == 0:
                 return
-            give = self.avail if give_all else 0
+            give = 0
+            if give_all or (want_worst > 0 and self.keep_worst is not None):
+                give = self.avail  # an ask hands back the rest: less than the worst case it asks for
+            elif trim and self.keep_worst is not None:
+                give = max(0, self.avail - self.keep_worst * self._sized)
             self.avail -= give
             try:
                 answer = await self.quota.report(self.lease, self.deployment, self.owner, calls, give, want_worst)

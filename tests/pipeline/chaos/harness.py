@@ -327,7 +327,7 @@ def journal_spend(entries: Iterable[dict[str, Any]]) -> dict[str, int]:
 
 def reserved_episodes(entries: Iterable[dict[str, Any]]) -> set[str]:
     """Episodes for which at least one call was reserved (about to be sent)."""
-    return {episode_of_key(e["key"]) for e in entries if e.get("op") == "reserve"}
+    return {episode_of_key(e["key"]) for e in entries if e.get("op") == "reserve" and not e["key"].startswith("lease:")}
 
 
 def fake_price() -> Any:

@@ -90,7 +90,8 @@ def _said(text: str) -> list[str]:
 
 def _money(out: Path) -> dict[str, Any]:
     """The ledger journal read per call: settled ok, charged (worst case, orphaned), still open."""
-    entries = journal(out)
+    # a gateway's dollar lease ("lease:<rid>") is a reservation that names no call
+    entries = [e for e in journal(out) if not str(e.get("key", "")).startswith("lease:")]
     reserved = {e["key"] for e in entries if e.get("op") == "reserve"}
     settled = {e["key"]: e for e in entries if e.get("op") == "settle"}
     return {
