@@ -25,6 +25,7 @@ Prints a table; figures only, nothing asserted.
 from __future__ import annotations
 
 import argparse
+import atexit
 import json
 import os
 import statistics
@@ -44,6 +45,18 @@ CALLS = 10
 LATENCY = 0.2
 
 
+def _die_with_parent() -> None:
+    """In the server's process before it starts: a SIGTERM when the bench that started it dies
+    (Linux ``prctl(PR_SET_PDEATHSIG)``), so a bench killed or failed never leaves it running."""
+    try:
+        import ctypes
+        import signal
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)
+    except OSError:
+        pass
+
+
 def start_server() -> tuple[subprocess.Popen[str], str]:
     """A fresh fake server in its own process; its base URL (``http://127.0.0.1:PORT/v1``)."""
     server = subprocess.Popen(
@@ -51,6 +64,7 @@ def start_server() -> tuple[subprocess.Popen[str], str]:
         cwd=ROOT,
         stdout=subprocess.PIPE,
         text=True,
+        preexec_fn=_die_with_parent,
     )
     assert server.stdout is not None
     line = server.stdout.readline()
@@ -75,8 +89,9 @@ class ServerProcess:
             return len(json.load(resp)["calls"])
 
     def stop(self) -> None:
-        self.process.terminate()
-        self.process.wait(10)
+        if self.process.poll() is None:
+            self.process.terminate()
+            self.process.wait(10)
 
 
 def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float, extra: str = "") -> str:
@@ -251,6 +266,7 @@ def main() -> None:
 
     os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
     server = ServerProcess()
+    atexit.register(server.stop)  # also when Ray fails to start
     url = server.url
     init_ray(RaySpec(num_cpus=args.num_cpus))
     cpus = ray.cluster_resources().get("CPU", 0)
