@@ -1,7 +1,7 @@
 """Pipeline throughput: episodes per minute vs workers, sink rows per second, worker memory.
 
 Every episode is ReAct on a blocksworld instance against the fake OpenAI server
-(``workers.llm.offline.fake_server``) answering after 200 ms, through the real driver, episode workers,
+(``workers.llm.offline.fake_server``, in a process of its own) answering after 200 ms, through the real driver, episode workers,
 gateway and sink; the per-episode call limit fixes each episode at CALLS model calls, so the
 ideal is ``workers x 60 / (CALLS x 0.2 s)`` episodes per minute. The series runs without a
 quota; a last run repeats the largest worker count under a gateway quota, where the rate must
@@ -11,9 +11,11 @@ stop at the quota's.
     python bench/pipeline.py --workers 1 4 --rounds 3 --quota-check 0
     python bench/pipeline.py --scale                        # 8 32 64 workers, 2 rounds, no quota run
 
-CPU ms/call sums the CPU seconds of every process of the run (driver with the fake server, Ray's
-own processes, gateway, sink, budget, episode workers: ``bench/procstats.py``) between the end of
-the first round and the last result, divided by the calls the fake server answered in that span;
+CPU ms/call sums the CPU seconds of every process of the pipeline (driver, Ray's own processes,
+gateway, sink, budget, episode workers: ``bench/procstats.py``) between the end of the first round
+and the last result, divided by the calls the fake server answered in that span (counted from the
+server's own log); the server's process stands in for the provider: its CPU is printed apart
+(``provider (not counted)`` with --by-role), never summed;
 gw added ms is the median of the gateway's recorded call latency minus the server's fixed latency
 (what admission, the budget, litellm and the records add to a call).
 
@@ -23,11 +25,15 @@ Prints a table; figures only, nothing asserted.
 from __future__ import annotations
 
 import argparse
+import atexit
+import json
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
+import urllib.request
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,6 +43,55 @@ os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 
 CALLS = 10
 LATENCY = 0.2
+
+
+def _die_with_parent() -> None:
+    """In the server's process before it starts: a SIGTERM when the bench that started it dies
+    (Linux ``prctl(PR_SET_PDEATHSIG)``), so a bench killed or failed never leaves it running."""
+    try:
+        import ctypes
+        import signal
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)
+    except OSError:
+        pass
+
+
+def start_server() -> tuple[subprocess.Popen[str], str]:
+    """A fresh fake server in its own process; its base URL (``http://127.0.0.1:PORT/v1``)."""
+    server = subprocess.Popen(
+        [sys.executable, "-m", "workers.llm.offline.fake_server", "--port", "0", "--latency-s", str(LATENCY)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+        preexec_fn=_die_with_parent,
+    )
+    assert server.stdout is not None
+    line = server.stdout.readline()
+    if "listening on" not in line:
+        server.kill()
+        raise SystemExit(f"bench: the fake server did not start ({line.strip() or 'no output'})")
+    return server, line.split("listening on", 1)[1].strip()
+
+
+class ServerProcess:
+    """The fake server in a process of its own (``start_server``), as ``run_one`` reads it: the calls
+    it answered (from its log) and its process id (its CPU is the provider's, kept out of the
+    pipeline's figure)."""
+
+    def __init__(self) -> None:
+        self.process, self.url = start_server()
+        self.pid = self.process.pid
+
+    @property
+    def arrivals(self) -> int:
+        with urllib.request.urlopen(self.url.removesuffix("/v1") + "/fake/log", timeout=30) as resp:
+            return len(json.load(resp)["calls"])
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            self.process.wait(10)
 
 
 def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float, extra: str = "") -> str:
@@ -60,6 +115,9 @@ workers: {workers}
 
 
 def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp: Path, extra: str = "") -> dict:
+    """One run of ``workers`` x ``rounds`` episodes; ``server.arrivals`` counts the calls answered so far
+    (a ``ServerProcess``, or an in-thread ``FakeServer`` whose CPU is then the driver's); a server
+    with a ``pid`` in the driver's process tree is taken out of the roles as the provider."""
     tmp.mkdir(parents=True, exist_ok=True)
 
     from pipeline.driver import Driver, Hooks, prepare
@@ -104,10 +162,14 @@ def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: flo
     gw_latency = statistics.median(lat.column("latency_s").to_pylist()) if lat.num_rows else float("nan")
     cpu_ms = rss_mb = float("nan")
     cpu_roles: dict[str, float] = {}
+    provider_ms = float("nan")
     if "end" in marks:
         (snap0, arr0, _), (snap1, arr1, _) = marks["start"], marks["end"]
-        cpu_roles = cpu_delta(snap0, snap1)
         measured_calls = max(arr1 - arr0, 1)
+        provider_pid = getattr(server, "pid", None)
+        if provider_pid in snap0 and provider_pid in snap1:
+            provider_ms = (snap1.pop(provider_pid).cpu_s - snap0.pop(provider_pid).cpu_s) * 1000 / measured_calls
+        cpu_roles = cpu_delta(snap0, snap1)
         cpu_ms = sum(cpu_roles.values()) * 1000 / measured_calls
         cpu_roles = {role: s * 1000 / measured_calls for role, s in cpu_roles.items()}
         worker_rss = [max(s.rss, snap0[pid].rss if pid in snap0 else 0) for pid, s in snap1.items() if s.role == "episode worker"]
@@ -125,6 +187,7 @@ def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: flo
         "gw_added_ms": (gw_latency - LATENCY) * 1000,
         "cpu_ms": cpu_ms,
         "cpu_roles": cpu_roles,
+        "provider_ms": provider_ms,
         "call_ms": span * workers / max(calls, 1) * 1000,
         "rss_mb": rss_mb,
         "reasons": sorted(set(eps.column("end_reason").to_pylist())),
@@ -200,15 +263,22 @@ def main() -> None:
 
     from pipeline.raysetup import init_ray
     from pipeline.spec import RaySpec
-    from workers.llm.offline.fake_server import FakeServer, FakeServerConfig
 
     os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
-    server = FakeServer(FakeServerConfig(latency_s=LATENCY))
-    url = server.start_in_thread()
-    init_ray(RaySpec(num_cpus=args.num_cpus))
+    server = ServerProcess()
+    atexit.register(server.stop)  # also when Ray fails to start
+    url = server.url
+    for tries_left in (2, 1, 0):  # a loaded machine: Ray gives its raylet 30 s to register, then gives up
+        try:
+            init_ray(RaySpec(num_cpus=args.num_cpus))
+            break
+        except Exception as exc:
+            if not tries_left or "timed out during startup" not in str(exc):
+                raise
+            ray.shutdown()
     cpus = ray.cluster_resources().get("CPU", 0)
     print(
-        f"host CPUs {os.cpu_count()}, Ray CPUs {cpus:.0f}; fake server latency {LATENCY * 1000:.0f} ms; "
+        f"host CPUs {os.cpu_count()}, Ray CPUs {cpus:.0f}; fake server latency {LATENCY * 1000:.0f} ms in its own process; "
         f"{CALLS} calls per episode; {args.rounds} episodes per worker (first round = warm-up, not timed)"
     )
     print(
@@ -237,7 +307,12 @@ def main() -> None:
             )
             if args.by_role and r["cpu_roles"]:
                 roles = sorted(r["cpu_roles"].items(), key=lambda kv: -kv[1])
-                print("        CPU ms/call by role: " + ", ".join(f"{k} {v:.1f}" for k, v in roles if v >= 0.05), flush=True)
+                print(
+                    "        CPU ms/call by role: "
+                    + ", ".join(f"{k} {v:.1f}" for k, v in roles if v >= 0.05)
+                    + f"; provider (not counted) {r['provider_ms']:.1f}",
+                    flush=True,
+                )
         local = sink_rows_per_second(args.sink_rows, Path(tmp), via_ray=False)
         remote = sink_rows_per_second(args.sink_rows, Path(tmp), via_ray=True)
     print(
@@ -247,10 +322,11 @@ def main() -> None:
     print(
         "ideal = workers x 60 s / (calls x latency), or the quota's rate when lower; vs linear = ep/min relative to\n"
         "1 worker x workers; gw ms = median call latency inside the gateway; gw added ms = gw ms minus the server's\n"
-        "latency; CPU ms/call = CPU of all the run's processes over the measured span / calls the server answered in it;\n"
+        "latency; CPU ms/call = CPU of all the pipeline's processes (the fake server's apart) over the measured\n"
+        "span / calls the server answered in it (its own CPU: provider, not counted);\n"
         "call ms = wall time per call in a worker; worker RSS = median over the episode workers (from /proc)"
     )
-    server.stop_thread()
+    server.stop()
     ray.shutdown()
 
 

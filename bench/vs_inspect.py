@@ -64,7 +64,7 @@ os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 
 import bench.pipeline as pipeline_bench  # noqa: E402
-from bench.pipeline import CALLS, LATENCY  # noqa: E402
+from bench.pipeline import CALLS, LATENCY, start_server  # noqa: E402
 from bench.procstats import ProcSample, snapshot  # noqa: E402
 
 SIDES = ("recap", "inspect")
@@ -231,22 +231,6 @@ def inspect_versions(python: str) -> str | None:
     except OSError:
         return None
     return done.stdout.strip() if done.returncode == 0 else None
-
-
-def start_server() -> tuple[subprocess.Popen[str], str]:
-    """A fresh fake server in its own process; its base URL (``http://127.0.0.1:PORT/v1``)."""
-    server = subprocess.Popen(
-        [sys.executable, "-m", "workers.llm.offline.fake_server", "--port", "0", "--latency-s", str(LATENCY)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert server.stdout is not None
-    line = server.stdout.readline()
-    if "listening on" not in line:
-        server.kill()
-        raise SystemExit(f"vs_inspect: the fake server did not start ({line.strip() or 'no output'})")
-    return server, line.split("listening on", 1)[1].strip()
 
 
 def server_prompt_tokens(url: str) -> float:

@@ -30,13 +30,15 @@ class AdmissionError(ValueError):
 
 
 class _Entry:
-    __slots__ = ("t", "amount", "ends")
+    __slots__ = ("t", "amount", "ends", "held")
 
     def __init__(self, t: float, amount: int, ends: float | None):
         self.t = t
         self.amount = amount
         #: the time the entry's window starts to run out; None while the request is in flight
         self.ends = ends
+        #: still among its window's entries (not pruned or removed): its amount is in the total
+        self.held = True
 
 
 class SlidingWindow:
@@ -47,6 +49,12 @@ class SlidingWindow:
     entry covers every provider-side window that can contain it, whatever the delays of the
     client or the network. With ``anchor="admission"`` it counts for ``span_s`` from admission
     (higher utilisation for slow generations; ``pad_s`` must then cover the send delay).
+
+    Why two collections: a window holds every request of the last ``span_s`` (thousands at a
+    high RPM), and every admission asks it for room. Entries still in flight sit in a set; an
+    entry whose window started to run out moves to a queue kept in order of that time (responses
+    arrive in clock order), so pruning pops from its front and never scans the window, and
+    ``finish`` is O(1) (issue 37: the scans were a window's length of steps per call).
     """
 
     def __init__(self, limit: int | None, span_s: float, anchor: str = "response"):
@@ -55,19 +63,35 @@ class SlidingWindow:
         self.limit = limit
         self.span_s = span_s
         self.anchor = anchor
-        self._entries: list[_Entry] = []
+        #: entries in flight (no ``ends`` yet)
+        self._flight: set[_Entry] = set()
+        #: entries whose window runs out, in order of ``ends``
+        self._ending: deque[_Entry] = deque()
         self.total = 0
-        #: without a limit nothing asks for room (``wait_s`` returns at once), so ``add`` prunes
-        #: once the entries have doubled since the last prune (amortised O(1) a call): else a
-        #: window of an unlimited deployment (no ``tpm``, say) kept every entry of the run
-        self._prune_at = 64
+
+    @property
+    def _entries(self) -> list[_Entry]:
+        """Every entry the window holds (in flight first, then by the end of their window)."""
+        return [*self._flight, *self._ending]
+
+    def _queue(self, entry: _Entry) -> None:
+        """Put an entry whose ``ends`` is set in the queue, keeping it ordered by ``ends``."""
+        ending = self._ending
+        if not ending or ending[-1].ends <= entry.ends:  # type: ignore[operator]  # queued entries have ends
+            ending.append(entry)
+            return
+        i = len(ending)  # a clock that went back (a test's): insert in order
+        while i > 0 and ending[i - 1].ends > entry.ends:  # type: ignore[operator]
+            i -= 1
+        ending.insert(i, entry)
 
     def _prune(self, now: float) -> None:
         cutoff = now - self.span_s
-        if any(e.ends is not None and e.ends <= cutoff for e in self._entries):
-            kept = [e for e in self._entries if e.ends is None or e.ends > cutoff]
-            self._entries = kept
-            self.total = sum(e.amount for e in kept)
+        ending = self._ending
+        while ending and ending[0].ends <= cutoff:  # type: ignore[operator]
+            e = ending.popleft()
+            e.held = False
+            self.total -= e.amount
 
     def wait_s(self, amount: int, now: float) -> float:
         """Seconds until ``amount`` fits (0 when it fits now; ``span_s`` when only requests
@@ -78,20 +102,21 @@ class SlidingWindow:
         if self.total + amount <= self.limit:
             return 0.0
         remaining = self.total
-        ending = sorted(((e.ends, e.amount) for e in self._entries if e.ends is not None), key=lambda pair: pair[0])
-        for ends, entry_amount in ending:
-            remaining -= entry_amount
+        for e in self._ending:  # in order of the end of their window
+            remaining -= e.amount
             if remaining + amount <= self.limit:
-                return max(1e-4, ends + self.span_s - now)
+                return max(1e-4, e.ends + self.span_s - now)  # type: ignore[operator]
         return self.span_s
 
     def add(self, amount: int, now: float) -> _Entry:
         e = _Entry(now, amount, now if self.anchor == "admission" else None)
-        self._entries.append(e)
+        if e.ends is None:
+            self._flight.add(e)
+        else:
+            self._queue(e)
         self.total += amount
-        if self.limit is None and len(self._entries) >= self._prune_at:
+        if self.limit is None:  # nothing asks an unlimited window for room: it prunes itself
             self._prune(now)
-            self._prune_at = max(64, 2 * len(self._entries))
         return e
 
     def finish(self, entry: _Entry, now: float, amount: int | None = None) -> None:
@@ -99,21 +124,32 @@ class SlidingWindow:
         the estimate by the actual usage."""
         if entry.ends is None:
             entry.ends = now
+            if entry.held:
+                self._flight.discard(entry)
+                self._queue(entry)
         if amount is not None:
-            if any(e is entry for e in self._entries):
+            if entry.held:
                 self.total += amount - entry.amount
             entry.amount = amount
 
     def remove(self, entry: _Entry) -> None:
-        for i, e in enumerate(self._entries):
-            if e is entry:
-                del self._entries[i]
-                self.total -= e.amount
+        if not entry.held:
+            return
+        if entry in self._flight:
+            self._flight.discard(entry)
+        else:
+            for i, e in enumerate(self._ending):
+                if e is entry:
+                    del self._ending[i]
+                    break
+            else:
                 return
+        entry.held = False
+        self.total -= entry.amount
 
     def usage(self, now: float) -> tuple[int, int]:
         self._prune(now)
-        return len(self._entries), self.total
+        return len(self._flight) + len(self._ending), self.total
 
 
 @dataclass

@@ -26,6 +26,26 @@ def test_sliding_window_counts_entries_until_a_window_after_their_response():
     assert w.usage(now=7.0) == (2, 5)
 
 
+def test_a_window_follows_the_end_of_each_entrys_window_not_the_admission_order():
+    """Responses arrive out of admission order (and a test's clock may go back): the room a window
+    finds, its pruning and a late usage correction follow each entry's own end, and a pruned
+    entry's correction no longer counts."""
+    w = SlidingWindow(limit=10, span_s=6.0)
+    a, b, c = w.add(3, now=0.0), w.add(3, now=0.1), w.add(3, now=0.2)
+    w.finish(c, now=1.0)
+    w.finish(a, now=3.0)
+    w.finish(b, now=2.0)  # before a's end although it came back later
+    assert w.wait_s(4, now=3.0) == 4.0  # c's window ends at 1 + 6
+    assert w.wait_s(7, now=3.0) == 5.0  # then b's, at 2 + 6
+    assert w.wait_s(10, now=3.0) == 6.0  # then a's, at 3 + 6
+    assert w.usage(now=7.0) == (2, 6)  # c left
+    assert w.usage(now=8.0) == (1, 3)  # b too
+    w.finish(b, now=8.0, amount=1)  # a late correction of a pruned entry: not counted
+    assert w.usage(now=8.0) == (1, 3)
+    w.remove(a)
+    assert w.usage(now=8.0) == (0, 0)
+
+
 def test_admission_anchor_counts_from_admission():
     w = SlidingWindow(limit=10, span_s=6.0, anchor="admission")
     w.add(4, now=0.0)
