@@ -11,6 +11,10 @@ calls against their no-queue baseline and, where the server reports it, its queu
 
 The rule, per finished call (:meth:`AdaptiveLimit.observe`):
 
+* a call's latency is counted per output token when the reply's size is known: an LLM call's
+  time grows with the tokens it generates, so a 250-token reply is not 25 times as slow as a
+  10-token one in the sense that matters, while a replica holding more calls than it can batch
+  slows every token (vLLM's time per output token) and queues the rest;
 * the baseline is the least latency among the last ``baseline_samples`` calls (the no-queue
   round trip: Envoy's minRTT), this one included;
 * the call is *congested* when its latency exceeds ``tolerance x baseline``, or the server
@@ -44,6 +48,7 @@ class LimitChange:
     after: int
     #: ``latency``, ``queue``, ``error`` (a decrease) or ``recovered`` (an increase)
     reason: str
+    #: the call's latency (per output token when its size was known) and the baseline's
     latency_s: float | None
     baseline_s: float | None
     queue: int | None
@@ -81,9 +86,12 @@ class AdaptiveLimit:
     def baseline_s(self) -> float | None:
         return min(self._recent) if self._recent else None
 
-    def observe(self, latency_s: float, queue: int | None = None) -> LimitChange | None:
-        """A call came back after ``latency_s`` (admission to reply); ``queue``: the requests the
-        server reports waiting, when it reports them. The change of :attr:`slots`, if any."""
+    def observe(self, latency_s: float, queue: int | None = None, output_tokens: int | None = None) -> LimitChange | None:
+        """A call came back after ``latency_s`` (admission to reply) with ``output_tokens`` (when
+        known: the latency is then counted per output token); ``queue``: the requests the server
+        reports waiting, when it reports them. The change of :attr:`slots`, if any."""
+        if output_tokens is not None and output_tokens > 0:
+            latency_s = latency_s / output_tokens
         self._recent.append(latency_s)
         baseline = min(self._recent)
         if queue is not None and queue > 0:

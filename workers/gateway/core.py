@@ -444,13 +444,14 @@ class DeploymentGateway(CallRecorder):
                 self.counts["retry_after_refused"] += 1
                 raise FinalFailure(refused) from None
             raise (Retryable if c.retryable else FinalFailure)(c) from None
-        actual = None  # the token window learns the reported usage only when it is plausible
+        actual = output = None  # the token window learns the reported usage only when it is plausible
         try:
             call.settlement = settled = settle(cfg.model, self.price, attempt, call.sizing)
             if not settled.rejected and settled.usage.token_count_source == "provider":
                 actual = settled.usage.prompt_tokens + settled.usage.completion_tokens
+                output = settled.usage.completion_tokens  # a served model's limit counts latency per output token
         finally:
-            self.admission.release(ticket, "ok", actual_tokens=actual)
+            self.admission.release(ticket, "ok", actual_tokens=actual, output_tokens=output)
         return attempt
 
     def _untrusted(self) -> BudgetRefusal | None:

@@ -230,6 +230,7 @@ class AdmissionController:
         actual_tokens: int | None = None,
         retry_after_s: float | None = None,
         pause: bool = True,
+        output_tokens: int | None = None,
     ) -> None:
         """``outcome``: ``ok`` or an error kind. Corrects the token entry on success.
 
@@ -254,7 +255,7 @@ class AdmissionController:
                 wait = self.rate_limit_default_wait_s if retry_after_s is None else retry_after_s
                 self.paused_until = max(self.paused_until, now + wait)
         if self.adaptive is not None and outcome != "cancelled":
-            self._adapt(outcome, now - ticket.admitted_at)
+            self._adapt(outcome, now - ticket.admitted_at, output_tokens)
         self._window_changed.set()  # a finished request may make room in the windows
         self._wake()
 
@@ -269,10 +270,11 @@ class AdmissionController:
         self._window_changed.set()
         self._wake()
 
-    def _adapt(self, outcome: str, latency_s: float) -> None:
+    def _adapt(self, outcome: str, latency_s: float, output_tokens: int | None) -> None:
         """A served model's limit follows its latency and capacity errors (workers.gateway.adaptive)."""
         assert self.adaptive is not None
-        change = self.adaptive.observe(latency_s) if outcome == "ok" else self.adaptive.failed(outcome)
+        ok = outcome == "ok"
+        change = self.adaptive.observe(latency_s, output_tokens=output_tokens) if ok else self.adaptive.failed(outcome)
         self.limit = float(self.adaptive.slots)
         if change is not None and self.on_limit is not None:
             self.on_limit(change)

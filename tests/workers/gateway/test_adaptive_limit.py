@@ -112,3 +112,14 @@ def test_admission_keeps_no_more_calls_in_flight_than_the_adapted_limit():
         LimitChange(2, 1, "error", None, 1.0, None),
         LimitChange(1, 2, "recovered", 1.0, 1.0, None),
     ]
+
+
+def test_latency_is_counted_per_output_token_when_the_reply_size_is_known():
+    limit = AdaptiveLimit(floor=1, ceiling=4)
+    # 1 s for 10 tokens, then 20 s for 250 tokens: 0.1 and 0.08 s a token, not congested
+    assert limit.observe(1.0, output_tokens=10) is None and limit.observe(20.0, output_tokens=250) is None
+    assert limit.baseline_s == 0.08
+    # 2 s for 10 tokens: 0.2 s a token, over twice the 0.08 baseline
+    assert limit.observe(2.0, output_tokens=10) == LimitChange(4, 2, "latency", 0.2, 0.08, None)
+    # no size: 5 s as is (slow, but within the round of the last decrease: no change)
+    assert limit.observe(5.0, output_tokens=0) is None and (limit.baseline_s, limit.slots) == (0.08, 2)
