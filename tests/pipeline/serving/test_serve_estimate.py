@@ -41,7 +41,7 @@ def test_a_served_model_is_priced_by_the_replica_hours_of_its_output_tokens_at_t
     # 4 workers fill half of 2 replicas x 4 slots: 660 / (10 x 2 x 0.5) = 66 s held by 2 replicas
     # = 0.0367 replica-hours x $36 = $1.32; 10250 tokens: 1025 s, $20.50
     assert g.cost is not None and (g.cost.low, g.cost.high) == (pytest.approx(1.32), pytest.approx(20.5))
-    assert (g.throughput.tokens_per_s, g.throughput.source) == (10, "from the sweep")
+    assert g.throughput is not None and (g.throughput.tokens_per_s, g.throughput.source) == (10, "from the sweep")
     text = _text([g], plan)
     assert "1.32 - 20.50" in text and "total: 1 unit, 11 - 41 calls, $1.32 - $20.50" in text
     assert "served-expert: served, 10.0 output tokens/s a replica (from the sweep), 2 x $36/replica-hour, efficiency 0.50" in text
