@@ -11,7 +11,10 @@ The estimate is deliberately a *range* from a simple model of each method, not a
   on the instance itself, at 4 characters per token) plus the sliding window, which fills with
   one observation and one reply per step up to its size K.
 * cost: those tokens at the model's price (sweep override, else the repo price table); the low
-  end bills half of each prompt at the cached-input price.
+  end bills half of each prompt at the cached-input price. A model the sweep serves itself
+  (``models[].serve``) is priced by the replica-hours its output tokens take at its tokens/s -
+  ``serve.tokens_per_s`` in the sweep, or measured by ``recap estimate --probe``
+  (:mod:`pipeline.serving.throughput`); the source is printed with the figure.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ from typing import Any
 
 from rich.markup import escape
 
+from pipeline.serving.engines import serve_plan
+from pipeline.serving.throughput import Throughput, efficiency, serving_cost, sweep_throughput
 from pipeline.spec import SweepSpec
 from pipeline.summary import model_label
 from pipeline.tables import Col, print_fitted
@@ -106,9 +111,13 @@ class GroupEstimate:
     calls: Range = None  # type: ignore[assignment]
     tokens: Range = None  # type: ignore[assignment]
     cost: Range | None = None
+    #: the output tokens of ``tokens`` (what a served model's replica-hours are priced by)
+    output: Range = None  # type: ignore[assignment]
+    #: a served model: the tokens/s its cost was priced at (None: neither given nor probed)
+    throughput: Throughput | None = None
 
     def __post_init__(self) -> None:
-        self.calls, self.tokens = Range(), Range()
+        self.calls, self.tokens, self.output = Range(), Range(), Range()
 
 
 def call_shape(method: str) -> tuple[bool, tuple[float, float]]:
@@ -140,11 +149,14 @@ def instances_to_measure(plan: Plan) -> int:
     return len({(u.instance_id, float(u.step_multiplier)) for u in plan.units})
 
 
-def estimate(plan: Plan) -> list[GroupEstimate]:
+def estimate(plan: Plan, measured: dict[str, Throughput] | None = None) -> list[GroupEstimate]:
     """One :class:`GroupEstimate` per (method label, model label) of the plan, in the order first
     seen. Calls come from the method's call shape and the instance's steps, clipped to
-    ``max_llm_calls``; tokens from the sliding-window model; dollars from the model's price."""
+    ``max_llm_calls``; tokens from the sliding-window model; dollars from the model's price, or
+    for a served model from its replica-hours at the tokens/s of the sweep or of ``measured``
+    (model label -> what a probe measured)."""
     spec = plan.spec
+    throughput = {**(measured or {}), **sweep_throughput(spec)}
     # keyed by the step multiplier too: methods of one sweep may run an instance at different caps
     shapes: dict[tuple[str, float], InstanceShape] = {}
     groups: dict[tuple[str, str], GroupEstimate] = {}
@@ -177,7 +189,10 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
         g.units += 1
         g.calls.add(c_low, c_high)
         g.tokens.add(p_low + o_low, p_high + o_high)
+        g.output.add(o_low, o_high)
         price = _price(spec, u.model_label)
+        if spec.model(u.model_label).serve is not None:
+            continue  # priced by its replica-hours below
         if price is not None:
             r_in, r_cached, r_out = (x / 1e12 for x in price.rates())
             low = p_low / 2 * r_cached + p_low / 2 * r_in + o_low * r_out
@@ -185,6 +200,13 @@ def estimate(plan: Plan) -> list[GroupEstimate]:
             if g.cost is None:
                 g.cost = Range()
             g.cost.add(low, high)
+    for g in groups.values():
+        m = spec.model(g.model)
+        if m.serve is not None and g.model in throughput:
+            splan, g.throughput = serve_plan(m), throughput[g.model]
+            low_cost = serving_cost(g.output.low, splan, g.throughput.tokens_per_s, spec.workers)
+            high_cost = serving_cost(g.output.high, splan, g.throughput.tokens_per_s, spec.workers)
+            g.cost = Range(low_cost.usd, high_cost.usd)
     return list(groups.values())
 
 
@@ -230,7 +252,33 @@ def render(plan: Plan, groups: list[GroupEstimate], needs: Sequence[str], consol
     if cap is not None:
         verdict = "fits" if total_cost.high <= cap else ("may be reached" if total_cost.low <= cap else "will be reached")
         console.print(f"run cap ${cap:.2f}: {verdict}")
+    for label, t, splan in _served_lines(plan.spec, groups):
+        console.print(
+            escape(
+                f"{label}: served, {t.tokens_per_s:,.1f} output tokens/s a replica ({t.source}), {splan.replicas} x "
+                f"${splan.usd_per_replica_hour:g}/replica-hour, efficiency {efficiency(splan, plan.spec.workers):.2f}"
+            ),
+            soft_wrap=True,
+        )
+    for label in _served_unpriced(plan.spec, groups):
+        console.print(
+            escape(f"{label}: served, no tokens/s: give serve.tokens_per_s or run recap estimate --probe"), soft_wrap=True
+        )
     if needs:  # one per line, never wrapped: each is a phrase to read (and grep) whole
         console.print("a run still needs (recap run refuses until then):", soft_wrap=True)
         for need in needs:
             console.print(escape(f"  - {need}"), soft_wrap=True)
+
+
+def _served_lines(spec: SweepSpec, groups: list[GroupEstimate]) -> list[tuple[str, Throughput, Any]]:
+    """(label, tokens/s, plan) of each served model priced by its tokens/s, once each."""
+    seen: dict[str, tuple[str, Throughput, Any]] = {}
+    for g in groups:
+        if g.throughput is not None and g.model not in seen:
+            seen[g.model] = (g.model, g.throughput, serve_plan(spec.model(g.model)))
+    return list(seen.values())
+
+
+def _served_unpriced(spec: SweepSpec, groups: list[GroupEstimate]) -> list[str]:
+    """The served models with no tokens/s to price them by."""
+    return list(dict.fromkeys(g.model for g in groups if g.throughput is None and spec.model(g.model).serve is not None))

@@ -99,6 +99,7 @@ EventKind = Literal[
     "call_failed",
     "usage_rejected",
     "orphans_charged",
+    "concurrency_limit",
     "ledger_restored",
 ]
 EVENT_KINDS: tuple[str, ...] = get_args(EventKind)

@@ -1,9 +1,11 @@
-"""``recap estimate SPEC``: the plan and its expected cost, without connecting to Ray or calling any model."""
+"""``recap estimate SPEC``: the plan and its expected cost, without connecting to Ray or calling any model
+(``--probe``: the models the sweep serves itself are deployed briefly to measure their tokens/s)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from pipeline.cli.common import OneLineParser, named_source
 from pipeline.cli.console import render_safely
@@ -18,9 +20,13 @@ _EPILOG = """\
 examples:
   recap estimate examples/real-model.yaml
   recap estimate examples/demo.yaml
+  recap estimate examples/served/cross-model-vllm.yaml --probe --address auto
 
 Reads the sweep file only: no model is called, nothing is written. What a run would still
 need on this machine (images, the Docker daemon) is listed under the estimate, not refused.
+A model the sweep serves itself is priced by its replica-hours at serve.tokens_per_s; --probe
+measures that figure for the served models without it (deployed on Ray, a few requests, then
+taken down: the one case where estimate calls a model).
 exit status: 0 shown; 2 bad sweep file
 """
 
@@ -34,6 +40,12 @@ def add_parser(sub: argparse._SubParsersAction[OneLineParser], name: str, help: 
         description="Units, model calls, tokens and a cost range of a sweep file, before anything is spent.",
     )
     es.add_argument("spec", help="the sweep file (YAML)")
+    es.add_argument(
+        "--probe",
+        action="store_true",
+        help="deploy the served models without serve.tokens_per_s, measure their output tokens/s, take them down",
+    )
+    es.add_argument("--address", default=None, help="the Ray cluster a probe deploys on (default: a local one)")
 
 
 def execute(args: argparse.Namespace, command: str) -> int:
@@ -50,7 +62,29 @@ def execute(args: argparse.Namespace, command: str) -> int:
             check_models(spec)  # what run refuses before any call, estimate refuses too (keys aside)
         with slow_notice("checking that every unit can start its episode"):
             check_plan(plan, needs)
+        measured = None
+        if args.probe:
+            with slow_notice("probing the served models' tokens/s (deploying them on Ray)"):
+                measured = _probe(spec, args.address)
     with slow_notice(f"measuring {count(instances_to_measure(plan), 'instance')}"):
-        groups = estimate(plan)
+        groups = estimate(plan, measured)
     render_safely(render, plan, groups, needs)
     return 0
+
+
+def _probe(spec: Any, address: str | None) -> dict[str, Any]:
+    """The tokens/s of the served models the sweep gives no figure for (pipeline.serving.throughput)."""
+    labels = [m.name for m in spec.models if m.serve is not None and m.serve.tokens_per_s is None]
+    if not labels:
+        return {}
+    from pipeline.raysetup import init_ray, shutdown_ray  # lazy: Ray loads only for a probe
+    from pipeline.serving.checks import check_serving
+    from pipeline.serving.throughput import probe
+
+    check_serving(spec)  # the engine installed, the weights here: refused in one line otherwise
+    started = init_ray(spec.ray, address)
+    try:
+        return probe(spec, labels)
+    finally:
+        if started:
+            shutdown_ray()

@@ -8,5 +8,10 @@
   ``replicas x max_in_flight`` calls outstanding, stopped at the end of the session, on
   Ctrl-C, and by the next session of the run when a killed driver left it;
 - :mod:`pipeline.serving.cost`: the replica-hours held, charged to the run's ledger as they
-  accrue and attributed to the model's calls by their tokens.
+  accrue and attributed to the model's calls by their tokens;
+- :mod:`pipeline.serving.throughput`: what ``recap estimate`` prices a served model by - its
+  output tokens/s, from the sweep (``serve.tokens_per_s``) or measured by a short probe.
+
+The gateway's in-flight limit for a served model adapts to its replicas' latency
+(:mod:`workers.gateway.adaptive`).
 """

@@ -100,18 +100,27 @@ def application(plan: ServePlan, deployment_name: str) -> Any:
     return _llm_application(plan)
 
 
+def engine_kwargs(plan: ServePlan) -> dict[str, Any]:
+    """vLLM's / SGLang's engine arguments: the tensor parallel degree of a replica's GPUs and
+    automatic prefix caching on (ReCAP re-sends long prefixes: the pinned demonstration and task,
+    the window), each unless the sweep's ``engine_args`` set it; the rest passed as they are.
+    The server reports the prompt tokens it read from the cache as
+    ``usage.prompt_tokens_details.cached_tokens``, which the gateway records in
+    ``llm_calls.cached_prompt_tokens`` like a provider's cache hits (workers.llm.calling)."""
+    return {"tensor_parallel_size": plan.gpus, "enable_prefix_caching": True, **plan.engine_args}
+
+
 def _llm_application(plan: ServePlan) -> Any:
     """vLLM / SGLang through ``ray.serve.llm`` (only where it is installed: preflight refuses otherwise)."""
     from ray.serve.llm import LLMConfig, build_openai_app  # lazy: Ray's LLM serving needs vLLM
 
-    engine_kwargs = {"tensor_parallel_size": plan.gpus, "enable_prefix_caching": True, **plan.engine_args}
     config: dict[str, Any] = {
         "model_loading_config": {"model_id": plan.served_name, "model_source": plan.weights},
         "deployment_config": {
             "num_replicas": plan.replicas,
             "max_ongoing_requests": plan.max_in_flight,
         },
-        "engine_kwargs": engine_kwargs,
+        "engine_kwargs": engine_kwargs(plan),
     }
     if plan.engine == "sglang":
         config["llm_engine"] = "SGLang"

@@ -13,8 +13,10 @@ its run left.
   reports all its replicas running (a replica runs once its health check passed: Serve calls
   each replica's ``check_health``) and the route answers ``GET .../v1/models``; not ready
   within ``ready_timeout_s``, or failed: one line, the session stops before any unit.
-* the gateway: ``api_base`` = the route, ``max_concurrency`` = replicas x max_in_flight
-  (:meth:`ServedModels.deployment_updates`).
+* the gateway: ``api_base`` = the route, ``max_concurrency`` = replicas x max_in_flight, the
+  in-flight limit adapting between ``replicas`` and that to the calls' latency against their
+  no-queue baseline and to capacity errors (:mod:`workers.gateway.adaptive`; each change an
+  ``events`` row of kind ``concurrency_limit``) (:meth:`ServedModels.deployment_updates`).
 * a replica that dies mid-run: Serve starts another; the calls it held fail with a 5xx and the
   gateway retries them (``server_error``), so an episode never sees the loss.
 * stop: :meth:`ServedModels.close` (the session's end, Ctrl-C: the driver's ``finally``).
@@ -208,8 +210,13 @@ class ServedModels:
 
     def deployment_updates(self) -> dict[str, dict[str, Any]]:
         """Model name -> the gateway deployment's fields the service sets: the route as
-        ``api_base`` and every replica's share of calls as ``max_concurrency``."""
-        return {label: {"api_base": s.api_base, "max_concurrency": s.plan.concurrency} for label, s in self.served.items()}
+        ``api_base``, every replica's share of calls as ``max_concurrency``, and one call per
+        replica as ``min_concurrency`` (the in-flight limit adapts between them to the replicas'
+        latency and lost replicas: workers.gateway.adaptive)."""
+        return {
+            label: {"api_base": s.api_base, "max_concurrency": s.plan.concurrency, "min_concurrency": s.plan.replicas}
+            for label, s in self.served.items()
+        }
 
     def close(self) -> None:
         """Take this run's applications down (and Serve, when this session started it)."""

@@ -57,6 +57,8 @@ LIST_MAX = 100
 #: served models (models[].serve): replicas of one model, GPUs of one replica (tensor parallel)
 SERVE_REPLICAS_MAX = 256
 SERVE_GPUS_MAX = 64
+#: output tokens per second of one replica
+SERVE_TOKENS_PER_S_MAX = 1e7
 SAMPLING_SEEDS_MAX = 10_000
 SELECTORS_MAX = 1000
 INSTANCES_MAX = 10_000
@@ -102,6 +104,7 @@ NUMBER_BOUNDS: dict[str, Bound] = {
     "models[].serve.cpus_per_replica": Bound(WORKER_CPUS_MIN, WORKER_CPUS_MAX),
     "models[].serve.max_in_flight": Bound(1, CONCURRENCY_MAX),
     "models[].serve.ready_timeout_s": Bound(1, SECONDS_MAX),
+    "models[].serve.tokens_per_s": Bound(0.001, SERVE_TOKENS_PER_S_MAX),
     "environments[].limit": Bound(1, LIMIT_MAX),
     "limits.llm_calls": Bound(1, LLM_CALLS_MAX),
     "limits.tokens": Bound(1, TOKENS_MAX),

@@ -48,6 +48,9 @@ class ServeSpec(StrictModel):
     max_in_flight: Annotated[int, NOT_BOOL, Bounded("models[].serve.max_in_flight")] = 8
     #: seconds the sweep waits for every replica to answer its health request
     ready_timeout_s: Annotated[float, NOT_BOOL, Bounded("models[].serve.ready_timeout_s")] = 900.0
+    #: output tokens per second of one replica holding its max_in_flight calls: what ``recap
+    #: estimate`` prices the replica-hours by (None: ``recap estimate --probe`` measures it)
+    tokens_per_s: Annotated[float, NOT_BOOL, Bounded("models[].serve.tokens_per_s")] | None = None
     #: passed to the engine as they are (vLLM's engine_kwargs, llama.cpp server settings)
     engine_args: dict[str, Any] = Field(default_factory=dict)
 

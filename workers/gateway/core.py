@@ -63,6 +63,7 @@ from tenacity import (
 
 from recap.llm import LLMError, LLMRequest, LLMResponse
 from schemas.outcomes import BudgetRefusal
+from workers.gateway.adaptive import AdaptiveLimit, LimitChange
 from workers.gateway.call_log import CallLog, run_id_of, writer_name
 from workers.gateway.call_records import CallRecorder
 from workers.gateway.call_state import (
@@ -145,6 +146,8 @@ class DeploymentGateway(CallRecorder):
             rate_limit_default_wait_s=config.rate_limit_default_wait_s,
             anchor=config.window_anchor,
             clock=clock,
+            adaptive=self._adaptive_limit(config),
+            on_limit=self._limit_changed,
         )
         self.call_log = call_log or CallLog(self.run_dir, self.run_id, writer_name(self.deployment))
         self._clock = clock
@@ -180,6 +183,29 @@ class DeploymentGateway(CallRecorder):
             self._flusher = None
         self.call_log.flush()
         await self.budget.close()  # a shared budget only confirms this gateway's settlements
+
+    @staticmethod
+    def _adaptive_limit(config: DeploymentConfig) -> AdaptiveLimit | None:
+        """A served model's latency-driven in-flight limit (``min_concurrency`` set: pipeline.serving)."""
+        if config.min_concurrency is None:
+            return None
+        return AdaptiveLimit(floor=min(config.min_concurrency, config.max_concurrency), ceiling=config.max_concurrency)
+
+    def _limit_changed(self, change: LimitChange) -> None:
+        """Each change of the adaptive in-flight limit is an ``events`` row (the limit over time, in SQL)."""
+        self.call_log.add_event(
+            "concurrency_limit",
+            "info",
+            {
+                "deployment": self.deployment,
+                "limit": change.after,
+                "before": change.before,
+                "reason": change.reason,
+                "latency_s": None if change.latency_s is None else round(change.latency_s, 4),
+                "baseline_s": None if change.baseline_s is None else round(change.baseline_s, 4),
+                "queue": change.queue,
+            },
+        )
 
     # ---- the call ----
     async def complete(self, request: LLMRequest) -> LLMResponse:
@@ -418,13 +444,14 @@ class DeploymentGateway(CallRecorder):
                 self.counts["retry_after_refused"] += 1
                 raise FinalFailure(refused) from None
             raise (Retryable if c.retryable else FinalFailure)(c) from None
-        actual = None  # the token window learns the reported usage only when it is plausible
+        actual = output = None  # the token window learns the reported usage only when it is plausible
         try:
             call.settlement = settled = settle(cfg.model, self.price, attempt, call.sizing)
             if not settled.rejected and settled.usage.token_count_source == "provider":
                 actual = settled.usage.prompt_tokens + settled.usage.completion_tokens
+                output = settled.usage.completion_tokens  # a served model's limit counts latency per output token
         finally:
-            self.admission.release(ticket, "ok", actual_tokens=actual)
+            self.admission.release(ticket, "ok", actual_tokens=actual, output_tokens=output)
         return attempt
 
     def _untrusted(self) -> BudgetRefusal | None:

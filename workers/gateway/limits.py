@@ -12,7 +12,9 @@ before the call (counted prompt + max output) and corrected to the reported usag
 Concurrency is AIMD: halve the in-flight limit on HTTP 429 (at most once per Retry-After
 pause) and add 1/limit per success, back up to ``max_concurrency``. A 429's Retry-After
 pauses every new attempt of the deployment. 5xx and timeouts retry without shrinking.
-Admission is FIFO: one waiter at a time holds the window lock, so large requests do not starve.
+A served model (``DeploymentConfig.min_concurrency`` set) adapts its in-flight limit instead to the
+replicas' latency and capacity errors, between that floor and ``max_concurrency``
+(:mod:`workers.gateway.adaptive`). Admission is FIFO: one waiter at a time holds the window lock, so large requests do not starve.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+
+from workers.gateway.adaptive import AdaptiveLimit, LimitChange
 
 
 class AdmissionError(ValueError):
@@ -178,8 +182,13 @@ class AdmissionController:
         rate_limit_default_wait_s: float = 5.0,
         anchor: str = "response",
         clock: Callable[[], float] = time.monotonic,
+        adaptive: AdaptiveLimit | None = None,
+        on_limit: Callable[[LimitChange], None] | None = None,
     ):
         self._clock = clock
+        #: a served model's latency-driven limit (workers.gateway.adaptive); None: AIMD on 429 only
+        self.adaptive = adaptive
+        self.on_limit = on_limit
         self.requests = SlidingWindow(rpm, window_s + pad_s, anchor)
         self.tokens = SlidingWindow(tpm, window_s + pad_s, anchor)
         self.max_concurrency = max_concurrency
@@ -257,6 +266,7 @@ class AdmissionController:
         actual_tokens: int | None = None,
         retry_after_s: float | None = None,
         pause: bool = True,
+        output_tokens: int | None = None,
     ) -> None:
         """``outcome``: ``ok`` or an error kind. Corrects the token entry on success.
 
@@ -270,7 +280,7 @@ class AdmissionController:
         now = self._clock()
         self.requests.finish(ticket.request_entry, now)
         self.tokens.finish(ticket.token_entry, now, actual_tokens if outcome == "ok" else None)
-        if outcome == "ok":
+        if outcome == "ok" and self.adaptive is None:
             self.limit = min(float(self.max_concurrency), self.limit + 1.0 / self.limit)
         elif outcome == "rate_limit":
             self.rate_limited += 1
@@ -280,6 +290,8 @@ class AdmissionController:
             if pause:
                 wait = self.rate_limit_default_wait_s if retry_after_s is None else retry_after_s
                 self.paused_until = max(self.paused_until, now + wait)
+        if self.adaptive is not None and outcome != "cancelled":
+            self._adapt(outcome, now - ticket.admitted_at, output_tokens)
         self._window_changed.set()  # a finished request may make room in the windows
         self._wake()
 
@@ -293,6 +305,15 @@ class AdmissionController:
         self.tokens.remove(ticket.token_entry)
         self._window_changed.set()
         self._wake()
+
+    def _adapt(self, outcome: str, latency_s: float, output_tokens: int | None) -> None:
+        """A served model's limit follows its latency and capacity errors (workers.gateway.adaptive)."""
+        assert self.adaptive is not None
+        ok = outcome == "ok"
+        change = self.adaptive.observe(latency_s, output_tokens=output_tokens) if ok else self.adaptive.failed(outcome)
+        self.limit = float(self.adaptive.slots)
+        if change is not None and self.on_limit is not None:
+            self.on_limit(change)
 
     # ---- control ----
     def pause(self) -> None:
@@ -311,6 +332,10 @@ class AdmissionController:
         if max_concurrency is not None:
             self.max_concurrency = max_concurrency
             self.limit = float(max_concurrency)
+            if self.adaptive is not None:  # the new ceiling, from where the limit adapts again
+                self.adaptive.ceiling = max_concurrency
+                self.adaptive.floor = min(self.adaptive.floor, max_concurrency)
+                self.adaptive.limit = self.limit
         self._window_changed.set()
         self._wake()
 

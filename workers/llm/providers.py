@@ -195,6 +195,9 @@ class DeploymentConfig(BaseModel):
     #: delays); "admission": for window_s after it was admitted (pad must cover send delays)
     window_anchor: Literal["response", "admission"] = "response"
     max_concurrency: int = Field(default=16, gt=0)
+    #: set (a served model: pipeline.serving): the in-flight limit adapts to the server's latency
+    #: and capacity errors between this floor and ``max_concurrency`` (workers.gateway.adaptive)
+    min_concurrency: int | None = Field(default=None, gt=0)
     max_attempts: int = Field(default=6, gt=0)
     total_timeout_s: float = Field(default=900.0, gt=0)
     attempt_timeout_s: float = Field(default=120.0, gt=0)

@@ -12,30 +12,69 @@ label it a test double.
 
 ``engine_args``: ``latency_s`` (seconds each answer waits, so that calls are in flight when a
 test kills a replica). Nothing else is accepted (:data:`ENGINE_ARGS`).
+
+Prefix caching, as vLLM's automatic prefix caching reports it: each replica remembers the
+message prefixes it has seen (:class:`PrefixCache`, per replica like vLLM's KV cache), and an
+answer reports the prompt tokens of the longest one the request repeats as
+``usage.prompt_tokens_details.cached_tokens`` (message-granular where vLLM is block-granular),
+so a test can assert the cache columns of ``llm_calls`` exactly.
 """
 
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import json
 import os
 import time
 import uuid
-from collections.abc import Mapping
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from workers.llm.offline.provider import offline_reply
 from workers.llm.offline.wire import OFFLINE_METADATA_KEY
-from workers.llm.tokens import estimate_prompt_tokens, estimate_text_tokens
+from workers.llm.tokens import REPLY_PRIMING_TOKENS, estimate_prompt_tokens, estimate_text_tokens
 
 #: the engine arguments the test double takes
 ENGINE_ARGS = ("latency_s",)
 #: what a replica answers on ``GET <route>/health``
 HEALTHY = {"status": "ok"}
+#: message prefixes a replica remembers (the least recently used leave first)
+PREFIX_CACHE_SIZE = 4096
 
 
-def chat_answer(body: Mapping[str, Any]) -> dict[str, Any]:
+class PrefixCache:
+    """The message prefixes one replica has seen; :meth:`cached_tokens` of a request is the prompt
+    tokens of the longest prefix of its messages seen before (each message's chars/4 + 3, the
+    usage estimate's own count), and remembers every prefix of the request."""
+
+    def __init__(self, size: int = PREFIX_CACHE_SIZE) -> None:
+        self.size = size
+        self._seen: OrderedDict[str, None] = OrderedDict()
+
+    def cached_tokens(self, messages: Sequence[Mapping[str, Any]]) -> int:
+        digest = hashlib.sha256()
+        cached = 0
+        missed = False
+        for i, m in enumerate(messages):
+            digest.update(json.dumps([m.get("role"), m.get("content")]).encode())
+            key = digest.hexdigest()
+            if not missed and key in self._seen:
+                cached = estimate_prompt_tokens(messages[: i + 1]) - REPLY_PRIMING_TOKENS
+                self._seen.move_to_end(key)
+            else:
+                missed = True
+                self._seen[key] = None
+        while len(self._seen) > self.size:
+            self._seen.popitem(last=False)
+        return cached
+
+
+def chat_answer(body: Mapping[str, Any], cache: PrefixCache | None = None) -> dict[str, Any]:
     """The OpenAI chat-completion answer to one request body (the test double's reply, its
-    tool calls and the chars/4 usage estimate the in-process provider reports)."""
+    tool calls and the chars/4 usage estimate the in-process provider reports; with ``cache``,
+    the prompt tokens of the prefix it has seen as ``prompt_tokens_details.cached_tokens``)."""
     model = str(body.get("model") or "expert").removeprefix("offline/")
     messages = [{"role": str(m.get("role")), "content": str(m.get("content") or "")} for m in body.get("messages") or []]
     tools = tuple(
@@ -57,13 +96,16 @@ def chat_answer(body: Mapping[str, Any]) -> dict[str, Any]:
         finish = "tool_calls"
     prompt = estimate_prompt_tokens(messages)
     completion = estimate_text_tokens(answer.text + "".join(c["name"] + c["arguments"] for c in answer.tool_calls))
+    usage: dict[str, Any] = {"prompt_tokens": prompt, "completion_tokens": completion, "total_tokens": prompt + completion}
+    if cache is not None:
+        usage["prompt_tokens_details"] = {"cached_tokens": cache.cached_tokens(messages)}
     return {
         "id": f"chatcmpl-{uuid.uuid4().hex[:12]}",
         "object": "chat.completion",
         "created": int(time.time()),
         "model": f"offline/{model}",
         "choices": [{"index": 0, "message": message, "finish_reason": finish}],
-        "usage": {"prompt_tokens": prompt, "completion_tokens": completion, "total_tokens": prompt + completion},
+        "usage": usage,
         # which replica answered (tests check the calls were spread, and which one to kill)
         "system_fingerprint": f"replica-{os.getpid()}",
     }
@@ -78,6 +120,7 @@ class TestDoubleServer:
     def __init__(self, model: str, engine_args: Mapping[str, Any] | None = None) -> None:
         self.model = model
         self.latency_s = float((engine_args or {}).get("latency_s", 0.0))
+        self.prefixes = PrefixCache()
 
     async def __call__(self, request: Any) -> Any:
         from starlette.responses import JSONResponse  # lazy: Serve's web stack loads in the replica
@@ -96,7 +139,7 @@ class TestDoubleServer:
         if self.latency_s:
             await asyncio.sleep(self.latency_s)
         try:
-            return JSONResponse(chat_answer(body))
+            return JSONResponse(chat_answer(body, self.prefixes))
         except ValueError as exc:
             return JSONResponse({"error": {"message": str(exc), "type": "invalid_request_error"}}, status_code=400)
 

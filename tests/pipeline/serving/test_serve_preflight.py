@@ -248,3 +248,23 @@ def test_the_serve_section_is_checked_in_one_line(tmp_path, model, message):
     with pytest.raises(SpecError) as info:
         spec_of(tmp_path, model)
     assert str(info.value) == f"sweep.yaml: {message}"
+
+
+def test_vllm_gets_automatic_prefix_caching_and_its_tensor_parallel_degree_unless_the_sweep_sets_them():
+    from pipeline.serving.engines import engine_kwargs, serve_plan
+
+    def kwargs(serve: str) -> dict:
+        spec = parse_spec(
+            "run: r\noutput: /tmp/x\nmodels:\n  - model: openai/Qwen/Qwen2.5-7B-Instruct\n"
+            f"    serve: {serve}\nmethods: [{{method: react}}]\nenvironments: [{{benchmark: blocksworld, tasks: ['3']}}]\n",
+            "sweep.yaml",
+        )
+        return engine_kwargs(serve_plan(spec.models[0]))
+
+    assert kwargs("{engine: vllm, weights: Qwen/Qwen2.5-7B-Instruct, gpus_per_replica: 2}") == {
+        "tensor_parallel_size": 2,
+        "enable_prefix_caching": True,
+    }
+    assert kwargs(
+        "{engine: vllm, weights: Qwen/Qwen2.5-7B-Instruct, engine_args: {enable_prefix_caching: false, max_model_len: 8192}}"
+    ) == {"tensor_parallel_size": 1, "enable_prefix_caching": False, "max_model_len": 8192}

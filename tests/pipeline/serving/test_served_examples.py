@@ -29,6 +29,8 @@ def test_the_cross_model_example_serves_three_open_weight_models_with_vllm():
     ]
     assert [p.usd_per_replica_hour for p in plans] == [1.20, 1.20, 2.40]  # gpu_hour x GPUs of a replica
     assert [p.concurrency for p in plans] == [64, 32, 16]
+    # recap estimate prices Qwen from the sweep's tokens/s; the other two need a probe
+    assert [m.serve.tokens_per_s for m in spec.models[1:] if m.serve is not None] == [1000, None, None]
     # the cluster file's GPU workers hold the five GPUs the replicas ask for
     raw = yaml.safe_load((SERVED / "cluster.yaml").read_text())
     gpu = raw["available_node_types"]["gpu_worker"]

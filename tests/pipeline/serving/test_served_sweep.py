@@ -104,6 +104,14 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     retried = q("select count(*) from events where kind = 'retry' and detail->>'kind' = 'server_error'")
     calls_retried = q("select coalesce(sum(retries), 0) from llm_calls")
     assert retried[0][0] >= 1 and calls_retried[0][0] >= 1
+    # the in-flight limit adapted between one call a replica and replicas x max_in_flight: the lost
+    # replica's 5xx (or the survivors' slower replies) lowered it, each change an events row
+    limits = q(
+        "select detail->>'reason', (detail->>'before')::int, (detail->>'limit')::int from events "
+        "where kind = 'concurrency_limit' and detail->>'deployment' = 'served-expert' order by ts"
+    )
+    assert limits and limits[0][0] in ("error", "latency") and limits[0][1:] == (4, 2)
+    assert all(2 <= after <= 4 and (after < before) == (why != "recovered") for why, before, after in limits)
 
     # taken down: no application of the run, Serve (which the sweep started) shut down, no actor of it left
     assert not serve_running() and serve_apps() == {} and _serve_actors() == []

@@ -100,7 +100,7 @@ def _make_provider_class() -> type:
     # litellm only once it is imported offline and quiet (workers.llm.litellm_import)
     from litellm import CustomLLM
     from litellm.llms.custom_llm import CustomLLMError
-    from litellm.types.utils import ChatCompletionMessageToolCall, Function, Usage
+    from litellm.types.utils import ChatCompletionMessageToolCall, Function, PromptTokensDetailsWrapper, Usage
 
     class OfflineProvider(CustomLLM):
         """TEST DOUBLE provider for ``offline/expert``, ``offline/random``, ``offline/replay``."""
@@ -130,7 +130,9 @@ def _make_provider_class() -> type:
             completion = estimate_text_tokens(answer.text + "".join(c["name"] + c["arguments"] for c in answer.tool_calls))
             return self._respond(model, model_response, answer, prompt, completion)
 
-        def _respond(self, model: str, model_response: Any, answer: ToolAnswer, prompt: int, completion: int) -> Any:
+        def _respond(
+            self, model: str, model_response: Any, answer: ToolAnswer, prompt: int, completion: int, cached: int = 0
+        ) -> Any:
             text = answer.text
             message = model_response.choices[0].message
             message.content = text
@@ -145,6 +147,8 @@ def _make_provider_class() -> type:
                 model_response.choices[0].finish_reason = "tool_calls"
             model_response.model = f"{PROVIDER}/{model}"
             model_response.usage = Usage(prompt_tokens=prompt, completion_tokens=completion, total_tokens=prompt + completion)
+            if cached:  # a served copy's prefix cache hit, as vLLM reports it
+                model_response.usage.prompt_tokens_details = PromptTokensDetailsWrapper(cached_tokens=cached)
             return model_response
 
         def completion(
@@ -181,7 +185,7 @@ def _make_provider_class() -> type:
                 got = await forward(api_base, body, timeout if isinstance(timeout, (int, float)) else None)
             except RemoteError as exc:
                 raise CustomLLMError(status_code=exc.status_code, message=exc.message) from None
-            return self._respond(model, model_response, got.answer, got.prompt_tokens, got.completion_tokens)
+            return self._respond(model, model_response, got.answer, got.prompt_tokens, got.completion_tokens, got.cached_tokens)
 
     return OfflineProvider
 

@@ -43,6 +43,8 @@ class RemoteAnswer:
     answer: ToolAnswer
     prompt_tokens: int
     completion_tokens: int
+    #: the prompt tokens the server found in its prefix cache (``usage.prompt_tokens_details.cached_tokens``)
+    cached_tokens: int = 0
 
 
 def request_body(
@@ -74,10 +76,12 @@ def parse_answer(data: Mapping[str, Any]) -> RemoteAnswer:
             for c in message.get("tool_calls") or ()
         )
         usage = data.get("usage") or {}
+        details = usage.get("prompt_tokens_details") or {}
         return RemoteAnswer(
             ToolAnswer(str(message.get("content") or ""), calls),
             int(usage.get("prompt_tokens", 0)),
             int(usage.get("completion_tokens", 0)),
+            int(details.get("cached_tokens") or 0),
         )
     except (KeyError, IndexError, TypeError, ValueError) as exc:
         raise RemoteError(502, f"the served test double answered an unreadable body ({type(exc).__name__})") from None
