@@ -74,10 +74,23 @@ def actor_runtime_env(extra: dict[str, str] | None = None) -> dict[str, Any] | N
     worker inherits; a cluster joined with ``--address`` is somebody else's, so its workers get
     the variables the usual way. A variable changed since the start (a test pointing a data
     folder elsewhere) sends the whole environment again."""
-    env_vars = {**runtime_env()["env_vars"], **(extra or {})}
+    full = runtime_env()
+    env_vars = {**full["env_vars"], **(extra or {})}
     if _started_env is not None and env_vars == _started_env:
         return None
-    return {"env_vars": env_vars}
+    return {**full, "env_vars": env_vars}
+
+
+def _setup_hook_var() -> dict[str, str]:
+    """The variable by which Ray runs a ``worker_process_setup_hook`` in each worker it starts
+    (``ray/_private/runtime_env/setup_hook.py``: a hook given as a module path is only this
+    variable, read by ``default_worker.py``): set in a local cluster's raylet environment, the hook
+    runs in every worker without a runtime_env."""
+    try:  # lazy: Ray loads only where a session uses it
+        from ray._private.ray_constants import WORKER_PROCESS_SETUP_HOOK_ENV_VAR
+    except ImportError:  # another Ray layout: the hook comes with runtime_env() only
+        return {}
+    return {WORKER_PROCESS_SETUP_HOOK_ENV_VAR: WORKER_SETUP_HOOK}
 
 
 @contextmanager
@@ -151,7 +164,7 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
         # then starts without Ray's setup_worker step (actor_runtime_env)
         env_vars = runtime_env()["env_vars"]
         try:
-            with _loopback_node(), _lean_head(not ray_spec.dashboard), _worker_environment(env_vars):
+            with _loopback_node(), _lean_head(not ray_spec.dashboard), _worker_environment({**env_vars, **_setup_hook_var()}):
                 ray.init(
                     num_cpus=ray_spec.num_cpus or os.cpu_count() or 2,
                     include_dashboard=ray_spec.dashboard,

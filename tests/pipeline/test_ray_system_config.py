@@ -112,8 +112,14 @@ def test_a_cluster_started_here_gives_its_workers_the_variables_without_a_runtim
         return {name: (pairs[name.encode()].decode() if name.encode() in pairs else None) for name in names}
 
     assert ray.get(start_environment.remote(sorted(wanted)), timeout=120) == wanted
-    monkeypatch.setenv("ROBOTOUILLE_DATA", "/elsewhere/robotouille")
-    assert actor_runtime_env() == {"env_vars": {**wanted, "ROBOTOUILLE_DATA": "/elsewhere/robotouille"}}
-    monkeypatch.undo()
+    hook = runtime_env()["worker_process_setup_hook"]
     assert actor_runtime_env() is None
-    assert actor_runtime_env({"RECAP_SERVICE": "svc-1"}) == {"env_vars": {**wanted, "RECAP_SERVICE": "svc-1"}}
+    assert actor_runtime_env({"RECAP_SERVICE": "svc-1"}) == {
+        "env_vars": {**wanted, "RECAP_SERVICE": "svc-1"},
+        "worker_process_setup_hook": hook,
+    }
+    monkeypatch.setenv("ROBOTOUILLE_DATA", "/elsewhere/robotouille")
+    assert actor_runtime_env() == {
+        "env_vars": {**wanted, "ROBOTOUILLE_DATA": "/elsewhere/robotouille"},
+        "worker_process_setup_hook": hook,
+    }

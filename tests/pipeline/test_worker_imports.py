@@ -65,21 +65,24 @@ def test_a_part_writer_loads_pyarrow_but_not_pandas(tmp_path):
 
 
 @pytest.mark.usefixtures("ray_address")
-def test_an_actor_holding_the_sink_and_budget_handles_loads_nothing_heavy(tmp_path):
-    """A fresh actor started like the episode workers (the pipeline's runtime_env, so Ray's setup
-    hook runs) is handed the run's sink and budget actors, calls them, and imports the episode
-    worker's module: still none of HEAVY in its process."""
+@pytest.mark.parametrize("how", ["the pipeline's (none: the cluster's environment)", "runtime_env()"])
+def test_an_actor_holding_the_sink_and_budget_handles_loads_nothing_heavy(tmp_path, how):
+    """A fresh actor started like the episode workers is handed the run's sink and budget actors,
+    calls them, and imports the episode worker's module: still none of HEAVY in its process. Ray's
+    setup hook runs either way: from the local cluster's environment, as a run's actors start
+    (actor_runtime_env() is None there), or from an explicit runtime_env (a joined cluster)."""
     import ray
 
-    from pipeline.raysetup import runtime_env
+    from pipeline.raysetup import actor_runtime_env, runtime_env
     from workers.gateway.actors import BudgetActor
     from workers.sink import sink_actor
 
-    env = runtime_env()
+    env = runtime_env() if how == "runtime_env()" else actor_runtime_env()
+    assert (env is None) == (how != "runtime_env()")
     sink = sink_actor(env, max_restarts=0).remote(str(tmp_path / "run"), "run-1")
     budget = BudgetActor.options(runtime_env=env).remote(str(tmp_path / "ledger"))
 
-    @ray.remote(num_cpus=0, runtime_env=env)
+    @ray.remote(num_cpus=0)
     class Probe:
         def __init__(self, handles: list) -> None:
             self.handles = handles
@@ -92,7 +95,7 @@ def test_an_actor_holding_the_sink_and_budget_handles_loads_nothing_heavy(tmp_pa
             heavy = sorted(m for m in HEAVY if m in sys.modules)
             return heavy, sink_stats, budget_stats
 
-    probe = Probe.remote([sink, budget])
+    probe = Probe.options(runtime_env=env).remote([sink, budget])
     try:
         heavy, sink_stats, budget_stats = ray.get(probe.loaded.remote(), timeout=180)
     finally:
