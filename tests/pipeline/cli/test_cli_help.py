@@ -4,6 +4,7 @@ description, at least one example; options work before or after the positional a
 from __future__ import annotations
 
 import argparse
+import io
 from pathlib import Path
 
 import pytest
@@ -153,8 +154,36 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 QUERY = "SELECT run_id, count(*) AS n, sum(cost_usd) AS usd FROM terminal GROUP BY run_id ORDER BY run_id"
 
 
+@pytest.fixture
+def query_runs(monkeypatch: pytest.MonkeyPatch) -> dict[str, tuple[str, str, object]]:
+    """``recap sql``'s query process run once per distinct (job, limits): an argv that settles to a job
+    already run gets that run's exact output and status replayed (the query process is a function of
+    them; each costs a Python start with DuckDB and pyarrow). Returns the runs by job, filled as the
+    test goes: a test sees how many distinct jobs its argument orders settled to."""
+    import json
+
+    import pipeline.cli.sql as sql_cli
+
+    real = sql_cli.run_limited
+    done: dict[str, tuple[str, str, object]] = {}
+
+    def once(job, limits, out, err):  # type: ignore[no-untyped-def]
+        key = json.dumps([job, limits.memory_bytes, limits.timeout_s, limits.memory_text], sort_keys=True)
+        if key not in done:
+            o, e = io.StringIO(), io.StringIO()
+            outcome = real(job, limits, o, e)
+            done[key] = (o.getvalue(), e.getvalue(), outcome)
+        text, errors, outcome = done[key]
+        out.write(text)
+        err.write(errors)
+        return outcome
+
+    monkeypatch.setattr(sql_cli, "run_limited", once)
+    return done
+
+
 @pytest.mark.parametrize("opts", [["--csv"], ["--json"], ["--max-rows", "1"]], ids=lambda o: " ".join(o))
-def test_sql_options_in_any_position(runs, opts, capsys):
+def test_sql_options_in_any_position(runs, opts, capsys, query_runs):
     a, b = map(str, runs)
     orders = [
         ["sql", a, *opts, QUERY],
@@ -169,9 +198,10 @@ def test_sql_options_in_any_position(runs, opts, capsys):
     assert results[3][0] == 0 and results[3][1] != results[0][1]  # two runs: more rows
     assert results[:3] == [results[0]] * 3
     assert results[3:] == [results[3]] * 3
+    assert len(query_runs) == 2  # every order settled to the same job as its first (one run, two runs)
 
 
-def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys):
+def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys, query_runs):
     a = str(runs[0])
     q = tmp_path / "q.sql"
     q.write_text(QUERY + "\n")
@@ -190,6 +220,7 @@ def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys):
         for argv in (["sql", a, "@overview", "--json"], ["sql", "--json", a, "@overview"], ["sql", a, "--json", "@overview"])
     ]
     assert named[0][0] == 0 and '"units"' in named[0][1] and named == [named[0]] * 3
+    assert len(query_runs) == 3  # one job per query text (the file keeps its newline), whatever the order
 
 
 def test_report_options_in_any_position(runs, tmp_path, capsys):
