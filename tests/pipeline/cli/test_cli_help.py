@@ -223,7 +223,27 @@ def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys, query_
     assert len(query_runs) == 3  # one job per query text (the file keeps its newline), whatever the order
 
 
-def test_report_options_in_any_position(runs, tmp_path, capsys):
+@pytest.fixture
+def report_builds(monkeypatch: pytest.MonkeyPatch) -> dict[str, object]:
+    """``recap report`` builds its report once per distinct (run folders, options): an argv that settles
+    to a build already made writes that report again (the build is a function of them; the files are
+    still written by each call). Returns the builds by their arguments, filled as the test goes."""
+    import pipeline.cli.report as report_cli
+
+    real = report_cli.build_report
+    done: dict[str, object] = {}
+
+    def once(run_dirs, options):  # type: ignore[no-untyped-def]
+        key = repr(([str(Path(d).resolve()) for d in run_dirs], options))
+        if key not in done:
+            done[key] = real(run_dirs, options)
+        return done[key]
+
+    monkeypatch.setattr(report_cli, "build_report", once)
+    return done
+
+
+def test_report_options_in_any_position(runs, tmp_path, capsys, report_builds):
     a, b = map(str, runs)
     out = str(tmp_path / "rep")
     orders = [
@@ -251,3 +271,4 @@ def test_report_options_in_any_position(runs, tmp_path, capsys):
         assert code == 0, err
         md.append((tmp_path / "rep" / "report.md").read_text())
     assert md == [md[0]] * 3 and md[0] != texts[0][1]
+    assert len(report_builds) == 2  # every order settled to the build of its first (one run, two runs)
