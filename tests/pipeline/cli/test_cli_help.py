@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import io
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -155,7 +156,7 @@ QUERY = "SELECT run_id, count(*) AS n, sum(cost_usd) AS usd FROM terminal GROUP 
 
 
 @pytest.fixture
-def query_runs(monkeypatch: pytest.MonkeyPatch) -> dict[str, tuple[str, str, object]]:
+def query_runs(monkeypatch: pytest.MonkeyPatch) -> dict[str, tuple[str, str, Any]]:
     """``recap sql``'s query process run once per distinct (job, limits): an argv that settles to a job
     already run gets that run's exact output and status replayed (the query process is a function of
     them; each costs a Python start with DuckDB and pyarrow). Returns the runs by job, filled as the
@@ -165,9 +166,9 @@ def query_runs(monkeypatch: pytest.MonkeyPatch) -> dict[str, tuple[str, str, obj
     import pipeline.cli.sql as sql_cli
 
     real = sql_cli.run_limited
-    done: dict[str, tuple[str, str, object]] = {}
+    done: dict[str, tuple[str, str, Any]] = {}
 
-    def once(job, limits, out, err):  # type: ignore[no-untyped-def]
+    def once(job, limits, out, err):
         key = json.dumps([job, limits.memory_bytes, limits.timeout_s, limits.memory_text], sort_keys=True)
         if key not in done:
             o, e = io.StringIO(), io.StringIO()
@@ -224,16 +225,16 @@ def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys, query_
 
 
 @pytest.fixture
-def report_builds(monkeypatch: pytest.MonkeyPatch) -> dict[str, object]:
+def report_builds(monkeypatch: pytest.MonkeyPatch) -> dict[str, Any]:
     """``recap report`` builds its report once per distinct (run folders, options): an argv that settles
     to a build already made writes that report again (the build is a function of them; the files are
     still written by each call). Returns the builds by their arguments, filled as the test goes."""
     import pipeline.cli.report as report_cli
 
     real = report_cli.build_report
-    done: dict[str, object] = {}
+    done: dict[str, Any] = {}
 
-    def once(run_dirs, options):  # type: ignore[no-untyped-def]
+    def once(run_dirs, options):
         key = repr(([str(Path(d).resolve()) for d in run_dirs], options))
         if key not in done:
             done[key] = real(run_dirs, options)
