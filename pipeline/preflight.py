@@ -24,6 +24,7 @@ from unittest import mock
 
 from pipeline.deployments import deployment_config
 from pipeline.errors import PreflightError, SpecError
+from pipeline.litellm_files import provider_names, surely_unroutable
 from pipeline.serving.checks import check_serving
 from pipeline.spec import OFFLINE_PREFIX, ModelSpec, SweepSpec
 from pipeline.units import Plan, Unit, stratum
@@ -94,19 +95,28 @@ def provider_problem(m: ModelSpec) -> str | None:
     provider prefix (``nosuchprovider/zzz``), a model without a prefix litellm does not know
     (``zzz``), or an ``offline/`` name that is not one of the test doubles. Asked of litellm the
     way a call asks it (``get_llm_provider``), so ``gpt-4o`` and ``openai/<anything>`` at an
-    ``api_base`` (a self-hosted server) pass."""
+    ``api_base`` (a self-hosted server) pass. A known provider prefix, and a model string no route
+    of litellm's can take, are answered from litellm's files without importing it
+    (:mod:`pipeline.litellm_files`): a refused sweep file costs no litellm import."""
     if m.test_double:
         name = m.model.removeprefix(OFFLINE_PREFIX)
         if name in OFFLINE_MODELS:
             return None
         return f"unknown test double {m.model!r}; known: {', '.join(OFFLINE_PREFIX + x for x in OFFLINE_MODELS)}"
-    try:
-        import_litellm().get_llm_provider(m.model, api_base=m.api_base)
-        return None
-    except Exception:
-        pass
     prefix, slash, rest = m.model.partition("/")
-    known = _providers()
+    names = provider_names()
+    offline = frozenset({OFFLINE_PREFIX.rstrip("/")})
+    if slash and names is not None and prefix in names:
+        return None  # a provider of litellm's: routed, or known and in need of its settings (check_keys)
+    if names is not None and surely_unroutable(m.model, m.api_base, offline):
+        known = sorted(names)  # litellm's answer, read from its files: refused without importing it
+    else:
+        try:
+            import_litellm().get_llm_provider(m.model, api_base=m.api_base)
+            return None
+        except Exception:
+            pass
+        known = _providers()
     if not slash:
         return (
             f"litellm does not know the model {m.model!r} and it names no provider; write provider/model "

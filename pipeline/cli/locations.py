@@ -11,10 +11,8 @@ from collections.abc import Callable, Sequence
 
 from pipeline.cli.common import CHECKED_LOCATIONS
 from pipeline.errors import PipelineError
-from pipeline.mirror import mirror_dir, pull
 from pipeline.spec import URI_SCHEMES, check_output_location
 from pipeline.store import RUN_FILE, RunStore
-from reports.views import RunDirError, resolve_run_dirs
 from workers.sink import is_uri
 
 #: turns one run-folder argument into a local folder (:func:`local_run_dir`, or none in tests)
@@ -33,6 +31,9 @@ def local_run_dir(arg: str) -> str:
     """One run-folder argument of ``recap sql`` / ``recap report`` as a local folder: an object-store
     run is pulled to its local mirror first. Called for run-folder arguments only (never for a
     query, a title or an output folder); its errors are one line (RunDirError)."""
+    from pipeline.mirror import mirror_dir, pull  # pyarrow and DuckDB: only the commands that read runs
+    from reports.views import RunDirError
+
     if not is_uri(arg):
         return arg
     scheme = arg.split("://", 1)[0].lower()
@@ -58,6 +59,8 @@ def local_run_dir(arg: str) -> str:
 
 def run_folders(raw: Sequence[str], resolve: Resolver | None) -> list[str]:
     """The run-folder arguments, each made local by ``resolve`` and checked (RunDirError, one line)."""
+    from reports.views import resolve_run_dirs
+
     local = [resolve(r) if resolve is not None else r for r in raw]
     resolve_run_dirs(local)
     return local

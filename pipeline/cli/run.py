@@ -17,11 +17,10 @@ from pipeline.backend import ModelBackend
 from pipeline.cli.common import OneLineParser, finite_positive, named_source
 from pipeline.cli.console import console, plain, render_safely, styled
 from pipeline.cli.locations import check_location
-from pipeline.driver import Driver, Prepared, prepare
 from pipeline.errors import PipelineError, RunFolderError
-from pipeline.gateway_backend import make_backend
 from pipeline.local_cluster import reap_dead
 from pipeline.preflight import check_plan
+from pipeline.prepare import Prepared, prepare
 from pipeline.resume import repair_run
 from pipeline.spec import SweepSpec, check_ray_address_reachable, load_spec, parse_spec, with_overrides
 from pipeline.stopping import DEFAULT_GRACE_S
@@ -201,6 +200,9 @@ def _print_plan(prepared: Prepared, out: Console) -> None:
 
 def _execute(prepared: Prepared, args: argparse.Namespace, command: str, backend: ModelBackend | None = None) -> int:
     """Drive the prepared run to its end and print what happened; the session's exit status."""
+    from pipeline.driver import Driver  # Ray and the run's services: imported once a run proceeds
+    from pipeline.gateway_backend import make_backend
+
     for reaped in reap_dead():  # a killed driver's local Ray cluster (pipeline.local_cluster)
         print(f"recap: {reaped.describe()}", file=sys.stderr, flush=True)
     backend = backend if backend is not None else make_backend(prepared.spec)
@@ -269,6 +271,8 @@ def _prepare(spec: SweepSpec, text: str) -> tuple[Prepared, ModelBackend]:
     try:
         prepared = prepare(spec, text)
         check_plan(prepared.plan)  # every (task kind, method) builds, renders its demo and opens: before any call
+        from pipeline.gateway_backend import make_backend  # once the sweep is accepted (a refusal skips it)
+
         return prepared, make_backend(spec)
     except OSError as exc:
         detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

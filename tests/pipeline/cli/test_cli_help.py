@@ -4,7 +4,9 @@ description, at least one example; options work before or after the positional a
 from __future__ import annotations
 
 import argparse
+import io
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -153,8 +155,36 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 QUERY = "SELECT run_id, count(*) AS n, sum(cost_usd) AS usd FROM terminal GROUP BY run_id ORDER BY run_id"
 
 
+@pytest.fixture
+def query_runs(monkeypatch: pytest.MonkeyPatch) -> dict[str, tuple[str, str, Any]]:
+    """``recap sql``'s query process run once per distinct (job, limits): an argv that settles to a job
+    already run gets that run's exact output and status replayed (the query process is a function of
+    them; each costs a Python start with DuckDB and pyarrow). Returns the runs by job, filled as the
+    test goes: a test sees how many distinct jobs its argument orders settled to."""
+    import json
+
+    import pipeline.cli.sql as sql_cli
+
+    real = sql_cli.run_limited
+    done: dict[str, tuple[str, str, Any]] = {}
+
+    def once(job, limits, out, err):
+        key = json.dumps([job, limits.memory_bytes, limits.timeout_s, limits.memory_text], sort_keys=True)
+        if key not in done:
+            o, e = io.StringIO(), io.StringIO()
+            outcome = real(job, limits, o, e)
+            done[key] = (o.getvalue(), e.getvalue(), outcome)
+        text, errors, outcome = done[key]
+        out.write(text)
+        err.write(errors)
+        return outcome
+
+    monkeypatch.setattr(sql_cli, "run_limited", once)
+    return done
+
+
 @pytest.mark.parametrize("opts", [["--csv"], ["--json"], ["--max-rows", "1"]], ids=lambda o: " ".join(o))
-def test_sql_options_in_any_position(runs, opts, capsys):
+def test_sql_options_in_any_position(runs, opts, capsys, query_runs):
     a, b = map(str, runs)
     orders = [
         ["sql", a, *opts, QUERY],
@@ -169,9 +199,10 @@ def test_sql_options_in_any_position(runs, opts, capsys):
     assert results[3][0] == 0 and results[3][1] != results[0][1]  # two runs: more rows
     assert results[:3] == [results[0]] * 3
     assert results[3:] == [results[3]] * 3
+    assert len(query_runs) == 2  # every order settled to the same job as its first (one run, two runs)
 
 
-def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys):
+def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys, query_runs):
     a = str(runs[0])
     q = tmp_path / "q.sql"
     q.write_text(QUERY + "\n")
@@ -190,9 +221,30 @@ def test_sql_file_and_named_query_in_any_position(runs, tmp_path, capsys):
         for argv in (["sql", a, "@overview", "--json"], ["sql", "--json", a, "@overview"], ["sql", a, "--json", "@overview"])
     ]
     assert named[0][0] == 0 and '"units"' in named[0][1] and named == [named[0]] * 3
+    assert len(query_runs) == 3  # one job per query text (the file keeps its newline), whatever the order
 
 
-def test_report_options_in_any_position(runs, tmp_path, capsys):
+@pytest.fixture
+def report_builds(monkeypatch: pytest.MonkeyPatch) -> dict[str, Any]:
+    """``recap report`` builds its report once per distinct (run folders, options): an argv that settles
+    to a build already made writes that report again (the build is a function of them; the files are
+    still written by each call). Returns the builds by their arguments, filled as the test goes."""
+    import pipeline.cli.report as report_cli
+
+    real = report_cli.build_report
+    done: dict[str, Any] = {}
+
+    def once(run_dirs, options):
+        key = repr(([str(Path(d).resolve()) for d in run_dirs], options))
+        if key not in done:
+            done[key] = real(run_dirs, options)
+        return done[key]
+
+    monkeypatch.setattr(report_cli, "build_report", once)
+    return done
+
+
+def test_report_options_in_any_position(runs, tmp_path, capsys, report_builds):
     a, b = map(str, runs)
     out = str(tmp_path / "rep")
     orders = [
@@ -220,3 +272,4 @@ def test_report_options_in_any_position(runs, tmp_path, capsys):
         assert code == 0, err
         md.append((tmp_path / "rep" / "report.md").read_text())
     assert md == [md[0]] * 3 and md[0] != texts[0][1]
+    assert len(report_builds) == 2  # every order settled to the build of its first (one run, two runs)
