@@ -15,6 +15,10 @@ os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 os.environ.setdefault("ROBOTOUILLE_DATA", str(SHARED_DATA / "robotouille"))
 os.environ.setdefault("ALFWORLD_DATA", str(SHARED_DATA / "alfworld"))
+# the level an in-process `recap` command sets (workers/log_setup.py) when none is asked for, set
+# before the session's cluster starts: its workers then have the same variables as the runs
+# (pipeline.raysetup.actor_runtime_env), which start their actors without a runtime_env
+os.environ.setdefault("RECAP_LOG_LEVEL", "warning")
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # pytest-xdist's workers start with COLUMNS=80 and LINES=24 of their own; the CLI fits its
     # tables to $COLUMNS, so a test would see another width under -n than alone. Tests that care
@@ -61,6 +65,29 @@ def ray_address() -> Iterator[str]:
     yield ray.get_runtime_context().gcs_address
     if started:
         shutdown_ray()
+
+
+@pytest.fixture
+def cluster_env(ray_address, monkeypatch) -> dict[str, str]:
+    """This process's environment put back to the variables the session's cluster was started with
+    (a test before may have changed one for good, e.g. an in-process ``recap --log-level``):
+    :func:`pipeline.raysetup.actor_runtime_env` is then None. Returns those variables."""
+    from pipeline import raysetup
+
+    started = dict(raysetup._started_env or {})
+    assert started, "the session's Ray cluster was not started by init_ray in this process"
+    for name in (*raysetup.forwarded_vars(), "PYTHONPATH"):
+        if name in started and name != "PYTHONPATH":
+            monkeypatch.setenv(name, started[name])
+        elif name != "PYTHONPATH":
+            monkeypatch.delenv(name, raising=False)
+    # PYTHONPATH: runtime_env() puts the project root first, then this process's own entries
+    rest = [p for p in started["PYTHONPATH"].split(os.pathsep) if p and p != str(REPO)]
+    if rest:
+        monkeypatch.setenv("PYTHONPATH", os.pathsep.join(rest))
+    else:
+        monkeypatch.delenv("PYTHONPATH", raising=False)
+    return started
 
 
 #: fixtures whose one expensive run (a sweep through the pipeline) is shared by the tests that only

@@ -93,8 +93,7 @@ def test_workers_start_with_few_malloc_arenas():
     assert ray.get(start_environment.remote(), timeout=120) == MALLOC_ARENAS
 
 
-@pytest.mark.usefixtures("ray_address")
-def test_a_cluster_started_here_gives_its_workers_the_variables_without_a_runtime_env(monkeypatch):
+def test_a_cluster_started_here_gives_its_workers_the_variables_without_a_runtime_env(cluster_env, monkeypatch):
     """The session's cluster was started by init_ray: its raylet has the workers' variables, so a
     run's actors need no runtime_env (Ray would start each through setup_worker.py, a second
     Python importing Ray); a variable changed since the start sends the whole environment again."""
@@ -104,6 +103,7 @@ def test_a_cluster_started_here_gives_its_workers_the_variables_without_a_runtim
 
     assert actor_runtime_env() is None
     wanted = runtime_env()["env_vars"]
+    assert wanted == cluster_env
 
     @ray.remote(num_cpus=0)
     def start_environment(names: list[str]) -> dict[str, str | None]:

@@ -64,7 +64,7 @@ def test_a_part_writer_loads_pyarrow_but_not_pandas(tmp_path):
     ]
 
 
-@pytest.mark.usefixtures("ray_address")
+@pytest.mark.usefixtures("cluster_env")
 @pytest.mark.parametrize("how", ["the pipeline's (none: the cluster's environment)", "runtime_env()"])
 def test_an_actor_holding_the_sink_and_budget_handles_loads_nothing_heavy(tmp_path, how):
     """A fresh actor started like the episode workers is handed the run's sink and budget actors,

@@ -72,7 +72,8 @@ def test_two_ray_workers_share_one_limit_per_host(ray_address):
     )
 
 
-def test_the_driver_starts_the_actor_only_for_a_fever_sweep(ray_address):
+@pytest.mark.usefixtures("cluster_env")
+def test_the_driver_starts_the_actor_only_for_a_fever_sweep():
     import ray
 
     def spec(benchmark: str) -> SweepSpec:
