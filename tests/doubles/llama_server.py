@@ -50,6 +50,8 @@ def main(argv: list[str]) -> None:
 
         def do_POST(self) -> None:
             body = json.loads(self.rfile.read(int(self.headers["content-length"])))
+            # about a token per 4 characters of the messages (the gateway rejects implausible usage)
+            prompt = 1 + sum(len(str(m.get("content") or "")) for m in body.get("messages") or []) // 4
             with lock:
                 time.sleep(hold_s)
                 self._json(
@@ -57,7 +59,7 @@ def main(argv: list[str]) -> None:
                         "object": "chat.completion",
                         "model": body.get("model"),
                         "choices": [{"index": 0, "message": {"role": "assistant", "content": "ok"}, "finish_reason": "stop"}],
-                        "usage": {"prompt_tokens": 3, "completion_tokens": 1, "total_tokens": 4},
+                        "usage": {"prompt_tokens": prompt, "completion_tokens": 1, "total_tokens": prompt + 1},
                     }
                 )
 

@@ -113,7 +113,7 @@ def test_llama_cpp_served_by_the_sweep_runs_recap_and_react_and_is_taken_down(ra
     def on_dispatch(unit, attempt, worker):  # the first unit: serving must be up already
         if at_first_unit:
             return
-        apps = {name: str(a.status) for name, a in serve_apps().items() if name.startswith("recap-")}
+        apps = {name: str(a.status.value) for name, a in serve_apps().items() if name.startswith("recap-")}
         (app,) = apps
         route = f"http://127.0.0.1:{_http_port()}/recap/{app.removeprefix('recap-').rsplit('-', 1)[0]}/0/v1/models"
         with urllib.request.urlopen(route, timeout=30) as resp:
