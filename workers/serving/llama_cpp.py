@@ -21,6 +21,9 @@ What the real server asks of the wrapper (found running it, issue 38):
 * the port: a free one is picked and then bound by the server; taken in between (another
   process), the server exits at once and the replica starts it again on another port
   (:data:`PORT_TRIES`);
+* its settings: the server reads environment variables over its options (``HOST``, ``PORT``,
+  ``CONFIG_FILE``, and each setting by its name: ``API_KEY`` would make it refuse the route's
+  calls); the launcher removes them before the server starts;
 * its output goes to a log file beside the replica's (``$TMPDIR``), whose tail is in the
   error when it fails to start.
 
@@ -55,7 +58,11 @@ PORT_TRIES = 3
 #: the module the launcher runs (a test stands a double in for it)
 SERVER_MODULE = "llama_cpp.server"
 #: the launcher: a watchdog thread that ends the server when the replica that started it is gone
-#: (its parent pid changes), then the server module as ``python -m`` would run it
+#: (its parent pid changes); the environment variables llama_cpp.server would read over its
+#: command line removed (its settings are pydantic-settings without a prefix, so an ``API_KEY``,
+#: ``MODEL`` or ``N_CTX`` of the driver's environment, which Ray's workers inherit, would set
+#: them, and ``HOST``/``PORT``/``CONFIG_FILE`` override the options outright:
+#: ``llama_cpp/server/__main__.py``); then the server module as ``python -m`` would run it
 LAUNCHER = """import os, runpy, sys, threading, time
 parent, period, module = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
 def watch():
@@ -63,6 +70,11 @@ def watch():
         time.sleep(period)
     os._exit(0)
 threading.Thread(target=watch, daemon=True).start()
+if module == "llama_cpp.server":
+    from llama_cpp.server.settings import ModelSettings, ServerSettings
+    names = {"config_file", *ModelSettings.model_fields, *ServerSettings.model_fields}
+    for key in [k for k in os.environ if k.lower() in names]:
+        del os.environ[key]
 sys.argv = [module, *sys.argv[4:]]
 runpy.run_module(module, run_name="__main__", alter_sys=True)
 """
