@@ -28,7 +28,8 @@ What the real server asks of the wrapper (found running it, issue 38):
   error when it fails to start.
 
 ``engine_args`` become the server's options (``n_ctx: 4096`` -> ``--n_ctx 4096``);
-``n_gpu_layers`` defaults to all layers when the replica has a GPU. Only where llama-cpp-python
+``n_gpu_layers`` defaults to all layers when the replica has a GPU, ``n_threads`` and
+``n_threads_batch`` to the replica's CPUs. Only where llama-cpp-python
 is installed (``pip install 'llama-cpp-python[server]'``): preflight refuses the engine otherwise.
 """
 
@@ -81,10 +82,20 @@ runpy.run_module(module, run_name="__main__", alter_sys=True)
 
 
 def server_command(
-    gguf: str, served_name: str, port: int, engine_args: Mapping[str, Any], gpus: int, *, module: str = SERVER_MODULE
+    gguf: str,
+    served_name: str,
+    port: int,
+    engine_args: Mapping[str, Any],
+    gpus: int,
+    cpus: float = 1.0,
+    *,
+    module: str = SERVER_MODULE,
 ) -> list[str]:
-    """The command line of one replica's server (under the launcher, watched from this process)."""
-    args = {"n_gpu_layers": -1 if gpus else 0, **engine_args}
+    """The command line of one replica's server (under the launcher, watched from this process).
+    Its threads are the CPUs Ray holds for the replica (llama.cpp's own default is half the
+    node's cores, whatever the replica was given)."""
+    threads = max(1, int(cpus))
+    args = {"n_gpu_layers": -1 if gpus else 0, "n_threads": threads, "n_threads_batch": threads, **engine_args}
     cmd = [sys.executable, "-c", LAUNCHER, str(os.getpid()), str(WATCH_S), module]
     cmd += ["--model", gguf, "--model_alias", served_name, "--host", HOST, "--port", str(port)]
     for key, value in args.items():
@@ -118,7 +129,14 @@ class LlamaCppServer:
     """The deployment's class: starts the server, relays requests, reports its health."""
 
     def __init__(
-        self, served_name: str, gguf: str, engine_args: Mapping[str, Any], gpus: int, *, module: str = SERVER_MODULE
+        self,
+        served_name: str,
+        gguf: str,
+        engine_args: Mapping[str, Any],
+        gpus: int,
+        cpus: float = 1.0,
+        *,
+        module: str = SERVER_MODULE,
     ) -> None:
         self.proc: subprocess.Popen[bytes] | None = None
         self.session: Any = None
@@ -130,7 +148,7 @@ class LlamaCppServer:
             self.base = f"http://{HOST}:{self.port}"
             with open(self.log, "ab") as out:
                 self.proc = subprocess.Popen(
-                    server_command(gguf, served_name, self.port, engine_args, gpus, module=module),
+                    server_command(gguf, served_name, self.port, engine_args, gpus, cpus, module=module),
                     stdin=subprocess.DEVNULL,
                     stdout=out,
                     stderr=subprocess.STDOUT,
@@ -233,4 +251,4 @@ def deployment(
         ray_actor_options={"num_cpus": cpus, "num_gpus": gpus},
         health_check_period_s=5.0,
         health_check_timeout_s=30.0,
-    )(LlamaCppServer).bind(served_name, gguf, dict(engine_args), gpus)
+    )(LlamaCppServer).bind(served_name, gguf, dict(engine_args), gpus, cpus)

@@ -124,3 +124,17 @@ def test_a_server_failing_on_its_weights_says_why(tmp_path):
     assert str(info.value) == (
         f"llama_cpp.server exited with status 1 while loading {missing}: ValueError: Model path does not exist: {missing}"
     )
+
+
+def test_the_server_command_line_threads_on_the_replica_s_cpus_and_takes_the_engine_args():
+    cmd = llama_cpp.server_command("/w/m.gguf", "smol", 8123, {"n_ctx": 8192, "flash_attn": True}, 0, 2.0)
+    assert cmd[:3] == [sys.executable, "-c", llama_cpp.LAUNCHER]
+    assert cmd[3:6] == [str(os.getpid()), str(llama_cpp.WATCH_S), "llama_cpp.server"]
+    assert cmd[6:] == [
+        "--model", "/w/m.gguf", "--model_alias", "smol", "--host", "127.0.0.1", "--port", "8123",
+        "--n_gpu_layers", "0", "--n_threads", "2", "--n_threads_batch", "2", "--n_ctx", "8192", "--flash_attn", "true",
+    ]  # fmt: skip
+    # a GPU replica offloads every layer; the engine arguments win over the defaults
+    gpu = llama_cpp.server_command("/w/m.gguf", "smol", 1, {"n_threads": 6}, 1, 0.5)
+    assert gpu[gpu.index("--n_gpu_layers") + 1] == "-1" and gpu[gpu.index("--n_threads") + 1] == "6"
+    assert gpu[gpu.index("--n_threads_batch") + 1] == "1"
