@@ -5,12 +5,15 @@ It takes the options the engine passes (``--model --model_alias --host --port`` 
 ``--key value``), answers like the real server where the engine depends on it: ``GET /v1/models``
 waits for the model's lock, as the real one does (``llama_cpp/server/app.py``, ``get_llama_proxy``),
 ``GET /openapi.json`` does not, and ``POST /v1/chat/completions`` holds the lock for ``--hold_s``
-seconds. ``--model`` naming a missing file exits with status 1, as the real server does.
+seconds. ``--model`` naming a missing file exits with status 1, as the real server does. Like the
+real one (``llama_cpp/server/__main__.py``, its pydantic-settings), ``HOST`` and ``PORT`` in the
+environment override the options, and an ``API_KEY`` there makes it refuse calls without it.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import threading
 import time
@@ -24,6 +27,7 @@ def main(argv: list[str]) -> None:
         print(f"ValueError: Model path does not exist: {opts['--model']}", flush=True)
         sys.exit(1)
     hold_s = float(opts.get("--hold_s", "0"))
+    api_key = os.environ.get("API_KEY")
     lock = threading.Lock()
     alias = opts.get("--model_alias", opts["--model"])
 
@@ -49,6 +53,9 @@ def main(argv: list[str]) -> None:
                 self.send_error(404)
 
         def do_POST(self) -> None:
+            if api_key is not None and self.headers.get("authorization") != f"Bearer {api_key}":
+                self.send_error(401)
+                return
             body = json.loads(self.rfile.read(int(self.headers["content-length"])))
             # about a token per 4 characters of the messages (the gateway rejects implausible usage)
             prompt = 1 + sum(len(str(m.get("content") or "")) for m in body.get("messages") or []) // 4
@@ -63,7 +70,7 @@ def main(argv: list[str]) -> None:
                     }
                 )
 
-    ThreadingHTTPServer((opts["--host"], int(opts["--port"])), Handler).serve_forever()
+    ThreadingHTTPServer((os.getenv("HOST", opts["--host"]), int(os.getenv("PORT", opts["--port"]))), Handler).serve_forever()
 
 
 if __name__ == "__main__":

@@ -138,3 +138,31 @@ def test_the_server_command_line_threads_on_the_replica_s_cpus_and_takes_the_eng
     gpu = llama_cpp.server_command("/w/m.gguf", "smol", 1, {"n_threads": 6}, 1, 0.5)
     assert gpu[gpu.index("--n_gpu_layers") + 1] == "-1" and gpu[gpu.index("--n_threads") + 1] == "6"
     assert gpu[gpu.index("--n_threads_batch") + 1] == "1"
+
+
+def test_the_server_does_not_read_the_replica_s_environment_over_its_options(tmp_path, gguf, monkeypatch):
+    """llama_cpp.server takes HOST, PORT and each setting (API_KEY ...) from the environment, which
+    a replica inherits from the driver: the launcher removes them. A stand-in ``llama_cpp.server``
+    package (the double, with settings classes naming those fields) shows it."""
+    fake = tmp_path / "site" / "llama_cpp" / "server"
+    fake.mkdir(parents=True)
+    (fake.parent / "__init__.py").write_text("")
+    (fake / "__init__.py").write_text("")
+    (fake / "__main__.py").write_text("import sys\nfrom tests.doubles.llama_server import main\nmain(sys.argv[1:])\n")
+    (fake / "settings.py").write_text(
+        "class ModelSettings:\n    model_fields = {'model': None, 'n_ctx': None}\n"
+        "class ServerSettings:\n    model_fields = {'host': None, 'port': None, 'api_key': None}\n"
+    )
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path / "site"), str(REPO)]))
+    monkeypatch.setenv("API_KEY", "sk-of-something-else")
+    monkeypatch.setenv("PORT", "1")
+    monkeypatch.setenv("HOST", "0.0.0.0")
+    monkeypatch.setattr(llama_cpp, "START_TIMEOUT_S", 30.0)  # a server listening elsewhere: fail in 30 s
+    server = llama_cpp.LlamaCppServer("smol", gguf, {}, 0)  # module: llama_cpp.server (the stand-in)
+    try:
+        body = b'{"model": "smol", "messages": [{"role": "user", "content": "hi"}]}'
+        req = urllib.request.Request(server.base + "/v1/chat/completions", data=body, method="POST")
+        with urllib.request.urlopen(req, timeout=30) as resp:
+            assert resp.status == 200  # on the port the replica chose, without a key
+    finally:
+        server.__del__()
