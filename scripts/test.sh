@@ -2,7 +2,11 @@
 # The test command (README, .ci/run): sets up .venv and runs the default suite.
 #   bash scripts/test.sh          default suite (everything not marked slow/realmodel/docker), then
 #                                 the Docker sandbox tests (marker docker; they start Docker if needed)
-#   bash scripts/test.sh slow     the slow suites (all 134 ALFWorld games x 2 versions, two-node Ray, ...)
+#   bash scripts/test.sh slow     the slow suites (all 134 ALFWorld games x 2 versions, two-node Ray, ...),
+#                                 then the real-model slow test (a sweep serving SmolLM2-135M with llama.cpp
+#                                 through Ray Serve) by scripts/realmodel.sh, which installs llama-cpp-python
+#                                 (a compile of llama.cpp the first time) and the weights;
+#                                 RECAP_SKIP_REALMODEL=1 skips it
 # pytest's exit code 5 (no tests collected) is a failure here.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -52,7 +56,8 @@ export RAY_USAGE_STATS_ENABLED=0
 unset PYTHONDONTWRITEBYTECODE
 marker="not slow and not realmodel and not docker"
 phase=default
-if [ "${1:-}" = "slow" ]; then marker="slow"; phase=slow; shift; fi
+# the slow suites that need a real model (marker realmodel) run after them, by scripts/realmodel.sh
+if [ "${1:-}" = "slow" ]; then marker="slow and not realmodel"; phase=slow; shift; fi
 # the habits (pyproject.toml [tool.ruff], [tool.mypy]): lint, format and types, before the tests
 lint=0
 .venv/bin/ruff check . || { echo "ruff check: findings above (ruff check --fix fixes the marked ones)" >&2; lint=1; }
@@ -75,13 +80,24 @@ fi
 # run (xdist_group) on one worker, so that run is made once. The slow suites (chaos timings, two
 # Ray nodes) stay in one process unless RECAP_TEST_WORKERS says otherwise.
 cores=$(nproc 2>/dev/null || echo 2)
-if [ "$marker" = slow ]; then workers="${RECAP_TEST_WORKERS:-0}"; else workers="${RECAP_TEST_WORKERS:-$((cores < 2 ? 2 : cores))}"; fi
+if [ "$phase" = slow ]; then workers="${RECAP_TEST_WORKERS:-0}"; else workers="${RECAP_TEST_WORKERS:-$((cores < 2 ? 2 : cores))}"; fi
 .venv/bin/python -m pytest -m "$marker" -q --durations=15 -n "$workers" --dist loadgroup "$@"
 rc=$?
 if [ "$phase" = default ]; then wait "$mypy_pid"; mypy_rc=$?; fi
 if [ "$mypy_rc" -ne 0 ]; then cat "$mypy_log" >&2; echo "mypy: type errors above" >&2; lint=1; fi
 rm -f "$mypy_log"
 if [ $rc -eq 5 ]; then echo "no tests were collected: failing" >&2; exit 1; fi
+# the real-model slow test (tests/realmodel/test_served_llama_cpp.py): llama.cpp served by the sweep
+if [ "$phase" = slow ] && [ $# -eq 0 ]; then
+  if [ "${RECAP_SKIP_REALMODEL:-}" = 1 ]; then
+    echo "RECAP_SKIP_REALMODEL=1: the real-model slow test (llama.cpp served by the sweep) is skipped" >&2
+  else
+    bash scripts/realmodel.sh -m "realmodel and slow" --durations=5
+    mrc=$?
+    if [ $mrc -eq 5 ]; then echo "no real-model slow test was collected: failing" >&2; mrc=1; fi
+    if [ $rc -eq 0 ]; then rc=$mrc; fi
+  fi
+fi
 # the Docker sandbox tests (marker docker), after the default suite: they need a Docker engine
 # (scripts/docker_up.sh installs and starts one where we are root with apt-get) and the sandbox
 # image, built locally from the Debian mirror (scripts/build_sandbox_image.sh: ~2 min, once per

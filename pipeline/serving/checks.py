@@ -36,6 +36,8 @@ ENGINE_MODULES = {
     "llama.cpp": ("llama_cpp", "sse_starlette"),
     "test-double": (),
 }
+#: the first bytes of every GGUF file (llama.cpp's weights)
+GGUF_MAGIC = b"GGUF"
 #: the longest a test double's latency may be (seconds)
 LATENCY_MAX_S = 60.0
 
@@ -67,6 +69,26 @@ def weights_present(weights: str) -> bool:
     return snapshots.is_dir() and any(snapshots.iterdir())
 
 
+def check_gguf(where: str, weights: str | None) -> None:
+    """llama.cpp's weights: one GGUF file on this machine (``serve_plan`` made the path absolute:
+    the replica runs in another folder). Its first bytes are GGUF's magic, so that a folder, a
+    hub id or a file of another format is refused here, not by the server once the replicas start."""
+    if weights is None:
+        raise PreflightError(f"{where}: serve.weights: llama.cpp needs the path of a GGUF file (*.gguf)")
+    path = Path(weights)
+    if not weights.endswith(".gguf"):
+        raise PreflightError(f"{where}: serve.weights: llama.cpp serves a GGUF file (*.gguf), got {weights}")
+    if not path.is_file():
+        raise PreflightError(f"{where}: serve.weights {weights} is not a file here (llama.cpp serves a local GGUF file)")
+    try:
+        with open(path, "rb") as f:
+            magic = f.read(len(GGUF_MAGIC))
+    except OSError as exc:
+        raise PreflightError(f"{where}: serve.weights {weights} cannot be read ({exc.strerror})") from None
+    if magic != GGUF_MAGIC:
+        raise PreflightError(f"{where}: serve.weights {weights} is not a GGUF file (it does not begin with GGUF)")
+
+
 def check_serving(spec: SweepSpec) -> None:
     """The served models can start here (see the module docstring); PreflightError otherwise."""
     served = [(i, m) for i, m in enumerate(spec.models) if m.serve is not None]
@@ -94,13 +116,13 @@ def check_serving(spec: SweepSpec) -> None:
                 )
             if plan.weights is not None:
                 raise PreflightError(f"{where}: serve.weights: the test double serves no weights; leave it out")
+        elif plan.engine == "llama.cpp":
+            check_gguf(where, plan.weights)
         elif plan.weights is not None and not weights_present(plan.weights):
             raise PreflightError(
                 f"{where}: serve.weights {plan.weights} is neither a local path nor in the Hugging Face cache "
                 f"({hub_cache()}); fetch it first (huggingface-cli download {plan.weights})"
             )
-        if plan.engine == "llama.cpp" and plan.weights is not None and not plan.weights.endswith(".gguf"):
-            raise PreflightError(f"{where}: serve.weights: llama.cpp serves a GGUF file (*.gguf), got {plan.weights}")
         if plan.engine in ("vllm", "sglang") and plan.gpus < 1:
             raise PreflightError(f"{where}: serve.gpus_per_replica: {plan.engine} needs at least 1 GPU per replica")
         if m.prices is not None and m.prices.gpu_hour is not None and plan.gpus == 0:

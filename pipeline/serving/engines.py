@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -55,11 +56,15 @@ def serve_plan(m: ModelSpec) -> ServePlan:
         per_hour = m.prices.gpu_hour * gpus
     elif m.prices is not None and m.prices.replica_hour is not None:
         per_hour = m.prices.replica_hour
+    weights = s.weights
+    if engine == "llama.cpp" and weights is not None:
+        # a local file, read by a replica whose working folder is not the sweep's
+        weights = os.path.abspath(os.path.expanduser(weights))
     return ServePlan(
         label=m.name,
         engine=engine,
         model=m.model,
-        weights=s.weights,
+        weights=weights,
         replicas=s.replicas,
         gpus=gpus,
         cpus=s.cpus(engine),

@@ -100,8 +100,7 @@ def test_weights_neither_local_nor_cached_are_refused(tmp_path, engines_installe
 def test_a_missing_local_path_is_refused(tmp_path, engines_installed, hub):
     gguf = tmp_path / "none.gguf"
     assert refusal(tmp_path, f"{{model: openai/s, serve: {{engine: llama.cpp, weights: {gguf}}}}}") == (
-        f"models[0] (openai/s): serve.weights {gguf} is neither a local path nor in the Hugging Face cache ({hub}); "
-        f"fetch it first (huggingface-cli download {gguf})"
+        f"models[0] (openai/s): serve.weights {gguf} is not a file here (llama.cpp serves a local GGUF file)"
     )
     gguf.write_bytes(b"GGUF")
     preflight(spec_of(tmp_path, f"{{model: openai/s, serve: {{engine: llama.cpp, weights: {gguf}}}}}"))
@@ -113,6 +112,26 @@ def test_llama_cpp_serves_gguf_files_only(tmp_path, engines_installed):
     assert refusal(tmp_path, f"{{model: openai/s, serve: {{engine: llama.cpp, weights: {folder}}}}}") == (
         f"models[0] (openai/s): serve.weights: llama.cpp serves a GGUF file (*.gguf), got {folder}"
     )
+    # a folder named like one, and a file of another format named like one: refused before any replica starts
+    (tmp_path / "dir.gguf").mkdir()
+    assert refusal(tmp_path, f"{{model: openai/s, serve: {{engine: llama.cpp, weights: {tmp_path / 'dir.gguf'}}}}}") == (
+        f"models[0] (openai/s): serve.weights {tmp_path / 'dir.gguf'} is not a file here (llama.cpp serves a local GGUF file)"
+    )
+    (tmp_path / "st.gguf").write_bytes(b"\x00" * 64)  # a safetensors header, say
+    assert refusal(tmp_path, f"{{model: openai/s, serve: {{engine: llama.cpp, weights: {tmp_path / 'st.gguf'}}}}}") == (
+        f"models[0] (openai/s): serve.weights {tmp_path / 'st.gguf'} is not a GGUF file (it does not begin with GGUF)"
+    )
+
+
+def test_a_relative_gguf_path_is_the_sweep_folder_s_made_absolute(tmp_path, engines_installed, monkeypatch):
+    """The replica runs in another working folder: the plan names the file by its absolute path."""
+    from pipeline.serving.engines import serve_plan
+
+    (tmp_path / "m.gguf").write_bytes(b"GGUF" + b"\x00" * 8)
+    monkeypatch.chdir(tmp_path)
+    spec = spec_of(tmp_path, "{model: openai/s, serve: {engine: llama.cpp, weights: m.gguf}}")
+    preflight(spec)
+    assert serve_plan(spec.models[0]).weights == str(tmp_path / "m.gguf")
 
 
 # -- sizes and prices -------------------------------------------------------------------------------
