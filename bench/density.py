@@ -91,9 +91,6 @@ def main() -> None:
 
     import ray
 
-    from pipeline.raysetup import init_ray
-    from pipeline.spec import RaySpec
-
     try:
         from pipeline.worker_pool import episodes_per_process
     except ImportError:  # a checkout from before ray.episodes_per_process: one episode per process
@@ -109,14 +106,7 @@ def main() -> None:
     os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
     server = FakeServer(FakeServerConfig(latency_s=pipeline_bench.LATENCY))
     url = server.start_in_thread()
-    for tries_left in (2, 1, 0):  # a loaded machine: Ray gives its raylet 30 s to register, then gives up
-        try:
-            init_ray(RaySpec(num_cpus=args.num_cpus))
-            break
-        except Exception as exc:
-            if not tries_left or "timed out during startup" not in str(exc):
-                raise
-            ray.shutdown()
+    pipeline_bench.start_ray(args.num_cpus)
     cpus = ray.cluster_resources().get("CPU", 0)
     print(
         f"host CPUs {os.cpu_count()}, Ray CPUs {cpus:.0f}; fake server latency {pipeline_bench.LATENCY * 1000:.0f} ms; "

@@ -229,6 +229,24 @@ def sink_rows_per_second(n_rows: int, tmp: Path, via_ray: bool) -> float:
     return n_rows / (time.perf_counter() - t0)
 
 
+def start_ray(num_cpus: int | None) -> None:
+    """The benches' local Ray, started again (twice at most) when its raylet misses Ray's 30 s to
+    register, as happens on a loaded machine."""
+    import ray
+
+    from pipeline.raysetup import init_ray
+    from pipeline.spec import RaySpec
+
+    for tries_left in (2, 1, 0):
+        try:
+            init_ray(RaySpec(num_cpus=num_cpus))
+            return
+        except Exception as exc:
+            if not tries_left or "timed out during startup" not in str(exc):
+                raise
+            ray.shutdown()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, nargs="+", default=None, help="worker counts (default 1 2 4 8 16; --scale: 8 32 64)")
@@ -261,21 +279,11 @@ def main() -> None:
 
     import ray
 
-    from pipeline.raysetup import init_ray
-    from pipeline.spec import RaySpec
-
     os.environ["RECAP_BENCH_KEY"] = "bench-not-a-secret"
     server = ServerProcess()
     atexit.register(server.stop)  # also when Ray fails to start
     url = server.url
-    for tries_left in (2, 1, 0):  # a loaded machine: Ray gives its raylet 30 s to register, then gives up
-        try:
-            init_ray(RaySpec(num_cpus=args.num_cpus))
-            break
-        except Exception as exc:
-            if not tries_left or "timed out during startup" not in str(exc):
-                raise
-            ray.shutdown()
+    start_ray(args.num_cpus)
     cpus = ray.cluster_resources().get("CPU", 0)
     print(
         f"host CPUs {os.cpu_count()}, Ray CPUs {cpus:.0f}; fake server latency {LATENCY * 1000:.0f} ms in its own process; "

