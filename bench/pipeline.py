@@ -94,11 +94,13 @@ class ServerProcess:
             self.process.wait(10)
 
 
-def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float, extra: str = "") -> str:
+def sweep_text(out: Path, url: str, workers: int, units: int, rpm: int, window_s: float, extra: str = "", shards: int = 1) -> str:
     """The bench's sweep: ``workers`` episodes in flight, the model's concurrency at least that (so the
-    gateway never queues them), ``extra`` YAML appended (another bench's own options)."""
+    gateway never queues them), ``shards`` gateway shards, ``extra`` YAML appended (another bench's own options)."""
     seeds = list(range((units + 8) // 9))
     quota = f"\n    rpm: {rpm}\n    window_s: {window_s}" if rpm else ""
+    if shards > 1:
+        quota += f"\n    gateway_shards: {shards}"
     return f"""run: bench-{workers}
 output: {out}
 models:
@@ -114,7 +116,9 @@ workers: {workers}
 {extra}"""
 
 
-def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp: Path, extra: str = "") -> dict:
+def run_one(
+    server, url: str, workers: int, rounds: int, rpm: int, window_s: float, tmp: Path, extra: str = "", shards: int = 1
+) -> dict:
     """One run of ``workers`` x ``rounds`` episodes; ``server.arrivals`` counts the calls answered so far
     (a ``ServerProcess``, or an in-thread ``FakeServer`` whose CPU is then the driver's); a server
     with a ``pid`` in the driver's process tree is taken out of the roles as the provider."""
@@ -126,7 +130,7 @@ def run_one(server, url: str, workers: int, rounds: int, rpm: int, window_s: flo
     from pipeline.store import RunStore
 
     out = tmp / f"w{workers}"
-    text = sweep_text(out, url, workers, max(workers * rounds, 4), rpm, window_s, extra)
+    text = sweep_text(out, url, workers, max(workers * rounds, 4), rpm, window_s, extra, shards)
     spec = parse_spec(text)
     prepared = prepare(spec, text)
     n_units = workers * rounds
@@ -267,6 +271,7 @@ def main() -> None:
         metavar="RPM",
         help="finally run the largest worker count under this quota per window (0: skip)",
     )
+    ap.add_argument("--shards", type=int, default=1, help="gateway shards of the model (models[].gateway_shards)")
     ap.add_argument("--num-cpus", type=int, default=None)
     ap.add_argument("--sink-rows", type=int, default=100_000)
     args = ap.parse_args()
@@ -299,7 +304,7 @@ def main() -> None:
         runs.append((max(args.workers), args.quota_check))
     with tempfile.TemporaryDirectory(prefix="recap-bench-") as tmp:
         for i, (w, rpm) in enumerate(runs):
-            r = run_one(server, url, w, args.rounds, rpm, args.window_s, Path(tmp) / str(i))
+            r = run_one(server, url, w, args.rounds, rpm, args.window_s, Path(tmp) / str(i), shards=args.shards)
             quota = rpm / args.window_s if rpm else None
             ideal = w * 60 / (CALLS * LATENCY)
             if quota:
