@@ -11,6 +11,7 @@ from pipeline.errors import SpecError
 from pipeline.gateway_backend import GatewayBackend, GatewayFactory
 from pipeline.spec import parse_spec
 from pipeline.worker_pool import RayWorkerPool
+from tests.pipeline.test_model_config import E2E as TWO_NAMES
 
 SPEC = """
 run: shards
@@ -51,24 +52,12 @@ def test_the_backend_plans_the_shards_and_workers_take_them_round_robin():
     assert {f.client("other") for f in Worker.made} == {"single"}
 
 
-E2E = """run: shards-e2e
-output: {out}
-models:
-  - model: offline/expert
-    label: expert-a
-    options: {{seed: 1}}
-    cap_usd: {cap}
-    gateway_shards: 2
-  - model: offline/expert
-    label: expert-b
-    options: {{seed: 2}}
-    cap_usd: 1.0
-    gateway_shards: 2
-methods: [{{method: react}}]
-environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
-workers: 2
-order: plan
-"""
+#: test_model_config's sweep of two names on one model string, each name's gateway in two shards
+E2E = (
+    TWO_NAMES.replace("run: {name}", "run: shards-e2e")
+    .replace("    cap_usd: {cap}\n", "    cap_usd: {cap}\n    gateway_shards: 2\n")
+    .replace("    cap_usd: 1.0\n", "    cap_usd: 1.0\n    gateway_shards: 2\n")
+)
 
 
 @pytest.mark.slow  # a sweep on Ray with four gateway actors and the quota actor
