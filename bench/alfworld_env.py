@@ -4,10 +4,12 @@ Part 1 plays the expert walkthrough of the first N games of each task type (defa
 and keeps every instance alive until the end, so the RSS growth divided by the instance count is
 what a worker pays per *open* game. Part 2 opens, plays and closes M further games one after the
 other (default 12), the way an episode worker uses them, and prints the RSS growth per game
-(closed games hand their planner library to the next one, so it should stay near zero).
+(closed games hand their planner library to the next one, so it should stay near zero). "again s"
+is a second reset of the same game after its walkthrough: its PDDL translation is cached per process
+(workers/envs/alfworld/translations.py), so only the first reset of a game pays for it.
 Run from the repository root:
 
-    .venv/bin/python bench/alfworld_env.py [--per-type N] [--sequential M] [--version 2.1.1|2.1.2]
+    .venv/bin/python bench/alfworld_env.py [--per-type N] [--sequential M] [--version 2.1.1|2.1.2] [--no-translation-cache]
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from workers.envs.alfworld import AlfworldBenchmark  # noqa: E402
 from workers.envs.alfworld.task_types import TASK_TYPES  # noqa: E402
+from workers.envs.alfworld.translations import TRANSLATIONS  # noqa: E402
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "alfworld"
 
@@ -41,9 +44,16 @@ def main() -> None:
     parser.add_argument("--per-type", type=int, default=1, help="games per task type")
     parser.add_argument("--version", default="2.1.1", choices=["2.1.1", "2.1.2"])
     parser.add_argument("--sequential", type=int, default=12, help="games opened and closed in turn")
+    parser.add_argument(
+        "--no-translation-cache",
+        action="store_true",
+        help="translate on every reset, as textworld alone does (the before figure)",
+    )
     parser.add_argument("--data", default=os.environ.get("ALFWORLD_DATA", str(DEFAULT_DATA)))
     args = parser.parse_args()
 
+    if args.no_translation_cache:
+        TRANSLATIONS.size = 0  # every translation evicted at once: each one runs
     bench = AlfworldBenchmark(Path(args.data).resolve())
     ids = [i for short in TASK_TYPES for i in bench.list_instances(short)[: args.per_type]]
 
@@ -54,9 +64,9 @@ def main() -> None:
     print(f"engine import: {time.perf_counter() - t0:.2f} s")
     base = rss_mib()
     print(f"RSS after import: {base:.0f} MiB; {len(ids)} games, version {args.version}")
-    print(f"{'game':<58} {'make s':>7} {'reset s':>8} {'step ms':>8} {'steps':>5} {'won':>4} {'RSS +MiB':>9}")
+    print(f"{'game':<58} {'make s':>7} {'reset s':>8} {'step ms':>8} {'steps':>5} {'won':>4} {'again s':>8} {'RSS +MiB':>9}")
 
-    envs, makes, resets, steps = [], [], [], []
+    envs, makes, resets, agains, steps = [], [], [], [], []
     for instance_id in ids:
         before = rss_mib()
         t = time.perf_counter()
@@ -70,6 +80,9 @@ def main() -> None:
             t = time.perf_counter()
             won = env.step(action).success
             step_times.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        env.reset()
+        agains.append(time.perf_counter() - t)
         envs.append(env)
         makes.append(t_make)
         resets.append(t_reset)
@@ -77,7 +90,7 @@ def main() -> None:
         name = instance_id.split("/", 2)[2][:58]
         print(
             f"{name:<58} {t_make:7.3f} {t_reset:8.2f} {1000 * statistics.mean(step_times):8.1f} "
-            f"{len(step_times):5d} {'yes' if won else 'no':>4} {rss_mib() - before:9.1f}"
+            f"{len(step_times):5d} {'yes' if won else 'no':>4} {agains[-1]:8.2f} {rss_mib() - before:9.1f}"
         )
 
     total = rss_mib() - base
@@ -85,6 +98,11 @@ def main() -> None:
         f"\nmean make {statistics.mean(makes):.3f} s | mean reset {statistics.mean(resets):.2f} s "
         f"(max {max(resets):.2f}) | mean step {1000 * statistics.mean(steps):.1f} ms "
         f"(max {1000 * max(steps):.1f}) over {len(steps)} steps"
+    )
+    print(
+        f"first reset of a game {statistics.mean(resets):.2f} s, a later reset {statistics.mean(agains):.2f} s "
+        f"(ratio {statistics.mean(resets) / statistics.mean(agains):.1f}); PDDL translations run: "
+        f"{TRANSLATIONS.translations} for {len(ids)} games"
     )
     print(f"RSS delta with {len(envs)} live instances: {total:.0f} MiB = {total / len(envs):.1f} MiB per instance")
     for env in envs:
