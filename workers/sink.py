@@ -51,8 +51,13 @@ log = logging.getLogger(__name__)
 _LAST = ("episodes",)
 #: the write-ahead log folder, relative to the run folder
 WAL_DIR = ".sink-wal"
-#: how many retired segments a sink keeps (their batch hashes answer retried sends)
+#: how many retired segments a sink keeps at least (their batch hashes answer retried sends) ...
 _KEEP_DONE = 2
+#: ... and for how long it keeps every segment it retired: Ray re-sends the calls a kill swallowed
+#: in no set order with other senders' new calls ("the task execution order is not guaranteed when
+#: task retries occur", Ray's docs on actor task order), so a restarted sink may retire several
+#: segments before an old batch comes again; by time, so a soak's memory stays bounded
+_KEEP_DONE_S = 300.0
 #: restarts of a killed sink actor before the driver gives up on it
 SINK_MAX_RESTARTS = 20
 _HEADER = struct.Struct("<II")  # payload length, crc32
@@ -202,8 +207,15 @@ class Sink:
         self.files_written = 0
         self.write_seconds = 0.0
         self.rows_by_table: dict[str, int] = {}
-        #: hashes of the batches of the open segment and of the last retired ones
+        #: hashes of the batches of the open segment and of the last retired ones, by segment ...
         self._hashes: dict[int, set[str]] = {}
+        #: ... and every one of them, for an O(1) check per batch
+        self._known_hashes: set[str] = set()
+        #: when each segment of this process was retired (monotonic seconds)
+        self._retired_at: dict[int, float] = {}
+        #: segments a previous process of this writer logged: known for this process's whole life
+        #: (the calls whose replies its kill swallowed come back whenever Ray re-sends them)
+        self._pinned: set[int] = set()
         self._wal_fh: Any = None
         self.recovered_rows = 0
         self.seg = 1
@@ -232,6 +244,8 @@ class Sink:
                 self.recovered_rows += sum(written.values())
                 path.rename(_segment_path(self.run_dir, self.name, seg, "done"))
             self._hashes[seg] = hashes
+            self._known_hashes |= hashes
+            self._pinned.add(seg)
         for p in self.run_dir.glob(f"*/part-{self.name}-*.parquet"):
             tail = p.stem.rsplit("-", 1)[-1]
             if tail.isdigit():
@@ -265,18 +279,23 @@ class Sink:
         if path.exists():
             path.rename(_segment_path(self.run_dir, self.name, self.seg, "done"))
         self._hashes.setdefault(self.seg, set())
+        self._retired_at[self.seg] = time.monotonic()
         self.seg += 1
         self._prune()
 
     def _prune(self) -> None:
-        keep = sorted(self._hashes)[-_KEEP_DONE:]
+        """Forget retired segments that are neither among the last ``_KEEP_DONE``, nor retired in the
+        last ``_KEEP_DONE_S`` seconds, nor left by a previous process of this writer."""
+        keep = set(sorted(self._hashes)[-_KEEP_DONE:]) | self._pinned
+        old = time.monotonic() - _KEEP_DONE_S
         for seg in list(self._hashes):
-            if seg not in keep and seg < self.seg:
-                del self._hashes[seg]
+            if seg not in keep and seg < self.seg and self._retired_at.get(seg, old) <= old:
+                self._known_hashes -= self._hashes.pop(seg)
+                self._retired_at.pop(seg, None)
                 _segment_path(self.run_dir, self.name, seg, "done").unlink(missing_ok=True)
 
     def _known(self, h: str) -> bool:
-        return any(h in hs for hs in self._hashes.values())
+        return h in self._known_hashes
 
     # -- input ----------------------------------------------------------------------------------
     def add(self, rows_by_table: Mapping[str, Sequence[dict[str, Any]]], flush: bool = False) -> int:
@@ -292,6 +311,7 @@ class Sink:
             if not known:
                 self._log(h, rows_by_table)
                 self._hashes.setdefault(self.seg, set()).add(h)
+                self._known_hashes.add(h)
         if not known:
             for table, rows in rows_by_table.items():
                 if rows:
@@ -343,6 +363,7 @@ class Sink:
             if state == "done":
                 path.unlink(missing_ok=True)
         self._hashes.clear()
+        self._known_hashes.clear()
         try:
             (self.run_dir / WAL_DIR).rmdir()
         except OSError:

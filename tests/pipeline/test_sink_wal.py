@@ -134,3 +134,22 @@ def test_tool_call_rows_and_tool_messages_reach_their_parts_through_the_log(tmp_
     ]
     rows, bad = read_table(tmp_path, "tool_calls")
     assert bad == [] and rows.to_pylist() == [record_to_row(r, "run1") for r in records[2:]]
+
+
+def test_a_resent_batch_is_known_however_many_flushes_the_new_sink_made_before_it_came(tmp_path):
+    """Ray re-sends the calls a kill swallowed in no set order with the new calls of other senders:
+    the restarted sink may flush several segments before the old batch arrives again (CI saw a
+    ninth episode row for eight units). The batches its previous process logged stay known for the
+    whole life of the new one, and a segment retired in the last minutes stays known too."""
+    sink = Sink(str(tmp_path), "run1", writer="sinkO", flush_rows=10_000, flush_s=3600)
+    swallowed = records_by_table([ep("u1-1")], "run1")
+    sink.add(swallowed, flush=True)  # logged, written, retired: then the kill took its reply
+    del sink
+    again = Sink(str(tmp_path), "run1", writer="sinkO", flush_rows=10_000, flush_s=3600)
+    for i in range(2, 7):  # other senders' terminal rows, each flushed at once
+        again.add(records_by_table([ep(f"u{i}-1")], "run1"), flush=True)
+    again.add(swallowed, flush=True)  # the swallowed call, re-sent last
+    late = records_by_table([ep("u2-1")], "run1")  # a batch this process took five segments ago, re-sent
+    again.add(late, flush=True)
+    again.close()
+    assert sorted(rows_of(tmp_path, "episodes", "episode_id")) == [f"u{i}-1" for i in range(1, 7)]
