@@ -41,6 +41,8 @@ log = logging.getLogger(__name__)
 VLLM_WAITING = ("vllm:num_requests_waiting", "ray_vllm_num_requests_waiting")
 #: SGLang's waiting-queue gauge, likewise
 SGLANG_WAITING = ("sglang:num_queue_reqs", "ray_sglang_num_queue_reqs")
+#: seconds between two looks at the in-flight count while no call is in flight
+IDLE_CHECK_S = 0.1
 
 _NAME = re.compile(r"[a-zA-Z_:][a-zA-Z0-9_:]*")
 _LABEL = re.compile(r'\s*([a-zA-Z_][a-zA-Z0-9_]*)\s*=\s*"((?:[^"\\]|\\.)*)"\s*(,)?')
@@ -143,8 +145,11 @@ class QueueFeed:
         return queue
 
     async def run(self) -> None:
-        """Until cancelled: a read each ``period_s`` while the target has calls in flight."""
+        """Until cancelled: a read each ``period_s`` while the target has calls in flight (the
+        first within :data:`IDLE_CHECK_S` of the first call: a look at a counter, no read)."""
         while True:
-            await asyncio.sleep(self.period_s)
             if self.target.active > 0:
                 await self.poll_once()
+                await asyncio.sleep(self.period_s)
+            else:
+                await asyncio.sleep(min(self.period_s, IDLE_CHECK_S))

@@ -50,6 +50,8 @@ SERVE_NAMESPACE = "serve"
 REPLICA_PREFIX = "SERVE_REPLICA::"
 #: seconds before the replicas' handles are listed again
 RELIST_S = 10.0
+#: seconds a replica gets to answer a read
+REPLICA_TIMEOUT_S = 0.5
 #: seconds a node's metrics endpoint gets to answer
 SCRAPE_TIMEOUT_S = 2.0
 
@@ -82,13 +84,21 @@ class _Replicas:
         self.listed_at = -RELIST_S
 
 
+async def _call(handle: Any, method: str) -> Any:
+    return await getattr(handle, method).remote()
+
+
 async def _per_replica(replicas: _Replicas, method: str) -> list[Any]:
-    """``method`` of every replica actor; the replicas that failed are left out (and the handles
-    listed again next time); RuntimeError when none answered."""
+    """``method`` of every replica actor; the replicas that failed or did not answer within
+    :data:`REPLICA_TIMEOUT_S` (a killed one that Ray has not declared dead yet) are left out, and
+    the handles listed again next time; RuntimeError when none answered."""
     handles = await replicas.get()
-    results = await asyncio.gather(*(getattr(h, method).remote() for h in handles), return_exceptions=True)
-    answered = [r for r in results if not isinstance(r, BaseException)]
-    if len(answered) < len(results) or not handles:
+    tasks = [asyncio.ensure_future(_call(h, method)) for h in handles]
+    done, late = await asyncio.wait(tasks, timeout=REPLICA_TIMEOUT_S) if tasks else (set(), set())
+    for t in late:
+        t.cancel()
+    answered = [t.result() for t in tasks if t in done and not t.cancelled() and t.exception() is None]
+    if len(answered) < len(tasks) or not handles:
         replicas.forget()
     if not answered:
         raise RuntimeError(f"no replica of {replicas.prefix} answered {method}")

@@ -22,11 +22,11 @@ output: {out}
 models:
   - model: offline/expert
     label: served-expert
-    serve: {{replicas: 2, max_in_flight: 2, engine_args: {{latency_s: 0.4}}}}
+    serve: {{replicas: 2, max_in_flight: 4, engine_args: {{latency_s: 0.4, max_running: 1}}}}
     prices: {{replica_hour: {price}}}
 methods: [{{method: react}}]
 environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
-workers: 2
+workers: 3
 order: plan
 """
 
@@ -97,7 +97,7 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     ]
     started = [json.loads(d) for (d,) in q("select detail from events where kind = 'serve_started'")]
     assert [(s["model"], s["engine"], s["replicas"], s["max_in_flight"], s["test_double"]) for s in started] == [
-        ("served-expert", "test-double", 2, 2, True)
+        ("served-expert", "test-double", 2, 4, True)
     ]
     assert started[0]["api_base"].endswith(f"/recap/{run_id}/0/v1")
     # the calls cut by the lost replica were retried by the gateway as a server error
@@ -105,13 +105,18 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     calls_retried = q("select coalesce(sum(retries), 0) from llm_calls")
     assert retried[0][0] >= 1 and calls_retried[0][0] >= 1
     # the in-flight limit adapted between one call a replica and replicas x max_in_flight: the lost
-    # replica's 5xx (or the survivors' slower replies) lowered it, each change an events row
+    # replica's 5xx, the survivors' slower replies or their queue lowered it, each change an events row
     limits = q(
-        "select detail->>'reason', (detail->>'before')::int, (detail->>'limit')::int from events "
-        "where kind = 'concurrency_limit' and detail->>'deployment' = 'served-expert' order by ts"
+        "select detail->>'reason', (detail->>'before')::int, (detail->>'limit')::int, (detail->>'queue')::int "
+        "from events where kind = 'concurrency_limit' and detail->>'deployment' = 'served-expert' order by ts"
     )
-    assert limits and limits[0][0] in ("error", "latency") and limits[0][1:] == (4, 2)
-    assert all(2 <= after <= 4 and (after < before) == (why != "recovered") for why, before, after in limits)
+    assert limits and limits[0][0] in ("error", "latency", "queue") and limits[0][1:3] == (8, 4)
+    assert all(2 <= after <= 8 and (after < before) == (why != "recovered") for why, before, after, _ in limits)
+    # each replica runs one answer at a time (max_running: 1): two calls on one replica - the
+    # survivor's while the lost one is replaced - queue one, which the gateway read from the
+    # replicas' vLLM gauge (workers.gateway.queue_feed) and halved the limit for
+    queued = [(before, after, queue) for why, before, after, queue in limits if why == "queue"]
+    assert queued and all(queue >= 1 and after < before for before, after, queue in queued)
 
     # taken down: no application of the run, Serve (which the sweep started) shut down, no actor of it left
     assert not serve_running() and serve_apps() == {} and _serve_actors() == []

@@ -103,7 +103,7 @@ class _ReplicaActor:
     """Stands in for a Serve replica actor: ``record_routing_stats`` and
     ``get_num_ongoing_requests`` called with ``.remote()``, awaited."""
 
-    def __init__(self, server: TestDoubleServer | None = None, ongoing: int = 0, dead: bool = False) -> None:
+    def __init__(self, server: TestDoubleServer | None = None, ongoing: int = 0, dead: bool = False, hung: bool = False) -> None:
         async def stats() -> dict[str, Any]:
             if dead:
                 raise RuntimeError("the actor died")
@@ -113,6 +113,8 @@ class _ReplicaActor:
         async def count() -> int:
             if dead:
                 raise RuntimeError("the actor died")
+            if hung:  # killed, and Ray has not said so yet
+                await asyncio.sleep(3600)
             return ongoing
 
         self.record_routing_stats = _Method(stats)
@@ -186,6 +188,17 @@ def test_a_replica_that_fails_to_answer_is_left_out_and_the_replicas_are_listed_
 
     assert asyncio.run(run()) == [3, "no replica of SERVE_REPLICA::recap-r-0# answered get_num_ongoing_requests", 4, 4]
     assert listings == []
+
+
+def test_a_replica_that_does_not_answer_in_time_is_left_out(monkeypatch):
+    monkeypatch.setattr(queue_source, "REPLICA_TIMEOUT_S", 0.05)
+    monkeypatch.setattr(queue_source._Replicas, "_list", lambda self: [_ReplicaActor(ongoing=3), _ReplicaActor(hung=True)])
+    read = queue_source.queue_reader(QueueSource(kind="replica_ongoing", app="recap-r-0", running=1))
+
+    async def run() -> int | None:
+        return await asyncio.wait_for(read(), timeout=5)
+
+    assert asyncio.run(run()) == 2
 
 
 # -- the feed and the limit --------------------------------------------------------------------------
