@@ -1,5 +1,6 @@
 """A sweep that serves its model itself: the test-double engine deployed through Ray Serve with 2
-replicas, a sweep run on it, one replica killed mid-run (its calls retried as infrastructure, every
+replicas, a sweep run on it by 3 workers (so the replicas, each running one answer at a time, queue
+calls that the gateway's queue feed reads), one replica killed mid-run (its calls retried as infrastructure, every
 unit done once, nothing paid twice), everything taken down at the end, and the replica-hours
 charged to the ledger and attributed to the calls (pipeline/serving)."""
 
@@ -25,7 +26,7 @@ models:
     serve: {{replicas: 2, max_in_flight: 4, engine_args: {{latency_s: 0.4, max_running: 1}}}}
     prices: {{replica_hour: {price}}}
 methods: [{{method: react}}]
-environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
+environments: [{{benchmark: blocksworld, instances: [blocksworld/5@1, blocksworld/5@2, blocksworld/5@3, blocksworld/3@1]}}]
 workers: 3
 order: plan
 """
@@ -74,7 +75,7 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     killed: list[str] = []
     seen: dict[str, object] = {}
 
-    def on_result(unit, attempt, outcome):  # the first episode back: the other one is mid-episode
+    def on_result(unit, attempt, outcome):  # the first episode back: the last unit is mid-episode
         if killed:
             return
         apps = [a for a in serve_apps() if a.startswith("recap-")]
@@ -82,7 +83,7 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
         killed.append(_kill_a_busy_replica(apps[0]))
 
     summary = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_result=on_result)).run()
-    assert summary.all_done and (summary.total, summary.finished_now) == (3, 3)
+    assert summary.all_done and (summary.total, summary.finished_now) == (4, 4)
     run_id = json.loads((out / "run.json").read_text())["run_id"]
     assert seen["apps"] == [app_prefix(run_id) + "0"] and len(killed) == 1
 
@@ -90,7 +91,7 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     assert bad == []
     q = lambda sql: con.execute(sql).fetchall()  # noqa: E731
     # every unit done once (a lost replica is not the episode's failure), every episode a success
-    assert q("select attempt, end_reason, count(*) from episodes group by 1, 2") == [(1, "success", 3)]
+    assert q("select attempt, end_reason, count(*) from episodes group by 1, 2") == [(1, "success", 4)]
     # the calls went over HTTP to the served test double, labelled one, at the replicas' concurrency
     assert q("select distinct model, model_name, test_double, status from llm_calls") == [
         ("offline/expert", "served-expert", True, "ok")
