@@ -118,7 +118,7 @@ def engine_kwargs(plan: ServePlan) -> dict[str, Any]:
     a field of vLLM's ``FrontendArgs`` in ``vllm/entrypoints/openai/cli_args.py``, default False:
     "If set to True, enable prompt_tokens_details in usage"), so it is on for vLLM unless the sweep
     says otherwise. ``ray.serve.llm`` hands the engine arguments that are ``FrontendArgs`` fields to
-    vLLM's server state (``ray/llm/_internal/serve/engines/vllm/vllm_models.py:211-228``,
+    vLLM's server state (``ray/llm/_internal/serve/engines/vllm/vllm_models.py:211-229``,
     ``vllm_engine.py:433``, Ray 2.60)."""
     defaults: dict[str, Any] = {"tensor_parallel_size": plan.gpus, "enable_prefix_caching": True}
     if plan.engine == "vllm":

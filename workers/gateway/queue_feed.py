@@ -11,9 +11,10 @@ exposes (where, per engine: :class:`workers.llm.providers.QueueSource` and
 * vLLM: ``vllm:num_requests_waiting`` (labels ``model_name``, ``engine``), defined in
   ``vllm/v1/metrics/loggers.py`` (``PrometheusStatLogger.__init__``, ``gauge_scheduler_waiting``,
   vllm-project/vllm@005a810); exported by Ray's metrics agent as ``ray_vllm_num_requests_waiting``
-  (the Serve LLM dashboard's query: ``ray/dashboard/modules/metrics/dashboards/serve_llm_dashboard_panels.py``);
+  (the Serve LLM dashboard's query: ``ray/dashboard/modules/metrics/dashboards/serve_llm_dashboard_panels.py:394``);
 * SGLang: ``sglang:num_queue_reqs`` ("the number of requests in the waiting queue",
-  ``sglang/srt/metrics/collector.py``), through Ray ``ray_sglang_num_queue_reqs``;
+  ``python/sglang/srt/metrics/collector.py``, sgl-project/sglang@00ae9c1),
+  through Ray ``ray_sglang_num_queue_reqs``;
 * the test double: vLLM's gauge, in vLLM's exposition format, so the same parser runs in the
   default suite.
 
