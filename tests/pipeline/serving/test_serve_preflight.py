@@ -310,3 +310,36 @@ def test_vllm_gets_automatic_prefix_caching_cached_token_reports_and_its_tensor_
     # a vLLM frontend flag: SGLang's engine is not given it
     sglang = llm_config(plan("{engine: sglang, weights: Qwen/Qwen2.5-7B-Instruct}"))
     assert sglang["llm_engine"] == "SGLang" and "enable_prompt_tokens_details" not in sglang["engine_kwargs"]
+
+
+def test_each_engine_names_where_the_gateway_reads_its_replicas_queue():
+    from pipeline.serving.engines import serve_plan
+    from pipeline.serving.service import queue_source
+    from workers.llm.providers import QueueSource
+
+    def source(model: str, serve: str) -> QueueSource:
+        spec = parse_spec(
+            f"run: r\noutput: /tmp/x\nmodels:\n  - model: {model}\n    serve: {serve}\n"
+            "methods: [{method: react}]\nenvironments: [{benchmark: blocksworld, tasks: ['3']}]\n",
+            "sweep.yaml",
+        )
+        return queue_source(serve_plan(spec.models[0]), "recap-r-0")
+
+    assert source("offline/expert", "{replicas: 2}") == QueueSource(
+        kind="replica_metrics", app="recap-r-0", gauges=("vllm:num_requests_waiting", "ray_vllm_num_requests_waiting")
+    )
+    assert source("openai/smollm2", "{engine: llama.cpp, weights: /w/smollm2.gguf}") == QueueSource(
+        kind="replica_ongoing", app="recap-r-0", running=1
+    )
+    assert source("openai/Qwen/Qwen2.5-7B-Instruct", "{engine: vllm, weights: Qwen/Qwen2.5-7B-Instruct}") == QueueSource(
+        kind="ray_metrics",
+        app="recap-r-0",
+        gauges=("vllm:num_requests_waiting", "ray_vllm_num_requests_waiting"),
+        labels={"model_name": "Qwen/Qwen2.5-7B-Instruct"},
+    )
+    assert source("openai/Qwen/Qwen2.5-7B-Instruct", "{engine: sglang, weights: Qwen/Qwen2.5-7B-Instruct}") == QueueSource(
+        kind="ray_metrics",
+        app="recap-r-0",
+        gauges=("sglang:num_queue_reqs", "ray_sglang_num_queue_reqs"),
+        labels={"model_name": "Qwen/Qwen2.5-7B-Instruct"},
+    )
