@@ -12,6 +12,7 @@
 - :mod:`pipeline.serving.throughput`: what ``recap estimate`` prices a served model by - its
   output tokens/s, from the sweep (``serve.tokens_per_s``) or measured by a short probe.
 
-The gateway's in-flight limit for a served model adapts to its replicas' latency
-(:mod:`workers.gateway.adaptive`).
+The gateway's in-flight limit for a served model adapts to its replicas' latency and queue
+(:mod:`workers.gateway.adaptive`; the queue read per engine: :func:`pipeline.serving.service.queue_source`,
+:mod:`workers.gateway.queue_feed`).
 """

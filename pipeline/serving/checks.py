@@ -106,9 +106,18 @@ def check_serving(spec: SweepSpec) -> None:
                 f"{where}: serve.engine {plan.engine} is not installed here (no module {missing[0]}; {INSTALL_HINT[plan.engine]})"
             )
         if plan.engine == "test-double":
-            unknown = sorted(set(plan.engine_args) - {"latency_s"})
+            from workers.serving.test_double import ENGINE_ARGS as TEST_DOUBLE_ARGS  # lazy: only a sweep serving one
+
+            unknown = sorted(set(plan.engine_args) - set(TEST_DOUBLE_ARGS))
             if unknown:
-                raise PreflightError(f"{where}: serve.engine_args: the test double takes only latency_s, not {unknown[0]}")
+                raise PreflightError(
+                    f"{where}: serve.engine_args: the test double takes only {' and '.join(TEST_DOUBLE_ARGS)}, not {unknown[0]}"
+                )
+            running = plan.engine_args.get("max_running", 0)
+            if isinstance(running, bool) or not isinstance(running, int) or running < 0:
+                raise PreflightError(
+                    f"{where}: serve.engine_args.max_running must be a whole number >= 0 (0: no limit), got {running!r}"
+                )
             latency = plan.engine_args.get("latency_s", 0.0)
             if isinstance(latency, bool) or not isinstance(latency, (int, float)) or not 0 <= latency <= LATENCY_MAX_S:
                 raise PreflightError(

@@ -4,8 +4,9 @@
 - ``llama.cpp``: :func:`workers.serving.llama_cpp.deployment` (a GGUF file, ``llama_cpp.server``);
 - ``vllm`` / ``sglang``: ``ray.serve.llm.build_openai_app`` with one ``LLMConfig`` (the model id
   is what the sweep's ``openai/<id>`` names; weights, replicas, tensor parallel degree and the
-  engine arguments passed through; vLLM's automatic prefix caching on unless the engine
-  arguments say otherwise: ReCAP re-sends long prefixes).
+  engine arguments passed through; vLLM's automatic prefix caching on, and the cached prompt
+  tokens reported in its replies, unless the engine arguments say otherwise: ReCAP re-sends
+  long prefixes).
 """
 
 from __future__ import annotations
@@ -111,14 +112,22 @@ def engine_kwargs(plan: ServePlan) -> dict[str, Any]:
     the window), each unless the sweep's ``engine_args`` set it; the rest passed as they are.
     The server reports the prompt tokens it read from the cache as
     ``usage.prompt_tokens_details.cached_tokens``, which the gateway records in
-    ``llm_calls.cached_prompt_tokens`` like a provider's cache hits (workers.llm.calling)."""
-    return {"tensor_parallel_size": plan.gpus, "enable_prefix_caching": True, **plan.engine_args}
+    ``llm_calls.cached_prompt_tokens`` like a provider's cache hits (workers.llm.calling).
+
+    vLLM reports them only when asked: ``enable_prompt_tokens_details`` (``--enable-prompt-tokens-details``,
+    a field of vLLM's ``FrontendArgs`` in ``vllm/entrypoints/openai/cli_args.py``, default False:
+    "If set to True, enable prompt_tokens_details in usage"), so it is on for vLLM unless the sweep
+    says otherwise. ``ray.serve.llm`` hands the engine arguments that are ``FrontendArgs`` fields to
+    vLLM's server state (``ray/llm/_internal/serve/engines/vllm/vllm_models.py:211-229``,
+    ``vllm_engine.py:433``, Ray 2.60)."""
+    defaults: dict[str, Any] = {"tensor_parallel_size": plan.gpus, "enable_prefix_caching": True}
+    if plan.engine == "vllm":
+        defaults["enable_prompt_tokens_details"] = True
+    return {**defaults, **plan.engine_args}
 
 
-def _llm_application(plan: ServePlan) -> Any:
-    """vLLM / SGLang through ``ray.serve.llm`` (only where it is installed: preflight refuses otherwise)."""
-    from ray.serve.llm import LLMConfig, build_openai_app  # lazy: Ray's LLM serving needs vLLM
-
+def llm_config(plan: ServePlan) -> dict[str, Any]:
+    """The ``ray.serve.llm.LLMConfig`` fields of a vLLM / SGLang ``plan`` (what the service deploys)."""
     config: dict[str, Any] = {
         "model_loading_config": {"model_id": plan.served_name, "model_source": plan.weights},
         "deployment_config": {
@@ -129,4 +138,11 @@ def _llm_application(plan: ServePlan) -> Any:
     }
     if plan.engine == "sglang":
         config["llm_engine"] = "SGLang"
-    return build_openai_app({"llm_configs": [LLMConfig(**config)]})
+    return config
+
+
+def _llm_application(plan: ServePlan) -> Any:
+    """vLLM / SGLang through ``ray.serve.llm`` (only where it is installed: preflight refuses otherwise)."""
+    from ray.serve.llm import LLMConfig, build_openai_app  # lazy: Ray's LLM serving needs vLLM
+
+    return build_openai_app({"llm_configs": [LLMConfig(**llm_config(plan))]})

@@ -15,8 +15,10 @@ its run left.
   within ``ready_timeout_s``, or failed: one line, the session stops before any unit.
 * the gateway: ``api_base`` = the route, ``max_concurrency`` = replicas x max_in_flight, the
   in-flight limit adapting between ``replicas`` and that to the calls' latency against their
-  no-queue baseline and to capacity errors (:mod:`workers.gateway.adaptive`; each change an
-  ``events`` row of kind ``concurrency_limit``) (:meth:`ServedModels.deployment_updates`).
+  no-queue baseline, to the replicas' waiting requests (read about once a second while calls
+  are in flight: :func:`queue_source`, :mod:`workers.gateway.queue_feed`) and to capacity
+  errors (:mod:`workers.gateway.adaptive`; each change an ``events`` row of kind
+  ``concurrency_limit``) (:meth:`ServedModels.deployment_updates`).
 * a replica that dies mid-run: Serve starts another; the calls it held fail with a 5xx and the
   gateway retries them (``server_error``), so an episode never sees the loss.
 * stop: :meth:`ServedModels.close` (the session's end, Ctrl-C: the driver's ``finally``).
@@ -40,6 +42,8 @@ from typing import Any
 from pipeline.errors import PipelineError
 from pipeline.serving.engines import ServePlan, application, serve_plan
 from pipeline.spec import SweepSpec
+from workers.gateway.queue_feed import SGLANG_WAITING, VLLM_WAITING
+from workers.llm.providers import QueueSource
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +68,20 @@ class Served:
     #: time.time() when its replicas were asked for (what the cost counts from)
     started_at: float
     ready_s: float = 0.0
+
+
+def queue_source(plan: ServePlan, app: str) -> QueueSource:
+    """Where the gateway reads the waiting requests of ``plan``'s replicas (Serve application
+    ``app``), per engine (why each: :mod:`workers.serving.queue_source`): the test double answers
+    vLLM's gauge from each replica; llama.cpp's server exposes no metrics, so Serve's count of
+    each replica's requests less the one it runs; vLLM / SGLang under ``ray.serve.llm`` through
+    Ray's metrics agents, the samples labelled with the served model."""
+    if plan.engine == "test-double":
+        return QueueSource(kind="replica_metrics", app=app, gauges=VLLM_WAITING)
+    if plan.engine == "llama.cpp":
+        return QueueSource(kind="replica_ongoing", app=app, running=1)
+    gauges = SGLANG_WAITING if plan.engine == "sglang" else VLLM_WAITING
+    return QueueSource(kind="ray_metrics", app=app, gauges=gauges, labels={"model_name": plan.served_name})
 
 
 def _free_port() -> int:
@@ -210,11 +228,17 @@ class ServedModels:
 
     def deployment_updates(self) -> dict[str, dict[str, Any]]:
         """Model name -> the gateway deployment's fields the service sets: the route as
-        ``api_base``, every replica's share of calls as ``max_concurrency``, and one call per
+        ``api_base``, every replica's share of calls as ``max_concurrency``, one call per
         replica as ``min_concurrency`` (the in-flight limit adapts between them to the replicas'
-        latency and lost replicas: workers.gateway.adaptive)."""
+        latency, queue and lost replicas: workers.gateway.adaptive), and where the replicas'
+        waiting requests are read (``queue_source``: :func:`queue_source`)."""
         return {
-            label: {"api_base": s.api_base, "max_concurrency": s.plan.concurrency, "min_concurrency": s.plan.replicas}
+            label: {
+                "api_base": s.api_base,
+                "max_concurrency": s.plan.concurrency,
+                "min_concurrency": s.plan.replicas,
+                "queue_source": queue_source(s.plan, s.app),
+            }
             for label, s in self.served.items()
         }
 

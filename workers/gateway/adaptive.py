@@ -7,7 +7,8 @@ latency grows while the throughput does not. A replica that dies mid-run (Serve 
 halves what the others can take until it is back. So the gateway's in-flight limit adapts, as
 in Netflix's concurrency-limits and Envoy's adaptive concurrency filter: a limit between a
 ``floor`` and the ``ceiling`` (``replicas x max_in_flight``), AIMD driven by the latency of the
-calls against their no-queue baseline and, where the server reports it, its queue length.
+calls against their no-queue baseline and, where the server reports it, its queue length (read
+about once a second by :mod:`workers.gateway.queue_feed`).
 
 The rule, per finished call (:meth:`AdaptiveLimit.observe`):
 

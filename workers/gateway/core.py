@@ -77,6 +77,7 @@ from workers.gateway.call_state import (
 )
 from workers.gateway.ledger import BudgetLedger, EpisodeBudget, LocalBudget
 from workers.gateway.limits import AdmissionController, AdmissionError, Ticket
+from workers.gateway.queue_feed import QueueFeed
 from workers.llm.accounting import (
     USAGE_REJECTED_EVENT,
     served_from,
@@ -153,6 +154,9 @@ class DeploymentGateway(CallRecorder):
         self._clock = clock
         self._inflight: dict[str, asyncio.Future] = {}
         self._flusher: asyncio.Task | None = None
+        #: a served model's queue feed (workers.gateway.queue_feed) and its task
+        self.queue_feed: QueueFeed | None = None
+        self._queue_task: asyncio.Task | None = None
         self.loop: asyncio.AbstractEventLoop | None = None
         self._started = False
         self.counts: Counter[str] = Counter()
@@ -166,14 +170,33 @@ class DeploymentGateway(CallRecorder):
         self._started = True
         self.loop = asyncio.get_running_loop()
         self._flusher = self.loop.create_task(self.call_log.run_periodic_flush())
+        self._start_queue_feed()
         # reservations left open by an earlier incarnation of this deployment's gateway
         adopted = await self.budget.adopt_orphans(self.deployment, self.instance)
         self.counts["orphans_adopted"] += adopted
         if adopted:
             self.call_log.add_event("orphans_charged", "warning", {"deployment": self.deployment, "reservations": adopted})
 
+    def _start_queue_feed(self) -> None:
+        """A served model's replicas' waiting requests, read while calls are in flight and fed to
+        the adaptive limit (``queue_source`` set: pipeline.serving; workers.gateway.queue_feed)."""
+        source = self.config.queue_source
+        if source is None or self.admission.adaptive is None or self.loop is None:
+            return
+        from workers.serving.queue_source import queue_reader  # lazy: Ray's side, only for a served model
+
+        self.queue_feed = QueueFeed(self.admission, queue_reader(source), source.period_s)
+        self._queue_task = self.loop.create_task(self.queue_feed.run())
+
     async def aclose(self) -> None:
         """Flush the call rows (and close the ledger when this gateway owns it)."""
+        if self._queue_task is not None:
+            self._queue_task.cancel()
+            try:
+                await self._queue_task
+            except asyncio.CancelledError:
+                pass
+            self._queue_task = None
         if self._flusher is not None:
             self._flusher.cancel()
             try:

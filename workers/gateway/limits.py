@@ -202,6 +202,9 @@ class AdmissionController:
         self._window_changed = asyncio.Event()
         self.rate_limited = 0
         self.shrinks = 0
+        #: a served model's waiting requests as last read (workers.gateway.queue_feed) and until when it holds
+        self.queue: int | None = None
+        self.queue_until = 0.0
 
     # ---- admission ----
     def _slots(self) -> int:
@@ -306,11 +309,21 @@ class AdmissionController:
         self._window_changed.set()
         self._wake()
 
+    def report_queue(self, queue: int, fresh_s: float) -> None:
+        """The replicas of a served model hold ``queue`` requests waiting (read by the queue feed:
+        workers.gateway.queue_feed); each call that finishes within ``fresh_s`` observes it."""
+        self.queue = queue
+        self.queue_until = self._clock() + fresh_s
+
     def _adapt(self, outcome: str, latency_s: float, output_tokens: int | None) -> None:
-        """A served model's limit follows its latency and capacity errors (workers.gateway.adaptive)."""
+        """A served model's limit follows its latency, its replicas' queue (when the queue feed
+        reads one) and capacity errors (workers.gateway.adaptive)."""
         assert self.adaptive is not None
         ok = outcome == "ok"
-        change = self.adaptive.observe(latency_s, output_tokens=output_tokens) if ok else self.adaptive.failed(outcome)
+        queue = self.queue if self.queue is not None and self._clock() <= self.queue_until else None
+        change = (
+            self.adaptive.observe(latency_s, queue=queue, output_tokens=output_tokens) if ok else self.adaptive.failed(outcome)
+        )
         self.limit = float(self.adaptive.slots)
         if change is not None and self.on_limit is not None:
             self.on_limit(change)

@@ -159,6 +159,30 @@ def url_secrets(url: str | None) -> list[str]:
     return sorted({s for s in out if s and len(s) >= 4}, key=len, reverse=True)
 
 
+class QueueSource(BaseModel):
+    """Where the gateway reads how many requests a served model's replicas hold waiting (the
+    queue figure its in-flight limit adapts to: :mod:`workers.gateway.queue_feed`, read by
+    :mod:`workers.serving.queue_source`). Set by the sweep's serving (pipeline.serving), per engine:
+
+    * ``replica_metrics``: each replica of Serve application ``app`` answers its engine's
+      Prometheus text (the test double: vLLM's gauge); ``gauges`` summed over the replicas;
+    * ``replica_ongoing``: Serve's own count of each replica's requests, less the ``running``
+      its engine runs at once (llama.cpp's server runs one, exposes no metrics);
+    * ``ray_metrics``: the engine's gauges as Ray's metrics agents export them on every node
+      (vLLM / SGLang under ``ray.serve.llm``), the samples whose labels match ``labels``.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    kind: Literal["replica_metrics", "replica_ongoing", "ray_metrics"]
+    app: str
+    gauges: tuple[str, ...] = ()
+    labels: dict[str, str] = Field(default_factory=dict)
+    running: int = Field(default=1, ge=0)
+    #: seconds between two reads while calls are in flight
+    period_s: float = Field(default=1.0, gt=0)
+
+
 class DeploymentConfigError(ValueError):
     """A deployment configuration that cannot work."""
 
@@ -198,6 +222,9 @@ class DeploymentConfig(BaseModel):
     #: set (a served model: pipeline.serving): the in-flight limit adapts to the server's latency
     #: and capacity errors between this floor and ``max_concurrency`` (workers.gateway.adaptive)
     min_concurrency: int | None = Field(default=None, gt=0)
+    #: set (a served model): where the gateway reads the replicas' waiting requests, which the
+    #: in-flight limit adapts to as well (workers.gateway.queue_feed)
+    queue_source: QueueSource | None = None
     max_attempts: int = Field(default=6, gt=0)
     total_timeout_s: float = Field(default=900.0, gt=0)
     attempt_timeout_s: float = Field(default=120.0, gt=0)

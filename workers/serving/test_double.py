@@ -11,7 +11,15 @@ model string stays ``offline/expert`` (or ``offline/random``), so every record a
 label it a test double.
 
 ``engine_args``: ``latency_s`` (seconds each answer waits, so that calls are in flight when a
-test kills a replica). Nothing else is accepted (:data:`ENGINE_ARGS`).
+test kills a replica) and ``max_running`` (the answers a replica works on at once, as vLLM's
+scheduler runs at most a batch; the other requests wait their turn - a queue; 0, the default:
+no limit). Nothing else is accepted (:data:`ENGINE_ARGS`).
+
+Its queue, as vLLM reports it: each replica answers Serve's ``record_routing_stats`` with its
+gauges in vLLM's Prometheus exposition (:func:`metrics_text`: ``vllm:num_requests_waiting`` and
+``vllm:num_requests_running``, labels ``engine`` and ``model_name``), which the gateway's queue
+feed reads from every replica and sums (:mod:`workers.serving.queue_source`,
+:mod:`workers.gateway.queue_feed`).
 
 Prefix caching, as vLLM's automatic prefix caching reports it: each replica remembers the
 message prefixes it has seen (:class:`PrefixCache`, per replica like vLLM's KV cache), and an
@@ -37,7 +45,7 @@ from workers.llm.offline.wire import OFFLINE_METADATA_KEY
 from workers.llm.tokens import REPLY_PRIMING_TOKENS, estimate_prompt_tokens, estimate_text_tokens
 
 #: the engine arguments the test double takes
-ENGINE_ARGS = ("latency_s",)
+ENGINE_ARGS = ("latency_s", "max_running")
 #: what a replica answers on ``GET <route>/health``
 HEALTHY = {"status": "ok"}
 #: message prefixes a replica remembers (the least recently used leave first)
@@ -111,6 +119,21 @@ def chat_answer(body: Mapping[str, Any], cache: PrefixCache | None = None) -> di
     }
 
 
+def metrics_text(model: str, waiting: int, running: int) -> str:
+    """A replica's gauges as vLLM's server exposes them on ``/metrics`` (names, help, labels:
+    ``vllm/v1/metrics/loggers.py``, ``PrometheusStatLogger``; values as prometheus_client prints
+    them)."""
+    labels = f'engine="0",model_name="{model}"'
+    return (
+        "# HELP vllm:num_requests_running Number of requests in model execution batches.\n"
+        "# TYPE vllm:num_requests_running gauge\n"
+        f"vllm:num_requests_running{{{labels}}} {float(running)}\n"
+        "# HELP vllm:num_requests_waiting Number of requests waiting to be processed.\n"
+        "# TYPE vllm:num_requests_waiting gauge\n"
+        f"vllm:num_requests_waiting{{{labels}}} {float(waiting)}\n"
+    )
+
+
 class TestDoubleServer:
     """The deployment's class (wrapped by ``serve.deployment`` in :func:`deployment`): routes
     ``POST .../v1/chat/completions``, ``GET .../v1/models`` and ``GET .../health``."""
@@ -120,6 +143,11 @@ class TestDoubleServer:
     def __init__(self, model: str, engine_args: Mapping[str, Any] | None = None) -> None:
         self.model = model
         self.latency_s = float((engine_args or {}).get("latency_s", 0.0))
+        max_running = int((engine_args or {}).get("max_running", 0))
+        #: the answers worked on at once (None: no limit) and the requests waiting for one
+        self.slots = asyncio.Semaphore(max_running) if max_running > 0 else None
+        self.waiting = 0
+        self.running = 0
         self.prefixes = PrefixCache()
 
     async def __call__(self, request: Any) -> Any:
@@ -136,12 +164,36 @@ class TestDoubleServer:
             body = await request.json()
         except ValueError:
             return JSONResponse({"error": {"message": "the body is not JSON", "type": "invalid_request_error"}}, status_code=400)
-        if self.latency_s:
-            await asyncio.sleep(self.latency_s)
+        if self.slots is None:
+            return await self._answer(body)
+        self.waiting += 1
         try:
+            await self.slots.acquire()
+        finally:
+            self.waiting -= 1
+        try:
+            return await self._answer(body)
+        finally:
+            self.slots.release()
+
+    async def _answer(self, body: Any) -> Any:
+        from starlette.responses import JSONResponse  # lazy: as above
+
+        self.running += 1
+        try:
+            if self.latency_s:
+                await asyncio.sleep(self.latency_s)
             return JSONResponse(chat_answer(body, self.prefixes))
         except ValueError as exc:
             return JSONResponse({"error": {"message": str(exc), "type": "invalid_request_error"}}, status_code=400)
+        finally:
+            self.running -= 1
+
+    async def record_routing_stats(self) -> dict[str, Any]:
+        """What Serve's replica actor answers ``record_routing_stats`` with: this replica's gauges
+        in vLLM's exposition (the gateway's queue feed calls it on every replica, outside the
+        router; Serve's controller polls it too, for request routers that want it)."""
+        return {"prometheus": metrics_text(self.model, self.waiting, self.running)}
 
     def check_health(self) -> None:
         """Serve's per-replica health check: a replica that can answer is healthy."""

@@ -155,13 +155,17 @@ def test_a_served_model_under_a_cap_needs_its_hourly_price(tmp_path):
 
 
 # -- the test double --------------------------------------------------------------------------------
-def test_the_test_double_takes_only_a_latency(tmp_path):
+def test_the_test_double_takes_only_a_latency_and_a_batch_size(tmp_path):
     assert refusal(tmp_path, "{model: offline/expert, serve: {engine_args: {max_model_len: 4096}}}") == (
-        "models[0] (offline/expert): serve.engine_args: the test double takes only latency_s, not max_model_len"
+        "models[0] (offline/expert): serve.engine_args: the test double takes only latency_s and max_running, not max_model_len"
     )
     assert refusal(tmp_path, "{model: offline/expert, serve: {engine_args: {latency_s: 61}}}") == (
         "models[0] (offline/expert): serve.engine_args.latency_s must be seconds in [0, 60], got 61"
     )
+    assert refusal(tmp_path, "{model: offline/expert, serve: {engine_args: {max_running: -1}}}") == (
+        "models[0] (offline/expert): serve.engine_args.max_running must be a whole number >= 0 (0: no limit), got -1"
+    )
+    preflight(spec_of(tmp_path, "{model: offline/expert, serve: {engine_args: {latency_s: 0.1, max_running: 1}}}"))
     assert refusal(tmp_path, "{model: offline/expert, serve: {weights: Org/cached}}") == (
         "models[0] (offline/expert): serve.weights: the test double serves no weights; leave it out"
     )
@@ -269,21 +273,73 @@ def test_the_serve_section_is_checked_in_one_line(tmp_path, model, message):
     assert str(info.value) == f"sweep.yaml: {message}"
 
 
-def test_vllm_gets_automatic_prefix_caching_and_its_tensor_parallel_degree_unless_the_sweep_sets_them():
-    from pipeline.serving.engines import engine_kwargs, serve_plan
+def test_vllm_gets_automatic_prefix_caching_cached_token_reports_and_its_tensor_parallel_degree_unless_the_sweep_sets_them():
+    from pipeline.serving.engines import engine_kwargs, llm_config, serve_plan
 
-    def kwargs(serve: str) -> dict:
+    def plan(serve: str, model: str = "openai/Qwen/Qwen2.5-7B-Instruct"):
         spec = parse_spec(
-            "run: r\noutput: /tmp/x\nmodels:\n  - model: openai/Qwen/Qwen2.5-7B-Instruct\n"
+            f"run: r\noutput: /tmp/x\nmodels:\n  - model: {model}\n"
             f"    serve: {serve}\nmethods: [{{method: react}}]\nenvironments: [{{benchmark: blocksworld, tasks: ['3']}}]\n",
             "sweep.yaml",
         )
-        return engine_kwargs(serve_plan(spec.models[0]))
+        return serve_plan(spec.models[0])
 
+    def kwargs(serve: str) -> dict:
+        return engine_kwargs(plan(serve))
+
+    # vLLM reports usage.prompt_tokens_details.cached_tokens only with enable_prompt_tokens_details
     assert kwargs("{engine: vllm, weights: Qwen/Qwen2.5-7B-Instruct, gpus_per_replica: 2}") == {
         "tensor_parallel_size": 2,
         "enable_prefix_caching": True,
+        "enable_prompt_tokens_details": True,
     }
     assert kwargs(
         "{engine: vllm, weights: Qwen/Qwen2.5-7B-Instruct, engine_args: {enable_prefix_caching: false, max_model_len: 8192}}"
-    ) == {"tensor_parallel_size": 1, "enable_prefix_caching": False, "max_model_len": 8192}
+    ) == {"tensor_parallel_size": 1, "enable_prefix_caching": False, "enable_prompt_tokens_details": True, "max_model_len": 8192}
+    assert kwargs("{engine: vllm, weights: Qwen/Qwen2.5-7B-Instruct, engine_args: {enable_prompt_tokens_details: false}}") == {
+        "tensor_parallel_size": 1,
+        "enable_prefix_caching": True,
+        "enable_prompt_tokens_details": False,
+    }
+    # the LLMConfig the service deploys carries it (ray.serve.llm hands it to vLLM's server state)
+    assert llm_config(plan("{engine: vllm, weights: Qwen/Qwen2.5-7B-Instruct, replicas: 2, max_in_flight: 8}")) == {
+        "model_loading_config": {"model_id": "Qwen/Qwen2.5-7B-Instruct", "model_source": "Qwen/Qwen2.5-7B-Instruct"},
+        "deployment_config": {"num_replicas": 2, "max_ongoing_requests": 8},
+        "engine_kwargs": {"tensor_parallel_size": 1, "enable_prefix_caching": True, "enable_prompt_tokens_details": True},
+    }
+    # a vLLM frontend flag: SGLang's engine is not given it
+    sglang = llm_config(plan("{engine: sglang, weights: Qwen/Qwen2.5-7B-Instruct}"))
+    assert sglang["llm_engine"] == "SGLang" and "enable_prompt_tokens_details" not in sglang["engine_kwargs"]
+
+
+def test_each_engine_names_where_the_gateway_reads_its_replicas_queue():
+    from pipeline.serving.engines import serve_plan
+    from pipeline.serving.service import queue_source
+    from workers.llm.providers import QueueSource
+
+    def source(model: str, serve: str) -> QueueSource:
+        spec = parse_spec(
+            f"run: r\noutput: /tmp/x\nmodels:\n  - model: {model}\n    serve: {serve}\n"
+            "methods: [{method: react}]\nenvironments: [{benchmark: blocksworld, tasks: ['3']}]\n",
+            "sweep.yaml",
+        )
+        return queue_source(serve_plan(spec.models[0]), "recap-r-0")
+
+    assert source("offline/expert", "{replicas: 2}") == QueueSource(
+        kind="replica_metrics", app="recap-r-0", gauges=("vllm:num_requests_waiting", "ray_vllm_num_requests_waiting")
+    )
+    assert source("openai/smollm2", "{engine: llama.cpp, weights: /w/smollm2.gguf}") == QueueSource(
+        kind="replica_ongoing", app="recap-r-0", running=1
+    )
+    assert source("openai/Qwen/Qwen2.5-7B-Instruct", "{engine: vllm, weights: Qwen/Qwen2.5-7B-Instruct}") == QueueSource(
+        kind="ray_metrics",
+        app="recap-r-0",
+        gauges=("vllm:num_requests_waiting", "ray_vllm_num_requests_waiting"),
+        labels={"model_name": "Qwen/Qwen2.5-7B-Instruct"},
+    )
+    assert source("openai/Qwen/Qwen2.5-7B-Instruct", "{engine: sglang, weights: Qwen/Qwen2.5-7B-Instruct}") == QueueSource(
+        kind="ray_metrics",
+        app="recap-r-0",
+        gauges=("sglang:num_queue_reqs", "ray_sglang_num_queue_reqs"),
+        labels={"model_name": "Qwen/Qwen2.5-7B-Instruct"},
+    )

@@ -1,5 +1,6 @@
 """A sweep that serves its model itself: the test-double engine deployed through Ray Serve with 2
-replicas, a sweep run on it, one replica killed mid-run (its calls retried as infrastructure, every
+replicas, a sweep run on it by 3 workers (so the replicas, each running one answer at a time, queue
+calls that the gateway's queue feed reads), one replica killed mid-run (its calls retried as infrastructure, every
 unit done once, nothing paid twice), everything taken down at the end, and the replica-hours
 charged to the ledger and attributed to the calls (pipeline/serving)."""
 
@@ -22,11 +23,11 @@ output: {out}
 models:
   - model: offline/expert
     label: served-expert
-    serve: {{replicas: 2, max_in_flight: 2, engine_args: {{latency_s: 0.4}}}}
+    serve: {{replicas: 2, max_in_flight: 4, engine_args: {{latency_s: 0.4, max_running: 1}}}}
     prices: {{replica_hour: {price}}}
 methods: [{{method: react}}]
-environments: [{{benchmark: blocksworld, tasks: ["3"]}}]
-workers: 2
+environments: [{{benchmark: blocksworld, instances: [blocksworld/5@1, blocksworld/5@2, blocksworld/5@3, blocksworld/3@1]}}]
+workers: 3
 order: plan
 """
 
@@ -74,7 +75,7 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     killed: list[str] = []
     seen: dict[str, object] = {}
 
-    def on_result(unit, attempt, outcome):  # the first episode back: the other one is mid-episode
+    def on_result(unit, attempt, outcome):  # the first episode back: the last unit is mid-episode
         if killed:
             return
         apps = [a for a in serve_apps() if a.startswith("recap-")]
@@ -82,7 +83,7 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
         killed.append(_kill_a_busy_replica(apps[0]))
 
     summary = Driver(prepare(spec, text), make_backend(spec), progress="off", hooks=Hooks(on_result=on_result)).run()
-    assert summary.all_done and (summary.total, summary.finished_now) == (3, 3)
+    assert summary.all_done and (summary.total, summary.finished_now) == (4, 4)
     run_id = json.loads((out / "run.json").read_text())["run_id"]
     assert seen["apps"] == [app_prefix(run_id) + "0"] and len(killed) == 1
 
@@ -90,14 +91,14 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     assert bad == []
     q = lambda sql: con.execute(sql).fetchall()  # noqa: E731
     # every unit done once (a lost replica is not the episode's failure), every episode a success
-    assert q("select attempt, end_reason, count(*) from episodes group by 1, 2") == [(1, "success", 3)]
+    assert q("select attempt, end_reason, count(*) from episodes group by 1, 2") == [(1, "success", 4)]
     # the calls went over HTTP to the served test double, labelled one, at the replicas' concurrency
     assert q("select distinct model, model_name, test_double, status from llm_calls") == [
         ("offline/expert", "served-expert", True, "ok")
     ]
     started = [json.loads(d) for (d,) in q("select detail from events where kind = 'serve_started'")]
     assert [(s["model"], s["engine"], s["replicas"], s["max_in_flight"], s["test_double"]) for s in started] == [
-        ("served-expert", "test-double", 2, 2, True)
+        ("served-expert", "test-double", 2, 4, True)
     ]
     assert started[0]["api_base"].endswith(f"/recap/{run_id}/0/v1")
     # the calls cut by the lost replica were retried by the gateway as a server error
@@ -105,13 +106,18 @@ def test_a_served_test_double_runs_a_sweep_survives_a_lost_replica_and_is_taken_
     calls_retried = q("select coalesce(sum(retries), 0) from llm_calls")
     assert retried[0][0] >= 1 and calls_retried[0][0] >= 1
     # the in-flight limit adapted between one call a replica and replicas x max_in_flight: the lost
-    # replica's 5xx (or the survivors' slower replies) lowered it, each change an events row
+    # replica's 5xx, the survivors' slower replies or their queue lowered it, each change an events row
     limits = q(
-        "select detail->>'reason', (detail->>'before')::int, (detail->>'limit')::int from events "
-        "where kind = 'concurrency_limit' and detail->>'deployment' = 'served-expert' order by ts"
+        "select detail->>'reason', (detail->>'before')::int, (detail->>'limit')::int, (detail->>'queue')::int "
+        "from events where kind = 'concurrency_limit' and detail->>'deployment' = 'served-expert' order by ts"
     )
-    assert limits and limits[0][0] in ("error", "latency") and limits[0][1:] == (4, 2)
-    assert all(2 <= after <= 4 and (after < before) == (why != "recovered") for why, before, after in limits)
+    assert limits and limits[0][0] in ("error", "latency", "queue") and limits[0][1:3] == (8, 4)
+    assert all(2 <= after <= 8 and (after < before) == (why != "recovered") for why, before, after, _ in limits)
+    # each replica runs one answer at a time (max_running: 1): two calls on one replica - the
+    # survivor's while the lost one is replaced - queue one, which the gateway read from the
+    # replicas' vLLM gauge (workers.gateway.queue_feed) and halved the limit for
+    queued = [(before, after, queue) for why, before, after, queue in limits if why == "queue"]
+    assert queued and all(queue >= 1 and after < before for before, after, queue in queued)
 
     # taken down: no application of the run, Serve (which the sweep started) shut down, no actor of it left
     assert not serve_running() and serve_apps() == {} and _serve_actors() == []
