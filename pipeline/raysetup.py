@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -243,7 +244,8 @@ def _loopback_node() -> Iterator[None]:
 def _lean_head(lean: bool) -> Iterator[None]:
     """Start a local Ray without the processes a sweep never reads, unless the sweep asks for the
     dashboard (``ray: {dashboard: true}``): no dashboard (API server) process, the dashboard
-    agent in its minimal form, no log monitor and no autoscaler monitor.
+    agent replaced by :mod:`pipeline.idle_dashboard_agent`, no log monitor and no autoscaler
+    monitor.
 
     Why: ``include_dashboard=False`` still starts the API server (the dashboard process with its
     usage-stats module), the dashboard agent with its HTTP server, metrics and event modules, the
@@ -256,20 +258,29 @@ def _lean_head(lean: bool) -> Iterator[None]:
     node's parameters, skips the API server, and has Ray choose its minimal agent - what a
     ``pip install ray`` without ``[default]`` runs - by reporting the dashboard's optional
     dependencies missing (``ray._private.utils.get_dashboard_dependency_error``, read while
-    ``ray.init`` builds the agent's command line). What a sweep uses stays: the GCS, the raylet,
-    the workers and the runtime-environment agent (the workers' env_vars). Another Ray layout
-    (a private name gone): the default start."""
+    ``ray.init`` builds the agent's command line). Even that agent imports every dashboard
+    module it finds and polls for the absent dashboard (~78 MB PSS): the raylet's command line
+    (``ray._private.services.start_ray_process`` for the raylet) gets
+    :mod:`pipeline.idle_dashboard_agent` as its dashboard agent instead (a standard-library
+    process of ~5 MB that publishes the agent's ports unused and lives as long as the raylet:
+    :func:`_with_idle_dashboard_agent`). What a sweep uses stays: the GCS, the raylet, the
+    workers and the runtime-environment agent (a run's actors may still start with a
+    runtime_env: :func:`actor_runtime_env`). Another Ray layout (a private name gone): the
+    default start."""
     if not lean:
         yield
         return
     try:  # lazy: Ray loads only where a session uses it
         from ray._private import node as ray_node
         from ray._private import parameter as ray_parameter
+        from ray._private import services as ray_services
         from ray._private import utils as ray_utils
 
         params_init = ray_parameter.RayParams.__init__
         start_api_server = ray_node.Node.start_api_server
         dependency_error = ray_utils.get_dashboard_dependency_error
+        start_process = ray_services.start_ray_process
+        raylet_type = ray_services.ray_constants.PROCESS_TYPE_RAYLET
     except (ImportError, AttributeError):
         yield
         return
@@ -279,12 +290,56 @@ def _lean_head(lean: bool) -> Iterator[None]:
         self.include_log_monitor = False
         self.no_monitor = True
 
+    def idle_agent_raylet(command: list[str], process_type: str, *args: Any, **kwargs: Any) -> Any:
+        if process_type == raylet_type:
+            command = _with_idle_dashboard_agent(command)
+        return start_process(command, process_type, *args, **kwargs)
+
     ray_parameter.RayParams.__init__ = lean_params  # type: ignore[method-assign]
     ray_node.Node.start_api_server = lambda self, **_: None  # type: ignore[method-assign]
     ray_utils.get_dashboard_dependency_error = lambda: ImportError("the dashboard is off (ray: {dashboard: false})")
+    ray_services.start_ray_process = idle_agent_raylet
     try:
         yield
     finally:
         ray_parameter.RayParams.__init__ = params_init  # type: ignore[method-assign]
         ray_node.Node.start_api_server = start_api_server  # type: ignore[method-assign]
         ray_utils.get_dashboard_dependency_error = dependency_error
+        ray_services.start_ray_process = start_process
+
+
+#: the raylet's argument holding the command it starts its dashboard agent with
+_AGENT_ARG = "--dashboard_agent_command="
+#: :mod:`pipeline.idle_dashboard_agent`, run as a file (``python -I -S``: no project import)
+IDLE_AGENT = Path(__file__).resolve().with_name("idle_dashboard_agent.py")
+
+
+def _with_idle_dashboard_agent(raylet_command: list[str]) -> list[str]:
+    """The raylet's command line with :mod:`pipeline.idle_dashboard_agent` as its dashboard agent:
+    the agent's three port files (named by Ray's own rule from the node id and session folder
+    on Ray's agent command line) published unused, nothing else. Ray's command as it was where
+    anything of that is not found (another Ray layout)."""
+    import shlex
+    import subprocess
+
+    try:  # lazy: Ray loads only where a session uses it
+        from ray._raylet import (  # type: ignore[attr-defined]  # Ray's compiled module: no stubs for it
+            DASHBOARD_AGENT_LISTEN_PORT_NAME,
+            METRICS_AGENT_PORT_NAME,
+            METRICS_EXPORT_PORT_NAME,
+            get_port_filename,
+        )
+    except ImportError:
+        return raylet_command
+    at = [i for i, arg in enumerate(raylet_command) if arg.startswith(_AGENT_ARG)]
+    if len(at) != 1:
+        return raylet_command
+    agent = shlex.split(raylet_command[at[0]][len(_AGENT_ARG) :])
+    opts = dict(arg[2:].split("=", 1) for arg in agent if arg.startswith("--") and "=" in arg)
+    node_id, session_dir = opts.get("node-id"), opts.get("session-dir")
+    if not node_id or not session_dir:
+        return raylet_command
+    names = (METRICS_AGENT_PORT_NAME, METRICS_EXPORT_PORT_NAME, DASHBOARD_AGENT_LISTEN_PORT_NAME)
+    idle = [sys.executable, "-I", "-S", str(IDLE_AGENT), f"--session-dir={session_dir}"]
+    idle += [f"--port-file={os.path.join(session_dir, get_port_filename(node_id, name))}" for name in names]
+    return [*raylet_command[: at[0]], _AGENT_ARG + subprocess.list2cmdline(idle), *raylet_command[at[0] + 1 :]]
