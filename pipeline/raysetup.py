@@ -244,8 +244,8 @@ def _loopback_node() -> Iterator[None]:
 def _lean_head(lean: bool) -> Iterator[None]:
     """Start a local Ray without the processes a sweep never reads, unless the sweep asks for the
     dashboard (``ray: {dashboard: true}``): no dashboard (API server) process, the dashboard
-    agent replaced by :mod:`pipeline.idle_dashboard_agent`, no log monitor and no autoscaler
-    monitor.
+    agent replaced by :mod:`pipeline.idle_dashboard_agent`, the runtime-environment agent
+    started on first use, no log monitor and no autoscaler monitor.
 
     Why: ``include_dashboard=False`` still starts the API server (the dashboard process with its
     usage-stats module), the dashboard agent with its HTTP server, metrics and event modules, the
@@ -263,10 +263,12 @@ def _lean_head(lean: bool) -> Iterator[None]:
     (``ray._private.services.start_ray_process`` for the raylet) gets
     :mod:`pipeline.idle_dashboard_agent` as its dashboard agent instead (a standard-library
     process of ~5 MB that publishes the agent's ports unused and lives as long as the raylet:
-    :func:`_with_idle_dashboard_agent`). What a sweep uses stays: the GCS, the raylet, the
-    workers and the runtime-environment agent (a run's actors may still start with a
-    runtime_env: :func:`actor_runtime_env`). Another Ray layout (a private name gone): the
-    default start."""
+    :func:`_with_lean_agents`), and Ray's runtime-environment agent (~48 MB) behind
+    :mod:`pipeline.lazy_runtime_env_agent`, which holds its port and becomes Ray's agent on the
+    raylet's first request: a run's actors start without a runtime_env here
+    (:func:`actor_runtime_env`), some still with one (the first such start waits for the
+    agent, ~2-4 s). What a sweep uses stays: the GCS, the raylet, the workers, runtime
+    environments. Another Ray layout (a private name gone): the default start."""
     if not lean:
         yield
         return
@@ -290,15 +292,15 @@ def _lean_head(lean: bool) -> Iterator[None]:
         self.include_log_monitor = False
         self.no_monitor = True
 
-    def idle_agent_raylet(command: list[str], process_type: str, *args: Any, **kwargs: Any) -> Any:
+    def lean_agents_raylet(command: list[str], process_type: str, *args: Any, **kwargs: Any) -> Any:
         if process_type == raylet_type:
-            command = _with_idle_dashboard_agent(command)
+            command = _with_lean_agents(command)
         return start_process(command, process_type, *args, **kwargs)
 
     ray_parameter.RayParams.__init__ = lean_params  # type: ignore[method-assign]
     ray_node.Node.start_api_server = lambda self, **_: None  # type: ignore[method-assign]
     ray_utils.get_dashboard_dependency_error = lambda: ImportError("the dashboard is off (ray: {dashboard: false})")
-    ray_services.start_ray_process = idle_agent_raylet
+    ray_services.start_ray_process = lean_agents_raylet
     try:
         yield
     finally:
@@ -308,17 +310,22 @@ def _lean_head(lean: bool) -> Iterator[None]:
         ray_services.start_ray_process = start_process
 
 
-#: the raylet's argument holding the command it starts its dashboard agent with
-_AGENT_ARG = "--dashboard_agent_command="
-#: :mod:`pipeline.idle_dashboard_agent`, run as a file (``python -I -S``: no project import)
+#: the raylet's arguments holding the commands it starts its two agents with
+_DASHBOARD_AGENT_ARG = "--dashboard_agent_command="
+_RUNTIME_ENV_AGENT_ARG = "--runtime_env_agent_command="
+#: :mod:`pipeline.idle_dashboard_agent` and :mod:`pipeline.lazy_runtime_env_agent`, each run as a
+#: file (``python -I -S``: standard library only, no project import)
 IDLE_AGENT = Path(__file__).resolve().with_name("idle_dashboard_agent.py")
+LAZY_AGENT = Path(__file__).resolve().with_name("lazy_runtime_env_agent.py")
 
 
-def _with_idle_dashboard_agent(raylet_command: list[str]) -> list[str]:
-    """The raylet's command line with :mod:`pipeline.idle_dashboard_agent` as its dashboard agent:
-    the agent's three port files (named by Ray's own rule from the node id and session folder
-    on Ray's agent command line) published unused, nothing else. Ray's command as it was where
-    anything of that is not found (another Ray layout)."""
+def _with_lean_agents(raylet_command: list[str]) -> list[str]:
+    """The raylet's command line with :mod:`pipeline.idle_dashboard_agent` as its dashboard agent
+    (the agent's three port files published unused, nothing else) and
+    :mod:`pipeline.lazy_runtime_env_agent` in front of Ray's runtime-env agent (started on the
+    raylet's first request). The port files are named by Ray's own rule from the node id and
+    session folder on Ray's agent command lines. An agent whose command line is not as expected
+    (another Ray layout, a quoting this module would not give back unchanged) keeps Ray's."""
     import shlex
     import subprocess
 
@@ -327,19 +334,44 @@ def _with_idle_dashboard_agent(raylet_command: list[str]) -> list[str]:
             DASHBOARD_AGENT_LISTEN_PORT_NAME,
             METRICS_AGENT_PORT_NAME,
             METRICS_EXPORT_PORT_NAME,
+            RUNTIME_ENV_AGENT_PORT_NAME,
             get_port_filename,
         )
     except ImportError:
         return raylet_command
-    at = [i for i, arg in enumerate(raylet_command) if arg.startswith(_AGENT_ARG)]
-    if len(at) != 1:
-        return raylet_command
-    agent = shlex.split(raylet_command[at[0]][len(_AGENT_ARG) :])
-    opts = dict(arg[2:].split("=", 1) for arg in agent if arg.startswith("--") and "=" in arg)
-    node_id, session_dir = opts.get("node-id"), opts.get("session-dir")
-    if not node_id or not session_dir:
-        return raylet_command
+
+    def rewrite(command: list[str], prefix: str, lean: Any) -> list[str]:
+        at = [i for i, arg in enumerate(command) if arg.startswith(prefix)]
+        if len(at) != 1:
+            return command
+        text = command[at[0]][len(prefix) :]
+        agent = shlex.split(text)
+        if subprocess.list2cmdline(agent) != text:  # not read back as the raylet would run it
+            return command
+        opts = dict(arg[2:].split("=", 1) for arg in agent if arg.startswith("--") and "=" in arg)
+        node_id, session_dir = opts.get("node-id"), opts.get("session-dir")
+        if not node_id or not session_dir:
+            return command
+        port_file = lambda name: f"--port-file={os.path.join(session_dir, get_port_filename(node_id, name))}"  # noqa: E731
+        head = [sys.executable, "-I", "-S"]
+        replaced = lean(agent, head, port_file, f"--session-dir={session_dir}")
+        return [*command[: at[0]], prefix + subprocess.list2cmdline(replaced), *command[at[0] + 1 :]]
+
     names = (METRICS_AGENT_PORT_NAME, METRICS_EXPORT_PORT_NAME, DASHBOARD_AGENT_LISTEN_PORT_NAME)
-    idle = [sys.executable, "-I", "-S", str(IDLE_AGENT), f"--session-dir={session_dir}"]
-    idle += [f"--port-file={os.path.join(session_dir, get_port_filename(node_id, name))}" for name in names]
-    return [*raylet_command[: at[0]], _AGENT_ARG + subprocess.list2cmdline(idle), *raylet_command[at[0] + 1 :]]
+    raylet_command = rewrite(
+        raylet_command,
+        _DASHBOARD_AGENT_ARG,
+        lambda agent, head, port_file, where: [*head, str(IDLE_AGENT), where, *map(port_file, names)],
+    )
+    return rewrite(
+        raylet_command,
+        _RUNTIME_ENV_AGENT_ARG,
+        lambda agent, head, port_file, where: [
+            *head,
+            str(LAZY_AGENT),
+            port_file(RUNTIME_ENV_AGENT_PORT_NAME),
+            where,
+            "--",
+            *agent,
+        ],
+    )
