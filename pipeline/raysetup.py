@@ -119,13 +119,18 @@ def _worker_environment(env_vars: dict[str, str]) -> Iterator[None]:
 #: spent CPU on the reports. ``task_events_report_interval_ms: 0`` turns the reporting off in
 #: every worker; the GCS's own cap is lowered too, for anything that still reports (a driver of
 #: another Ray version joining). Metrics (Prometheus figures the dashboard agent collects from
-#: every process) go the same way: nobody here scrapes them.
+#: every process) go the same way: nobody here scrapes them. ``agent_register_timeout_ms``: how
+#: long the raylet retries a request to the runtime-env agent before it exits (Ray's default 30 s
+#: on Linux); with the dashboard off that agent starts on the first such request
+#: (:mod:`pipeline.lazy_runtime_env_agent`), and a loaded machine must not turn its start into
+#: the end of the run.
 SYSTEM_CONFIG: dict[str, Any] = {
     "task_events_report_interval_ms": 0,
     "task_events_max_num_task_in_gcs": 1000,
     "task_events_max_num_profile_events_per_task": 0,
     "enable_timeline": False,
     "enable_metrics_collection": False,
+    "agent_register_timeout_ms": 120_000,
 }
 
 #: the temp folder of the local cluster this process started (None: none, or joined one)
