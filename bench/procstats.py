@@ -41,7 +41,9 @@ ROLES: tuple[tuple[str, str], ...] = (
     ("dashboard/dashboard.py", "dashboard"),
     ("ray::RuntimeEnvAgent", "runtime env agent"),
     ("gcs_server", "gcs"),
-    ("raylet", "raylet"),
+    ("raylet", "raylet"),  # before the idle agent: the raylet's command line holds the agent's
+    ("idle_dashboard_agent.py", "idle dashboard agent"),
+    ("lazy_runtime_env_agent.py", "lazy runtime env agent"),  # until its first request: then ray::RuntimeEnvAgent
     ("log_monitor.py", "log monitor"),
     ("autoscaler/_private/monitor.py", "autoscaler monitor"),
     ("pipeline.local_cluster", "cluster watcher"),

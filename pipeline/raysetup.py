@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -118,13 +119,18 @@ def _worker_environment(env_vars: dict[str, str]) -> Iterator[None]:
 #: spent CPU on the reports. ``task_events_report_interval_ms: 0`` turns the reporting off in
 #: every worker; the GCS's own cap is lowered too, for anything that still reports (a driver of
 #: another Ray version joining). Metrics (Prometheus figures the dashboard agent collects from
-#: every process) go the same way: nobody here scrapes them.
+#: every process) go the same way: nobody here scrapes them. ``agent_register_timeout_ms``: how
+#: long the raylet retries a request to the runtime-env agent before it exits (Ray's default 30 s
+#: on Linux); with the dashboard off that agent starts on the first such request
+#: (:mod:`pipeline.lazy_runtime_env_agent`), and a loaded machine must not turn its start into
+#: the end of the run.
 SYSTEM_CONFIG: dict[str, Any] = {
     "task_events_report_interval_ms": 0,
     "task_events_max_num_task_in_gcs": 1000,
     "task_events_max_num_profile_events_per_task": 0,
     "enable_timeline": False,
     "enable_metrics_collection": False,
+    "agent_register_timeout_ms": 120_000,
 }
 
 #: the temp folder of the local cluster this process started (None: none, or joined one)
@@ -243,7 +249,8 @@ def _loopback_node() -> Iterator[None]:
 def _lean_head(lean: bool) -> Iterator[None]:
     """Start a local Ray without the processes a sweep never reads, unless the sweep asks for the
     dashboard (``ray: {dashboard: true}``): no dashboard (API server) process, the dashboard
-    agent in its minimal form, no log monitor and no autoscaler monitor.
+    agent replaced by :mod:`pipeline.idle_dashboard_agent`, the runtime-environment agent
+    started on first use, no log monitor and no autoscaler monitor.
 
     Why: ``include_dashboard=False`` still starts the API server (the dashboard process with its
     usage-stats module), the dashboard agent with its HTTP server, metrics and event modules, the
@@ -256,20 +263,31 @@ def _lean_head(lean: bool) -> Iterator[None]:
     node's parameters, skips the API server, and has Ray choose its minimal agent - what a
     ``pip install ray`` without ``[default]`` runs - by reporting the dashboard's optional
     dependencies missing (``ray._private.utils.get_dashboard_dependency_error``, read while
-    ``ray.init`` builds the agent's command line). What a sweep uses stays: the GCS, the raylet,
-    the workers and the runtime-environment agent (the workers' env_vars). Another Ray layout
-    (a private name gone): the default start."""
+    ``ray.init`` builds the agent's command line). Even that agent imports every dashboard
+    module it finds and polls for the absent dashboard (~78 MB PSS): the raylet's command line
+    (``ray._private.services.start_ray_process`` for the raylet) gets
+    :mod:`pipeline.idle_dashboard_agent` as its dashboard agent instead (a standard-library
+    process of ~5 MB that publishes the agent's ports unused and lives as long as the raylet:
+    :func:`_with_lean_agents`), and Ray's runtime-environment agent (~48 MB) behind
+    :mod:`pipeline.lazy_runtime_env_agent`, which holds its port and becomes Ray's agent on the
+    raylet's first request: a run's actors start without a runtime_env here
+    (:func:`actor_runtime_env`), some still with one (the first such start waits for the
+    agent, ~2-4 s). What a sweep uses stays: the GCS, the raylet, the workers, runtime
+    environments. Another Ray layout (a private name gone): the default start."""
     if not lean:
         yield
         return
     try:  # lazy: Ray loads only where a session uses it
         from ray._private import node as ray_node
         from ray._private import parameter as ray_parameter
+        from ray._private import services as ray_services
         from ray._private import utils as ray_utils
 
         params_init = ray_parameter.RayParams.__init__
         start_api_server = ray_node.Node.start_api_server
         dependency_error = ray_utils.get_dashboard_dependency_error
+        start_process = ray_services.start_ray_process
+        raylet_type = ray_services.ray_constants.PROCESS_TYPE_RAYLET
     except (ImportError, AttributeError):
         yield
         return
@@ -279,12 +297,86 @@ def _lean_head(lean: bool) -> Iterator[None]:
         self.include_log_monitor = False
         self.no_monitor = True
 
+    def lean_agents_raylet(command: list[str], process_type: str, *args: Any, **kwargs: Any) -> Any:
+        if process_type == raylet_type:
+            command = _with_lean_agents(command)
+        return start_process(command, process_type, *args, **kwargs)
+
     ray_parameter.RayParams.__init__ = lean_params  # type: ignore[method-assign]
     ray_node.Node.start_api_server = lambda self, **_: None  # type: ignore[method-assign]
     ray_utils.get_dashboard_dependency_error = lambda: ImportError("the dashboard is off (ray: {dashboard: false})")
+    ray_services.start_ray_process = lean_agents_raylet
     try:
         yield
     finally:
         ray_parameter.RayParams.__init__ = params_init  # type: ignore[method-assign]
         ray_node.Node.start_api_server = start_api_server  # type: ignore[method-assign]
         ray_utils.get_dashboard_dependency_error = dependency_error
+        ray_services.start_ray_process = start_process
+
+
+#: the raylet's arguments holding the commands it starts its two agents with
+_DASHBOARD_AGENT_ARG = "--dashboard_agent_command="
+_RUNTIME_ENV_AGENT_ARG = "--runtime_env_agent_command="
+#: :mod:`pipeline.idle_dashboard_agent` and :mod:`pipeline.lazy_runtime_env_agent`, each run as a
+#: file (``python -I -S``: standard library only, no project import)
+IDLE_AGENT = Path(__file__).resolve().with_name("idle_dashboard_agent.py")
+LAZY_AGENT = Path(__file__).resolve().with_name("lazy_runtime_env_agent.py")
+
+
+def _with_lean_agents(raylet_command: list[str]) -> list[str]:
+    """The raylet's command line with :mod:`pipeline.idle_dashboard_agent` as its dashboard agent
+    (the agent's three port files published unused, nothing else) and
+    :mod:`pipeline.lazy_runtime_env_agent` in front of Ray's runtime-env agent (started on the
+    raylet's first request). The port files are named by Ray's own rule from the node id and
+    session folder on Ray's agent command lines. An agent whose command line is not as expected
+    (another Ray layout, a quoting this module would not give back unchanged) keeps Ray's."""
+    import shlex
+    import subprocess
+
+    try:  # lazy: Ray loads only where a session uses it
+        from ray._raylet import (  # type: ignore[attr-defined]  # Ray's compiled module: no stubs for it
+            DASHBOARD_AGENT_LISTEN_PORT_NAME,
+            METRICS_AGENT_PORT_NAME,
+            METRICS_EXPORT_PORT_NAME,
+            RUNTIME_ENV_AGENT_PORT_NAME,
+            get_port_filename,
+        )
+    except ImportError:
+        return raylet_command
+
+    def rewrite(command: list[str], prefix: str, lean: Any) -> list[str]:
+        at = [i for i, arg in enumerate(command) if arg.startswith(prefix)]
+        if len(at) != 1:
+            return command
+        text = command[at[0]][len(prefix) :]
+        agent = shlex.split(text)
+        if subprocess.list2cmdline(agent) != text:  # not read back as the raylet would run it
+            return command
+        opts = dict(arg[2:].split("=", 1) for arg in agent if arg.startswith("--") and "=" in arg)
+        node_id, session_dir = opts.get("node-id"), opts.get("session-dir")
+        if not node_id or not session_dir:
+            return command
+        port_file = lambda name: f"--port-file={os.path.join(session_dir, get_port_filename(node_id, name))}"  # noqa: E731
+        head = [sys.executable, "-I", "-S"]
+        replaced = lean(agent, head, port_file, f"--session-dir={session_dir}")
+        return [*command[: at[0]], prefix + subprocess.list2cmdline(replaced), *command[at[0] + 1 :]]
+
+    names = (METRICS_AGENT_PORT_NAME, METRICS_EXPORT_PORT_NAME, DASHBOARD_AGENT_LISTEN_PORT_NAME)
+    raylet_command = rewrite(
+        raylet_command,
+        _DASHBOARD_AGENT_ARG,
+        lambda agent, head, port_file, where: [*head, str(IDLE_AGENT), where, *map(port_file, names)],
+    )
+    return rewrite(
+        raylet_command,
+        _RUNTIME_ENV_AGENT_ARG,
+        lambda agent, head, port_file, where: [
+            *head,
+            str(LAZY_AGENT),
+            port_file(RUNTIME_ENV_AGENT_PORT_NAME),
+            where,
+            "--",
+            *agent,
+        ],
+    )

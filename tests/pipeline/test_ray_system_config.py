@@ -19,6 +19,7 @@ WANTED = {
     "task_events_max_num_task_in_gcs": 1000,
     "enable_timeline": False,
     "enable_metrics_collection": False,
+    "agent_register_timeout_ms": 120_000,  # the lazy runtime-env agent's first start (pipeline/lazy_runtime_env_agent.py)
 }
 
 

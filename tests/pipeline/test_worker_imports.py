@@ -64,6 +64,35 @@ def test_a_part_writer_loads_pyarrow_but_not_pandas(tmp_path):
     ]
 
 
+def test_importing_litellm_points_tiktoken_at_its_bundled_encodings_without_loading_one():
+    """import_litellm sets TIKTOKEN_CACHE_DIR as litellm's default_encoding module does, but
+    without importing it: that module loads cl100k_base (~38 MB) in the gateway and the driver,
+    whatever their models. An OpenAI model's prompt is still counted by its tokenizer, from the
+    bundled file (no download: the folder is litellm's)."""
+    code = (
+        "import os\n"
+        "from workers.llm.litellm_import import import_litellm\n"
+        "litellm = import_litellm()\n"
+        "from importlib import resources\n"
+        "bundled = str(resources.files(litellm).joinpath('litellm_core_utils/tokenizers'))\n"
+        "print(json.dumps([os.environ.get('TIKTOKEN_CACHE_DIR') == bundled, "
+        "'litellm.litellm_core_utils.default_encoding' in sys.modules, 'tiktoken.registry' in sys.modules "
+        "and bool(sys.modules['tiktoken.registry'].ENCODINGS)]))\n"
+        "from workers.llm.tokens import count_prompt_tokens\n"
+        "print(json.dumps(count_prompt_tokens('openai/gpt-4o', [{'role': 'user', 'content': 'hi'}]).source))"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "LITELLM_LOCAL_MODEL_COST_MAP": "True"}
+    env.pop("TIKTOKEN_CACHE_DIR", None)
+    env.pop("CUSTOM_TIKTOKEN_CACHE_DIR", None)
+    out = subprocess.run(
+        [sys.executable, "-c", "import json, sys\n" + code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.strip().splitlines()
+    assert json.loads(lines[-2]) == [True, False, False]
+    assert json.loads(lines[-1]) == "tokenizer"
+
+
 @pytest.mark.usefixtures("cluster_env")
 @pytest.mark.parametrize("how", ["the pipeline's (none: the cluster's environment)", "runtime_env()"])
 def test_an_actor_holding_the_sink_and_budget_handles_loads_nothing_heavy(tmp_path, how):

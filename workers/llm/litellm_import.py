@@ -32,9 +32,7 @@ def import_litellm() -> Any:
         if _litellm is None:
             import litellm  # the one place litellm is imported: offline, quiet, once
 
-            # importing this module points TIKTOKEN_CACHE_DIR at litellm's bundled encodings
-            import litellm.litellm_core_utils.default_encoding  # noqa: F401
-
+            _use_bundled_encodings(litellm)
             litellm.suppress_debug_info = True
             litellm.telemetry = False
             # never try to download a Hugging Face tokenizer (no network at run time)
@@ -42,3 +40,24 @@ def import_litellm() -> Any:
             logging.getLogger("LiteLLM").setLevel(logging.ERROR)
             _litellm = litellm
     return _litellm
+
+
+def _use_bundled_encodings(litellm: Any) -> None:
+    """Point tiktoken at the encodings bundled with litellm (``TIKTOKEN_CACHE_DIR``), by litellm's
+    own rule (``litellm/litellm_core_utils/default_encoding.py``: ``CUSTOM_TIKTOKEN_CACHE_DIR``
+    if set, else the package's ``litellm_core_utils/tokenizers`` folder), so that token counts
+    never download (:mod:`workers.llm.tokens`).
+
+    Why not import that module, as litellm does where it needs its default encoding: importing
+    it also loads ``cl100k_base`` (~38 MB of PSS in every process that imports litellm - the
+    gateway, the driver), which a run whose models are not OpenAI's, or use another encoding,
+    never reads; litellm itself loads it lazily (``litellm._lazy_imports.get_default_encoding``),
+    and so does :func:`workers.llm.tokens._encoding_for` (issue 37, item 3)."""
+    custom = os.getenv("CUSTOM_TIKTOKEN_CACHE_DIR")
+    if custom:
+        os.makedirs(custom, exist_ok=True)
+        os.environ["TIKTOKEN_CACHE_DIR"] = custom
+        return
+    from importlib import resources
+
+    os.environ["TIKTOKEN_CACHE_DIR"] = str(resources.files(litellm).joinpath("litellm_core_utils/tokenizers"))
