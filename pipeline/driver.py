@@ -68,7 +68,7 @@ from pipeline.prepare import Prepared
 
 # prepare, RunSummary and the exit codes: the CLI, tests and benches import them from here
 from pipeline.prepare import prepare as prepare
-from pipeline.raysetup import init_ray, shutdown_ray
+from pipeline.raysetup import init_ray, needs_metrics, shutdown_ray
 from pipeline.resume import (
     RETRY_MODES,
     Retry,
@@ -283,7 +283,7 @@ class Driver(SessionLoop):
         # rows a sink had acknowledged when the last session died with it (a driver kill)
         recovered = recover_wal(store.path) if self.p.identity is not None else None
         state: RunState = load_state(store, retry=self.retry)
-        started_ray = init_ray(spec.ray, self.address, run=self.p.store.location)
+        started_ray = init_ray(spec.ray, self.address, run=self.p.store.location, metrics=needs_metrics(spec))
         self.stop.install()  # ray.init set a SIGTERM handler of its own
         self.channel = SinkChannel(store.path, self.run_id, self.events, session=self.session)
         try:

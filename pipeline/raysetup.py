@@ -139,11 +139,16 @@ _owned: Path | None = None
 _started_env: dict[str, str] | None = None
 
 
-def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") -> bool:
+def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "", metrics: bool = False) -> bool:
     """Start a local Ray (or join ``address``). Returns True when this call started Ray (and so
     must shut it down, with :func:`shutdown_ray`); an already initialised Ray (tests share one)
     is reused as is. A local cluster gets its own temp folder, recording this process as its
-    owner and ``run`` (the run folder) for the message of whoever cleans up after a crash."""
+    owner and ``run`` (the run folder) for the message of whoever cleans up after a crash.
+
+    ``metrics``: a local cluster that collects metrics, with Ray's own dashboard agent (which
+    exports them): a sweep serving vLLM or SGLang reads its replicas' queue from there
+    (:mod:`workers.serving.queue_source`, ``ray_metrics``); without it the adaptive limit would
+    have latency and errors only (:func:`needs_metrics`)."""
     global _owned, _started_env
     import ray  # lazy: Ray loads only where a session uses it
 
@@ -170,7 +175,9 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
         # then starts without Ray's setup_worker step (actor_runtime_env)
         env_vars = runtime_env()["env_vars"]
         try:
-            with _loopback_node(), _lean_head(not ray_spec.dashboard), _worker_environment({**env_vars, **_setup_hook_var()}):
+            lean = not (ray_spec.dashboard or metrics)
+            config = SYSTEM_CONFIG if not metrics else {**SYSTEM_CONFIG, "enable_metrics_collection": True}
+            with _loopback_node(), _lean_head(lean), _worker_environment({**env_vars, **_setup_hook_var()}):
                 ray.init(
                     num_cpus=ray_spec.num_cpus or os.cpu_count() or 2,
                     include_dashboard=ray_spec.dashboard,
@@ -178,7 +185,7 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
                     object_store_memory=ray_spec.object_store_mb * 1024 * 1024,
                     resources={NODE_RESOURCE: ray_spec.sandboxes_per_node} if ray_spec.sandboxes_per_node else None,
                     _temp_dir=str(folder),
-                    _system_config=SYSTEM_CONFIG,
+                    _system_config=config,
                     **common,
                 )
         except BaseException:
@@ -187,6 +194,14 @@ def init_ray(ray_spec: RaySpec, address: str | None = None, *, run: str = "") ->
             raise
         _owned, _started_env = folder, dict(env_vars)
     return True
+
+
+def needs_metrics(spec: Any) -> bool:
+    """A sweep that serves a model whose queue figure comes from Ray's metrics (vLLM, SGLang
+    under ``ray.serve.llm``): its local cluster collects metrics (:func:`init_ray`)."""
+    from pipeline.serving.engines import METRICS_ENGINES
+
+    return any(m.serve is not None and m.serve.engine in METRICS_ENGINES for m in getattr(spec, "models", []))
 
 
 def shutdown_ray() -> None:

@@ -17,6 +17,10 @@ from typing import Any
 
 from pipeline.spec import OFFLINE_PREFIX, ModelSpec
 
+#: the engines whose replicas' queue is read from Ray's metrics (:mod:`workers.serving.queue_source`,
+#: ``ray_metrics``): a local cluster serving one collects metrics (:func:`pipeline.raysetup.needs_metrics`)
+METRICS_ENGINES = ("vllm", "sglang")
+
 
 @dataclass(frozen=True)
 class ServePlan:
