@@ -199,7 +199,10 @@ class LocalSandbox(Sandbox):
             self._prefix = ["unshare", *flags] if _unshare_works(flags) else []
         self.env = {"PATH": host_path, "HOME": home, "LANG": "C.UTF-8", "TMPDIR": tmp, **spec.env}
         isolated = self.bwrap or bool(self._prefix)
-        self._used = disk_bound.used_bytes(self.root, self.tmpfs)
+        #: (bytes, entries) of the root after the last command, where no tmpfs bounds it: the
+        #: watchdog's first reference (:meth:`_watch_disk`)
+        self._tree = disk_bound.tree_usage(self.root) if not self.tmpfs else (disk_bound.used_bytes(self.root, True), 0)
+        self._used = self._tree[0]
         self.confinement: tuple[str, ...] = tuple(
             x
             for x, on in (
@@ -303,7 +306,7 @@ class LocalSandbox(Sandbox):
 
             reader = threading.Thread(target=read, daemon=True)
             reader.start()
-            over: list[int] = []
+            over: list[str] = []
             stop = threading.Event()
             watcher = None
             if not self.tmpfs:  # no kernel bound on the root: look at it while the command runs
@@ -327,26 +330,42 @@ class LocalSandbox(Sandbox):
             self._register(None)
         exit_code: int | None = None if timed_out or over else (rc if rc >= 0 else 128 - rc)
         output = bytes(kept).decode("utf-8", errors="replace")
-        used = self._used = disk_bound.used_bytes(self.root, self.tmpfs)
+        if self.tmpfs:
+            used = self._used = disk_bound.used_bytes(self.root, True)
+        else:
+            self._tree = disk_bound.tree_usage(self.root)
+            used = self._used = self._tree[0]
         if over or used > lim.disk_bytes:
             exit_code = None
+            what = over[0] if over else f"{used} bytes"
             output += (
-                f"\n[sandbox: the sandbox's files (repository, /tmp, /var/tmp, $HOME) are {max([used, *over])} bytes, "
+                f"\n[sandbox: the sandbox's files (repository, /tmp, /var/tmp, $HOME) are {what}, "
                 f"over the {lim.disk_bytes}-byte disk limit]"
             )
         return CommandResult(exit_code, output, seen[0], duration, timed_out=timed_out, truncated=seen[0] > cap)
 
-    def _watch_disk(self, pgid: int, stop: threading.Event, over: list[int]) -> None:
+    def _watch_disk(self, pgid: int, stop: threading.Event, over: list[str]) -> None:
         """Kill the command when the root holds more than the disk limit in bytes, or more
-        entries than a tmpfs of that size would allow."""
+        entries than a tmpfs of that size would allow, and it grew since the last look (the
+        first look: since the last command ended).
+
+        Why "grew": a sandbox left over the limit (what a command wrote between two looks got
+        through before it was stopped) must still take the command that cleans it up; an
+        ``rm -rf`` of many files outlasts a look and, judged by the level alone, was killed
+        every time - the sandbox could not be brought back under its limit. A command that
+        writes while the sandbox is over is still stopped at the next look."""
         lim = self.limits.disk_bytes
+        most = disk_bound.tmpfs_inodes(lim)
+        before_used, before_entries = self._tree
         while not stop.wait(WATCH_EVERY_S):
             used, entries = disk_bound.tree_usage(self.root)
-            if used > lim or entries > disk_bound.tmpfs_inodes(lim):
-                over.append(used)
+            grew = used > before_used or entries > before_entries
+            if grew and (used > lim or entries > most):
+                over.append(f"{used} bytes" if used > lim else f"{used} bytes in {entries} files and folders (at most {most})")
                 self._kill_group(pgid)
                 kill_cgroup_procs(self._cgroup)
                 return
+            before_used, before_entries = used, entries
 
     @staticmethod
     def _kill_group(pgid: int) -> None:

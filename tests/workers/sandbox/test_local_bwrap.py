@@ -85,6 +85,34 @@ def test_where_no_tmpfs_can_be_mounted_the_watchdog_stops_and_reports_an_overrun
         assert sb.run("rm -rf /tmp/recap-big* /var/tmp/recap-big* $HOME/recap-big* recap-big*; echo alive").output == "alive\n"
 
 
+def test_a_sandbox_left_over_its_limit_takes_a_slow_cleanup_and_stops_a_command_that_writes_more(
+    repo: Repo, labels: dict[str, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the watchdog bounds the disk: a cleanup of many files that outlasts its looks is not
+    killed for the level it starts from (CI, under load: the ``rm -rf`` after the small-files
+    overrun was stopped and the sandbox stayed over its limit); a command adding files while the
+    sandbox is over is stopped at the next look."""
+    from workers.sandbox import disk_bound
+
+    monkeypatch.setattr(disk_bound, "can_mount", lambda: False)
+    spec = SandboxSpec(str(repo.path), repo.commit, labels=labels, limits=SandboxLimits(disk_bytes=A.DISK_LIMIT))
+    most = disk_bound.tmpfs_inodes(A.DISK_LIMIT)
+    with open_sandbox("local", spec) as sb:
+        assert isinstance(sb, LocalSandbox) and "disk-tmpfs" not in sb.confinement
+        # over the limit in entries, left there by a command that ended between two looks
+        sb.run(f"mkdir -p /tmp/recap-big; cd /tmp/recap-big; touch $(seq -f f%g {most + 500})", timeout_s=60)
+        left = disk_bound.tree_usage(sb.root)[1]
+        assert left > most
+        # adding files while over: stopped at the next look, the entries named in the message
+        r = sb.run("for i in $(seq 200); do : > /tmp/recap-big/g$i; sleep 0.01; done; echo done", timeout_s=60)
+        assert r.exit_code is None and "done" not in r.output
+        assert r.output.endswith(f"files and folders (at most {most}), over the {A.DISK_LIMIT}-byte disk limit]")
+        # a cleanup in steps, each step under a look apart, the sandbox still over meanwhile
+        r = sb.run("rm -f /tmp/recap-big/f1*; sleep 0.8; rm -rf /tmp/recap-big; echo alive", timeout_s=60)
+        assert (r.exit_code, r.output) == (0, "alive\n")
+        assert disk_bound.tree_usage(sb.root)[1] < most
+
+
 @pytest.mark.parametrize("name", list(A.SYMLINKS))
 def test_symlinks_leaving_the_repository_are_refused(sandbox: LocalSandbox, host: A.Host, name: str) -> None:
     held, detail = A.SYMLINKS[name](sandbox, host)
