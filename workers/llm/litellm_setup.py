@@ -46,5 +46,6 @@ def get_litellm() -> Any:
             from workers.llm import success_logging
 
             success_logging.install(litellm)
+            success_logging.install_zero_cost_diagnostic(litellm)
             _ready = litellm
     return _ready
