@@ -53,6 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from tenacity import (
+    AsyncRetrying,
     RetryCallState,
     stop_after_attempt,
     stop_after_delay,
@@ -346,7 +347,7 @@ class DeploymentGateway(CallRecorder):
         cfg = self.config
         backoff = wait_exponential_jitter(multiplier=cfg.backoff_initial_s, max=cfg.backoff_max_s)
         stop = stop_after_attempt(cfg.max_attempts) | stop_after_delay(cfg.total_timeout_s)
-        rs = RetryCallState(None, None, (), {})
+        rs = RetryCallState(AsyncRetrying(stop=stop, wait=backoff, reraise=True), None, (), {})  # built on a retry only
         rs.start_time = start
         while True:
             rs.set_exception((type(failure), failure, failure.__traceback__))

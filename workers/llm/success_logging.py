@@ -87,6 +87,6 @@ def install_zero_cost_diagnostic(litellm: Any) -> bool:
         return original(self, *args, **kwargs)
 
     _record_zero_cost_diagnostic.__wrapped__ = original  # type: ignore[attr-defined]
-    Logging._record_zero_cost_diagnostic = _record_zero_cost_diagnostic
+    Logging._record_zero_cost_diagnostic = _record_zero_cost_diagnostic  # type: ignore[method-assign]
     _diagnostic_installed = True
     return True

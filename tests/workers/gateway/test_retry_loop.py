@@ -13,6 +13,7 @@ import time
 
 import pytest
 
+from schemas.kinds import LLMErrorKind
 from tests.doubles.llm_requests import make_request
 from workers.gateway.call_state import CallState, FinalFailure, Retryable
 from workers.gateway.core import DeploymentGateway
@@ -54,7 +55,7 @@ def _run(gw: DeploymentGateway, outcomes: list, *, attempt_s: float = 0.0) -> tu
     return result, run, events
 
 
-def _retryable(kind: str = "server_error") -> Retryable:
+def _retryable(kind: LLMErrorKind = "server_error") -> Retryable:
     return Retryable(Classified(kind, f"{kind} from the stub"))
 
 

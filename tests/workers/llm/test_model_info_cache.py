@@ -4,6 +4,8 @@ exception, without searching again until the cost map changes."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from workers.llm import model_info_cache
@@ -92,11 +94,11 @@ def test_bridge_check_answers_as_the_uncached_lookup(monkeypatch) -> None:
     import litellm.main as main
 
     assert model_info_cache.install(litellm) is True
-    bridge = main.get_model_info_helper
+    bridge: Any = main.get_model_info_helper
     uncached = bridge.__wrapped__
     assert uncached is litellm.utils.get_model_info_helper
 
-    known = bridge(model="gpt-4o", custom_llm_provider="openai")
+    known: Any = bridge(model="gpt-4o", custom_llm_provider="openai")
     assert known == uncached(model="gpt-4o", custom_llm_provider="openai") and known["input_cost_per_token"] > 0
     known["mode"] = "written by a caller"
     assert bridge(model="gpt-4o", custom_llm_provider="openai")["mode"] == "chat"  # the cache holds its own copy
@@ -112,7 +114,7 @@ def test_bridge_check_answers_as_the_uncached_lookup(monkeypatch) -> None:
     assert with_cache == [main.responses_api_bridge_check(model=m, custom_llm_provider=p) for m, p in cases]
     monkeypatch.undo()
 
-    searched: list[str] = []
+    searched: list[Any] = []
     helper = litellm.utils.cached_get_model_info_helper
     inner = helper.fn
 

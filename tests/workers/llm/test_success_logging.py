@@ -5,6 +5,7 @@ payload, and a registered callback still gets the call's success event with its 
 from __future__ import annotations
 
 import asyncio
+from typing import Any
 
 from workers.llm import success_logging
 from workers.llm.litellm_setup import get_litellm
@@ -76,7 +77,7 @@ def test_no_task_without_listeners_and_events_with_one(fake_server, monkeypatch)
     assert len(events) == 1 and events[0].get("total_tokens", 0) > 0
 
 
-def _priced_call(url: str, model: str) -> object:
+def _priced_call(url: str, model: str) -> Any:
     return asyncio.run(
         litellm.acompletion(
             model=model,
