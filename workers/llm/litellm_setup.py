@@ -38,6 +38,10 @@ def get_litellm() -> Any:
             from workers.llm import sdk_fast_path
 
             sdk_fast_path.install()
+            # no uuid4 per request for an idempotency key the SDK's clients never send
+            from workers.llm import sdk_idempotency
+
+            sdk_idempotency.install()
             # "model not mapped" remembered like a found model (litellm prices every reply)
             from workers.llm import model_info_cache
 
@@ -46,5 +50,6 @@ def get_litellm() -> Any:
             from workers.llm import success_logging
 
             success_logging.install(litellm)
+            success_logging.install_zero_cost_diagnostic(litellm)
             _ready = litellm
     return _ready

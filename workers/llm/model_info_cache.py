@@ -14,6 +14,14 @@ same type and arguments, without searching, until litellm's cost map changes (th
 litellm's own mutation counter, ``get_model_cost_mutation_generation``, which every
 registration bumps; ``cache_clear`` clears ours with theirs). Found models go to litellm's cache
 as before: what any lookup returns or raises is unchanged.
+
+Before every chat call litellm also asks for the model's info once more, uncached
+(``litellm.main.responses_api_bridge_check`` calls ``get_model_info_helper``: does the model need
+the Responses API?), about 2 % of the gateway's CPU per call on an unmapped model (issue 37).
+:func:`install` points that name at :func:`bridge_lookup`: the same answer from litellm's own
+cached lookup (``cached_get_model_info_helper``, which litellm keys on the same arguments and
+clears with every cost-map change), as a copy - the bridge check may write ``mode`` into it - or
+the same exception.
 """
 
 from __future__ import annotations
@@ -75,6 +83,22 @@ def _rebuildable(exc: Exception) -> bool:
     return type(again) is type(exc) and again.args == exc.args and str(again) == str(exc)
 
 
+def make_bridge_lookup(uncached: Any, cached: Any) -> Any:
+    """``get_model_info_helper`` answered from ``cached`` (litellm's ``cached_get_model_info_helper``,
+    wrapped in a :class:`NegativeCache`) when called as the bridge check calls it, as a fresh copy;
+    any other call (an ``api_key``) goes to ``uncached`` as before."""
+
+    def get_model_info_helper(
+        model: str, custom_llm_provider: str | None = None, api_base: str | None = None, api_key: str | None = None
+    ) -> Any:
+        if api_key is not None:
+            return uncached(model=model, custom_llm_provider=custom_llm_provider, api_base=api_base, api_key=api_key)
+        return dict(cached(model=model, custom_llm_provider=custom_llm_provider, api_base=api_base))
+
+    get_model_info_helper.__wrapped__ = uncached  # type: ignore[attr-defined]
+    return get_model_info_helper
+
+
 def install(litellm: Any) -> bool:
     """Wrap litellm's two model-info caches (once per process); False when its layout differs
     (then nothing is changed)."""
@@ -96,6 +120,10 @@ def install(litellm: Any) -> bool:
     utils._cached_get_model_info_helper = wrapped_helper
     if getattr(cost_calculator, "cached_get_model_info_helper", None) is helper:
         cost_calculator.cached_get_model_info_helper = wrapped_helper
+    main = getattr(litellm, "main", None)
+    uncached = getattr(utils, "get_model_info_helper", None)
+    if main is not None and uncached is not None and getattr(main, "get_model_info_helper", None) is uncached:
+        main.get_model_info_helper = make_bridge_lookup(uncached, wrapped_helper)
     public = getattr(utils, "get_model_info", None)
     if public is not None and getattr(public, "cache_clear", None) == info.cache_clear:
         public.cache_clear = wrapped_info.cache_clear  # litellm.get_model_info.cache_clear() clears ours too

@@ -4,6 +4,8 @@ exception, without searching again until the cost map changes."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from workers.llm import model_info_cache
@@ -83,3 +85,47 @@ def test_negative_cache_unit() -> None:
     assert state["n"] == 4
     cache.cache_clear()
     assert not cache.misses
+
+
+def test_bridge_check_answers_as_the_uncached_lookup(monkeypatch) -> None:
+    """litellm's per-call Responses-API bridge check gets the same model info from the cached
+    lookup (a copy it may write into) and the same verdict, for a mapped, an unmapped and a
+    ``responses/`` model; an unmapped model is not searched again."""
+    import litellm.main as main
+
+    assert model_info_cache.install(litellm) is True
+    bridge: Any = main.get_model_info_helper
+    uncached = bridge.__wrapped__
+    assert uncached is litellm.utils.get_model_info_helper
+
+    known: Any = bridge(model="gpt-4o", custom_llm_provider="openai")
+    assert known == uncached(model="gpt-4o", custom_llm_provider="openai") and known["input_cost_per_token"] > 0
+    known["mode"] = "written by a caller"
+    assert bridge(model="gpt-4o", custom_llm_provider="openai")["mode"] == "chat"  # the cache holds its own copy
+    with pytest.raises(Exception) as direct:
+        uncached(model="recap-bridge-unmapped", custom_llm_provider="openai")
+    with pytest.raises(Exception) as cached:
+        bridge(model="recap-bridge-unmapped", custom_llm_provider="openai")
+    assert type(cached.value) is type(direct.value) and str(cached.value) == str(direct.value)
+
+    cases = [("gpt-4o", "openai"), ("fake-gpt", "openai"), ("responses/gpt-4o", "openai"), ("recap-bridge-unmapped", "openai")]
+    with_cache = [main.responses_api_bridge_check(model=m, custom_llm_provider=p) for m, p in cases]
+    monkeypatch.setattr(main, "get_model_info_helper", uncached)
+    assert with_cache == [main.responses_api_bridge_check(model=m, custom_llm_provider=p) for m, p in cases]
+    monkeypatch.undo()
+
+    searched: list[Any] = []
+    helper = litellm.utils.cached_get_model_info_helper
+    inner = helper.fn
+
+    def counting(*args, **kwargs):
+        searched.append(kwargs.get("model", args[0] if args else None))
+        return inner(*args, **kwargs)
+
+    helper.fn = counting
+    try:
+        for _ in range(3):
+            main.responses_api_bridge_check(model="recap-bridge-unmapped-2", custom_llm_provider="openai")
+    finally:
+        helper.fn = inner
+    assert searched == ["recap-bridge-unmapped-2"]  # searched once, then answered from the memory

@@ -5,6 +5,7 @@ payload, and a registered callback still gets the call's success event with its 
 from __future__ import annotations
 
 import asyncio
+from typing import Any
 
 from workers.llm import success_logging
 from workers.llm.litellm_setup import get_litellm
@@ -74,3 +75,60 @@ def test_no_task_without_listeners_and_events_with_one(fake_server, monkeypatch)
     asyncio.run(call_and_drain())
     assert len(built) == 1
     assert len(events) == 1 and events[0].get("total_tokens", 0) > 0
+
+
+def _priced_call(url: str, model: str) -> Any:
+    return asyncio.run(
+        litellm.acompletion(
+            model=model,
+            api_base=url,
+            api_key="k",
+            messages=[{"role": "user", "content": "price me"}],
+            max_tokens=20,
+            num_retries=0,
+            max_retries=0,
+        )
+    )
+
+
+def test_zero_cost_diagnostic_runs_only_when_read_and_the_cost_is_unchanged(fake_server, monkeypatch) -> None:
+    """The diagnostic's price lookup is skipped while nothing reads it; litellm's response_cost (our
+    provider_cost_usd) is the same with and without it, for a model litellm prices and for one it
+    cannot price (None)."""
+    import logging
+
+    from litellm.litellm_core_utils import litellm_logging
+
+    assert success_logging.install_zero_cost_diagnostic(litellm) is True
+    findings: list[object] = []
+    real = litellm_logging.Logging._zero_cost_finding
+
+    def spy(self, *args, **kwargs):
+        findings.append(self)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(litellm_logging.Logging, "_zero_cost_finding", spy)
+    for name in success_logging.LISTENER_LISTS:  # an earlier test's listener stays in litellm's own lists
+        monkeypatch.setattr(litellm, name, [])
+    server = fake_server(cache_rule="none")  # the same usage for every call of the same prompt
+    # the fake server answers any model name: one litellm's cost map knows, one it does not
+    costs_quiet = [
+        _priced_call(server.base_url, m)._hidden_params.get("response_cost") for m in ("openai/gpt-4o-mini", "openai/fake-gpt")
+    ]
+    assert success_logging.diagnostic_unread(litellm)
+    assert findings == []  # nobody reads it: no lookup
+
+    lg = logging.getLogger("LiteLLM")
+    quiet_level = lg.level
+    lg.setLevel(logging.WARNING)  # now the warning would be logged (setLevel clears the logger's level cache)
+    try:
+        assert not success_logging.diagnostic_unread(litellm)
+        costs_read = [
+            _priced_call(server.base_url, m)._hidden_params.get("response_cost")
+            for m in ("openai/gpt-4o-mini", "openai/fake-gpt")
+        ]
+    finally:
+        lg.setLevel(quiet_level)
+    assert len(findings) == 2  # read: each reply's diagnostic ran
+    assert costs_quiet == costs_read
+    assert costs_quiet[0] is not None and costs_quiet[0] > 0 and costs_quiet[1] is None
