@@ -23,40 +23,18 @@ from pathlib import Path
 import pytest
 
 from pipeline import idle_dashboard_agent, lazy_runtime_env_agent
+from tests.pipeline.ray_procs import children, session_cluster
 
 AGENT = Path(idle_dashboard_agent.__file__)
 LAZY = Path(lazy_runtime_env_agent.__file__)
-
-
-def _children(pid: int) -> list[list[str]]:
-    """The command lines of ``pid``'s child processes."""
-    found = []
-    for entry in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            with open(f"/proc/{entry}/stat") as fh:
-                ppid = int(fh.read().rsplit(")", 1)[1].split()[1])
-            if ppid != pid:
-                continue
-            with open(f"/proc/{entry}/cmdline", "rb") as fh:
-                found.append(fh.read().decode(errors="replace").split("\0"))
-        except (OSError, IndexError, ValueError):
-            continue
-    return found
 
 
 @pytest.mark.usefixtures("ray_address")
 def test_the_raylet_runs_the_idle_agent_and_sees_its_ports_unused():
     import ray
 
-    from pipeline import raysetup
-
-    if raysetup._owned is None:
-        pytest.skip("Ray was started outside init_ray in this process")
-    node = ray._private.worker._global_node
-    assert node is not None
-    session_dir = node.get_session_dir_path()
-    raylet = node.all_processes[ray._private.ray_constants.PROCESS_TYPE_RAYLET][0].process.pid
-    started = [" ".join(argv) for argv in _children(raylet)]
+    session_dir, raylet = session_cluster()
+    started = [" ".join(argv) for argv in children(raylet)]
     assert [c for c in started if str(AGENT) in c] and all(
         f"--session-dir={session_dir}" in c for c in started if str(AGENT) in c
     )
@@ -77,14 +55,7 @@ def test_the_raylet_runs_the_idle_agent_and_sees_its_ports_unused():
 def test_the_raylet_starts_the_runtime_env_agent_through_the_lazy_one_and_it_answers():
     import ray
 
-    from pipeline import raysetup
-
-    if raysetup._owned is None:
-        pytest.skip("Ray was started outside init_ray in this process")
-    node = ray._private.worker._global_node
-    assert node is not None
-    session_dir = node.get_session_dir_path()
-    raylet = node.all_processes[ray._private.ray_constants.PROCESS_TYPE_RAYLET][0].process.pid
+    session_dir, raylet = session_cluster()
     with open(f"/proc/{raylet}/cmdline", "rb") as fh:
         argv = fh.read().decode().split("\0")
     (command,) = [a for a in argv if a.startswith("--runtime_env_agent_command=")]
@@ -100,21 +71,26 @@ def test_the_raylet_starts_the_runtime_env_agent_through_the_lazy_one_and_it_ans
     assert ray.get(probe.remote(), timeout=180) == "yes"
     # Ray's agent answered on the port the raylet read at its start, in the lazy agent's process
     assert port_file.read_text() == port
-    assert [c for c in _children(raylet) if c[0].startswith("ray::RuntimeEnvAgent")]
+    assert [c for c in children(raylet) if c[0].startswith("ray::RuntimeEnvAgent")]
 
 
-def test_the_idle_agent_publishes_its_ports_and_leaves_with_its_parent(tmp_path):
-    files = [tmp_path / "metrics_agent_port_n1", tmp_path / "dashboard_agent_listen_port_n1"]
-    args = " ".join(f"--port-file={f}" for f in files)
-    # the parent: a shell that starts the agent, reports its pid, waits for a line on stdin, exits
+def _start_under_a_parent(agent_command: str) -> tuple[subprocess.Popen, int]:
+    """A parent shell that starts ``agent_command`` in the background, reports its pid and waits
+    for a line on stdin before it exits: (the parent, the agent's pid)."""
     parent = subprocess.Popen(
-        ["sh", "-c", f"{sys.executable} -I -S {AGENT} {args} & echo $!; read line"],
+        ["sh", "-c", f"{agent_command} & echo $!; read line"],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
     )
     assert parent.stdout is not None and parent.stdin is not None
-    agent = int(parent.stdout.readline())
+    return parent, int(parent.stdout.readline())
+
+
+def test_the_idle_agent_publishes_its_ports_and_leaves_with_its_parent(tmp_path):
+    files = [tmp_path / "metrics_agent_port_n1", tmp_path / "dashboard_agent_listen_port_n1"]
+    args = " ".join(f"--port-file={f}" for f in files)
+    parent, agent = _start_under_a_parent(f"{sys.executable} -I -S {AGENT} {args}")
     deadline = time.monotonic() + 60
     while not all(f.exists() for f in files) and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -171,14 +147,7 @@ def test_the_lazy_agent_holds_the_port_and_becomes_the_agent_on_a_connection(tmp
 def test_the_lazy_agent_leaves_with_its_parent_without_starting_the_agent(tmp_path):
     port_file, seen = tmp_path / "runtime_env_agent_port_n1", tmp_path / "started"
     command = f"{sys.executable} -c 'open({str(seen)!r}, \"w\")' --runtime-env-agent-port=0"
-    parent = subprocess.Popen(
-        ["sh", "-c", f"{sys.executable} -I -S {LAZY} --port-file={port_file} -- {command} & echo $!; read line"],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert parent.stdout is not None and parent.stdin is not None
-    agent = int(parent.stdout.readline())
+    parent, agent = _start_under_a_parent(f"{sys.executable} -I -S {LAZY} --port-file={port_file} -- {command}")
     deadline = time.monotonic() + 60
     while not port_file.exists() and time.monotonic() < deadline:
         time.sleep(0.1)

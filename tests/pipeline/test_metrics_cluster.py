@@ -39,31 +39,19 @@ def test_only_a_sweep_serving_vllm_or_sglang_needs_metrics(tmp_path, models, wan
 
 
 PROBE = r"""
-import json, os, sys
+import json
 from pathlib import Path
-import ray
 from pipeline.raysetup import init_ray, shutdown_ray
 from pipeline.spec import RaySpec
+from tests.pipeline.ray_procs import children, gcs_config, session_cluster
 init_ray(RaySpec(num_cpus=1), metrics=True)
 try:
-    node = ray._private.worker._global_node
-    session = node.get_session_dir_path()
-    raylet = node.all_processes[ray._private.ray_constants.PROCESS_TYPE_RAYLET][0].process.pid
-    out = {"config": None, "children": []}
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            argv = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace").split("\0")
-            ppid = int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
-        except (OSError, IndexError, ValueError):
-            continue
-        if os.path.basename(argv[0]) == "gcs_server" and f"--session-dir={session}" in argv:
-            import base64
-            (arg,) = [a for a in argv if a.startswith("--config_list=")]
-            out["config"] = json.loads(base64.b64decode(arg.split("=", 1)[1]))
-        if ppid == raylet:
-            out["children"].append(" ".join(argv))
-    out["export_port"] = next(Path(session).glob("metrics_export_port_*")).read_text()
-    print(json.dumps(out))
+    session, raylet = session_cluster()
+    print(json.dumps({
+        "config": gcs_config(session),
+        "children": [" ".join(argv) for argv in children(raylet)],
+        "export_port": next(Path(session).glob("metrics_export_port_*")).read_text(),
+    }))
 finally:
     shutdown_ray()
 """

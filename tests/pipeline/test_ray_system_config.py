@@ -8,11 +8,9 @@ task and actor call of a run for the dashboard (43 -> 170 MB over a 12,000-call 
 
 from __future__ import annotations
 
-import base64
-import json
-import os
-
 import pytest
+
+from tests.pipeline.ray_procs import gcs_config, session_cluster
 
 WANTED = {
     "task_events_report_interval_ms": 0,
@@ -23,38 +21,10 @@ WANTED = {
 }
 
 
-def _gcs_command_line(session_dir: str) -> list[str]:
-    """The command line of this cluster's GCS."""
-    found = []
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            with open(f"/proc/{pid}/cmdline", "rb") as fh:
-                argv = fh.read().decode(errors="replace").split("\0")
-        except OSError:
-            continue
-        if os.path.basename(argv[0]) == "gcs_server" and f"--session-dir={session_dir}" in argv:
-            found.append(argv)
-    assert len(found) == 1, found
-    return found[0]
-
-
-def _config_list(argv: list[str]) -> dict:
-    (arg,) = [a for a in argv if a.startswith("--config_list=")]
-    return json.loads(base64.b64decode(arg.split("=", 1)[1]))
-
-
 @pytest.mark.usefixtures("ray_address")
 def test_the_gcs_starts_without_task_events_or_metrics():
-    import ray
-
-    from pipeline import raysetup
-
-    if raysetup._owned is None:
-        pytest.skip("Ray was started outside init_ray in this process")
-    node = ray._private.worker._global_node
-    assert node is not None
-    session_dir = node.get_session_dir_path()
-    applied = _config_list(_gcs_command_line(session_dir))
+    session_dir, _ = session_cluster()
+    applied = gcs_config(session_dir)
     assert {k: applied.get(k) for k in WANTED} == WANTED
 
 

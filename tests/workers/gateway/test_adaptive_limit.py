@@ -7,8 +7,8 @@ import asyncio
 
 import pytest
 
+from tests.workers.gateway.adaptive_admission import adaptive_controller
 from workers.gateway.adaptive import AdaptiveLimit, LimitChange
-from workers.gateway.limits import AdmissionController
 
 
 def _slots(limit: AdaptiveLimit, latencies: list[float]) -> tuple[list[int], list[LimitChange]]:
@@ -75,16 +75,7 @@ def test_admission_keeps_no_more_calls_in_flight_than_the_adapted_limit():
     changes: list[LimitChange] = []
 
     async def run():
-        ac = AdmissionController(
-            rpm=None,
-            tpm=None,
-            window_s=60.0,
-            pad_s=0.0,
-            max_concurrency=4,
-            clock=lambda: now[0],
-            adaptive=AdaptiveLimit(floor=1, ceiling=4),
-            on_limit=changes.append,
-        )
+        ac = adaptive_controller(now, changes, floor=1, ceiling=4)
         first = [await ac.acquire(10) for _ in range(4)]
         now[0] = 1.0
         ac.release(first[0], "ok")  # 1 s: the baseline

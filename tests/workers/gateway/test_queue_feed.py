@@ -11,8 +11,8 @@ from typing import Any
 
 import pytest
 
-from workers.gateway.adaptive import AdaptiveLimit, LimitChange
-from workers.gateway.limits import AdmissionController
+from tests.workers.gateway.adaptive_admission import adaptive_controller
+from workers.gateway.adaptive import LimitChange
 from workers.gateway.queue_feed import SGLANG_WAITING, VLLM_WAITING, QueueFeed, waiting_requests
 from workers.llm.providers import QueueSource
 from workers.serving import queue_source
@@ -215,16 +215,7 @@ def test_a_queue_on_the_test_doubles_replicas_halves_the_limit_once_a_round_then
         return sum(f for f in figures if f is not None)
 
     async def run() -> tuple[list[float], QueueFeed]:
-        ac = AdmissionController(
-            rpm=None,
-            tpm=None,
-            window_s=60.0,
-            pad_s=0.0,
-            max_concurrency=8,
-            clock=lambda: now[0],
-            adaptive=AdaptiveLimit(floor=2, ceiling=8),
-            on_limit=changes.append,
-        )
+        ac = adaptive_controller(now, changes, floor=2, ceiling=8)
         feed = QueueFeed(ac, read, period_s=1.0)
         tickets = [await ac.acquire(10) for _ in range(8)]
         assert await feed.poll_once() == 3 and (ac.queue, ac.queue_until) == (3, 2.0)
@@ -261,16 +252,7 @@ def test_a_stale_queue_figure_and_a_failed_read_leave_the_limit_to_its_other_sig
         raise ConnectionError("the replica is restarting")
 
     async def run() -> QueueFeed:
-        ac = AdmissionController(
-            rpm=None,
-            tpm=None,
-            window_s=60.0,
-            pad_s=0.0,
-            max_concurrency=4,
-            clock=lambda: now[0],
-            adaptive=AdaptiveLimit(floor=1, ceiling=4),
-            on_limit=changes.append,
-        )
+        ac = adaptive_controller(now, changes, floor=1, ceiling=4)
         ac.report_queue(5, fresh_s=2.0)
         feed = QueueFeed(ac, broken, period_s=1.0)
         assert await feed.poll_once() is None  # ignored: the last figure stays, and goes stale

@@ -3,13 +3,13 @@
 
 from __future__ import annotations
 
-import asyncio
 import uuid
 
 import httpx
 from openai import AsyncOpenAI
 from openai._models import FinalRequestOptions
 
+from tests.workers.llm.fake_calls import fake_call
 from workers.llm import sdk_idempotency
 from workers.llm.litellm_setup import get_litellm
 
@@ -49,16 +49,6 @@ def test_a_litellm_call_makes_no_uuid_in_the_sdk(fake_server, monkeypatch) -> No
 
     monkeypatch.setattr(base_client, "uuid", CountingUuid)
     server = fake_server()
-    resp = asyncio.run(
-        litellm.acompletion(
-            model="openai/fake-gpt",
-            api_base=server.base_url,
-            api_key="k",
-            messages=[{"role": "user", "content": "hello"}],
-            max_tokens=20,
-            num_retries=0,
-            max_retries=0,
-        )
-    )
+    resp = fake_call(server.base_url)
     assert resp.choices[0].message.content  # the call is answered as before
     assert made == []

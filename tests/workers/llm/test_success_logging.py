@@ -5,26 +5,12 @@ payload, and a registered callback still gets the call's success event with its 
 from __future__ import annotations
 
 import asyncio
-from typing import Any
 
+from tests.workers.llm.fake_calls import fake_call
 from workers.llm import success_logging
 from workers.llm.litellm_setup import get_litellm
 
 litellm = get_litellm()
-
-
-def _call(url: str) -> object:
-    return asyncio.run(
-        litellm.acompletion(
-            model="openai/fake-gpt",
-            api_base=url,
-            api_key="k",
-            messages=[{"role": "user", "content": "hello"}],
-            max_tokens=20,
-            num_retries=0,
-            max_retries=0,
-        )
-    )
 
 
 def test_no_task_without_listeners_and_events_with_one(fake_server, monkeypatch) -> None:
@@ -42,7 +28,7 @@ def test_no_task_without_listeners_and_events_with_one(fake_server, monkeypatch)
 
     monkeypatch.setattr(litellm_logging.Logging, "async_success_handler", spy)
     server = fake_server()
-    resp = _call(server.base_url)
+    resp = fake_call(server.base_url)
     assert resp.choices[0].message.content  # the call itself is unchanged
     assert resp._hidden_params.get("litellm_call_id")  # and its hidden params are set
     assert built == []  # nobody listens: no payload task
@@ -77,20 +63,6 @@ def test_no_task_without_listeners_and_events_with_one(fake_server, monkeypatch)
     assert len(events) == 1 and events[0].get("total_tokens", 0) > 0
 
 
-def _priced_call(url: str, model: str) -> Any:
-    return asyncio.run(
-        litellm.acompletion(
-            model=model,
-            api_base=url,
-            api_key="k",
-            messages=[{"role": "user", "content": "price me"}],
-            max_tokens=20,
-            num_retries=0,
-            max_retries=0,
-        )
-    )
-
-
 def test_zero_cost_diagnostic_runs_only_when_read_and_the_cost_is_unchanged(fake_server, monkeypatch) -> None:
     """The diagnostic's price lookup is skipped while nothing reads it; litellm's response_cost (our
     provider_cost_usd) is the same with and without it, for a model litellm prices and for one it
@@ -113,7 +85,8 @@ def test_zero_cost_diagnostic_runs_only_when_read_and_the_cost_is_unchanged(fake
     server = fake_server(cache_rule="none")  # the same usage for every call of the same prompt
     # the fake server answers any model name: one litellm's cost map knows, one it does not
     costs_quiet = [
-        _priced_call(server.base_url, m)._hidden_params.get("response_cost") for m in ("openai/gpt-4o-mini", "openai/fake-gpt")
+        fake_call(server.base_url, m, "price me")._hidden_params.get("response_cost")
+        for m in ("openai/gpt-4o-mini", "openai/fake-gpt")
     ]
     assert success_logging.diagnostic_unread(litellm)
     assert findings == []  # nobody reads it: no lookup
@@ -124,7 +97,7 @@ def test_zero_cost_diagnostic_runs_only_when_read_and_the_cost_is_unchanged(fake
     try:
         assert not success_logging.diagnostic_unread(litellm)
         costs_read = [
-            _priced_call(server.base_url, m)._hidden_params.get("response_cost")
+            fake_call(server.base_url, m, "price me")._hidden_params.get("response_cost")
             for m in ("openai/gpt-4o-mini", "openai/fake-gpt")
         ]
     finally:
