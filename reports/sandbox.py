@@ -30,6 +30,7 @@ import os
 import re
 import resource
 import signal
+import struct
 import subprocess
 import sys
 import threading
@@ -110,13 +111,21 @@ def _mb(n: int) -> str:
     return f"{n / 1000**2:.0f}MB"
 
 
-def _rss(pid: int) -> int | None:
-    """Resident bytes of ``pid`` now (Linux /proc); None where it cannot be read."""
+def _sizes(pid: int) -> tuple[int, int] | None:
+    """(address space, resident) bytes of ``pid`` now (Linux /proc); None where they cannot be read."""
     try:
         with open(f"/proc/{pid}/statm", "rb") as fh:
-            return int(fh.read().split()[1]) * _PAGE
+            size, resident = fh.read().split()[:2]
+        return int(size) * _PAGE, int(resident) * _PAGE
     except (OSError, ValueError, IndexError):
         return None
+
+
+#: what the child sends when its query starts: b"R", then its address space then and its cap
+_READY = struct.Struct("<cQQ")
+#: signals a child dies of when an allocation at its address-space cap fails in code that does not
+#: check for it (a native library's allocator or thread start) rather than raising Out of Memory
+_ALLOCATION_DEATHS = (signal.SIGSEGV, signal.SIGBUS, signal.SIGABRT)
 
 
 _PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
@@ -204,13 +213,19 @@ class _Watch:
     peak: int = 0
     #: the child's exit status once it has ended
     status: int | None = None
+    #: the child's address space at the last poll; at its query's start and the cap it set (0: not said)
+    size: int = 0
+    start_size: int = 0
+    cap: int = 0
 
     def until_exit(self) -> None:
         """Poll until the child has ended (killed or not)."""
         threshold = self.limits.memory_bytes * (1 - MARGIN_FRACTION)
         while not self._ended():
-            rss = _rss(self.proc.pid)
-            if rss is not None:
+            sizes = _sizes(self.proc.pid)
+            rss = None
+            if sizes is not None and sizes[0]:  # a child that has died but is not reaped yet shows zeros
+                self.size, rss = sizes
                 self.peak = max(self.peak, rss)
             if self.started is None:
                 self._note_start()
@@ -222,6 +237,8 @@ class _Watch:
                 if self.limit_hit is not None:
                     self.proc.send_signal(signal.SIGKILL)
             time.sleep(POLL_S)
+        if self.limit_hit is None and self._died_at_the_cap():
+            self.limit_hit = "address space"
 
     def _ended(self) -> bool:
         """Reap the child if it has ended, keeping its exit status and peak resident set."""
@@ -234,12 +251,24 @@ class _Watch:
         return True
 
     def _note_start(self) -> None:
-        """Start the time limit's clock once the child has said its query starts."""
+        """Start the time limit's clock once the child has said its query starts (with its address
+        space then and the cap it set: :func:`child_main`)."""
         try:
-            if os.read(self.ready_r, 1):
-                self.started = time.monotonic()
+            said = os.read(self.ready_r, _READY.size)
         except BlockingIOError:
-            pass
+            return
+        if said:
+            self.started = time.monotonic()
+            if len(said) == _READY.size:
+                _, self.start_size, self.cap = _READY.unpack(said)
+
+    def _died_at_the_cap(self) -> bool:
+        """The child died of a signal an allocation failing at its address-space cap causes, its
+        address space last seen in the upper half of the room the cap gave the query: the memory
+        limit, not a crash (seen under load: a cross join's result, SIGSEGV in native code)."""
+        if self.status is None or self.status >= 0 or -self.status not in _ALLOCATION_DEATHS or not self.cap:
+            return False
+        return self.size >= self.start_size + (self.cap - self.start_size) // 2
 
 
 def _say_limit(watch: _Watch, err: TextIO) -> None:
@@ -252,6 +281,12 @@ def _say_limit(watch: _Watch, err: TextIO) -> None:
         )
     elif watch.limit_hit == "time":
         err.write(f"recap: error: sql: time limit {limits.timeout_s:g}s hit: the query was stopped; raise it with --timeout\n")
+    elif watch.limit_hit == "address space":
+        err.write(
+            f"recap: error: sql: memory limit {limits.memory_text} hit: the query process died "
+            f"({signal.Signals(-(status or 0)).name}) at its address-space cap ({_mb(watch.size)} mapped); "
+            "raise it with --memory-limit, or select fewer rows or smaller values\n"
+        )
     elif status is not None and status < 0:
         err.write(f"recap: error: sql: the query process died ({signal.Signals(-status).name}); try a smaller query\n")
 
@@ -277,13 +312,13 @@ def _statm() -> tuple[int, int] | None:
         return None
 
 
-def _cap_address_space(memory_bytes: int) -> None:
+def _cap_address_space(memory_bytes: int) -> tuple[int, int]:
     """No new mapping past what the process has now plus the room left under the limit: new memory
     needs new mappings, so one allocation bigger than that room fails at once (DuckDB's Out of Memory
     error, Python's MemoryError) instead of being filled page by page until the parent kills."""
     now = _statm()
     if now is None:
-        return
+        return 0, 0
     size, resident = now
     room = max(int(memory_bytes * (1 - MARGIN_FRACTION)) - resident, 16 << 20)
     soft, hard = resource.getrlimit(resource.RLIMIT_AS)
@@ -291,6 +326,7 @@ def _cap_address_space(memory_bytes: int) -> None:
     if hard != resource.RLIM_INFINITY:
         want = min(want, hard)
     resource.setrlimit(resource.RLIMIT_AS, (want, hard))
+    return size, want
 
 
 def child_main(ready_fd: int, argv: Sequence[str] = ()) -> int:
@@ -303,8 +339,8 @@ def child_main(ready_fd: int, argv: Sequence[str] = ()) -> int:
     try:
         con, skipped = open_runs_checked(job["run_dirs"], memory_limit=f"{memory // 2 // 1024}KiB", threads=THREADS)
         try:
-            _cap_address_space(memory)
-            os.write(ready_fd, b"R")
+            size, cap = _cap_address_space(memory)
+            os.write(ready_fd, _READY.pack(b"R", size, cap))
             os.close(ready_fd)
             result = run_query(con, job["query"])
         finally:
