@@ -211,11 +211,11 @@ class Sink:
         self._hashes: dict[int, set[str]] = {}
         #: ... and every one of them, for an O(1) check per batch
         self._known_hashes: set[str] = set()
-        #: when each segment of this process was retired (monotonic seconds)
+        #: when each segment this process retired was retired (monotonic seconds, oldest first): the
+        #: only segments :meth:`_prune` forgets; those a previous process of this writer logged are
+        #: known for this process's whole life (the calls whose replies its kill swallowed come back
+        #: whenever Ray re-sends them)
         self._retired_at: dict[int, float] = {}
-        #: segments a previous process of this writer logged: known for this process's whole life
-        #: (the calls whose replies its kill swallowed come back whenever Ray re-sends them)
-        self._pinned: set[int] = set()
         self._wal_fh: Any = None
         self.recovered_rows = 0
         self.seg = 1
@@ -245,13 +245,11 @@ class Sink:
                 path.rename(_segment_path(self.run_dir, self.name, seg, "done"))
             self._hashes[seg] = hashes
             self._known_hashes |= hashes
-            self._pinned.add(seg)
         for p in self.run_dir.glob(f"*/part-{self.name}-*.parquet"):
             tail = p.stem.rsplit("-", 1)[-1]
             if tail.isdigit():
                 last = max(last, int(tail))
         self.seg = last + 1
-        self._prune()
 
     def _count(self, written: Mapping[str, int]) -> None:
         for table, n in written.items():
@@ -284,15 +282,17 @@ class Sink:
         self._prune()
 
     def _prune(self) -> None:
-        """Forget retired segments that are neither among the last ``_KEEP_DONE``, nor retired in the
-        last ``_KEEP_DONE_S`` seconds, nor left by a previous process of this writer."""
-        keep = set(sorted(self._hashes)[-_KEEP_DONE:]) | self._pinned
+        """Forget the segments this process retired that are neither among its last ``_KEEP_DONE``
+        nor retired in the last ``_KEEP_DONE_S`` seconds: oldest first, stopping at the first one
+        kept (retirement times only grow), so a flush costs what it forgets, not the window."""
         old = time.monotonic() - _KEEP_DONE_S
-        for seg in list(self._hashes):
-            if seg not in keep and seg < self.seg and self._retired_at.get(seg, old) <= old:
-                self._known_hashes -= self._hashes.pop(seg)
-                self._retired_at.pop(seg, None)
-                _segment_path(self.run_dir, self.name, seg, "done").unlink(missing_ok=True)
+        while self._retired_at:
+            seg, at = next(iter(self._retired_at.items()))
+            if at > old or seg >= self.seg - _KEEP_DONE:
+                return
+            del self._retired_at[seg]
+            self._known_hashes -= self._hashes.pop(seg, set())
+            _segment_path(self.run_dir, self.name, seg, "done").unlink(missing_ok=True)
 
     def _known(self, h: str) -> bool:
         return h in self._known_hashes

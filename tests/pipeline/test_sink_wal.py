@@ -153,3 +153,18 @@ def test_a_resent_batch_is_known_however_many_flushes_the_new_sink_made_before_i
     again.add(late, flush=True)
     again.close()
     assert sorted(rows_of(tmp_path, "episodes", "episode_id")) == [f"u{i}-1" for i in range(1, 7)]
+
+
+def test_segments_older_than_the_window_are_forgotten_but_the_last_two_are_kept(tmp_path, monkeypatch):
+    """The window bounds what a long session keeps: past it, only the last two retired segments'
+    log files and batch hashes stay (a soak's sink stays flat)."""
+    import workers.sink
+
+    monkeypatch.setattr(workers.sink, "_KEEP_DONE_S", 0.0)
+    sink = Sink(str(tmp_path), "run1", writer="sinkW", flush_rows=10_000, flush_s=3600)
+    for i in range(1, 6):
+        sink.add(records_by_table([ep(f"u{i}-1")], "run1"), flush=True)
+    done = sorted(p.name for p in (tmp_path / WAL_DIR).glob("*.done"))
+    assert done == [".tmp-sinkW-000004.done", ".tmp-sinkW-000005.done"]
+    assert len(sink._known_hashes) == 2
+    sink.close()
